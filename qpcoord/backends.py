@@ -1,0 +1,321 @@
+"""Dense QP backends: one entry point, a dict of backends.
+
+Every QP qpcoord solves internally has the form::
+
+    minimise    ½ yᵀ H y + fᵀ y
+    subject to  lo ≤ G y ≤ hi        (two-sided rows; ±inf allowed)
+                lb ≤ y ≤ ub          (optional box)
+
+with ``H`` symmetric positive definite (the stack adds regularisation to make it so).
+:func:`solve_dense_qp` dispatches on the solver name. ``daqp``, ``quadprog`` and ``proxqp``
+are called directly (no conversion layer: a small control-loop QP costs ≈ 10–60 µs less
+than through :func:`qpsolvers.solve_qp`, see ``benchmarks/README.md``); every other backend
+that :mod:`qpsolvers` can import goes through :func:`qpsolvers.solve_problem` with tight
+tolerances.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import metadata
+
+import numpy as np
+
+__all__ = [
+    "QPResult",
+    "available_solvers",
+    "default_solver",
+    "solver_versions",
+    "solve_dense_qp",
+    "check_solver",
+]
+
+OK, INFEASIBLE, FAILED = 0, 1, 2
+
+#: Preference order for the default solver: fastest first on small dense QPs
+#: (measured in ``benchmarks/stack_bench.py``).
+_PREFERENCE = ("daqp", "quadprog", "proxqp", "piqp", "clarabel", "highs", "osqp", "scs", "cvxopt")
+
+#: Distribution that provides each qpsolvers backend (for version reports).
+_DISTRIBUTION = {
+    "daqp": "daqp",
+    "quadprog": "quadprog",
+    "proxqp": "proxsuite",
+    "osqp": "osqp",
+    "clarabel": "clarabel",
+    "piqp": "piqp",
+    "highs": "highspy",
+    "scs": "scs",
+    "cvxopt": "cvxopt",
+    "ecos": "ecos",
+    "gurobi": "gurobipy",
+    "mosek": "mosek",
+    "qpalm": "qpalm",
+    "qpoases": "qpoases",
+    "qpswift": "qpSWIFT",
+    "hpipm": "hpipm_python",
+    "jaxopt_osqp": "jaxopt",
+    "kvxopt": "kvxopt",
+    "sip": "sip-python",
+}
+
+#: Accuracy settings passed to the generic (qpsolvers) path. Our stacks need ~1e-9.
+_GENERIC_SETTINGS: dict[str, dict] = {
+    "osqp": dict(eps_abs=1e-10, eps_rel=1e-10, max_iter=200_000, polishing=True, verbose=False),
+    "clarabel": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, verbose=False),
+    "piqp": dict(eps_abs=1e-10, eps_rel=1e-10, verbose=False),
+    "scs": dict(eps_abs=1e-10, eps_rel=1e-10, max_iters=500_000, verbose=False),
+    "highs": dict(),
+    "cvxopt": dict(),
+}
+
+
+@dataclass
+class QPResult:
+    """Outcome of one dense QP solve.
+
+    Attributes
+    ----------
+    y : numpy.ndarray or None
+        Primal solution (``None`` unless ``code == OK``).
+    code : int
+        ``0`` solved, ``1`` declared infeasible by the backend, ``2`` other failure.
+    message : str
+        Backend status text, for error messages.
+    """
+
+    y: np.ndarray | None
+    code: int
+    message: str
+
+
+def available_solvers() -> list[str]:
+    """Names of the QP backends that import here (qpsolvers names, e.g. ``"daqp"``).
+
+    Returns
+    -------
+    list of str
+        Sorted by qpcoord's preference (fastest on small dense QPs first).
+    """
+    import qpsolvers
+
+    names = list(qpsolvers.available_solvers)
+    rank = {name: i for i, name in enumerate(_PREFERENCE)}
+    return sorted(names, key=lambda s: (rank.get(s, len(rank)), s))
+
+
+def default_solver() -> str:
+    """The solver used when none is named: the first of :func:`available_solvers`."""
+    names = available_solvers()
+    if not names:
+        raise RuntimeError(
+            "no QP backend is installed: install qpcoord's dependencies (daqp, quadprog, proxsuite)"
+        )
+    return names[0]
+
+
+def solver_versions() -> dict[str, str]:
+    """Installed version of each available backend's distribution (``"?"`` if unknown)."""
+    out = {}
+    for name in available_solvers():
+        dist = _DISTRIBUTION.get(name, name)
+        try:
+            out[name] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[name] = "?"
+    return out
+
+
+def check_solver(solver: str | None) -> str:
+    """Resolve ``None`` to the default and validate a solver name (``ValueError`` if unknown)."""
+    if solver is None:
+        return default_solver()
+    if not isinstance(solver, str):
+        raise ValueError(f"solver must be a string, got {solver!r}")
+    names = available_solvers()
+    if solver not in names:
+        raise ValueError(f"unknown or uninstalled solver {solver!r}; installed: {', '.join(names)}")
+    return solver
+
+
+# --------------------------------------------------------------------------------------
+# Direct backends
+# --------------------------------------------------------------------------------------
+
+
+def _solve_daqp(H, f, G, lo, hi, lb, ub, y0):
+    import daqp
+
+    n = H.shape[0]
+    if lb is not None:
+        bupper = np.concatenate((ub, hi))
+        blower = np.concatenate((lb, lo))
+    else:
+        bupper, blower = hi, lo
+    if G.shape[0] == 0 and lb is None:
+        # daqp needs at least one constraint: an always-inactive bound row.
+        G = np.zeros((1, n))
+        bupper = np.array([1.0])
+        blower = np.array([-1.0])
+    # daqp treats |bound| >= 1e30 as infinite
+    bupper = np.minimum(bupper, 1e30)
+    blower = np.maximum(blower, -1e30)
+    sense = np.zeros(bupper.shape[0], dtype=np.int32)
+    if y0 is None:
+        x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense)
+    else:
+        x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense, primal_start=y0)
+    if flag in (1, 2):
+        return QPResult(np.asarray(x, dtype=float), OK, f"daqp exitflag {flag}")
+    if flag == -1:
+        return QPResult(None, INFEASIBLE, "daqp: infeasible (exitflag -1)")
+    return QPResult(None, FAILED, f"daqp exitflag {flag}")
+
+
+def _solve_quadprog(H, f, G, lo, hi, lb, ub, y0):
+    import quadprog
+
+    n = H.shape[0]
+    rows, rhs = [], []
+    fl, fh = np.isfinite(lo), np.isfinite(hi)
+    if fl.any():
+        rows.append(G[fl])
+        rhs.append(lo[fl])
+    if fh.any():
+        rows.append(-G[fh])
+        rhs.append(-hi[fh])
+    if lb is not None:
+        eye = np.eye(n)
+        bl, bu = np.isfinite(lb), np.isfinite(ub)
+        if bl.any():
+            rows.append(eye[bl])
+            rhs.append(lb[bl])
+        if bu.any():
+            rows.append(-eye[bu])
+            rhs.append(-ub[bu])
+    if rows:
+        C = np.vstack(rows).T
+        b = np.concatenate(rhs)
+    else:
+        C = np.zeros((n, 0))
+        b = np.zeros(0)
+    try:
+        x = quadprog.solve_qp(H, -f, C, b, 0)[0]
+    except ValueError as exc:
+        text = str(exc)
+        if "inconsistent" in text:
+            return QPResult(None, INFEASIBLE, f"quadprog: {text}")
+        return QPResult(None, FAILED, f"quadprog: {text}")
+    return QPResult(np.asarray(x, dtype=float), OK, "quadprog solved")
+
+
+def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
+    from proxsuite import proxqp
+
+    n = H.shape[0]
+    C = G if G.shape[0] else None
+    kw = dict(eps_abs=1e-10, eps_rel=0.0, max_iter=10_000, verbose=False)
+    lo_c = np.maximum(lo, -1e20) if C is not None else None
+    hi_c = np.minimum(hi, 1e20) if C is not None else None
+    if lb is not None:
+        kw["l_box"] = np.maximum(lb, -1e20)
+        kw["u_box"] = np.minimum(ub, 1e20)
+    if y0 is not None:
+        kw["x"] = y0
+        kw["initial_guess"] = proxqp.InitialGuess.WARM_START
+    res = proxqp.dense.solve(H, f, None, None, C, lo_c, hi_c, **kw)
+    status = res.info.status
+    name = str(status).split(".")[-1]
+    if status == proxqp.QPSolverOutput.PROXQP_SOLVED:
+        return QPResult(np.array(res.x, dtype=float).reshape(n), OK, name)
+    if status in (
+        proxqp.QPSolverOutput.PROXQP_PRIMAL_INFEASIBLE,
+        proxqp.QPSolverOutput.PROXQP_DUAL_INFEASIBLE,
+    ):
+        return QPResult(None, INFEASIBLE, f"proxqp: {name}")
+    return QPResult(None, FAILED, f"proxqp: {name}")
+
+
+def _solve_generic(name: str):
+    def solve(H, f, G, lo, hi, lb, ub, y0):
+        import qpsolvers
+
+        rows, rhs = [], []
+        fl, fh = np.isfinite(lo), np.isfinite(hi)
+        if fh.any():
+            rows.append(G[fh])
+            rhs.append(hi[fh])
+        if fl.any():
+            rows.append(-G[fl])
+            rhs.append(-lo[fl])
+        Gq = np.vstack(rows) if rows else None
+        hq = np.concatenate(rhs) if rows else None
+        lbq = ubq = None
+        if lb is not None:
+            lbq = np.where(np.isfinite(lb), lb, -1e20)
+            ubq = np.where(np.isfinite(ub), ub, 1e20)
+        problem = qpsolvers.Problem(H, f, Gq, hq, None, None, lbq, ubq)
+        try:
+            sol = qpsolvers.solve_problem(
+                problem, solver=name, initvals=y0, **_GENERIC_SETTINGS.get(name, {})
+            )
+        except Exception as exc:  # backends raise a zoo of exception types
+            return QPResult(None, FAILED, f"{name}: {type(exc).__name__}: {exc}")
+        if sol.found and sol.x is not None:
+            return QPResult(np.asarray(sol.x, dtype=float), OK, f"{name} solved")
+        return QPResult(None, FAILED, f"{name}: no solution found")
+
+    return solve
+
+
+_DIRECT: dict[str, Callable] = {
+    "daqp": _solve_daqp,
+    "quadprog": _solve_quadprog,
+    "proxqp": _solve_proxqp,
+}
+
+
+def solve_dense_qp(
+    solver: str,
+    H: np.ndarray,
+    f: np.ndarray,
+    G: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    lb: np.ndarray | None = None,
+    ub: np.ndarray | None = None,
+    y0: np.ndarray | None = None,
+) -> QPResult:
+    """Solve one dense QP with the named backend.
+
+    Parameters
+    ----------
+    solver : str
+        A name from :func:`available_solvers` (not checked here: hot path).
+    H : ndarray, shape (k, k)
+        Symmetric positive-definite Hessian.
+    f : ndarray, shape (k,)
+        Linear term.
+    G : ndarray, shape (m, k)
+        Constraint rows (``m`` may be 0).
+    lo, hi : ndarray, shape (m,)
+        Row bounds, ±inf allowed.
+    lb, ub : ndarray, shape (k,), optional
+        Box on ``y`` (both or neither), ±inf allowed.
+    y0 : ndarray, shape (k,), optional
+        Warm start (primal guess) where the backend accepts one.
+
+    Returns
+    -------
+    QPResult
+        The solution is returned unchecked here; :class:`~qpcoord.Stack` checks it.
+    """
+    fn = _DIRECT.get(solver)
+    if fn is None:
+        fn = _solve_generic(solver)
+    res = fn(H, f, G, lo, hi, lb, ub, y0)
+    if res.code == OK and (res.y is None or not all(math.isfinite(v) for v in res.y)):
+        return QPResult(None, FAILED, f"{solver} returned a non-finite solution")
+    return res

@@ -1,0 +1,258 @@
+"""The prioritised QP stack: :class:`Stack`, :class:`Solution` and :func:`solve_stack`."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .backends import check_solver
+from .errors import SolverError
+from .hierarchical import solve_hierarchical
+from .nullspace import check_equality_only, solve_nullspace
+from .problem import compile_stack
+from .reduced import CHECK_TOL, within
+from .tasks import Bounds
+from .weighted import solve_weighted
+
+__all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
+
+#: The solve methods a :class:`Stack` offers.
+METHODS = ("hierarchical", "nullspace", "weighted")
+
+
+@dataclass
+class Solution:
+    """Result of :meth:`Stack.solve`.
+
+    Attributes
+    ----------
+    x : numpy.ndarray, shape (n,)
+        The solution, checked against the bounds and hard constraints.
+    status : str
+        ``"optimal"``.
+    level_residuals : numpy.ndarray, shape (levels,)
+        Per level, ``√(‖√w (A x − b)‖² + ‖√w · violation(C x)‖²)`` over its tasks, in task
+        units (weights included).
+    solver : str
+        Backend used for the QPs (the closed-form steps need none).
+    solve_time : float
+        Wall-clock time of the solve, in seconds.
+    method : str
+        ``"hierarchical"``, ``"nullspace"`` or ``"weighted"``.
+    info : dict
+        ``qp_calls`` (QPs actually solved), ``level_ranks`` (dimensions each level fixed;
+        hierarchical and nullspace methods) and ``free_dofs`` (freedom left to the
+        minimum-norm step; hierarchical).
+    """
+
+    x: np.ndarray
+    status: str
+    level_residuals: np.ndarray
+    solver: str
+    solve_time: float
+    method: str = "hierarchical"
+    info: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        res = ", ".join(f"{r:.3g}" for r in self.level_residuals)
+        return (
+            f"Solution(status={self.status!r}, method={self.method!r}, solver={self.solver!r}, "
+            f"level_residuals=[{res}], solve_time={self.solve_time * 1e6:.1f} µs)"
+        )
+
+
+class Stack:
+    """A prioritised stack of tasks, solved once per control step.
+
+    Parameters
+    ----------
+    levels : sequence
+        ``levels[0]`` is the highest priority. Each item is a task
+        (:class:`~qpcoord.Equality` / :class:`~qpcoord.Inequality`) or a list of tasks that
+        share the level (their squared residuals add up).
+    bounds : Bounds, optional
+        Box on ``x``, always hard.
+    regularization : float
+        Weight of ``‖x‖²``-type terms that keep every QP strictly convex in directions a
+        level leaves free (default ``1e-9``, relative to a unit-weight task). It does not bias
+        the strict hierarchy: those directions are handed to lower levels and finally to the
+        minimum-norm step.
+    damping : float
+        Relative singular-value threshold ``τ/s₀`` under which a level's directions are
+        damped rather than inverted exactly (default ``1e-7``; see :mod:`qpcoord.linalg`):
+        gains are ``1/s`` above ``τ`` and ``s/τ²`` below, so no step exceeds ``‖e‖/τ``.
+    constraints : sequence of tasks, optional
+        Hard constraints: must hold exactly (to ``1e-6`` relative). Inconsistent hard
+        constraints or bounds raise :class:`~qpcoord.InfeasibleError`.
+    weight_ratio : float
+        Cost ratio between consecutive levels for ``method="weighted"`` (default ``1e-3``).
+
+    Notes
+    -----
+    The stack keeps references to its tasks. Change their numbers with ``task.update(...)``
+    (same shapes) and call :meth:`solve` again: the structure is validated once and the
+    buffers are reused (the per-step hot path).
+    """
+
+    def __init__(
+        self,
+        levels,
+        bounds: Bounds | None = None,
+        regularization: float = 1e-9,
+        damping: float = 1e-7,
+        constraints=None,
+        weight_ratio: float = 1e-3,
+    ) -> None:
+        for name, value, lo_ok in (
+            ("regularization", regularization, False),
+            ("damping", damping, True),
+            ("weight_ratio", weight_ratio, False),
+        ):
+            if not isinstance(value, (int, float, np.floating)) or not np.isfinite(value):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
+            if value < 0 or (value == 0 and not lo_ok):
+                raise ValueError(f"{name} must be {'>= 0' if lo_ok else '> 0'}, got {value!r}")
+        self._compiled = compile_stack(levels, bounds, constraints)
+        self.regularization = float(regularization)
+        self.damping = float(damping)
+        self.weight_ratio = float(weight_ratio)
+
+    @property
+    def n(self) -> int:
+        """Number of decision variables."""
+        return self._compiled.n
+
+    @property
+    def num_levels(self) -> int:
+        """Number of priority levels (hard constraints not counted)."""
+        return len(self._compiled.levels)
+
+    @property
+    def levels(self) -> list[list]:
+        """The tasks of each level (equalities first, then inequalities)."""
+        return [L.eqs + L.ineqs for L in self._compiled.levels]
+
+    def solve(self, solver: str | None = None, method: str = "hierarchical", warm_start=None):
+        """Solve the stack with the tasks' current numbers.
+
+        Parameters
+        ----------
+        solver : str, optional
+            QP backend name from :func:`~qpcoord.available_solvers` (default: the fastest
+            installed, ``daqp`` when present).
+        method : {"hierarchical", "nullspace", "weighted"}
+            Strict lexicographic priorities, the classic projection formula (equalities
+            only), or one weighted QP.
+        warm_start : Solution or array_like, optional
+            The previous step's solution (or its ``x``); gives the QPs a primal start.
+
+        Returns
+        -------
+        Solution
+
+        Raises
+        ------
+        ValueError
+            Unknown method or solver, bad warm start, inequalities with ``"nullspace"``.
+        InfeasibleError
+            Bounds and hard constraints are inconsistent.
+        SolverError
+            A backend failed or returned a point that violates the hard constraints.
+        """
+        t0 = time.perf_counter()
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+        P = self._compiled
+        P.refresh()
+        x_warm = self._warm(warm_start)
+        if method == "nullspace":
+            check_equality_only(P)
+            x, info = solve_nullspace(P, self.damping)
+            used = "none"
+            R = None
+        else:
+            used = check_solver(solver)
+            if method == "hierarchical":
+                x, R, info = solve_hierarchical(
+                    P, used, self.damping, self.regularization, x_warm
+                )
+            else:
+                x, R, info = solve_weighted(
+                    P, used, self.regularization, self.weight_ratio, x_warm
+                )
+        self._check(x, R, used)
+        residuals = np.array([L.residual(x) for L in P.levels])
+        return Solution(
+            x=x,
+            status="optimal",
+            level_residuals=residuals,
+            solver=used,
+            solve_time=time.perf_counter() - t0,
+            method=method,
+            info=info,
+        )
+
+    def _warm(self, warm_start) -> np.ndarray | None:
+        if warm_start is None:
+            return None
+        x = warm_start.x if isinstance(warm_start, Solution) else warm_start
+        try:
+            x = np.asarray(x, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"warm_start must be a Solution or an array, got {warm_start!r}") from None
+        if x.shape[0] != self.n or not np.all(np.isfinite(x)):
+            raise ValueError(
+                f"warm_start must be a finite array of {self.n} values, got shape {x.shape}"
+            )
+        return x
+
+    def _check(self, x: np.ndarray, R, solver: str) -> None:
+        """Never return an unchecked x: finite, bounds, hard rows, inherited rows."""
+        P = self._compiled
+        if not np.all(np.isfinite(x)):
+            raise SolverError(f"backend {solver!r} produced a non-finite solution")
+        if P.lb is not None and not within(x, P.lb, P.ub, CHECK_TOL):
+            i = int(np.argmax(np.maximum(P.lb - x, x - P.ub)))
+            raise SolverError(
+                f"backend {solver!r} returned x[{i}] = {x[i]!r} outside the bounds "
+                f"[{P.lb[i]!r}, {P.ub[i]!r}]"
+            )
+        H = P.hard
+        if H.m_eq:
+            res = H.Ae @ x - H.be
+            scale = max(1.0, float(np.max(np.abs(H.be))))
+            if float(np.max(np.abs(res))) > CHECK_TOL * scale:
+                raise SolverError(
+                    f"backend {solver!r} returned a point violating the hard equalities "
+                    f"(residual {np.linalg.norm(res):.3g})"
+                )
+        if H.m_in and not within(H.C @ x, H.lo, H.hi, CHECK_TOL):
+            raise SolverError(f"backend {solver!r} returned a point violating the hard inequalities")
+        if R is not None and R.Cin.shape[0] and not within(R.Cin @ x, R.lin, R.uin, CHECK_TOL):
+            raise SolverError(
+                f"backend {solver!r} returned a point that breaks an inequality a higher "
+                "level had satisfied"
+            )
+
+    def __repr__(self) -> str:
+        sizes = ", ".join(
+            f"{L.m_eq}eq+{L.m_in}in" for L in self._compiled.levels
+        )
+        return f"Stack(n={self.n}, levels=[{sizes}], bounds={self._compiled.bounds is not None})"
+
+
+def solve_stack(
+    levels,
+    bounds: Bounds | None = None,
+    solver: str | None = None,
+    method: str = "hierarchical",
+    **options,
+) -> Solution:
+    """Build a :class:`Stack` and solve it once (function form of :meth:`Stack.solve`).
+
+    ``options`` go to :class:`Stack` (``regularization``, ``damping``, ``constraints``,
+    ``weight_ratio``).
+    """
+    return Stack(levels, bounds=bounds, **options).solve(solver=solver, method=method)

@@ -1,0 +1,277 @@
+"""Tasks: the building blocks of a :class:`~qpcoord.Stack`.
+
+A task is linear in the decision variable ``x`` (for a velocity-level IK step ``x`` is the
+joint velocity in rad/s or the joint displacement in rad; for a force-sharing problem it is
+a force in N; the units of ``A``, ``b``, ``C`` and the bounds follow from the user's choice
+of ``x``):
+
+- :class:`Equality` -- minimise ``‖diag(√w)(A x − b)‖²``;
+- :class:`Inequality` -- ``lower ≤ C x ≤ upper``; at a soft level of a stack the squared
+  violation is minimised, as a hard constraint it must hold;
+- :class:`Bounds` -- a box ``lower ≤ x ≤ upper`` that always holds.
+
+Every task validates its numbers when built and when updated with ``update(...)``, and
+raises :class:`ValueError` naming the task and what is wrong. ``update`` keeps the shape,
+so a stack built once can be re-solved every control step with new numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = ["Equality", "Inequality", "Bounds", "Task"]
+
+
+def _label(kind: str, name: str) -> str:
+    return f"{kind} {name!r}" if name else f"{kind} (unnamed)"
+
+
+def _matrix(value, what: str, label: str) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{label}: {what} is not a numeric array ({exc})") from None
+    if arr.ndim == 1:
+        arr = arr.reshape(1, -1)
+    if arr.ndim != 2:
+        raise ValueError(f"{label}: {what} must be 2-D (rows × variables), got shape {arr.shape}")
+    if arr.shape[1] == 0:
+        raise ValueError(f"{label}: {what} has no columns (shape {arr.shape})")
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise ValueError(
+            f"{label}: {what} contains a non-finite value {arr[tuple(bad)]!r} "
+            f"at row {bad[0]}, column {bad[1]}"
+        )
+    return arr
+
+
+def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.ndarray:
+    """Validate a length-``rows`` vector; scalars broadcast.
+
+    ``allow_inf``: 0 forbids ±inf, +1 allows +inf only, -1 allows -inf only.
+    """
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{label}: {what} is not numeric ({exc})") from None
+    if arr.ndim == 0:
+        arr = np.full(rows, float(arr))
+    arr = arr.reshape(-1) if arr.ndim == 2 and 1 in arr.shape else arr
+    if arr.ndim != 1 or arr.shape[0] != rows:
+        raise ValueError(f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}")
+    if np.any(np.isnan(arr)):
+        i = int(np.flatnonzero(np.isnan(arr))[0])
+        raise ValueError(f"{label}: {what} contains NaN at index {i}")
+    if allow_inf == 0:
+        bad = ~np.isfinite(arr)
+    elif allow_inf > 0:
+        bad = arr == -np.inf
+    else:
+        bad = arr == np.inf
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{label}: {what} has the non-allowed value {arr[i]!r} at index {i}")
+    return arr
+
+
+def _weight(value, rows: int, label: str) -> np.ndarray:
+    w = _vector(value, rows, "weight", label)
+    if np.any(w <= 0):
+        i = int(np.flatnonzero(w <= 0)[0])
+        raise ValueError(f"{label}: weight must be > 0, got {w[i]!r} at row {i}")
+    return w
+
+
+class Equality:
+    """Least-squares task ``minimise ‖diag(√w)(A x − b)‖²``.
+
+    Parameters
+    ----------
+    A : array_like, shape (m, n)
+        Task matrix (a 1-D array is one row). Units: task units per unit of ``x``.
+    b : array_like, shape (m,)
+        Target, in task units (a scalar broadcasts).
+    weight : float or array_like, shape (m,)
+        Positive weight of each row inside its level (default 1). Within a strict
+        hierarchy a level's overall scale does not matter; relative row weights do.
+    name : str
+        Used in error messages and reports.
+    """
+
+    kind = "Equality"
+
+    def __init__(self, A, b, weight=1.0, name: str = "") -> None:
+        self.name = str(name)
+        label = _label(self.kind, self.name)
+        self.A = _matrix(A, "A", label)
+        self.b = _vector(b, self.A.shape[0], "b", label)
+        self.weight = _weight(weight, self.A.shape[0], label)
+
+    @property
+    def label(self) -> str:
+        """Human-readable name used in messages."""
+        return _label(self.kind, self.name)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, variables)."""
+        return self.A.shape
+
+    def update(self, A=None, b=None, weight=None) -> Equality:
+        """Replace numbers in place (same shape), validating them. Returns ``self``."""
+        label = self.label
+        if A is not None:
+            newA = _matrix(A, "A", label)
+            if newA.shape != self.A.shape:
+                raise ValueError(f"{label}: update changes A's shape {self.A.shape} to {newA.shape}")
+            self.A = newA
+        if b is not None:
+            self.b = _vector(b, self.A.shape[0], "b", label)
+        if weight is not None:
+            self.weight = _weight(weight, self.A.shape[0], label)
+        return self
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """Weighted residual ``diag(√w)(A x − b)`` (task units)."""
+        return np.sqrt(self.weight) * (self.A @ x - self.b)
+
+    def __repr__(self) -> str:
+        return f"Equality(rows={self.A.shape[0]}, n={self.A.shape[1]}, name={self.name!r})"
+
+
+class Inequality:
+    """Two-sided linear inequality ``lower ≤ C x ≤ upper``.
+
+    Parameters
+    ----------
+    C : array_like, shape (m, n)
+        Constraint matrix (a 1-D array is one row).
+    lower, upper : float or array_like, shape (m,), optional
+        Bounds in the units of ``C x``; ``None`` means unbounded on that side. ``-inf`` is
+        allowed in ``lower`` and ``+inf`` in ``upper``. At least one side must be given.
+    weight : float or array_like, shape (m,)
+        Positive weight of each row's squared violation within its level (default 1).
+    name : str
+        Used in error messages and reports.
+    """
+
+    kind = "Inequality"
+
+    def __init__(self, C, lower=None, upper=None, weight=1.0, name: str = "") -> None:
+        self.name = str(name)
+        label = self.label
+        if lower is None and upper is None:
+            raise ValueError(f"{label}: give lower, upper or both")
+        self.C = _matrix(C, "C", label)
+        m = self.C.shape[0]
+        self.lower = _vector(-np.inf if lower is None else lower, m, "lower", label, allow_inf=-1)
+        self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
+        self._check_order()
+        self.weight = _weight(weight, m, label)
+
+    @property
+    def label(self) -> str:
+        """Human-readable name used in messages."""
+        return _label(self.kind, self.name)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, variables)."""
+        return self.C.shape
+
+    def _check_order(self) -> None:
+        bad = self.lower > self.upper
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"{self.label}: lower > upper at row {i} ({self.lower[i]!r} > {self.upper[i]!r})"
+            )
+
+    def update(self, C=None, lower=None, upper=None, weight=None) -> Inequality:
+        """Replace numbers in place (same shape), validating them. Returns ``self``."""
+        label = self.label
+        if C is not None:
+            newC = _matrix(C, "C", label)
+            if newC.shape != self.C.shape:
+                raise ValueError(f"{label}: update changes C's shape {self.C.shape} to {newC.shape}")
+            self.C = newC
+        m = self.C.shape[0]
+        if lower is not None:
+            self.lower = _vector(lower, m, "lower", label, allow_inf=-1)
+        if upper is not None:
+            self.upper = _vector(upper, m, "upper", label, allow_inf=+1)
+        self._check_order()
+        if weight is not None:
+            self.weight = _weight(weight, m, label)
+        return self
+
+    def violation(self, x: np.ndarray) -> np.ndarray:
+        """Weighted violation ``√w · (C x − clip(C x, lower, upper))`` (units of ``C x``)."""
+        cx = self.C @ x
+        return np.sqrt(self.weight) * (cx - np.clip(cx, self.lower, self.upper))
+
+    def __repr__(self) -> str:
+        return f"Inequality(rows={self.C.shape[0]}, n={self.C.shape[1]}, name={self.name!r})"
+
+
+class Bounds:
+    """Box ``lower ≤ x ≤ upper`` on the decision variable; always hard.
+
+    Parameters
+    ----------
+    lower, upper : float or array_like, shape (n,)
+        Bounds in the units of ``x`` (scalars broadcast once the stack knows ``n``);
+        ``None`` or ``∓inf`` leaves that side open.
+    name : str
+        Used in error messages.
+    """
+
+    kind = "Bounds"
+
+    def __init__(self, lower=None, upper=None, name: str = "bounds") -> None:
+        self.name = str(name)
+        self._lower_in = -np.inf if lower is None else lower
+        self._upper_in = np.inf if upper is None else upper
+        n = None
+        for v in (self._lower_in, self._upper_in):
+            if np.ndim(v) > 0:
+                n = int(np.size(v))
+        self.n = n
+        if n is not None:
+            self.lower, self.upper = self.resolve(n)
+
+    @property
+    def label(self) -> str:
+        """Human-readable name used in messages."""
+        return _label(self.kind, self.name)
+
+    def resolve(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Validated ``(lower, upper)`` arrays of length ``n``."""
+        label = self.label
+        lo = _vector(self._lower_in, n, "lower", label, allow_inf=-1)
+        hi = _vector(self._upper_in, n, "upper", label, allow_inf=+1)
+        bad = lo > hi
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})")
+        return lo, hi
+
+    def update(self, lower=None, upper=None) -> Bounds:
+        """Replace the bounds (same length), validating them. Returns ``self``."""
+        if lower is not None:
+            self._lower_in = lower
+        if upper is not None:
+            self._upper_in = upper
+        if self.n is not None:
+            self.lower, self.upper = self.resolve(self.n)
+        return self
+
+    def __repr__(self) -> str:
+        return f"Bounds(n={self.n}, name={self.name!r})"
+
+
+Task = Equality | Inequality
+TaskLevel = Sequence[Task]
