@@ -17,6 +17,7 @@ tolerances.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
@@ -242,6 +243,7 @@ def _solve_generic(name: str):
     def solve(H, f, G, lo, hi, lb, ub, y0):
         import qpsolvers
 
+        k = H.shape[0]
         rows, rhs = [], []
         fl, fh = np.isfinite(lo), np.isfinite(hi)
         if fh.any():
@@ -250,17 +252,32 @@ def _solve_generic(name: str):
         if fl.any():
             rows.append(-G[fl])
             rhs.append(-lo[fl])
+        if lb is not None:
+            # finite box entries become rows: backends disagree on infinite box entries
+            eye = np.eye(k)
+            bu, bl = np.isfinite(ub), np.isfinite(lb)
+            if bu.any():
+                rows.append(eye[bu])
+                rhs.append(ub[bu])
+            if bl.any():
+                rows.append(-eye[bl])
+                rhs.append(-lb[bl])
         Gq = np.vstack(rows) if rows else None
         hq = np.concatenate(rhs) if rows else None
-        lbq = ubq = None
-        if lb is not None:
-            lbq = np.where(np.isfinite(lb), lb, -1e20)
-            ubq = np.where(np.isfinite(ub), ub, 1e20)
-        problem = qpsolvers.Problem(H, f, Gq, hq, None, None, lbq, ubq)
+        Hq = H
+        if name not in qpsolvers.dense_solvers:
+            from scipy import sparse
+
+            Hq = sparse.csc_matrix(H)
+            Gq = None if Gq is None else sparse.csc_matrix(Gq)
+        problem = qpsolvers.Problem(Hq, f, Gq, hq)
         try:
-            sol = qpsolvers.solve_problem(
-                problem, solver=name, initvals=y0, **_GENERIC_SETTINGS.get(name, {})
-            )
+            with warnings.catch_warnings():
+                # e.g. osqp 1.x's PendingDeprecationWarning about raise_error
+                warnings.simplefilter("ignore")
+                sol = qpsolvers.solve_problem(
+                    problem, solver=name, initvals=y0, **_GENERIC_SETTINGS.get(name, {})
+                )
         except Exception as exc:  # backends raise a zoo of exception types
             return QPResult(None, FAILED, f"{name}: {type(exc).__name__}: {exc}")
         if sol.found and sol.x is not None:

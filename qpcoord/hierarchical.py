@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .problem import CompiledStack
 from .linalg import filtered_svd
+from .problem import CompiledStack
 from .reduced import FEAS_TOL, Reduced, within
 
 __all__ = ["solve_hierarchical"]

@@ -60,7 +60,7 @@ class CompiledLevel:
     def refresh(self) -> None:
         """Copy the tasks' current numbers into the buffers (checks shapes did not change)."""
         i = 0
-        for t, shape in zip(self.eqs, self._eq_shapes):
+        for t, shape in zip(self.eqs, self._eq_shapes, strict=True):
             if t.A.shape != shape:
                 raise ValueError(f"{t.label}: A changed shape from {shape} to {t.A.shape}")
             m = shape[0]
@@ -69,7 +69,7 @@ class CompiledLevel:
             np.multiply(t.b, sw, out=self.be[i : i + m])
             i += m
         i = 0
-        for t, shape in zip(self.ineqs, self._in_shapes):
+        for t, shape in zip(self.ineqs, self._in_shapes, strict=True):
             if t.C.shape != shape:
                 raise ValueError(f"{t.label}: C changed shape from {shape} to {t.C.shape}")
             m = shape[0]
@@ -205,7 +205,9 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
         raise ValueError("empty stack: no task found")
     if bounds is not None:
         if bounds.n is not None and bounds.n != n:
-            raise ValueError(f"{bounds.label}: has {bounds.n} entries but the tasks have {n} columns")
+            raise ValueError(
+                f"{bounds.label}: has {bounds.n} entries but the tasks have {n} columns"
+            )
         if bounds.n is None:
             bounds.n = n
             bounds.lower, bounds.upper = bounds.resolve(n)

@@ -31,10 +31,14 @@ def _slack(bound: np.ndarray, tol: float) -> np.ndarray:
 
 
 def within(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
-    """True if ``lo − tol ≤ values ≤ hi + tol`` (tolerances relative to the bounds)."""
+    """True if ``lo − tol·max(1,|lo|) ≤ values ≤ hi + tol·max(1,|hi|)`` (±inf bounds allowed)."""
     if values.size == 0:
         return True
-    return bool(np.all(values <= hi + _slack(hi, tol)) and np.all(values >= lo - _slack(lo, tol)))
+    # with hi = +inf the right side is +inf; with lo = -inf, lo - values = -inf: both pass
+    return bool(
+        (values - hi <= tol * np.maximum(1.0, np.abs(hi))).all()
+        and (lo - values <= tol * np.maximum(1.0, np.abs(lo))).all()
+    )
 
 
 class Reduced:

@@ -118,6 +118,7 @@ class Stack:
         self.regularization = float(regularization)
         self.damping = float(damping)
         self.weight_ratio = float(weight_ratio)
+        self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
 
     @property
     def n(self) -> int:
@@ -173,7 +174,9 @@ class Stack:
             used = "none"
             R = None
         else:
-            used = check_solver(solver)
+            used = self._solvers.get(solver)
+            if used is None:
+                used = self._solvers[solver] = check_solver(solver)
             if method == "hierarchical":
                 x, R, info = solve_hierarchical(
                     P, used, self.damping, self.regularization, x_warm
@@ -201,7 +204,9 @@ class Stack:
         try:
             x = np.asarray(x, dtype=float).reshape(-1)
         except (TypeError, ValueError):
-            raise ValueError(f"warm_start must be a Solution or an array, got {warm_start!r}") from None
+            raise ValueError(
+                f"warm_start must be a Solution or an array, got {warm_start!r}"
+            ) from None
         if x.shape[0] != self.n or not np.all(np.isfinite(x)):
             raise ValueError(
                 f"warm_start must be a finite array of {self.n} values, got shape {x.shape}"
@@ -229,7 +234,9 @@ class Stack:
                     f"(residual {np.linalg.norm(res):.3g})"
                 )
         if H.m_in and not within(H.C @ x, H.lo, H.hi, CHECK_TOL):
-            raise SolverError(f"backend {solver!r} returned a point violating the hard inequalities")
+            raise SolverError(
+                f"backend {solver!r} returned a point violating the hard inequalities"
+            )
         if R is not None and R.Cin.shape[0] and not within(R.Cin @ x, R.lin, R.uin, CHECK_TOL):
             raise SolverError(
                 f"backend {solver!r} returned a point that breaks an inequality a higher "

@@ -30,7 +30,7 @@ def _label(kind: str, name: str) -> str:
 
 def _matrix(value, what: str, label: str) -> np.ndarray:
     try:
-        arr = np.array(value, dtype=float)
+        arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{label}: {what} is not a numeric array ({exc})") from None
     if arr.ndim == 1:
@@ -39,7 +39,8 @@ def _matrix(value, what: str, label: str) -> np.ndarray:
         raise ValueError(f"{label}: {what} must be 2-D (rows × variables), got shape {arr.shape}")
     if arr.shape[1] == 0:
         raise ValueError(f"{label}: {what} has no columns (shape {arr.shape})")
-    if not np.all(np.isfinite(arr)):
+    # one reduction on the hot path; NaN/inf propagate into the sum
+    if not np.isfinite(arr.sum()) and not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise ValueError(
             f"{label}: {what} contains a non-finite value {arr[tuple(bad)]!r} "
@@ -54,14 +55,18 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
     ``allow_inf``: 0 forbids ±inf, +1 allows +inf only, -1 allows -inf only.
     """
     try:
-        arr = np.array(value, dtype=float)
+        arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{label}: {what} is not numeric ({exc})") from None
     if arr.ndim == 0:
         arr = np.full(rows, float(arr))
-    arr = arr.reshape(-1) if arr.ndim == 2 and 1 in arr.shape else arr
+    elif arr.ndim == 2 and 1 in arr.shape:
+        arr = arr.reshape(-1)
     if arr.ndim != 1 or arr.shape[0] != rows:
         raise ValueError(f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}")
+    total = arr.sum()
+    if np.isfinite(total):
+        return arr
     if np.any(np.isnan(arr)):
         i = int(np.flatnonzero(np.isnan(arr))[0])
         raise ValueError(f"{label}: {what} contains NaN at index {i}")
@@ -79,7 +84,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
 
 def _weight(value, rows: int, label: str) -> np.ndarray:
     w = _vector(value, rows, "weight", label)
-    if np.any(w <= 0):
+    if w.min() <= 0:
         i = int(np.flatnonzero(w <= 0)[0])
         raise ValueError(f"{label}: weight must be > 0, got {w[i]!r} at row {i}")
     return w
@@ -126,7 +131,9 @@ class Equality:
         if A is not None:
             newA = _matrix(A, "A", label)
             if newA.shape != self.A.shape:
-                raise ValueError(f"{label}: update changes A's shape {self.A.shape} to {newA.shape}")
+                raise ValueError(
+                    f"{label}: update changes A's shape {self.A.shape} to {newA.shape}"
+                )
             self.A = newA
         if b is not None:
             self.b = _vector(b, self.A.shape[0], "b", label)
@@ -184,7 +191,7 @@ class Inequality:
 
     def _check_order(self) -> None:
         bad = self.lower > self.upper
-        if np.any(bad):
+        if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(
                 f"{self.label}: lower > upper at row {i} ({self.lower[i]!r} > {self.upper[i]!r})"
@@ -196,7 +203,9 @@ class Inequality:
         if C is not None:
             newC = _matrix(C, "C", label)
             if newC.shape != self.C.shape:
-                raise ValueError(f"{label}: update changes C's shape {self.C.shape} to {newC.shape}")
+                raise ValueError(
+                    f"{label}: update changes C's shape {self.C.shape} to {newC.shape}"
+                )
             self.C = newC
         m = self.C.shape[0]
         if lower is not None:

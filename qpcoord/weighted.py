@@ -55,7 +55,7 @@ def solve_weighted(
         xc = x + R.lift(z)
         ok = R.feasible(xc)
         if ok and Cs:
-            for C, lo, hi in zip(Cs, los, his):
+            for C, lo, hi in zip(Cs, los, his, strict=True):
                 if not within(C @ xc, lo, hi, FEAS_TOL):
                     ok = False
                     break

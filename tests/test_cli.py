@@ -1,0 +1,69 @@
+"""The console command, the demo and the README/CI contract."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from qpcoord.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_solvers_lists_every_available_backend(capsys):
+    import qpcoord as qc
+
+    assert main(["solvers"]) == 0
+    out = capsys.readouterr().out
+    for name in qc.available_solvers():
+        assert re.search(rf"^{name}\s", out, re.M), name
+    assert "<- default" in out
+
+
+def test_demo_runs_and_reports_both_methods(capsys):
+    assert main(["demo", "--steps", "60"]) == 0
+    out = capsys.readouterr().out
+    assert "hierarchical" in out and "weighted" in out
+    band = re.search(r"max band violation \(rad\)\s+(\S+)\s+(\S+)", out)
+    assert band, out
+    # the strict hierarchy keeps the band (priority 1) while the posture (priority 2) pulls
+    assert float(band.group(1)) < 1e-6
+
+
+def test_unknown_solver_is_a_clean_error(capsys):
+    assert main(["demo", "--steps", "5", "--solver", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown or uninstalled solver 'nope'" in err
+
+
+def test_console_script_entry_point():
+    out = subprocess.run(
+        [sys.executable, "-m", "qpcoord.cli", "solvers"], capture_output=True, text=True, check=True
+    ).stdout
+    assert "daqp" in out or "quadprog" in out
+
+
+def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_second():
+    readme = (ROOT / "README.md").read_text()
+    commands = re.findall(r"^    (python3 -m venv .*)$", readme, re.M)
+    assert len(commands) == 2, commands
+    assert commands[0].endswith("qpcoord demo")
+    assert 'pip install -e ".[test]"' in commands[1] and "pytest" in commands[1]
+    ci = (ROOT / ".ci" / "run").read_text()
+    pattern = re.search(r"grep -m1 -E '(.*?)' README.md", ci).group(1)
+    assert re.search(pattern, "    " + commands[1])
+    assert "-eq 5" in ci  # pytest's "no tests collected" fails CI
+
+
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+def test_readme_example_runs(method):
+    readme = (ROOT / "README.md").read_text()
+    code = re.search(r"```python\n(.*?)```", readme, re.S).group(1)
+    ns: dict = {}
+    exec(compile(code, "README.md", "exec"), ns)
+    sol = ns["stack"].solve(method=method)
+    assert sol.x.shape == (3,)
