@@ -84,7 +84,7 @@ def solve_hierarchical(
         if ok and L.m_in:
             ok = within(L.C @ xc, L.lo, L.hi, FEAS_TOL)
         if ok:
-            R.x = xc
+            R.move_to(xc)
             if rank:
                 R.restrict(Vt[rank:].T)
             R.inherit(L.C, L.lo, L.hi)
@@ -116,7 +116,7 @@ def solve_hierarchical(
             y0[:r] = dx if R.Z is None else R.Z.T @ dx
         y = R.solve_qp(H, f, D, dlo, dhi, y0, where=where)
         z, w = y[:r], y[r:]
-        R.x = x + R.lift(z)
+        R.move_to(x + R.lift(z))
         F = [Vt[:rank]] if rank else []
         if mi:
             scale = np.maximum(1.0, np.maximum(np.abs(np.where(np.isfinite(L.lo), L.lo, 0.0)),
@@ -150,6 +150,6 @@ def solve_hierarchical(
                 dx = x_warm - x
                 y0 = dx if R.Z is None else R.Z.T @ dx
             z = R.solve_qp(np.eye(r), f, y0=y0, where="minimum-norm step")
-            R.x = x + R.lift(z)
+            R.move_to(x + R.lift(z))
     info = {"qp_calls": R.qp_calls, "level_ranks": ranks, "free_dofs": r}
     return R.x, R, info

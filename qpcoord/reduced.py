@@ -69,6 +69,11 @@ class Reduced:
         """``Z z`` (a z-space step to x-space)."""
         return z if self.Z is None else self.Z @ z
 
+    def move_to(self, x: np.ndarray) -> None:
+        """Set ``x̄``, snapped into the bounds (removes a backend's ~1e-12 overshoot, which
+        would otherwise make ``z = 0`` infeasible for the next level)."""
+        self.x = x if self.lb is None else np.clip(x, self.lb, self.ub)
+
     def restrict(self, basis: np.ndarray) -> None:
         """Keep only the z-directions spanned by ``basis`` (r × r', orthonormal columns)."""
         self.Z = basis if self.Z is None else self.Z @ basis
@@ -109,8 +114,10 @@ class Reduced:
             if k > r:
                 Cz = np.hstack((Cz, np.zeros((Cz.shape[0], k - r))))
             blocks.append(Cz)
-            los.append(self.lin - cx)
-            his.append(self.uin - cx)
+            # x̄ meets these rows up to the previous solve's tolerance; never ask for more
+            # than z = 0 already gives, so the QP stays feasible by construction
+            los.append(np.minimum(self.lin - cx, 0.0))
+            his.append(np.maximum(self.uin - cx, 0.0))
         lb = ub = None
         if self.lb is not None:
             if self.Z is None:
