@@ -68,7 +68,8 @@ _GENERIC_SETTINGS: dict[str, dict] = {
     "clarabel": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, verbose=False),
     "piqp": dict(eps_abs=1e-10, eps_rel=1e-10, verbose=False),
     "scs": dict(eps_abs=1e-10, eps_rel=1e-10, max_iters=500_000, verbose=False),
-    "highs": dict(),
+    # HiGHS drops Hessian entries ≤ small_matrix_value (default 1e-9): our regularisation
+    "highs": dict(small_matrix_value=1e-15),
     "cvxopt": dict(),
 }
 
@@ -90,6 +91,7 @@ class QPResult:
     y: np.ndarray | None
     code: int
     message: str
+    exact: bool = False  # solved to round-off (active-set backend at tight tolerances)
 
 
 def available_solvers() -> list[str]:
@@ -146,6 +148,18 @@ def check_solver(solver: str | None) -> str:
 # --------------------------------------------------------------------------------------
 
 
+#: Tried in order until daqp reports success. Degenerate level QPs (a point pinned by
+#: more active rows than free directions) made daqp report infeasibility with tight
+#: tolerances; a stronger proximal term, then daqp's defaults, solve them. The stack
+#: refines every level QP's answer on its active set, so the looser tries cost no accuracy
+#: when they find the right active set.
+_DAQP_SETTINGS = (
+    dict(eps_prox=1e-6, eta_prox=1e-12, primal_tol=1e-10),
+    dict(eps_prox=1e-4, eta_prox=1e-12, primal_tol=1e-10),
+    dict(),
+)
+
+
 def _solve_daqp(H, f, G, lo, hi, lb, ub, y0):
     import daqp
 
@@ -164,12 +178,23 @@ def _solve_daqp(H, f, G, lo, hi, lb, ub, y0):
     bupper = np.minimum(bupper, 1e30)
     blower = np.maximum(blower, -1e30)
     sense = np.zeros(bupper.shape[0], dtype=np.int32)
-    if y0 is None:
-        x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense)
-    else:
-        x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense, primal_start=y0)
+    # proximal-point outer iterations keep daqp exact on the nearly singular Hessians of
+    # a hierarchy's levels (eigenvalues ~ regularization); without them it declared some
+    # feasible level QPs infeasible (12 of 200 random 3-level stacks, measured). Its
+    # default primal tolerance (1e-6) let level optima miss their rows by 6e-7, and its
+    # default proximal stopping (eta_prox) left level optima 2e-3 off in x.
+    attempt = 0
+    for attempt, settings in enumerate(_DAQP_SETTINGS):  # noqa: B007 (used after the loop)
+        if y0 is None:
+            x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense, **settings)
+        else:
+            x, _, flag, _ = daqp.solve(
+                H, f, G, bupper, blower, sense, primal_start=y0, **settings
+            )
+        if flag in (1, 2):
+            break
     if flag in (1, 2):
-        return QPResult(np.asarray(x, dtype=float), OK, f"daqp exitflag {flag}")
+        return QPResult(np.asarray(x, dtype=float), OK, f"daqp exitflag {flag}", attempt == 0)
     if flag == -1:
         return QPResult(None, INFEASIBLE, "daqp: infeasible (exitflag -1)")
     return QPResult(None, FAILED, f"daqp exitflag {flag}")
@@ -209,27 +234,56 @@ def _solve_quadprog(H, f, G, lo, hi, lb, ub, y0):
         if "inconsistent" in text:
             return QPResult(None, INFEASIBLE, f"quadprog: {text}")
         return QPResult(None, FAILED, f"quadprog: {text}")
-    return QPResult(np.asarray(x, dtype=float), OK, "quadprog solved")
+    return QPResult(np.asarray(x, dtype=float), OK, "quadprog solved", True)
 
 
 def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
     from proxsuite import proxqp
 
     n = H.shape[0]
-    C = G if G.shape[0] else None
-    kw = dict(eps_abs=1e-10, eps_rel=0.0, max_iter=10_000, verbose=False)
-    lo_c = np.maximum(lo, -1e20) if C is not None else None
-    hi_c = np.minimum(hi, 1e20) if C is not None else None
-    if lb is not None:
-        kw["l_box"] = np.maximum(lb, -1e20)
-        kw["u_box"] = np.minimum(ub, 1e20)
+    m = G.shape[0]
+    box = lb is not None
+    qp = proxqp.dense.QP(n, 0, m, box)
+    st = qp.settings
+    st.eps_abs = 1e-10
+    st.eps_rel = 0.0
+    # the default infeasibility threshold (1e-4) declared feasible level QPs infeasible
+    st.eps_primal_inf = 1e-9
+    st.eps_dual_inf = 1e-9
+    st.max_iter = 100_000
+    st.verbose = False
     if y0 is not None:
-        kw["x"] = y0
-        kw["initial_guess"] = proxqp.InitialGuess.WARM_START
-    res = proxqp.dense.solve(H, f, None, None, C, lo_c, hi_c, **kw)
+        st.initial_guess = proxqp.InitialGuess.WARM_START
+    C = G if m else None
+    lo_c = np.maximum(lo, -1e20) if m else None
+    hi_c = np.minimum(hi, 1e20) if m else None
+    if box:
+        qp.init(H, f, None, None, C, lo_c, hi_c, np.maximum(lb, -1e20), np.minimum(ub, 1e20))
+    else:
+        qp.init(H, f, None, None, C, lo_c, hi_c)
+    if y0 is not None:
+        qp.solve(y0, None, None)
+    else:
+        qp.solve()
+    res = qp.results
     status = res.info.status
+    if status == proxqp.QPSolverOutput.PROXQP_PRIMAL_INFEASIBLE:
+        # proxqp 0.8 declared feasible, nearly degenerate level QPs infeasible; its
+        # closest-feasible mode solves them (a feasible problem's solution is unchanged)
+        st.primal_infeasibility_solving = True
+        st.initial_guess = proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
+        if box:
+            qp.init(H, f, None, None, C, lo_c, hi_c, np.maximum(lb, -1e20), np.minimum(ub, 1e20))
+        else:
+            qp.init(H, f, None, None, C, lo_c, hi_c)
+        qp.solve()
+        res = qp.results
+        status = res.info.status
     name = str(status).split(".")[-1]
-    if status == proxqp.QPSolverOutput.PROXQP_SOLVED:
+    if status in (
+        proxqp.QPSolverOutput.PROXQP_SOLVED,
+        proxqp.QPSolverOutput.PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE,
+    ):
         return QPResult(np.array(res.x, dtype=float).reshape(n), OK, name)
     if status in (
         proxqp.QPSolverOutput.PROXQP_PRIMAL_INFEASIBLE,
@@ -239,50 +293,91 @@ def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
     return QPResult(None, FAILED, f"proxqp: {name}")
 
 
+#: Backends whose "almost solved" answers are accepted at our tight tolerances (the
+#: point must still satisfy the QP's rows to 1e-7, and the stack re-checks it).
+_ALMOST_OK = frozenset({"clarabel", "scs", "osqp"})
+
+
+def _as_rows(G, lo, hi, lb, ub, k):
+    """Two-sided rows and box as one-sided ``G y ≤ h`` rows (finite entries only)."""
+    rows, rhs = [], []
+    fl, fh = np.isfinite(lo), np.isfinite(hi)
+    if fh.any():
+        rows.append(G[fh])
+        rhs.append(hi[fh])
+    if fl.any():
+        rows.append(-G[fl])
+        rhs.append(-lo[fl])
+    if lb is not None:
+        # finite box entries become rows: backends disagree on infinite box entries
+        eye = np.eye(k)
+        bu, bl = np.isfinite(ub), np.isfinite(lb)
+        if bu.any():
+            rows.append(eye[bu])
+            rhs.append(ub[bu])
+        if bl.any():
+            rows.append(-eye[bl])
+            rhs.append(-lb[bl])
+    if not rows:
+        return None, None
+    return np.vstack(rows), np.concatenate(rhs)
+
+
+def _generic_once(name, H, f, G, lo, hi, lb, ub, y0) -> QPResult:
+    import qpsolvers
+
+    k = H.shape[0]
+    Gq, hq = _as_rows(G, lo, hi, lb, ub, k)
+    Hq = H
+    if name not in qpsolvers.dense_solvers:
+        from scipy import sparse
+
+        Hq = sparse.csc_matrix(H)
+        Gq = None if Gq is None else sparse.csc_matrix(Gq)
+    problem = qpsolvers.Problem(Hq, f, Gq, hq)
+    try:
+        with warnings.catch_warnings():
+            # e.g. osqp 1.x's PendingDeprecationWarning about raise_error
+            warnings.simplefilter("ignore")
+            sol = qpsolvers.solve_problem(
+                problem, solver=name, initvals=y0, **_GENERIC_SETTINGS.get(name, {})
+            )
+    except Exception as exc:  # backends raise a zoo of exception types
+        return QPResult(None, FAILED, f"{name}: {type(exc).__name__}: {exc}")
+    x = sol.x
+    if x is None or x.shape != (k,) or not np.all(np.isfinite(x)):
+        return QPResult(None, FAILED, f"{name}: no solution found")
+    if sol.found:
+        return QPResult(np.asarray(x, dtype=float), OK, f"{name} solved")
+    if name in _ALMOST_OK:
+        gx = G @ x
+        tol = 1e-7
+        if (
+            (gx >= lo - tol * np.maximum(1.0, np.abs(lo))).all()
+            and (gx <= hi + tol * np.maximum(1.0, np.abs(hi))).all()
+            and (lb is None or ((x >= lb - tol) & (x <= ub + tol)).all())
+        ):
+            return QPResult(np.asarray(x, dtype=float), OK, f"{name}: almost solved, accepted")
+    return QPResult(None, FAILED, f"{name}: no solution found")
+
+
 def _solve_generic(name: str):
     def solve(H, f, G, lo, hi, lb, ub, y0):
-        import qpsolvers
-
+        res = _generic_once(name, H, f, G, lo, hi, lb, ub, y0)
+        if res.code == OK or name != "highs":
+            return res
+        # HiGHS 1.15 returned NaN for free variables (our slacks) of some QPs; with every
+        # variable boxed it solves them. The box is far outside any step qpcoord asks for,
+        # and a solution touching it is rejected.
         k = H.shape[0]
-        rows, rhs = [], []
-        fl, fh = np.isfinite(lo), np.isfinite(hi)
-        if fh.any():
-            rows.append(G[fh])
-            rhs.append(hi[fh])
-        if fl.any():
-            rows.append(-G[fl])
-            rhs.append(-lo[fl])
-        if lb is not None:
-            # finite box entries become rows: backends disagree on infinite box entries
-            eye = np.eye(k)
-            bu, bl = np.isfinite(ub), np.isfinite(lb)
-            if bu.any():
-                rows.append(eye[bu])
-                rhs.append(ub[bu])
-            if bl.any():
-                rows.append(-eye[bl])
-                rhs.append(-lb[bl])
-        Gq = np.vstack(rows) if rows else None
-        hq = np.concatenate(rhs) if rows else None
-        Hq = H
-        if name not in qpsolvers.dense_solvers:
-            from scipy import sparse
-
-            Hq = sparse.csc_matrix(H)
-            Gq = None if Gq is None else sparse.csc_matrix(Gq)
-        problem = qpsolvers.Problem(Hq, f, Gq, hq)
-        try:
-            with warnings.catch_warnings():
-                # e.g. osqp 1.x's PendingDeprecationWarning about raise_error
-                warnings.simplefilter("ignore")
-                sol = qpsolvers.solve_problem(
-                    problem, solver=name, initvals=y0, **_GENERIC_SETTINGS.get(name, {})
-                )
-        except Exception as exc:  # backends raise a zoo of exception types
-            return QPResult(None, FAILED, f"{name}: {type(exc).__name__}: {exc}")
-        if sol.found and sol.x is not None:
-            return QPResult(np.asarray(sol.x, dtype=float), OK, f"{name} solved")
-        return QPResult(None, FAILED, f"{name}: no solution found")
+        finite = np.concatenate((lo[np.isfinite(lo)], hi[np.isfinite(hi)], f))
+        big = 1e6 * max(1.0, float(np.abs(finite).max()) if finite.size else 1.0)
+        lb2 = np.full(k, -big) if lb is None else np.where(np.isfinite(lb), lb, -big)
+        ub2 = np.full(k, big) if ub is None else np.where(np.isfinite(ub), ub, big)
+        res = _generic_once(name, H, f, G, lo, hi, lb2, ub2, y0)
+        if res.code == OK and np.abs(res.y).max() >= 0.99 * big:
+            return QPResult(None, FAILED, f"{name}: solution reached the artificial box")
+        return res
 
     return solve
 

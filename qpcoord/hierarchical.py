@@ -7,7 +7,7 @@ Escande, Mansard & Wieber 2014):
    filtered pseudo-inverse of :mod:`qpcoord.linalg`; if the candidate satisfies the level's
    own inequalities, the inherited rows and the bounds, it is optimal and no QP is solved;
 2. otherwise a QP in ``(z, w)`` is solved, where the slack ``w`` carries the violation of
-   the level's inequality rows (``lo ≤ C x − w ≤ hi``, minimising ``Σ wᵢ·weightᵢ·wᵢ``
+   the level's inequality rows (``lo ≤ C x − w ≤ hi``, minimising ``Σ weightᵢ·wᵢ²``
    together with the damped equality residual), under the inherited rows and bounds;
 3. the optimum is frozen: the row space of ``M`` and the violated inequality rows are
    eliminated (``Z ← Z · null(F)``), the satisfied inequality rows are inherited as
@@ -15,53 +15,154 @@ Escande, Mansard & Wieber 2014):
 
 After the last level the remaining freedom is spent on the minimum-norm ``x`` (subject to
 the inherited rows and bounds), so a single equality level without bounds gives ``A⁺b``.
+
+Tolerances. In a level's QP each inequality row that ``z`` can move is normalised to a
+unit row in ``z`` (its slack in units of ``z``) and the objective is scaled so that the
+level's largest curvature is 1; ``regularization·‖z‖²`` is added in the directions the
+level's equalities leave free. A row counts as violated (and is frozen as an equality) when
+its slack exceeds ``VIOLATION_TOL`` times the row's scale (``max(|bounds|, ‖Cᵢ‖·‖x‖)``); a
+row below that stays an inequality whose bounds are opened to its current value, so lower
+levels can never make it worse. The regularisation biases a row's violation by about
+``regularization × (largest / its own curvature)``: below ``VIOLATION_TOL`` unless the
+curvatures in one level spread over more than 10³ (row norms over ~30×).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .linalg import filtered_svd
+from .linalg import filtered_svd, numerical_rank, svd
 from .problem import CompiledStack
-from .reduced import FEAS_TOL, Reduced, within
+from .reduced import Reduced
 
-__all__ = ["solve_hierarchical"]
+__all__ = ["solve_hierarchical", "VIOLATION_TOL"]
 
-#: Relative threshold above which an inequality row's optimal slack counts as a violation
-#: that is frozen as an equality for the lower levels.
-VIOLATION_TOL = 1e-9
+#: Relative slack (to the row's scale) above which an inequality row is frozen as violated.
+VIOLATION_TOL = 1e-6
+#: Relative distance to a bound under which the refinement takes a row as active.
+ACTIVE_TOL = 1e-7
+#: Relative objective increase the refinement may cost over the QP's own point.
+REFINE_SLACK = 1e-7
+_ABS_FLOOR = 1e-14
+
+
+def _finite_abs(v: np.ndarray) -> np.ndarray:
+    a = np.abs(v)
+    a[~np.isfinite(a)] = 0.0
+    return a
+
+
+def _active(values, lo, hi):
+    """Rows at their lower / upper bound (to ``ACTIVE_TOL``, relative)."""
+    at_lo = np.isfinite(lo) & (values - lo <= ACTIVE_TOL * np.maximum(1.0, np.abs(lo)))
+    at_hi = np.isfinite(hi) & (hi - values <= ACTIVE_TOL * np.maximum(1.0, np.abs(hi))) & ~at_lo
+    return at_lo, at_hi
+
+
+def _level_objective(L, x, ls_rows, ls_rhs, z, viol_rows) -> float:
+    total = 0.0
+    for A, b in zip(ls_rows, ls_rhs, strict=True):
+        res = A @ z - b
+        total += float(res @ res)
+    return total
+
+
+def _refine(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows):
+    """Solve the level exactly on the active set of the QP's point ``x + Z z0``.
+
+    Active inherited rows, bounds and satisfied level rows at a bound become equalities;
+    the level's equality rows (with their damping rows) and its violated rows are solved
+    in least squares on what remains, minimum-norm. Returns the refined ``z``, or ``None``
+    if the guess is inconsistent, infeasible or no better than the QP's point.
+    """
+    r = z0.shape[0]
+    xn0 = x + R.lift(z0)
+    E, t = [], []
+    if R.k:
+        Cin = R.Cin
+        a_lo, a_hi = _active(Cin @ xn0, R.lin, R.uin)
+        if a_lo.any() or a_hi.any():
+            act = a_lo | a_hi
+            E.append(R.reduce(Cin[act]))
+            t.append(np.where(a_lo, R.lin, R.uin)[act] - Cin[act] @ x)
+    if R.lb is not None:
+        a_lo, a_hi = _active(xn0, R.lb, R.ub)
+        if a_lo.any() or a_hi.any():
+            act = a_lo | a_hi
+            E.append(R.Z[act] if R.Z is not None else np.eye(r)[act])
+            t.append(np.where(a_lo, R.lb, R.ub)[act] - x[act])
+    sat = ~viol_rows
+    if L.m_in and sat.any():
+        Cs = L.C[sat]
+        a_lo, a_hi = _active(Cs @ xn0, L.lo[sat], L.hi[sat])
+        if a_lo.any() or a_hi.any():
+            act = a_lo | a_hi
+            E.append(R.reduce(Cs[act]))
+            t.append(np.where(a_lo, L.lo[sat], L.hi[sat])[act] - Cs[act] @ x)
+    if E:
+        Em = np.vstack(E)
+        tv = np.concatenate(t)
+        U, s, Vt = svd(Em, full=True)
+        rk = numerical_rank(s, Em.shape)
+        zp = Vt[:rk].T @ ((U[:, :rk].T @ tv) / s[:rk])
+        if np.abs(Em @ zp - tv).max() > 1e-9 * max(1.0, float(np.abs(tv).max())):
+            return None
+        N = Vt[rk:].T
+    else:
+        zp = np.zeros(r)
+        N = np.eye(r)
+    if N.shape[1] and ls_rows:
+        A = np.vstack(ls_rows)
+        b = np.concatenate(ls_rhs)
+        K = A @ N
+        U, s, Vt = svd(K, full=False)
+        rk = numerical_rank(s, K.shape)
+        if rk:
+            u = Vt[:rk].T @ ((U[:, :rk].T @ (b - A @ zp)) / s[:rk])
+            zp = zp + N @ u
+    xn = x + R.lift(zp)
+    if not np.all(np.isfinite(xn)) or not R.feasible(xn):
+        return None
+    if L.m_in and sat.any():
+        c = L.C[sat] @ xn
+        if not ((c <= L.hiw[sat]).all() and (c >= L.low[sat]).all()):
+            return None
+    before = _level_objective(L, x, ls_rows, ls_rhs, z0, viol_rows)
+    after = _level_objective(L, x, ls_rows, ls_rhs, zp, viol_rows)
+    # the QP's point may sit outside the rows by the opening RELAX and gain ~RELAX from it
+    if after > before + REFINE_SLACK * max(1.0, before):
+        return None
+    return zp
 
 
 def solve_hierarchical(
     P: CompiledStack,
-    solver: str,
+    R: Reduced,
     damping: float,
     regularization: float,
     x_warm: np.ndarray | None = None,
-) -> tuple[np.ndarray, Reduced, dict]:
-    """Solve a compiled stack lexicographically.
+) -> dict:
+    """Solve a compiled stack lexicographically into the workspace ``R`` (already reset).
 
-    Returns ``(x, reduced, info)``: the solution, the final elimination state (its
-    inherited rows are what the returned ``x`` must satisfy) and solve statistics.
+    Returns solve statistics; the solution is ``R.x`` and ``R``'s inherited rows are what
+    it must satisfy.
 
     Parameters
     ----------
     P : CompiledStack
-    solver : str
-        Backend for the QPs that closed forms cannot replace.
+    R : Reduced
+        Workspace, reset with the bounds and the solver to use for the QPs that closed
+        forms cannot replace.
     damping : float
         Relative damping threshold (see :mod:`qpcoord.linalg`).
     regularization : float
-        Weight of ``‖z‖²`` in directions a level does not determine (keeps each QP strictly
-        convex; dimensionless, relative to a unit-weight task).
+        Relative weight of ``‖z‖²`` in directions a level does not determine.
     x_warm : ndarray, optional
         A previous solution; its projection gives each level QP a primal start.
     """
-    R = Reduced(P.n, P.lb, P.ub, solver)
     R.hard_phase(P.hard)
     ranks = []
     for k, L in enumerate(P.levels):
-        where = f"level {k}"
         r = R.r
         x = R.x
         if r == 0:
@@ -69,63 +170,127 @@ def solve_hierarchical(
             R.inherit(L.C, L.lo, L.hi)
             continue
         # ---- closed form for the equality rows --------------------------------------
+        rank = 0
         if L.m_eq:
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
             U, s, Vt, rank, g = filtered_svd(M, damping)
-            tau = damping * s[0] if rank else 0.0
-            z = Vt[:rank].T @ (g * (U[:, :rank].T @ e))
-            xc = x + R.lift(z)
+            if rank:
+                xc = x + R.lift(Vt[:rank].T @ (g * (U[:, :rank].T @ e)))
+            else:
+                xc = x
         else:
-            rank = 0
-            Vt = None
             xc = x
-        ok = R.feasible(xc)
-        if ok and L.m_in:
-            ok = within(L.C @ xc, L.lo, L.hi, FEAS_TOL)
-        if ok:
-            R.move_to(xc)
+        if R.feasible(xc) and (
+            not L.m_in or ((L.C @ xc <= L.hiw).all() and (L.C @ xc >= L.low).all())
+        ):
+            R.move_to(xc, verified=True)
             if rank:
                 R.restrict(Vt[rank:].T)
             R.inherit(L.C, L.lo, L.hi)
             ranks.append(rank)
             continue
         # ---- QP with slacks --------------------------------------------------------
-        mi = L.m_in
-        kdim = r + mi
+        # Only rows that z can move get a slack; each is normalised to a unit row in z
+        # (slack w̃ in units of z, violation = ‖Dᵢ‖·w̃ᵢ) so that the QP stays well scaled
+        # whatever the rows' units.
+        curv = []
+        if rank:
+            tau = damping * s[0]
+            d = np.maximum(s[:rank] ** 2, tau * tau)
+            curv.append(d)
+        mv = 0
+        if L.m_in:
+            D = R.reduce(L.C)
+            dn = np.sqrt(np.einsum("ij,ij->i", D, D))
+            cn = np.sqrt(np.einsum("ij,ij->i", L.C, L.C))
+            movable = dn > 1e-9 * cn
+            mv = int(movable.sum())
+            if mv:
+                idx = np.flatnonzero(movable)
+                dm = dn[idx]
+                Dm = D[idx] / dm[:, None]
+                cx = L.C[idx] @ x
+                dlo = (L.lo[idx] - cx) / dm
+                dhi = (L.hi[idx] - cx) / dm
+                wcurv = (L.sw[idx] * dm) ** 2
+                curv.append(wcurv)
+        # objective scaled so the level's largest curvature is 1; the regularisation is
+        # relative to it (active-set backends lose accuracy below ~1e-10, measured)
+        cmax = max(float(c.max()) for c in curv) if curv else 1.0
+        eps = regularization
+        kdim = r + mv
         H = np.zeros((kdim, kdim))
         f = np.zeros(kdim)
         if rank:
-            d = np.full(r, regularization)
-            d[:rank] = np.maximum(s[:rank] ** 2, tau * tau)
-            H[:r, :r] = (Vt.T * d) @ Vt
-            f[:r] = -(M.T @ e)
+            dd = np.full(r, eps)
+            dd[:rank] = d / cmax
+            H[:r, :r] = (Vt.T * dd) @ Vt
+            f[:r] = -(M.T @ e) / cmax
         else:
-            H[:r, :r] = regularization * np.eye(r)
-        if mi:
-            H[r:, r:] = np.diag(L.sw**2)
-            D = np.hstack((R.reduce(L.C), -np.eye(mi)))
-            cx = L.C @ x
-            dlo, dhi = L.lo - cx, L.hi - cx
+            H[:r, :r] = eps * np.eye(r)
+        if mv:
+            H[r:, r:] = np.diag(wcurv / cmax)
+            Dy = np.hstack((Dm, -np.eye(mv)))
         else:
-            D = dlo = dhi = None
+            Dy = dlo = dhi = None
         y0 = None
         if x_warm is not None:
             y0 = np.zeros(kdim)
-            dx = x_warm - x
-            y0[:r] = dx if R.Z is None else R.Z.T @ dx
-        y = R.solve_qp(H, f, D, dlo, dhi, y0, where=where)
-        z, w = y[:r], y[r:]
-        R.move_to(x + R.lift(z))
+            y0[:r] = R.project(x_warm - x)
+        y = R.solve_qp(H, f, Dy, dlo, dhi, y0, where=f"level {k}")
+        z = y[:r]
+        xn = x + R.lift(z)
         F = [Vt[:rank]] if rank else []
-        if mi:
-            scale = np.maximum(1.0, np.maximum(np.abs(np.where(np.isfinite(L.lo), L.lo, 0.0)),
-                                               np.abs(np.where(np.isfinite(L.hi), L.hi, 0.0))))
-            viol = np.abs(w) > VIOLATION_TOL * scale
-            if viol.any():
-                F.append(D[viol, :r])
-            keep = ~viol
-            R.inherit(L.C[keep], L.lo[keep], L.hi[keep])
+        viol_rows = np.zeros(L.m_in, dtype=bool)
+        if mv:
+            w = y[r:] * dm  # violation, units of C x
+            xscale = max(float(np.abs(x).max()), float(np.abs(xn).max()))
+            scale = np.maximum(
+                np.maximum(_finite_abs(L.lo[idx]), _finite_abs(L.hi[idx])), cn[idx] * xscale
+            )
+            viol_rows[idx[np.abs(w) > VIOLATION_TOL * scale + _ABS_FLOOR]] = True
+            vscale = np.zeros(L.m_in)
+            vscale[idx] = scale
+        # exact refinement on the QP's active set (removes the backend's tolerance and
+        # the regularisation's bias before the level is frozen)
+        ls_rows, ls_rhs = [], []
+        if rank:
+            ls_rows.append(M)
+            ls_rhs.append(e)
+            damped = s[:rank] < tau
+            if damped.any():
+                gain = np.sqrt(tau * tau - s[:rank][damped] ** 2)
+                ls_rows.append(gain[:, None] * Vt[:rank][damped])
+                ls_rhs.append(np.zeros(int(damped.sum())))
+        if viol_rows.any():
+            Cv = L.C[viol_rows]
+            cxv = Cv @ xn
+            target = np.where(cxv > L.hi[viol_rows], L.hi[viol_rows], L.lo[viol_rows])
+            swv = L.sw[viol_rows]
+            ls_rows.append(swv[:, None] * R.reduce(Cv))
+            ls_rhs.append(swv * (target - Cv @ x))
+        zp = _refine(R, L, x, z, ls_rows, ls_rhs, viol_rows)
+        if zp is not None:
+            z = zp
+            xn = x + R.lift(z)
+            R.polished += 1
+            if viol_rows.any():
+                # classify on the refined point's own violation: a row the QP's tolerance
+                # left violated but the exact solve satisfies is not frozen
+                cv = L.C[viol_rows] @ xn
+                gap = np.maximum(L.lo[viol_rows] - cv, cv - L.hi[viol_rows])
+                still = gap > VIOLATION_TOL * vscale[viol_rows] + _ABS_FLOOR
+                viol_rows[np.flatnonzero(viol_rows)[~still]] = False
+        R.move_to(xn, verified=False)
+        if viol_rows.any():
+            F.append(R.reduce(L.C[viol_rows]))
+        if L.m_in:
+            # rows kept as inequalities are inherited with their bounds opened to the
+            # current value: a violation under the threshold may stay, never grow
+            keep = ~viol_rows
+            cxn = L.C[keep] @ R.x
+            R.inherit(L.C[keep], np.minimum(L.lo[keep], cxn), np.maximum(L.hi[keep], cxn))
         if F:
             R.freeze(np.vstack(F) if len(F) > 1 else F[0])
         ranks.append(r - R.r)
@@ -134,22 +299,19 @@ def solve_hierarchical(
     if r:
         x = R.x
         if R.Z is None:
-            xc = np.zeros(P.n) if R.lb is None else np.clip(np.zeros(P.n), R.lb, R.ub)
-            if not R.feasible(xc):
-                xc = None
+            xc = np.zeros(P.n)
         else:
             xc = x - R.Z @ (R.Z.T @ x)
-            if not R.feasible(xc):
-                xc = None
-        if xc is not None:
-            R.x = xc
+        if R.feasible(xc):
+            R.move_to(xc, verified=True)
         else:
-            f = x.copy() if R.Z is None else R.Z.T @ x
-            y0 = None
-            if x_warm is not None:
-                dx = x_warm - x
-                y0 = dx if R.Z is None else R.Z.T @ dx
-            z = R.solve_qp(np.eye(r), f, y0=y0, where="minimum-norm step")
-            R.move_to(x + R.lift(z))
-    info = {"qp_calls": R.qp_calls, "level_ranks": ranks, "free_dofs": r}
-    return R.x, R, info
+            y0 = None if x_warm is None else R.project(x_warm - x)
+            z = R.solve_qp(np.eye(r), R.project(x), y0=y0, where="minimum-norm step")
+            R.move_to(x + R.lift(z), verified=False)
+    return {
+        "qp_calls": R.qp_calls,
+        "retries": R.retries,
+        "polished": R.polished,
+        "level_ranks": ranks,
+        "free_dofs": r,
+    }

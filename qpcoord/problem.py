@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .reduced import FEAS_TOL, widen
 from .tasks import Bounds, Equality, Inequality
 
 __all__ = ["CompiledLevel", "CompiledStack", "compile_stack"]
@@ -44,6 +45,8 @@ class CompiledLevel:
         self.lo = np.zeros(mi)
         self.hi = np.zeros(mi)
         self.sw = np.ones(mi)
+        self.low = self.lo  # lo/hi widened by FEAS_TOL (the closed-form feasibility test)
+        self.hiw = self.hi
         self._eq_shapes = [t.A.shape for t in self.eqs]
         self._in_shapes = [t.C.shape for t in self.ineqs]
 
@@ -64,9 +67,13 @@ class CompiledLevel:
             if t.A.shape != shape:
                 raise ValueError(f"{t.label}: A changed shape from {shape} to {t.A.shape}")
             m = shape[0]
-            sw = np.sqrt(t.weight)
-            np.multiply(t.A, sw[:, None], out=self.Ae[i : i + m])
-            np.multiply(t.b, sw, out=self.be[i : i + m])
+            if t.unit_weight:
+                self.Ae[i : i + m] = t.A
+                self.be[i : i + m] = t.b
+            else:
+                sw = t.sqrt_weight
+                np.multiply(t.A, sw[:, None], out=self.Ae[i : i + m])
+                np.multiply(t.b, sw, out=self.be[i : i + m])
             i += m
         i = 0
         for t, shape in zip(self.ineqs, self._in_shapes, strict=True):
@@ -76,8 +83,10 @@ class CompiledLevel:
             self.C[i : i + m] = t.C
             self.lo[i : i + m] = t.lower
             self.hi[i : i + m] = t.upper
-            np.sqrt(t.weight, out=self.sw[i : i + m])
+            self.sw[i : i + m] = t.sqrt_weight
             i += m
+        if self.ineqs:
+            self.low, self.hiw = widen(self.lo, self.hi, FEAS_TOL)
 
     def residual(self, x: np.ndarray) -> float:
         """Norm of the weighted equality residual and inequality violation at ``x``."""
@@ -102,6 +111,11 @@ class CompiledStack:
     bounds: Bounds | None
     lb: np.ndarray | None = None
     ub: np.ndarray | None = None
+
+    @property
+    def capacity(self) -> int:
+        """Most inequality rows a solve can inherit."""
+        return self.hard.m_in + sum(L.m_in for L in self.levels)
 
     @property
     def has_inequalities(self) -> bool:

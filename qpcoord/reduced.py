@@ -6,6 +6,9 @@ and ``x̄`` is the current solution. Inequality rows that must keep holding (bou
 inequalities, satisfied rows of higher levels) are *inherited*: every later QP sees them as
 constraints on ``z``. Because ``x̄`` satisfies all of them, ``z = 0`` is always feasible for a
 later level, so a strict hierarchy cannot become spuriously infeasible.
+
+One :class:`Reduced` workspace belongs to a compiled stack and is reset at every solve: the
+inherited-row buffers are allocated once (the per-step hot path).
 """
 
 from __future__ import annotations
@@ -14,9 +17,10 @@ import numpy as np
 
 from .backends import INFEASIBLE, OK, solve_dense_qp
 from .errors import InfeasibleError, SolverError
-from .linalg import null_space
+from .linalg import null_space, numerical_rank, svd
+from .polish import polish
 
-__all__ = ["Reduced", "FEAS_TOL", "CHECK_TOL"]
+__all__ = ["Reduced", "FEAS_TOL", "CHECK_TOL", "within", "widen"]
 
 #: Relative tolerance under which a closed-form candidate counts as feasible
 #: (``row ≤ hi + FEAS_TOL·max(1, |hi|)``).
@@ -24,36 +28,91 @@ FEAS_TOL = 1e-9
 #: Relative tolerance of the final check of every returned ``x`` against the hard
 #: constraints and inherited rows; beyond it a :class:`SolverError` is raised.
 CHECK_TOL = 1e-6
+#: Relative opening of inherited rows and bounds in the QPs of lower levels, per backend:
+#: active-set backends resolve a point pinned by active rows exactly; the others need a
+#: feasible set at least as wide as their tolerances (proxqp and highs reported
+#: "infeasible" on 1e-12-wide sets that daqp and quadprog solved).
+RELAX = {"daqp": 1e-12, "quadprog": 1e-12}
+RELAX_DEFAULT = 1e-8
 
 
-def _slack(bound: np.ndarray, tol: float) -> np.ndarray:
-    return tol * np.maximum(1.0, np.abs(np.where(np.isfinite(bound), bound, 0.0)))
+def widen(lo: np.ndarray, hi: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo − tol·max(1,|lo|), hi + tol·max(1,|hi|))``; infinite bounds stay infinite."""
+    return lo - tol * np.maximum(1.0, np.abs(lo)), hi + tol * np.maximum(1.0, np.abs(hi))
 
 
 def within(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
     """True if ``lo − tol·max(1,|lo|) ≤ values ≤ hi + tol·max(1,|hi|)`` (±inf bounds allowed)."""
     if values.size == 0:
         return True
-    # with hi = +inf the right side is +inf; with lo = -inf, lo - values = -inf: both pass
-    return bool(
-        (values - hi <= tol * np.maximum(1.0, np.abs(hi))).all()
-        and (lo - values <= tol * np.maximum(1.0, np.abs(lo))).all()
-    )
+    low, high = widen(lo, hi, tol)
+    return bool((values <= high).all() and (values >= low).all())
 
 
 class Reduced:
-    """Current solution ``x̄``, null-space basis ``Z`` and inherited inequality rows."""
+    """Current solution ``x̄``, null-space basis ``Z`` and inherited inequality rows.
 
-    def __init__(self, n: int, lb: np.ndarray | None, ub: np.ndarray | None, solver: str):
+    Parameters
+    ----------
+    n : int
+        Number of variables.
+    capacity : int
+        Most inherited rows a solve can collect (hard inequalities plus every level's).
+    """
+
+    def __init__(self, n: int, capacity: int) -> None:
         self.n = n
-        self.x = np.zeros(n)
+        self._C = np.empty((capacity, n))
+        self._lo = np.empty(capacity)
+        self._hi = np.empty(capacity)
+        self._low = np.empty(capacity)  # widened by FEAS_TOL, for the closed-form test
+        self._high = np.empty(capacity)
+        self.reset(None, None, "")
+
+    def reset(self, lb: np.ndarray | None, ub: np.ndarray | None, solver: str) -> Reduced:
+        """Start a new solve at ``x̄ = 0`` with the full freedom."""
+        self.x = np.zeros(self.n)
         self.Z: np.ndarray | None = None
+        self.k = 0
         self.lb, self.ub = lb, ub
+        if lb is not None:
+            self.lbw, self.ubw = widen(lb, ub, FEAS_TOL)
         self.solver = solver
-        self.Cin = np.zeros((0, n))
-        self.lin = np.zeros(0)
-        self.uin = np.zeros(0)
+        self.relax = RELAX.get(solver, RELAX_DEFAULT)
+        self.used_relax = self.relax
         self.qp_calls = 0
+        self.retries = 0
+        self.polished = 0
+        self.verified = True  # x̄ passed the feasibility test (no QP output since)
+        return self
+
+    # -- inherited rows -----------------------------------------------------------------
+    @property
+    def Cin(self) -> np.ndarray:
+        """Inherited rows (k × n)."""
+        return self._C[: self.k]
+
+    @property
+    def lin(self) -> np.ndarray:
+        """Lower bounds of the inherited rows."""
+        return self._lo[: self.k]
+
+    @property
+    def uin(self) -> np.ndarray:
+        """Upper bounds of the inherited rows."""
+        return self._hi[: self.k]
+
+    def inherit(self, C: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Add inequality rows (x-space) that every later level must keep satisfied."""
+        m = C.shape[0]
+        if m == 0:
+            return
+        k = self.k
+        self._C[k : k + m] = C
+        self._lo[k : k + m] = lo
+        self._hi[k : k + m] = hi
+        self._low[k : k + m], self._high[k : k + m] = widen(lo, hi, FEAS_TOL)
+        self.k = k + m
 
     # -- parameterisation -------------------------------------------------------------
     @property
@@ -69,10 +128,9 @@ class Reduced:
         """``Z z`` (a z-space step to x-space)."""
         return z if self.Z is None else self.Z @ z
 
-    def move_to(self, x: np.ndarray) -> None:
-        """Set ``x̄``, snapped into the bounds (removes a backend's ~1e-12 overshoot, which
-        would otherwise make ``z = 0`` infeasible for the next level)."""
-        self.x = x if self.lb is None else np.clip(x, self.lb, self.ub)
+    def project(self, v: np.ndarray) -> np.ndarray:
+        """``Zᵀ v`` (an x-space vector to z-space coordinates)."""
+        return v if self.Z is None else self.Z.T @ v
 
     def restrict(self, basis: np.ndarray) -> None:
         """Keep only the z-directions spanned by ``basis`` (r × r', orthonormal columns)."""
@@ -83,24 +141,37 @@ class Reduced:
         if F.shape[0]:
             self.restrict(null_space(F))
 
-    def inherit(self, C: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Add inequality rows (x-space) that every later level must keep satisfied."""
-        if C.shape[0] == 0:
-            return
-        self.Cin = np.vstack((self.Cin, C))
-        self.lin = np.concatenate((self.lin, lo))
-        self.uin = np.concatenate((self.uin, hi))
+    def move_to(self, x: np.ndarray, verified: bool) -> None:
+        """Set ``x̄``. A QP output (``verified=False``) is snapped into the bounds: that
+        removes a backend's ~1e-12 overshoot, which would make ``z = 0`` infeasible for
+        the next level."""
+        if not verified and self.lb is not None:
+            x = np.minimum(np.maximum(x, self.lb), self.ub)
+        self.x = x
+        self.verified = verified
 
     # -- checks ---------------------------------------------------------------------
-    def feasible(self, x: np.ndarray, tol: float = FEAS_TOL) -> bool:
-        """Does ``x`` satisfy the bounds and inherited rows (to ``tol``, relative)?"""
-        if self.lb is not None and not within(x, self.lb, self.ub, tol):
+    def feasible(self, x: np.ndarray) -> bool:
+        """Does ``x`` satisfy the bounds and inherited rows (to ``FEAS_TOL``, relative)?"""
+        if self.lb is not None and not ((x <= self.ubw).all() and (x >= self.lbw).all()):
             return False
-        return within(self.Cin @ x, self.lin, self.uin, tol) if self.Cin.shape[0] else True
+        k = self.k
+        if k:
+            c = self._C[:k] @ x
+            return bool((c <= self._high[:k]).all() and (c >= self._low[:k]).all())
+        return True
 
     # -- QP in z (plus optional slack block) -------------------------------------------
-    def _assemble(self, k: int, D, dlo, dhi):
-        """Constraint rows of a QP in ``y = (z, w)`` (``k`` entries, ``w`` unbounded)."""
+    def _relax(self, bound: np.ndarray) -> np.ndarray:
+        """``RELAX·max(1, |bound|)``: opens the inherited rows by a hair so that a point
+        pinned by more active rows than free directions is not a degenerate vertex (daqp
+        declared such QPs infeasible). Bounds are snapped back after the solve."""
+        if self.relax == 0.0:
+            return 0.0
+        return self.relax * np.maximum(1.0, np.abs(bound))
+
+    def _assemble(self, kdim: int, D, dlo, dhi):
+        """Constraint rows of a QP in ``y = (z, w)`` (``kdim`` entries, ``w`` unbounded)."""
         r = self.r
         x = self.x
         blocks, los, his = [], [], []
@@ -108,30 +179,32 @@ class Reduced:
             blocks.append(D)
             los.append(dlo)
             his.append(dhi)
-        if self.Cin.shape[0]:
-            Cz = self.reduce(self.Cin)
-            cx = self.Cin @ x
-            if k > r:
-                Cz = np.hstack((Cz, np.zeros((Cz.shape[0], k - r))))
+        k = self.k
+        if k:
+            Cin = self._C[:k]
+            Cz = self.reduce(Cin)
+            cx = Cin @ x
+            if kdim > r:
+                Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
             blocks.append(Cz)
             # x̄ meets these rows up to the previous solve's tolerance; never ask for more
             # than z = 0 already gives, so the QP stays feasible by construction
-            los.append(np.minimum(self.lin - cx, 0.0))
-            his.append(np.maximum(self.uin - cx, 0.0))
+            los.append(np.minimum(self._lo[:k] - cx, 0.0) - self._relax(self._lo[:k]))
+            his.append(np.maximum(self._hi[:k] - cx, 0.0) + self._relax(self._hi[:k]))
         lb = ub = None
         if self.lb is not None:
             if self.Z is None:
-                lb = np.full(k, -np.inf)
-                ub = np.full(k, np.inf)
-                lb[:r] = self.lb - x
-                ub[:r] = self.ub - x
+                lb = np.full(kdim, -np.inf)
+                ub = np.full(kdim, np.inf)
+                lb[:r] = np.minimum(self.lb - x, 0.0) - self._relax(self.lb)
+                ub[:r] = np.maximum(self.ub - x, 0.0) + self._relax(self.ub)
             else:
-                Zr = self.Z if k == r else np.hstack((self.Z, np.zeros((self.n, k - r))))
+                Zr = self.Z if kdim == r else np.hstack((self.Z, np.zeros((self.n, kdim - r))))
                 blocks.append(Zr)
-                los.append(self.lb - x)
-                his.append(self.ub - x)
+                los.append(np.minimum(self.lb - x, 0.0) - self._relax(self.lb))
+                his.append(np.maximum(self.ub - x, 0.0) + self._relax(self.ub))
         if not blocks:
-            return np.zeros((0, k)), np.zeros(0), np.zeros(0), lb, ub
+            return np.zeros((0, kdim)), np.zeros(0), np.zeros(0), lb, ub
         if len(blocks) == 1:
             return blocks[0], los[0], his[0], lb, ub
         return np.vstack(blocks), np.concatenate(los), np.concatenate(his), lb, ub
@@ -149,23 +222,36 @@ class Reduced:
         """Solve ``min ½yᵀHy + fᵀy`` over ``y = (z, w)`` with the inherited rows and bounds
         on ``x̄ + Z z`` and the extra rows ``dlo ≤ D y ≤ dhi``; ``w`` (``len(y) − r`` slack
         entries) is unbounded. Returns ``y``; raises :class:`SolverError` on failure."""
-        G, lo, hi, lb, ub = self._assemble(H.shape[0], D, dlo, dhi)
+        kdim = H.shape[0]
+        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
         self.qp_calls += 1
         res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, y0)
-        if res.code == INFEASIBLE and (self.Cin.shape[0] or self.lb is not None):
-            # z = 0 is feasible by construction, up to the previous solve's tolerance:
-            # relax the inherited rows by a hair and try once more.
-            t = CHECK_TOL * 1e-2
+        if res.code != OK and y0 is not None:
+            # a warm start can mislead an active-set backend: once more from cold
             self.qp_calls += 1
-            res = solve_dense_qp(
-                self.solver, H, f, G, lo - _slack(lo, t), hi + _slack(hi, t),
-                None if lb is None else lb - _slack(lb, t),
-                None if ub is None else ub + _slack(ub, t),
-                None,
-            )
+            res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
+        if res.code != OK and (self.k or self.lb is not None):
+            # a point pinned by more active rows than free directions leaves a feasible
+            # set as thin as the opening; some backends call that infeasible: open it
+            # 100× wider once (the final check allows for it)
+            self.retries += 1
+            keep = self.relax
+            self.relax = keep * 100.0
+            G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+            self.relax = keep
+            self.used_relax = max(self.used_relax, keep * 100.0)
+            self.qp_calls += 1
+            res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
         if res.code != OK:
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
-        return res.y
+        if res.exact:
+            return res.y
+        # polish against the unopened rows: the point lands exactly on the true bounds
+        keep = self.relax
+        self.relax = 0.0
+        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+        self.relax = keep
+        return polish(H, f, G, lo, hi, lb, ub, res.y)
 
     def hard_phase(self, hard, where: str = "constraints") -> None:
         """Satisfy the hard constraints and bounds; start at the min-norm feasible point.
@@ -177,27 +263,24 @@ class Reduced:
         """
         if hard.m_eq:
             Ae, be = hard.Ae, hard.be
-            U, s, Vt = np.linalg.svd(Ae, full_matrices=True)
-            rank = 0
-            if s.size and s[0] > 0:
-                rank = int(np.count_nonzero(s > max(Ae.shape) * np.finfo(float).eps * s[0]))
-            self.x = Vt[:rank].T @ ((U[:, :rank].T @ be) / s[:rank])
-            res = Ae @ self.x - be
-            scale = max(1.0, float(np.max(np.abs(be))) if be.size else 1.0)
+            U, s, Vt = svd(Ae, full=True)
+            rank = numerical_rank(s, Ae.shape)
+            x = Vt[:rank].T @ ((U[:, :rank].T @ be) / s[:rank])
+            res = Ae @ x - be
+            scale = max(1.0, float(np.max(np.abs(be))))
             if float(np.max(np.abs(res))) > CHECK_TOL * scale:
                 names = ", ".join(t.label for t in hard.eqs)
                 raise InfeasibleError(
                     f"hard equality constraints are inconsistent ({names}): "
                     f"least-squares residual {np.linalg.norm(res):.3g}"
                 )
+            self.x = x
             self.restrict(Vt[rank:].T)
         self.inherit(hard.C, hard.lo, hard.hi)
-        if self.lb is None and not self.Cin.shape[0]:
+        if (self.lb is None and not self.k) or self.feasible(self.x):
             return
-        if self.feasible(self.x):
-            return
-        if self.lb is not None and self.Z is None and not self.Cin.shape[0]:
-            self.x = np.clip(self.x, self.lb, self.ub)
+        if self.lb is not None and self.Z is None and not self.k:
+            self.x = np.minimum(np.maximum(self.x, self.lb), self.ub)
             return
         r = self.r
         if r == 0:
@@ -205,12 +288,21 @@ class Reduced:
                 f"{where}: the hard equalities fix x completely and it violates the bounds "
                 "or hard inequalities"
             )
-        H = np.eye(r)
-        f = self.x.copy() if self.Z is None else self.Z.T @ self.x
         x = self.x
         G, lo, hi, lb, ub = self._assemble(r, None, None, None)
+        # the start point need not be feasible here: use the true row bounds
+        if self.k:
+            cx = self._C[: self.k] @ x
+            lo[: self.k] = self._lo[: self.k] - cx
+            hi[: self.k] = self._hi[: self.k] - cx
+        if self.lb is not None:
+            if self.Z is None:
+                lb, ub = self.lb - x, self.ub - x
+            else:
+                lo[self.k :] = self.lb - x
+                hi[self.k :] = self.ub - x
         self.qp_calls += 1
-        res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
+        res = solve_dense_qp(self.solver, np.eye(r), self.project(x), G, lo, hi, lb, ub, None)
         if res.code == INFEASIBLE:
             raise InfeasibleError(
                 f"{where}: bounds and hard constraints are inconsistent "
@@ -219,9 +311,12 @@ class Reduced:
         if res.code != OK:
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
         xn = x + self.lift(res.y)
-        if not self.feasible(xn, CHECK_TOL):
+        if not (
+            (self.lb is None or within(xn, self.lb, self.ub, CHECK_TOL))
+            and within(self.Cin @ xn, self.lin, self.uin, CHECK_TOL)
+        ):
             raise InfeasibleError(
                 f"{where}: bounds and hard constraints appear inconsistent "
                 f"({self.solver} returned a point violating them)"
             )
-        self.x = xn
+        self.move_to(xn, verified=False)

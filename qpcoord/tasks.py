@@ -113,7 +113,13 @@ class Equality:
         label = _label(self.kind, self.name)
         self.A = _matrix(A, "A", label)
         self.b = _vector(b, self.A.shape[0], "b", label)
-        self.weight = _weight(weight, self.A.shape[0], label)
+        self._set_weight(_weight(weight, self.A.shape[0], label))
+
+    def _set_weight(self, w: np.ndarray) -> None:
+        self.weight = w
+        #: ``√weight`` (cached: weights rarely change between control steps)
+        self.sqrt_weight = np.sqrt(w)
+        self.unit_weight = bool((w == 1.0).all())
 
     @property
     def label(self) -> str:
@@ -138,7 +144,7 @@ class Equality:
         if b is not None:
             self.b = _vector(b, self.A.shape[0], "b", label)
         if weight is not None:
-            self.weight = _weight(weight, self.A.shape[0], label)
+            self._set_weight(_weight(weight, self.A.shape[0], label))
         return self
 
     def residual(self, x: np.ndarray) -> np.ndarray:
@@ -177,7 +183,12 @@ class Inequality:
         self.lower = _vector(-np.inf if lower is None else lower, m, "lower", label, allow_inf=-1)
         self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
         self._check_order()
-        self.weight = _weight(weight, m, label)
+        self._set_weight(_weight(weight, m, label))
+
+    def _set_weight(self, w: np.ndarray) -> None:
+        self.weight = w
+        #: ``√weight`` (cached: weights rarely change between control steps)
+        self.sqrt_weight = np.sqrt(w)
 
     @property
     def label(self) -> str:
@@ -214,7 +225,7 @@ class Inequality:
             self.upper = _vector(upper, m, "upper", label, allow_inf=+1)
         self._check_order()
         if weight is not None:
-            self.weight = _weight(weight, m, label)
+            self._set_weight(_weight(weight, m, label))
         return self
 
     def violation(self, x: np.ndarray) -> np.ndarray:

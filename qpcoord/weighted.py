@@ -10,30 +10,33 @@ priorities.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import lapack
 
 from .problem import CompiledStack
-from .reduced import FEAS_TOL, Reduced, within
+from .reduced import Reduced
 
 __all__ = ["solve_weighted"]
 
 
 def solve_weighted(
     P: CompiledStack,
-    solver: str,
+    R: Reduced,
     regularization: float,
     weight_ratio: float,
     x_warm: np.ndarray | None = None,
-) -> tuple[np.ndarray, Reduced, dict]:
-    """Solve a compiled stack as one weighted QP. Returns ``(x, reduced, info)``."""
-    R = Reduced(P.n, P.lb, P.ub, solver)
+) -> dict:
+    """Solve a compiled stack as one weighted QP into the workspace ``R`` (already reset).
+
+    Returns solve statistics; the solution is ``R.x``.
+    """
     R.hard_phase(P.hard)
     r = R.r
     x = R.x
     if r == 0:
-        return x, R, {"qp_calls": R.qp_calls}
+        return {"qp_calls": R.qp_calls, "retries": R.retries}
     H = np.zeros((r, r))
     f = np.zeros(r)
-    Cs, los, his, sws = [], [], [], []
+    soft = []
     beta = 1.0
     for L in P.levels:
         if L.m_eq:
@@ -42,44 +45,38 @@ def solve_weighted(
             H += beta * (M.T @ M)
             f -= beta * (M.T @ e)
         if L.m_in:
-            Cs.append(L.C)
-            los.append(L.lo)
-            his.append(L.hi)
-            sws.append(np.sqrt(beta) * L.sw)
+            soft.append((L, np.sqrt(beta)))
         beta *= weight_ratio
-    H.flat[:: r + 1] += regularization
+    H.flat[:: r + 1] += regularization * max(1.0, float(H.diagonal().max()))
     # unconstrained optimum first: if it violates nothing it is the QP's optimum
-    try:
-        cho = np.linalg.cholesky(H)
-        z = np.linalg.solve(cho.T, np.linalg.solve(cho, -f))
+    cho, info = lapack.dpotrf(H, lower=0, clean=1)
+    if info == 0:
+        z, info = lapack.dpotrs(cho, -f, lower=0)
+    if info == 0:
         xc = x + R.lift(z)
-        ok = R.feasible(xc)
-        if ok and Cs:
-            for C, lo, hi in zip(Cs, los, his, strict=True):
-                if not within(C @ xc, lo, hi, FEAS_TOL):
-                    ok = False
-                    break
-    except np.linalg.LinAlgError:
-        ok = False
-    if ok:
-        return xc, R, {"qp_calls": R.qp_calls}
-    mi = sum(C.shape[0] for C in Cs)
+        if R.feasible(xc) and all(
+            (L.C @ xc <= L.hiw).all() and (L.C @ xc >= L.low).all() for L, _ in soft
+        ):
+            R.move_to(xc, verified=True)
+            return {"qp_calls": R.qp_calls, "retries": R.retries}
+    mi = sum(L.m_in for L, _ in soft)
     if mi:
-        C = np.vstack(Cs)
-        sw = np.concatenate(sws)
+        C = np.vstack([L.C for L, _ in soft])
+        sw = np.concatenate([b * L.sw for L, b in soft])
         Hy = np.zeros((r + mi, r + mi))
         Hy[:r, :r] = H
         Hy[r:, r:] = np.diag(sw**2)
         fy = np.concatenate((f, np.zeros(mi)))
         D = np.hstack((R.reduce(C), -np.eye(mi)))
         cx = C @ x
-        dlo, dhi = np.concatenate(los) - cx, np.concatenate(his) - cx
+        dlo = np.concatenate([L.lo for L, _ in soft]) - cx
+        dhi = np.concatenate([L.hi for L, _ in soft]) - cx
     else:
         Hy, fy, D, dlo, dhi = H, f, None, None, None
     y0 = None
     if x_warm is not None:
         y0 = np.zeros(Hy.shape[0])
-        dx = x_warm - x
-        y0[:r] = dx if R.Z is None else R.Z.T @ dx
+        y0[:r] = R.project(x_warm - x)
     y = R.solve_qp(Hy, fy, D, dlo, dhi, y0, where="weighted QP")
-    return x + R.lift(y[:r]), R, {"qp_calls": R.qp_calls}
+    R.move_to(x + R.lift(y[:r]), verified=False)
+    return {"qp_calls": R.qp_calls, "retries": R.retries}
