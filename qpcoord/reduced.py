@@ -83,6 +83,7 @@ class Reduced:
         self.qp_calls = 0
         self.retries = 0
         self.polished = 0
+        self.last_exact = True  # the last QP answer was exact to round-off
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
         return self
 
@@ -244,6 +245,7 @@ class Reduced:
             res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
         if res.code != OK:
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
+        self.last_exact = res.exact
         if res.exact:
             return res.y
         # polish against the unopened rows: the point lands exactly on the true bounds
