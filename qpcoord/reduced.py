@@ -49,6 +49,26 @@ def within(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bo
     return bool((values <= high).all() and (values >= low).all())
 
 
+def _lp_feasible(G, lo, hi, lb, ub) -> bool:
+    """Is ``{y : lo ≤ G y ≤ hi, lb ≤ y ≤ ub}`` non-empty? (HiGHS LP via scipy.)"""
+    from scipy.optimize import linprog
+
+    k = G.shape[1]
+    fl, fh = np.isfinite(lo), np.isfinite(hi)
+    A = np.vstack((G[fh], -G[fl]))
+    b = np.concatenate((hi[fh], -lo[fl]))
+    if lb is None:
+        bounds = [(None, None)] * k
+    else:
+        bounds = [
+            (None if not np.isfinite(a) else a, None if not np.isfinite(c) else c)
+            for a, c in zip(lb, ub, strict=True)
+        ]
+    res = linprog(np.zeros(k), A_ub=A if A.shape[0] else None, b_ub=b if A.shape[0] else None,
+                  bounds=bounds, method="highs")
+    return res.status != 2  # 2: infeasible
+
+
 class Reduced:
     """Current solution ``x̄``, null-space basis ``Z`` and inherited inequality rows.
 
@@ -305,12 +325,14 @@ class Reduced:
                 hi[self.k :] = self.ub - x
         self.qp_calls += 1
         res = solve_dense_qp(self.solver, np.eye(r), self.project(x), G, lo, hi, lb, ub, None)
-        if res.code == INFEASIBLE:
-            raise InfeasibleError(
-                f"{where}: bounds and hard constraints are inconsistent "
-                f"({self.solver}: {res.message})"
-            )
         if res.code != OK:
+            # backends behind qpsolvers cannot say "infeasible"; decide it independently
+            if res.code == INFEASIBLE or not _lp_feasible(G, lo, hi, lb, ub):
+                how = "" if res.code == INFEASIBLE else "; confirmed by an LP feasibility test"
+                raise InfeasibleError(
+                    f"{where}: bounds and hard constraints are inconsistent "
+                    f"({res.message}{how})"
+                )
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
         xn = x + self.lift(res.y)
         if not (
