@@ -143,6 +143,32 @@ def check_solver(solver: str | None) -> str:
     return solver
 
 
+def as_rows(G, lo, hi, lb, ub, k):
+    """Two-sided rows and box as one-sided ``G y ≤ h`` rows (finite entries only)."""
+    rows, rhs = [], []
+    fl, fh = np.isfinite(lo), np.isfinite(hi)
+    if fh.any():
+        rows.append(G[fh])
+        rhs.append(hi[fh])
+    if fl.any():
+        rows.append(-G[fl])
+        rhs.append(-lo[fl])
+    if lb is not None:
+        # finite box entries become rows: backends disagree on infinite box entries
+        eye = np.eye(k)
+        bu, bl = np.isfinite(ub), np.isfinite(lb)
+        if bu.any():
+            rows.append(eye[bu])
+            rhs.append(ub[bu])
+        if bl.any():
+            rows.append(-eye[bl])
+            rhs.append(-lb[bl])
+    if not rows:
+        return None, None
+    return np.vstack(rows), np.concatenate(rhs)
+
+
+
 # --------------------------------------------------------------------------------------
 # Direct backends
 # --------------------------------------------------------------------------------------
@@ -204,29 +230,10 @@ def _solve_quadprog(H, f, G, lo, hi, lb, ub, y0):
     import quadprog
 
     n = H.shape[0]
-    rows, rhs = [], []
-    fl, fh = np.isfinite(lo), np.isfinite(hi)
-    if fl.any():
-        rows.append(G[fl])
-        rhs.append(lo[fl])
-    if fh.any():
-        rows.append(-G[fh])
-        rhs.append(-hi[fh])
-    if lb is not None:
-        eye = np.eye(n)
-        bl, bu = np.isfinite(lb), np.isfinite(ub)
-        if bl.any():
-            rows.append(eye[bl])
-            rhs.append(lb[bl])
-        if bu.any():
-            rows.append(-eye[bu])
-            rhs.append(-ub[bu])
-    if rows:
-        C = np.vstack(rows).T
-        b = np.concatenate(rhs)
-    else:
-        C = np.zeros((n, 0))
-        b = np.zeros(0)
+    Gq, hq = as_rows(G, lo, hi, lb, ub, n)
+    # quadprog wants Cᵀ y ≥ b
+    C = np.zeros((n, 0)) if Gq is None else -Gq.T
+    b = np.zeros(0) if hq is None else -hq
     try:
         x = quadprog.solve_qp(H, -f, C, b, 0)[0]
     except ValueError as exc:
@@ -298,36 +305,11 @@ def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
 _ALMOST_OK = frozenset({"clarabel", "scs", "osqp"})
 
 
-def _as_rows(G, lo, hi, lb, ub, k):
-    """Two-sided rows and box as one-sided ``G y ≤ h`` rows (finite entries only)."""
-    rows, rhs = [], []
-    fl, fh = np.isfinite(lo), np.isfinite(hi)
-    if fh.any():
-        rows.append(G[fh])
-        rhs.append(hi[fh])
-    if fl.any():
-        rows.append(-G[fl])
-        rhs.append(-lo[fl])
-    if lb is not None:
-        # finite box entries become rows: backends disagree on infinite box entries
-        eye = np.eye(k)
-        bu, bl = np.isfinite(ub), np.isfinite(lb)
-        if bu.any():
-            rows.append(eye[bu])
-            rhs.append(ub[bu])
-        if bl.any():
-            rows.append(-eye[bl])
-            rhs.append(-lb[bl])
-    if not rows:
-        return None, None
-    return np.vstack(rows), np.concatenate(rhs)
-
-
 def _generic_once(name, H, f, G, lo, hi, lb, ub, y0) -> QPResult:
     import qpsolvers
 
     k = H.shape[0]
-    Gq, hq = _as_rows(G, lo, hi, lb, ub, k)
+    Gq, hq = as_rows(G, lo, hi, lb, ub, k)
     Hq = H
     if name not in qpsolvers.dense_solvers:
         from scipy import sparse

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .backends import INFEASIBLE, OK, solve_dense_qp
+from .backends import INFEASIBLE, OK, as_rows, solve_dense_qp
 from .errors import InfeasibleError, SolverError
 from .linalg import null_space, numerical_rank, svd
 from .polish import polish
@@ -54,18 +54,8 @@ def _lp_feasible(G, lo, hi, lb, ub) -> bool:
     from scipy.optimize import linprog
 
     k = G.shape[1]
-    fl, fh = np.isfinite(lo), np.isfinite(hi)
-    A = np.vstack((G[fh], -G[fl]))
-    b = np.concatenate((hi[fh], -lo[fl]))
-    if lb is None:
-        bounds = [(None, None)] * k
-    else:
-        bounds = [
-            (None if not np.isfinite(a) else a, None if not np.isfinite(c) else c)
-            for a, c in zip(lb, ub, strict=True)
-        ]
-    res = linprog(np.zeros(k), A_ub=A if A.shape[0] else None, b_ub=b if A.shape[0] else None,
-                  bounds=bounds, method="highs")
+    A, b = as_rows(G, lo, hi, lb, ub, k)  # the box as rows too
+    res = linprog(np.zeros(k), A_ub=A, b_ub=b, bounds=[(None, None)] * k, method="highs")
     return res.status != 2  # 2: infeasible
 
 

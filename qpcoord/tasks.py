@@ -90,7 +90,25 @@ def _weight(value, rows: int, label: str) -> np.ndarray:
     return w
 
 
-class Equality:
+class _Task:
+    """What every task shares: a name, a label for messages and cached row weights."""
+
+    kind = "Task"
+    name = ""
+
+    @property
+    def label(self) -> str:
+        """Human-readable name used in messages."""
+        return _label(self.kind, self.name)
+
+    def _set_weight(self, w: np.ndarray) -> None:
+        self.weight = w
+        #: ``√weight`` (cached: weights rarely change between control steps)
+        self.sqrt_weight = np.sqrt(w)
+        self.unit_weight = bool((w == 1.0).all())
+
+
+class Equality(_Task):
     """Least-squares task ``minimise ‖diag(√w)(A x − b)‖²``.
 
     Parameters
@@ -114,17 +132,6 @@ class Equality:
         self.A = _matrix(A, "A", label)
         self.b = _vector(b, self.A.shape[0], "b", label)
         self._set_weight(_weight(weight, self.A.shape[0], label))
-
-    def _set_weight(self, w: np.ndarray) -> None:
-        self.weight = w
-        #: ``√weight`` (cached: weights rarely change between control steps)
-        self.sqrt_weight = np.sqrt(w)
-        self.unit_weight = bool((w == 1.0).all())
-
-    @property
-    def label(self) -> str:
-        """Human-readable name used in messages."""
-        return _label(self.kind, self.name)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -155,7 +162,7 @@ class Equality:
         return f"Equality(rows={self.A.shape[0]}, n={self.A.shape[1]}, name={self.name!r})"
 
 
-class Inequality:
+class Inequality(_Task):
     """Two-sided linear inequality ``lower ≤ C x ≤ upper``.
 
     Parameters
@@ -184,16 +191,6 @@ class Inequality:
         self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
         self._check_order()
         self._set_weight(_weight(weight, m, label))
-
-    def _set_weight(self, w: np.ndarray) -> None:
-        self.weight = w
-        #: ``√weight`` (cached: weights rarely change between control steps)
-        self.sqrt_weight = np.sqrt(w)
-
-    @property
-    def label(self) -> str:
-        """Human-readable name used in messages."""
-        return _label(self.kind, self.name)
 
     @property
     def shape(self) -> tuple[int, int]:
