@@ -39,8 +39,9 @@ __all__ = ["solve_hierarchical", "VIOLATION_TOL"]
 
 #: Relative slack (to the row's scale) above which an inequality row is frozen as violated.
 VIOLATION_TOL = 1e-6
-#: Relative distance to a bound under which the refinement takes a row as active.
-ACTIVE_TOL = 1e-7
+#: Relative distances to a bound under which the refinement takes a row as active: the
+#: first guess, then a looser one for backends that stop ~1e-6 short (SCS).
+ACTIVE_TOL = (1e-7, 1e-5)
 #: Relative objective increase the refinement may cost over the QP's own point.
 REFINE_SLACK = 1e-7
 _ABS_FLOOR = 1e-14
@@ -52,10 +53,10 @@ def _finite_abs(v: np.ndarray) -> np.ndarray:
     return a
 
 
-def _active(values, lo, hi):
-    """Rows at their lower / upper bound (to ``ACTIVE_TOL``, relative)."""
-    at_lo = np.isfinite(lo) & (values - lo <= ACTIVE_TOL * np.maximum(1.0, np.abs(lo)))
-    at_hi = np.isfinite(hi) & (hi - values <= ACTIVE_TOL * np.maximum(1.0, np.abs(hi))) & ~at_lo
+def _active(values, lo, hi, tol=ACTIVE_TOL[0]):
+    """Rows at their lower / upper bound (to ``tol``, relative)."""
+    at_lo = np.isfinite(lo) & (values - lo <= tol * np.maximum(1.0, np.abs(lo)))
+    at_hi = np.isfinite(hi) & (hi - values <= tol * np.maximum(1.0, np.abs(hi))) & ~at_lo
     return at_lo, at_hi
 
 
@@ -68,6 +69,15 @@ def _level_objective(L, x, ls_rows, ls_rhs, z, viol_rows) -> float:
 
 
 def _refine(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows):
+    """Try :func:`_refine_at` with each active-set tolerance in turn."""
+    for tol in ACTIVE_TOL:
+        z = _refine_at(R, L, x, z0, ls_rows, ls_rhs, viol_rows, tol)
+        if z is not None:
+            return z
+    return None
+
+
+def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     """Solve the level exactly on the active set of the QP's point ``x + Z z0``.
 
     Active inherited rows, bounds and satisfied level rows at a bound become equalities;
@@ -80,13 +90,13 @@ def _refine(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows):
     E, t = [], []
     if R.k:
         Cin = R.Cin
-        a_lo, a_hi = _active(Cin @ xn0, R.lin, R.uin)
+        a_lo, a_hi = _active(Cin @ xn0, R.lin, R.uin, tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
             E.append(R.reduce(Cin[act]))
             t.append(np.where(a_lo, R.lin, R.uin)[act] - Cin[act] @ x)
     if R.lb is not None:
-        a_lo, a_hi = _active(xn0, R.lb, R.ub)
+        a_lo, a_hi = _active(xn0, R.lb, R.ub, tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
             E.append(R.Z[act] if R.Z is not None else np.eye(r)[act])
@@ -94,7 +104,7 @@ def _refine(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows):
     sat = ~viol_rows
     if L.m_in and sat.any():
         Cs = L.C[sat]
-        a_lo, a_hi = _active(Cs @ xn0, L.lo[sat], L.hi[sat])
+        a_lo, a_hi = _active(Cs @ xn0, L.lo[sat], L.hi[sat], tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
             E.append(R.reduce(Cs[act]))

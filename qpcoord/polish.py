@@ -18,8 +18,8 @@ from .linalg import numerical_rank, svd
 
 __all__ = ["polish"]
 
-#: Relative distance to a bound under which a row is taken as active.
-ACTIVE_TOL = 1e-7
+#: Relative distances to a bound under which a row is taken as active (tried in turn).
+ACTIVE_TOLS = (1e-7, 1e-5)
 #: Relative feasibility tolerance the polished point must meet.
 POLISH_FEAS_TOL = 1e-10
 
@@ -40,15 +40,24 @@ def _feasible(values, lo, hi, tol) -> bool:
 def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray) -> np.ndarray:
     """Refine ``y`` for ``min ½yᵀHy + fᵀy, lo ≤ G y ≤ hi, lb ≤ y ≤ ub`` on its active set.
 
-    Returns the refined point, or ``y`` itself when the refinement is infeasible or worse.
+    Returns the refined point, or ``y`` itself when no active-set guess gives a feasible
+    point that is no worse.
     """
+    for tol in ACTIVE_TOLS:
+        out = _polish_at(H, f, G, lo, hi, lb, ub, y, tol)
+        if out is not None:
+            return out
+    return y
+
+
+def _polish_at(H, f, G, lo, hi, lb, ub, y, tol):
     k = y.shape[0]
     gy = G @ y
-    a_lo, a_hi = _rows_at(gy, lo, hi, ACTIVE_TOL)
+    a_lo, a_hi = _rows_at(gy, lo, hi, tol)
     rows = [G[a_lo], G[a_hi]]
     rhs = [lo[a_lo], hi[a_hi]]
     if lb is not None:
-        b_lo, b_hi = _rows_at(y, lb, ub, ACTIVE_TOL)
+        b_lo, b_hi = _rows_at(y, lb, ub, tol)
         eye = np.eye(k)
         rows += [eye[b_lo], eye[b_hi]]
         rhs += [lb[b_lo], ub[b_hi]]
@@ -59,7 +68,7 @@ def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray) -> np.ndarray:
         rank = numerical_rank(s, A.shape)
         yp = Vt[:rank].T @ ((U[:, :rank].T @ b) / s[:rank])
         if np.abs(A @ yp - b).max() > POLISH_FEAS_TOL * max(1.0, float(np.abs(b).max())):
-            return y  # inconsistent guess (degenerate active set)
+            return None  # inconsistent guess (degenerate active set)
         N = Vt[rank:].T
     else:
         yp = np.zeros(k)
@@ -69,21 +78,21 @@ def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray) -> np.ndarray:
         try:
             u = np.linalg.solve(Hn, -(N.T @ (f + H @ yp)))
         except np.linalg.LinAlgError:
-            return y
+            return None
         yn = yp + N @ u
     else:
         yn = yp
     if not np.all(np.isfinite(yn)):
-        return y
+        return None
     if not _feasible(G @ yn, lo, hi, POLISH_FEAS_TOL):
-        return y
+        return None
     if lb is not None and not _feasible(yn, lb, ub, POLISH_FEAS_TOL):
-        return y
+        return None
 
     def obj(v):
         return 0.5 * v @ (H @ v) + f @ v
 
     fy, fn = obj(y), obj(yn)
     if fn > fy + 1e-12 * max(1.0, abs(fy)):
-        return y
+        return None
     return yn
