@@ -71,7 +71,9 @@ _GENERIC_SETTINGS: dict[str, dict] = {
     # cost 2.5 s in the benchmark); capping it at 2·10⁴ left level optima 2e-6 off
     "scs": dict(eps_abs=1e-10, eps_rel=1e-10, max_iters=500_000, verbose=False),
     # HiGHS drops Hessian entries ≤ small_matrix_value (default 1e-9): our regularisation
-    "highs": dict(small_matrix_value=1e-12),  # its lower limit
+    # small_matrix_value at its lower limit; iteration and time caps: its QP solver ran for
+    # minutes on some degenerate level QPs
+    "highs": dict(small_matrix_value=1e-12, qp_iteration_limit=20_000, time_limit=2.0),
     "cvxopt": dict(),
 }
 

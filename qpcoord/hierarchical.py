@@ -177,7 +177,9 @@ def solve_hierarchical(
         x = R.x
         if r == 0:
             ranks.append(0)
-            R.inherit(L.C, L.lo, L.hi)
+            if L.m_in:  # nothing can move: the rows are kept as they are
+                cx = L.C @ x
+                R.inherit(L.C, np.minimum(L.lo, cx), np.maximum(L.hi, cx))
             continue
         # ---- closed form for the equality rows --------------------------------------
         rank = 0

@@ -1,0 +1,76 @@
+"""Regression tests for strict-hierarchy corner cases found while building the core.
+
+Each case has a closed-form answer and runs on every installed backend.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import qpcoord as qc
+
+SOLVERS = qc.available_solvers()
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_lower_row_with_no_freedom_left_is_reported_not_rejected(solver):
+    """Level 0 uses all freedom under active bounds; level 1's row cannot be met and must
+    be reported as its residual, not raise 'breaks an inequality a higher level had
+    satisfied'."""
+    sol = qc.solve_stack(
+        [qc.Equality(np.eye(2), [1.0, 2.0]), qc.Inequality([[1.0, 1.0]], upper=0.5)],
+        bounds=qc.Bounds(-1.0, 1.0),
+        solver=solver,
+    )
+    np.testing.assert_allclose(sol.x, [1.0, 1.0], atol=1e-7)
+    np.testing.assert_allclose(sol.level_residuals, [1.0, 1.5], atol=1e-6)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_small_scale_rows_are_not_frozen_as_violated(solver):
+    """A limit row scaled by dt = 0.01 is satisfiable; the posture below must still get
+    x₂ = 1 (it got 0.0999 when the regularisation outweighed the row's slack cost)."""
+    sol = qc.Stack(
+        [
+            qc.Equality([[1.0, 0.0]], [0.0]),
+            qc.Inequality([[0.0, 0.01]], lower=0.001),
+            qc.Equality([[0.0, 1.0]], [1.0]),
+        ]
+    ).solve(solver=solver)
+    np.testing.assert_allclose(sol.x, [0.0, 1.0], atol=1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_hard_phase_starts_outside_the_hard_inequalities(solver):
+    """The min-norm point of the hard equalities violates a hard inequality by O(1)."""
+    sol = qc.Stack(
+        [qc.Equality(np.eye(2), [0.0, 0.0])],
+        constraints=[qc.Equality([[1.0, 1.0]], [0.0]), qc.Inequality([[1.0, 0.0]], lower=1.0)],
+    ).solve(solver=solver)
+    np.testing.assert_allclose(sol.x, [1.0, -1.0], atol=1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_satisfiable_mixed_level_row_is_not_frozen(solver):
+    """Level 0 = {x₀ = 1, x₁ ≥ 1}: satisfiable, so level 1 (x₁ = 5) is met exactly."""
+    sol = qc.Stack(
+        [
+            [qc.Equality([1.0, 0.0, 0.0], 1.0), qc.Inequality([0.0, 1.0, 0.0], lower=1.0)],
+            qc.Equality([0.0, 1.0, 0.0], 5.0),
+        ]
+    ).solve(solver=solver)
+    np.testing.assert_allclose(sol.x, [1.0, 5.0, 0.0], atol=1e-7)
+    np.testing.assert_allclose(sol.level_residuals, [0.0, 0.0], atol=1e-7)
+
+
+def test_nullspace_keeps_higher_levels_exact():
+    """Projector round-off once counted as rank and broke level 0 (1.85 instead of 7e-15)."""
+    rng = np.random.default_rng(0)
+    A1, b1 = rng.standard_normal((3, 4)), rng.standard_normal(3)
+    A2, b2 = rng.standard_normal((2, 4)), rng.standard_normal(2)
+    stack = qc.Stack([qc.Equality(A1, b1), qc.Equality(A2, b2)])
+    ns = stack.solve(method="nullspace")
+    hi = stack.solve(method="hierarchical")
+    assert ns.level_residuals[0] < 1e-12
+    np.testing.assert_allclose(ns.x, hi.x, atol=1e-10)
