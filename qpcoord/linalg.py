@@ -56,7 +56,7 @@ def numerical_rank(s: np.ndarray, shape: tuple[int, int]) -> int:
 
 def filtered_gains(s: np.ndarray, tau: float) -> np.ndarray:
     """Gains ``1/s`` for ``s ≥ τ`` and ``s/τ²`` below (see module docstring)."""
-    if tau <= 0.0 or s[-1] >= tau:
+    if tau <= 0.0 or s.min() >= tau:
         return 1.0 / s
     return np.where(s >= tau, 1.0 / np.maximum(s, tau), s / (tau * tau))
 

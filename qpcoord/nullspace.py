@@ -62,9 +62,10 @@ def solve_nullspace(P: CompiledStack, damping: float) -> tuple[np.ndarray, dict]
             res = L.Ae @ x - L.be
             scale = max(1.0, float(np.max(np.abs(L.be))))
             if float(np.max(np.abs(res))) > CHECK_TOL * scale:
+                names = ", ".join(t.label for t in P.hard.eqs)
                 raise InfeasibleError(
-                    "hard equality constraints are inconsistent: least-squares residual "
-                    f"{np.linalg.norm(res):.3g}"
+                    f"hard equality constraints are inconsistent ({names}): "
+                    f"least-squares residual {np.linalg.norm(res):.3g}"
                 )
     if hard:
         ranks = ranks[1:]

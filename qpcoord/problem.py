@@ -111,6 +111,7 @@ class CompiledStack:
     bounds: Bounds | None
     lb: np.ndarray | None = None
     ub: np.ndarray | None = None
+    _bounds_version: int = -1
 
     @property
     def capacity(self) -> int:
@@ -131,8 +132,10 @@ class CompiledStack:
         for L in self.levels:
             L.refresh()
         self.hard.refresh()
-        if self.bounds is not None:
-            self.lb, self.ub = self.bounds.lower, self.bounds.upper
+        b = self.bounds
+        if b is not None and b.version != self._bounds_version:
+            self.lb, self.ub = b.resolve(self.n)
+            self._bounds_version = b.version
 
 
 def _split(tasks, where: str) -> tuple[list[Equality], list[Inequality]]:
@@ -218,13 +221,7 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
     if n is None:
         raise ValueError("empty stack: no task found")
     if bounds is not None:
-        if bounds.n is not None and bounds.n != n:
-            raise ValueError(
-                f"{bounds.label}: has {bounds.n} entries but the tasks have {n} columns"
-            )
-        if bounds.n is None:
-            bounds.n = n
-            bounds.lower, bounds.upper = bounds.resolve(n)
+        bounds.resolve(n)  # ValueError now if the length does not match
     out = CompiledStack(
         n=n,
         levels=[CompiledLevel(e, i, n) for e, i in compiled_levels],

@@ -49,6 +49,22 @@ def within(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bo
     return bool((values <= high).all() and (values >= low).all())
 
 
+def _miss(G, lo, hi, lb, ub, y) -> float:
+    """Largest relative violation ``(row − bound)/max(1, |bound|)`` of a QP point."""
+    worst = 0.0
+    pairs = [(G @ y, lo, hi)] if G.shape[0] else []
+    if lb is not None:
+        pairs.append((y, lb, ub))
+    for v, low, high in pairs:
+        fl, fh = np.isfinite(low), np.isfinite(high)
+        if fl.any():
+            worst = max(worst, float(((low[fl] - v[fl]) / np.maximum(1.0, np.abs(low[fl]))).max()))
+        if fh.any():
+            rel = (v[fh] - high[fh]) / np.maximum(1.0, np.abs(high[fh]))
+            worst = max(worst, float(rel.max()))
+    return worst
+
+
 def _lp_feasible(G, lo, hi, lb, ub) -> bool:
     """Is ``{y : lo ≤ G y ≤ hi, lb ≤ y ≤ ub}`` non-empty? (HiGHS LP via scipy.)"""
     from scipy.optimize import linprog
@@ -57,6 +73,10 @@ def _lp_feasible(G, lo, hi, lb, ub) -> bool:
     A, b = as_rows(G, lo, hi, lb, ub, k)  # the box as rows too
     res = linprog(np.zeros(k), A_ub=A, b_ub=b, bounds=[(None, None)] * k, method="highs")
     return res.status != 2  # 2: infeasible
+
+
+#: Active-set backends that certify infeasibility exactly and fast.
+_CERTIFYING = frozenset({"daqp", "quadprog"})
 
 
 class Reduced:
@@ -255,6 +275,12 @@ class Reduced:
             res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
         if res.code != OK:
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
+        miss = _miss(G, lo, hi, lb, ub, res.y)
+        if miss > CHECK_TOL:
+            raise SolverError(
+                f"{where}: backend {self.solver!r} returned a point that violates its QP's "
+                f"constraints by {miss:.3g} (relative)"
+            )
         self.last_exact = res.exact
         if res.exact:
             return res.y
@@ -313,8 +339,17 @@ class Reduced:
             else:
                 lo[self.k :] = self.lb - x
                 hi[self.k :] = self.ub - x
+        if self.solver not in _CERTIFYING and not _lp_feasible(G, lo, hi, lb, ub):
+            # backends behind qpsolvers cannot say "infeasible" and proxqp needed 50–260 s
+            # to give up on a 2-variable infeasible hard part: decide it first with an LP
+            raise InfeasibleError(
+                f"{where}: bounds and hard constraints are inconsistent "
+                "(an LP feasibility test found no point)"
+            )
         self.qp_calls += 1
         res = solve_dense_qp(self.solver, np.eye(r), self.project(x), G, lo, hi, lb, ub, None)
+        if res.code == OK and not np.all(np.isfinite(res.y)):
+            raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite point")
         if res.code != OK:
             # backends behind qpsolvers cannot say "infeasible"; decide it independently
             if res.code == INFEASIBLE or not _lp_feasible(G, lo, hi, lb, ub):

@@ -30,7 +30,9 @@ def _label(kind: str, name: str) -> str:
 
 def _matrix(value, what: str, label: str) -> np.ndarray:
     try:
-        arr = np.asarray(value, dtype=float)
+        # a copy: a task never aliases the caller's array (a later in-place change would
+        # bypass validation)
+        arr = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{label}: {what} is not a numeric array ({exc})") from None
     if arr.ndim == 1:
@@ -55,7 +57,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
     ``allow_inf``: 0 forbids ±inf, +1 allows +inf only, -1 allows -inf only.
     """
     try:
-        arr = np.asarray(value, dtype=float)
+        arr = np.array(value, dtype=float)  # a copy, as in _matrix
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{label}: {what} is not numeric ({exc})") from None
     if arr.ndim == 0:
@@ -88,6 +90,13 @@ def _weight(value, rows: int, label: str) -> np.ndarray:
         i = int(np.flatnonzero(w <= 0)[0])
         raise ValueError(f"{label}: weight must be > 0, got {w[i]!r} at row {i}")
     return w
+
+
+def _check_order(lower: np.ndarray, upper: np.ndarray, label: str) -> None:
+    bad = lower > upper
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{label}: lower > upper at row {i} ({lower[i]!r} > {upper[i]!r})")
 
 
 class _Task:
@@ -139,19 +148,29 @@ class Equality(_Task):
         return self.A.shape
 
     def update(self, A=None, b=None, weight=None) -> Equality:
-        """Replace numbers in place (same shape), validating them. Returns ``self``."""
+        """Replace numbers in place (same shape), validating them. Returns ``self``.
+
+        All-or-nothing: if any argument is rejected, the task keeps its old numbers.
+        """
         label = self.label
+        m = self.A.shape[0]
+        newA = newb = neww = None
         if A is not None:
             newA = _matrix(A, "A", label)
             if newA.shape != self.A.shape:
                 raise ValueError(
                     f"{label}: update changes A's shape {self.A.shape} to {newA.shape}"
                 )
-            self.A = newA
         if b is not None:
-            self.b = _vector(b, self.A.shape[0], "b", label)
+            newb = _vector(b, m, "b", label)
         if weight is not None:
-            self._set_weight(_weight(weight, self.A.shape[0], label))
+            neww = _weight(weight, m, label)
+        if newA is not None:
+            self.A = newA
+        if newb is not None:
+            self.b = newb
+        if neww is not None:
+            self._set_weight(neww)
         return self
 
     def residual(self, x: np.ndarray) -> np.ndarray:
@@ -189,7 +208,7 @@ class Inequality(_Task):
         m = self.C.shape[0]
         self.lower = _vector(-np.inf if lower is None else lower, m, "lower", label, allow_inf=-1)
         self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
-        self._check_order()
+        _check_order(self.lower, self.upper, label)
         self._set_weight(_weight(weight, m, label))
 
     @property
@@ -197,32 +216,30 @@ class Inequality(_Task):
         """(rows, variables)."""
         return self.C.shape
 
-    def _check_order(self) -> None:
-        bad = self.lower > self.upper
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(
-                f"{self.label}: lower > upper at row {i} ({self.lower[i]!r} > {self.upper[i]!r})"
-            )
-
     def update(self, C=None, lower=None, upper=None, weight=None) -> Inequality:
-        """Replace numbers in place (same shape), validating them. Returns ``self``."""
+        """Replace numbers in place (same shape), validating them. Returns ``self``.
+
+        All-or-nothing: if any argument is rejected, the task keeps its old numbers.
+        """
         label = self.label
+        m = self.C.shape[0]
+        newC = neww = None
         if C is not None:
             newC = _matrix(C, "C", label)
             if newC.shape != self.C.shape:
                 raise ValueError(
                     f"{label}: update changes C's shape {self.C.shape} to {newC.shape}"
                 )
-            self.C = newC
-        m = self.C.shape[0]
-        if lower is not None:
-            self.lower = _vector(lower, m, "lower", label, allow_inf=-1)
-        if upper is not None:
-            self.upper = _vector(upper, m, "upper", label, allow_inf=+1)
-        self._check_order()
+        lo = self.lower if lower is None else _vector(lower, m, "lower", label, allow_inf=-1)
+        hi = self.upper if upper is None else _vector(upper, m, "upper", label, allow_inf=+1)
+        _check_order(lo, hi, label)
         if weight is not None:
-            self._set_weight(_weight(weight, m, label))
+            neww = _weight(weight, m, label)
+        if newC is not None:
+            self.C = newC
+        self.lower, self.upper = lo, hi
+        if neww is not None:
+            self._set_weight(neww)
         return self
 
     def violation(self, x: np.ndarray) -> np.ndarray:
@@ -240,8 +257,8 @@ class Bounds:
     Parameters
     ----------
     lower, upper : float or array_like, shape (n,)
-        Bounds in the units of ``x`` (scalars broadcast once the stack knows ``n``);
-        ``None`` or ``∓inf`` leaves that side open.
+        Bounds in the units of ``x``; ``None`` or ``∓inf`` leaves that side open. Scalars
+        broadcast to each stack's ``n`` (one scalar ``Bounds`` may serve several stacks).
     name : str
         Used in error messages.
     """
@@ -250,15 +267,28 @@ class Bounds:
 
     def __init__(self, lower=None, upper=None, name: str = "bounds") -> None:
         self.name = str(name)
-        self._lower_in = -np.inf if lower is None else lower
-        self._upper_in = np.inf if upper is None else upper
+        self.version = 0  # incremented by update(): stacks re-read the bounds then
+        self._set(-np.inf if lower is None else lower, np.inf if upper is None else upper)
+
+    def _set(self, lower, upper) -> None:
         n = None
-        for v in (self._lower_in, self._upper_in):
+        for v in (lower, upper):
             if np.ndim(v) > 0:
                 n = int(np.size(v))
-        self.n = n
+        lo, hi = self._validate(lower, upper, 1 if n is None else n)
+        self._lower_in, self._upper_in, self.n = lower, upper, n
         if n is not None:
-            self.lower, self.upper = self.resolve(n)
+            self.lower, self.upper = lo, hi
+
+    def _validate(self, lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
+        label = self.label
+        lo = _vector(lower, n, "lower", label, allow_inf=-1)
+        hi = _vector(upper, n, "upper", label, allow_inf=+1)
+        bad = lo > hi
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})")
+        return lo, hi
 
     @property
     def label(self) -> str:
@@ -267,23 +297,29 @@ class Bounds:
 
     def resolve(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Validated ``(lower, upper)`` arrays of length ``n``."""
-        label = self.label
-        lo = _vector(self._lower_in, n, "lower", label, allow_inf=-1)
-        hi = _vector(self._upper_in, n, "upper", label, allow_inf=+1)
-        bad = lo > hi
-        if np.any(bad):
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})")
-        return lo, hi
+        if self.n is not None:
+            if self.n != n:
+                raise ValueError(
+                    f"{self.label}: has {self.n} entries but the tasks have {n} columns"
+                )
+            return self.lower, self.upper
+        return self._validate(self._lower_in, self._upper_in, n)
 
     def update(self, lower=None, upper=None) -> Bounds:
-        """Replace the bounds (same length), validating them. Returns ``self``."""
-        if lower is not None:
-            self._lower_in = lower
-        if upper is not None:
-            self._upper_in = upper
+        """Replace the bounds, validating them (all-or-nothing). Returns ``self``.
+
+        A ``Bounds`` built with arrays keeps its length; one built with scalars may take
+        scalars or arrays.
+        """
+        new_lo = self._lower_in if lower is None else lower
+        new_hi = self._upper_in if upper is None else upper
         if self.n is not None:
-            self.lower, self.upper = self.resolve(self.n)
+            lo, hi = self._validate(new_lo, new_hi, self.n)  # names a wrong length
+            self._lower_in, self._upper_in = new_lo, new_hi
+            self.lower, self.upper = lo, hi
+        else:
+            self._set(new_lo, new_hi)
+        self.version += 1
         return self
 
     def __repr__(self) -> str:
