@@ -126,7 +126,7 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
         b = np.concatenate(ls_rhs)
         K = A @ N
         U, s, Vt = svd(K, full=False)
-        rk = numerical_rank(s, K.shape)
+        rk = numerical_rank(s, K.shape, float(np.linalg.norm(A)))
         if rk:
             u = Vt[:rk].T @ ((U[:, :rk].T @ (b - A @ zp)) / s[:rk])
             zp = zp + N @ u
@@ -186,7 +186,7 @@ def solve_hierarchical(
         if L.m_eq:
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
-            U, s, Vt, rank, g = filtered_svd(M, damping)
+            U, s, Vt, rank, g, tau = filtered_svd(M, damping, float(np.linalg.norm(L.Ae)))
             if rank:
                 xc = x + R.lift(Vt[:rank].T @ (g * (U[:, :rank].T @ e)))
             else:
@@ -208,7 +208,6 @@ def solve_hierarchical(
         # whatever the rows' units.
         curv = []
         if rank:
-            tau = damping * s[0]
             d = np.maximum(s[:rank] ** 2, tau * tau)
             curv.append(d)
         mv = 0
@@ -296,8 +295,10 @@ def solve_hierarchical(
                 still = gap > VIOLATION_TOL * vscale[viol_rows] + _ABS_FLOOR
                 viol_rows[np.flatnonzero(viol_rows)[~still]] = False
         R.move_to(xn, verified=False)
+        fscale = 1.0  # rows of Vt are unit vectors
         if viol_rows.any():
             F.append(R.reduce(L.C[viol_rows]))
+            fscale = max(fscale, float(np.linalg.norm(L.C[viol_rows])))
         if L.m_in:
             # rows kept as inequalities are inherited with their bounds opened to the
             # current value: a violation under the threshold may stay, never grow
@@ -305,7 +306,7 @@ def solve_hierarchical(
             cxn = L.C[keep] @ R.x
             R.inherit(L.C[keep], np.minimum(L.lo[keep], cxn), np.maximum(L.hi[keep], cxn))
         if F:
-            R.freeze(np.vstack(F) if len(F) > 1 else F[0])
+            R.freeze(np.vstack(F) if len(F) > 1 else F[0], fscale)
         ranks.append(r - R.r)
     # ---- remaining freedom: minimum-norm x ----------------------------------------
     r = R.r

@@ -51,7 +51,9 @@ def solve_nullspace(P: CompiledStack, damping: float) -> tuple[np.ndarray, dict]
             ranks.append(0)
             continue
         M = L.Ae if Z is None else L.Ae @ Z
-        U, s, Vt, rank, g = filtered_svd(M, 0.0 if (i == 0 and hard) else damping)
+        U, s, Vt, rank, g, _ = filtered_svd(
+            M, 0.0 if (i == 0 and hard) else damping, float(np.linalg.norm(L.Ae))
+        )
         ranks.append(rank)
         if rank == 0:
             continue

@@ -167,10 +167,11 @@ class Reduced:
         """Keep only the z-directions spanned by ``basis`` (r × r', orthonormal columns)."""
         self.Z = basis if self.Z is None else self.Z @ basis
 
-    def freeze(self, F: np.ndarray) -> None:
-        """Fix the z-space rows ``F z`` at their current values (restrict to null(F))."""
+    def freeze(self, F: np.ndarray, scale: float = 0.0) -> None:
+        """Fix the z-space rows ``F z`` at their current values (restrict to null(F));
+        ``scale`` is the size of the rows before projection (see :func:`null_space`)."""
         if F.shape[0]:
-            self.restrict(null_space(F))
+            self.restrict(null_space(F, scale))
 
     def move_to(self, x: np.ndarray, verified: bool) -> None:
         """Set ``x̄``. A QP output (``verified=False``) is snapped into the bounds: that
