@@ -281,8 +281,8 @@ def solve_hierarchical(
             swv = L.sw[viol_rows]
             ls_rows.append(swv[:, None] * R.reduce(Cv))
             ls_rhs.append(swv * (target - Cv @ x))
-        # (an active-set backend at tight tolerances is exact already: skip it)
-        zp = None if R.last_exact else _refine(R, L, x, z, ls_rows, ls_rhs, viol_rows)
+        # also for exact backends: their optimum carries the regularisation's ~1e-9 bias
+        zp = _refine(R, L, x, z, ls_rows, ls_rhs, viol_rows)
         if zp is not None:
             z = zp
             xn = x + R.lift(z)

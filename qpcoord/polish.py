@@ -20,6 +20,8 @@ __all__ = ["polish"]
 
 #: Relative distances to a bound under which a row is taken as active (tried in turn).
 ACTIVE_TOLS = (1e-7, 1e-5)
+#: Relative objective increase the exact point may cost over the backend's point.
+OBJ_SLACK = 1e-7
 #: Relative feasibility tolerance the polished point must meet.
 POLISH_FEAS_TOL = 1e-10
 
@@ -93,6 +95,8 @@ def _polish_at(H, f, G, lo, hi, lb, ub, y, tol):
         return 0.5 * v @ (H @ v) + f @ v
 
     fy, fn = obj(y), obj(yn)
-    if fn > fy + 1e-12 * max(1.0, abs(fy)):
+    # the backend's point may sit outside the rows by the opening RELAX (≤ 1e-6) and gain
+    # that much from it: allow the exact point to be worse by as much
+    if fn > fy + OBJ_SLACK * max(1.0, abs(fy)):
         return None
     return yn
