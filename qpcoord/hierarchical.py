@@ -140,7 +140,7 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     before = _level_objective(L, x, ls_rows, ls_rhs, z0, viol_rows)
     after = _level_objective(L, x, ls_rows, ls_rhs, zp, viol_rows)
     # the QP's point may sit outside the rows by the opening RELAX and gain ~RELAX from it
-    if after > before + REFINE_SLACK * max(1.0, before):
+    if after > before + max(REFINE_SLACK, 10.0 * R.used_relax) * max(1.0, before):
         return None
     return zp
 

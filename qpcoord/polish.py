@@ -39,20 +39,22 @@ def _feasible(values, lo, hi, tol) -> bool:
     )
 
 
-def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray) -> np.ndarray:
+def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray, obj_slack: float = 0.0) -> np.ndarray:
     """Refine ``y`` for ``min ½yᵀHy + fᵀy, lo ≤ G y ≤ hi, lb ≤ y ≤ ub`` on its active set.
 
     Returns the refined point, or ``y`` itself when no active-set guess gives a feasible
-    point that is no worse.
+    point that is no worse (within ``max(OBJ_SLACK, obj_slack)``, relative: a point found
+    with the rows opened by ``δ`` may beat the exact one by about ``δ``).
     """
+    slack = max(OBJ_SLACK, obj_slack)
     for tol in ACTIVE_TOLS:
-        out = _polish_at(H, f, G, lo, hi, lb, ub, y, tol)
+        out = _polish_at(H, f, G, lo, hi, lb, ub, y, tol, slack)
         if out is not None:
             return out
     return y
 
 
-def _polish_at(H, f, G, lo, hi, lb, ub, y, tol):
+def _polish_at(H, f, G, lo, hi, lb, ub, y, tol, slack):
     k = y.shape[0]
     gy = G @ y
     a_lo, a_hi = _rows_at(gy, lo, hi, tol)
@@ -97,6 +99,6 @@ def _polish_at(H, f, G, lo, hi, lb, ub, y, tol):
     fy, fn = obj(y), obj(yn)
     # the backend's point may sit outside the rows by the opening RELAX (≤ 1e-6) and gain
     # that much from it: allow the exact point to be worse by as much
-    if fn > fy + OBJ_SLACK * max(1.0, abs(fy)):
+    if fn > fy + slack * max(1.0, abs(fy)):
         return None
     return yn

@@ -256,6 +256,7 @@ class Reduced:
         entries) is unbounded. Returns ``y``; raises :class:`SolverError` on failure."""
         kdim = H.shape[0]
         G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+        opened = self.relax
         self.qp_calls += 1
         res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, y0)
         if res.code != OK and y0 is not None:
@@ -272,6 +273,7 @@ class Reduced:
             G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
             self.relax = keep
             self.used_relax = max(self.used_relax, keep * 100.0)
+            opened = keep * 100.0
             self.qp_calls += 1
             res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
         if res.code != OK:
@@ -290,7 +292,7 @@ class Reduced:
         self.relax = 0.0
         G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
         self.relax = keep
-        return polish(H, f, G, lo, hi, lb, ub, res.y)
+        return polish(H, f, G, lo, hi, lb, ub, res.y, obj_slack=10.0 * opened)
 
     def hard_phase(self, hard, where: str = "constraints") -> None:
         """Satisfy the hard constraints and bounds; start at the min-norm feasible point.

@@ -381,11 +381,9 @@ def _hard_violations(spec: Spec, x: np.ndarray, tol: float = 1e-6) -> list[str]:
 
 #: Property/backend combinations that fail today because of a library bug, as strict xfails
 #: (so that a fix shows up as XPASS). Keys: (test key, solver, family).
-KNOWN: dict[tuple[str, str, str], str] = {
-    ("a", "proxqp", "mixed"): "BUG: after a failed level QP, proxqp's relaxed retry (inherited "
-    "rows opened 100x) leaks up to ~4e-6 into higher levels; see "
-    "test_lower_level_does_not_leak_after_a_relaxed_retry",
-}
+KNOWN: dict[tuple[str, str, str], str] = {}
+# fixed: proxqp's relaxed retry leaked ~4e-6 into higher levels (the exact refinement now
+# accepts a point found with rows opened by δ when it is within ~10δ of its objective)
 
 
 def _grid(key: str, families=("",)):
@@ -891,14 +889,6 @@ def _retry_leak_case():
         constraints=[qc.Inequality([[-1.55, 1.1, 0.07, 0.2, 0.08]], [-1.49], [0.98])],
     )
     return head, extra, options
-
-
-KNOWN[("retry_leak", "proxqp", "")] = (
-    "BUG: proxqp fails the last level's QP once; the retry opens the inherited rows 100x "
-    "(RELAX 1e-8 -> 1e-6) and its answer is kept, so level 0 (two lower == upper rows, "
-    "satisfiable) goes from residual ~1e-8 or less to 1.36e-6: a priority leak far above "
-    "the 1e-7 budget"
-)
 
 
 @pytest.mark.parametrize("solver, family", _grid("retry_leak"))
