@@ -367,8 +367,14 @@ class Reduced:
             (self.lb is None or within(xn, self.lb, self.ub, CHECK_TOL))
             and within(self.Cin @ xn, self.lin, self.uin, CHECK_TOL)
         ):
+            if _lp_feasible(G, lo, hi, lb, ub):
+                raise SolverError(
+                    f"{where}: backend {self.solver!r} returned a point violating the hard "
+                    "constraints, which an LP feasibility test shows are consistent"
+                )
             raise InfeasibleError(
-                f"{where}: bounds and hard constraints appear inconsistent "
-                f"({self.solver} returned a point violating them)"
+                f"{where}: bounds and hard constraints are inconsistent "
+                f"({self.solver} returned a point violating them; confirmed by an LP "
+                "feasibility test)"
             )
         self.move_to(xn, verified=False)

@@ -619,16 +619,6 @@ def test_misbehaving_backend_raises_solver_error(fake_name, stack_name, method, 
 def test_misbehaving_backend_in_the_hard_phase(fake_name, patch_backend, request):
     """The hard phase (finding a point that satisfies bounds and hard rows) needs a QP here;
     the hard part *is* feasible (x = (0.5, 0.5)), so a bad backend answer is a SolverError."""
-    if fake_name == "far_outside":
-        request.applymarker(
-            pytest.mark.xfail(
-                strict=True,
-                reason="minor: when the backend's hard-phase point violates the hard rows, "
-                "hard_phase raises InfeasibleError ('appear inconsistent') without checking "
-                "feasibility itself; its LP feasibility test would show the hard part is "
-                "feasible and the backend is at fault (SolverError)",
-            )
-        )
     patch_backend(FAKES[fake_name])
     stack = qc.Stack(
         [Equality(np.eye(2), [5.0, 5.0], name="goal")],
