@@ -64,7 +64,8 @@ _DISTRIBUTION = {
 
 #: Accuracy settings passed to the generic (qpsolvers) path. Our stacks need ~1e-9.
 _GENERIC_SETTINGS: dict[str, dict] = {
-    "osqp": dict(eps_abs=1e-10, eps_rel=1e-10, max_iter=200_000, polishing=True, verbose=False),
+    # 1e-10 did not converge on a 3-variable level QP; 1e-9 plus the exact refinement does
+    "osqp": dict(eps_abs=1e-9, eps_rel=1e-9, max_iter=200_000, polishing=True, verbose=False),
     "clarabel": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, verbose=False),
     "piqp": dict(eps_abs=1e-10, eps_rel=1e-10, verbose=False),
     # a first-order method: reaching 1e-10 can take 10⁵ iterations (a hard control step
