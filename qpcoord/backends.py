@@ -24,6 +24,8 @@ from importlib import metadata
 
 import numpy as np
 
+from .tolerance import within
+
 __all__ = [
     "QPResult",
     "available_solvers",
@@ -150,17 +152,7 @@ def check_solver(solver: str | None) -> str:
 
 def _meets_rows(G, lo, hi, lb, ub, y, tol: float) -> bool:
     """Does ``y`` meet ``lo ≤ G y ≤ hi`` and the box to ``tol`` (relative)?"""
-    gy = G @ y
-    ok = bool(
-        (gy >= lo - tol * np.maximum(1.0, np.abs(lo))).all()
-        and (gy <= hi + tol * np.maximum(1.0, np.abs(hi))).all()
-    )
-    if ok and lb is not None:
-        ok = bool(
-            (y >= lb - tol * np.maximum(1.0, np.abs(lb))).all()
-            and (y <= ub + tol * np.maximum(1.0, np.abs(ub))).all()
-        )
-    return ok
+    return within(G @ y, lo, hi, tol) and (lb is None or within(y, lb, ub, tol))
 
 
 def as_rows(G, lo, hi, lb, ub, k):

@@ -34,6 +34,7 @@ import numpy as np
 from .linalg import filtered_svd, numerical_rank, svd
 from .problem import CompiledStack
 from .reduced import Reduced
+from .tolerance import at_bounds
 
 __all__ = ["solve_hierarchical", "VIOLATION_TOL"]
 
@@ -53,14 +54,8 @@ def _finite_abs(v: np.ndarray) -> np.ndarray:
     return a
 
 
-def _active(values, lo, hi, tol=ACTIVE_TOL[0]):
-    """Rows at their lower / upper bound (to ``tol``, relative)."""
-    at_lo = np.isfinite(lo) & (values - lo <= tol * np.maximum(1.0, np.abs(lo)))
-    at_hi = np.isfinite(hi) & (hi - values <= tol * np.maximum(1.0, np.abs(hi))) & ~at_lo
-    return at_lo, at_hi
-
-
-def _level_objective(L, x, ls_rows, ls_rhs, z, viol_rows) -> float:
+def _level_objective(ls_rows, ls_rhs, z) -> float:
+    """Level objective on the least-squares rows (equalities, damping, violated rows)."""
     total = 0.0
     for A, b in zip(ls_rows, ls_rhs, strict=True):
         res = A @ z - b
@@ -90,13 +85,13 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     E, t = [], []
     if R.k:
         Cin = R.Cin
-        a_lo, a_hi = _active(Cin @ xn0, R.lin, R.uin, tol)
+        a_lo, a_hi = at_bounds(Cin @ xn0, R.lin, R.uin, tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
             E.append(R.reduce(Cin[act]))
             t.append(np.where(a_lo, R.lin, R.uin)[act] - Cin[act] @ x)
     if R.lb is not None:
-        a_lo, a_hi = _active(xn0, R.lb, R.ub, tol)
+        a_lo, a_hi = at_bounds(xn0, R.lb, R.ub, tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
             E.append(R.Z[act] if R.Z is not None else np.eye(r)[act])
@@ -104,7 +99,7 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     sat = ~viol_rows
     if L.m_in and sat.any():
         Cs = L.C[sat]
-        a_lo, a_hi = _active(Cs @ xn0, L.lo[sat], L.hi[sat], tol)
+        a_lo, a_hi = at_bounds(Cs @ xn0, L.lo[sat], L.hi[sat], tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
             E.append(R.reduce(Cs[act]))
@@ -137,8 +132,8 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
         c = L.C[sat] @ xn
         if not ((c <= L.hiw[sat]).all() and (c >= L.low[sat]).all()):
             return None
-    before = _level_objective(L, x, ls_rows, ls_rhs, z0, viol_rows)
-    after = _level_objective(L, x, ls_rows, ls_rhs, zp, viol_rows)
+    before = _level_objective(ls_rows, ls_rhs, z0)
+    after = _level_objective(ls_rows, ls_rhs, zp)
     # the QP's point may sit outside the rows by the opening RELAX and gain ~RELAX from it
     if after > before + max(REFINE_SLACK, 10.0 * R.used_relax) * max(1.0, before):
         return None

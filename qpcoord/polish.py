@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .linalg import numerical_rank, svd
+from .tolerance import at_bounds, within
 
 __all__ = ["polish"]
 
@@ -24,19 +25,6 @@ ACTIVE_TOLS = (1e-7, 1e-5)
 OBJ_SLACK = 1e-7
 #: Relative feasibility tolerance the polished point must meet.
 POLISH_FEAS_TOL = 1e-10
-
-
-def _rows_at(values, lo, hi, tol):
-    at_lo = np.isfinite(lo) & (values - lo <= tol * np.maximum(1.0, np.abs(lo)))
-    at_hi = np.isfinite(hi) & (hi - values <= tol * np.maximum(1.0, np.abs(hi))) & ~at_lo
-    return at_lo, at_hi
-
-
-def _feasible(values, lo, hi, tol) -> bool:
-    return bool(
-        (values >= lo - tol * np.maximum(1.0, np.abs(lo))).all()
-        and (values <= hi + tol * np.maximum(1.0, np.abs(hi))).all()
-    )
 
 
 def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray, obj_slack: float = 0.0) -> np.ndarray:
@@ -57,11 +45,11 @@ def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray, obj_slack: float = 0.0) -> np
 def _polish_at(H, f, G, lo, hi, lb, ub, y, tol, slack):
     k = y.shape[0]
     gy = G @ y
-    a_lo, a_hi = _rows_at(gy, lo, hi, tol)
+    a_lo, a_hi = at_bounds(gy, lo, hi, tol)
     rows = [G[a_lo], G[a_hi]]
     rhs = [lo[a_lo], hi[a_hi]]
     if lb is not None:
-        b_lo, b_hi = _rows_at(y, lb, ub, tol)
+        b_lo, b_hi = at_bounds(y, lb, ub, tol)
         eye = np.eye(k)
         rows += [eye[b_lo], eye[b_hi]]
         rhs += [lb[b_lo], ub[b_hi]]
@@ -88,9 +76,9 @@ def _polish_at(H, f, G, lo, hi, lb, ub, y, tol, slack):
         yn = yp
     if not np.all(np.isfinite(yn)):
         return None
-    if not _feasible(G @ yn, lo, hi, POLISH_FEAS_TOL):
+    if not within(G @ yn, lo, hi, POLISH_FEAS_TOL):
         return None
-    if lb is not None and not _feasible(yn, lb, ub, POLISH_FEAS_TOL):
+    if lb is not None and not within(yn, lb, ub, POLISH_FEAS_TOL):
         return None
 
     def obj(v):

@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .reduced import FEAS_TOL, widen
+from .reduced import FEAS_TOL
 from .tasks import Bounds, Equality, Inequality
+from .tolerance import widen
 
 __all__ = ["CompiledLevel", "CompiledStack", "compile_stack"]
 
@@ -117,15 +118,6 @@ class CompiledStack:
     def capacity(self) -> int:
         """Most inequality rows a solve can inherit."""
         return self.hard.m_in + sum(L.m_in for L in self.levels)
-
-    @property
-    def has_inequalities(self) -> bool:
-        """True if any level or hard constraint holds an inequality, or bounds exist."""
-        return (
-            self.bounds is not None
-            or self.hard.m_in > 0
-            or any(L.m_in > 0 for L in self.levels)
-        )
 
     def refresh(self) -> None:
         """Re-read every task's numbers (the per-step update)."""

@@ -19,6 +19,7 @@ from .backends import INFEASIBLE, OK, as_rows, solve_dense_qp
 from .errors import InfeasibleError, SolverError
 from .linalg import null_space, numerical_rank, svd
 from .polish import polish
+from .tolerance import widen, within
 
 __all__ = ["Reduced", "FEAS_TOL", "CHECK_TOL", "within", "widen"]
 
@@ -34,19 +35,6 @@ CHECK_TOL = 1e-6
 #: "infeasible" on 1e-12-wide sets that daqp and quadprog solved).
 RELAX = {"daqp": 1e-12, "quadprog": 1e-12}
 RELAX_DEFAULT = 1e-8
-
-
-def widen(lo: np.ndarray, hi: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(lo − tol·max(1,|lo|), hi + tol·max(1,|hi|))``; infinite bounds stay infinite."""
-    return lo - tol * np.maximum(1.0, np.abs(lo)), hi + tol * np.maximum(1.0, np.abs(hi))
-
-
-def within(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
-    """True if ``lo − tol·max(1,|lo|) ≤ values ≤ hi + tol·max(1,|hi|)`` (±inf bounds allowed)."""
-    if values.size == 0:
-        return True
-    low, high = widen(lo, hi, tol)
-    return bool((values <= high).all() and (values >= low).all())
 
 
 def _miss(G, lo, hi, lb, ub, y) -> float:
@@ -113,7 +101,6 @@ class Reduced:
         self.qp_calls = 0
         self.retries = 0
         self.polished = 0
-        self.last_exact = True  # the last QP answer was exact to round-off
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
         return self
 
@@ -284,7 +271,6 @@ class Reduced:
                 f"{where}: backend {self.solver!r} returned a point that violates its QP's "
                 f"constraints by {miss:.3g} (relative)"
             )
-        self.last_exact = res.exact
         if res.exact:
             return res.y
         # polish against the unopened rows: the point lands exactly on the true bounds

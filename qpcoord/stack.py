@@ -12,8 +12,9 @@ from .errors import SolverError
 from .hierarchical import solve_hierarchical
 from .nullspace import check_equality_only, solve_nullspace
 from .problem import compile_stack
-from .reduced import CHECK_TOL, Reduced, within
+from .reduced import CHECK_TOL, Reduced
 from .tasks import Bounds
+from .tolerance import within
 from .weighted import solve_weighted
 
 __all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
