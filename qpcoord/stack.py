@@ -111,7 +111,11 @@ class Stack:
             ("damping", damping, True),
             ("weight_ratio", weight_ratio, False),
         ):
-            if not isinstance(value, (int, float, np.floating)) or not np.isfinite(value):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float, np.floating, np.integer))
+                or not np.isfinite(value)
+            ):
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
             if value < 0 or (value == 0 and not lo_ok):
                 raise ValueError(f"{name} must be {'>= 0' if lo_ok else '> 0'}, got {value!r}")

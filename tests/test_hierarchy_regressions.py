@@ -74,3 +74,10 @@ def test_nullspace_keeps_higher_levels_exact():
     hi = stack.solve(method="hierarchical")
     assert ns.level_residuals[0] < 1e-12
     np.testing.assert_allclose(ns.x, hi.x, atol=1e-10)
+
+
+@pytest.mark.parametrize("name", ["regularization", "damping", "weight_ratio"])
+@pytest.mark.parametrize("value", [True, float("nan"), "1e-9", -1.0])
+def test_stack_options_are_validated(name, value):
+    with pytest.raises(ValueError, match=name):
+        qc.Stack([qc.Equality([[1.0, 0.0]], [0.0])], **{name: value})
