@@ -8,8 +8,20 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
                          bounds=qc.Bounds(-dq_max, dq_max))
 """
 
+from . import paths, robots
 from .backends import available_solvers, default_solver, solver_versions
 from .errors import InfeasibleError, SolverError
+from .ik import IK, ik_step, inverse_kinematics
+from .kinematic_tasks import (
+    JointLimits,
+    OneFormTask,
+    PositionTask,
+    PostureTask,
+    PotentialTask,
+    VelocityLimits,
+)
+from .robot import Robot
+from .simulate import Trajectory, simulate
 from .stack import METHODS, Solution, Stack, solve_stack
 from .tasks import Bounds, Equality, Inequality
 
@@ -18,14 +30,28 @@ __version__ = "0.1.0"
 __all__ = [
     "Bounds",
     "Equality",
+    "IK",
     "InfeasibleError",
     "Inequality",
+    "JointLimits",
     "METHODS",
+    "OneFormTask",
+    "PositionTask",
+    "PostureTask",
+    "PotentialTask",
+    "Robot",
     "Solution",
     "SolverError",
     "Stack",
+    "Trajectory",
+    "VelocityLimits",
     "available_solvers",
     "default_solver",
+    "ik_step",
+    "inverse_kinematics",
+    "paths",
+    "robots",
+    "simulate",
     "solve_stack",
     "solver_versions",
 ]

@@ -36,7 +36,7 @@ from .problem import CompiledStack
 from .reduced import Reduced
 from .tolerance import at_bounds
 
-__all__ = ["solve_hierarchical", "VIOLATION_TOL"]
+__all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
 
 #: Relative slack (to the row's scale) above which an inequality row is frozen as violated.
 VIOLATION_TOL = 1e-6
@@ -138,6 +138,42 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     if after > before + max(REFINE_SLACK, 10.0 * R.used_relax) * max(1.0, before):
         return None
     return zp
+
+
+def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, dict]:
+    """Closed-form lexicographic solution of a stack of equality levels, bounds ignored.
+
+    The per-step fast path for stacks without inequality rows or hard constraints: each
+    level's filtered pseudo-inverse step in the null space of the levels above, then the
+    minimum-norm step. If the result satisfies the bounds it is also the solution of the
+    bounded problem (every level already reaches its unconstrained optimum, and the
+    remaining freedom its minimum norm); the caller checks that and otherwise runs
+    :func:`solve_hierarchical`.
+    """
+    x = np.zeros(P.n)
+    Z = None  # orthonormal basis of the remaining freedom (None: all of R^n)
+    r = P.n
+    ranks = []
+    for L in P.levels:
+        if r == 0:
+            ranks.append(0)
+            continue
+        A = L.Ae
+        M = A if Z is None else A @ Z
+        e = L.be - A @ x
+        _U, _s, Vt, rank, g, _tau = filtered_svd(M, damping, float(np.sqrt(np.vdot(A, A))))
+        if rank:
+            dz = Vt[:rank].T @ (g * (_U[:, :rank].T @ e))
+            x += dz if Z is None else Z @ dz
+            Z = Vt[rank:].T if Z is None else Z @ Vt[rank:].T
+            r -= rank
+        ranks.append(rank)
+    if r and Z is not None:
+        x -= Z @ (Z.T @ x)
+    elif r:
+        x[:] = 0.0
+    info = {"qp_calls": 0, "retries": 0, "polished": 0, "level_ranks": ranks, "free_dofs": r}
+    return x, info
 
 
 def solve_hierarchical(

@@ -115,6 +115,16 @@ class CompiledStack:
     _bounds_version: int = -1
 
     @property
+    def equalities_only(self) -> bool:
+        """No hard constraints and no inequality rows in any level (bounds allowed)."""
+        return self._equalities_only
+
+    def __post_init__(self) -> None:
+        self._equalities_only = not (
+            self.hard.m_eq or self.hard.m_in or any(L.m_in for L in self.levels)
+        )
+
+    @property
     def capacity(self) -> int:
         """Most inequality rows a solve can inherit."""
         return self.hard.m_in + sum(L.m_in for L in self.levels)

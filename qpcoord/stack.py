@@ -9,10 +9,10 @@ import numpy as np
 
 from .backends import check_solver
 from .errors import SolverError
-from .hierarchical import solve_hierarchical
+from .hierarchical import solve_equality_chain, solve_hierarchical
 from .nullspace import check_equality_only, solve_nullspace
 from .problem import compile_stack
-from .reduced import CHECK_TOL, Reduced
+from .reduced import CHECK_TOL, FEAS_TOL, Reduced
 from .tasks import Bounds
 from .tolerance import within
 from .weighted import solve_weighted
@@ -183,7 +183,14 @@ class Stack:
             used = self._solvers.get(solver)
             if used is None:
                 used = self._solvers[solver] = check_solver(solver)
-            R = self._work.reset(P.lb, P.ub, used)
+            R = None
+            if method == "hierarchical" and P.equalities_only:
+                x, info = solve_equality_chain(P, self.damping)
+                if P.lb is not None and not within(x, P.lb, P.ub, FEAS_TOL):
+                    R = self._work.reset(P.lb, P.ub, used)
+            else:
+                R = self._work.reset(P.lb, P.ub, used)
+        if R is not None:
             if method == "hierarchical":
                 info = solve_hierarchical(P, R, self.damping, self.regularization, x_warm)
             else:
@@ -204,6 +211,8 @@ class Stack:
     def _warm(self, warm_start) -> np.ndarray | None:
         if warm_start is None:
             return None
+        if isinstance(warm_start, Solution) and warm_start.x.shape == (self.n,):
+            return warm_start.x  # a checked solution: finite, float, right length
         x = warm_start.x if isinstance(warm_start, Solution) else warm_start
         try:
             x = np.asarray(x, dtype=float).reshape(-1)
@@ -251,9 +260,7 @@ class Stack:
             )
 
     def __repr__(self) -> str:
-        sizes = ", ".join(
-            f"{L.m_eq}eq+{L.m_in}in" for L in self._compiled.levels
-        )
+        sizes = ", ".join(f"{L.m_eq}eq+{L.m_in}in" for L in self._compiled.levels)
         return f"Stack(n={self.n}, levels=[{sizes}], bounds={self._compiled.bounds is not None})"
 
 

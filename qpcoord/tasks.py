@@ -99,6 +99,11 @@ def _check_order(lower: np.ndarray, upper: np.ndarray, label: str) -> None:
         raise ValueError(f"{label}: lower > upper at row {i} ({lower[i]!r} > {upper[i]!r})")
 
 
+def _bad_box(lower: np.ndarray, upper: np.ndarray) -> bool:
+    """NaN, ``lower = +inf``, ``upper = −inf`` or ``lower > upper`` anywhere."""
+    return bool(not (lower <= upper).all() or lower.max() == np.inf or upper.min() == -np.inf)
+
+
 class _Task:
     """What every task shares: a name, a label for messages and cached row weights."""
 
@@ -173,6 +178,21 @@ class Equality(_Task):
             self._set_weight(neww)
         return self
 
+    def _assign(self, A=None, b=None) -> Equality:
+        """Trusted per-step path for library-built tasks: same shapes, values copied in place.
+
+        Only finiteness is checked (one reduction); shapes are the caller's contract.
+        """
+        if A is not None:
+            if not np.isfinite(A.sum()):
+                raise ValueError(f"{self.label}: A contains a non-finite value")
+            self.A[...] = A
+        if b is not None:
+            if not np.isfinite(b.sum()):
+                raise ValueError(f"{self.label}: b contains a non-finite value")
+            self.b[...] = b
+        return self
+
     def residual(self, x: np.ndarray) -> np.ndarray:
         """Weighted residual ``diag(√w)(A x − b)`` (task units)."""
         return np.sqrt(self.weight) * (self.A @ x - self.b)
@@ -240,6 +260,15 @@ class Inequality(_Task):
         self.lower, self.upper = lo, hi
         if neww is not None:
             self._set_weight(neww)
+        return self
+
+    def _assign(self, lower: np.ndarray, upper: np.ndarray) -> Inequality:
+        """Trusted per-step path: new bounds of the same length (NaN and order checked)."""
+        if _bad_box(lower, upper):
+            _check_order(lower, upper, self.label)
+            raise ValueError(f"{self.label}: bounds contain NaN or ±inf on the wrong side")
+        self.lower[...] = lower
+        self.upper[...] = upper
         return self
 
     def violation(self, x: np.ndarray) -> np.ndarray:
@@ -319,6 +348,16 @@ class Bounds:
             self.lower, self.upper = lo, hi
         else:
             self._set(new_lo, new_hi)
+        self.version += 1
+        return self
+
+    def _assign(self, lower: np.ndarray, upper: np.ndarray) -> Bounds:
+        """Trusted per-step path for arrays of the built length: checks NaN and order only."""
+        if _bad_box(lower, upper):
+            return self.update(lower, upper)  # raises with the full message
+        self.lower[...] = lower
+        self.upper[...] = upper
+        self._lower_in, self._upper_in = self.lower, self.upper
         self.version += 1
         return self
 

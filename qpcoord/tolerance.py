@@ -20,6 +20,8 @@ def within(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bo
     """True if ``lo − tol·max(1,|lo|) ≤ values ≤ hi + tol·max(1,|hi|)``."""
     if values.size == 0:
         return True
+    if (values <= hi).all() and (values >= lo).all():
+        return True  # exactly inside: the common case, no widening needed
     low, high = widen(lo, hi, tol)
     return bool((values <= high).all() and (values >= low).all())
 

@@ -1,0 +1,241 @@
+"""Side-by-side differential IK on the Franka Panda: qpcoord vs Pink (``qpcoord bench ik``).
+
+The same task for every controller, from the same start, stepping in lockstep (one step of
+each controller in turn, the order rotating each step, so machine noise hits all alike):
+
+- end-effector **position** target (frame ``panda_hand_tcp``), a waypoint that changes
+  every quarter of the run (or, in the ``tight`` scenario, a circle of 0.15 m radius run
+  in 1 s, so the joint speeds reach their bounds);
+- **posture** task toward the start configuration;
+- joint **position limits** (gain 0.5, as Pink's default) and joint **velocity bounds**
+  (the Panda's, or 0.45 rad/s in ``tight``), hard.
+
+Controllers:
+
+- ``pink``: ``pink.solve_ik`` (one weighted QP: ``FrameTask`` with position cost 1 and no
+  orientation cost, ``PostureTask`` cost ``1e-3``, Pink's configuration and velocity
+  limits) and ``Configuration.integrate_inplace``;
+- ``qpcoord hierarchical``: an :class:`~qpcoord.IK` with the position task strictly above
+  the posture task, limits merged into hard bounds;
+- ``qpcoord weighted``: the same stack solved as one weighted QP (``weight_ratio`` 1e-3).
+
+Gains match Pink's convention (Pink's task gain ``α`` per step is a CLIK gain
+``α/dt``; qpcoord's position task also gets the path's feed-forward velocity when the
+target moves, Pink's cannot). The time of one step includes the kinematics update, the
+task updates, the QP(s) and the integration. BLAS runs on one thread. Absolute times vary
+up to 2× between runs on a small shared machine: compare ratios within one run.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .ik import IK
+from .kinematic_tasks import JointLimits, PositionTask, PostureTask, VelocityLimits
+from .paths import Path
+from .robots import load
+
+__all__ = ["run_ik_bench", "format_ik_table", "PANDA_Q0", "pink_available"]
+
+#: Start configuration of the Panda (rad), away from its limits.
+PANDA_Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])
+#: Waypoint offsets from the start position (m), one per quarter of the run.
+WAYPOINTS = np.array([[0.15, 0.0, 0.0], [0.0, 0.15, -0.1], [-0.1, -0.1, 0.1], [0.05, 0.1, 0.0]])
+#: Task gain per step (Pink's ``α``) of the position and posture tasks.
+ALPHA = 0.05
+POSTURE_COST = 1e-3
+TIGHT_SPEED = 0.45  # rad/s
+
+
+def pink_available() -> bool:
+    """Is ``pin-pink`` importable (the ``bench`` extra)?"""
+    try:
+        import pink  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class _CircleTarget(Path):
+    """A horizontal circle around a centre (m), radius (m), period (s)."""
+
+    dim = 3
+
+    def __init__(self, center: np.ndarray, radius: float, period: float) -> None:
+        self.center, self.radius, self.period = center, radius, period
+
+    def _eval(self, t):
+        w = 2 * np.pi / self.period
+        c, s = np.cos(w * t), np.sin(w * t)
+        z = np.zeros_like(t)
+        r = self.radius
+        p = self.center + r * np.stack([c - 1.0, s, z], axis=1)
+        v = r * w * np.stack([-s, c, z], axis=1)
+        a = -r * w * w * np.stack([c, s, z], axis=1)
+        return p, v, a
+
+
+class _QpcoordLoop:
+    def __init__(self, method: str, robot, q0, dt, speed, solver) -> None:
+        self.name = f"qpcoord {method}"
+        self.robot = robot
+        self.q = q0.copy()
+        self.dt = dt
+        self.ee = PositionTask(robot, gain=ALPHA / dt)
+        posture = PostureTask(robot, q0, gain=ALPHA / dt)
+        limits = [JointLimits(robot, gain=0.5), VelocityLimits(robot, speed)]
+        self.ik = IK(robot, [self.ee, posture], dt, limits=limits, method=method, solver=solver)
+
+    def step(self, t: float, target) -> None:
+        if isinstance(target, Path):
+            self.ee.target = target
+        else:
+            self.ee.target = target
+        v, _ = self.ik.step(self.q, t)
+        self.q = self.q + self.dt * v
+
+    def position(self) -> np.ndarray:
+        return self.robot.position(self.q)
+
+
+class _PinkLoop:
+    name = "pink"
+
+    def __init__(self, robot, q0, dt, speed, solver) -> None:
+        import pink
+        import pinocchio as pin
+        from pink.limits import ConfigurationLimit, VelocityLimit
+        from pink.tasks import FrameTask, PostureTask
+
+        self.pink, self.pin = pink, pin
+        model = robot.model.copy() if hasattr(robot.model, "copy") else robot.model
+        model.velocityLimit[:] = speed
+        self.model = model
+        self.frame = robot.frame
+        self.conf = pink.Configuration(model, model.createData(), q0.copy())
+        self.ee = FrameTask(robot.frame, position_cost=1.0, orientation_cost=0.0, gain=ALPHA)
+        self.posture = PostureTask(cost=POSTURE_COST, gain=ALPHA)
+        self.posture.set_target(q0.copy())
+        self.limits = [ConfigurationLimit(model, 0.5), VelocityLimit(model)]
+        self.dt = dt
+        self.solver = solver
+        self._goal = self.conf.get_transform_frame_to_world(self.frame).copy()
+
+    def step(self, t: float, target) -> None:
+        p = target.position(t) if isinstance(target, Path) else target
+        self._goal.translation = p
+        self.ee.set_target(self._goal)
+        v = self.pink.solve_ik(
+            self.conf, [self.ee, self.posture], self.dt, solver=self.solver, limits=self.limits
+        )
+        self.conf.integrate_inplace(v, self.dt)
+
+    def position(self) -> np.ndarray:
+        return self.conf.get_transform_frame_to_world(self.frame).translation.copy()
+
+
+def run_ik_bench(
+    steps: int = 2000,
+    solver: str = "daqp",
+    scenario: str = "waypoints",
+    dt: float = 1e-3,
+    include_pink: bool | None = None,
+) -> list[dict]:
+    """Run the lockstep comparison; one result row per controller.
+
+    Parameters
+    ----------
+    steps : int
+        Control steps per controller (≥ 2000 for the published table).
+    solver : str
+        QP backend for every controller.
+    scenario : {"waypoints", "tight"}
+        Four position waypoints with the Panda's speed limits, or a fast circle with
+        0.45 rad/s bounds (binding).
+    dt : float
+        Control period (s).
+    include_pink : bool, optional
+        Default: when ``pin-pink`` is installed.
+
+    Returns
+    -------
+    list of dict
+        ``controller``, ``median_us``, ``p90_us``, ``final_error_m`` (distance to the
+        target at the end of the run), ``max_error_m`` (largest error over the last
+        three quarters of each waypoint segment, or over the whole circle after its first
+        10 % in ``tight``), ``steps``, ``scenario``, ``solver``.
+    """
+    if scenario not in ("waypoints", "tight"):
+        raise ValueError(f"scenario must be 'waypoints' or 'tight', got {scenario!r}")
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 8:
+        raise ValueError(f"steps must be an integer >= 8, got {steps!r}")
+    robot = load("panda")
+    q0 = PANDA_Q0.copy()
+    y0 = robot.position(q0)
+    speed = robot.velocity_limit.copy() if scenario == "waypoints" else TIGHT_SPEED
+    if include_pink is None:
+        include_pink = pink_available()
+    loops: list = [
+        _QpcoordLoop("hierarchical", load("panda"), q0, dt, speed, solver),
+        _QpcoordLoop("weighted", load("panda"), q0, dt, speed, solver),
+    ]
+    if include_pink:
+        loops.append(_PinkLoop(load("panda"), q0, dt, speed, solver))
+    circle = _CircleTarget(y0, 0.15, 1.0)
+    seg = max(1, steps // len(WAYPOINTS))
+    times = np.zeros((len(loops), steps))
+    errors = np.zeros((len(loops), steps))
+    scored = np.zeros(steps, dtype=bool)
+    for k in range(steps):
+        t = k * dt
+        if scenario == "tight":
+            target = circle
+            scored[k] = t >= 0.1 * steps * dt
+        else:
+            i = min(k // seg, len(WAYPOINTS) - 1)
+            target = y0 + WAYPOINTS[i]
+            scored[k] = (k % seg) >= seg // 4
+        for j in range(len(loops)):
+            loop = loops[(j + k) % len(loops)]
+            t0 = time.perf_counter()
+            loop.step(t, target)
+            times[(j + k) % len(loops), k] = time.perf_counter() - t0
+        for j, loop in enumerate(loops):
+            goal = target.position(t + dt) if isinstance(target, Path) else target
+            errors[j, k] = float(np.linalg.norm(loop.position() - goal))
+    rows = []
+    for j, loop in enumerate(loops):
+        ts = times[j, steps // 10 :] * 1e6  # the first 10 % warm caches up
+        rows.append(
+            {
+                "controller": loop.name,
+                "median_us": float(np.median(ts)),
+                "p90_us": float(np.percentile(ts, 90)),
+                "final_error_m": float(errors[j, -1]),
+                "max_error_m": float(errors[j, scored].max()),
+                "steps": steps,
+                "scenario": scenario,
+                "solver": solver,
+            }
+        )
+    return rows
+
+
+def format_ik_table(rows: list[dict]) -> str:
+    """Markdown table of :func:`run_ik_bench` rows, with time ratios to Pink."""
+    pink = next((r for r in rows if r["controller"] == "pink"), None)
+    lines = [
+        "| scenario | controller | solver | median µs/step | p90 µs/step | vs Pink (median) "
+        "| final error (m) | max error (m) |",
+        "|---|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        ratio = f"{r['median_us'] / pink['median_us']:.2f}" if pink else "n/a"
+        lines.append(
+            f"| {r['scenario']} | {r['controller']} | {r['solver']} | {r['median_us']:.0f} "
+            f"| {r['p90_us']:.0f} | {ratio} | {r['final_error_m']:.2e} "
+            f"| {r['max_error_m']:.2e} |"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,263 @@
+"""Per-step differential inverse kinematics on a prioritised stack.
+
+:class:`IK` builds one :class:`~qpcoord.Stack` over the joint velocity ``q̇`` (rad/s) from
+kinematic tasks (:mod:`qpcoord.kinematic_tasks`) and re-solves it every control step:
+
+>>> import numpy as np, qpcoord as qc
+>>> arm = qc.robots.load("planar_3r")
+>>> ee = qc.PositionTask(arm, target=[1.5, 1.0], gain=10.0)
+>>> ik = qc.IK(arm, [ee, qc.PostureTask(arm, [0.0, 0.5, 1.0])], dt=0.01)
+>>> qdot, sol = ik.step(np.array([0.1, 0.6, 1.2]))
+
+Limits (:class:`~qpcoord.JointLimits`, :class:`~qpcoord.VelocityLimits`) are boxes on
+``q̇``; they are merged into one hard :class:`~qpcoord.Bounds` (by default the robot's own
+finite limits are used).
+
+:func:`ik_step` is the one-call form; :func:`inverse_kinematics` solves the position IK
+``ζ(q) = y`` from a start configuration (Gauss–Newton with minimum-norm steps).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .kinematic_tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
+from .linalg import filtered_svd
+from .robot import Robot
+from .stack import Solution, Stack
+from .tasks import Bounds, Equality, Inequality
+
+__all__ = ["IK", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
+
+#: Default relative damping of the IK stacks: a singular value below ``1e-4 · s₀`` is
+#: damped, so no joint speed exceeds ``‖task error‖ / (1e-4 s₀)``.
+DEFAULT_IK_DAMPING = 1e-4
+
+
+def _default_limits(robot: Robot) -> list[Limit]:
+    limits: list[Limit] = []
+    if np.any(np.isfinite(robot.lower)) or np.any(np.isfinite(robot.upper)):
+        limits.append(JointLimits(robot))
+    if np.any(np.isfinite(robot.velocity_limit)):
+        limits.append(VelocityLimits(robot))
+    return limits
+
+
+class IK:
+    """A differential-IK stack for one robot, built once and stepped every control period.
+
+    Parameters
+    ----------
+    robot : Robot
+    levels : sequence
+        Priority levels, highest first. Each item is a task or a list of tasks; a task is a
+        :class:`~qpcoord.kinematic_tasks.KinematicTask` (refreshed every step) or a
+        constant :class:`~qpcoord.Equality` / :class:`~qpcoord.Inequality` on ``q̇``.
+    dt : float
+        Control period (s): used by :class:`~qpcoord.JointLimits`.
+    limits : "robot", sequence of Limit, or None
+        Hard boxes on ``q̇``. ``"robot"`` (default): the robot's finite position limits
+        (:class:`~qpcoord.JointLimits`) and speed limits (:class:`~qpcoord.VelocityLimits`).
+    constraints : sequence, optional
+        Hard tasks (kinematic or constant), e.g. a 1-form that must hold exactly.
+    method : {"hierarchical", "nullspace", "weighted"}
+        Stack method (default strict priorities).
+    solver : str, optional
+        QP backend (default: the fastest installed).
+    damping : float
+        Relative singular-value damping of the stack (default :data:`DEFAULT_IK_DAMPING`).
+    regularization, weight_ratio : float
+        Passed to :class:`~qpcoord.Stack`.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        levels,
+        dt: float,
+        limits="robot",
+        constraints=None,
+        method: str = "hierarchical",
+        solver: str | None = None,
+        damping: float = DEFAULT_IK_DAMPING,
+        regularization: float = 1e-9,
+        weight_ratio: float = 1e-3,
+    ) -> None:
+        if not isinstance(robot, Robot):
+            raise ValueError(f"robot must be a qpcoord.Robot, got {type(robot).__name__}")
+        self.robot = robot
+        self.dt = _check_dt(dt)
+        self.method = method
+        self.solver = solver
+        if isinstance(limits, str):
+            if limits != "robot":
+                raise ValueError(
+                    f"limits must be 'robot', a list of limits or None, got {limits!r}"
+                )
+            limits = _default_limits(robot)
+        limits = list(limits or [])
+        for lim in limits:
+            if not isinstance(lim, Limit):
+                raise ValueError(f"limits must be JointLimits/VelocityLimits objects, got {lim!r}")
+            if lim.robot is not robot:
+                raise ValueError(f"limit {lim.task.name!r} belongs to another robot")
+        self.limits = limits
+        self._dynamic: list[KinematicTask] = []
+        stack_levels = [self._collect(level, f"levels[{i}]") for i, level in enumerate(levels)]
+        stack_constraints = self._collect(list(constraints or []), "constraints")
+        self.bounds = Bounds(np.full(robot.nq, -np.inf), np.full(robot.nq, np.inf), "limits")
+        self.stack = Stack(
+            stack_levels,
+            bounds=self.bounds if limits else None,
+            regularization=regularization,
+            damping=damping,
+            constraints=stack_constraints or None,
+            weight_ratio=weight_ratio,
+        )
+        self._lo = np.empty(robot.nq)
+        self._hi = np.empty(robot.nq)
+        self.last: Solution | None = None
+
+    def _collect(self, level, where: str) -> list:
+        items = level if isinstance(level, (list, tuple)) else [level]
+        out = []
+        for task in items:
+            if isinstance(task, KinematicTask):
+                if task.robot is not self.robot:
+                    raise ValueError(f"{where}: task {task.name!r} belongs to another robot")
+                self._dynamic.append(task)
+                out.append(task.task)
+            elif isinstance(task, (Equality, Inequality)):
+                if task.shape[1] != self.robot.nq:
+                    raise ValueError(
+                        f"{where}: {task.label} has {task.shape[1]} columns, the robot "
+                        f"{self.robot.nq} joints"
+                    )
+                out.append(task)
+            else:
+                raise ValueError(
+                    f"{where}: expected kinematic tasks, Equality or Inequality, got {task!r}"
+                )
+        return out
+
+    def refresh(self, q: np.ndarray, t: float = 0.0, reference=None) -> None:
+        """Update every task and the bounds for a validated configuration ``q`` (rad)
+        (float array of shape (nq,)) at time ``t`` (s)."""
+        for task in self._dynamic:
+            task._refresh(q, t, self.dt, reference)
+        if self.limits:
+            lo, hi = self._lo, self._hi
+            lo.fill(-np.inf)
+            hi.fill(np.inf)
+            for lim in self.limits:
+                a, b = lim.box(q, self.dt)
+                np.maximum(lo, a, out=lo)
+                np.minimum(hi, b, out=hi)
+            # joint limit pushing back beyond the speed limit: the speed limit wins
+            np.minimum(lo, hi, out=lo)
+            self.bounds._assign(lo, hi)
+
+    def step(
+        self, q, t: float = 0.0, reference=None, warm_start=None
+    ) -> tuple[np.ndarray, Solution]:
+        """Solve one control step.
+
+        Parameters
+        ----------
+        q : array_like, shape (nq,)
+            Current configuration (rad).
+        t : float
+            Time (s), for tasks that follow a path.
+        reference : Path, optional
+            End-effector path for position tasks built without a target.
+        warm_start : Solution or array, optional
+            Previous step's solution (default: the last one of this IK).
+
+        Returns
+        -------
+        qdot : numpy.ndarray, shape (nq,)
+            Joint velocity (rad/s).
+        solution : Solution
+            The stack's solution (``info["level_ranks"]`` shows a rank loss near a
+            singularity).
+        """
+        q = self.robot.check_configuration(q)
+        self.refresh(q, t, reference)
+        sol = self.stack.solve(
+            solver=self.solver,
+            method=self.method,
+            warm_start=self.last if warm_start is None else warm_start,
+        )
+        self.last = sol
+        return sol.x, sol
+
+    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+        """Joint velocity (rad/s) at ``(q, t)``: the scheme interface used by :func:`simulate`."""
+        return self.step(q, t, reference)[0]
+
+
+def ik_step(
+    robot: Robot, q, levels, dt: float, solver: str | None = None, t: float = 0.0, **options
+) -> tuple[np.ndarray, Solution]:
+    """Build an :class:`IK` and solve one step (convenience; a control loop keeps the IK).
+
+    ``options`` go to :class:`IK` (``limits``, ``constraints``, ``method``, ``damping``…).
+    Returns ``(qdot, solution)`` with ``qdot`` in rad/s.
+    """
+    return IK(robot, levels, dt, solver=solver, **options).step(q, t)
+
+
+def inverse_kinematics(
+    robot: Robot,
+    target,
+    q0,
+    tol: float = 1e-12,
+    max_iter: int = 100,
+    max_step: float = 0.5,
+) -> np.ndarray:
+    """Configuration ``q`` with ``ζ(q) = target``, reached from ``q0`` by minimum-norm steps.
+
+    Gauss–Newton: ``q ← q + J⁺(q) (target − ζ(q))`` (filtered pseudo-inverse, step norm
+    capped at ``max_step`` rad), so ``q`` stays close to ``q0`` along the self-motion.
+    Joint limits are not enforced.
+
+    Parameters
+    ----------
+    robot : Robot
+    target : array_like, shape (rows,)
+        End-effector position (m).
+    q0 : array_like, shape (nq,)
+        Start configuration (rad).
+    tol : float
+        Stop when ``‖ζ(q) − target‖ ≤ tol · max(1, ‖target‖)`` (m).
+    max_iter : int
+    max_step : float
+        Largest joint step per iteration (rad).
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, or the target is not reached (out of reach, or a singularity).
+    """
+    q = robot.check_configuration(q0, "q0").copy()
+    y_target = np.asarray(target, dtype=float).reshape(-1)
+    if y_target.shape != (robot.m,) or not np.all(np.isfinite(y_target)):
+        raise ValueError(f"target must be {robot.m} finite coordinates (m), got {target!r}")
+    goal = tol * max(1.0, float(np.linalg.norm(y_target)))
+    err = np.inf
+    for _ in range(max_iter):
+        y, J = robot.kinematics(q)
+        e = y_target - y
+        err = float(np.linalg.norm(e))
+        if err <= goal:
+            return q
+        U, _s, Vt, rank, g, _tau = filtered_svd(J, 1e-6)
+        dq = Vt[:rank].T @ (g * (U[:, :rank].T @ e))
+        norm = float(np.linalg.norm(dq))
+        if norm > max_step:
+            dq *= max_step / norm
+        q = q + dq
+    raise ValueError(
+        f"inverse_kinematics: target {y_target.tolist()} not reached from q0 "
+        f"(residual {err:.3g} m after {max_iter} iterations; out of reach or singular)"
+    )

@@ -1,0 +1,98 @@
+"""Robot descriptions shipped with qpcoord, turned into :class:`~qpcoord.Robot` objects.
+
+>>> import qpcoord as qc
+>>> arm = qc.robots.load("planar_3r")
+>>> arm.position([0.0, 0.0, 0.0])          # x = Σ cos qᵢ, y = Σ sin qᵢ (m)
+array([3., 0.])
+
+Known names (:func:`names`):
+
+- ``planar_3r`` -- thesis 3R2D arm, unit links, **absolute** joint angles (rad);
+- ``spatial_5r`` -- thesis 5R3D arm, l0..l4 = 1 m, l5 = 0.5 m (axes: see
+  :func:`qpcoord.robots.spatial_5r.describe`);
+- ``planar_nr`` -- ``n`` unit links in the plane, absolute angles (``load("planar_nr", n=5)``);
+- ``panda`` -- Franka Panda, 7 DoF, fingers locked, frame ``panda_hand_tcp``;
+- ``ur5`` -- Universal Robots UR5, 6 DoF, frame ``tool0``.
+
+``panda`` and ``ur5`` come from the ``example-robot-data`` package (the optional extra
+``qpcoord[robots]``); the others are files in this distribution.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+
+from ..robot import Robot
+from .builders import absolute_angle_map, planar_chain
+from .external import example_robot_data_urdf
+
+__all__ = ["load", "names", "description_path", "planar_chain", "absolute_angle_map"]
+
+_NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5")
+
+
+def names() -> tuple[str, ...]:
+    """Names accepted by :func:`load`."""
+    return _NAMES
+
+
+def description_path(filename: str):
+    """Path of a description file shipped in ``robots/`` (a :mod:`importlib.resources` path)."""
+    path = resources.files("qpcoord.robots.descriptions").joinpath(filename)
+    if not path.is_file():
+        raise ValueError(f"no robot description file {filename!r} is installed")
+    return path
+
+
+def load(name: str, **options) -> Robot:
+    """Load a robot by name.
+
+    Parameters
+    ----------
+    name : str
+        One of :func:`names`.
+    **options
+        ``n`` (number of links) for ``planar_nr``; none for the others.
+
+    Raises
+    ------
+    ValueError
+        Unknown name (the message lists the known ones), unexpected options, or
+        ``example-robot-data`` missing for ``panda`` / ``ur5``.
+    """
+    if name not in _NAMES:
+        raise ValueError(f"unknown robot {name!r}; known robots: {', '.join(_NAMES)}")
+    if name == "planar_nr":
+        extra = set(options) - {"n"}
+        if extra or "n" not in options:
+            raise ValueError(f"load('planar_nr') takes exactly the option n=…, got {options!r}")
+        n = options["n"]
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise ValueError(f"planar_nr: n must be an integer >= 1, got {n!r}")
+        return Robot(
+            planar_chain(n),
+            "tip",
+            rows=(0, 1),
+            coordinate_map=absolute_angle_map(n),
+            name=f"planar_{n}r",
+        )
+    if options:
+        raise ValueError(f"load({name!r}) takes no options, got {options!r}")
+    if name == "planar_3r":
+        with resources.as_file(description_path("planar_3r.urdf")) as path:
+            return Robot.from_urdf(
+                path, "tip", rows=(0, 1), coordinate_map=absolute_angle_map(3), name=name
+            )
+    if name == "spatial_5r":
+        with resources.as_file(description_path("spatial_5r.urdf")) as path:
+            return Robot.from_urdf(path, "tip", name=name)
+    if name == "panda":
+        return Robot.from_urdf(
+            example_robot_data_urdf("panda_description/urdf/panda.urdf"),
+            "panda_hand_tcp",
+            locked_joints=("panda_finger_joint1", "panda_finger_joint2"),
+            name=name,
+        )
+    return Robot.from_urdf(
+        example_robot_data_urdf("ur_description/urdf/ur5_robot.urdf"), "tool0", name=name
+    )

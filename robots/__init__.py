@@ -1,0 +1,1 @@
+"""Robot descriptions shipped as data (installed as ``qpcoord.robots.descriptions``)."""
