@@ -4,11 +4,12 @@ The same task for every controller, from the same start, stepping in lockstep (o
 each controller in turn, the order rotating each step, so machine noise hits all alike):
 
 - end-effector **position** target (frame ``panda_hand_tcp``), a waypoint that changes
-  every quarter of the run (or, in the ``tight`` scenario, a circle of 0.15 m radius run
-  in 1 s, so the joint speeds reach their bounds);
+  every quarter of the run (or, in the ``tight`` scenario, a horizontal circle of 0.1 m
+  radius run in 2 s, with the speed bounds lowered to 0.8 rad/s so that they bind on about
+  a third of the steps);
 - **posture** task toward the start configuration;
 - joint **position limits** (gain 0.5, as Pink's default) and joint **velocity bounds**
-  (the Panda's, or 0.45 rad/s in ``tight``), hard.
+  (the Panda's, or 0.8 rad/s in ``tight``), hard.
 
 Controllers:
 
@@ -46,7 +47,9 @@ WAYPOINTS = np.array([[0.15, 0.0, 0.0], [0.0, 0.15, -0.1], [-0.1, -0.1, 0.1], [0
 #: Task gain per step (Pink's ``α``) of the position and posture tasks.
 ALPHA = 0.05
 POSTURE_COST = 1e-3
-TIGHT_SPEED = 0.45  # rad/s
+TIGHT_SPEED = 0.8  # rad/s
+TIGHT_RADIUS = 0.1  # m
+TIGHT_PERIOD = 2.0  # s
 
 
 def pink_available() -> bool:
@@ -88,13 +91,11 @@ class _QpcoordLoop:
         limits = [JointLimits(robot, gain=0.5), VelocityLimits(robot, speed)]
         self.ik = IK(robot, [self.ee, posture], dt, limits=limits, method=method, solver=solver)
 
-    def step(self, t: float, target) -> None:
-        if isinstance(target, Path):
-            self.ee.target = target
-        else:
-            self.ee.target = target
+    def step(self, t: float, target) -> np.ndarray:
+        self.ee.target = target
         v, _ = self.ik.step(self.q, t)
         self.q = self.q + self.dt * v
+        return v
 
     def position(self) -> np.ndarray:
         return self.robot.position(self.q)
@@ -123,7 +124,7 @@ class _PinkLoop:
         self.solver = solver
         self._goal = self.conf.get_transform_frame_to_world(self.frame).copy()
 
-    def step(self, t: float, target) -> None:
+    def step(self, t: float, target) -> np.ndarray:
         p = target.position(t) if isinstance(target, Path) else target
         self._goal.translation = p
         self.ee.set_target(self._goal)
@@ -131,6 +132,7 @@ class _PinkLoop:
             self.conf, [self.ee, self.posture], self.dt, solver=self.solver, limits=self.limits
         )
         self.conf.integrate_inplace(v, self.dt)
+        return v
 
     def position(self) -> np.ndarray:
         return self.conf.get_transform_frame_to_world(self.frame).translation.copy()
@@ -163,9 +165,10 @@ def run_ik_bench(
     -------
     list of dict
         ``controller``, ``median_us``, ``p90_us``, ``final_error_m`` (distance to the
-        target at the end of the run), ``max_error_m`` (largest error over the last
-        three quarters of each waypoint segment, or over the whole circle after its first
-        10 % in ``tight``), ``steps``, ``scenario``, ``solver``.
+        target at the end of the run), ``max_error_m`` (largest distance at the end of a
+        waypoint segment, or along the circle after its first 10 % in ``tight``),
+        ``bound_steps`` (steps with a joint speed at its bound), ``steps``,
+        ``scenario``, ``solver``.
     """
     if scenario not in ("waypoints", "tight"):
         raise ValueError(f"scenario must be 'waypoints' or 'tight', got {scenario!r}")
@@ -183,11 +186,13 @@ def run_ik_bench(
     ]
     if include_pink:
         loops.append(_PinkLoop(load("panda"), q0, dt, speed, solver))
-    circle = _CircleTarget(y0, 0.15, 1.0)
+    circle = _CircleTarget(y0, TIGHT_RADIUS, TIGHT_PERIOD)
     seg = max(1, steps // len(WAYPOINTS))
     times = np.zeros((len(loops), steps))
     errors = np.zeros((len(loops), steps))
+    at_bound = np.zeros((len(loops), steps), dtype=bool)
     scored = np.zeros(steps, dtype=bool)
+    limit = np.broadcast_to(speed, (robot.nq,))
     for k in range(steps):
         t = k * dt
         if scenario == "tight":
@@ -196,12 +201,13 @@ def run_ik_bench(
         else:
             i = min(k // seg, len(WAYPOINTS) - 1)
             target = y0 + WAYPOINTS[i]
-            scored[k] = (k % seg) >= seg // 4
+            scored[k] = (k + 1) % seg == 0 or k == steps - 1  # end of each segment
         for j in range(len(loops)):
-            loop = loops[(j + k) % len(loops)]
+            idx = (j + k) % len(loops)
             t0 = time.perf_counter()
-            loop.step(t, target)
-            times[(j + k) % len(loops), k] = time.perf_counter() - t0
+            v = loops[idx].step(t, target)
+            times[idx, k] = time.perf_counter() - t0
+            at_bound[idx, k] = bool(np.any(np.abs(v) >= limit * (1 - 1e-6)))
         for j, loop in enumerate(loops):
             goal = target.position(t + dt) if isinstance(target, Path) else target
             errors[j, k] = float(np.linalg.norm(loop.position() - goal))
@@ -215,6 +221,7 @@ def run_ik_bench(
                 "p90_us": float(np.percentile(ts, 90)),
                 "final_error_m": float(errors[j, -1]),
                 "max_error_m": float(errors[j, scored].max()),
+                "bound_steps": int(at_bound[j].sum()),
                 "steps": steps,
                 "scenario": scenario,
                 "solver": solver,
@@ -225,17 +232,18 @@ def run_ik_bench(
 
 def format_ik_table(rows: list[dict]) -> str:
     """Markdown table of :func:`run_ik_bench` rows, with time ratios to Pink."""
-    pink = next((r for r in rows if r["controller"] == "pink"), None)
+    pink = {r["scenario"]: r for r in rows if r["controller"] == "pink"}
     lines = [
         "| scenario | controller | solver | median µs/step | p90 µs/step | vs Pink (median) "
-        "| final error (m) | max error (m) |",
-        "|---|---|---|---:|---:|---:|---:|---:|",
+        "| final error (m) | max error (m) | steps at a speed bound |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
-        ratio = f"{r['median_us'] / pink['median_us']:.2f}" if pink else "n/a"
+        ref = pink.get(r["scenario"])
+        ratio = f"{r['median_us'] / ref['median_us']:.2f}" if ref else "n/a"
         lines.append(
             f"| {r['scenario']} | {r['controller']} | {r['solver']} | {r['median_us']:.0f} "
             f"| {r['p90_us']:.0f} | {ratio} | {r['final_error_m']:.2e} "
-            f"| {r['max_error_m']:.2e} |"
+            f"| {r['max_error_m']:.2e} | {r['bound_steps']}/{r['steps']} |"
         )
     return "\n".join(lines)

@@ -3,6 +3,7 @@
 ``qpcoord solvers``        installed QP backends, with versions, default first
 ``qpcoord demo``           a small end-to-end stack solve (3R arm tracking a circle)
 ``qpcoord bench stack``    per-step solve-time benchmark of 3-level stacks
+``qpcoord bench ik``       Panda differential IK, qpcoord vs Pink, per-step times and errors
 """
 
 from __future__ import annotations
@@ -45,6 +46,23 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_ik(args: argparse.Namespace) -> int:
+    from threadpoolctl import threadpool_limits
+
+    from .bench_ik import format_ik_table, pink_available, run_ik_bench
+
+    if not pink_available():
+        print("note: pin-pink is not installed (pip install 'qpcoord[bench]'): qpcoord rows only")
+    scenarios = ("waypoints", "tight") if args.scenario == "both" else (args.scenario,)
+    steps = 40 if args.quick else args.steps
+    rows = []
+    with threadpool_limits(limits=1):
+        for scenario in scenarios:
+            rows += run_ik_bench(steps=steps, solver=args.solver, scenario=scenario)
+    print(format_ik_table(rows))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``qpcoord`` command."""
     p = argparse.ArgumentParser(prog="qpcoord", description=__doc__.split("\n")[0])
@@ -62,6 +80,14 @@ def build_parser() -> argparse.ArgumentParser:
     bs.add_argument("--steps", type=int, default=1000, help="steps per case (default 1000)")
     bs.add_argument("--solver", default=None, help="only this backend")
     bs.set_defaults(func=_cmd_bench)
+    bi = bsub.add_parser("ik", help="Panda differential IK: qpcoord vs Pink (per-step µs, errors)")
+    bi.add_argument("--quick", action="store_true", help="40 steps, for smoke tests")
+    bi.add_argument("--steps", type=int, default=2000, help="steps per controller (default 2000)")
+    bi.add_argument("--solver", default="daqp", help="QP backend for all (default daqp)")
+    bi.add_argument(
+        "--scenario", choices=("waypoints", "tight", "both"), default="both", help="motion"
+    )
+    bi.set_defaults(func=_cmd_bench_ik)
     return p
 
 

@@ -172,7 +172,14 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
         x -= Z @ (Z.T @ x)
     elif r:
         x[:] = 0.0
-    info = {"qp_calls": 0, "retries": 0, "polished": 0, "level_ranks": ranks, "free_dofs": r}
+    info = {
+        "qp_calls": 0,
+        "retries": 0,
+        "fallbacks": [],
+        "polished": 0,
+        "level_ranks": ranks,
+        "free_dofs": r,
+    }
     return x, info
 
 
@@ -356,6 +363,7 @@ def solve_hierarchical(
     return {
         "qp_calls": R.qp_calls,
         "retries": R.retries,
+        "fallbacks": R.fallbacks,
         "polished": R.polished,
         "level_ranks": ranks,
         "free_dofs": r,

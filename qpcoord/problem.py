@@ -40,8 +40,8 @@ class CompiledLevel:
     def __post_init__(self) -> None:
         me = sum(t.A.shape[0] for t in self.eqs)
         mi = sum(t.C.shape[0] for t in self.ineqs)
-        self.Ae = np.zeros((me, self.n))
-        self.be = np.zeros(me)
+        self.Ae = self._Ae_buf = np.zeros((me, self.n))
+        self.be = self._be_buf = np.zeros(me)
         self.C = np.zeros((mi, self.n))
         self.lo = np.zeros(mi)
         self.hi = np.zeros(mi)
@@ -62,9 +62,25 @@ class CompiledLevel:
         return self.C.shape[0]
 
     def refresh(self) -> None:
-        """Copy the tasks' current numbers into the buffers (checks shapes did not change)."""
+        """Copy the tasks' current numbers into the buffers (checks shapes did not change).
+
+        A level made of one unit-weight equality reads that task's arrays directly; they
+        are only read, never written, by the solve methods.
+        """
+        eqs = self.eqs
+        if len(eqs) == 1 and eqs[0].unit_weight:
+            # one unit-weight task: read its arrays in place (no copy on the hot path)
+            t = eqs[0]
+            if t.A.shape != self._eq_shapes[0]:
+                raise ValueError(
+                    f"{t.label}: A changed shape from {self._eq_shapes[0]} to {t.A.shape}"
+                )
+            self.Ae, self.be = t.A, t.b
+            eqs = ()
+        elif eqs:
+            self.Ae, self.be = self._Ae_buf, self._be_buf
         i = 0
-        for t, shape in zip(self.eqs, self._eq_shapes, strict=True):
+        for t, shape in zip(eqs, self._eq_shapes, strict=False):
             if t.A.shape != shape:
                 raise ValueError(f"{t.label}: A changed shape from {shape} to {t.A.shape}")
             m = shape[0]

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .backends import INFEASIBLE, OK, as_rows, solve_dense_qp
+from .backends import INFEASIBLE, OK, as_rows, available_solvers, solve_dense_qp
 from .errors import InfeasibleError, SolverError
 from .linalg import null_space, numerical_rank, svd
 from .polish import polish
@@ -35,6 +35,11 @@ CHECK_TOL = 1e-6
 #: "infeasible" on 1e-12-wide sets that daqp and quadprog solved).
 RELAX = {"daqp": 1e-12, "quadprog": 1e-12}
 RELAX_DEFAULT = 1e-8
+#: Backends tried, in order, when the requested one fails on a level QP that is feasible
+#: by construction (``z = 0`` meets every row; slacks are free). Measured case: at a
+#: point pinned by four joint-speed bounds whose cone in ``z`` is pointed (a Panda IK
+#: step), daqp 0.11 reported "infeasible" with every setting, quadprog solved it exactly.
+FALLBACKS = ("quadprog", "daqp", "proxqp")
 
 
 def _miss(G, lo, hi, lb, ub, y) -> float:
@@ -76,10 +81,13 @@ class Reduced:
         Number of variables.
     capacity : int
         Most inherited rows a solve can collect (hard inequalities plus every level's).
+    fallback : bool
+        Retry a level QP the backend failed on with :data:`FALLBACKS` (see there).
     """
 
-    def __init__(self, n: int, capacity: int) -> None:
+    def __init__(self, n: int, capacity: int, fallback: bool = True) -> None:
         self.n = n
+        self.fallback = fallback
         self._C = np.empty((capacity, n))
         self._lo = np.empty(capacity)
         self._hi = np.empty(capacity)
@@ -100,6 +108,8 @@ class Reduced:
         self.used_relax = self.relax
         self.qp_calls = 0
         self.retries = 0
+        self.fallbacks: list[str] = []
+        self._in_fallback = False
         self.polished = 0
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
         return self
@@ -264,6 +274,9 @@ class Reduced:
             self.qp_calls += 1
             res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
         if res.code != OK:
+            y = self._fallback(H, f, D, dlo, dhi, where)
+            if y is not None:
+                return y
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
         miss = _miss(G, lo, hi, lb, ub, res.y)
         if miss > CHECK_TOL:
@@ -279,6 +292,32 @@ class Reduced:
         G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
         self.relax = keep
         return polish(H, f, G, lo, hi, lb, ub, res.y, obj_slack=10.0 * opened)
+
+    def _fallback(self, H, f, D, dlo, dhi, where: str) -> np.ndarray | None:
+        """Solve a level QP the requested backend failed on with the next backend of
+        :data:`FALLBACKS` that is installed; recorded in ``self.fallbacks``."""
+        if self._in_fallback or not self.fallback:
+            return None
+        installed = set(available_solvers())
+        keep_solver, keep_relax = self.solver, self.relax
+        self._in_fallback = True
+        try:
+            for alt in FALLBACKS:
+                if alt == keep_solver or alt not in installed:
+                    continue
+                self.solver = alt
+                self.relax = RELAX.get(alt, RELAX_DEFAULT)
+                self.used_relax = max(self.used_relax, self.relax)
+                try:
+                    y = self.solve_qp(H, f, D, dlo, dhi, None, where)
+                except SolverError:
+                    continue
+                self.fallbacks.append(f"{where}: {alt}")
+                return y
+        finally:
+            self.solver, self.relax = keep_solver, keep_relax
+            self._in_fallback = False
+        return None
 
     def hard_phase(self, hard, where: str = "constraints") -> None:
         """Satisfy the hard constraints and bounds; start at the min-norm feasible point.

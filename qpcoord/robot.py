@@ -256,9 +256,10 @@ class Robot:
         return y, J  # y is a view into the Pinocchio data: copy it to keep it
 
     def _jacobian_pin(self) -> np.ndarray:
-        return pin.getFrameJacobian(self.model, self.data, self.frame_id, pin.LOCAL_WORLD_ALIGNED)[
-            :3
-        ]
+        J = pin.getFrameJacobian(self.model, self.data, self.frame_id, pin.LOCAL_WORLD_ALIGNED)
+        if J.ndim == 1:  # nq = 1: the binding returns the 6×1 matrix as a vector
+            J = J.reshape(6, 1)
+        return J[:3]
 
     def hessian(self, q) -> np.ndarray:
         """Position Hessian ``H[k, i, j] = ∂²ζ_k/∂q_i∂q_j`` (m/rad²), shape (rows, nq, nq).
@@ -270,7 +271,7 @@ class Robot:
         q = self.check_configuration(q)
         self._update(q, 2)
         HW = self._world_hessian()
-        JW = pin.getJointJacobian(self.model, self.data, self.joint_id, pin.WORLD)
+        JW = self._jacobian_world()
         p = self.data.oMf[self.frame_id].translation
         Jp = self._jacobian_pin()
         n = self.nq
@@ -292,13 +293,20 @@ class Robot:
         (the data are column-major); which layout is right is decided once per robot
         against a finite difference of the Jacobian, so a fixed binding is also handled.
         """
-        raw = pin.getJointKinematicHessian(self.model, self.data, self.joint_id, pin.WORLD)
         if self._layout is None:
             self._layout = self._detect_layout()
-            raw = pin.getJointKinematicHessian(self.model, self.data, self.joint_id, pin.WORLD)
+        raw = self._raw_hessian()
         if self._layout == "fortran":
             return raw.reshape(-1, order="C").reshape(raw.shape, order="F")
         return raw
+
+    def _raw_hessian(self) -> np.ndarray:
+        raw = pin.getJointKinematicHessian(self.model, self.data, self.joint_id, pin.WORLD)
+        return np.asarray(raw).reshape(6, self.nq, self.nq)
+
+    def _jacobian_world(self) -> np.ndarray:
+        J = pin.getJointJacobian(self.model, self.data, self.joint_id, pin.WORLD)
+        return np.asarray(J).reshape(6, self.nq)
 
     def _detect_layout(self) -> str:
         m, d = self.model, self.data
@@ -311,12 +319,12 @@ class Robot:
             e = np.zeros(self.nq)
             e[i] = h
             pin.computeJointJacobians(m, d, qp + e)
-            Jplus = pin.getJointJacobian(m, d, self.joint_id, pin.WORLD).copy()
+            Jplus = self._jacobian_world().copy()
             pin.computeJointJacobians(m, d, qp - e)
-            Jminus = pin.getJointJacobian(m, d, self.joint_id, pin.WORLD)
+            Jminus = self._jacobian_world()
             dJ[:, :, i] = (Jplus - Jminus) / (2 * h)
         pin.computeJointKinematicHessians(m, d, qp)
-        raw = pin.getJointKinematicHessian(m, d, self.joint_id, pin.WORLD)
+        raw = self._raw_hessian()
         fortran = raw.reshape(-1, order="C").reshape(raw.shape, order="F")
         scale = 1e-5 * max(1.0, float(np.abs(dJ).max()))
         err_c = float(np.abs(raw - dJ).max())

@@ -43,7 +43,9 @@ class Solution:
     method : str
         ``"hierarchical"``, ``"nullspace"`` or ``"weighted"``.
     info : dict
-        ``qp_calls`` (QPs actually solved), ``level_ranks`` (dimensions each level fixed;
+        ``qp_calls`` (QPs actually solved), ``fallbacks`` (level QPs the requested
+        backend failed on and another backend solved, e.g. ``"level 1: quadprog"``),
+        ``level_ranks`` (dimensions each level fixed;
         hierarchical and nullspace methods) and ``free_dofs`` (freedom left to the
         minimum-norm step; hierarchical).
     """
@@ -89,6 +91,12 @@ class Stack:
         constraints or bounds raise :class:`~qpcoord.InfeasibleError`.
     weight_ratio : float
         Cost ratio between consecutive levels for ``method="weighted"`` (default ``1e-3``).
+    fallback : bool
+        If the backend fails on a level QP (such QPs are feasible by construction, so a
+        claimed infeasibility is the backend's failure), solve that QP with the next of
+        quadprog, daqp, proxqp instead (default ``True``); reported in
+        ``Solution.info["fallbacks"]``. ``False`` raises :class:`~qpcoord.SolverError`
+        (use it to compare backends).
 
     Notes
     -----
@@ -105,7 +113,10 @@ class Stack:
         damping: float = 1e-7,
         constraints=None,
         weight_ratio: float = 1e-3,
+        fallback: bool = True,
     ) -> None:
+        if not isinstance(fallback, bool):
+            raise ValueError(f"fallback must be True or False, got {fallback!r}")
         for name, value, lo_ok in (
             ("regularization", regularization, False),
             ("damping", damping, True),
@@ -124,7 +135,7 @@ class Stack:
         self.damping = float(damping)
         self.weight_ratio = float(weight_ratio)
         self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
-        self._work = Reduced(self._compiled.n, self._compiled.capacity)
+        self._work = Reduced(self._compiled.n, self._compiled.capacity, fallback)
 
     @property
     def n(self) -> int:
@@ -196,7 +207,10 @@ class Stack:
             else:
                 info = solve_weighted(P, R, self.regularization, self.weight_ratio, x_warm)
             x = R.x
-        self._check(x, R, used)
+        if R is not None or method != "hierarchical" or not P.equalities_only:
+            self._check(x, R, used)
+        elif not np.isfinite(x.sum()):  # bounds met to FEAS_TOL already; no hard rows
+            raise SolverError("the closed-form solution is not finite")
         residuals = np.array([L.residual(x) for L in P.levels])
         return Solution(
             x=x,

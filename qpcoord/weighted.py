@@ -33,7 +33,7 @@ def solve_weighted(
     r = R.r
     x = R.x
     if r == 0:
-        return {"qp_calls": R.qp_calls, "retries": R.retries}
+        return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
     H = np.zeros((r, r))
     f = np.zeros(r)
     soft = []
@@ -58,7 +58,7 @@ def solve_weighted(
             (L.C @ xc <= L.hiw).all() and (L.C @ xc >= L.low).all() for L, _ in soft
         ):
             R.move_to(xc, verified=True)
-            return {"qp_calls": R.qp_calls, "retries": R.retries}
+            return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
     mi = sum(L.m_in for L, _ in soft)
     if mi:
         C = np.vstack([L.C for L, _ in soft])
@@ -79,4 +79,4 @@ def solve_weighted(
         y0[:r] = R.project(x_warm - x)
     y = R.solve_qp(Hy, fy, D, dlo, dhi, y0, where="weighted QP")
     R.move_to(x + R.lift(y[:r]), verified=False)
-    return {"qp_calls": R.qp_calls, "retries": R.retries}
+    return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}

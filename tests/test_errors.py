@@ -599,6 +599,7 @@ def test_misbehaving_backend_raises_solver_error(fake_name, stack_name, method, 
     set, not passed on as NaN."""
     patch_backend(FAKES[fake_name])
     stack = _stacks()[stack_name]()
+    stack._work.fallback = False  # as Stack(..., fallback=False)
     with pytest.raises(qc.SolverError, match=r"daqp") as info:
         stack.solve(solver="daqp", method=method)
     text = str(info.value)
@@ -612,6 +613,27 @@ def test_misbehaving_backend_raises_solver_error(fake_name, stack_name, method, 
     assert re.search(expected, text), text
     if fake_name in ("failed", "infeasible"):
         assert re.search(r"level 0|weighted QP", text), text  # says where it happened
+
+
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+@pytest.mark.parametrize("fake_name", ["failed", "infeasible"])
+def test_failing_backend_falls_back_and_says_so(fake_name, method, monkeypatch):
+    """A level QP is feasible by construction: a backend that fails on it is replaced by
+    the next fallback backend, and the Solution records it."""
+    monkeypatch.setitem(
+        backends._DIRECT,
+        "daqp",
+        lambda H, f, G, lo, hi, lb, ub, y0: FAKES[fake_name]("daqp", H, f, G, lo, hi, lb, ub, y0),
+    )
+    stack = _stacks()["bounds"]()
+    sol = stack.solve(solver="daqp", method=method)
+    np.testing.assert_allclose(sol.x, [1.0, 1.0], atol=1e-9)
+    assert sol.info["fallbacks"] and "quadprog" in sol.info["fallbacks"][0]
+
+
+def test_fallback_option_is_validated():
+    with pytest.raises(ValueError, match="fallback"):
+        qc.Stack([Equality(np.eye(2), [0.0, 0.0])], fallback="yes")
 
 
 @pytest.mark.parametrize("fake_name", ["failed", "nan", "far_outside"])

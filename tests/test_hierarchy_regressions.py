@@ -5,6 +5,8 @@ Each case has a closed-form answer and runs on every installed backend.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -81,3 +83,29 @@ def test_nullspace_keeps_higher_levels_exact():
 def test_stack_options_are_validated(name, value):
     with pytest.raises(ValueError, match=name):
         qc.Stack([qc.Equality([[1.0, 0.0]], [0.0])], **{name: value})
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_pointed_cone_of_pinned_speed_bounds(solver):
+    """A Panda IK step (position above posture, |q̇| ≤ 0.45 rad/s) where four joints sit
+    on their bound after level 0 and their cone in level 1's null space is pointed.
+
+    daqp 0.11 reported the (feasible by construction) level-1 QP infeasible with every
+    setting; the stack now falls back to another backend and says so in ``info``. Exact
+    answer: level 1 cannot move the four pinned joints (residual 26.515922); inexact
+    backends may gain ~2e-4 from their 1e-8 opening of the bounds.
+    """
+    d = np.load(Path(__file__).parent / "data" / "panda_pinned_cone.npz")
+    stack = qc.Stack(
+        [qc.Equality(d["A0"], d["b0"]), qc.Equality(d["A1"], d["b1"])],
+        bounds=qc.Bounds(d["lb"], d["ub"]),
+    )
+    sol = stack.solve(solver=solver)
+    assert np.all(sol.x >= d["lb"] - 1e-9) and np.all(sol.x <= d["ub"] + 1e-9)
+    # level 0 to the stack's stated tolerance; level 1 depends on how far a backend's
+    # tolerance lets level 0 move (osqp: 2e-7 at level 0 buys 4e-4 at level 1)
+    np.testing.assert_allclose(sol.level_residuals[0], 1.917008445, rtol=1e-6)
+    exact = solver in ("daqp", "quadprog")
+    np.testing.assert_allclose(sol.level_residuals[1], 26.515922, rtol=1e-7 if exact else 1e-3)
+    if solver == "daqp":
+        assert sol.info["fallbacks"] == ["level 1: quadprog"]
