@@ -153,8 +153,13 @@ class IK:
                 a, b = lim.box(q, self.dt)
                 np.maximum(lo, a, out=lo)
                 np.minimum(hi, b, out=hi)
-            # joint limit pushing back beyond the speed limit: the speed limit wins
-            np.minimum(lo, hi, out=lo)
+            # outside a joint limit the box that pushes back may lie beyond the speed
+            # limit: the boxes do not meet, and the speed limit (which contains 0) wins:
+            # move back at full speed, i.e. take the end nearer to 0
+            bad = lo > hi
+            if bad.any():
+                back = np.where(np.abs(lo) < np.abs(hi), lo, hi)
+                lo[bad] = hi[bad] = back[bad]
             self.bounds._assign(lo, hi)
 
     def step(

@@ -144,9 +144,20 @@ class PositionTask(KinematicTask):
                 f"{self.task.label}: no target; give target= or run it with a reference"
             )
         if isinstance(target, Path):
+            if target.dim != self.robot.m:
+                raise ValueError(
+                    f"{self.task.label}: reference path is {target.dim}-D, the robot has "
+                    f"{self.robot.m} task rows"
+                )
             return target.position_velocity(t)
-        if not isinstance(target, np.ndarray):
-            target = np.asarray(target, dtype=float)
+        if not isinstance(target, np.ndarray) or target.shape != (self.robot.m,):
+            arr = np.asarray(target, dtype=float)
+            if arr.shape != (self.robot.m,) or not np.all(np.isfinite(arr)):
+                raise ValueError(
+                    f"{self.task.label}: reference must be {self.robot.m} finite "
+                    f"coordinates (m) or a Path, got {target!r}"
+                )
+            target = arr
         return target, self._zero
 
     def _refresh(self, q, t, dt, reference) -> Equality:

@@ -134,7 +134,10 @@ class LissajousSphere(Path):
         self.center = np.array(center, dtype=float).reshape(-1)
         if self.center.shape != (3,) or not np.all(np.isfinite(self.center)):
             raise ValueError(f"center must be 3 finite numbers (m), got {center!r}")
-        a, b, c = (_finite(v, "angles") for v in np.asarray(angles, dtype=float).reshape(-1))
+        ang = np.asarray(angles, dtype=float).reshape(-1)
+        if ang.shape != (3,):
+            raise ValueError(f"angles must be 3 numbers (a, b, c) in rad, got {angles!r}")
+        a, b, c = (_finite(v, "angles") for v in ang)
         self.angles = (a, b, c)
         self.rotation = rotation_x(a) @ rotation_y(b) @ rotation_z(c)
         self.period = 2 * np.pi / self.omega

@@ -208,7 +208,7 @@ class Robot:
             )
         if not np.isfinite(arr.sum()):
             i = int(np.flatnonzero(~np.isfinite(arr))[0])
-            raise ValueError(f"{what}[{i}] is {arr[i]!r}: configurations must be finite")
+            raise ValueError(f"{what}[{i}] is {float(arr[i])}: configurations must be finite")
         return arr
 
     # ------------------------------------------------------------------ kinematics
@@ -244,10 +244,12 @@ class Robot:
 
     def kinematics(self, q) -> tuple[np.ndarray, np.ndarray]:
         """``(position(q), jacobian(q))`` from one kinematics pass (the per-step call)."""
-        return self._kinematics(self.check_configuration(q))
+        y, J = self._kinematics(self.check_configuration(q))
+        return y.copy(), J
 
     def _kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`kinematics` for a validated ``q`` (float array of shape (nq,))."""
+        """:meth:`kinematics` for a validated ``q`` (float array of shape (nq,)); ``y`` is a
+        view into the Pinocchio data, valid until the next kinematics call."""
         self._update(q, 1)
         y = self.data.oMf[self.frame_id].translation[self._rows]
         J = self._jacobian_pin()[self._rows]
