@@ -154,19 +154,21 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
     Z = None  # orthonormal basis of the remaining freedom (None: all of R^n)
     r = P.n
     ranks = []
+    moved = False
     for L in P.levels:
         if r == 0:
             ranks.append(0)
             continue
         A = L.Ae
         M = A if Z is None else A @ Z
-        e = L.be - A @ x
+        e = L.be - A @ x if moved else L.be
         _U, _s, Vt, rank, g, _tau = filtered_svd(M, damping, float(np.sqrt(np.vdot(A, A))))
         if rank:
             dz = Vt[:rank].T @ (g * (_U[:, :rank].T @ e))
             x += dz if Z is None else Z @ dz
             Z = Vt[rank:].T if Z is None else Z @ Vt[rank:].T
             r -= rank
+            moved = True
         ranks.append(rank)
     if r and Z is not None:
         x -= Z @ (Z.T @ x)

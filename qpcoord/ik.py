@@ -114,8 +114,6 @@ class IK:
             constraints=stack_constraints or None,
             weight_ratio=weight_ratio,
         )
-        self._lo = np.empty(robot.nq)
-        self._hi = np.empty(robot.nq)
         self.last: Solution | None = None
 
     def _collect(self, level, where: str) -> list:
@@ -146,10 +144,13 @@ class IK:
         for task in self._dynamic:
             task._refresh(q, t, self.dt, reference)
         if self.limits:
-            lo, hi = self._lo, self._hi
-            lo.fill(-np.inf)
-            hi.fill(np.inf)
-            for lim in self.limits:
+            # written straight into the stack's Bounds (same arrays), then marked changed
+            lo, hi = self.bounds.lower, self.bounds.upper
+            first, *rest = self.limits
+            a, b = first.box(q, self.dt)
+            np.copyto(lo, a)
+            np.copyto(hi, b)
+            for lim in rest:
                 a, b = lim.box(q, self.dt)
                 np.maximum(lo, a, out=lo)
                 np.minimum(hi, b, out=hi)
@@ -160,7 +161,7 @@ class IK:
             if bad.any():
                 back = np.where(np.abs(lo) < np.abs(hi), lo, hi)
                 lo[bad] = hi[bad] = back[bad]
-            self.bounds._assign(lo, hi)
+            self.bounds._touch()
 
     def step(
         self, q, t: float = 0.0, reference=None, warm_start=None

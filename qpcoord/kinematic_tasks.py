@@ -301,10 +301,8 @@ class JointLimits(Limit):
 
     def box(self, q, dt):
         k = self.gain / dt
-        lo = k * (self.lower - q)
-        hi = k * (self.upper - q)
-        # outside a limit: allow (and require) moving back
-        return np.minimum(lo, hi), np.maximum(lo, hi)
+        # lower ≤ upper, so lo ≤ hi; outside a limit both have the sign that moves back
+        return k * (self.lower - q), k * (self.upper - q)
 
 
 class VelocityLimits(Limit):

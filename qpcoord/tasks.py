@@ -351,6 +351,13 @@ class Bounds:
         self.version += 1
         return self
 
+    def _touch(self) -> Bounds:
+        """Mark ``lower``/``upper`` as changed after the library wrote them in place (the
+        writer guarantees ``lower ≤ upper`` and no NaN)."""
+        self._lower_in, self._upper_in = self.lower, self.upper
+        self.version += 1
+        return self
+
     def _assign(self, lower: np.ndarray, upper: np.ndarray) -> Bounds:
         """Trusted per-step path for arrays of the built length: checks NaN and order only."""
         if _bad_box(lower, upper):
