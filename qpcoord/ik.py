@@ -218,14 +218,16 @@ def inverse_kinematics(
     target,
     q0,
     tol: float = 1e-12,
-    max_iter: int = 100,
+    max_iter: int = 200,
     max_step: float = 0.5,
 ) -> np.ndarray:
-    """Configuration ``q`` with ``ζ(q) = target``, reached from ``q0`` by minimum-norm steps.
+    """Configuration ``q`` with ``ζ(q) = target``, closest to ``q0`` (locally).
 
-    Gauss–Newton: ``q ← q + J⁺(q) (target − ζ(q))`` (filtered pseudo-inverse, step norm
-    capped at ``max_step`` rad), so ``q`` stays close to ``q0`` along the self-motion.
-    Joint limits are not enforced.
+    Projected Gauss–Newton: ``q ← q + J⁺ (target − ζ(q)) + (I − J⁺J)(q0 − q)`` (filtered
+    pseudo-inverse, step norm capped at ``max_step`` rad). At convergence the task error is
+    zero and ``q − q0`` is orthogonal to the self-motion, so ``q`` is a local minimum of
+    ``‖q − q0‖`` on the set of configurations that reach ``target``. Joint limits are not
+    enforced.
 
     Parameters
     ----------
@@ -235,7 +237,8 @@ def inverse_kinematics(
     q0 : array_like, shape (nq,)
         Start configuration (rad).
     tol : float
-        Stop when ``‖ζ(q) − target‖ ≤ tol · max(1, ‖target‖)`` (m).
+        Stop when ``‖ζ(q) − target‖ ≤ tol · max(1, ‖target‖)`` (m) and the null-space part
+        of ``q0 − q`` is below ``1e3 · tol`` (rad).
     max_iter : int
     max_step : float
         Largest joint step per iteration (rad).
@@ -245,24 +248,29 @@ def inverse_kinematics(
     ValueError
         Bad arguments, or the target is not reached (out of reach, or a singularity).
     """
-    q = robot.check_configuration(q0, "q0").copy()
+    q_ref = robot.check_configuration(q0, "q0").copy()
+    q = q_ref.copy()
     y_target = np.asarray(target, dtype=float).reshape(-1)
     if y_target.shape != (robot.m,) or not np.all(np.isfinite(y_target)):
         raise ValueError(f"target must be {robot.m} finite coordinates (m), got {target!r}")
     goal = tol * max(1.0, float(np.linalg.norm(y_target)))
     err = np.inf
     for _ in range(max_iter):
-        y, J = robot.kinematics(q)
+        y, J = robot._kinematics(q)
         e = y_target - y
         err = float(np.linalg.norm(e))
-        if err <= goal:
-            return q
         U, _s, Vt, rank, g, _tau = filtered_svd(J, 1e-6)
-        dq = Vt[:rank].T @ (g * (U[:, :rank].T @ e))
+        N = Vt[rank:]  # rows: orthonormal basis of the self-motion directions
+        drift = N.T @ (N @ (q_ref - q))
+        if err <= goal and float(np.linalg.norm(drift)) <= 1e3 * tol:
+            return q
+        dq = Vt[:rank].T @ (g * (U[:, :rank].T @ e)) + drift
         norm = float(np.linalg.norm(dq))
         if norm > max_step:
             dq *= max_step / norm
         q = q + dq
+    if err <= goal:
+        return q  # on target; the distance to q0 is locally minimal to the step tolerance
     raise ValueError(
         f"inverse_kinematics: target {y_target.tolist()} not reached from q0 "
         f"(residual {err:.3g} m after {max_iter} iterations; out of reach or singular)"

@@ -8,8 +8,8 @@ array([3., 0.])
 Known names (:func:`names`):
 
 - ``planar_3r`` -- thesis 3R2D arm, unit links, **absolute** joint angles (rad);
-- ``spatial_5r`` -- thesis 5R3D arm, l0..l4 = 1 m, l5 = 0.5 m (axes: see
-  :func:`qpcoord.robots.spatial_5r.describe`);
+- ``spatial_5r`` -- thesis 5R3D arm, l0..l4 = 1 m, l5 = 0.5 m: yaw about z, then four
+  pitch joints (why: :mod:`qpcoord.robots.spatial_5r`);
 - ``planar_nr`` -- ``n`` unit links in the plane, absolute angles (``load("planar_nr", n=5)``);
 - ``panda`` -- Franka Panda, 7 DoF, fingers locked, frame ``panda_hand_tcp``;
 - ``ur5`` -- Universal Robots UR5, 6 DoF, frame ``tool0``.
@@ -22,7 +22,10 @@ from __future__ import annotations
 
 from importlib import resources
 
+import numpy as np
+
 from ..robot import Robot
+from . import spatial_5r as spatial_5r_description
 from .builders import absolute_angle_map, planar_chain
 from .external import example_robot_data_urdf
 
@@ -85,7 +88,10 @@ def load(name: str, **options) -> Robot:
             )
     if name == "spatial_5r":
         with resources.as_file(description_path("spatial_5r.urdf")) as path:
-            return Robot.from_urdf(path, "tip", name=name)
+            # the thesis model has no joint limits
+            return Robot.from_urdf(
+                path, "tip", name=name, lower=-np.inf, upper=np.inf, velocity_limit=np.inf
+            )
     if name == "panda":
         return Robot.from_urdf(
             example_robot_data_urdf("panda_description/urdf/panda.urdf"),
