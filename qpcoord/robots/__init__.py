@@ -25,11 +25,11 @@ from importlib import resources
 import numpy as np
 
 from ..robot import Robot
-from . import spatial_5r as spatial_5r_description
+from . import spatial_5r
 from .builders import absolute_angle_map, planar_chain
 from .external import example_robot_data_urdf
 
-__all__ = ["load", "names", "description_path", "planar_chain", "absolute_angle_map"]
+__all__ = ["load", "names", "description_path", "planar_chain", "absolute_angle_map", "spatial_5r"]
 
 _NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5")
 
