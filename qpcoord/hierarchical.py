@@ -159,6 +159,14 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
         if r == 0:
             ranks.append(0)
             continue
+        if L.identity and damping * np.sqrt(P.n) < 1.0:
+            # A = I: M = Z has orthonormal columns (singular values 1, above the damping
+            # threshold τ = damping·√n), so the step is Zᵀe and no SVD is needed
+            e = L.be - x
+            x = x + (e if Z is None else Z @ (Z.T @ e))
+            ranks.append(r)
+            r = 0
+            continue
         A = L.Ae
         M = A if Z is None else A @ Z
         e = L.be - A @ x if moved else L.be
@@ -166,8 +174,9 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
         if rank:
             dz = Vt[:rank].T @ (g * (_U[:, :rank].T @ e))
             x += dz if Z is None else Z @ dz
-            Z = Vt[rank:].T if Z is None else Z @ Vt[rank:].T
             r -= rank
+            if r:  # no basis needed once the freedom is used up
+                Z = Vt[rank:].T if Z is None else Z @ Vt[rank:].T
             moved = True
         ranks.append(rank)
     if r and Z is not None:

@@ -49,6 +49,8 @@ class CompiledLevel:
         self.low = self.lo  # lo/hi widened by FEAS_TOL (the closed-form feasibility test)
         self.hiw = self.hi
         self._eq_shapes = [t.A.shape for t in self.eqs]
+        #: the level is exactly ``x = be`` (one unit-weight identity task, no inequalities)
+        self.identity = False
         self._in_shapes = [t.C.shape for t in self.ineqs]
 
     @property
@@ -76,9 +78,11 @@ class CompiledLevel:
                     f"{t.label}: A changed shape from {self._eq_shapes[0]} to {t.A.shape}"
                 )
             self.Ae, self.be = t.A, t.b
+            self.identity = t.is_identity and not self.ineqs
             eqs = ()
         elif eqs:
             self.Ae, self.be = self._Ae_buf, self._be_buf
+            self.identity = False
         i = 0
         for t, shape in zip(eqs, self._eq_shapes, strict=False):
             if t.A.shape != shape:

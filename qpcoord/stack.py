@@ -136,6 +136,7 @@ class Stack:
         self.weight_ratio = float(weight_ratio)
         self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
         self._work = Reduced(self._compiled.n, self._compiled.capacity, fallback)
+        self._chain_missed = False
 
     @property
     def n(self) -> int:
@@ -195,15 +196,21 @@ class Stack:
             if used is None:
                 used = self._solvers[solver] = check_solver(solver)
             R = None
-            if method == "hierarchical" and P.equalities_only:
+            # equality levels only: try the closed-form chain first, unless it missed the
+            # bounds at the previous step (consecutive control steps are alike; a miss
+            # costs the chain's time on top of the general path's)
+            if method == "hierarchical" and P.equalities_only and not self._chain_missed:
                 x, info = solve_equality_chain(P, self.damping)
                 if P.lb is not None and not within(x, P.lb, P.ub, FEAS_TOL):
                     R = self._work.reset(P.lb, P.ub, used)
+                    self._chain_missed = True
             else:
                 R = self._work.reset(P.lb, P.ub, used)
         if R is not None:
             if method == "hierarchical":
                 info = solve_hierarchical(P, R, self.damping, self.regularization, x_warm)
+                if not info["qp_calls"]:
+                    self._chain_missed = False  # closed forms sufficed: chain next time
             else:
                 info = solve_weighted(P, R, self.regularization, self.weight_ratio, x_warm)
             x = R.x

@@ -99,6 +99,12 @@ def _check_order(lower: np.ndarray, upper: np.ndarray, label: str) -> None:
         raise ValueError(f"{label}: lower > upper at row {i} ({lower[i]!r} > {upper[i]!r})")
 
 
+def _is_identity(A: np.ndarray) -> bool:
+    """Is ``A`` exactly the identity matrix? (Posture-like tasks; lets solvers skip an SVD.)"""
+    n = A.shape[0]
+    return n == A.shape[1] and bool(np.array_equal(A, np.eye(n)))
+
+
 def _bad_box(lower: np.ndarray, upper: np.ndarray) -> bool:
     """NaN, ``lower = +inf``, ``upper = −inf`` or ``lower > upper`` anywhere."""
     return bool(not (lower <= upper).all() or lower.max() == np.inf or upper.min() == -np.inf)
@@ -144,6 +150,7 @@ class Equality(_Task):
         self.name = str(name)
         label = _label(self.kind, self.name)
         self.A = _matrix(A, "A", label)
+        self.is_identity = _is_identity(self.A)
         self.b = _vector(b, self.A.shape[0], "b", label)
         self._set_weight(_weight(weight, self.A.shape[0], label))
 
@@ -172,6 +179,7 @@ class Equality(_Task):
             neww = _weight(weight, m, label)
         if newA is not None:
             self.A = newA
+            self.is_identity = _is_identity(newA)
         if newb is not None:
             self.b = newb
         if neww is not None:
@@ -187,6 +195,7 @@ class Equality(_Task):
             if not np.isfinite(A.sum()):
                 raise ValueError(f"{self.label}: A contains a non-finite value")
             self.A[...] = A
+            self.is_identity = False
         if b is not None:
             if not np.isfinite(b.sum()):
                 raise ValueError(f"{self.label}: b contains a non-finite value")
