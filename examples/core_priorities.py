@@ -12,12 +12,12 @@ Run: ``python examples/core_priorities.py [--quick] [--out DIR]`` (writes ``summ
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 import qpcoord as qc
+from qpcoord.report import write_json
 
 
 def run(quick: bool = False, seed: int = 0) -> list[dict]:
@@ -57,10 +57,7 @@ def main(argv=None) -> int:
             f"{r['speed_limit']:9.2f} {r['main_residual_strict']:12.3e} "
             f"{r['main_residual_weighted']:14.3e} {r['posture_residual_strict']:15.3e}"
         )
-    args.out.mkdir(parents=True, exist_ok=True)
-    tmp = args.out / "summary.json.tmp"
-    tmp.write_text(json.dumps({"rows": rows}, indent=2))
-    tmp.replace(args.out / "summary.json")  # never leave a half-written file
+    write_json(args.out / "summary.json", {"rows": rows})  # atomic: never half-written
     print(f"wrote {args.out / 'summary.json'}")
     return 0
 

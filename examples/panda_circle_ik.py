@@ -14,12 +14,12 @@ Run: ``python examples/panda_circle_ik.py [--quick] [--out DIR]`` (writes ``summ
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 import qpcoord as qc
+from qpcoord.report import write_json
 
 DT = 1e-3  # s, control period
 Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
@@ -84,10 +84,7 @@ def main(argv=None) -> int:
             f"{r['method']:<13} {r['speed_limit_rad_s']:8.3f} {r['max_error_m']:14.3e} "
             f"{r['steps_at_speed_bound']:>5}/{r['steps']}"
         )
-    args.out.mkdir(parents=True, exist_ok=True)
-    tmp = args.out / "summary.json.tmp"
-    tmp.write_text(json.dumps({"rows": rows}, indent=2))
-    tmp.replace(args.out / "summary.json")  # never leave a half-written file
+    write_json(args.out / "summary.json", {"rows": rows})  # atomic: never half-written
     print(f"wrote {args.out / 'summary.json'}")
     return 0
 

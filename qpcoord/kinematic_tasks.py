@@ -21,6 +21,7 @@ a soft level.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 
 import numpy as np
@@ -57,7 +58,7 @@ def _check_dt(dt) -> float:
     return float(dt)
 
 
-class KinematicTask:
+class KinematicTask(ABC):
     """Base class: a task whose numbers depend on the configuration ``q`` and time ``t``.
 
     Subclasses set ``self.task`` (an :class:`Equality` or :class:`Inequality` on ``q̇``)
@@ -81,9 +82,9 @@ class KinematicTask:
         q = self.robot.check_configuration(q)
         return self._refresh(q, float(t), _check_dt(dt), reference)
 
+    @abstractmethod
     def _refresh(self, q: np.ndarray, t: float, dt: float, reference):
         """:meth:`update` for an already validated ``q`` (the per-step path of IK)."""
-        raise NotImplementedError  # pragma: no cover
 
     @property
     def name(self) -> str:
@@ -264,8 +265,9 @@ class OneFormTask(KinematicTask):
 class Limit(KinematicTask):
     """A box ``lower(q) ≤ q̇ ≤ upper(q)``: :meth:`box` gives it, ``task`` holds it."""
 
-    def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` on ``q̇`` (rad/s) at configuration ``q`` (rad), period ``dt`` (s)."""
 
     def _refresh(self, q, t, dt, reference) -> Inequality:
         lo, hi = self.box(q, dt)

@@ -12,6 +12,8 @@ Every path gives ``position(t)`` (m), ``velocity(t)`` (m/s) and ``acceleration(t
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import numpy as np
 
 __all__ = ["Path", "LissajousSphere", "Circle", "rotation_x", "rotation_y", "rotation_z"]
@@ -56,14 +58,15 @@ def _times(t) -> tuple[np.ndarray, bool]:
     return np.atleast_1d(arr), arr.ndim == 0
 
 
-class Path:
+class Path(ABC):
     """Base class: subclasses implement ``_eval(t) -> (p, v, a)`` for a 1-D array ``t``."""
 
     period: float = np.inf
     dim: int = 3
 
-    def _eval(self, t: np.ndarray):  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def _eval(self, t: np.ndarray):
+        """Position, velocity, acceleration (each ``(len(t), dim)``) at the times ``t`` (s)."""
 
     def _pick(self, t, k: int) -> np.ndarray:
         ts, scalar = _times(t)

@@ -28,3 +28,15 @@ def test_example_quick(script, tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary
+
+
+def test_write_json_is_atomic(tmp_path):
+    from qpcoord.report import write_json
+
+    target = tmp_path / "sub" / "summary.json"
+    write_json(target, {"a": 1})
+    assert target.read_text().startswith("{")
+    with pytest.raises(TypeError):
+        write_json(target, {"a": object()})  # not serialisable: the old file stays whole
+    assert '"a": 1' in target.read_text()
+    assert not (tmp_path / "sub" / "summary.json.tmp").exists()

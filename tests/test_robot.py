@@ -23,14 +23,6 @@ NUM_CONFIGURATIONS = 4
 # ---------------------------------------------------------------------------------------
 
 
-def load_or_skip(name: str, **options) -> qc.Robot:
-    """``qc.robots.load``, skipping when a shipped description file is not there yet."""
-    try:
-        return qc.robots.load(name, **options)
-    except ValueError as exc:
-        if "description file" in str(exc) and f"{name}.urdf" in str(exc):
-            pytest.skip(f"{name}.urdf is not installed yet")
-        raise
 
 
 def placement(rpy, xyz) -> pin.SE3:
@@ -66,13 +58,13 @@ def mixed_axes_model() -> pin.Model:
 MIXED_MAP = np.eye(5) + 0.3 * np.eye(5, k=1) - 0.2 * np.eye(5, k=-2)
 
 ROBOT_FACTORIES = {
-    "planar_3r": lambda: load_or_skip("planar_3r"),
-    "planar_1r": lambda: load_or_skip("planar_nr", n=1),
-    "planar_2r": lambda: load_or_skip("planar_nr", n=2),
-    "planar_5r": lambda: load_or_skip("planar_nr", n=5),
-    "panda": lambda: load_or_skip("panda"),
-    "ur5": lambda: load_or_skip("ur5"),
-    "spatial_5r": lambda: load_or_skip("spatial_5r"),
+    "planar_3r": lambda: qc.robots.load("planar_3r"),
+    "planar_1r": lambda: qc.robots.load("planar_nr", n=1),
+    "planar_2r": lambda: qc.robots.load("planar_nr", n=2),
+    "planar_5r": lambda: qc.robots.load("planar_nr", n=5),
+    "panda": lambda: qc.robots.load("panda"),
+    "ur5": lambda: qc.robots.load("ur5"),
+    "spatial_5r": lambda: qc.robots.load("spatial_5r"),
     "mixed_axes": lambda: qc.Robot(mixed_axes_model(), "tool", name="mixed"),
     "mixed_axes_rows_xz": lambda: qc.Robot(mixed_axes_model(), "tool", rows=(2, 0)),
     "mixed_axes_mapped": lambda: qc.Robot(

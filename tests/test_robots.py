@@ -20,14 +20,6 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 KNOWN_NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5")
 
 
-def load_or_skip(name: str, **options) -> qc.Robot:
-    """``qc.robots.load``, skipping when a shipped description file is not there yet."""
-    try:
-        return qc.robots.load(name, **options)
-    except ValueError as exc:
-        if "description file" in str(exc) and f"{name}.urdf" in str(exc):
-            pytest.skip(f"{name}.urdf is not installed yet")
-        raise
 
 
 # ---------------------------------------------------------------------------------------
@@ -142,7 +134,7 @@ def test_panda_fingers_are_locked():
 
 
 def test_spatial_5r_shape():
-    arm = load_or_skip("spatial_5r")
+    arm = qc.robots.load("spatial_5r")
     assert (arm.nq, arm.m, arm.frame) == (5, 3, "tip")
     y = arm.position(np.zeros(5))
     assert y.shape == (3,) and np.all(np.isfinite(y))

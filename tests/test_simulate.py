@@ -118,10 +118,7 @@ OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])  # E
 
 @pytest.fixture(scope="module")
 def arm5():
-    try:
-        return qc.robots.load("spatial_5r")
-    except ValueError as exc:  # pragma: no cover - until the description lands
-        pytest.skip(str(exc))
+    return qc.robots.load("spatial_5r")
 
 
 @pytest.mark.parametrize("with_forms", [False, True], ids=["pseudo-inverse", "thm-4.2"])
