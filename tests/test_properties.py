@@ -139,6 +139,7 @@ class Spec:
     hard: list = dataclasses.field(default_factory=list)
 
     def build(self, **options) -> qc.Stack:
+        options.setdefault("fallback", False)  # each backend answers on its own
         return qc.Stack(
             [[t.build() for t in lev] for lev in self.levels],
             bounds=None if self.bounds is None else qc.Bounds(*self.bounds),

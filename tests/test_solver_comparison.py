@@ -311,7 +311,10 @@ def build(name: str, seed: int) -> dict:
 
 
 def stack(spec: dict) -> qc.Stack:
-    return qc.Stack(spec["levels"], bounds=spec["bounds"], constraints=spec["constraints"])
+    # fallback=False: each backend answers on its own (no silent help from another)
+    return qc.Stack(
+        spec["levels"], bounds=spec["bounds"], constraints=spec["constraints"], fallback=False
+    )
 
 
 @functools.cache
