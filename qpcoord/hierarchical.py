@@ -140,6 +140,21 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     return zp
 
 
+def _level_svd(L, M: np.ndarray, damping: float):
+    """:func:`~qpcoord.linalg.filtered_svd` of a level's projected rows ``M = Ae Z``.
+
+    A level that is exactly ``x = be`` (``L.identity``) has ``M = Z`` with orthonormal
+    columns: singular values 1, ``U = M``, ``Vt = I`` — no SVD (the damping threshold
+    ``τ = damping·√n`` stays below 1 unless the damping is huge).
+    """
+    n = L.Ae.shape[1]
+    if L.identity and damping * np.sqrt(n) < 1.0:
+        r = M.shape[1]
+        one = np.ones(r)
+        return M, one, np.eye(r), r, one, damping * float(np.sqrt(n))
+    return filtered_svd(M, damping, float(np.sqrt(np.vdot(L.Ae, L.Ae))))
+
+
 def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, dict]:
     """Closed-form lexicographic solution of a stack of equality levels, bounds ignored.
 
@@ -235,7 +250,7 @@ def solve_hierarchical(
         if L.m_eq:
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
-            U, s, Vt, rank, g, tau = filtered_svd(M, damping, float(np.linalg.norm(L.Ae)))
+            U, s, Vt, rank, g, tau = _level_svd(L, M, damping)
             if rank:
                 xc = x + R.lift(Vt[:rank].T @ (g * (U[:, :rank].T @ e)))
             else:
@@ -354,7 +369,9 @@ def solve_hierarchical(
             keep = ~viol_rows
             cxn = L.C[keep] @ R.x
             R.inherit(L.C[keep], np.minimum(L.lo[keep], cxn), np.maximum(L.hi[keep], cxn))
-        if F:
+        if len(F) == 1 and rank and not viol_rows.any():
+            R.restrict(Vt[rank:].T)  # null(Vt[:rank]) is its orthonormal complement
+        elif F:
             R.freeze(np.vstack(F) if len(F) > 1 else F[0], fscale)
         ranks.append(r - R.r)
     # ---- remaining freedom: minimum-norm x ----------------------------------------
