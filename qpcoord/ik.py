@@ -24,7 +24,7 @@ import numpy as np
 from .kinematic_tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
 from .linalg import filtered_svd
 from .robot import Robot
-from .stack import Solution, Stack
+from .stack import METHODS, Solution, Stack
 from .tasks import Bounds, Equality, Inequality
 
 __all__ = ["IK", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
@@ -68,6 +68,9 @@ class IK:
         Relative singular-value damping of the stack (default :data:`DEFAULT_IK_DAMPING`).
     regularization, weight_ratio : float
         Passed to :class:`~qpcoord.Stack`.
+    fallback : bool
+        Passed to :class:`~qpcoord.Stack`: solve a level QP the backend failed on with
+        another backend (reported in ``Solution.info["fallbacks"]``).
     """
 
     def __init__(
@@ -82,7 +85,10 @@ class IK:
         damping: float = DEFAULT_IK_DAMPING,
         regularization: float = 1e-9,
         weight_ratio: float = 1e-3,
+        fallback: bool = True,
     ) -> None:
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
         if not isinstance(robot, Robot):
             raise ValueError(f"robot must be a qpcoord.Robot, got {type(robot).__name__}")
         self.robot = robot
@@ -101,6 +107,11 @@ class IK:
                 raise ValueError(f"limits must be JointLimits/VelocityLimits objects, got {lim!r}")
             if lim.robot is not robot:
                 raise ValueError(f"limit {lim.task.name!r} belongs to another robot")
+        if method == "nullspace" and limits:
+            raise ValueError(
+                "method='nullspace' takes no inequalities: pass limits=None (the robot's "
+                "limits are used by default)"
+            )
         self.limits = limits
         self._dynamic: list[KinematicTask] = []
         stack_levels = [self._collect(level, f"levels[{i}]") for i, level in enumerate(levels)]
@@ -113,6 +124,7 @@ class IK:
             damping=damping,
             constraints=stack_constraints or None,
             weight_ratio=weight_ratio,
+            fallback=fallback,
         )
         self.last: Solution | None = None
 

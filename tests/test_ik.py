@@ -414,6 +414,12 @@ def test_bad_configuration(planar, q, message):
 
 
 def test_unknown_method_is_reported(planar):
-    ik = qc.IK(planar, [qc.PostureTask(planar, PLANAR_Q)], dt=0.01, method="magic")
     with pytest.raises(ValueError, match="unknown method 'magic'"):
-        ik.step(PLANAR_Q)
+        qc.IK(planar, [qc.PostureTask(planar, PLANAR_Q)], dt=0.01, method="magic")
+
+
+def test_nullspace_method_refuses_limits(panda):
+    with pytest.raises(ValueError, match="nullspace.*limits=None"):
+        qc.IK(panda, [qc.PostureTask(panda, PANDA_Q)], dt=0.01, method="nullspace")
+    ik = qc.IK(panda, [qc.PostureTask(panda, PANDA_Q)], dt=0.01, method="nullspace", limits=None)
+    np.testing.assert_allclose(ik.step(PANDA_Q)[0], 0.0, atol=1e-12)
