@@ -235,11 +235,14 @@ def inverse_kinematics(
 ) -> np.ndarray:
     """Configuration ``q`` with ``ζ(q) = target``, closest to ``q0`` (locally).
 
-    Projected Gauss–Newton: ``q ← q + J⁺ (target − ζ(q)) + (I − J⁺J)(q0 − q)`` (filtered
-    pseudo-inverse, step norm capped at ``max_step`` rad). At convergence the task error is
-    zero and ``q − q0`` is orthogonal to the self-motion, so ``q`` is a local minimum of
-    ``‖q − q0‖`` on the set of configurations that reach ``target``. Joint limits are not
-    enforced.
+    Two phases (filtered pseudo-inverse, step norm capped at ``max_step`` rad): Gauss–Newton
+    minimum-norm steps ``q ← q + J⁺ (target − ζ(q))`` until the target is reached, then
+    projected steps ``q ← q + J⁺ (target − ζ(q)) + (I − J⁺J)(q0 − q)`` that slide along the
+    self-motion toward ``q0``. At convergence ``q − q0`` is orthogonal to the self-motion, so
+    ``q`` is a local minimum of ``‖q − q0‖`` among configurations that reach ``target``
+    (otherwise the on-target configuration closest to ``q0`` met is returned). A singular
+    configuration met in the first phase is left by a fixed 0.01 rad step. Joint limits are
+    not enforced.
 
     Parameters
     ----------
@@ -261,28 +264,54 @@ def inverse_kinematics(
         Bad arguments, or the target is not reached (out of reach, or a singularity).
     """
     q_ref = robot.check_configuration(q0, "q0").copy()
-    q = q_ref.copy()
     y_target = np.asarray(target, dtype=float).reshape(-1)
     if y_target.shape != (robot.m,) or not np.all(np.isfinite(y_target)):
         raise ValueError(f"target must be {robot.m} finite coordinates (m), got {target!r}")
     goal = tol * max(1.0, float(np.linalg.norm(y_target)))
-    err = np.inf
-    for _ in range(max_iter):
+
+    # a fixed small kick out of a singular configuration (e.g. a stretched arm, where
+    # minimum-norm steps keep it stretched forever)
+    kick = 1e-2 * np.where(np.arange(robot.nq) % 2 == 0, 1.0, -1.0) / np.sqrt(robot.nq)
+
+    def step(q: np.ndarray, toward_q0: bool):
         y, J = robot._kinematics(q)
         e = y_target - y
-        err = float(np.linalg.norm(e))
-        U, _s, Vt, rank, g, _tau = filtered_svd(J, 1e-6)
-        N = Vt[rank:]  # rows: orthonormal basis of the self-motion directions
-        drift = N.T @ (N @ (q_ref - q))
-        if err <= goal and float(np.linalg.norm(drift)) <= 1e3 * tol:
-            return q
-        dq = Vt[:rank].T @ (g * (U[:, :rank].T @ e)) + drift
+        U, s_, Vt, rank, g, _tau = filtered_svd(J, 1e-6)
+        if not toward_q0 and (rank < robot.m or s_[rank - 1] < 1e-6 * s_[0]):
+            return float(np.linalg.norm(e)), 0.0, kick
+        dq = Vt[:rank].T @ (g * (U[:, :rank].T @ e))
+        drift = np.zeros_like(q)
+        if toward_q0:
+            N = Vt[rank:]  # rows: orthonormal basis of the self-motion directions
+            drift = N.T @ (N @ (q_ref - q))
+            dq = dq + drift
         norm = float(np.linalg.norm(dq))
         if norm > max_step:
             dq *= max_step / norm
+        return float(np.linalg.norm(e)), float(np.linalg.norm(drift)), dq
+
+    # phase 1: reach the target by minimum-norm steps
+    q = q_ref.copy()
+    err = np.inf
+    for _ in range(max_iter):
+        err, _, dq = step(q, False)
+        if err <= goal:
+            break
         q = q + dq
     if err <= goal:
-        return q  # on target; the distance to q0 is locally minimal to the step tolerance
+        # phase 2: slide along the self-motion toward q0, staying on the target; keep the
+        # on-target configuration closest to q0 seen
+        best, best_d = q.copy(), float(np.linalg.norm(q - q_ref))
+        for _ in range(max_iter):
+            err, drift, dq = step(q, True)
+            if err <= goal:
+                d = float(np.linalg.norm(q - q_ref))
+                if d < best_d:
+                    best, best_d = q.copy(), d
+                if drift <= 1e3 * tol:
+                    break
+            q = q + dq
+        return best
     raise ValueError(
         f"inverse_kinematics: target {y_target.tolist()} not reached from q0 "
         f"(residual {err:.3g} m after {max_iter} iterations; out of reach or singular)"

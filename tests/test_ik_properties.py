@@ -1,0 +1,57 @@
+"""Property tests (hypothesis) of the per-step IK on random planar arms."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import qpcoord as qc
+
+angles = st.floats(-3.0, 3.0, allow_nan=False)
+
+
+@st.composite
+def ik_cases(draw):
+    n = draw(st.integers(3, 6))
+    q = np.array(draw(st.lists(angles, min_size=n, max_size=n)))
+    offset = np.array(draw(st.lists(st.floats(-0.5, 0.5), min_size=2, max_size=2)))
+    q_ref = np.array(draw(st.lists(angles, min_size=n, max_size=n)))
+    speed = draw(st.floats(0.05, 5.0))
+    return n, q, offset, q_ref, speed
+
+
+def _ik(arm, q, offset, q_ref, speed, method):
+    ee = qc.PositionTask(arm, target=arm.position(q) + offset, gain=10.0)
+    posture = qc.PostureTask(arm, q_ref, gain=10.0)
+    return qc.IK(arm, [ee, posture], 0.01, limits=[qc.VelocityLimits(arm, speed)], method=method)
+
+
+@settings(max_examples=60, deadline=None)
+@given(ik_cases())
+def test_strict_ik_respects_bounds_and_is_never_worse_on_its_first_level(case):
+    n, q, offset, q_ref, speed = case
+    arm = qc.robots.load("planar_nr", n=n)
+    strict, sol = _ik(arm, q, offset, q_ref, speed, "hierarchical").step(q)
+    weighted, wsol = _ik(arm, q, offset, q_ref, speed, "weighted").step(q)
+    for v in (strict, weighted):
+        assert np.all(np.abs(v) <= speed * (1 + 1e-9) + 1e-12)
+    scale = max(1.0, float(np.linalg.norm(10.0 * offset)))
+    assert sol.level_residuals[0] <= wsol.level_residuals[0] + 1e-7 * scale
+    # unconstrained by the bounds: the position task is met exactly (rank permitting)
+    J = arm.jacobian(q)
+    b = 10.0 * offset
+    if np.all(np.abs(strict) < speed * (1 - 1e-6)) and np.linalg.svd(J, compute_uv=False)[
+        -1
+    ] > 1e-3:
+        np.testing.assert_allclose(J @ strict, b, atol=1e-8 * scale)
+
+
+@settings(max_examples=40, deadline=None)
+@given(ik_cases())
+def test_inverse_kinematics_reaches_reachable_points(case):
+    n, q, offset, q_ref, _speed = case
+    arm = qc.robots.load("planar_nr", n=n)
+    target = arm.position(q_ref)  # reachable by construction
+    q_sol = qc.inverse_kinematics(arm, target, q, max_iter=500)
+    np.testing.assert_allclose(arm.position(q_sol), target, atol=1e-10)
