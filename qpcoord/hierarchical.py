@@ -126,7 +126,7 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
             u = Vt[:rk].T @ ((U[:, :rk].T @ (b - A @ zp)) / s[:rk])
             zp = zp + N @ u
     xn = x + R.lift(zp)
-    if not np.all(np.isfinite(xn)) or not R.feasible(xn):
+    if not np.isfinite(xn.sum()) or not R.feasible(xn):
         return None
     if L.m_in and sat.any():
         c = L.C[sat] @ xn

@@ -43,18 +43,19 @@ FALLBACKS = ("quadprog", "daqp", "proxqp")
 
 
 def _miss(G, lo, hi, lb, ub, y) -> float:
-    """Largest relative violation ``(row − bound)/max(1, |bound|)`` of a QP point."""
+    """Largest relative violation ``(row − bound)/max(1, |bound|)`` of a QP point
+    (``inf`` for a non-finite point; infinite bounds never count)."""
+    if not np.isfinite(y.sum()):
+        return np.inf
     worst = 0.0
     pairs = [(G @ y, lo, hi)] if G.shape[0] else []
     if lb is not None:
         pairs.append((y, lb, ub))
     for v, low, high in pairs:
-        fl, fh = np.isfinite(low), np.isfinite(high)
-        if fl.any():
-            worst = max(worst, float(((low[fl] - v[fl]) / np.maximum(1.0, np.abs(low[fl]))).max()))
-        if fh.any():
-            rel = (v[fh] - high[fh]) / np.maximum(1.0, np.abs(high[fh]))
-            worst = max(worst, float(rel.max()))
+        # |bound| capped at 1e300: an infinite bound gives ∓inf here, never NaN
+        below = (low - v) / np.maximum(1.0, np.minimum(np.abs(low), 1e300))
+        above = (v - high) / np.maximum(1.0, np.minimum(np.abs(high), 1e300))
+        worst = max(worst, float(below.max()), float(above.max()))
     return worst
 
 
@@ -278,6 +279,8 @@ class Reduced:
             if y is not None:
                 return y
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
+        if not np.isfinite(res.y.sum()):
+            raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite solution")
         miss = _miss(G, lo, hi, lb, ub, res.y)
         if miss > CHECK_TOL:
             raise SolverError(
