@@ -92,7 +92,7 @@ class _QpcoordLoop:
         self.ik = IK(robot, [self.ee, posture], dt, limits=limits, method=method, solver=solver)
 
     def step(self, t: float, target) -> np.ndarray:
-        self.ee.target = target
+        self.ee.set_target(target)  # validated, as Pink's set_target
         v, _ = self.ik.step(self.q, t)
         self.q = self.q + self.dt * v
         return v
