@@ -367,16 +367,6 @@ class Bounds:
         self.version += 1
         return self
 
-    def _assign(self, lower: np.ndarray, upper: np.ndarray) -> Bounds:
-        """Trusted per-step path for arrays of the built length: checks NaN and order only."""
-        if _bad_box(lower, upper):
-            return self.update(lower, upper)  # raises with the full message
-        self.lower[...] = lower
-        self.upper[...] = upper
-        self._lower_in, self._upper_in = self.lower, self.upper
-        self.version += 1
-        return self
-
     def __repr__(self) -> str:
         return f"Bounds(n={self.n}, name={self.name!r})"
 
