@@ -8,7 +8,7 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
                          bounds=qc.Bounds(-dq_max, dq_max))
 """
 
-from . import analysis, paths, robots
+from . import analysis, geometry, paths, robots
 from .backends import available_solvers, default_solver, solver_versions
 from .errors import InfeasibleError, SolverError
 from .ik import IK, ik_step, inverse_kinematics
@@ -45,6 +45,7 @@ __all__ = [
     "Stack",
     "Trajectory",
     "analysis",
+    "geometry",
     "VelocityLimits",
     "available_solvers",
     "default_solver",

@@ -136,9 +136,7 @@ class Periodicity:
                 f"periodic with period {self.multiple}·T from period {self.settled_after} on "
                 f"(gap ≤ {self.tol:.1e} rad over {self.periods} periods)"
             )
-        best = min(
-            (float(g[-1]) for g in self.gaps.values() if len(g)), default=float("nan")
-        )
+        best = min((float(g[-1]) for g in self.gaps.values() if len(g)), default=float("nan"))
         return (
             f"not periodic within {self.periods} periods (smallest final gap "
             f"{best:.3e} rad > {self.tol:.1e} rad)"

@@ -78,9 +78,7 @@ def test_5r_thesis_schemes_pinv_drifts_and_thm42_closes():
     runs = {}
     for name, cons in (("pinv", None), ("thm42", [qc.OneFormTask(arm, omega)])):
         ik = qc.IK(arm, [qc.PositionTask(arm, gain=10.0)], dt=dt, constraints=cons)
-        runs[name] = qc.simulate(
-            arm, ik, path, qc.robots.spatial_5r.Q0_THESIS, 3 * path.period, dt
-        )
+        runs[name] = qc.simulate(arm, ik, path, qc.robots.spatial_5r.Q0_THESIS, 3 * path.period, dt)
     pinv = closure_errors(runs["pinv"], path.period)
     thm = closure_errors(runs["thm42"], path.period)
     assert pinv.min() > 0.05  # measured 0.069–0.074 rad per period
