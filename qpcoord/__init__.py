@@ -8,7 +8,7 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
                          bounds=qc.Bounds(-dq_max, dq_max))
 """
 
-from . import analysis, geometry, paths, robots
+from . import analysis, geometry, paths, robots, schemes
 from .backends import available_solvers, default_solver, solver_versions
 from .errors import InfeasibleError, SolverError
 from .ik import IK, ik_step, inverse_kinematics
@@ -53,6 +53,7 @@ __all__ = [
     "inverse_kinematics",
     "paths",
     "robots",
+    "schemes",
     "simulate",
     "solve_stack",
     "solver_versions",

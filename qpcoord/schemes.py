@@ -1,0 +1,145 @@
+"""Coordination schemes of the thesis, usable with :func:`qpcoord.simulate`.
+
+Each scheme is an object with ``velocity(q, t, reference) -> q̇`` (rad/s), where
+``reference`` is the end-effector path (:mod:`qpcoord.paths`). Where the method is a QP it
+is posed as a :class:`~qpcoord.Stack` through :class:`~qpcoord.IK`.
+
+Chapter 4:
+
+- :class:`PseudoInverse` -- §4.3.1, Eq. 4.1: ``q̇ = J⁺ Ẏ`` (one equality level, minimum
+  norm, thesis Thm 3.2);
+- :class:`OutputManifoldBasis` -- §4.3.2, Prop. 4.1, Eqs. 4.2–4.3: ``Ẏ = α v₁ + β v₂`` in
+  the sphere's involutive basis, ``q̇ = α J⁺v₁ + β J⁺v₂``;
+- :class:`InvolutiveBasis` -- Thm 4.2 / Ex. 4.4: the main task with complementary
+  integrable 1-forms held at zero (``ω₄ q̇ = 0``, ``ω₅ q̇ = 0`` as hard constraints).
+
+``gain`` adds closed-loop correction ``K (Y_ref − Y)`` to ``Ẏ`` (1/s; the thesis integrates
+the open-loop maps, ``gain = 0``, the default).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .ik import IK
+from .kinematic_tasks import OneFormTask, PositionTask
+from .robot import Robot
+
+__all__ = ["PseudoInverse", "OutputManifoldBasis", "InvolutiveBasis", "sphere_basis"]
+
+
+def _robot(robot) -> Robot:
+    if not isinstance(robot, Robot):
+        raise ValueError(f"robot must be a qpcoord.Robot, got {type(robot).__name__}")
+    return robot
+
+
+class PseudoInverse:
+    """§4.3.1: ``q̇ = J⁺ (Ẏ_ref + K (Y_ref − Y))`` -- one equality level of a Stack.
+
+    Parameters
+    ----------
+    robot : Robot
+    gain : float
+        ``K`` (1/s), default 0 (the thesis's open-loop map).
+    solver : str, optional
+        QP backend (not used while the level's closed form applies: always, here).
+    """
+
+    def __init__(self, robot, gain: float = 0.0, solver: str | None = None) -> None:
+        self.robot = _robot(robot)
+        self.task = PositionTask(robot, gain=gain)
+        self.ik = IK(robot, [self.task], dt=1.0, limits=None, solver=solver)
+
+    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+        return self.ik.velocity(q, t, reference)
+
+
+def sphere_basis(y, center) -> tuple[np.ndarray, np.ndarray]:
+    """Prop. 4.1: ``v₁ = (−(z − c_z), 0, x − c_x)``, ``v₂ = (−(y − c_y), x − c_x, 0)``.
+
+    Tangent to every sphere about ``center`` and involutive; independent except on the
+    line ``x = c_x`` (the "equator" of the thesis).
+    """
+    d = np.asarray(y, dtype=float) - np.asarray(center, dtype=float)
+    return np.array([-d[2], 0.0, d[0]]), np.array([-d[1], d[0], 0.0])
+
+
+class OutputManifoldBasis:
+    """§4.3.2 (Ex. 4.2): decompose ``Ẏ = α v₁ + β v₂`` in the sphere basis of Prop. 4.1
+    (least squares), then ``q̇ = α J⁺v₁ + β J⁺v₂`` (Eq. 4.3).
+
+    By linearity of ``J⁺`` this is ``J⁺`` applied to the part of ``Ẏ`` tangent to the
+    sphere through the current end-effector point: on the sphere it equals
+    :class:`PseudoInverse` up to the tracking error (the thesis's Fig. 4.4 differs from
+    its Fig. 4.3; see the chapter 4 example for what is measured here).
+
+    Parameters
+    ----------
+    robot : Robot
+        Spatial robot (3 task rows).
+    center : array_like, shape (3,)
+        Sphere centre (m).
+    gain : float
+        ``K`` (1/s), default 0.
+
+    Raises
+    ------
+    ValueError
+        On the line ``x = c_x`` the basis degenerates: reported with the configuration.
+    """
+
+    def __init__(self, robot, center, gain: float = 0.0) -> None:
+        self.robot = _robot(robot)
+        if robot.m != 3:
+            raise ValueError(f"the sphere basis needs 3 task rows, robot has {robot.m}")
+        self.center = np.asarray(center, dtype=float).reshape(3)
+        self.task = PositionTask(robot, gain=gain)
+
+    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+        q = self.robot.check_configuration(q)
+        y_ref, v_ref = self.task.reference_at(t, reference)
+        y, J = self.robot.kinematics(q)
+        ydot = v_ref + self.task.gain * (y_ref - y)
+        v1, v2 = sphere_basis(y, self.center)
+        V = np.column_stack((v1, v2))
+        s = np.linalg.svd(V, compute_uv=False)
+        if s[-1] <= 1e-9 * max(1.0, s[0]):
+            raise ValueError(
+                f"the sphere basis degenerates at y = {y.tolist()} (x = c_x), q = {q.tolist()}"
+            )
+        ab = np.linalg.lstsq(V, ydot, rcond=None)[0]
+        Jp = np.linalg.pinv(J)
+        return ab[0] * (Jp @ v1) + ab[1] * (Jp @ v2)
+
+
+class InvolutiveBasis:
+    """Thm 4.2 / Ex. 4.4: track ``Y`` with complementary integrable 1-forms held at zero.
+
+    The Stack has the position task as its level and ``ω q̇ = 0`` for the given
+    1-forms as hard constraints. When ``[J; ω]`` is square and invertible (5R with ω₄, ω₅)
+    the solution is unique and equals ``α f₁ + β f₂`` with ``f₁, f₂`` dual to
+    ``(ω₁, ω₄, ω₅)`` and ``Ẏ = α J f₁ + β J f₂`` -- the construction of the theorem
+    (``tests/test_schemes.py``).
+
+    Parameters
+    ----------
+    robot : Robot
+    forms : array_like, shape (k, nq), or callable
+        Complementary 1-forms (Ex. 4.4: ``[[1,0,0,0,1], [0,1,0,1,0]]``).
+    gain : float
+        ``K`` (1/s), default 0.
+    solver : str, optional
+    """
+
+    def __init__(self, robot, forms, gain: float = 0.0, solver: str | None = None) -> None:
+        self.robot = _robot(robot)
+        self.task = PositionTask(robot, gain=gain)
+        self.forms = OneFormTask(robot, forms, name="complementary 1-forms")
+        self.ik = IK(
+            robot, [self.task], dt=1.0, limits=None, constraints=[self.forms], solver=solver
+        )
+
+    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+        qdot, sol = self.ik.step(q, t, reference)
+        return qdot
