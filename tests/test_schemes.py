@@ -78,3 +78,25 @@ def test_schemes_reject_bad_robots():
         S.PseudoInverse("arm")
     with pytest.raises(ValueError, match="3 task rows"):
         S.OutputManifoldBasis(qc.robots.load("planar_3r"), [0.0, 0.0, 0.0])
+
+
+def test_lemma_4_2_self_motion_changes_the_leaf_and_the_new_leaf_is_periodic(arm, path, q_on_path):
+    """A self-motion R (J R = 0) is not tangent to a leaf: [J; ω₄; ω₅] R ≠ 0."""
+    J = arm.jacobian(q_on_path)
+    R = np.linalg.svd(J)[2][3:].T  # self-motion basis (5 × 2)
+    assert np.linalg.svd(OMEGA_45 @ R, compute_uv=False)[-1] > 0.1
+    q_leaf = qc.inverse_kinematics(arm, path.position(0.0), q_on_path + 0.3 * R[:, 0])
+    assert np.abs(OMEGA_45 @ (q_leaf - q_on_path)).max() > 0.01  # another leaf
+    dt = path.period / 200
+    traj = qc.simulate(
+        arm,
+        S.InvolutiveBasis(arm, OMEGA_45, gain=10.0),
+        path,
+        q_leaf,
+        2 * path.period,
+        dt,
+        start="q0",
+    )
+    leaf = traj.q @ OMEGA_45.T
+    np.testing.assert_allclose(leaf, np.tile(leaf[0], (len(leaf), 1)), atol=1e-12)
+    assert qc.analysis.closure_errors(traj, path.period)[1] < 1e-9
