@@ -35,7 +35,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord import geometry as g
-from qpcoord.report import write_json
+from qpcoord.report import write_json, write_text
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
 
@@ -131,25 +131,31 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="coarse grids (CI)")
     p.add_argument("--out", type=Path, default=Path("out/ch4_involutivity"))
     args = p.parse_args(argv)
+    lines: list[str] = []
+
+    def say(text: str) -> None:  # printed and kept for summary.txt
+        print(text)
+        lines.append(text)
+
     n = 7 if args.quick else 25
     grid = np.linspace(-2.0, 2.0, n)
     l41 = lemma_4_1(grid)
     e43 = example_4_3(np.linspace(-np.pi, np.pi, n))
     e44 = example_4_4(5 if args.quick else 20)
     dets = l41.pop("_dets")
-    print(
+    say(
         f"Lemma 4.1: |det[f1, f2, [f1, f2]]| on the grid in [{l41['abs_det_min']:.3g}, "
         f"{l41['abs_det_max']:.3g}]; printed fields / printed formula: "
         f"{min(l41['printed_fields_det_over_thesis_formula']):.6g} … "
         f"{max(l41['printed_fields_det_over_thesis_formula']):.6g}"
     )
-    print(
+    say(
         f"Ex 4.3 (3R): |det| in [{e43['abs_det_min']:.3g}, {e43['abs_det_max']:.3g}] "
         f"over {e43['points_with_distinct_link_angles']} configurations with distinct link "
         f"angles; ≤ {e43['abs_det_max_with_two_parallel_links']:.1e} on the "
         f"{e43['points_with_two_parallel_links']} with two parallel links"
     )
-    print(
+    say(
         f"Ex 4.4 (5R): J⁺ sphere fields defect {e44['pinv_sphere_fields_defect_min']:.3g}"
         f"–{e44['pinv_sphere_fields_defect_max']:.3g}; Thm 4.2 fields defect ≤ "
         f"{e44['thm42_fields_defect_max']:.3g}"
@@ -157,7 +163,7 @@ def main(argv=None) -> int:
     try:
         from qpcoord.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
-        print("matplotlib not installed: figures skipped")
+        say("matplotlib not installed: figures skipped")
     else:
         plt = _pyplot()
         fig, ax = plt.subplots(figsize=(5, 4))
@@ -172,6 +178,7 @@ def main(argv=None) -> int:
         ax.set_ylabel("q1")
         ax.set_title("Lemma 4.1: J⁺-pulled fields, q2 = 0.3")
         save(fig, args.out / "lemma41_det.png")
+    write_text(args.out / "summary.txt", "\n".join(lines))
     write_json(
         args.out / "summary.json", {"lemma_4_1": l41, "example_4_3": e43, "example_4_4": e44}
     )

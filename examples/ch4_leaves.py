@@ -26,7 +26,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.analysis import closure_errors
-from qpcoord.report import write_json
+from qpcoord.report import write_json, write_text
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
 
@@ -74,15 +74,21 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="2 leaves, 1 period (CI)")
     p.add_argument("--out", type=Path, default=Path("out/ch4_leaves"))
     args = p.parse_args(argv)
+    lines: list[str] = []
+
+    def say(text: str) -> None:  # printed and kept for summary.txt
+        print(text)
+        lines.append(text)
+
     if args.quick:
         rows = run([(0.0, 0.0), (0.3, 0.0)], periods=2, steps_per_period=200)
     else:
         offsets = [(0.0, 0.0), (0.3, 0.0), (0.0, 0.3), (-0.3, -0.2)]
         rows = run(offsets, periods=3, steps_per_period=400)
-    print(f"{'offset':>14} {'c4, c5 (rad)':>20} {'leaf drift':>10}  closure per period (rad)")
+    say(f"{'offset':>14} {'c4, c5 (rad)':>20} {'leaf drift':>10}  closure per period (rad)")
     for r in rows:
         c = ", ".join(f"{e:.2e}" for e in r["closure_error_per_period_rad"])
-        print(
+        say(
             f"{str(r['self_motion_offset']):>14} "
             f"{r['leaf_c4_c5'][0]:9.4f} {r['leaf_c4_c5'][1]:9.4f} "
             f"{r['leaf_drift_max_rad']:10.1e}  {c}"
@@ -91,7 +97,7 @@ def main(argv=None) -> int:
     try:
         from qpcoord.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
-        print("matplotlib not installed: figures skipped")
+        say("matplotlib not installed: figures skipped")
     else:
         plt = _pyplot()
         fig, ax = plt.subplots(figsize=(5, 4))
@@ -102,6 +108,7 @@ def main(argv=None) -> int:
         ax.set_title("5R, Thm 4.2: one closed orbit per leaf")
         ax.legend(fontsize=7)
         save(fig, args.out / "leaves.png")
+    write_text(args.out / "summary.txt", "\n".join(lines))
     write_json(args.out / "summary.json", {"robot": "spatial_5r", "rows": rows})
     print(f"wrote {args.out}")
     return 0

@@ -39,7 +39,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.analysis import closure_errors, detect_period
-from qpcoord.report import write_json
+from qpcoord.report import write_json, write_text
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])  # Ex 4.4
 
@@ -93,21 +93,27 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="2 periods, coarse steps (CI)")
     p.add_argument("--out", type=Path, default=Path("out/ch4_periodicity"))
     args = p.parse_args(argv)
+    lines: list[str] = []
+
+    def say(text: str) -> None:  # printed and kept for summary.txt
+        print(text)
+        lines.append(text)
+
     result = run(periods=2, steps_per_period=200) if args.quick else run(10, 400)
     runs, period = result.pop("_runs"), result.pop("_period")
-    print(f"{'scheme':<30} {'max EE error (m)':>16}  closure per period (rad)")
+    say(f"{'scheme':<30} {'max EE error (m)':>16}  closure per period (rad)")
     for r in result["rows"]:
         closure = ", ".join(f"{e:.2e}" for e in r["closure_error_per_period_rad"])
-        print(f"{r['scheme']:<30} {r['max_tracking_error_m']:16.2e}  {closure}")
-        print(f"{'':<30} {r['periodicity']}")
-    print(
+        say(f"{r['scheme']:<30} {r['max_tracking_error_m']:16.2e}  {closure}")
+        say(f"{'':<30} {r['periodicity']}")
+    say(
         "Fig 4.4 scheme vs Fig 4.3 scheme, largest joint difference: "
         f"{result['fig44_minus_fig43_max_joint_difference_rad']:.2e} rad"
     )
     try:
         from qpcoord.figures import closure_plot, joint_plot
     except ImportError:  # pragma: no cover - matplotlib missing
-        print("matplotlib not installed: figures skipped")
+        say("matplotlib not installed: figures skipped")
     else:
         for name, traj in runs.items():
             tag = name.split(" (")[1].rstrip(")").replace(" ", "")
@@ -117,6 +123,7 @@ def main(argv=None) -> int:
             args.out / "closure.png",
             "5R on the Lissajous: joint closure error per period",
         )
+    write_text(args.out / "summary.txt", "\n".join(lines))
     write_json(args.out / "summary.json", result)
     print(f"wrote {args.out}")
     return 0

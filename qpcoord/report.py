@@ -6,7 +6,7 @@ import json
 import os
 from pathlib import Path
 
-__all__ = ["write_json"]
+__all__ = ["write_json", "write_text"]
 
 
 def write_json(path, data) -> Path:
@@ -26,6 +26,20 @@ def write_json(path, data) -> Path:
     tmp = path.with_name(path.name + ".tmp")
     try:
         tmp.write_text(json.dumps(data, indent=2))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def write_text(path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (temporary file + rename); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(text if text.endswith("\n") else text + "\n")
         os.replace(tmp, path)
     finally:
         if tmp.exists():
