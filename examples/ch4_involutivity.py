@@ -35,7 +35,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord import geometry as g
-from qpcoord.report import write_json, write_text
+from qpcoord.report import TextLog, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
 
@@ -98,10 +98,7 @@ def example_4_4(samples: int) -> dict:
     arm = qc.robots.load("spatial_5r")
     path = qc.paths.LissajousSphere()
     c = path.center
-    omega1 = g.pullback(arm, lambda y: 2.0 * (y - c))
-
-    def forms(q):
-        return np.vstack((omega1(q), OMEGA_45))
+    forms = qc.schemes.sphere_forms(arm, c, OMEGA_45)
 
     scheme = qc.schemes.InvolutiveBasis(arm, OMEGA_45, gain=10.0)
     traj = qc.simulate(
@@ -131,11 +128,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="coarse grids (CI)")
     p.add_argument("--out", type=Path, default=Path("out/ch4_involutivity"))
     args = p.parse_args(argv)
-    lines: list[str] = []
-
-    def say(text: str) -> None:  # printed and kept for summary.txt
-        print(text)
-        lines.append(text)
+    log = TextLog()
+    say = log.say
 
     n = 7 if args.quick else 25
     grid = np.linspace(-2.0, 2.0, n)
@@ -178,7 +172,7 @@ def main(argv=None) -> int:
         ax.set_ylabel("q1")
         ax.set_title("Lemma 4.1: J⁺-pulled fields, q2 = 0.3")
         save(fig, args.out / "lemma41_det.png")
-    write_text(args.out / "summary.txt", "\n".join(lines))
+    log.write(args.out / "summary.txt")
     write_json(
         args.out / "summary.json", {"lemma_4_1": l41, "example_4_3": e43, "example_4_4": e44}
     )

@@ -26,7 +26,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.analysis import closure_errors
-from qpcoord.report import write_json, write_text
+from qpcoord.report import TextLog, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
 
@@ -74,11 +74,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="2 leaves, 1 period (CI)")
     p.add_argument("--out", type=Path, default=Path("out/ch4_leaves"))
     args = p.parse_args(argv)
-    lines: list[str] = []
-
-    def say(text: str) -> None:  # printed and kept for summary.txt
-        print(text)
-        lines.append(text)
+    log = TextLog()
+    say = log.say
 
     if args.quick:
         rows = run([(0.0, 0.0), (0.3, 0.0)], periods=2, steps_per_period=200)
@@ -108,7 +105,7 @@ def main(argv=None) -> int:
         ax.set_title("5R, Thm 4.2: one closed orbit per leaf")
         ax.legend(fontsize=7)
         save(fig, args.out / "leaves.png")
-    write_text(args.out / "summary.txt", "\n".join(lines))
+    log.write(args.out / "summary.txt")
     write_json(args.out / "summary.json", {"robot": "spatial_5r", "rows": rows})
     print(f"wrote {args.out}")
     return 0

@@ -95,7 +95,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.figures import closure_plot, joint_plot
-from qpcoord.report import write_json, write_text
+from qpcoord.report import TextLog, write_json
 
 ZIGZAG = np.array([0.0, np.pi / 3, -np.pi / 3, 2 * np.pi / 3, -2 * np.pi / 3])  # rad
 CLIK_GAIN = 1.0  # 1/s
@@ -250,11 +250,8 @@ def main(argv=None) -> int:
     ]
     total = time.perf_counter() - t0
 
-    lines: list[str] = []
-
-    def say(text: str) -> None:  # printed and kept for summary.txt
-        print(text)
-        lines.append(text)
+    log = TextLog()
+    say = log.say
 
     say(
         f"{'case':<11}{'δ':>2}{'K':>5} {'closure 1st':>11} {'last raw':>9} {'last wrap':>9} "
@@ -273,7 +270,7 @@ def main(argv=None) -> int:
             f"{'never' if apart is None else apart:>10} {r['runtime_s']:6.1f}"
         )
     say(f"total {total:.1f} s (including the dt/2 runs)")
-    write_text(args.out / "summary.txt", "\n".join(lines))
+    log.write(args.out / "summary.txt")
     write_json(args.out / "summary.json", {"cases": rows, "total_runtime_s": total})
     print(f"wrote {args.out / 'summary.json'} and closure_*.png, joints_*.png")
     return 0

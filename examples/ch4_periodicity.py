@@ -39,7 +39,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.analysis import closure_errors, detect_period
-from qpcoord.report import write_json, write_text
+from qpcoord.report import TextLog, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])  # Ex 4.4
 
@@ -93,11 +93,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="2 periods, coarse steps (CI)")
     p.add_argument("--out", type=Path, default=Path("out/ch4_periodicity"))
     args = p.parse_args(argv)
-    lines: list[str] = []
-
-    def say(text: str) -> None:  # printed and kept for summary.txt
-        print(text)
-        lines.append(text)
+    log = TextLog()
+    say = log.say
 
     result = run(periods=2, steps_per_period=200) if args.quick else run(10, 400)
     runs, period = result.pop("_runs"), result.pop("_period")
@@ -123,7 +120,7 @@ def main(argv=None) -> int:
             args.out / "closure.png",
             "5R on the Lissajous: joint closure error per period",
         )
-    write_text(args.out / "summary.txt", "\n".join(lines))
+    log.write(args.out / "summary.txt")
     write_json(args.out / "summary.json", result)
     print(f"wrote {args.out}")
     return 0

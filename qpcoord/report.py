@@ -6,7 +6,7 @@ import json
 import os
 from pathlib import Path
 
-__all__ = ["write_json", "write_text"]
+__all__ = ["write_json", "write_text", "TextLog"]
 
 
 def write_json(path, data) -> Path:
@@ -45,3 +45,19 @@ def write_text(path, text: str) -> Path:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+class TextLog:
+    """Lines printed as they come and kept for a ``summary.txt`` (examples, CLI)."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def say(self, text: str) -> None:
+        """Print ``text`` and keep it."""
+        print(text)
+        self.lines.append(text)
+
+    def write(self, path) -> Path:
+        """Write the kept lines atomically to ``path``."""
+        return write_text(path, "\n".join(self.lines))

@@ -25,7 +25,13 @@ from .ik import IK
 from .kinematic_tasks import OneFormTask, PositionTask
 from .robot import Robot
 
-__all__ = ["PseudoInverse", "OutputManifoldBasis", "InvolutiveBasis", "sphere_basis"]
+__all__ = [
+    "PseudoInverse",
+    "OutputManifoldBasis",
+    "InvolutiveBasis",
+    "sphere_basis",
+    "sphere_forms",
+]
 
 
 def _robot(robot) -> Robot:
@@ -63,6 +69,31 @@ def sphere_basis(y, center) -> tuple[np.ndarray, np.ndarray]:
     """
     d = np.asarray(y, dtype=float) - np.asarray(center, dtype=float)
     return np.array([-d[2], 0.0, d[0]]), np.array([-d[1], d[0], 0.0])
+
+
+def sphere_forms(robot, center, complementary):
+    """Thm 4.2's 1-forms ``q ↦ [ω₁(q); ω₄; ω₅; …]`` (rows, ``(1 + k) × nq``).
+
+    ``ω₁ = ∇_q h`` for the sphere ``h(y) = ‖y − center‖² − R²`` (its radius does not
+    matter), pulled back through the robot; ``complementary`` are the constant 1-forms
+    (``k × nq``, Ex. 4.4: ``[[1,0,0,0,1], [0,1,0,1,0]]``). Their dual fields are
+    :func:`qpcoord.geometry.dual_fields`.
+    """
+    from .geometry import pullback
+
+    c = np.asarray(center, dtype=float).reshape(-1)
+    W = np.atleast_2d(np.asarray(complementary, dtype=float))
+    if c.shape != (robot.m,) or W.shape[1] != robot.nq:
+        raise ValueError(
+            f"center must have {robot.m} entries and complementary {robot.nq} columns, "
+            f"got {c.shape} and {W.shape}"
+        )
+    omega1 = pullback(robot, lambda y: 2.0 * (y - c))
+
+    def forms(q) -> np.ndarray:
+        return np.vstack((omega1(q), W))
+
+    return forms
 
 
 class OutputManifoldBasis:

@@ -109,10 +109,7 @@ def test_theorem_4_2_dual_fields_are_involutive_and_span_the_stack_solutions():
     arm = qc.robots.load("spatial_5r")
     path = qc.paths.LissajousSphere()
     c = path.center
-    omega1 = g.pullback(arm, lambda y: 2.0 * (y - c))
-
-    def forms(q):
-        return np.vstack((omega1(q), OMEGA_45))
+    forms = qc.schemes.sphere_forms(arm, c, OMEGA_45)
 
     q0 = qc.inverse_kinematics(arm, path.position(0.0), qc.robots.spatial_5r.Q0_THESIS)
     # the fields as functions of q (orientation carried from a reference basis)

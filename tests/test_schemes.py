@@ -57,8 +57,7 @@ def test_involutive_basis_is_the_theorem_4_2_construction(arm, path, q_on_path):
     Ẏ = α J f₁ + β J f₂."""
     q = q_on_path
     qdot = S.InvolutiveBasis(arm, OMEGA_45).velocity(q, 0.0, path)
-    omega1 = g.pullback(arm, lambda y: 2.0 * (y - path.center))
-    F = g.dual_fields(np.vstack((omega1(q), OMEGA_45)), q)  # 5 × 2
+    F = g.dual_fields(S.sphere_forms(arm, path.center, OMEGA_45), q)  # 5 × 2
     V = arm.jacobian(q) @ F  # v₁, v₂ = J f₁, J f₂ (a basis of the sphere's tangent plane)
     ab = np.linalg.lstsq(V, path.velocity(0.0), rcond=None)[0]
     np.testing.assert_allclose(V @ ab, path.velocity(0.0), atol=1e-12)  # Ẏ ∈ span{v}
@@ -71,6 +70,11 @@ def test_output_basis_degenerates_on_the_equator_line(arm):
     sch = S.OutputManifoldBasis(arm, center)
     with pytest.raises(ValueError, match="degenerates"):
         sch.velocity(np.zeros(5), 0.0, qc.paths.LissajousSphere())
+
+
+def test_sphere_forms_checks_sizes(arm):
+    with pytest.raises(ValueError, match="center must have 3 entries"):
+        S.sphere_forms(arm, [0.0, 0.0], OMEGA_45)
 
 
 def test_schemes_reject_bad_robots():
