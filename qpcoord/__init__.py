@@ -8,9 +8,9 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
                          bounds=qc.Bounds(-dq_max, dq_max))
 """
 
-from . import analysis, geometry, paths, robots, schemes
+from . import analysis, geometry, paths, potentials, robots, schemes, task_manifold
 from .backends import available_solvers, default_solver, solver_versions
-from .errors import InfeasibleError, SolverError
+from .errors import AlgorithmicSingularity, InfeasibleError, SolverError
 from .ik import IK, ik_step, inverse_kinematics
 from .kinematic_tasks import (
     JointLimits,
@@ -28,6 +28,7 @@ from .tasks import Bounds, Equality, Inequality
 __version__ = "0.1.0"
 
 __all__ = [
+    "AlgorithmicSingularity",
     "Bounds",
     "Equality",
     "IK",
@@ -52,9 +53,11 @@ __all__ = [
     "ik_step",
     "inverse_kinematics",
     "paths",
+    "potentials",
     "robots",
     "schemes",
     "simulate",
     "solve_stack",
     "solver_versions",
+    "task_manifold",
 ]

@@ -184,6 +184,29 @@ class Robot:
             model = pin.buildReducedModel(model, ids, pin.neutral(model))
         return cls(model, frame, rows=rows, name=name or path.stem, **kwargs)
 
+    def with_frame(self, frame: str, name: str = "") -> Robot:
+        """The same arm (model, coordinates, rows, limits) with another controlled point.
+
+        Used for points on the links, e.g. an elbow kept away from an obstacle
+        (:class:`qpcoord.potentials.ObstacleDistance`). The new robot has its own Pinocchio
+        data, so the two never share cached kinematics.
+
+        Raises
+        ------
+        ValueError
+            Unknown frame (the message lists the frames).
+        """
+        return Robot(
+            self.model,
+            frame,
+            rows=tuple(int(r) for r in self.rows),
+            coordinate_map=self.coordinate_map,
+            lower=self.lower,
+            upper=self.upper,
+            velocity_limit=self.velocity_limit,
+            name=name or f"{self.name}@{frame}",
+        )
+
     def _limit(self, value, default, what: str, allow: int) -> np.ndarray:
         arr = np.array(default if value is None else value, dtype=float).reshape(-1)
         if arr.size == 1:

@@ -13,6 +13,15 @@ Chapter 4:
 - :class:`InvolutiveBasis` -- Thm 4.2 / Ex. 4.4: the main task with complementary
   integrable 1-forms held at zero (``ω₄ q̇ = 0``, ``ω₅ q̇ = 0`` as hard constraints).
 
+Chapter 5 (defined in :mod:`qpcoord.extension` and :mod:`qpcoord.curvature`, re-exported):
+
+- :class:`RigidExtension` -- Def. 5.2: ``[J; G] q̇ = [Ẏ; 0]``, algorithmic singularities
+  reported;
+- :class:`SoftExtension` -- Defs. 5.3/5.4: potentials in strict priority in the reduced
+  null spaces (projection formula or lexicographic QP with hard limits);
+- :class:`HessianDirection` -- §5.4: the maximal-curvature direction of the task manifold;
+- :class:`ComplementaryForm` -- §5.5: a constant 1-form tangent to the fibre at ``q̄``.
+
 ``gain`` adds closed-loop correction ``K (Y_ref − Y)`` to ``Ẏ`` (1/s; the thesis integrates
 the open-loop maps, ``gain = 0``, the default).
 """
@@ -21,14 +30,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from .curvature import ComplementaryForm, HessianDirection
+from .extension import RigidExtension, SoftExtension
 from .ik import IK
-from .kinematic_tasks import OneFormTask, PositionTask
+from .kinematic_tasks import PositionTask
 from .robot import Robot
 
 __all__ = [
     "PseudoInverse",
     "OutputManifoldBasis",
     "InvolutiveBasis",
+    "RigidExtension",
+    "SoftExtension",
+    "HessianDirection",
+    "ComplementaryForm",
     "sphere_basis",
     "sphere_forms",
 ]
@@ -144,14 +159,15 @@ class OutputManifoldBasis:
         return ab[0] * (Jp @ v1) + ab[1] * (Jp @ v2)
 
 
-class InvolutiveBasis:
+class InvolutiveBasis(RigidExtension):
     """Thm 4.2 / Ex. 4.4: track ``Y`` with complementary integrable 1-forms held at zero.
 
-    The Stack has the position task as its level and ``ω q̇ = 0`` for the given
-    1-forms as hard constraints. When ``[J; ω]`` is square and invertible (5R with ω₄, ω₅)
-    the solution is unique and equals ``α f₁ + β f₂`` with ``f₁, f₂`` dual to
-    ``(ω₁, ω₄, ω₅)`` and ``Ẏ = α J f₁ + β J f₂`` -- the construction of the theorem
-    (``tests/test_schemes.py``).
+    A :class:`RigidExtension` whose ``G`` are integrable 1-forms: the Stack has the position
+    task as its level and ``ω q̇ = 0`` for the given 1-forms as hard constraints. When
+    ``[J; ω]`` is square and invertible (5R with ω₄, ω₅) the solution is unique and equals
+    ``α f₁ + β f₂`` with ``f₁, f₂`` dual to ``(ω₁, ω₄, ω₅)`` and ``Ẏ = α J f₁ + β J f₂``
+    -- the construction of the theorem (``tests/test_schemes.py``). Fewer forms than
+    ``nq − rows`` are accepted (the rest of the freedom goes to the minimum-norm ``q̇``).
 
     Parameters
     ----------
@@ -161,16 +177,13 @@ class InvolutiveBasis:
     gain : float
         ``K`` (1/s), default 0.
     solver : str, optional
+    tol : float
+        Relative smallest singular value of ``[J; ω]`` below which
+        :class:`~qpcoord.errors.AlgorithmicSingularity` is raised (default 1e-6).
     """
 
-    def __init__(self, robot, forms, gain: float = 0.0, solver: str | None = None) -> None:
-        self.robot = _robot(robot)
-        self.task = PositionTask(robot, gain=gain)
-        self.forms = OneFormTask(robot, forms, name="complementary 1-forms")
-        self.ik = IK(
-            robot, [self.task], dt=1.0, limits=None, constraints=[self.forms], solver=solver
-        )
-
-    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
-        qdot, sol = self.ik.step(q, t, reference)
-        return qdot
+    def __init__(
+        self, robot, forms, gain: float = 0.0, solver: str | None = None, tol: float = 1e-6
+    ) -> None:
+        super().__init__(robot, forms, gain=gain, tol=tol, square=False, solver=solver)
+        self.forms = self.extension
