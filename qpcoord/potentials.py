@@ -437,7 +437,8 @@ class Manipulability(Potential):
     Raises
     ------
     ValueError
-        At a singular configuration (``det(J Jᵀ) = 0``): the potential is infinite there.
+        At a (numerically) singular configuration, ``σ_min(J) ≤ 1e-8 σ_max(J)``: the
+        potential is infinite there.
     """
 
     def __init__(self, robot, alpha: float = 1.0, name: str = "") -> None:
@@ -447,11 +448,13 @@ class Manipulability(Potential):
 
     def _det(self, q):
         J = self.robot.jacobian(q)
-        M = J @ J.T
-        det = float(np.linalg.det(M))
-        if not det > 1e-300:
-            raise ValueError(f"{self.name}: singular configuration (det(J Jᵀ) = {det:.3g})")
-        return J, M, det
+        sv = np.linalg.svd(J, compute_uv=False)
+        if sv.size < J.shape[0] or not sv[-1] > 1e-8 * sv[0]:
+            raise ValueError(
+                f"{self.name}: singular configuration (σ_min/σ_max of J = "
+                f"{sv[-1] / sv[0] if sv[0] else 0.0:.3g} ≤ 1e-8)"
+            )
+        return J, J @ J.T, float(np.prod(sv**2))
 
     def value(self, q) -> float:
         return self.alpha / self._det(q)[2]
