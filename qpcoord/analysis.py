@@ -6,6 +6,9 @@ Poincaré section of a periodically forced system, thesis Def. 3.5 and Remark 3.
 
 - :func:`poincare_section` -- the section points ``p_k = q(t₀ + kT)`` (rad);
 - :func:`closure_errors` -- ``‖p_k − p_{k−1}‖`` per period (rad): the joint drift;
+- :func:`periods_to_closure` -- the period from which that drift stays below a threshold
+  (the convergence figure of the chapter 5 limit cycles);
+- :func:`joint_path_lengths` -- ``∫‖q̇‖ dt`` per period (rad), the §5.4 comparison;
 - :func:`detect_period` -- "periodic with period m·T from period k on", or "not periodic
   within K periods", with the evidence.
 
@@ -20,7 +23,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["poincare_section", "closure_errors", "detect_period", "Periodicity"]
+__all__ = [
+    "poincare_section",
+    "closure_errors",
+    "periods_to_closure",
+    "joint_path_lengths",
+    "detect_period",
+    "Periodicity",
+]
 
 
 def _check_period(traj, period, t0: float | None) -> tuple[float, float]:
@@ -101,6 +111,47 @@ def closure_errors(traj, period: float, t0: float | None = None) -> np.ndarray:
     """Joint drift per period ``‖q(t₀ + kT) − q(t₀ + (k−1)T)‖`` (rad), ``k = 1 … K``."""
     p = poincare_section(traj, period, t0)
     return np.linalg.norm(np.diff(p, axis=0), axis=1)
+
+
+def periods_to_closure(errors, threshold: float = 1e-6) -> int | None:
+    """The first period ``k`` (1-based) whose closure error, and every later one, is below
+    ``threshold`` (rad); ``None`` if the run never settles below it.
+
+    ``errors`` are :func:`closure_errors` (entry ``k−1`` compares periods ``k−1`` and ``k``).
+    A run periodic from the start gives 1.
+    """
+    e = np.asarray(errors, dtype=float).reshape(-1)
+    if e.size == 0:
+        raise ValueError("errors is empty: the run holds no whole period")
+    if not np.isfinite(threshold) or threshold <= 0:
+        raise ValueError(f"threshold must be > 0 (rad), got {threshold!r}")
+    above = np.flatnonzero(~(e < threshold))
+    if above.size == 0:
+        return 1
+    k = int(above[-1]) + 1  # index of the first entry after the last one above
+    return None if k >= e.size else k + 1
+
+
+def joint_path_lengths(traj, period: float, t0: float | None = None) -> np.ndarray:
+    """Joint-space path length ``∫ ‖q̇‖ dt`` over each whole period (rad).
+
+    Trapezoidal rule on the samples' ``‖q̇‖``; requires ``T`` to be a whole number of
+    steps (choose ``dt = T/N``).
+    """
+    period, t0 = _check_period(traj, period, t0)
+    dt = float(traj.t[1] - traj.t[0])
+    n = period / dt
+    if abs(n - round(n)) > 1e-6:
+        raise ValueError(f"period {period:.6g} s is not a whole number of steps dt = {dt:.6g} s")
+    n = int(round(n))
+    k0 = int(round((t0 - traj.t[0]) / dt))
+    speed = np.linalg.norm(traj.qdot, axis=1)
+    out = []
+    while k0 + n < len(speed):
+        s = speed[k0 : k0 + n + 1]
+        out.append(dt * (s.sum() - 0.5 * (s[0] + s[-1])))
+        k0 += n
+    return np.array(out)
 
 
 @dataclass

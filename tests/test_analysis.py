@@ -109,3 +109,27 @@ def test_bad_arguments(kwargs, match):
 def test_not_a_trajectory():
     with pytest.raises(ValueError, match="Trajectory"):
         closure_errors(np.zeros((10, 2)), 1.0)
+
+
+def test_periods_to_closure():
+    from qpcoord.analysis import periods_to_closure
+
+    assert periods_to_closure([1e-9, 1e-9]) == 1
+    assert periods_to_closure([0.1, 1e-3, 1e-8, 1e-9]) == 3
+    assert periods_to_closure([0.1, 1e-8, 1e-3]) is None
+    assert periods_to_closure([0.1, 1e-8, np.nan]) is None
+    with pytest.raises(ValueError, match="empty"):
+        periods_to_closure([])
+
+
+def test_joint_path_lengths_of_a_uniform_rotation():
+    from qpcoord.analysis import joint_path_lengths
+    from qpcoord.simulate import Trajectory
+
+    t = np.linspace(0, 4.0, 401)
+    q = np.column_stack((0.5 * t, np.zeros_like(t)))
+    qd = np.tile([0.5, 0.0], (t.size, 1))
+    tr = Trajectory(t=t, q=q, qdot=qd, y=q, y_ref=q)
+    np.testing.assert_allclose(joint_path_lengths(tr, 1.0), [0.5] * 4, atol=1e-12)
+    with pytest.raises(ValueError, match="whole number"):
+        joint_path_lengths(tr, 1.005)
