@@ -8,7 +8,18 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
                          bounds=qc.Bounds(-dq_max, dq_max))
 """
 
-from . import analysis, geometry, paths, potentials, robots, schemes, task_manifold
+from . import (
+    analysis,
+    ddl,
+    geometry,
+    hysteresis,
+    musculo,
+    paths,
+    potentials,
+    robots,
+    schemes,
+    task_manifold,
+)
 from .backends import available_solvers, default_solver, solver_versions
 from .errors import AlgorithmicSingularity, InfeasibleError, SolverError
 from .ik import IK, ik_step, inverse_kinematics
@@ -46,6 +57,9 @@ __all__ = [
     "Stack",
     "Trajectory",
     "analysis",
+    "ddl",
+    "hysteresis",
+    "musculo",
     "geometry",
     "VelocityLimits",
     "available_solvers",

@@ -180,7 +180,6 @@ def as_rows(G, lo, hi, lb, ub, k):
     return np.vstack(rows), np.concatenate(rhs)
 
 
-
 # --------------------------------------------------------------------------------------
 # Direct backends
 # --------------------------------------------------------------------------------------
@@ -226,9 +225,7 @@ def _solve_daqp(H, f, G, lo, hi, lb, ub, y0):
         if y0 is None:
             x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense, **settings)
         else:
-            x, _, flag, _ = daqp.solve(
-                H, f, G, bupper, blower, sense, primal_start=y0, **settings
-            )
+            x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense, primal_start=y0, **settings)
         if flag in (1, 2):
             break
     if flag in (1, 2):

@@ -386,8 +386,7 @@ class Reduced:
             if res.code == INFEASIBLE or not _lp_feasible(G, lo, hi, lb, ub):
                 how = "" if res.code == INFEASIBLE else "; confirmed by an LP feasibility test"
                 raise InfeasibleError(
-                    f"{where}: bounds and hard constraints are inconsistent "
-                    f"({res.message}{how})"
+                    f"{where}: bounds and hard constraints are inconsistent ({res.message}{how})"
                 )
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
         xn = x + self.lift(res.y)

@@ -143,9 +143,7 @@ def test_velocity_limits_hold_and_priority_beats_weighting(panda, solver, limit)
 def test_default_limits_use_the_robot_speed_limits(panda):
     """limits="robot" (default) applies the Panda's own joint speed limits."""
     far = panda.position(PANDA_Q) + np.array([1.0, -1.0, 1.0])
-    qdot, _ = qc.IK(panda, [qc.PositionTask(panda, target=far, gain=50.0)], dt=0.01).step(
-        PANDA_Q
-    )
+    qdot, _ = qc.IK(panda, [qc.PositionTask(panda, target=far, gain=50.0)], dt=0.01).step(PANDA_Q)
     assert np.all(np.abs(qdot) <= panda.velocity_limit * (1 + 1e-9))
     assert np.any(np.abs(qdot) >= panda.velocity_limit * (1 - 1e-9))
 
@@ -368,8 +366,10 @@ def test_task_of_another_robot(planar):
 
 @pytest.mark.parametrize(
     "task",
-    [qc.Equality(np.eye(2), [0.0, 0.0], name="small"),
-     qc.Inequality(np.ones((1, 4)), upper=1.0, name="wide")],
+    [
+        qc.Equality(np.eye(2), [0.0, 0.0], name="small"),
+        qc.Inequality(np.ones((1, 4)), upper=1.0, name="wide"),
+    ],
     ids=["equality", "inequality"],
 )
 def test_constant_task_with_the_wrong_number_of_columns(planar, task):
@@ -385,9 +385,11 @@ def test_level_item_that_is_not_a_task(planar, item):
 
 @pytest.mark.parametrize(
     ("limits", "message"),
-    [("foo", "limits must be 'robot', a list of limits or None"),
-     (["foo"], "JointLimits/VelocityLimits objects"),
-     ([qc.Bounds(-1.0, 1.0)], "JointLimits/VelocityLimits objects")],
+    [
+        ("foo", "limits must be 'robot', a list of limits or None"),
+        (["foo"], "JointLimits/VelocityLimits objects"),
+        ([qc.Bounds(-1.0, 1.0)], "JointLimits/VelocityLimits objects"),
+    ],
 )
 def test_bad_limits(planar, limits, message):
     with pytest.raises(ValueError, match=message):

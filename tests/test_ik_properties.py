@@ -41,9 +41,10 @@ def test_strict_ik_respects_bounds_and_is_never_worse_on_its_first_level(case):
     # unconstrained by the bounds: the position task is met exactly (rank permitting)
     J = arm.jacobian(q)
     b = 10.0 * offset
-    if np.all(np.abs(strict) < speed * (1 - 1e-6)) and np.linalg.svd(J, compute_uv=False)[
-        -1
-    ] > 1e-3:
+    if (
+        np.all(np.abs(strict) < speed * (1 - 1e-6))
+        and np.linalg.svd(J, compute_uv=False)[-1] > 1e-3
+    ):
         np.testing.assert_allclose(J @ strict, b, atol=1e-8 * scale)
 
 

@@ -227,7 +227,8 @@ def test_one_form_task_callable_form_is_refreshed(planar):
 
 
 @pytest.mark.parametrize(
-    "form", [np.ones((2, 4)), np.ones(2), np.ones((2, 3, 1)), lambda q: np.ones((1, 2))],
+    "form",
+    [np.ones((2, 4)), np.ones(2), np.ones((2, 3, 1)), lambda q: np.ones((1, 2))],
     ids=["4-columns", "2-vector", "3-d", "callable-2-columns"],
 )
 def test_one_form_task_wrong_number_of_columns(planar, form):

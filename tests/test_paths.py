@@ -15,7 +15,11 @@ FD_TOL = 1e-6
 PATHS = {
     "lissajous-default": paths.LissajousSphere,
     "lissajous-custom": lambda: paths.LissajousSphere(
-        radius=0.7, center=(1.0, 2.0, -0.5), omega=1.3, amplitude=1.1, phase=0.3,
+        radius=0.7,
+        center=(1.0, 2.0, -0.5),
+        omega=1.3,
+        amplitude=1.1,
+        phase=0.3,
         angles=(0.2, -0.9, 1.4),
     ),
     "circle-default": paths.Circle,
@@ -148,8 +152,7 @@ def test_path_is_periodic(path, rng):
     t = sample_times(path, rng)
     for method in ("position", "velocity", "acceleration"):
         fn = getattr(path, method)
-        np.testing.assert_allclose(fn(t + path.period), fn(t), rtol=0, atol=1e-12,
-                                   err_msg=method)
+        np.testing.assert_allclose(fn(t + path.period), fn(t), rtol=0, atol=1e-12, err_msg=method)
 
 
 def test_path_is_not_periodic_with_half_the_period(path):
@@ -250,8 +253,13 @@ def test_circle_bad_parameters(options, message):
 @pytest.mark.parametrize("method", ["position", "velocity", "acceleration"])
 @pytest.mark.parametrize(
     ("t", "message"),
-    [(np.zeros((2, 3)), "1-D array"), ([[0.0], [1.0]], "1-D array"),
-     (np.nan, "non-finite"), ([0.0, np.inf], "non-finite"), ("soon", "soon")],
+    [
+        (np.zeros((2, 3)), "1-D array"),
+        ([[0.0], [1.0]], "1-D array"),
+        (np.nan, "non-finite"),
+        ([0.0, np.inf], "non-finite"),
+        ("soon", "soon"),
+    ],
     ids=["2-d", "column", "nan", "inf", "text"],
 )
 def test_bad_times(path, method, t, message):

@@ -768,6 +768,7 @@ def test_quadprog_soft_rows_with_equal_bounds():
 def test_osqp_solves_a_small_level():
     """osqp at eps 1e-10 did not converge on this level's slack QP (SolverError); at 1e-9
     with the exact active-set refinement it matches daqp."""
+
     def level():
         return [
             [

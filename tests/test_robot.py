@@ -23,8 +23,6 @@ NUM_CONFIGURATIONS = 4
 # ---------------------------------------------------------------------------------------
 
 
-
-
 def placement(rpy, xyz) -> pin.SE3:
     """SE3 from roll-pitch-yaw angles (rad) and a translation (m)."""
     return pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(xyz, dtype=float))
@@ -166,13 +164,26 @@ def test_interleaved_calls_give_the_same_values_as_a_fresh_robot(any_robot, rng)
     for q in qs:
         fresh = rebuilt(any_robot)
         expected.append((fresh.position(q), fresh.jacobian(q), fresh.hessian(q)))
-    order = [(0, "hessian"), (1, "position"), (0, "position"), (1, "hessian"),
-             (2, "jacobian"), (2, "hessian"), (0, "jacobian"), (2, "position")]
+    order = [
+        (0, "hessian"),
+        (1, "position"),
+        (0, "position"),
+        (1, "hessian"),
+        (2, "jacobian"),
+        (2, "hessian"),
+        (0, "jacobian"),
+        (2, "position"),
+    ]
     index = {"position": 0, "jacobian": 1, "hessian": 2}
     for k, what in order:
         value = getattr(any_robot, what)(qs[k])
-        np.testing.assert_allclose(value, expected[k][index[what]], rtol=0, atol=1e-12,
-                                   err_msg=f"{what} at configuration {k}")
+        np.testing.assert_allclose(
+            value,
+            expected[k][index[what]],
+            rtol=0,
+            atol=1e-12,
+            err_msg=f"{what} at configuration {k}",
+        )
 
 
 def rebuilt(robot: qc.Robot) -> qc.Robot:
@@ -241,8 +252,7 @@ def test_coordinate_map_is_a_change_of_joint_coordinates(rng):
     for q in rng.uniform(-1.0, 1.0, size=(3, 5)):
         qp = MIXED_MAP @ q
         np.testing.assert_allclose(mapped.position(q), plain.position(qp), atol=1e-14)
-        np.testing.assert_allclose(mapped.jacobian(q), plain.jacobian(qp) @ MIXED_MAP,
-                                   atol=1e-13)
+        np.testing.assert_allclose(mapped.jacobian(q), plain.jacobian(qp) @ MIXED_MAP, atol=1e-13)
         expected_H = np.einsum("ia,kij,jb->kab", MIXED_MAP, plain.hessian(qp), MIXED_MAP)
         np.testing.assert_allclose(mapped.hessian(q), expected_H, atol=1e-12)
 
@@ -367,8 +377,9 @@ def planar() -> qc.Robot:
     return qc.robots.load("planar_3r")
 
 
-@pytest.mark.parametrize("method", ["position", "jacobian", "hessian", "kinematics",
-                                    "check_configuration"])
+@pytest.mark.parametrize(
+    "method", ["position", "jacobian", "hessian", "kinematics", "check_configuration"]
+)
 @pytest.mark.parametrize(
     ("q", "message"),
     [

@@ -17,9 +17,7 @@ import qpcoord as qc
 from qpcoord.robots import planar_chain
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-KNOWN_NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5")
-
-
+KNOWN_NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5", "shoulder")
 
 
 # ---------------------------------------------------------------------------------------
@@ -100,9 +98,13 @@ def test_planar_chain_link_length_scales_the_arm():
 
 @pytest.mark.parametrize(
     ("args", "message"),
-    [((0,), "n must be an integer >= 1"), ((True,), "n must be an integer"),
-     ((2.0,), "n must be an integer"), ((2, 0.0), "length must be a positive"),
-     ((2, np.nan), "length must be a positive")],
+    [
+        ((0,), "n must be an integer >= 1"),
+        ((True,), "n must be an integer"),
+        ((2.0,), "n must be an integer"),
+        ((2, 0.0), "length must be a positive"),
+        ((2, np.nan), "length must be a positive"),
+    ],
 )
 def test_planar_chain_bad_arguments(args, message):
     with pytest.raises(ValueError, match=message):
@@ -211,8 +213,17 @@ def _build_wheel(source: Path, out: Path) -> Path:
     errors = []
     for extra in (["--no-build-isolation"], []):
         proc = subprocess.run(
-            [sys.executable, "-m", "pip", "wheel", "--no-deps", *extra, "-w", str(out),
-             str(source)],
+            [
+                sys.executable,
+                "-m",
+                "pip",
+                "wheel",
+                "--no-deps",
+                *extra,
+                "-w",
+                str(out),
+                str(source),
+            ],
             capture_output=True,
             text=True,
             timeout=300,
@@ -231,8 +242,15 @@ def test_wheel_ships_and_loads_the_descriptions(tmp_path):
         REPO_ROOT,
         source,
         ignore=shutil.ignore_patterns(
-            ".git", "build", "dist", "*.egg-info", "__pycache__", ".pytest_cache",
-            ".hypothesis", ".ruff_cache", "out",
+            ".git",
+            "build",
+            "dist",
+            "*.egg-info",
+            "__pycache__",
+            ".pytest_cache",
+            ".hypothesis",
+            ".ruff_cache",
+            "out",
         ),
     )
     wheel = _build_wheel(source, tmp_path / "wheels")

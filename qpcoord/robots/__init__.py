@@ -12,7 +12,10 @@ Known names (:func:`names`):
   pitch joints (why: :mod:`qpcoord.robots.spatial_5r`);
 - ``planar_nr`` -- ``n`` unit links in the plane, absolute angles (``load("planar_nr", n=5)``);
 - ``panda`` -- Franka Panda, 7 DoF, fingers locked, frame ``panda_hand_tcp``;
-- ``ur5`` -- Universal Robots UR5, 6 DoF, frame ``tool0``.
+- ``ur5`` -- Universal Robots UR5, 6 DoF, frame ``tool0``;
+- ``shoulder`` -- appendix A glenohumeral joint with 11 muscles, a
+  :class:`~qpcoord.robots.shoulder.ShoulderModel` (not a ``Robot``; options of
+  :func:`~qpcoord.robots.shoulder.build`).
 
 ``panda`` and ``ur5`` come from the ``example-robot-data`` package (the optional extra
 ``qpcoord[robots]``); the others are files in this distribution.
@@ -25,13 +28,21 @@ from importlib import resources
 import numpy as np
 
 from ..robot import Robot
-from . import spatial_5r
+from . import shoulder, spatial_5r
 from .builders import absolute_angle_map, planar_chain
 from .external import example_robot_data_urdf
 
-__all__ = ["load", "names", "description_path", "planar_chain", "absolute_angle_map", "spatial_5r"]
+__all__ = [
+    "load",
+    "names",
+    "description_path",
+    "planar_chain",
+    "absolute_angle_map",
+    "spatial_5r",
+    "shoulder",
+]
 
-_NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5")
+_NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5", "shoulder")
 
 
 def names() -> tuple[str, ...]:
@@ -79,6 +90,8 @@ def load(name: str, **options) -> Robot:
             coordinate_map=absolute_angle_map(n),
             name=f"planar_{n}r",
         )
+    if name == "shoulder":
+        return shoulder.build(**options)
     if options:
         raise ValueError(f"load({name!r}) takes no options, got {options!r}")
     if name == "planar_3r":

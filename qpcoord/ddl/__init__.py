@@ -1,0 +1,48 @@
+"""ESO/PRIMA Differential Delay Line (thesis chapter 6, appendix B): a dual-stage plant,
+atmospheric references, the thesis's closed-loop coordinator and the two-DDL scheme.
+
+Quick start::
+
+    import qpcoord.ddl as ddl
+    plant = ddl.DualStage()
+    r = ddl.kolmogorov_opd(10.0, 8000.0, seed=1, preset="paranal_250hz")
+    run = ddl.simulate(plant, ddl.SisoCoordinator(), r, fs=8000.0)
+    run.metrics["rmse"]   # m
+
+Controllers follow a two-method interface — ``reset(plant, fs, y0, r0)`` and
+``step(y, r) -> (v, i_a, i_b)`` — documented in :mod:`qpcoord.ddl.coordinator`.
+"""
+
+from . import identify, references, two_ddl
+from .coordinator import SisoCoordinator
+from .fine import FineParams
+from .flexure import BladeFlexure
+from .identify import bandwidth_3db, coarse_frf, fine_frf, peak_frequency
+from .metrics import power, tracking_metrics
+from .plant import DualStage
+from .references import PRESETS, kolmogorov_opd, opd_psd, step_reference
+from .simulate import Run, simulate
+from .stepper import StepperParams
+
+__all__ = [
+    "BladeFlexure",
+    "DualStage",
+    "FineParams",
+    "PRESETS",
+    "Run",
+    "SisoCoordinator",
+    "StepperParams",
+    "bandwidth_3db",
+    "coarse_frf",
+    "fine_frf",
+    "identify",
+    "kolmogorov_opd",
+    "opd_psd",
+    "peak_frequency",
+    "power",
+    "references",
+    "simulate",
+    "step_reference",
+    "tracking_metrics",
+    "two_ddl",
+]

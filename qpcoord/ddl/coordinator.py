@@ -1,0 +1,240 @@
+"""The thesis's closed-loop coordinator for the DDL (Fig 6.10, Eq 6.1): `SisoCoordinator`.
+
+Controller interface (shared by every DDL controller, see :func:`.simulate.simulate`)::
+
+    ctl.reset(plant, fs, y0, r0)          # plant: DualStage at rest; y0 first measurement (m);
+                                          # r0 first reference sample (m); fs in Hz
+    v, i_a, i_b = ctl.step(y, r)          # once per period: measured output y (m), reference
+                                          # r (m) -> piezo voltage (V), coil currents (A)
+    ctl.y_c_hat                           # optional: the controller's carriage estimate (m)
+
+Structure (thesis §6.2.3, Fig 6.10):
+
+* fine stage: PI on the combined output error ``e = r − y`` (no model in this loop);
+* coarse reference ``r_c`` = 3rd-order Butterworth low-pass at 10 Hz of ``r``, minus the fine
+  mid-stroke offset (so that tracking ``r_c`` keeps the piezo centred — goal 2 of §6.2.2);
+* coordinator: carriage estimate ``ŷ_c = y − ŷ_f`` with ``ŷ_f`` the output of a second-order
+  fine-stage model driven by the voltage actually applied;
+* coarse "direct coil" phase controller (Eq 6.1): ``i_a = I sin α``, ``i_b = I cos α`` and the
+  field phase α integrates the coarse error with a rate limit,
+  ``α(k) = α(k−1) + sat(g e_c(k), ±Δα_max)``, ``e_c = r_c − ŷ_c``;
+* pre-compensation of the coarse motion into the fine stage: the coarse displacement predicted
+  from the commanded phase, ``ŷ_c,pred = ŷ_c(0) + (α − α(0)) lead/(2π p)`` (the rotor follows
+  the field well below the 120 Hz mode), is subtracted in volts:
+  ``u_d = (r_c − ŷ_c,pred) / K_f``. The thesis feeds ``−ŷ_c,pred/K_f``; the extra ``r_c/K_f``
+  is a slow reference feed-forward the PI integrator would otherwise have to hold — with it the
+  integrator stays near zero.
+
+Interpretation of Eq 6.1. The thesis prints ``e_i(k) = e_i(k−1) + K_i (h/T_i) e_c(k)``, then
+``α(k) = α(k−1) + e_i(k)``: read literally α is the double integral of the error and, with
+the rotor following the field (a static gain from α to y_c), the discrete loop
+``(z − 1)² + g = 0`` is unstable for every g > 0. The text describes "a simple integral
+controller summing continuously the position error" whose increments of α are rate-limited
+(Min/Max), which is what is implemented.
+
+Gains (choices, not in the thesis):
+
+* fine PI ``C(s) = (kp + ki/s)/K_f`` with ``kp = 0.8``, ``ki = 2π·180 s⁻¹``: the pair that
+  minimises |S| at 50 Hz subject to phase margin ≥ 60°, gain margin ≥ 10 dB and peak |S| ≤ 1.6
+  on the 300 Hz / ζ = 0.7 piezo model discretised at 8 kHz (grid search, ``docs/ch6.md``):
+  crossover ≈ 234 Hz, PM 63°, GM 17.9 dB;
+* coarse loop bandwidth 2 Hz: the integral loop ``g lead/(2π p)`` gives a first-order loop
+  of that bandwidth; at the 120 Hz mode (ζ = 0.02, peak ×25) its gain is
+  ``2/120 · 25 ≈ 0.42``, i.e. ≈ 7.6 dB gain margin (the thesis: "slow T_i ... to avoid
+  exciting the resonant mode");
+* field amplitude I = 1.5 A: 2.25 W under Eq 6.6, the thesis's direct-coil power;
+* rate limit 3 mm/s: a sudden carriage speed change Δv excites the 120 Hz mode to a load
+  angle ``p Δv / (ωn lead/2π)``; 3 mm/s keeps it below ≈ 0.6 rad electrical (π/4 at
+  3.8 mm/s), far from the π/2 pull-out angle.
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy import signal
+
+from ._check import finite, nonnegative, positive
+from .fine import FineParams, fine_zoh
+
+__all__ = ["SisoCoordinator"]
+
+
+class SisoCoordinator:
+    """Thesis coordinator: fine PI on the output, direct-coil integral phase control of the
+    stepper on a 10 Hz Butterworth reference, model-based carriage estimate and
+    pre-compensation (Fig 6.10, Eq 6.1).
+
+    Parameters
+    ----------
+    fine_kp : float
+        Proportional gain of the fine PI, dimensionless (V/m × K_f); ≥ 0.
+    fine_ki : float
+        Integral gain of the fine PI, 1/s (V/(m·s) × K_f); ≥ 0.
+    coarse_cutoff : float
+        Cut-off of the Butterworth low-pass on the coarse reference, Hz (thesis: 10 Hz).
+    coarse_order : int
+        Order of that Butterworth filter (thesis: 3).
+    coarse_bandwidth : float
+        Bandwidth of the coarse integral loop, Hz (``K_i/T_i`` of Eq 6.1 expressed as a
+        closed-loop bandwidth).
+    current : float
+        Field amplitude ``I_peak``, A.
+    max_speed : float
+        Rate limit of the field phase (Min/Max of Eq 6.1) as a carriage speed, m/s.
+    feedforward : bool
+        Pre-compensate the predicted coarse motion into the fine voltage.
+    fine_model : FineParams, optional
+        Fine-stage model used by the coordinator (default: the plant's own parameters —
+        pass different ones to study model mismatch).
+    literal_eq61 : bool
+        Use Eq 6.1 exactly as printed (``e_i`` accumulates the error, is clamped to the rate
+        limit, and α integrates ``e_i``: a double integrator). Unstable — kept only to show
+        why the default reads Eq 6.1 as a single, rate-limited integrator.
+
+    Attributes
+    ----------
+    y_c_hat : float
+        Latest carriage estimate, m.
+    """
+
+    def __init__(
+        self,
+        fine_kp: float = 0.8,
+        fine_ki: float = 2.0 * math.pi * 180.0,
+        coarse_cutoff: float = 10.0,
+        coarse_order: int = 3,
+        coarse_bandwidth: float = 2.0,
+        current: float = 1.5,
+        max_speed: float = 3.0e-3,
+        feedforward: bool = True,
+        fine_model: FineParams | None = None,
+        literal_eq61: bool = False,
+    ):
+        self.fine_kp = nonnegative("fine_kp", fine_kp)
+        self.fine_ki = nonnegative("fine_ki", fine_ki)
+        self.coarse_cutoff = positive("coarse_cutoff", coarse_cutoff)
+        if int(coarse_order) != coarse_order or not 1 <= coarse_order <= 8:
+            raise ValueError(f"coarse_order must be an integer in 1..8, got {coarse_order!r}")
+        self.coarse_order = int(coarse_order)
+        self.coarse_bandwidth = positive("coarse_bandwidth", coarse_bandwidth)
+        self.current = positive("current", current)
+        self.max_speed = positive("max_speed", max_speed)
+        self.feedforward = bool(feedforward)
+        if fine_model is not None and not isinstance(fine_model, FineParams):
+            raise ValueError(f"fine_model must be a FineParams, got {fine_model!r}")
+        self.fine_model = fine_model
+        self.literal_eq61 = bool(literal_eq61)
+        self.y_c_hat = 0.0
+
+    def reset(self, plant, fs: float, y0: float, r0: float) -> None:
+        """Initialise for ``plant`` (at rest, just reset) at sampling rate ``fs`` (Hz).
+
+        ``y0`` is the first measurement (m), ``r0`` the first reference sample (m). The field
+        phase starts at the plant's equilibrium phase for ``current`` so that the carriage
+        does not jump.
+        """
+        fs = positive("fs", fs)
+        y0 = finite("y0", y0)
+        r0 = finite("r0", r0)
+        if self.coarse_cutoff >= 0.5 * fs:
+            raise ValueError(
+                f"coarse_cutoff = {self.coarse_cutoff!r} Hz must be below fs/2 = {fs / 2} Hz"
+            )
+        fp = plant.fine
+        fm = fp if self.fine_model is None else self.fine_model
+        self._h = 1.0 / fs
+        self._kf = fm.gain
+        self._kp = self.fine_kp / fm.gain
+        self._kih = self.fine_ki / fm.gain / fs
+        self._vmin = fp.v_min
+        self._vmax = fp.v_max
+        self._vmid = fm.v_centre
+        self._yf_mid = fm.centre
+        self._integ = 0.0
+        # Butterworth sections (transposed direct form II), started in steady state at r0
+        sos = signal.butter(self.coarse_order, self.coarse_cutoff, fs=fs, output="sos")
+        zi = signal.sosfilt_zi(sos) * r0
+        # one list per section: [b0, b1, b2, a1, a2, z0, z1] (state kept in place)
+        self._bq = [
+            [
+                float(c[0]),
+                float(c[1]),
+                float(c[2]),
+                float(c[4]),
+                float(c[5]),
+                float(z[0]),
+                float(z[1]),
+            ]
+            for c, z in zip(sos, zi, strict=True)
+        ]
+        # fine-stage model for the carriage estimate, at rest at the applied voltage
+        self._fz = fine_zoh(fm, self._h)
+        v0 = plant.v_applied
+        self._v = v0
+        self._mf = fm.gain * v0
+        self._mfd = 0.0
+        # coarse phase controller
+        st = plant.stepper
+        gain_m = st.screw_radius / st.pole_pairs  # m per electrical rad
+        self._m_per_rad = gain_m
+        self._g = 2.0 * math.pi * self.coarse_bandwidth / fs / gain_m  # rad per m per step
+        self._dmax = self.max_speed / fs / gain_m  # rad per step
+        self._ei = 0.0
+        self._alpha = plant.equilibrium_phase(self.current)
+        self._alpha0 = self._alpha
+        self._yc0 = y0 - self._mf
+        self.y_c_hat = self._yc0
+
+    def step(self, y: float, r: float) -> tuple[float, float, float]:
+        """One control period: measurement ``y`` (m), reference ``r`` (m) → (V, A, A)."""
+        # coarse reference: Butterworth low-pass, minus the fine mid-stroke offset
+        x = r
+        for q in self._bq:
+            out = q[0] * x + q[5]
+            q[5] = q[1] * x - q[3] * out + q[6]
+            q[6] = q[2] * x - q[4] * out
+            x = out
+        rc = x - self._yf_mid
+        # coordinator: carriage estimate from the output and the fine-stage model
+        yc_hat = y - self._mf
+        self.y_c_hat = yc_hat
+        # direct-coil integral phase control with rate limit (Eq 6.1)
+        d = self._g * (rc - yc_hat)
+        if self.literal_eq61:
+            d += self._ei
+        dmax = self._dmax
+        if d > dmax:
+            d = dmax
+        elif d < -dmax:
+            d = -dmax
+        self._ei = d
+        alpha = self._alpha + d
+        self._alpha = alpha
+        cur = self.current
+        ia = cur * math.sin(alpha)
+        ib = cur * math.cos(alpha)
+        # fine PI on the combined output + pre-compensation of the coarse motion
+        e = r - y
+        u = self._vmid + self._kp * e + self._integ
+        if self.feedforward:
+            u += (rc - self._yc0 - (alpha - self._alpha0) * self._m_per_rad) / self._kf
+        integ_step = self._kih * e
+        v = u + integ_step
+        if v > self._vmax:
+            v = self._vmax
+            if integ_step < 0.0:
+                self._integ += integ_step
+        elif v < self._vmin:
+            v = self._vmin
+            if integ_step > 0.0:
+                self._integ += integ_step
+        else:
+            self._integ += integ_step
+        # advance the fine model with the applied voltage (estimate for the next period)
+        a11, a12, a21, a22, b1, b2 = self._fz
+        mf = self._mf
+        mfd = self._mfd
+        self._mf = a11 * mf + a12 * mfd + b1 * v
+        self._mfd = a21 * mf + a22 * mfd + b2 * v
+        return v, ia, ib
