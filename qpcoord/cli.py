@@ -4,6 +4,7 @@
 ``qpcoord demo``           a small end-to-end stack solve (3R arm tracking a circle)
 ``qpcoord bench stack``    per-step solve-time benchmark of 3-level stacks
 ``qpcoord bench ik``       Panda differential IK, qpcoord vs Pink, per-step times and errors
+``qpcoord ddl track``      DDL coordinator on Kolmogorov OPD references, metrics per seed
 """
 
 from __future__ import annotations
@@ -63,6 +64,37 @@ def _cmd_bench_ik(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_ddl_track(args: argparse.Namespace) -> int:
+    import time
+
+    from . import ddl
+
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+    print(
+        f"SisoCoordinator, preset {args.preset!r}, {args.duration:g} s at {args.fs:g} Hz, "
+        f"{args.seeds} seed(s)"
+    )
+    print(
+        f"{'seed':>4} {'RMSE nm':>8} {'max nm':>7} {'mean nm':>8} {'P W':>6} "
+        f"{'margin µm':>9} {'sat':>4} {'sync':>5} {'run s':>6}"
+    )
+    for seed in range(args.seeds):
+        r = ddl.kolmogorov_opd(args.duration, args.fs, seed=seed, preset=args.preset)
+        t0 = time.perf_counter()
+        run = ddl.simulate(
+            ddl.DualStage(), ddl.SisoCoordinator(), r, args.fs, seed=seed, progress=True
+        )
+        m = run.metrics
+        print(
+            f"{seed:4d} {m['rmse'] * 1e9:8.1f} {m['max_abs'] * 1e9:7.1f} "
+            f"{m['mean_abs'] * 1e9:8.1f} {m['power']:6.2f} {m['fine_margin_min'] * 1e6:9.2f} "
+            f"{m['saturated_steps']:4d} {'LOST' if m['lost_sync'] else 'ok':>5} "
+            f"{time.perf_counter() - t0:6.2f}"
+        )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``qpcoord`` command."""
     p = argparse.ArgumentParser(prog="qpcoord", description=__doc__.split("\n")[0])
@@ -88,6 +120,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenario", choices=("waypoints", "tight", "both"), default="both", help="motion"
     )
     bi.set_defaults(func=_cmd_bench_ik)
+    dd = sub.add_parser("ddl", help="chapter 6 dual-stage delay line")
+    dsub = dd.add_subparsers(dest="ddl", required=True)
+    dt = dsub.add_parser("track", help="coordinator on Kolmogorov OPD: RMSE, power, margins")
+    dt.add_argument("--seeds", type=int, default=3, help="references (seeds 0…N-1, default 3)")
+    dt.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
+    dt.add_argument("--fs", type=float, default=8000.0, help="control rate, Hz (default 8000)")
+    dt.add_argument("--preset", default="paranal_250hz", help="reference preset")
+    dt.set_defaults(func=_cmd_ddl_track)
     return p
 
 

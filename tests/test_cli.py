@@ -67,3 +67,16 @@ def test_readme_example_runs(method):
     exec(compile(code, "README.md", "exec"), ns)
     sol = ns["stack"].solve(method=method)
     assert sol.x.shape == (3,)
+
+
+def test_ddl_track_prints_metrics_per_seed(capsys):
+    assert main(["ddl", "track", "--seeds", "1", "--duration", "0.25"]) == 0
+    out = capsys.readouterr().out
+    row = out.strip().splitlines()[-1].split()
+    assert row[0] == "0" and float(row[1]) < 70.0  # RMSE nm on the 250 Hz preset
+    assert row[7] == "ok"
+
+
+def test_ddl_track_bad_preset_is_a_clean_error(capsys):
+    assert main(["ddl", "track", "--preset", "nope", "--duration", "0.1"]) == 2
+    assert "preset" in capsys.readouterr().err

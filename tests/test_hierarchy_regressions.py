@@ -109,3 +109,34 @@ def test_pointed_cone_of_pinned_speed_bounds(solver):
     np.testing.assert_allclose(sol.level_residuals[1], 26.515922, rtol=1e-7 if exact else 1e-3)
     if solver == "daqp":
         assert sol.info["fallbacks"] == ["level 1: quadprog"]
+
+
+SHOULDER_W = np.array(
+    [
+        [0.021745, -0.018582, 0.018375, 0.014491, -0.008618, 0.019016, 0.050926, -0.020842,
+         -0.011098, 0.03162, 0.045009],
+        [-0.033134, -0.018138, 0.017773, 0.030366, 0.009947, -0.000527, -0.039637, 0.009819,
+         -0.003534, -0.0207, 0.038764],
+        [-0.006101, -0.003409, 0.004618, -0.000658, -0.016366, -0.017279, 0.011166, 0.003368,
+         0.022027, 0.014794, 0.018701],
+    ]
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_exactly_met_level_over_a_nearly_singular_hessian_is_refined(solver):
+    """Muscle sharing (appendix A): W F = Q is met exactly by many F in the box; the level's
+    Hessian is WᵀW plus the 1e-9 regularisation. Interior-point points used to keep a
+    5.6e-8 residual (their active set is only a guess there); the truncated refinement of
+    ``polish`` brings piqp and clarabel to 1.6e-15 like the active-set backends. osqp (ADMM)
+    keeps 5e-8: its point is not polished at the next level either."""
+    Q = np.array([-4.787660, 3.156755, 0.026878])
+    fmax = np.array([1063.0, 1739, 505, 463, 1432, 497, 608, 621, 1431, 562, 1188])
+    stack = qc.Stack(
+        [qc.Equality(SHOULDER_W, Q), qc.Equality(np.diag(fmax.mean() / fmax), np.zeros(11))],
+        bounds=qc.Bounds(np.zeros(11), fmax),
+    )
+    sol = stack.solve(solver=solver)
+    tol = 1e-6 if solver == "osqp" else 1e-12
+    assert sol.level_residuals[0] < tol * np.linalg.norm(Q)
+    assert np.all(sol.x >= 0) and np.all(sol.x <= fmax)
