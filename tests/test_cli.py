@@ -80,3 +80,14 @@ def test_ddl_track_prints_metrics_per_seed(capsys):
 def test_ddl_track_bad_preset_is_a_clean_error(capsys):
     assert main(["ddl", "track", "--preset", "nope", "--duration", "0.1"]) == 2
     assert "preset" in capsys.readouterr().err
+
+
+def test_every_readme_code_block_runs():
+    """The README's snippets run in order, in one namespace (as a reader would paste them)."""
+    readme = (ROOT / "README.md").read_text()
+    ns: dict = {}
+    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
+    assert len(blocks) >= 3
+    for i, code in enumerate(blocks):
+        exec(compile(code, f"README.md block {i}", "exec"), ns)
+    assert ns["traj"].max_error < 1e-3
