@@ -229,6 +229,14 @@ class Stack:
             info=info,
         )
 
+    def persistent(self, weight_ratio: float | None = None, regularization: float | None = None):
+        """A :class:`~qpcoord.persistent.PersistentQP` on this stack: its weighted QP on one
+        daqp workspace kept across control steps (the tasks' matrices must stay fixed; a
+        change is detected and rebuilds the workspace)."""
+        from .persistent import PersistentQP
+
+        return PersistentQP(self, weight_ratio=weight_ratio, regularization=regularization)
+
     def _warm(self, warm_start) -> np.ndarray | None:
         if warm_start is None:
             return None

@@ -115,6 +115,10 @@ class _Task:
 
     kind = "Task"
     name = ""
+    #: Incremented whenever the matrix (``A`` or ``C``) or the weights change; the
+    #: right-hand sides and limits do not count. Lets a persistent solver
+    #: (:class:`qpcoord.persistent.PersistentQP`) keep its factorisation while it holds.
+    matrix_version = 0
 
     @property
     def label(self) -> str:
@@ -184,6 +188,8 @@ class Equality(_Task):
             self.b = newb
         if neww is not None:
             self._set_weight(neww)
+        if newA is not None or neww is not None:
+            self.matrix_version += 1
         return self
 
     def _assign(self, A=None, b=None) -> Equality:
@@ -196,6 +202,7 @@ class Equality(_Task):
                 raise ValueError(f"{self.label}: A contains a non-finite value")
             self.A[...] = A
             self.is_identity = False
+            self.matrix_version += 1
         if b is not None:
             if not np.isfinite(b.sum()):
                 raise ValueError(f"{self.label}: b contains a non-finite value")
@@ -269,6 +276,8 @@ class Inequality(_Task):
         self.lower, self.upper = lo, hi
         if neww is not None:
             self._set_weight(neww)
+        if newC is not None or neww is not None:
+            self.matrix_version += 1
         return self
 
     def _assign(self, lower: np.ndarray, upper: np.ndarray) -> Inequality:

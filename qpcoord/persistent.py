@@ -1,0 +1,304 @@
+"""A persistent fast path for stacks whose matrices do not change: :class:`PersistentQP`.
+
+In a condensed MPC, or any control loop around a fixed linear model, the task matrices
+(``A`` of every :class:`~qpcoord.Equality`, ``C`` of every :class:`~qpcoord.Inequality`, the
+hard constraints) stay the same from step to step; only the right-hand sides ``b``, the
+inequality limits and the bounds move. The weighted QP of such a stack (``method="weighted"``,
+:mod:`qpcoord.weighted`) then has a constant Hessian and constraint matrix, so the backend's
+workspace -- its factorisation and its working set -- can be kept between steps: this class
+sets up one ``daqp.Model`` once and, per step, only updates the linear term and the limits and
+hot-starts from the previous working set. No Python-level QP assembly happens per step.
+
+The answer is the same QP as ``stack.solve(method="weighted")`` (levels weighted by
+``weight_ratio**k``, soft inequalities with slacks, bounds and hard constraints hard) and is
+checked like it: bounds and hard constraints to the stack's tolerance. If the backend fails,
+or the matrices have changed (checked every step against the set-up copy), the step falls
+back to ``stack.solve(method="weighted")`` -- recorded in ``Solution.info`` (``fallback``,
+``setups``) -- so an unchecked answer is never returned.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .reduced import CHECK_TOL
+from .stack import Solution, Stack
+from .tolerance import within
+
+__all__ = ["PersistentQP"]
+
+_INF = 1e30  # daqp's infinity
+
+#: daqp settings of the persistent workspace: the stack's first (exact) setting.
+DAQP_SETTINGS = dict(eps_prox=0.0, primal_tol=1e-10)
+
+
+class PersistentQP:
+    """The weighted QP of a fixed-matrix :class:`~qpcoord.Stack` on a persistent daqp workspace.
+
+    Parameters
+    ----------
+    stack : Stack
+        Its tasks' matrices must stay constant; their ``b``, limits and the bounds may change
+        between :meth:`solve` calls (change them with ``task.update(b=...)`` or the bounds'
+        ``update``).
+    weight_ratio, regularization : float, optional
+        Default: the stack's.
+
+    Raises
+    ------
+    ValueError
+        ``stack`` is not a Stack.
+    ImportError
+        daqp is not installed.
+
+    Notes
+    -----
+    Variables: ``x`` (n) and one slack per soft inequality row. Cost:
+    ``Σ_k ρᵏ (‖A_k x − b_k‖² + ‖√w_k s_k‖²) + ε‖x‖²`` with ``ρ = weight_ratio``,
+    ``ε = regularization · max(1, max diag)``, as :func:`qpcoord.weighted.solve_weighted`.
+    """
+
+    def __init__(self, stack: Stack, weight_ratio=None, regularization=None) -> None:
+        import daqp
+
+        if not isinstance(stack, Stack):
+            raise ValueError(f"stack must be a qpcoord.Stack, got {type(stack).__name__}")
+        self.stack = stack
+        self.weight_ratio = stack.weight_ratio if weight_ratio is None else float(weight_ratio)
+        self.regularization = (
+            stack.regularization if regularization is None else float(regularization)
+        )
+        if not 0 < self.weight_ratio <= 1:
+            raise ValueError(f"weight_ratio must be in (0, 1], got {self.weight_ratio!r}")
+        if not self.regularization >= 0:
+            raise ValueError(f"regularization must be >= 0, got {self.regularization!r}")
+        self._daqp = daqp
+        self.model = None
+        self.setups = 0
+        self.fallbacks = 0
+        self.last: Solution | None = None
+        P = stack._compiled
+        P.refresh()
+        self._setup(P)
+
+    # ------------------------------------------------------------------ set-up
+    def _versions(self, P) -> tuple:
+        tasks = [t for L in (*P.levels, P.hard) for t in (*L.eqs, *L.ineqs)]
+        return (
+            tuple(t.matrix_version for t in tasks)
+            + tuple(id(t.A) for L in (*P.levels, P.hard) for t in L.eqs)
+            + tuple(id(t.C) for L in (*P.levels, P.hard) for t in L.ineqs)
+        )
+
+    def _setup(self, P) -> None:
+        n = P.n
+        soft = [L for L in P.levels if L.m_in]
+        mi = sum(L.m_in for L in soft)
+        nv = n + mi
+        H = np.zeros((nv, nv))
+        F = []  # per equality task: ρᵏ Aᵀ diag(w), so that f = −Σ F_t b_t
+        eq_tasks = []
+        beta = 1.0
+        j = n
+        for L in P.levels:
+            if L.m_eq:
+                H[:n, :n] += beta * (L.Ae.T @ L.Ae)
+                for t in L.eqs:
+                    F.append(beta * (t.A.T * t.weight))
+                    eq_tasks.append(t)
+            if L.m_in:
+                idx = np.arange(j, j + L.m_in)
+                H[idx, idx] = beta * L.sw**2
+                j += L.m_in
+            beta *= self.weight_ratio
+        H.flat[:: nv + 1][:n] += self.regularization * max(1.0, float(H.diagonal()[:n].max()))
+        hard = P.hard
+        # rows after the simple bounds: hard equalities, hard inequalities, soft rows C x − s
+        G = np.zeros((hard.m_eq + hard.m_in + mi, nv))
+        r = 0
+        if hard.m_eq:
+            G[: hard.m_eq, :n] = hard.Ae
+            r = hard.m_eq
+        if hard.m_in:
+            G[r : r + hard.m_in, :n] = hard.C
+            r += hard.m_in
+        j = n
+        for L in soft:
+            G[r : r + L.m_in, :n] = L.C
+            G[r : r + L.m_in, j : j + L.m_in] = -np.eye(L.m_in)
+            r += L.m_in
+            j += L.m_in
+        self._bounded = P.lb is not None
+        self._dummy = G.shape[0] == 0 and not self._bounded
+        if self._dummy:
+            G = np.zeros((1, nv))  # daqp needs a constraint: an always-inactive one
+        self._n, self._nv = n, nv
+        self._F = np.hstack(F) if F else np.zeros((n, 0))
+        self._eq_tasks = eq_tasks
+        self._b = np.zeros(self._F.shape[1])
+        self._f = np.zeros(nv)
+        # limit rows filled per step: (task, attribute pair, slice of bu/bl)
+        m0 = nv if self._bounded else 0
+        rows = []
+        k = m0 + (1 if self._dummy else 0)
+        for t in hard.eqs:
+            m = t.A.shape[0]
+            rows.append((t, "eq", slice(k, k + m)))
+            k += m
+        for t in (*hard.ineqs, *(t for L in soft for t in L.ineqs)):
+            m = t.C.shape[0]
+            rows.append((t, "in", slice(k, k + m)))
+            k += m
+        self._rows = rows
+        self._bu = np.full(k, _INF)
+        self._bl = np.full(k, -_INF)
+        if self._dummy:
+            self._bu[0], self._bl[0] = 1.0, -1.0
+        self._bounds_version = None
+        self._fill_limits(P)
+        self._version = self._versions(P)
+        self._hard_eq = [t for t in hard.eqs]
+        self._hard_in = [t for t in hard.ineqs]
+        # residual rows: the equality tasks stacked (same order as self._b), with the level
+        # of each task, for a one-matvec residual; inequality tasks one by one
+        self._nlevels = len(P.levels)
+        if eq_tasks:
+            lev_of = {id(t): k for k, L in enumerate(P.levels) for t in L.eqs}
+            sizes = [t.A.shape[0] for t in eq_tasks]
+            self._res_eq = (
+                np.vstack([t.A for t in eq_tasks]),
+                np.concatenate([t.sqrt_weight for t in eq_tasks]),
+                np.concatenate(([0], np.cumsum(sizes)[:-1])),
+                np.array([lev_of[id(t)] for t in eq_tasks]),
+            )
+        else:
+            self._res_eq = None
+        self._res_in = [(k, t) for k, L in enumerate(P.levels) for t in L.ineqs]
+        model = self._daqp.Model()
+        model.settings = dict(model.settings, **DAQP_SETTINGS)
+        flag = model.setup(H, self._f, G, self._bu, self._bl, np.zeros(k, dtype=np.int32))
+        if isinstance(flag, tuple):
+            flag = flag[0]
+        # a failed set-up (e.g. constraints daqp's presolve finds inconsistent) leaves no
+        # workspace: every step then goes to the general path, which reports the cause
+        self.model = model if flag >= 0 else None
+        self.setups += 1
+
+    def _fill_limits(self, P) -> None:
+        bu, bl = self._bu, self._bl
+        b = P.bounds
+        if self._bounded and b.version != self._bounds_version:
+            lo, hi = b.resolve(self._n)
+            np.minimum(hi, _INF, out=bu[: self._n])
+            np.maximum(lo, -_INF, out=bl[: self._n])
+            self._bounds_version = b.version
+        for t, kind, sl in self._rows:
+            if kind == "eq":
+                bu[sl] = t.b
+                bl[sl] = t.b
+            else:
+                np.minimum(t.upper, _INF, out=bu[sl])
+                np.maximum(t.lower, -_INF, out=bl[sl])
+
+    # ------------------------------------------------------------------ per step
+    def solve(self) -> Solution:
+        """Solve with the tasks' current numbers (one control step).
+
+        Returns
+        -------
+        Solution
+            ``method="weighted"``; ``info``: ``persistent`` (True when the persistent
+            workspace answered), ``iterations`` (daqp's), ``setups`` (workspace set-ups so
+            far: 1 unless the matrices, weights or the presence of bounds changed),
+            ``fallbacks`` (steps answered by ``stack.solve(method="weighted")`` so far).
+
+        Raises
+        ------
+        InfeasibleError, SolverError
+            As :meth:`Stack.solve` (from the fallback), if the fallback fails too.
+        """
+        t0 = time.perf_counter()
+        stack = self.stack
+        P = stack._compiled
+        if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
+            P.refresh()
+            self._setup(P)
+        if self._eq_tasks:
+            i = 0
+            b = self._b
+            for t in self._eq_tasks:
+                m = t.b.shape[0]
+                b[i : i + m] = t.b
+                i += m
+            np.dot(self._F, b, out=self._f[: self._n])
+            np.negative(self._f[: self._n], out=self._f[: self._n])
+        self._fill_limits(P)
+        model = self.model
+        x = None
+        flag, info = 0, {}
+        if model is not None:
+            model.update(f=self._f, bupper=self._bu, blower=self._bl)
+            y, _, flag, info = model.solve()
+        if flag in (1, 2):
+            x = np.asarray(y[: self._n], dtype=float)
+            if not self._feasible(x):
+                x = None
+        if x is None:
+            self.fallbacks += 1
+            sol = stack.solve(solver="daqp", method="weighted")
+            sol.info.update(persistent=False, setups=self.setups, fallbacks=self.fallbacks)
+            self.last = sol
+            return sol
+        sol = Solution(
+            x=x,
+            status="optimal",
+            level_residuals=self._residuals(x),
+            solver="daqp",
+            solve_time=time.perf_counter() - t0,
+            method="weighted",
+            info={
+                "persistent": True,
+                "iterations": int(info.get("iterations", -1)),
+                "setups": self.setups,
+                "fallbacks": self.fallbacks,
+                "qp_calls": 1,
+            },
+        )
+        self.last = sol
+        return sol
+
+    def _feasible(self, x: np.ndarray) -> bool:
+        """Finite, within the bounds and the hard rows to the stack's CHECK_TOL."""
+        if not np.isfinite(x.sum()):
+            return False
+        n = self._n
+        if self._bounded:
+            lo, hi = self._bl[:n], self._bu[:n]
+            if not ((x >= lo).all() and (x <= hi).all()) and not within(x, lo, hi, CHECK_TOL):
+                return False
+        for t in self._hard_eq:
+            if not within(t.A @ x, t.b, t.b, CHECK_TOL):
+                return False
+        for t in self._hard_in:
+            cx = t.C @ x
+            inside = (cx >= t.lower).all() and (cx <= t.upper).all()
+            if not inside and not within(cx, t.lower, t.upper, CHECK_TOL):
+                return False
+        return True
+
+    def _residuals(self, x: np.ndarray) -> np.ndarray:
+        """Per-level residual norms (as ``CompiledLevel.residual``), one matvec per kind."""
+        sq = np.zeros(self._nlevels)
+        if self._res_eq is not None:
+            A, sw, starts, lev = self._res_eq
+            b = self._b if self._eq_tasks else None
+            r = sw * (A @ x - b)
+            sq += np.bincount(lev, np.add.reduceat(r * r, starts), minlength=self._nlevels)
+        for k, t in self._res_in:
+            cx = t.C @ x
+            v = t.sqrt_weight * (cx - np.clip(cx, t.lower, t.upper))
+            sq[k] += float(v @ v)
+        return np.sqrt(sq)

@@ -1,0 +1,138 @@
+"""qpcoord.persistent.PersistentQP: the weighted QP of a fixed-matrix stack, persistent daqp."""
+
+from __future__ import annotations
+
+import cvxpy as cp
+import numpy as np
+import pytest
+
+import qpcoord as qc
+from qpcoord.persistent import PersistentQP
+
+pytestmark = pytest.mark.skipif("daqp" not in qc.available_solvers(), reason="needs daqp")
+
+
+def build(seed: int = 0, n: int = 12):
+    rng = np.random.default_rng(seed)
+    track = qc.Equality(rng.normal(size=(6, n)), np.zeros(6), weight=2.0, name="track")
+    soft = qc.Inequality(rng.normal(size=(4, n)), -np.ones(4), np.ones(4), name="soft")
+    effort = qc.Equality(np.eye(n), np.zeros(n), name="effort")
+    hard_in = qc.Inequality(rng.normal(size=(3, n)), -0.5, 0.5, name="hard in")
+    hard_eq = qc.Equality(rng.normal(size=(1, n)), [0.1], name="hard eq")
+    bounds = qc.Bounds(-np.ones(n), np.ones(n))
+    stack = qc.Stack(
+        [track, soft, effort], bounds=bounds, constraints=[hard_in, hard_eq], weight_ratio=1e-2
+    )
+    return stack, (track, soft, effort, hard_in, hard_eq, bounds), rng
+
+
+def weighted_oracle(tasks, rho: float, reg_scale: float):
+    """The same weighted QP, posed in cvxpy (Clarabel, tight tolerances)."""
+    track, soft, effort, hard_in, hard_eq, bounds = tasks
+    n = track.A.shape[1]
+    x, s = cp.Variable(n), cp.Variable(soft.C.shape[0])
+    cost = (
+        cp.sum_squares(cp.multiply(track.sqrt_weight, track.A @ x - track.b))
+        + rho * cp.sum_squares(s)
+        + rho**2 * cp.sum_squares(effort.A @ x - effort.b)
+        + reg_scale * cp.sum_squares(x)
+    )
+    cons = [
+        soft.C @ x - s <= soft.upper,
+        soft.C @ x - s >= soft.lower,
+        hard_in.C @ x <= hard_in.upper,
+        hard_in.C @ x >= hard_in.lower,
+        hard_eq.A @ x == hard_eq.b,
+        x <= bounds.upper,
+        x >= bounds.lower,
+    ]
+    cp.Problem(cp.Minimize(cost), cons).solve(
+        solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12
+    )
+    return x.value
+
+
+def test_matches_a_cvxpy_weighted_qp_over_many_steps():
+    stack, tasks, rng = build()
+    track, soft, effort, *_ = tasks
+    pq = PersistentQP(stack)
+    H = 2.0 * track.A.T @ track.A + 1e-4 * np.eye(12)  # the regularisation's scale
+    reg = stack.regularization * max(1.0, float(np.diag(H + 1e-4 * np.eye(12)).max()))
+    worst = 0.0
+    for k in range(15):
+        track.update(b=3.0 * np.sin(0.3 * k + np.arange(6)))
+        effort.update(b=0.2 * rng.normal(size=12))
+        sol = pq.solve()
+        assert sol.info["persistent"] and sol.method == "weighted"
+        ref = weighted_oracle(tasks, 1e-2, reg)
+        worst = max(worst, float(np.abs(sol.x - ref).max()))
+        assert sol.level_residuals[0] == pytest.approx(
+            np.linalg.norm(track.sqrt_weight * (track.A @ sol.x - track.b)), abs=1e-12
+        )
+    assert worst < 1e-6  # measured 1e-9 (Clarabel's tolerance)
+    assert pq.setups == 1 and pq.fallbacks == 0
+
+
+def test_agrees_with_the_general_weighted_method():
+    stack, tasks, _ = build(3)
+    tasks[0].update(b=np.linspace(-2, 2, 6))
+    a = PersistentQP(stack).solve().x
+    b = stack.solve(method="weighted", solver="daqp").x
+    np.testing.assert_allclose(a, b, atol=1e-4)  # the general path opens rows by 1e-6
+
+
+def test_a_changed_matrix_or_weight_rebuilds_the_workspace():
+    stack, tasks, _ = build(5)
+    track = tasks[0]
+    pq = PersistentQP(stack)
+    pq.solve()
+    track.update(A=track.A * 1.5)
+    sol = pq.solve()
+    assert pq.setups == 2
+    np.testing.assert_allclose(sol.x, stack.solve(method="weighted", solver="daqp").x, atol=1e-4)
+    track.update(weight=3.0)
+    pq.solve()
+    assert pq.setups == 3
+    track._assign(A=track.A * 0.5)  # the trusted in-place path counts too
+    pq.solve()
+    assert pq.setups == 4
+
+
+def test_bounds_changes_are_read_every_step():
+    stack, tasks, _ = build(7)
+    bounds = tasks[-1]
+    tasks[0].update(b=5.0 * np.ones(6))
+    pq = PersistentQP(stack)
+    bounds.update(lower=-0.2 * np.ones(12), upper=0.2 * np.ones(12))
+    x = pq.solve().x
+    assert np.abs(x).max() <= 0.2 + 1e-12
+    assert np.isclose(np.abs(x).max(), 0.2)  # binds
+
+
+def test_inconsistent_hard_constraints_raise_through_the_fallback():
+    n = 3
+    t = qc.Equality(np.eye(n), np.zeros(n))
+    hard = qc.Inequality(np.ones((1, n)), lower=10.0)
+    stack = qc.Stack([t], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+    with pytest.raises(qc.InfeasibleError):
+        PersistentQP(stack).solve()
+
+
+def test_a_stack_without_constraints_or_bounds():
+    t = qc.Equality([[1.0, 1.0]], [2.0])
+    sol = PersistentQP(qc.Stack([t])).solve()
+    np.testing.assert_allclose(sol.x, [1.0, 1.0], atol=1e-8)
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="Stack"):
+        PersistentQP("stack")
+    stack, _, _ = build()
+    with pytest.raises(ValueError, match="weight_ratio"):
+        PersistentQP(stack, weight_ratio=2.0)
+
+
+def test_stack_persistent_is_the_same_object_kind():
+    stack, _, _ = build(11)
+    pq = stack.persistent()
+    assert isinstance(pq, PersistentQP) and pq.stack is stack
