@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from scipy.linalg import lapack
 
 from .reduced import CHECK_TOL
 from .stack import Solution, Stack
@@ -85,15 +86,13 @@ class PersistentQP:
         self._setup(P)
 
     # ------------------------------------------------------------------ set-up
-    def _versions(self, P) -> tuple:
-        tasks = [t for L in (*P.levels, P.hard) for t in (*L.eqs, *L.ineqs)]
-        return (
-            tuple(t.matrix_version for t in tasks)
-            + tuple(id(t.A) for L in (*P.levels, P.hard) for t in L.eqs)
-            + tuple(id(t.C) for L in (*P.levels, P.hard) for t in L.ineqs)
-        )
+    def _versions(self, P) -> list:
+        """Matrix versions of every task (``update``/``_assign`` of a matrix or weight bump
+        them): cheap change detection."""
+        return [t.matrix_version for t in self._all_tasks]
 
     def _setup(self, P) -> None:
+        self._all_tasks = [t for L in (*P.levels, P.hard) for t in (*L.eqs, *L.ineqs)]
         n = P.n
         soft = [L for L in P.levels if L.m_in]
         mi = sum(L.m_in for L in soft)
@@ -136,10 +135,19 @@ class PersistentQP:
         if self._dummy:
             G = np.zeros((1, nv))  # daqp needs a constraint: an always-inactive one
         self._n, self._nv = n, nv
+        # no soft inequality: the unconstrained optimum -H⁻¹f is tried first each step (a
+        # Cholesky factor kept from here); it is the QP's answer whenever it meets the hard
+        # rows and bounds -- exact, where daqp's LDL loses accuracy on ill-conditioned H
+        self._chol = None
+        if mi == 0:
+            cho, info = lapack.dpotrf(H, lower=0, clean=1)
+            if info == 0:
+                self._chol = cho
         self._F = np.hstack(F) if F else np.zeros((n, 0))
         self._eq_tasks = eq_tasks
         self._b = np.zeros(self._F.shape[1])
         self._f = np.zeros(nv)
+        self._H, self._G = H, G
         # limit rows filled per step: (task, attribute pair, slice of bu/bl)
         m0 = nv if self._bounded else 0
         rows = []
@@ -160,8 +168,11 @@ class PersistentQP:
         self._bounds_version = None
         self._fill_limits(P)
         self._version = self._versions(P)
-        self._hard_eq = [t for t in hard.eqs]
-        self._hard_in = [t for t in hard.ineqs]
+        # hard rows (after the simple bounds in daqp's order) for a one-matvec check
+        mh = hard.m_eq + hard.m_in
+        self._G_hard = G[:mh, :n] if mh else None
+        h0 = m0 + (1 if self._dummy else 0)
+        self._hard_slice = slice(h0, h0 + mh)
         # residual rows: the equality tasks stacked (same order as self._b), with the level
         # of each task, for a one-matvec residual; inequality tasks one by one
         self._nlevels = len(P.levels)
@@ -195,13 +206,13 @@ class PersistentQP:
             np.minimum(hi, _INF, out=bu[: self._n])
             np.maximum(lo, -_INF, out=bl[: self._n])
             self._bounds_version = b.version
-        for t, kind, sl in self._rows:
+        for t, kind, sl in self._rows:  # daqp reads |bound| ≥ 1e30 (inf too) as none
             if kind == "eq":
                 bu[sl] = t.b
                 bl[sl] = t.b
             else:
-                np.minimum(t.upper, _INF, out=bu[sl])
-                np.maximum(t.lower, -_INF, out=bl[sl])
+                bu[sl] = t.upper
+                bl[sl] = t.lower
 
     # ------------------------------------------------------------------ per step
     def solve(self) -> Solution:
@@ -239,13 +250,19 @@ class PersistentQP:
         model = self.model
         x = None
         flag, info = 0, {}
-        if model is not None:
+        if self._chol is not None:
+            z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
+            if ok == 0:
+                z = -z
+                if self._feasible(z):
+                    x, flag, info = z, 1, {"iterations": 0}
+        if x is None and model is not None:
             model.update(f=self._f, bupper=self._bu, blower=self._bl)
             y, _, flag, info = model.solve()
-        if flag in (1, 2):
-            x = np.asarray(y[: self._n], dtype=float)
-            if not self._feasible(x):
-                x = None
+            if flag in (1, 2):
+                x = np.asarray(y[: self._n], dtype=float)
+                if not self._feasible(x):
+                    x = None
         if x is None:
             self.fallbacks += 1
             sol = stack.solve(solver="daqp", method="weighted")
@@ -271,21 +288,20 @@ class PersistentQP:
         return sol
 
     def _feasible(self, x: np.ndarray) -> bool:
-        """Finite, within the bounds and the hard rows to the stack's CHECK_TOL."""
+        """Finite, within the bounds and the hard rows to the stack's CHECK_TOL (relative to
+        ``max(1, |bound|)``; an absolute ``CHECK_TOL`` test, stricter, is tried first)."""
         if not np.isfinite(x.sum()):
             return False
         n = self._n
         if self._bounded:
             lo, hi = self._bl[:n], self._bu[:n]
-            if not ((x >= lo).all() and (x <= hi).all()) and not within(x, lo, hi, CHECK_TOL):
+            if np.maximum(lo - x, x - hi).max() > CHECK_TOL and not within(x, lo, hi, CHECK_TOL):
                 return False
-        for t in self._hard_eq:
-            if not within(t.A @ x, t.b, t.b, CHECK_TOL):
-                return False
-        for t in self._hard_in:
-            cx = t.C @ x
-            inside = (cx >= t.lower).all() and (cx <= t.upper).all()
-            if not inside and not within(cx, t.lower, t.upper, CHECK_TOL):
+        if self._G_hard is not None:
+            sl = self._hard_slice
+            lo, hi = self._bl[sl], self._bu[sl]
+            gx = self._G_hard @ x
+            if np.maximum(lo - gx, gx - hi).max() > CHECK_TOL and not within(gx, lo, hi, CHECK_TOL):
                 return False
         return True
 
