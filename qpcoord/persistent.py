@@ -26,7 +26,6 @@ from scipy.linalg import lapack
 
 from .reduced import CHECK_TOL
 from .stack import Solution, Stack
-from .tolerance import within
 
 __all__ = ["PersistentQP"]
 
@@ -34,6 +33,16 @@ _INF = 1e30  # daqp's infinity
 
 #: daqp settings of the persistent workspace: the stack's first (exact) setting.
 DAQP_SETTINGS = dict(eps_prox=0.0, primal_tol=1e-10)
+
+
+def _inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """``lo − CHECK_TOL·max(1,|lo|) ≤ v ≤ hi + CHECK_TOL·max(1,|hi|)`` (daqp's ±1e30 = none)."""
+    if np.maximum(lo - v, v - hi).max() <= CHECK_TOL:
+        return True
+    return bool(
+        (lo - v <= CHECK_TOL * np.maximum(1.0, np.abs(lo))).all()
+        and (v - hi <= CHECK_TOL * np.maximum(1.0, np.abs(hi))).all()
+    )
 
 
 class PersistentQP:
@@ -222,9 +231,10 @@ class PersistentQP:
         -------
         Solution
             ``method="weighted"``; ``info``: ``persistent`` (True when the persistent
-            workspace answered), ``iterations`` (daqp's), ``setups`` (workspace set-ups so
-            far: 1 unless the matrices, weights or the presence of bounds changed),
-            ``fallbacks`` (steps answered by ``stack.solve(method="weighted")`` so far).
+            workspace answered), ``iterations`` (daqp's; 0 when the unconstrained optimum
+            was feasible), ``setups`` (workspace set-ups so far: 1 unless the matrices,
+            weights or the presence of bounds changed), ``fallbacks`` (steps answered by
+            ``stack.solve(method="weighted")`` so far).
 
         Raises
         ------
@@ -232,11 +242,48 @@ class PersistentQP:
             As :meth:`Stack.solve` (from the fallback), if the fallback fails too.
         """
         t0 = time.perf_counter()
-        stack = self.stack
-        P = stack._compiled
+        x, iterations = self._solve_x()
+        if x is None:
+            sol = self._fallback()
+        else:
+            sol = Solution(
+                x=x,
+                status="optimal",
+                level_residuals=self._residuals(x),
+                solver="daqp",
+                solve_time=time.perf_counter() - t0,
+                method="weighted",
+                info={
+                    "persistent": True,
+                    "iterations": iterations,
+                    "setups": self.setups,
+                    "fallbacks": self.fallbacks,
+                    "qp_calls": 1,
+                },
+            )
+        self.last = sol
+        return sol
+
+    def solve_x(self) -> np.ndarray:
+        """:meth:`solve` for the hot loop: only the checked ``x`` (no residuals, no
+        :class:`~qpcoord.Solution`); the fallback is the same (:attr:`last` is set then)."""
+        x, _ = self._solve_x()
+        return self._fallback().x if x is None else x
+
+    def _fallback(self) -> Solution:
+        self.fallbacks += 1
+        sol = self.stack.solve(solver="daqp", method="weighted")
+        sol.info.update(persistent=False, setups=self.setups, fallbacks=self.fallbacks)
+        self.last = sol
+        return sol
+
+    def _solve_x(self) -> tuple[np.ndarray | None, int]:
+        """Checked ``x`` from the persistent workspace, or ``None`` (then: fall back)."""
+        P = self.stack._compiled
         if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
             P.refresh()
             self._setup(P)
+        n = self._n
         if self._eq_tasks:
             i = 0
             b = self._b
@@ -244,64 +291,39 @@ class PersistentQP:
                 m = t.b.shape[0]
                 b[i : i + m] = t.b
                 i += m
-            np.dot(self._F, b, out=self._f[: self._n])
-            np.negative(self._f[: self._n], out=self._f[: self._n])
+            f = self._f[:n]
+            np.dot(self._F, b, out=f)
+            np.negative(f, out=f)
         self._fill_limits(P)
-        model = self.model
-        x = None
-        flag, info = 0, {}
         if self._chol is not None:
             z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
             if ok == 0:
-                z = -z
+                np.negative(z, out=z)
                 if self._feasible(z):
-                    x, flag, info = z, 1, {"iterations": 0}
-        if x is None and model is not None:
-            model.update(f=self._f, bupper=self._bu, blower=self._bl)
-            y, _, flag, info = model.solve()
-            if flag in (1, 2):
-                x = np.asarray(y[: self._n], dtype=float)
-                if not self._feasible(x):
-                    x = None
-        if x is None:
-            self.fallbacks += 1
-            sol = stack.solve(solver="daqp", method="weighted")
-            sol.info.update(persistent=False, setups=self.setups, fallbacks=self.fallbacks)
-            self.last = sol
-            return sol
-        sol = Solution(
-            x=x,
-            status="optimal",
-            level_residuals=self._residuals(x),
-            solver="daqp",
-            solve_time=time.perf_counter() - t0,
-            method="weighted",
-            info={
-                "persistent": True,
-                "iterations": int(info.get("iterations", -1)),
-                "setups": self.setups,
-                "fallbacks": self.fallbacks,
-                "qp_calls": 1,
-            },
-        )
-        self.last = sol
-        return sol
+                    return z, 0
+        model = self.model
+        if model is None:
+            return None, 0
+        model.update(f=self._f, bupper=self._bu, blower=self._bl)
+        y, _, flag, info = model.solve()
+        if flag in (1, 2):
+            x = np.asarray(y[:n], dtype=float)
+            if self._feasible(x):
+                return x, int(info.get("iterations", -1))
+        return None, 0
 
     def _feasible(self, x: np.ndarray) -> bool:
-        """Finite, within the bounds and the hard rows to the stack's CHECK_TOL (relative to
-        ``max(1, |bound|)``; an absolute ``CHECK_TOL`` test, stricter, is tried first)."""
+        """Finite, within the bounds and the hard rows to the stack's CHECK_TOL relative to
+        ``max(1, |bound|)`` (:func:`qpcoord.tolerance.within`'s rule; an absolute
+        ``CHECK_TOL`` test, stricter, is tried first)."""
         if not np.isfinite(x.sum()):
             return False
         n = self._n
-        if self._bounded:
-            lo, hi = self._bl[:n], self._bu[:n]
-            if np.maximum(lo - x, x - hi).max() > CHECK_TOL and not within(x, lo, hi, CHECK_TOL):
-                return False
+        if self._bounded and not _inside(x, self._bl[:n], self._bu[:n]):
+            return False
         if self._G_hard is not None:
             sl = self._hard_slice
-            lo, hi = self._bl[sl], self._bu[sl]
-            gx = self._G_hard @ x
-            if np.maximum(lo - gx, gx - hi).max() > CHECK_TOL and not within(gx, lo, hi, CHECK_TOL):
+            if not _inside(self._G_hard @ x, self._bl[sl], self._bu[sl]):
                 return False
         return True
 

@@ -226,10 +226,28 @@ class MPC:
         self._xf = np.array([fp.gain * v0, 0.0])
         self._xc = np.zeros(3)  # (y_c − y_c0, ẏ_c, d), prior for the first measurement
         self._z = np.zeros(7)  # (x0, u_prev)
-        self._nb = len(self.blocks)
-        self._Pfree = np.vstack(
-            (np.hstack((self._Py, self._Ppy)), np.hstack((self._Pf, self._Ppf)))
-        )  # free response of (y, y_f) at the block ends from (x0, u_prev)
+        # per step, one matvec gives the free response of (y, y_f, y_f, y_f) at the block
+        # ends from (x0, u_prev); the four right-hand sides (tracking, centring, stroke
+        # lower and upper, µm) are views of one buffer, refreshed by one multiply-add
+        Pyz = np.hstack((self._Py, self._Ppy))
+        Pfz = np.hstack((self._Pf, self._Ppf))
+        self._Pfree = -_UM * np.vstack((Pyz, Pfz, Pfz, Pfz))
+        self._rhs_off = _UM * np.concatenate(
+            (
+                np.full(N, -self._yc0),
+                np.full(N, self._f_mid),
+                np.full(N, self._f_lo),
+                np.full(N, self._f_hi),
+            )
+        )
+        self._rhs_r = np.concatenate((np.full(N, _UM), np.zeros(3 * N)))
+        self._rhs = self._rhs_off.copy()
+        self.track.b = self._rhs[:N]
+        self.centre.b = self._rhs[N : 2 * N]
+        self.stroke.lower = self._rhs[2 * N : 3 * N]
+        self.stroke.upper = self._rhs[3 * N :]
+        self._ABx = np.hstack((A, B))  # estimate update: x⁺ = A x + B u from (x, u)
+        self._zu = np.zeros(7)
         self._Af, self._Bf = A[:2, :2], B[:2, 0]
         self._shadow = SisoCoordinator(current=self.current, feedforward=False)
         self._shadow.reset(plant, fs, y0, r0)
@@ -252,31 +270,32 @@ class MPC:
         z7[2:5] = xc
         z7[5] = self._v
         z7[6] = self._alpha - self._alpha0
-        # free response at the block ends → right-hand sides (µm)
-        free = self._Pfree @ z7
-        py, pf = free[: self._nb], free[self._nb :]
-        self.track.b[:] = (r - self._yc0 - py) * _UM
-        self.centre.b[:] = (self._f_mid - pf) * _UM
-        self.stroke.lower[:] = (self._f_lo - pf) * _UM
-        self.stroke.upper[:] = (self._f_hi - pf) * _UM
+        # right-hand sides (µm): offsets + r (tracking rows) − free response at block ends
+        rhs = self._rhs
+        np.dot(self._Pfree, z7, out=rhs)
+        rhs += self._rhs_off
+        rhs += r * self._rhs_r
         self.volts.lower[:] = min(self._vmin - self._v, 0.0)
         self.volts.upper[:] = max(self._vmax - self._v, 0.0)
         shadow_v, _, _ = self._shadow.step(y, r)
         try:
             if self._pq is not None:
-                sol = self._pq.solve()
+                x = self._pq.solve_x()
             else:
-                sol = self.stack.solve(solver=self.solver, method="hierarchical")
-            dv, da = float(sol.x[0]), float(sol.x[1])
+                x = self.stack.solve(solver=self.solver, method="hierarchical").x
+            dv, da = float(x[0]), float(x[1])
             v = self._v + dv
             alpha = self._alpha + da
         except (ValueError, RuntimeError):
             self.fallback_steps += 1
             v, alpha = shadow_v, self._alpha
         v = min(max(v, self._vmin), self._vmax)
-        # advance the estimates with the applied inputs
-        self._xf = self._Af @ xf + self._Bf * v
-        self._xc = self._Ac @ xc + self._Bc * (alpha - self._alpha0)
+        # advance the estimates with the applied inputs (one matvec of the 5-state model)
+        z7[5] = v
+        z7[6] = alpha - self._alpha0
+        nxt = self._ABx @ z7
+        self._xf = nxt[:2]
+        self._xc = nxt[2:5]
         self._v, self._alpha = v, alpha
         cur = self.current
         self.solve_times.append(time.perf_counter() - t0)
