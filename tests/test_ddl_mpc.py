@@ -118,3 +118,42 @@ def test_every_backend_solves_the_mpc_qp_alike(solver):
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         MPC(**kwargs)
+
+
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+def test_unconstrained_lq_mpc_first_move_is_the_lqr(method):
+    """Terminal cost from the Riccati equation: the condensed LQ stack gives −K x₀ for any
+    horizon (dual-stage model without the disturbance state, same Q and R as the LQR)."""
+    from scipy.linalg import solve_discrete_are
+
+    from qpcoord.ddl.mpc import lq_first_move
+
+    plant = ddl.DualStage()
+    plant.reset(FS)
+    A, B = prediction_model(plant, FS)
+    A, B = A[:4, :4], B[:4]
+    # scaled states (µm, mm/s) so that the LQ rows are well conditioned
+    T = np.diag([1e6, 1e3, 1e6, 1e3])
+    A, B = T @ A @ np.linalg.inv(T), T @ B
+    Q = np.diag([1.0, 1e-2, 1.0, 1e-2])
+    R = np.diag([1e-2, 1e2])
+    P = solve_discrete_are(A, B, Q, R)
+    K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+    x0 = np.array([2.0, 0.1, -3.0, 0.2])  # µm, mm/s
+    u_lqr = -K @ x0
+    for N in (1, 5, 20):
+        u = lq_first_move(A, B, Q, R, P, N, x0, method=method)
+        # weighted: its regularisation 1e-9·max diag(H) biases the cheap input direction
+        # (measured 1.8e-6 at N = 1, 3.6e-4 at N = 20); the strict method is exact
+        rtol = 1e-8 if method == "hierarchical" else 1e-3
+        np.testing.assert_allclose(u, u_lqr, rtol=rtol, atol=1e-10 * np.abs(u_lqr).max())
+
+
+def test_lq_first_move_bad_weights():
+    from qpcoord.ddl.mpc import lq_first_move
+
+    A, B = np.eye(2), np.eye(2)
+    with pytest.raises(ValueError, match="Q must be positive semi-definite"):
+        lq_first_move(A, B, -np.eye(2), np.eye(2), np.eye(2), 3, np.zeros(2))
+    with pytest.raises(ValueError, match="horizon"):
+        lq_first_move(A, B, np.eye(2), np.eye(2), np.eye(2), 0, np.zeros(2))

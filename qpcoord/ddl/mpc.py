@@ -45,7 +45,7 @@ from ..tasks import Bounds, Equality, Inequality
 from ._check import positive
 from .coordinator import SisoCoordinator
 
-__all__ = ["MPC", "prediction_model", "DEFAULT_BLOCKS"]
+__all__ = ["MPC", "prediction_model", "condense", "lq_first_move", "DEFAULT_BLOCKS"]
 
 #: Default move-blocking: block lengths in control periods (255 periods in all).
 DEFAULT_BLOCKS = (1, 2, 4, 8, 16, 32, 64, 128)
@@ -80,6 +80,89 @@ def prediction_model(plant, fs: float, current: float = 1.5):
     M[:5, 5:] = Bc
     E = expm(M / fs)
     return E[:5, :5], E[:5, 5:]
+
+
+def condense(A, B, blocks):
+    """Condensed predictions over a move-blocked horizon of input *increments*.
+
+    With inputs held over block ``j`` (``L_j`` periods) at ``u_j = u₋₁ + Σ_{i≤j} Δu_i``, the
+    state at the end of block ``j`` is ``x_j = Φ_j x₀ + Ψ_j u₋₁ + Γ_j ΔU``.
+
+    Parameters
+    ----------
+    A : ndarray, shape (nx, nx)
+    B : ndarray, shape (nx, nu)
+    blocks : sequence of int
+        Block lengths, periods.
+
+    Returns
+    -------
+    Phi : ndarray, shape (N, nx, nx)
+    Psi : ndarray, shape (N, nx, nu)
+    Gam : ndarray, shape (N, nx, N·nu)
+    """
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    nx, nu = B.shape
+    N = len(blocks)
+    Phi = np.eye(nx)
+    Psi = np.zeros((nx, nu))
+    Gam = np.zeros((nx, nu * N))
+    rows_phi, rows_psi, rows_gam = [], [], []
+    for j, L in enumerate(blocks):
+        Aj = np.linalg.matrix_power(A, L)
+        Bj = sum(np.linalg.matrix_power(A, i) for i in range(L)) @ B
+        S = np.zeros((nu, nu * N))
+        for i in range(j + 1):
+            S[:, nu * i : nu * i + nu] = np.eye(nu)
+        Phi, Psi, Gam = Aj @ Phi, Aj @ Psi + Bj, Aj @ Gam + Bj @ S
+        rows_phi.append(Phi)
+        rows_psi.append(Psi)
+        rows_gam.append(Gam)
+    return np.stack(rows_phi), np.stack(rows_psi), np.stack(rows_gam)
+
+
+def _sqrt_psd(M, name: str) -> np.ndarray:
+    """Symmetric square root of a positive semi-definite matrix (``ValueError`` otherwise)."""
+    M = np.asarray(M, dtype=float)
+    if M.ndim != 2 or M.shape[0] != M.shape[1] or not np.allclose(M, M.T):
+        raise ValueError(f"{name} must be a symmetric square matrix, got shape {M.shape}")
+    lam, V = np.linalg.eigh(M)
+    if lam.min() < -1e-12 * max(1.0, abs(lam.max())):
+        raise ValueError(f"{name} must be positive semi-definite (eigenvalue {lam.min():.3g})")
+    return (V * np.sqrt(np.clip(lam, 0.0, None))) @ V.T
+
+
+def lq_first_move(A, B, Q, R, P, horizon: int, x0, method: str = "hierarchical") -> np.ndarray:
+    """First input of the finite-horizon LQ problem, posed and solved as a :class:`Stack`.
+
+    ``min Σ_{j<N} (x_jᵀQx_j + u_jᵀRu_j) + x_NᵀPx_N`` over ``u_0 … u_{N−1}`` (one level of
+    rows ``√Q x_j``, ``√R u_j``, ``√P x_N``, condensed with :func:`condense`; no constraint).
+    With ``P`` the discrete Riccati solution this is the LQR's ``−K x₀`` for every horizon:
+    ``tests/test_ddl_mpc.py`` checks it on the dual-stage model.
+    """
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    nx, nu = B.shape
+    x0 = np.asarray(x0, dtype=float).reshape(nx)
+    N = int(horizon)
+    if N < 1:
+        raise ValueError(f"horizon must be >= 1, got {horizon!r}")
+    Phi, Psi, Gam = condense(A, B, (1,) * N)  # u₋₁ = 0: ΔU are cumulative inputs
+    Lq, Lr, Lp = (_sqrt_psd(M, name) for M, name in ((Q, "Q"), (R, "R"), (P, "P")))
+    rows, rhs = [], []  # (x_0ᵀQx_0 is a constant: no row)
+    for j in range(N):
+        S = np.zeros((nu, nu * N))
+        for i in range(j + 1):
+            S[:, nu * i : nu * i + nu] = np.eye(nu)
+        rows.append(Lr @ S)
+        rhs.append(np.zeros(nu))
+        Lx = Lp if j == N - 1 else Lq
+        rows.append(Lx @ Gam[j])
+        rhs.append(-Lx @ (Phi[j] @ x0))
+    stack = Stack([Equality(np.vstack(rows), np.concatenate(rhs), name="LQ cost")])
+    dU = stack.solve(method=method).x
+    return dU[:nu].copy()
 
 
 class MPC:
@@ -140,23 +223,7 @@ class MPC:
 
     # ------------------------------------------------------------------ design
     def _condense(self, A, B):
-        N = len(self.blocks)
-        nu = 2 * N
-        Phi = np.eye(5)
-        Psi = np.zeros((5, 2))
-        Gam = np.zeros((5, nu))
-        rows_phi, rows_psi, rows_gam = [], [], []
-        for j, L in enumerate(self.blocks):
-            Aj = np.linalg.matrix_power(A, L)
-            Bj = sum(np.linalg.matrix_power(A, i) for i in range(L)) @ B
-            S = np.zeros((2, nu))
-            for i in range(j + 1):
-                S[:, 2 * i : 2 * i + 2] = np.eye(2)
-            Phi, Psi, Gam = Aj @ Phi, Aj @ Psi + Bj, Aj @ Gam + Bj @ S
-            rows_phi.append(Phi)
-            rows_psi.append(Psi)
-            rows_gam.append(Gam)
-        return np.stack(rows_phi), np.stack(rows_psi), np.stack(rows_gam)
+        return condense(A, B, self.blocks)
 
     def reset(self, plant, fs: float, y0: float, r0: float) -> None:
         """Design for ``plant`` (at rest, just reset) at ``fs`` Hz and initialise the state."""
