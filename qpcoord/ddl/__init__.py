@@ -14,27 +14,43 @@ Controllers follow a two-method interface — ``reset(plant, fs, y0, r0)`` and
 """
 
 from . import identify, references, two_ddl
+from .compare import compare, format_grid, format_table
 from .coordinator import SisoCoordinator
 from .fine import FineParams
+from .flatness import FlatnessBased
 from .flexure import BladeFlexure
 from .identify import bandwidth_3db, coarse_frf, fine_frf, peak_frequency
+from .lqr import LQR, DesignModel, design_model
 from .metrics import power, tracking_metrics
+from .mpc import MPC
+from .pi_linearised import PILinearised
 from .plant import DualStage
+from .pq import PQ
 from .references import PRESETS, kolmogorov_opd, opd_psd, step_reference
 from .simulate import Run, simulate
 from .stepper import StepperParams
 
 __all__ = [
     "BladeFlexure",
+    "DesignModel",
     "DualStage",
     "FineParams",
+    "FlatnessBased",
+    "LQR",
+    "MPC",
+    "PILinearised",
+    "PQ",
     "PRESETS",
     "Run",
     "SisoCoordinator",
     "StepperParams",
     "bandwidth_3db",
     "coarse_frf",
+    "compare",
+    "design_model",
     "fine_frf",
+    "format_grid",
+    "format_table",
     "identify",
     "kolmogorov_opd",
     "opd_psd",
