@@ -2,7 +2,8 @@
 
 Runs :func:`qpcoord.ddl.compare.compare` on the thesis coordinator (``SisoCoordinator``), the
 discrete LQR with integral action and Kalman observer (``LQR``), the PQ-method design
-(``PQ``) and, if ``qpcoord.ddl.MPC`` exists, the MPC — all with default arguments — on the
+(``PQ``), the prioritised-stack ``MPC`` and the PI-linearised and flatness-based coarse
+controls (:func:`qpcoord.ddl.compare.default_controllers`), all with default arguments, on the
 same cases: the ``paranal_250hz`` Kolmogorov OPD (one realisation per seed), the two 5 mm
 steps of Fig 6.19, the Kolmogorov reference on a plant ±20 % off in piezo gain, flexure
 stiffness and friction (controllers designed on the nominal plant) and, beyond the thesis,
@@ -23,25 +24,16 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord.ddl as ddl
-from qpcoord.ddl.compare import compare, format_grid, format_table, qualitative_grid
-from qpcoord.ddl.lqr import LQR
-from qpcoord.ddl.pq import PQ
+from qpcoord.ddl.compare import (
+    compare,
+    default_controllers,
+    format_grid,
+    format_table,
+    qualitative_grid,
+)
 from qpcoord.report import TextLog, write_json
 
 FS = 8000.0
-
-
-def controllers() -> dict:
-    """Name → factory of every controller compared (the MPC only if it exists)."""
-    out = {"coordinator": ddl.SisoCoordinator, "LQR": LQR, "PQ": PQ}
-    mpc = getattr(ddl, "MPC", None)
-    if mpc is not None:
-        out["MPC"] = mpc
-    for name in ("PILinearised", "FlatnessBased"):
-        cls = getattr(ddl, name, None)
-        if cls is not None:
-            out[name] = cls
-    return out
 
 
 def _clean(v):
@@ -65,7 +57,7 @@ def main(argv=None) -> int:
     duration, step_duration = (1.0, 3.0) if args.quick else (10.0, 6.0)
     nseeds = args.seeds if args.seeds is not None else (1 if args.quick else 3)
     seeds = tuple(range(nseeds))
-    ctls = controllers()
+    ctls = default_controllers()
     say(
         f"DDL comparison at {FS:.0f} Hz: {', '.join(ctls)}; Kolmogorov {duration:g} s × "
         f"{nseeds} seed(s), steps {step_duration:g} s, mismatch ±20 %, latency 2 periods"
@@ -88,8 +80,8 @@ def main(argv=None) -> int:
             say(f"FAILED {r['controller']} / {r['case']}: {r['error']}")
     # design reports (linear analysis at the stroke centre)
     plant = ddl.DualStage()
-    lq = LQR().design(plant, FS)
-    pq = PQ().design(plant, FS)
+    lq = ddl.LQR().design(plant, FS)
+    pq = ddl.PQ().design(plant, FS)
     rep = {"LQR": lq.report(), "PQ": pq.report()}
     say("LQR design: " + ", ".join(f"{k} {v:.4g}" for k, v in rep["LQR"].items()))
     say(

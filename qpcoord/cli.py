@@ -5,6 +5,7 @@
 ``qpcoord bench stack``    per-step solve-time benchmark of 3-level stacks
 ``qpcoord bench ik``       Panda differential IK, qpcoord vs Pink, per-step times and errors
 ``qpcoord ddl track``      DDL coordinator on Kolmogorov OPD references, metrics per seed
+``qpcoord ddl compare``    every DDL controller on the same cases: Table 6.1 and 6.2 forms
 """
 
 from __future__ import annotations
@@ -95,6 +96,29 @@ def _cmd_ddl_track(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_ddl_compare(args: argparse.Namespace) -> int:
+    from threadpoolctl import threadpool_limits
+
+    from .ddl.compare import compare, default_controllers, format_grid, format_table
+
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+    duration, step_duration = (1.0, 3.0) if args.quick else (args.duration, 6.0)
+    with threadpool_limits(limits=1):
+        rows = compare(
+            default_controllers(),
+            seeds=tuple(range(args.seeds)),
+            duration=duration,
+            fs=args.fs,
+            step_duration=step_duration,
+            progress=True,
+        )
+    print(format_table(rows))
+    print()
+    print(format_grid(rows))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``qpcoord`` command."""
     p = argparse.ArgumentParser(prog="qpcoord", description=__doc__.split("\n")[0])
@@ -128,6 +152,12 @@ def build_parser() -> argparse.ArgumentParser:
     dt.add_argument("--fs", type=float, default=8000.0, help="control rate, Hz (default 8000)")
     dt.add_argument("--preset", default="paranal_250hz", help="reference preset")
     dt.set_defaults(func=_cmd_ddl_track)
+    dc = dsub.add_parser("compare", help="every controller on the same cases (Table 6.1/6.2)")
+    dc.add_argument("--quick", action="store_true", help="1 s tracking, 3 s steps")
+    dc.add_argument("--seeds", type=int, default=1, help="Kolmogorov seeds (default 1)")
+    dc.add_argument("--duration", type=float, default=10.0, help="tracking seconds (10)")
+    dc.add_argument("--fs", type=float, default=8000.0, help="control rate, Hz (8000)")
+    dc.set_defaults(func=_cmd_ddl_compare)
     return p
 
 

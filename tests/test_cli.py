@@ -91,3 +91,10 @@ def test_every_readme_code_block_runs():
     for i, code in enumerate(blocks):
         exec(compile(code, f"README.md block {i}", "exec"), ns)
     assert ns["traj"].max_error < 1e-3
+
+
+def test_ddl_compare_quick_prints_both_tables(capsys):
+    assert main(["ddl", "compare", "--quick"]) == 0
+    out = capsys.readouterr().out
+    for name in ("coordinator", "LQR", "PQ", "MPC"):
+        assert name in out

@@ -40,6 +40,7 @@ from .references import fig619_steps, kolmogorov_opd
 from .simulate import simulate
 
 __all__ = [
+    "default_controllers",
     "Case",
     "DelayedPlant",
     "DesignedOn",
@@ -97,6 +98,27 @@ class Case:
     design_plant: Callable | None = None
     seeded: bool = True
     step_time: float | None = None
+
+
+def default_controllers() -> dict:
+    """Name → factory of every DDL controller of the library, with default arguments: the
+    thesis coordinator, LQR, PQ, the prioritised-stack MPC (weighted, persistent QP), and
+    the PI-linearised and flatness-based coarse controls of Table 6.1."""
+    from .coordinator import SisoCoordinator
+    from .flatness import FlatnessBased
+    from .lqr import LQR
+    from .mpc import MPC
+    from .pi_linearised import PILinearised
+    from .pq import PQ
+
+    return {
+        "coordinator": SisoCoordinator,
+        "LQR": LQR,
+        "PQ": PQ,
+        "MPC": MPC,
+        "PILinearised": PILinearised,
+        "FlatnessBased": FlatnessBased,
+    }
 
 
 def mismatched_plant(factor: float) -> DualStage:
