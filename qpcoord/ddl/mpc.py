@@ -58,18 +58,24 @@ V_EFFORT = 10.0
 def prediction_model(plant, fs: float, current: float = 1.5):
     """Discrete model ``x⁺ = A x + B u`` at ``1/fs`` of the dual stage with a disturbance.
 
+    The continuous model of :func:`qpcoord.ddl.lqr.design_model` (shared with the LQR:
+    detent stiffness averaged over a full step, so the static gain α → y_c is right over
+    moves longer than 10 µm) about the plant's current carriage position, plus a constant
+    carriage acceleration ``d`` (the disturbance of offset-free MPC), held over each period.
+
     States ``(y_f [m], ẏ_f [m/s], y_c − y_c0 [m], ẏ_c [m/s], d [m/s²])``, inputs
     ``(v [V], α − α0 [rad])``, with ``(y_c0, α0)`` the plant's rest position and field phase
-    at call time and ``d`` a constant acceleration of the carriage (disturbance). The fine
-    part is absolute (its model is linear, ``y_f = K v`` at rest).
+    at call time. The fine part is absolute (its model is linear, ``y_f = K v`` at rest).
 
     Returns
     -------
     A : ndarray, shape (5, 5)
     B : ndarray, shape (5, 2)
     """
+    from .lqr import design_model
+
     fs = positive("fs", fs)
-    lin = plant.linearise(plant.y_c, current, inputs="phase")
+    lin = design_model(plant, fs, plant.y_c, current).continuous
     Ac = np.zeros((5, 5))
     Bc = np.zeros((5, 2))
     Ac[:4, :4] = np.asarray(lin.A)
