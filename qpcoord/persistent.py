@@ -148,6 +148,7 @@ class PersistentQP:
         # Cholesky factor kept from here); it is the QP's answer whenever it meets the hard
         # rows and bounds -- exact, where daqp's LDL loses accuracy on ill-conditioned H
         self._chol = None
+        self._try_unconstrained = True
         if mi == 0:
             cho, info = lapack.dpotrf(H, lower=0, clean=1)
             if info == 0:
@@ -295,7 +296,9 @@ class PersistentQP:
             np.dot(self._F, b, out=f)
             np.negative(f, out=f)
         self._fill_limits(P)
-        if self._chol is not None:
+        # consecutive steps are alike: the unconstrained optimum is tried first only when
+        # the previous step had no active constraint (daqp's multipliers all zero)
+        if self._chol is not None and self._try_unconstrained:
             z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
             if ok == 0:
                 np.negative(z, out=z)
@@ -309,6 +312,13 @@ class PersistentQP:
         if flag in (1, 2):
             x = np.asarray(y[:n], dtype=float)
             if self._feasible(x):
+                lam = info.get("lam")
+                self._try_unconstrained = lam is None or not np.any(lam)
+                if self._try_unconstrained and self._chol is not None:
+                    # nothing active: the exact unconstrained optimum is the answer
+                    z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
+                    if ok == 0 and self._feasible(-z):
+                        return -z, 0
                 return x, int(info.get("iterations", -1))
         return None, 0
 
