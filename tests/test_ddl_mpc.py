@@ -77,6 +77,29 @@ def _weighted_cost(mpc, x):
     )
 
 
+def _cvxpy_weighted(mpc):
+    """The MPC's weighted QP posed in cvxpy (Clarabel), without the 1e-9 regularisation."""
+    import cvxpy as cp
+
+    rho = mpc.weight_ratio
+    x = cp.Variable(mpc.stack.n)
+    cost = (
+        cp.sum_squares(mpc.track.A @ x - mpc.track.b)
+        + rho * cp.sum_squares(mpc.centre.A @ x - mpc.centre.b)
+        + rho**2 * cp.sum_squares(mpc.effort.A @ x - mpc.effort.b)
+    )
+    cons = [
+        mpc.stroke.C @ x <= mpc.stroke.upper,
+        mpc.stroke.C @ x >= mpc.stroke.lower,
+        mpc.volts.C @ x <= mpc.volts.upper,
+        mpc.volts.C @ x >= mpc.volts.lower,
+    ]
+    finite = np.isfinite(mpc.bounds.upper)
+    cons += [x[finite] <= mpc.bounds.upper[finite], x[finite] >= mpc.bounds.lower[finite]]
+    cp.Problem(cp.Minimize(cost), cons).solve(solver="CLARABEL")
+    return x.value
+
+
 @pytest.mark.parametrize("solver", qc.available_solvers())
 def test_every_backend_solves_the_mpc_qp_alike(solver):
     """The same weighted MPC QP by every backend, against the persistent daqp answer.
@@ -96,6 +119,8 @@ def test_every_backend_solves_the_mpc_qp_alike(solver):
     ref = mpc._pq.solve().x  # the QP of the last step, solved again
     sol = mpc.stack.solve(method="weighted", solver=solver)
     j_ref, j = _weighted_cost(mpc, ref), _weighted_cost(mpc, sol.x)
+    j_cvx = _weighted_cost(mpc, _cvxpy_weighted(mpc))
+    assert abs(j_ref - j_cvx) <= 1e-3 * j_cvx + 1e-10  # the persistent answer vs the oracle
     # interior-point and ADMM backends stop at ~1e-8 tolerances: 6.6e-3 measured (piqp)
     rel = 1e-3 if solver in ("daqp", "quadprog", "proxqp", "highs") else 1e-2
     assert abs(j - j_ref) <= rel * j_ref + 1e-10
