@@ -52,9 +52,8 @@ from __future__ import annotations
 
 import math
 
-from scipy import signal
-
 from ._check import finite, nonnegative, positive
+from .biquad import butterworth_sections, filter_sample
 from .fine import FineParams, fine_zoh
 
 __all__ = ["SisoCoordinator"]
@@ -152,22 +151,8 @@ class SisoCoordinator:
         self._vmid = fm.v_centre
         self._yf_mid = fm.centre
         self._integ = 0.0
-        # Butterworth sections (transposed direct form II), started in steady state at r0
-        sos = signal.butter(self.coarse_order, self.coarse_cutoff, fs=fs, output="sos")
-        zi = signal.sosfilt_zi(sos) * r0
-        # one list per section: [b0, b1, b2, a1, a2, z0, z1] (state kept in place)
-        self._bq = [
-            [
-                float(c[0]),
-                float(c[1]),
-                float(c[2]),
-                float(c[4]),
-                float(c[5]),
-                float(z[0]),
-                float(z[1]),
-            ]
-            for c, z in zip(sos, zi, strict=True)
-        ]
+        # coarse-reference Butterworth, started in steady state at r0
+        self._bq = butterworth_sections(self.coarse_order, self.coarse_cutoff, fs, r0)
         # fine-stage model for the carriage estimate, at rest at the applied voltage
         self._fz = fine_zoh(fm, self._h)
         v0 = plant.v_applied
@@ -189,12 +174,7 @@ class SisoCoordinator:
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One control period: measurement ``y`` (m), reference ``r`` (m) → (V, A, A)."""
         # coarse reference: Butterworth low-pass, minus the fine mid-stroke offset
-        x = r
-        for q in self._bq:
-            out = q[0] * x + q[5]
-            q[5] = q[1] * x - q[3] * out + q[6]
-            q[6] = q[2] * x - q[4] * out
-            x = out
+        x = filter_sample(self._bq, r)
         rc = x - self._yf_mid
         # coordinator: carriage estimate from the output and the fine-stage model
         yc_hat = y - self._mf

@@ -36,10 +36,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import signal
 from scipy.linalg import expm
 
 from ._check import finite, nonnegative, positive
+from .biquad import butterworth_sections, filter_sample
 from .fine import fine_zoh
 
 __all__ = ["PILinearised"]
@@ -125,20 +125,8 @@ class PILinearised:
         self._vmin, self._vmax = fp.v_min, fp.v_max
         self._vmid = fp.v_centre
         self._yf_mid = fp.centre
-        sos = signal.butter(3, self.coarse_cutoff, fs=fs, output="sos")
-        zi = signal.sosfilt_zi(sos) * r0
-        self._bq = [
-            [
-                float(c[0]),
-                float(c[1]),
-                float(c[2]),
-                float(c[4]),
-                float(c[5]),
-                float(z[0]),
-                float(z[1]),
-            ]
-            for c, z in zip(sos, zi, strict=True)
-        ]
+        # coarse-reference Butterworth, started in steady state at r0
+        self._bq = butterworth_sections(3, self.coarse_cutoff, fs, r0)
         self._fz = fine_zoh(fp, h)
         v0 = plant.v_applied
         self._mf = fp.gain * v0
@@ -179,12 +167,7 @@ class PILinearised:
 
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One period: measured output ``y`` (m), reference ``r`` (m) → (V, A, A)."""
-        x = r
-        for q in self._bq:
-            out = q[0] * x + q[5]
-            q[5] = q[1] * x - q[3] * out + q[6]
-            q[6] = q[2] * x - q[4] * out
-            x = out
+        x = filter_sample(self._bq, r)
         rc = x - self._yf_mid
         # rate-limited coarse reference and its differences (flat outputs' derivatives)
         d = rc - self._rcl
