@@ -84,23 +84,6 @@ PANDA_Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
 PANDA_DT = 2e-3  # s
 
 
-class HorizontalCircle(qc.paths.Path):
-    """Circle of ``radius`` m in the horizontal plane through ``start``, period ``period`` s."""
-
-    dim = 3
-
-    def __init__(self, start, radius: float, period: float) -> None:
-        self.start, self.radius, self.period = np.asarray(start, float), radius, period
-
-    def _eval(self, t):
-        w = 2 * np.pi / self.period
-        c, s, z = np.cos(w * t), np.sin(w * t), np.zeros_like(t)
-        r = self.radius
-        p = self.start + r * np.stack([c - 1.0, s, z], axis=1)
-        v = r * w * np.stack([-s, c, z], axis=1)
-        return p, v, -r * w * w * np.stack([c, s, z], axis=1)
-
-
 def periods_to_close(closure, tol: float = 1e-6):
     """First period k (1-based) from which every closure error is < tol; None if never."""
     closure = np.asarray(closure)
@@ -193,7 +176,7 @@ def run_5r(periods: float, spp: int, every: int) -> tuple[dict, dict]:
 
 
 def run_panda(arm, duration: float) -> list[dict]:
-    path = HorizontalCircle(arm.position(PANDA_Q0), radius=0.1, period=2.0)
+    path = qc.paths.HorizontalCircle(arm.position(PANDA_Q0), radius=0.1, period=2.0)
     q_pref = PANDA_Q0.copy()
     q_pref[0], q_pref[6] = 0.8, 3.5  # joint 7 beyond its upper limit 2.8973
     jla = JointLimitAvoidance(robot=arm, alpha=1.0)

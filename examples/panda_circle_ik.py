@@ -26,26 +26,9 @@ DT = 1e-3  # s, control period
 Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
 
 
-class HorizontalCircle(qc.paths.Path):
-    """Circle of ``radius`` m in the horizontal plane through ``start``, period ``period`` s."""
-
-    dim = 3
-
-    def __init__(self, start, radius: float, period: float) -> None:
-        self.start, self.radius, self.period = np.asarray(start, float), radius, period
-
-    def _eval(self, t):
-        w = 2 * np.pi / self.period
-        c, s, z = np.cos(w * t), np.sin(w * t), np.zeros_like(t)
-        r = self.radius
-        p = self.start + r * np.stack([c - 1.0, s, z], axis=1)
-        v = r * w * np.stack([-s, c, z], axis=1)
-        return p, v, -r * w * w * np.stack([c, s, z], axis=1)
-
-
 def run_loop(method: str, speed, steps: int, posture_gain: float) -> dict:
     arm = qc.robots.load("panda")
-    circle = HorizontalCircle(arm.position(Q0), radius=0.1, period=2.0)
+    circle = qc.paths.HorizontalCircle(arm.position(Q0), radius=0.1, period=2.0)
     ee = qc.PositionTask(arm, target=circle, gain=50.0)
     posture = qc.PostureTask(arm, Q0 + 0.3, gain=posture_gain)  # pulls away from the start
     limits = [qc.JointLimits(arm, gain=0.5), qc.VelocityLimits(arm, speed)]

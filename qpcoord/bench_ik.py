@@ -35,7 +35,7 @@ import numpy as np
 
 from .ik import IK
 from .kinematic_tasks import JointLimits, PositionTask, PostureTask, VelocityLimits
-from .paths import Path
+from .paths import HorizontalCircle, Path
 from .robots import load
 
 __all__ = ["run_ik_bench", "format_ik_table", "PANDA_Q0", "pink_available"]
@@ -59,25 +59,6 @@ def pink_available() -> bool:
     except ImportError:
         return False
     return True
-
-
-class _CircleTarget(Path):
-    """A horizontal circle around a centre (m), radius (m), period (s)."""
-
-    dim = 3
-
-    def __init__(self, center: np.ndarray, radius: float, period: float) -> None:
-        self.center, self.radius, self.period = center, radius, period
-
-    def _eval(self, t):
-        w = 2 * np.pi / self.period
-        c, s = np.cos(w * t), np.sin(w * t)
-        z = np.zeros_like(t)
-        r = self.radius
-        p = self.center + r * np.stack([c - 1.0, s, z], axis=1)
-        v = r * w * np.stack([-s, c, z], axis=1)
-        a = -r * w * w * np.stack([c, s, z], axis=1)
-        return p, v, a
 
 
 class _QpcoordLoop:
@@ -186,7 +167,7 @@ def run_ik_bench(
     ]
     if include_pink:
         loops.append(_PinkLoop(load("panda"), q0, dt, speed, solver))
-    circle = _CircleTarget(y0, TIGHT_RADIUS, TIGHT_PERIOD)
+    circle = HorizontalCircle(y0, TIGHT_RADIUS, TIGHT_PERIOD)
     seg = max(1, steps // len(WAYPOINTS))
     times = np.zeros((len(loops), steps))
     errors = np.zeros((len(loops), steps))

@@ -16,7 +16,15 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-__all__ = ["Path", "LissajousSphere", "Circle", "rotation_x", "rotation_y", "rotation_z"]
+__all__ = [
+    "Path",
+    "LissajousSphere",
+    "Circle",
+    "HorizontalCircle",
+    "rotation_x",
+    "rotation_y",
+    "rotation_z",
+]
 
 
 def rotation_x(a: float) -> np.ndarray:
@@ -211,3 +219,38 @@ class Circle(Path):
         du = np.stack([-np.sin(ang), np.cos(ang)], axis=1)
         R = self.radius
         return self.center + R * u, R * w * du, -R * w**2 * u
+
+
+class HorizontalCircle(Path):
+    """A 3-D circle in the horizontal plane that starts at a given point (IK demos).
+
+    ``y(t) = start + R (cos ωt − 1, sin ωt, 0)``, ``ω = 2π/T``: it passes through ``start``
+    at ``t = 0`` (so a robot standing there needs no initial jump), centre ``start − (R, 0, 0)``.
+
+    Parameters
+    ----------
+    start : array_like, shape (3,)
+        Point at ``t = 0`` (m).
+    radius : float
+        ``R`` (m), > 0.
+    period : float
+        ``T`` (s), > 0.
+    """
+
+    dim = 3
+
+    def __init__(self, start, radius: float, period: float) -> None:
+        self.start = np.array(start, dtype=float).reshape(-1)
+        if self.start.shape != (3,) or not np.all(np.isfinite(self.start)):
+            raise ValueError(f"start must be 3 finite numbers (m), got {start!r}")
+        self.radius = _finite(radius, "radius", positive=True)
+        self.period = _finite(period, "period", positive=True)
+        self.center = self.start - np.array([self.radius, 0.0, 0.0])
+
+    def _eval(self, t: np.ndarray):
+        w = 2 * np.pi / self.period
+        c, s, z = np.cos(w * t), np.sin(w * t), np.zeros_like(t)
+        r = self.radius
+        p = self.start + r * np.stack([c - 1.0, s, z], axis=1)
+        v = r * w * np.stack([-s, c, z], axis=1)
+        return p, v, -r * w * w * np.stack([c, s, z], axis=1)

@@ -265,3 +265,20 @@ def test_circle_bad_parameters(options, message):
 def test_bad_times(path, method, t, message):
     with pytest.raises(ValueError, match=message):
         getattr(path, method)(t)
+
+
+def test_horizontal_circle_starts_at_its_start_point():
+    start = np.array([0.3, -0.1, 0.5])
+    c = paths.HorizontalCircle(start, radius=0.1, period=2.0)
+    np.testing.assert_allclose(c.position(0.0), start, atol=1e-15)
+    np.testing.assert_allclose(c.position(2.0), start, atol=1e-14)
+    t = np.linspace(0, 2, 7)
+    np.testing.assert_allclose(np.linalg.norm(c.position(t) - c.center, axis=1), 0.1)
+    h = 1e-6
+    np.testing.assert_allclose(
+        c.velocity(0.3), (c.position(0.3 + h) - c.position(0.3 - h)) / 2e-6, atol=1e-8
+    )
+    with pytest.raises(ValueError, match="start"):
+        paths.HorizontalCircle([0, 0], 0.1, 1.0)
+    with pytest.raises(ValueError, match="radius"):
+        paths.HorizontalCircle(start, -0.1, 1.0)
