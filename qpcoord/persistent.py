@@ -183,6 +183,12 @@ class PersistentQP:
         self._G_hard = G[:mh, :n] if mh else None
         h0 = m0 + (1 if self._dummy else 0)
         self._hard_slice = slice(h0, h0 + mh)
+        # no slack and bounded: bounds then hard rows lead daqp's limit vectors, so one
+        # stacked matrix [I; G_hard] checks them all with one matvec
+        self._G_check = None
+        if mi == 0 and self._bounded:
+            self._G_check = np.vstack((np.eye(n), G[:mh, :n]))
+            self._check_rows = slice(0, n + mh)
         # residual rows: the equality tasks stacked (same order as self._b), with the level
         # of each task, for a one-matvec residual; inequality tasks one by one
         self._nlevels = len(P.levels)
@@ -326,6 +332,9 @@ class PersistentQP:
         """Finite, within the bounds and the hard rows to the stack's CHECK_TOL relative to
         ``max(1, |bound|)`` (:func:`qpcoord.tolerance.within`'s rule; an absolute
         ``CHECK_TOL`` test, stricter, is tried first)."""
+        if self._G_check is not None:  # NaN or inf in x fails both tests of _inside
+            sl = self._check_rows
+            return _inside(self._G_check @ x, self._bl[sl], self._bu[sl])
         if not np.isfinite(x.sum()):
             return False
         n = self._n
