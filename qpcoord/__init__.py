@@ -8,18 +8,7 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
                          bounds=qc.Bounds(-dq_max, dq_max))
 """
 
-from . import (
-    analysis,
-    ddl,
-    geometry,
-    hysteresis,
-    musculo,
-    paths,
-    potentials,
-    robots,
-    schemes,
-    task_manifold,
-)
+from . import analysis, geometry, paths, potentials, robots, schemes, task_manifold
 from .backends import available_solvers, default_solver, solver_versions
 from .errors import AlgorithmicSingularity, InfeasibleError, SolverError
 from .ik import IK, ik_step, inverse_kinematics
@@ -75,3 +64,14 @@ __all__ = [
     "solver_versions",
     "task_manifold",
 ]
+
+#: Submodules imported on first use (``qc.ddl`` pulls in scipy.signal: ~1.4 s measured).
+_LAZY = ("ddl", "hysteresis", "musculo")
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'qpcoord' has no attribute {name!r}")

@@ -98,3 +98,13 @@ def test_ddl_compare_quick_prints_both_tables(capsys):
     out = capsys.readouterr().out
     for name in ("coordinator", "LQR", "PQ", "MPC"):
         assert name in out
+
+
+def test_import_is_light_and_heavy_subpackages_load_on_use():
+    """``import qpcoord`` does not pull in scipy.signal (the DDL package does, ~1.4 s)."""
+    code = (
+        "import sys, qpcoord as qc; assert 'scipy.signal' not in sys.modules; "
+        "assert qc.ddl.DualStage and qc.hysteresis.PreisachModel and qc.musculo.distribute; "
+        "assert 'scipy.signal' in sys.modules"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
