@@ -11,7 +11,8 @@ call (``MPC.solve_times``). BLAS is limited to one thread. The table reports med
 max per step, the share of steps over 125 µs, and the run's RMSE and fallback steps. A
 second table solves the MPC's QPs of a Kolmogorov run with every installed backend through
 the general ``Stack.solve(method="weighted")`` path (µs per QP, largest cost deviation from
-the persistent daqp answer, relative to the cost of not moving). This script reports; it asserts nothing.
+the persistent daqp answer, relative to the cost of not moving). This script reports; it
+asserts nothing.
 """
 
 from __future__ import annotations
@@ -84,6 +85,7 @@ def backend_rows(steps: int, every: int = 20) -> list[dict]:
         y = plant.step(*mpc.step(y, r[k]))
         if k % every:
             continue
+        mpc.sync_tasks()  # the step's QP numbers into the tasks (θ-form otherwise)
         ref = cost(mpc._pq.solve().x)
         scale = max(cost(np.zeros(mpc.stack.n)), 1e-300)  # cost of not moving
         for s in times:

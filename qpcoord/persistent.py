@@ -26,6 +26,7 @@ from scipy.linalg import lapack
 
 from .reduced import CHECK_TOL
 from .stack import Solution, Stack
+from .tasks import Equality
 
 __all__ = ["PersistentQP"]
 
@@ -149,6 +150,8 @@ class PersistentQP:
         # rows and bounds -- exact, where daqp's LDL loses accuracy on ill-conditioned H
         self._chol = None
         self._try_unconstrained = True
+        self._pspec = None
+        self._p_version = None
         if mi == 0:
             cho, info = lapack.dpotrf(H, lower=0, clean=1)
             if info == 0:
@@ -302,6 +305,11 @@ class PersistentQP:
             np.dot(self._F, b, out=f)
             np.negative(f, out=f)
         self._fill_limits(P)
+        return self._solve_current()
+
+    def _solve_current(self) -> tuple[np.ndarray | None, int]:
+        """The QP with the current ``_f``, ``_bu``, ``_bl``: unconstrained try, then daqp."""
+        n = self._n
         # consecutive steps are alike: the unconstrained optimum is tried first only when
         # the previous step had no active constraint (daqp's multipliers all zero)
         if self._chol is not None and self._try_unconstrained:
@@ -327,6 +335,124 @@ class PersistentQP:
                         return -z, 0
                 return x, int(info.get("iterations", -1))
         return None, 0
+
+    # ------------------------------------------------------------------ parametric form
+    def parametrize(self, size: int, maps: dict) -> None:
+        """Declare right-hand sides affine in a parameter vector ``θ`` (size ``size``).
+
+        ``maps[task]`` is ``(c, M)`` for an :class:`~qpcoord.Equality` (``b = c + M θ``) or
+        ``((c_lo, M_lo), (c_hi, M_hi))`` for an :class:`~qpcoord.Inequality` (its limits).
+        The linear term and the limits of the QP then follow ``θ`` by two matrix-vector
+        products per step (:meth:`solve_theta`), the form of a condensed MPC whose
+        parameters are the state estimate and the reference. Tasks not in ``maps`` and the
+        bounds keep the values they have now (call :meth:`parametrize` again after changing
+        them; a changed matrix or bounds object is detected and handled).
+
+        Raises
+        ------
+        ValueError
+            A task not in the stack, or maps of the wrong shapes.
+        """
+        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
+            raise ValueError(f"size must be an integer >= 1, got {size!r}")
+        P = self.stack._compiled
+        tasks = {id(t): t for t in self._all_tasks}
+        spec = {}
+        for t, m in maps.items():
+            if id(t) not in tasks:
+                raise ValueError(f"parametrize: {getattr(t, 'label', t)!r} is not in the stack")
+            parts = [m] if isinstance(t, Equality) else list(m)
+            rows = t.A.shape[0] if isinstance(t, Equality) else t.C.shape[0]
+            if len(parts) != (1 if isinstance(t, Equality) else 2):
+                raise ValueError(f"parametrize: {t.label} needs (c, M) per limit")
+            out = []
+            for c, M in parts:
+                c = np.broadcast_to(np.asarray(c, dtype=float), (rows,)).copy()
+                M = np.asarray(M, dtype=float)
+                if M.shape != (rows, size) or not np.all(np.isfinite(M)):
+                    raise ValueError(
+                        f"parametrize: {t.label}: M must be finite, shape {(rows, size)}, "
+                        f"got {M.shape}"
+                    )
+                out.append((c, M))
+            spec[id(t)] = (t, out)
+        self._pspec = (int(size), spec)
+        self._build_parametric(P)
+
+    def _build_parametric(self, P) -> None:
+        size, spec = self._pspec
+        b0 = np.zeros(self._F.shape[1])
+        Bt = np.zeros((self._F.shape[1], size))
+        i = 0
+        for t in self._eq_tasks:
+            m = t.b.shape[0]
+            if id(t) in spec:
+                ((c, M),) = spec[id(t)][1]
+                b0[i : i + m], Bt[i : i + m] = c, M
+            else:
+                b0[i : i + m] = t.b
+            i += m
+        self._f0 = -(self._F @ b0)
+        self._Ft = -(self._F @ Bt)
+        self._fill_limits(P)
+        k = self._bu.shape[0]
+        self._lu0, self._ll0 = self._bu.copy(), self._bl.copy()
+        self._Lu, self._Ll = np.zeros((k, size)), np.zeros((k, size))
+        for t, kind, sl in self._rows:
+            if id(t) not in spec:
+                continue
+            parts = spec[id(t)][1]
+            if kind == "eq":
+                ((c, M),) = parts
+                self._lu0[sl] = self._ll0[sl] = c
+                self._Lu[sl] = self._Ll[sl] = M
+            else:
+                (cl, Ml), (cu, Mu) = parts
+                self._ll0[sl], self._Ll[sl] = cl, Ml
+                self._lu0[sl], self._Lu[sl] = cu, Mu
+        self._p_version = self._version
+        self._p_bounds = self._bounds_version
+
+    def solve_theta(self, theta: np.ndarray) -> np.ndarray:
+        """Checked ``x`` for the parameter ``θ`` declared by :meth:`parametrize` (hot loop).
+
+        On a failure the tasks are given the values ``θ`` implies and the step goes to
+        ``stack.solve(method="weighted")`` (counted in :attr:`fallbacks`).
+        """
+        P = self.stack._compiled
+        if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
+            P.refresh()
+            self._setup(P)
+        if self._p_version != self._version or (
+            self._bounded and P.bounds.version != self._p_bounds
+        ):
+            self._build_parametric(P)
+        f = self._f[: self._n]
+        np.dot(self._Ft, theta, out=f)
+        f += self._f0
+        np.dot(self._Lu, theta, out=self._bu)
+        self._bu += self._lu0
+        np.dot(self._Ll, theta, out=self._bl)
+        self._bl += self._ll0
+        x, _ = self._solve_current()
+        if x is not None:
+            return x
+        self.write_tasks(theta)
+        return self._fallback().x
+
+    def write_tasks(self, theta: np.ndarray) -> None:
+        """Give the parametrised tasks the values ``θ`` implies (the stack can then be
+        solved by any method or backend, e.g. to compare them)."""
+        if self._pspec is None:
+            raise ValueError("write_tasks: call parametrize() first")
+        for t, parts in self._pspec[1].values():
+            if isinstance(t, Equality):
+                ((c, M),) = parts
+                t.b[...] = c + M @ theta
+            else:
+                (cl, Ml), (cu, Mu) = parts
+                t.lower[...] = cl + Ml @ theta
+                t.upper[...] = cu + Mu @ theta
 
     def _feasible(self, x: np.ndarray) -> bool:
         """Finite, within the bounds and the hard rows to the stack's CHECK_TOL relative to

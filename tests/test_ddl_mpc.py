@@ -116,6 +116,7 @@ def test_every_backend_solves_the_mpc_qp_alike(solver):
     for _ in range(5):
         y = plant.step(*mpc.step(y, r))
     mpc.step(y, r)
+    mpc.sync_tasks()  # the last step's QP into the stack's tasks
     ref = mpc._pq.solve().x  # the QP of the last step, solved again
     sol = mpc.stack.solve(method="weighted", solver=solver)
     j_ref, j = _weighted_cost(mpc, ref), _weighted_cost(mpc, sol.x)

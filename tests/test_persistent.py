@@ -136,3 +136,49 @@ def test_stack_persistent_is_the_same_object_kind():
     stack, _, _ = build(11)
     pq = stack.persistent()
     assert isinstance(pq, PersistentQP) and pq.stack is stack
+
+
+def test_parametric_form_equals_the_task_form():
+    """b and limits affine in θ: solve_theta(θ) = solve() once the tasks hold those values."""
+    stack, tasks, rng = build(13)
+    track, soft, effort, hard_in, hard_eq, bounds = tasks
+    pq = stack.persistent()
+    p = 3
+    maps = {
+        track: (rng.normal(size=6), rng.normal(size=(6, p))),
+        hard_in: (
+            (-0.5 * np.ones(3), np.zeros((3, p))),
+            (0.5 + np.zeros(3), 0.1 * np.ones((3, p))),
+        ),
+    }
+    pq.parametrize(p, maps)
+    for _ in range(5):
+        theta = rng.normal(size=p)
+        x = pq.solve_theta(theta).copy()
+        pq.write_tasks(theta)
+        np.testing.assert_allclose(track.b, maps[track][0] + maps[track][1] @ theta)
+        np.testing.assert_allclose(x, pq.solve().x, atol=1e-9)
+    assert pq.fallbacks == 0
+
+
+def test_parametric_form_reports_and_falls_back():
+    stack, tasks, rng = build(17)
+    track, soft, effort, hard_in, hard_eq, bounds = tasks
+    pq = stack.persistent()
+    with pytest.raises(ValueError, match="write_tasks"):
+        pq.write_tasks(np.zeros(2))
+    with pytest.raises(ValueError, match="shape"):
+        pq.parametrize(2, {track: (np.zeros(6), np.zeros((5, 2)))})
+    with pytest.raises(ValueError, match="not in the stack"):
+        pq.parametrize(2, {qc.Equality(np.eye(12), np.zeros(12)): (0.0, np.zeros((12, 2)))})
+    with pytest.raises(ValueError, match="size"):
+        pq.parametrize(0, {})
+    # hard rows pushed to an inconsistent box: the general path raises, after the tasks
+    # were given θ's values
+    pq.parametrize(
+        1, {hard_in: ((np.full(3, 5.0), np.zeros((3, 1))), (np.full(3, 6.0), np.zeros((3, 1))))}
+    )
+    with pytest.raises(qc.InfeasibleError):
+        pq.solve_theta(np.zeros(1))
+    np.testing.assert_array_equal(hard_in.lower, 5.0)
+    assert pq.fallbacks == 1

@@ -298,7 +298,8 @@ class MPC:
         self._yc0 = float(plant.y_c)
         self._xf = np.array([fp.gain * v0, 0.0])
         self._xc = np.zeros(3)  # (y_c − y_c0, ẏ_c, d), prior for the first measurement
-        self._z = np.zeros(7)  # (x0, u_prev)
+        self._theta = np.zeros(8)  # (x0, u_prev, r)
+        self._z = self._theta[:7]  # (x0, u_prev)
         # per step, one matvec gives the free response of (y, y_f, y_f, y_f) at the block
         # ends from (x0, u_prev); the four right-hand sides (tracking, centring, stroke
         # lower and upper, µm) are views of one buffer, refreshed by one multiply-add
@@ -320,6 +321,24 @@ class MPC:
         self.stroke.lower = self._rhs[2 * N : 3 * N]
         self.stroke.upper = self._rhs[3 * N :]
         self._ABx = np.hstack((A, B))  # estimate update: x⁺ = A x + B u from (x, u)
+        if self._pq is not None:
+            # every right-hand side and limit is affine in θ = (x0, u_prev, r)
+            def rows(k: int, r_coef: float):
+                sl = slice(k * N, (k + 1) * N)
+                M = np.hstack((self._Pfree[sl], np.full((N, 1), r_coef)))
+                return self._rhs_off[sl], M
+
+            dv = np.zeros((N, 8))
+            dv[:, 5] = -1.0  # v_j − v_prev limits: (v_min − v_prev, v_max − v_prev)
+            self._pq.parametrize(
+                8,
+                {
+                    self.track: rows(0, _UM),
+                    self.centre: rows(1, 0.0),
+                    self.stroke: (rows(2, 0.0), rows(3, 0.0)),
+                    self.volts: ((np.full(N, self._vmin), dv), (np.full(N, self._vmax), dv)),
+                },
+            )
         self._zu = np.zeros(7)
         self._Af, self._Bf = A[:2, :2], B[:2, 0]
         self._shadow = SisoCoordinator(current=self.current, feedforward=False)
@@ -327,6 +346,17 @@ class MPC:
         self.y_c_hat = y0 - self._xf[0]
         self.fallback_steps = 0
         self.solve_times = []
+
+    def sync_tasks(self) -> None:
+        """Write the last step's QP numbers into the stack's tasks.
+
+        With ``method="weighted"`` the persistent QP reads its parameters
+        ``θ = (x0, u_prev, r)`` directly and the tasks are not updated every step; call
+        this to inspect them or to solve the same QP with another method or backend
+        (``mpc.stack.solve(...)``).
+        """
+        if self._pq is not None:
+            self._pq.write_tasks(self._theta)
 
     # ------------------------------------------------------------------ per step
     def step(self, y: float, r: float) -> tuple[float, float, float]:
@@ -338,23 +368,26 @@ class MPC:
         z = y - xf[0] - self._yc0
         xc += self._K * (z - xc[0])
         self.y_c_hat = self._yc0 + xc[0]
-        z7 = self._z  # (x0, u_prev)
+        theta = self._theta  # (x0, u_prev, r): the QP's parameters
+        z7 = self._z  # a view of its first 7 entries
         z7[:2] = xf
         z7[2:5] = xc
         z7[5] = self._v
         z7[6] = self._alpha - self._alpha0
-        # right-hand sides (µm): offsets + r (tracking rows) − free response at block ends
-        rhs = self._rhs
-        np.dot(self._Pfree, z7, out=rhs)
-        rhs += self._rhs_off
-        rhs += r * self._rhs_r
-        self.volts.lower[:] = min(self._vmin - self._v, 0.0)
-        self.volts.upper[:] = max(self._vmax - self._v, 0.0)
+        theta[7] = r
         shadow_v, _, _ = self._shadow.step(y, r)
         try:
             if self._pq is not None:
-                x = self._pq.solve_x()
+                # right-hand sides and limits are affine in θ (declared at reset)
+                x = self._pq.solve_theta(theta)
             else:
+                # right-hand sides (µm): offsets + r (tracking rows) − free response
+                rhs = self._rhs
+                np.dot(self._Pfree, z7, out=rhs)
+                rhs += self._rhs_off
+                rhs += r * self._rhs_r
+                self.volts.lower[:] = self._vmin - self._v
+                self.volts.upper[:] = self._vmax - self._v
                 x = self.stack.solve(solver=self.solver, method="hierarchical").x
             dv, da = float(x[0]), float(x[1])
             v = self._v + dv
@@ -363,10 +396,13 @@ class MPC:
             self.fallback_steps += 1
             v, alpha = shadow_v, self._alpha
         v = min(max(v, self._vmin), self._vmax)
-        # advance the estimates with the applied inputs (one matvec of the 5-state model)
-        z7[5] = v
-        z7[6] = alpha - self._alpha0
-        nxt = self._ABx @ z7
+        # advance the estimates with the applied inputs (one matvec of the 5-state model;
+        # θ is left as the QP saw it)
+        zu = self._zu
+        zu[:5] = z7[:5]
+        zu[5] = v
+        zu[6] = alpha - self._alpha0
+        nxt = self._ABx @ zu
         self._xf = nxt[:2]
         self._xc = nxt[2:5]
         self._v, self._alpha = v, alpha
