@@ -151,6 +151,8 @@ class PersistentQP:
         self._chol = None
         self._try_unconstrained = True
         self._pspec = None
+        self._pz = None
+        self._fused = None
         self._p_version = None
         if mi == 0:
             cho, info = lapack.dpotrf(H, lower=0, clean=1)
@@ -307,8 +309,12 @@ class PersistentQP:
         self._fill_limits(P)
         return self._solve_current()
 
-    def _solve_current(self) -> tuple[np.ndarray | None, int]:
-        """The QP with the current ``_f``, ``_bu``, ``_bl``: unconstrained try, then daqp."""
+    def _solve_current(self, check=None) -> tuple[np.ndarray | None, int]:
+        """The QP with the current ``_f``, ``_bu``, ``_bl``: unconstrained try, then daqp.
+
+        ``check(x) -> bool`` replaces :meth:`_feasible` for daqp's answer (the parametric
+        path has a cheaper, equivalent one)."""
+        check = self._feasible if check is None else check
         n = self._n
         # consecutive steps are alike: the unconstrained optimum is tried first only when
         # the previous step had no active constraint (daqp's multipliers all zero)
@@ -325,9 +331,9 @@ class PersistentQP:
         y, _, flag, info = model.solve()
         if flag in (1, 2):
             x = np.asarray(y[:n], dtype=float)
-            if self._feasible(x):
+            if check(x):
                 lam = info.get("lam")
-                self._try_unconstrained = lam is None or not np.any(lam)
+                self._try_unconstrained = lam is None or not lam.any()
                 if self._try_unconstrained and self._chol is not None:
                     # nothing active: the exact unconstrained optimum is the answer
                     z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
@@ -410,6 +416,31 @@ class PersistentQP:
                 (cl, Ml), (cu, Mu) = parts
                 self._ll0[sl], self._Ll[sl] = cl, Ml
                 self._lu0[sl], self._Lu[sl] = cu, Mu
+        # the unconstrained optimum and its margins to the bounds and hard rows are affine
+        # in θ too: z(θ) = z0 + Z θ, and [G z − u; l − G z] = e0 + E θ (one matvec each)
+        self._pz = None
+        if self._chol is not None and self._G_check is not None:
+            Z = -lapack.dpotrs(self._chol, self._Ft, lower=0)[0]
+            z0 = -lapack.dpotrs(self._chol, self._f0, lower=0)[0]  # no slack: nv = n
+            sl = self._check_rows
+            G = self._G_check
+            with np.errstate(invalid="ignore"):
+                E = np.vstack((G @ Z - self._Lu[sl], self._Ll[sl] - G @ Z))
+                e0 = np.concatenate((G @ z0 - self._lu0[sl], self._ll0[sl] - G @ z0))
+            self._pz = (z0, Z, e0, E)
+        # bounds + hard rows are every limit row (no slack, no dummy): keep them stacked as
+        # [u; −l] = lb0 + Lb θ, so that one matvec gives both and [G; −G] x − [u; −l] ≤ tol
+        # checks an answer in three operations
+        self._fused = None
+        k = self._bu.shape[0]
+        if self._G_check is not None and self._check_rows.stop == k:
+            G = self._G_check
+            self._fused = (
+                np.vstack((self._Lu, -self._Ll)),
+                np.concatenate((self._lu0, -self._ll0)),
+                np.vstack((G, -G)),
+                np.empty(2 * k),
+            )
         self._p_version = self._version
         self._p_bounds = self._bounds_version
 
@@ -427,14 +458,31 @@ class PersistentQP:
             self._bounded and P.bounds.version != self._p_bounds
         ):
             self._build_parametric(P)
+        if self._pz is not None and self._try_unconstrained:
+            z0, Z, e0, E = self._pz
+            if (E @ theta + e0).max() <= CHECK_TOL:  # NaN fails too
+                return z0 + Z @ theta
         f = self._f[: self._n]
         np.dot(self._Ft, theta, out=f)
         f += self._f0
-        np.dot(self._Lu, theta, out=self._bu)
-        self._bu += self._lu0
-        np.dot(self._Ll, theta, out=self._bl)
-        self._bl += self._ll0
-        x, _ = self._solve_current()
+        check = None
+        if self._fused is not None:
+            Lb, lb0, GG, bb = self._fused
+            k = self._bu.shape[0]
+            np.dot(Lb, theta, out=bb)
+            bb += lb0
+            self._bu[:] = bb[:k]
+            np.negative(bb[k:], out=self._bl)
+
+            def check(x, GG=GG, bb=bb):  # absolute test first, then the relative rule
+                return (GG @ x - bb).max() <= CHECK_TOL or self._feasible(x)
+
+        else:
+            np.dot(self._Lu, theta, out=self._bu)
+            self._bu += self._lu0
+            np.dot(self._Ll, theta, out=self._bl)
+            self._bl += self._ll0
+        x, _ = self._solve_current(check)
         if x is not None:
             return x
         self.write_tasks(theta)

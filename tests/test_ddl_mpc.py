@@ -183,3 +183,13 @@ def test_lq_first_move_bad_weights():
         lq_first_move(A, B, -np.eye(2), np.eye(2), np.eye(2), 3, np.zeros(2))
     with pytest.raises(ValueError, match="horizon"):
         lq_first_move(A, B, np.eye(2), np.eye(2), np.eye(2), 0, np.zeros(2))
+
+
+def test_a_missed_deadline_falls_back_and_is_counted():
+    r = ddl.kolmogorov_opd(0.02, FS, seed=0, preset="paranal_250hz")
+    mpc = MPC(deadline=1e-9)  # no step can meet it
+    run = ddl.simulate(ddl.DualStage(), mpc, r, FS)
+    assert mpc.late_steps == len(r) and mpc.fallback_steps == 0
+    assert run.metrics["saturated_steps"] == 0  # the fine PI holds the stage
+    with pytest.raises(ValueError, match="deadline"):
+        MPC(deadline=-1.0)

@@ -182,3 +182,25 @@ def test_parametric_form_reports_and_falls_back():
         pq.solve_theta(np.zeros(1))
     np.testing.assert_array_equal(hard_in.lower, 5.0)
     assert pq.fallbacks == 1
+
+
+def test_parametric_unconstrained_shortcut_matches_the_qp():
+    """No soft inequality: the unconstrained optimum is affine in θ and used when it meets
+    the bounds and hard rows; otherwise daqp. Both agree with the task-form solve."""
+    rng = np.random.default_rng(23)
+    n = 8
+    track = qc.Equality(rng.normal(size=(4, n)), np.zeros(4), name="track")
+    effort = qc.Equality(np.eye(n), np.zeros(n), name="effort")
+    hard = qc.Inequality(rng.normal(size=(2, n)), -1.0, 1.0, name="hard")
+    stack = qc.Stack([track, effort], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+    pq = stack.persistent()
+    pq.parametrize(2, {track: (np.zeros(4), rng.normal(size=(4, 2)))})
+    active = 0
+    for scale in (0.01, 0.1, 1.0, 10.0, 0.01):
+        theta = scale * rng.normal(size=2)
+        x = pq.solve_theta(theta).copy()
+        pq.write_tasks(theta)
+        ref = pq.solve().x
+        np.testing.assert_allclose(x, ref, atol=1e-9)
+        active += int(np.isclose(np.abs(x).max(), 1.0) or np.abs(hard.C @ x).max() > 1 - 1e-9)
+    assert 0 < active < 5  # both paths were exercised

@@ -190,11 +190,18 @@ class MPC:
         Carriage speed limit, m/s (the coordinator's 3 mm/s).
     solver : str
         Backend of ``method="hierarchical"`` (default daqp).
+    deadline : float, optional
+        Time budget of a step, s (e.g. ``125e-6`` at 8 kHz). A step whose QP answer comes
+        later uses the shadow fine PI's command with the phase held, as a failed step does,
+        and is counted in :attr:`late_steps`. Default ``None``: no deadline, so that a
+        simulation does not depend on the machine's speed.
 
     Attributes
     ----------
     fallback_steps : int
         Steps whose QP failed (the shadow fine PI answered).
+    late_steps : int
+        Steps whose QP missed ``deadline`` (the shadow fine PI answered).
     solve_times : list of float
         Wall time of each step's ``step`` call, s (state update + QP).
     """
@@ -208,6 +215,7 @@ class MPC:
         current: float = 1.5,
         max_speed: float = 3.0e-3,
         solver: str = "daqp",
+        deadline: float | None = None,
     ) -> None:
         if method not in ("weighted", "hierarchical"):
             raise ValueError(f"method must be 'weighted' or 'hierarchical', got {method!r}")
@@ -223,6 +231,10 @@ class MPC:
         self.current = positive("current", current)
         self.max_speed = positive("max_speed", max_speed)
         self.solver = solver
+        if deadline is not None:
+            deadline = positive("deadline", deadline)
+        self.deadline = deadline
+        self.late_steps = 0
         self.y_c_hat = 0.0
         self.fallback_steps = 0
         self.solve_times: list[float] = []
@@ -345,6 +357,7 @@ class MPC:
         self._shadow.reset(plant, fs, y0, r0)
         self.y_c_hat = y0 - self._xf[0]
         self.fallback_steps = 0
+        self.late_steps = 0
         self.solve_times = []
 
     def sync_tasks(self) -> None:
@@ -389,9 +402,11 @@ class MPC:
                 self.volts.lower[:] = self._vmin - self._v
                 self.volts.upper[:] = self._vmax - self._v
                 x = self.stack.solve(solver=self.solver, method="hierarchical").x
-            dv, da = float(x[0]), float(x[1])
-            v = self._v + dv
-            alpha = self._alpha + da
+            if self.deadline is not None and time.perf_counter() - t0 > self.deadline:
+                self.late_steps += 1
+                v, alpha = shadow_v, self._alpha
+            else:
+                v, alpha = self._v + float(x[0]), self._alpha + float(x[1])
         except (ValueError, RuntimeError):
             self.fallback_steps += 1
             v, alpha = shadow_v, self._alpha
