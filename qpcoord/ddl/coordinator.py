@@ -55,6 +55,7 @@ import math
 from ._check import finite, nonnegative, positive
 from .biquad import butterworth_sections, filter_sample
 from .fine import FineParams, fine_zoh
+from .pi import clamp_with_antiwindup
 
 __all__ = ["SisoCoordinator"]
 
@@ -200,17 +201,9 @@ class SisoCoordinator:
         if self.feedforward:
             u += (rc - self._yc0 - (alpha - self._alpha0) * self._m_per_rad) / self._kf
         integ_step = self._kih * e
-        v = u + integ_step
-        if v > self._vmax:
-            v = self._vmax
-            if integ_step < 0.0:
-                self._integ += integ_step
-        elif v < self._vmin:
-            v = self._vmin
-            if integ_step > 0.0:
-                self._integ += integ_step
-        else:
-            self._integ += integ_step
+        v, self._integ = clamp_with_antiwindup(
+            u + integ_step, self._integ, integ_step, self._vmin, self._vmax
+        )
         # advance the fine model with the applied voltage (estimate for the next period)
         a11, a12, a21, a22, b1, b2 = self._fz
         mf = self._mf

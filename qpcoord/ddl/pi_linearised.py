@@ -41,6 +41,7 @@ from scipy.linalg import expm
 from ._check import finite, nonnegative, positive
 from .biquad import butterworth_sections, filter_sample
 from .fine import fine_zoh
+from .pi import clamp_with_antiwindup
 
 __all__ = ["PILinearised"]
 
@@ -222,17 +223,7 @@ class PILinearised:
         if self.feedforward:
             u += (rc - pp) / self._kf
         ii = self._kih * e
-        v = u + ii
-        if v > self._vmax:
-            v = self._vmax
-            if ii < 0.0:
-                self._integ += ii
-        elif v < self._vmin:
-            v = self._vmin
-            if ii > 0.0:
-                self._integ += ii
-        else:
-            self._integ += ii
+        v, self._integ = clamp_with_antiwindup(u + ii, self._integ, ii, self._vmin, self._vmax)
         self._pp = pp + m01 * pv + b0 * fp_
         self._pv = m11 * pv + b1 * fp_
         a11, a12, a21, a22, b1f, b2f = self._fz

@@ -48,6 +48,7 @@ import numpy as np
 
 from ._check import finite, nonnegative, positive
 from .lqr import delay_margin, design_model, loop_margins
+from .pi import clamp_with_antiwindup
 
 __all__ = ["PQ"]
 
@@ -285,20 +286,9 @@ class PQ:
         # C2: PI with conditional integration
         ii = self._kih * e
         u2 = self._kp * e + self._integ + ii
-        v = self._vmid + u2
-        clipped = False
-        if v > self._vmax:
-            v = self._vmax
-            clipped = True
-            if ii < 0.0:
-                self._integ += ii
-        elif v < self._vmin:
-            v = self._vmin
-            clipped = True
-            if ii > 0.0:
-                self._integ += ii
-        else:
-            self._integ += ii
+        raw = self._vmid + u2
+        v, self._integ = clamp_with_antiwindup(raw, self._integ, ii, self._vmin, self._vmax)
+        clipped = v != raw
         # C1 = Q C2: low-pass (DF2T biquad) then the phase integrator (rate-limited)
         b0, b1, b2, a1, a2 = self._lp
         w = b0 * u2 + self._z1
