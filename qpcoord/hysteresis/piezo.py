@@ -23,13 +23,14 @@ sampling. ``x₀`` puts ``x = 0`` at ``u_min`` on the major loop.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 
 import numpy as np
 
 __all__ = ["BoucWenPiezo", "RelayPiezo"]
 
 
-class _Stack:
+class _Stack(ABC):
     """Per-sample plumbing shared by the synthetic stacks: range checks, output units."""
 
     u_min: float
@@ -55,11 +56,13 @@ class _Stack:
         self.stroke = self._advance_to(self.u_max)
         self.reset()
 
-    def _advance_to(self, u: float) -> float:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def _advance_to(self, u: float) -> float:
+        """Move the input to ``u`` (V) along the stack's own path; return ``x`` (m)."""
 
-    def reset(self) -> None:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def reset(self) -> None:
+        """Put the stack on its major loop at ``u_min`` (negative saturation)."""
 
     @property
     def x(self) -> float:
