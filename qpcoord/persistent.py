@@ -467,16 +467,13 @@ class PersistentQP:
         f += self._f0
         check = None
         if self._fused is not None:
-            Lb, lb0, GG, bb = self._fused
+            Lb, lb0, _, bb = self._fused
             k = self._bu.shape[0]
             np.dot(Lb, theta, out=bb)
             bb += lb0
             self._bu[:] = bb[:k]
             np.negative(bb[k:], out=self._bl)
-
-            def check(x, GG=GG, bb=bb):  # absolute test first, then the relative rule
-                return (GG @ x - bb).max() <= CHECK_TOL or self._feasible(x)
-
+            check = self._fused_check
         else:
             np.dot(self._Lu, theta, out=self._bu)
             self._bu += self._lu0
@@ -487,6 +484,11 @@ class PersistentQP:
             return x
         self.write_tasks(theta)
         return self._fallback().x
+
+    def _fused_check(self, x: np.ndarray) -> bool:
+        """``[G; −G] x ≤ [u; −l]`` to ``CHECK_TOL`` absolute, else the relative rule."""
+        _, _, GG, bb = self._fused
+        return (GG @ x - bb).max() <= CHECK_TOL or self._feasible(x)
 
     def write_tasks(self, theta: np.ndarray) -> None:
         """Give the parametrised tasks the values ``θ`` implies (the stack can then be
