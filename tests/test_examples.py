@@ -40,3 +40,16 @@ def test_write_json_is_atomic(tmp_path):
         write_json(target, {"a": object()})  # not serialisable: the old file stays whole
     assert '"a": 1' in target.read_text()
     assert not (tmp_path / "sub" / "summary.json.tmp").exists()
+
+
+def test_claim_rows_are_checked():
+    from qpcoord.report import claim
+
+    row = claim("x", "a claim", "Fig 1: 3", "3.0", "reproduced")
+    assert row["status"] == "reproduced" and row["note"] == ""
+    with pytest.raises(ValueError, match="status"):
+        claim("x", "a claim", "Fig 1", "3", "ok")
+    with pytest.raises(ValueError, match="note"):
+        claim("x", "a claim", "Fig 1", "3", "differs")
+    with pytest.raises(ValueError, match="measured"):
+        claim("x", "a claim", "Fig 1", " ", "reproduced")
