@@ -15,6 +15,15 @@ checked like it: bounds and hard constraints to the stack's tolerance. If the ba
 or the matrices have changed (checked every step against the set-up copy), the step falls
 back to ``stack.solve(method="weighted")`` -- recorded in ``Solution.info`` (``fallback``,
 ``setups``) -- so an unchecked answer is never returned.
+
+In the parametric form (:meth:`PersistentQP.parametrize`, right-hand sides and limits affine
+in a parameter ``θ``) the optimum is piecewise affine in ``θ``: affine on each *critical
+region*, the set of ``θ`` with the same active constraints (Bemporad, Morari, Dua &
+Pistikopoulos 2002). :meth:`PersistentQP.solve_theta` keeps a small cache of the regions it
+has met (the on-line "partial enumeration" of Pannocchia, Rawlings & Wright 2007): the last
+region's affine law and its KKT test -- primal feasibility of every row and the sign of every
+active row's multiplier -- are one matrix-vector product each, and the QP solver is called
+only when ``θ`` has left that region.
 """
 
 from __future__ import annotations
@@ -34,6 +43,19 @@ _INF = 1e30  # daqp's infinity
 
 #: daqp settings of the persistent workspace: the stack's first (exact) setting.
 DAQP_SETTINGS = dict(eps_prox=0.0, primal_tol=1e-10)
+
+#: Critical-region test tolerance: a cached region's law answers only if every row holds and
+#: every active multiplier has its sign to this absolute margin (task units); else the QP
+#: solver is called. Tighter than CHECK_TOL, so a region answer is the QP's optimum to
+#: rounding, not merely feasible.
+REGION_TOL = 1e-9
+
+#: Most critical regions kept per workspace (least recently used dropped first).
+REGION_CACHE = 64
+
+#: Regions tested per step before the QP solver is called, most recently used first (a
+#: trajectory that alternates between two or three active sets stays off the solver).
+REGION_TRIES = 8
 
 
 def _inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
@@ -90,6 +112,10 @@ class PersistentQP:
         self.model = None
         self.setups = 0
         self.fallbacks = 0
+        #: :meth:`solve_theta` steps answered by a cached critical region's affine law
+        #: (the unconstrained region included) and by the QP solver.
+        self.region_steps = 0
+        self.qp_steps = 0
         self.last: Solution | None = None
         P = stack._compiled
         P.refresh()
@@ -309,16 +335,21 @@ class PersistentQP:
         self._fill_limits(P)
         return self._solve_current()
 
-    def _solve_current(self, check=None) -> tuple[np.ndarray | None, int]:
+    def _solve_current(
+        self, check=None, unconstrained_first: bool = True
+    ) -> tuple[np.ndarray | None, int]:
         """The QP with the current ``_f``, ``_bu``, ``_bl``: unconstrained try, then daqp.
 
         ``check(x) -> bool`` replaces :meth:`_feasible` for daqp's answer (the parametric
-        path has a cheaper, equivalent one)."""
+        path has a cheaper, equivalent one). ``unconstrained_first=False`` skips the
+        unconstrained try (the caller made it). Sets ``_lam``: daqp's multipliers, or
+        ``None`` when the unconstrained optimum answered."""
         check = self._feasible if check is None else check
         n = self._n
+        self._lam = None
         # consecutive steps are alike: the unconstrained optimum is tried first only when
         # the previous step had no active constraint (daqp's multipliers all zero)
-        if self._chol is not None and self._try_unconstrained:
+        if self._chol is not None and self._try_unconstrained and unconstrained_first:
             z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
             if ok == 0:
                 np.negative(z, out=z)
@@ -333,6 +364,7 @@ class PersistentQP:
             x = np.asarray(y[:n], dtype=float)
             if check(x):
                 lam = info.get("lam")
+                self._lam = lam
                 self._try_unconstrained = lam is None or not lam.any()
                 if self._try_unconstrained and self._chol is not None:
                     # nothing active: the exact unconstrained optimum is the answer
@@ -441,15 +473,117 @@ class PersistentQP:
                 np.vstack((G, -G)),
                 np.empty(2 * k),
             )
+        # critical regions (module notes): possible when every limit row is a checked row
+        # and H has a Cholesky factor; rows with l(θ) ≡ u(θ) are equalities (no sign test)
+        self._regions: dict = {}
+        self._recent: list = [self._pz] if self._fused is not None and self._pz else []
+        self._seen: dict = {}  # active sets met once (an ordered set)
+        self._eq_rows = (
+            (self._lu0 == self._ll0) & (self._Lu == self._Ll).all(axis=1)
+            if self._fused is not None
+            else None
+        )
         self._p_version = self._version
         self._p_bounds = self._bounds_version
+
+    def _build_region(self, lam: np.ndarray):
+        """The affine law and KKT test of the critical region whose active rows are
+        ``lam``'s non-zero entries (daqp's sign: > 0 upper, < 0 lower), or ``None`` if the
+        active rows are linearly dependent (degenerate: left to the QP solver).
+
+        Null-space form, accurate when ``H`` is ill-conditioned: with ``G_Aᵀ = [Q₁ Q₂] R``
+        (QR), the active rows ``G_A x = b_A(θ) = c + M θ`` give
+        ``x = Q₁ R⁻ᵀ b_A + Q₂ y``, ``y`` minimises the cost on ``Q₂``'s span
+        (``Q₂ᵀ H Q₂ y = −Q₂ᵀ (H xₚ + f)``), and the multipliers solve
+        ``R ν = −Q₁ᵀ (H x + f)``; all are affine in θ. The region's test stacks every row's
+        margin ``[G; −G] x − [u; −l]`` and ``−sign·ν`` of every active inequality:
+        ``r0 + R θ ≤ REGION_TOL``."""
+        act = np.flatnonzero(lam)
+        if act.size == 0:
+            return self._pz
+        n, k = self._n, act.size
+        if k > n:
+            return None
+        up = lam[act] > 0
+        GA = self._G_check[act]
+        c = np.where(up, self._lu0[act], self._ll0[act])
+        M = np.where(up[:, None], self._Lu[act], self._Ll[act])
+        Q, Rq = np.linalg.qr(GA.T, mode="complete")
+        Rq = Rq[:k]
+        d = np.abs(np.diag(Rq))
+        if d.min() <= 1e-9 * d.max():  # dependent active rows
+            return None
+        Q1, Q2 = Q[:, :k], Q[:, k:]
+        T = Q1 @ np.linalg.solve(Rq.T, np.eye(k))  # x_p = T b_A
+        H = self._H[:n, :n]
+        xp0, Xp = T @ c, T @ M
+        f0, Ft = self._f0, self._Ft
+        if k < n:
+            Hr = Q2.T @ H @ Q2
+            Lr, info = lapack.dpotrf(Hr, lower=0, clean=1)
+            if info != 0:
+                return None
+            y0 = -lapack.dpotrs(Lr, Q2.T @ (H @ xp0 + f0), lower=0)[0]
+            Y = -lapack.dpotrs(Lr, Q2.T @ (H @ Xp + Ft), lower=0)[0]
+            x0, X = xp0 + Q2 @ y0, Xp + Q2 @ Y
+        else:
+            x0, X = xp0, Xp
+        nu0 = -np.linalg.solve(Rq, Q1.T @ (H @ x0 + f0))
+        Nu = -np.linalg.solve(Rq, Q1.T @ (H @ X + Ft))
+        Lb, lb0, GG, _ = self._fused
+        ineq = ~self._eq_rows[act]
+        sgn = np.where(up, -1.0, 1.0)[ineq]
+        with np.errstate(invalid="ignore"):
+            R = np.vstack((GG @ X - Lb, sgn[:, None] * Nu[ineq]))
+            r0 = np.concatenate((GG @ x0 - lb0, sgn * nu0[ineq]))
+        if not (np.isfinite(R).all() and np.isfinite(x0).all() and np.isfinite(X).all()):
+            return None
+        return (x0, X, r0, R)
+
+    def _learn_region(self, lam: np.ndarray | None) -> None:
+        """After a QP answer: make its critical region the one tried first next step. A
+        region is built the second time its active set is met (a set met once costs
+        nothing) and kept in a small LRU cache."""
+        if lam is None or not lam.any():
+            region = self._pz
+        else:
+            key = np.flatnonzero(lam).tobytes() + (lam[lam != 0] > 0).tobytes()
+            regions = self._regions
+            if key in regions:
+                region = regions.pop(key)
+                regions[key] = region  # most recently used last
+            elif key not in self._seen:  # first sighting: remembered, not built
+                self._seen[key] = None
+                if len(self._seen) > 4 * REGION_CACHE:
+                    del self._seen[next(iter(self._seen))]
+                return
+            else:
+                region = regions[key] = self._build_region(lam)
+                if len(regions) > REGION_CACHE:
+                    del regions[next(iter(regions))]
+        if region is not None:
+            self._use_region(region)
+
+    def _use_region(self, region) -> None:
+        """Put ``region`` first in the list of regions tried per step."""
+        recent = self._recent
+        for i, r in enumerate(recent):
+            if r is region:
+                del recent[i]
+                break
+        recent.insert(0, region)
+        del recent[REGION_TRIES:]
 
     def solve_theta(self, theta: np.ndarray) -> np.ndarray:
         """Checked ``x`` for the parameter ``θ`` declared by :meth:`parametrize` (hot loop).
 
-        On a failure the tasks are given the values ``θ`` implies and the step goes to
+        The last step's critical region is tried first (module notes; counted in
+        :attr:`region_steps`), then the QP solver, hot-started (:attr:`qp_steps`). On a
+        failure the tasks are given the values ``θ`` implies and the step goes to
         ``stack.solve(method="weighted")`` (counted in :attr:`fallbacks`).
         """
+        if self._pspec is None:
+            raise ValueError("solve_theta: call parametrize() first")
         P = self.stack._compiled
         if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
             P.refresh()
@@ -458,9 +592,18 @@ class PersistentQP:
             self._bounded and P.bounds.version != self._p_bounds
         ):
             self._build_parametric(P)
-        if self._pz is not None and self._try_unconstrained:
+        recent = self._recent
+        for i, region in enumerate(recent):
+            x0, X, r0, R = region
+            if (R @ theta + r0).max() <= REGION_TOL:  # NaN fails too
+                self.region_steps += 1
+                if i:
+                    recent.insert(0, recent.pop(i))
+                return x0 + X @ theta
+        if self._fused is None and self._pz is not None and self._try_unconstrained:
             z0, Z, e0, E = self._pz
-            if (E @ theta + e0).max() <= CHECK_TOL:  # NaN fails too
+            if (E @ theta + e0).max() <= CHECK_TOL:
+                self.region_steps += 1
                 return z0 + Z @ theta
         f = self._f[: self._n]
         np.dot(self._Ft, theta, out=f)
@@ -479,8 +622,12 @@ class PersistentQP:
             self._bu += self._lu0
             np.dot(self._Ll, theta, out=self._bl)
             self._bl += self._ll0
-        x, _ = self._solve_current(check)
+        # the region test already covered the unconstrained optimum when there is one
+        x, _ = self._solve_current(check, unconstrained_first=self._fused is None)
         if x is not None:
+            self.qp_steps += 1
+            if self._fused is not None and self._pz is not None:
+                self._learn_region(self._lam)
             return x
         self.write_tasks(theta)
         return self._fallback().x

@@ -204,3 +204,119 @@ def test_parametric_unconstrained_shortcut_matches_the_qp():
         np.testing.assert_allclose(x, ref, atol=1e-9)
         active += int(np.isclose(np.abs(x).max(), 1.0) or np.abs(hard.C @ x).max() > 1 - 1e-9)
     assert 0 < active < 5  # both paths were exercised
+
+
+def region_problem(seed: int, n: int = 8, p: int = 3):
+    """No soft inequality, bounds and hard rows, everything affine in θ: the critical-region
+    cache applies."""
+    rng = np.random.default_rng(seed)
+    track = qc.Equality(rng.normal(size=(5, n)), np.zeros(5), name="track")
+    effort = qc.Equality(np.eye(n), np.zeros(n), name="effort")
+    hard = qc.Inequality(rng.normal(size=(3, n)), -1.0, 1.0, name="hard")
+    stack = qc.Stack(
+        [track, effort],
+        bounds=qc.Bounds(-0.5 * np.ones(n), 0.5 * np.ones(n)),
+        constraints=[hard],
+        weight_ratio=1e-2,
+    )
+    pq = stack.persistent()
+    M = rng.normal(size=(5, p))
+    pq.parametrize(
+        p,
+        {
+            track: (np.zeros(5), M),
+            hard: ((-np.ones(3), np.zeros((3, p))), (np.ones(3), 0.2 * rng.normal(size=(3, p)))),
+        },
+    )
+    return stack, pq, rng, hard
+
+
+def reference_x(stack, pq, theta):
+    """The same QP through the task form: the daqp workspace, no region law (the general
+    ``Stack.solve(method="weighted")`` path opens hard rows by 1e-6, so it is not exact)."""
+    pq.write_tasks(theta)
+    return pq.solve().x
+
+
+def oracle_x(stack, pq, hard, theta):
+    """The same weighted QP posed in cvxpy (Clarabel, tight tolerances)."""
+    track = stack.levels[0][0]
+    pq.write_tasks(theta)
+    n = track.A.shape[1]
+    H = track.A.T @ track.A + stack.weight_ratio * np.eye(n)
+    eps = stack.regularization * max(1.0, float(H.diagonal().max()))
+    x = cp.Variable(n)
+    cost = (
+        cp.sum_squares(track.A @ x - track.b)
+        + stack.weight_ratio * cp.sum_squares(x)
+        + eps * cp.sum_squares(x)
+    )
+    cons = [hard.C @ x <= hard.upper, hard.C @ x >= hard.lower, cp.abs(x) <= 0.5]
+    cp.Problem(cp.Minimize(cost), cons).solve(
+        solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12
+    )
+    return x.value
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_critical_regions_answer_the_same_qp(seed):
+    """A slow θ trajectory through many active sets: the cached regions answer most steps
+    and every answer equals the daqp workspace's (1e-9) and cvxpy's (1e-6) solution."""
+    stack, pq, rng, hard = region_problem(seed)
+    theta = np.zeros(3)
+    direction = rng.normal(size=3)
+    worst = worst_oracle = 0.0
+    for k in range(300):
+        theta = 3.0 * np.sin(0.02 * k) * direction + 0.3 * np.sin(0.11 * k)
+        x = pq.solve_theta(theta).copy()
+        worst = max(worst, float(np.abs(x - reference_x(stack, pq, theta)).max()))
+        if k % 30 == 0:
+            err = np.abs(x - oracle_x(stack, pq, hard, theta)).max()
+            worst_oracle = max(worst_oracle, float(err))
+    assert worst < 1e-9
+    assert worst_oracle < 1e-6
+    assert pq.region_steps > 150 and pq.qp_steps > 0 and pq.fallbacks == 0
+    assert len(pq._regions) >= 2  # constrained regions were learnt, not only the free one
+
+
+def test_alternating_active_sets_stay_off_the_solver():
+    """θ jumping between two points with different active sets: after each region is
+    learnt (second sighting) no QP is solved any more."""
+    stack, pq, rng, _ = region_problem(4)
+    d = rng.normal(size=3)
+    a, b = 2.5 * d / np.linalg.norm(d), -2.5 * d / np.linalg.norm(d)
+    for _ in range(6):
+        pq.solve_theta(a)
+        pq.solve_theta(b)
+    qp = pq.qp_steps
+    for _ in range(20):
+        xa = pq.solve_theta(a).copy()
+        xb = pq.solve_theta(b).copy()
+    assert pq.qp_steps == qp
+    assert len(pq._regions) == 2  # two different constrained regions
+    np.testing.assert_allclose(xa, reference_x(stack, pq, a), atol=1e-7)
+    np.testing.assert_allclose(xb, reference_x(stack, pq, b), atol=1e-7)
+
+
+def test_dependent_active_rows_are_left_to_the_solver():
+    """A hard row duplicated: at a point where both copies are active the region is
+    degenerate (not cached) and the solver answers, correctly."""
+    n = 4
+    A = np.eye(n)
+    track = qc.Equality(A, np.zeros(n), name="track")
+    row = np.ones((1, n))
+    hard = qc.Inequality(np.vstack((row, row)), -np.inf, 1.0, name="twice the same row")
+    stack = qc.Stack([track], bounds=qc.Bounds(-5 * np.ones(n), 5 * np.ones(n)), constraints=[hard])
+    pq = stack.persistent()
+    pq.parametrize(1, {track: (np.zeros(n), np.ones((n, 1)))})
+    for t in (2.0, 2.0, 2.0, 2.1):
+        x = pq.solve_theta(np.array([t])).copy()
+        np.testing.assert_allclose(row @ x, 1.0, atol=1e-9)  # the sum is held at its limit
+        np.testing.assert_allclose(x, np.full(n, 0.25), atol=1e-7)
+    assert pq.fallbacks == 0
+
+
+def test_solve_theta_needs_parametrize():
+    stack, tasks, rng = build(3)
+    with pytest.raises(ValueError, match="parametrize"):
+        stack.persistent().solve_theta(np.zeros(2))
