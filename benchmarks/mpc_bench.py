@@ -8,7 +8,9 @@ For each method (``weighted`` on the persistent daqp workspace, ``hierarchical``
 ``Stack.solve``) the MPC runs closed loop on the 250 Hz Kolmogorov preset and on a 5 mm step
 (constraints active: stroke margin and synchronism rate), and ``MPC.step`` is timed on every
 call (``MPC.solve_times``). BLAS is limited to one thread. The table reports median, p99 and
-max per step, the share of steps over 125 µs, and the run's RMSE and fallback steps. A
+max per step, the share of steps over 125 µs, the run's RMSE and fallback steps, and how
+many steps a cached critical region answered (``PersistentQP.region_steps``) and how many
+went to daqp (``qp_steps``). A
 second table solves the MPC's QPs of a Kolmogorov run with every installed backend through
 the general ``Stack.solve(method="weighted")`` path (µs per QP, largest cost deviation from
 the persistent daqp answer, relative to the cost of not moving). This script reports; it
@@ -52,6 +54,9 @@ def run_case(method: str, case: str, steps: int) -> dict:
         "rmse_nm": float(run.metrics["rmse"] * 1e9),
         "saturated_steps": int(run.metrics["saturated_steps"]),
         "fallback_steps": int(mpc.fallback_steps),
+        # weighted: steps answered by a cached critical region / by daqp
+        "region_steps": int(mpc._pq.region_steps) if mpc._pq is not None else 0,
+        "qp_steps": int(mpc._pq.qp_steps) if mpc._pq is not None else int(t.size),
     }
 
 
@@ -129,7 +134,8 @@ def main(argv=None) -> int:
     print(f"python {platform.python_version()} on {platform.machine()}, {sys.platform}")
     head = (
         f"{'method':<13} {'case':<11} {'steps':>6} {'median µs':>10} {'p99 µs':>8} "
-        f"{'max µs':>8} {'>125µs':>7} {'RMSE nm':>9} {'sat':>4} {'fallb':>5}"
+        f"{'max µs':>8} {'>125µs':>7} {'RMSE nm':>9} {'sat':>4} {'fallb':>5} "
+        f"{'region':>6} {'QP':>6}"
     )
     print(head)
     print("-" * len(head))
@@ -137,7 +143,8 @@ def main(argv=None) -> int:
         print(
             f"{r['method']:<13} {r['case']:<11} {r['steps']:>6} {r['median_us']:>10.1f} "
             f"{r['p99_us']:>8.1f} {r['max_us']:>8.0f} {100 * r['over_budget']:>6.2f}% "
-            f"{r['rmse_nm']:>9.1f} {r['saturated_steps']:>4} {r['fallback_steps']:>5}"
+            f"{r['rmse_nm']:>9.1f} {r['saturated_steps']:>4} {r['fallback_steps']:>5} "
+            f"{r['region_steps']:>6} {r['qp_steps']:>6}"
         )
     with threadpool_limits(limits=1):
         brows = backend_rows(steps // 5)

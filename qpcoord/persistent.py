@@ -29,6 +29,7 @@ only when ``θ`` has left that region.
 from __future__ import annotations
 
 import time
+from operator import attrgetter
 
 import numpy as np
 from scipy.linalg import lapack
@@ -40,6 +41,7 @@ from .tasks import Equality
 __all__ = ["PersistentQP"]
 
 _INF = 1e30  # daqp's infinity
+_MATRIX_VERSION = attrgetter("matrix_version")
 
 #: daqp settings of the persistent workspace: the stack's first (exact) setting.
 DAQP_SETTINGS = dict(eps_prox=0.0, primal_tol=1e-10)
@@ -66,6 +68,12 @@ def _inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
         (lo - v <= CHECK_TOL * np.maximum(1.0, np.abs(lo))).all()
         and (v - hi <= CHECK_TOL * np.maximum(1.0, np.abs(hi))).all()
     )
+
+
+def _region(x0, X, r0, R) -> tuple:
+    """A critical region as tested per step: ``(m, [R; X], [r0; x0])`` with ``m`` test rows
+    (``r0 + R θ ≤ REGION_TOL`` inside) and the law ``x = x0 + X θ`` below them."""
+    return (R.shape[0], np.ascontiguousarray(np.vstack((R, X))), np.concatenate((r0, x0)))
 
 
 class PersistentQP:
@@ -125,7 +133,7 @@ class PersistentQP:
     def _versions(self, P) -> list:
         """Matrix versions of every task (``update``/``_assign`` of a matrix or weight bump
         them): cheap change detection."""
-        return [t.matrix_version for t in self._all_tasks]
+        return list(map(_MATRIX_VERSION, self._all_tasks))
 
     def _setup(self, P) -> None:
         self._all_tasks = [t for L in (*P.levels, P.hard) for t in (*L.eqs, *L.ineqs)]
@@ -476,7 +484,8 @@ class PersistentQP:
         # critical regions (module notes): possible when every limit row is a checked row
         # and H has a Cholesky factor; rows with l(θ) ≡ u(θ) are equalities (no sign test)
         self._regions: dict = {}
-        self._recent: list = [self._pz] if self._fused is not None and self._pz else []
+        self._free = None if self._pz is None else _region(*self._pz)  # nothing active
+        self._recent: list = [self._free] if self._fused is not None and self._pz else []
         self._seen: dict = {}  # active sets met once (an ordered set)
         self._eq_rows = (
             (self._lu0 == self._ll0) & (self._Lu == self._Ll).all(axis=1)
@@ -500,7 +509,7 @@ class PersistentQP:
         ``r0 + R θ ≤ REGION_TOL``."""
         act = np.flatnonzero(lam)
         if act.size == 0:
-            return self._pz
+            return self._free
         n, k = self._n, act.size
         if k > n:
             return None
@@ -538,14 +547,14 @@ class PersistentQP:
             r0 = np.concatenate((GG @ x0 - lb0, sgn * nu0[ineq]))
         if not (np.isfinite(R).all() and np.isfinite(x0).all() and np.isfinite(X).all()):
             return None
-        return (x0, X, r0, R)
+        return _region(x0, X, r0, R)
 
     def _learn_region(self, lam: np.ndarray | None) -> None:
         """After a QP answer: make its critical region the one tried first next step. A
         region is built the second time its active set is met (a set met once costs
         nothing) and kept in a small LRU cache."""
         if lam is None or not lam.any():
-            region = self._pz
+            region = self._free
         else:
             key = np.flatnonzero(lam).tobytes() + (lam[lam != 0] > 0).tobytes()
             regions = self._regions
@@ -593,13 +602,14 @@ class PersistentQP:
         ):
             self._build_parametric(P)
         recent = self._recent
-        for i, region in enumerate(recent):
-            x0, X, r0, R = region
-            if (R @ theta + r0).max() <= REGION_TOL:  # NaN fails too
+        for i, (m, W, w0) in enumerate(recent):
+            v = W @ theta  # [test rows; x]: one matvec gives both
+            v += w0
+            if v[:m].max() <= REGION_TOL:  # NaN fails too
                 self.region_steps += 1
                 if i:
                     recent.insert(0, recent.pop(i))
-                return x0 + X @ theta
+                return v[m:]
         if self._fused is None and self._pz is not None and self._try_unconstrained:
             z0, Z, e0, E = self._pz
             if (E @ theta + e0).max() <= CHECK_TOL:
