@@ -15,6 +15,7 @@ from .ik import IK, ik_step, inverse_kinematics
 from .kinematic_tasks import (
     JointLimits,
     OneFormTask,
+    PositionBand,
     PositionTask,
     PostureTask,
     PotentialTask,
@@ -37,6 +38,7 @@ __all__ = [
     "JointLimits",
     "METHODS",
     "OneFormTask",
+    "PositionBand",
     "PositionTask",
     "PostureTask",
     "PotentialTask",

@@ -7,6 +7,7 @@ with ``update(q, t, dt, reference)``, so a stack built once is re-solved every c
 
 =====================  =============================================================
 :class:`PositionTask`  ``J q̇ = ẏ_ref + K (y_ref − y)`` (closed-loop IK, CLIK)
+:class:`PositionBand`  ``K (y_lo − y) ≤ J q̇ ≤ K (y_hi − y)`` (stay in a box, any level)
 :class:`PostureTask`   ``q̇ = K (q_ref − q)``
 :class:`PotentialTask` ``q̇ = −K ∇p(q)`` (gradient descent on a potential, chapter 5)
 :class:`OneFormTask`   ``ω(q) q̇ = rate`` (a 1-form, chapter 4; default rate 0)
@@ -33,6 +34,7 @@ from .tasks import Equality, Inequality
 __all__ = [
     "KinematicTask",
     "PositionTask",
+    "PositionBand",
     "PostureTask",
     "PotentialTask",
     "OneFormTask",
@@ -165,6 +167,72 @@ class PositionTask(KinematicTask):
         y_ref, v_ref = self.reference_at(t, reference)
         y, J = self.robot._kinematics(q)
         return self.task._assign(J, v_ref + self.gain * (y_ref - y))
+
+
+class PositionBand(KinematicTask):
+    """Keep the end effector in a box: ``K (y_lo − y) ≤ J q̇ ≤ K (y_hi − y)`` per row.
+
+    An :class:`~qpcoord.Inequality` task: at a soft level it is met when the levels above
+    allow it (its violation is minimised, strictly below them and above the levels
+    under it); as a hard constraint (``IK(..., constraints=[band])``) it always holds. With
+    ``K·dt = 1`` one Euler step lands at most on the face; a point already outside is
+    pushed back at rate ``K``.
+
+    Parameters
+    ----------
+    robot : Robot
+    lower, upper : array_like, shape (robot.m,)
+        Box faces (m); ``-inf`` / ``inf`` for a free side (e.g. only ``z ≥ 0.2``:
+        ``lower=[-inf, -inf, 0.2]``, ``upper=inf``). Scalars are broadcast.
+    gain : float
+        ``K`` (1/s), default 10.
+    weight : float or array_like
+        Row weights inside the level.
+    name : str
+
+    Raises
+    ------
+    ValueError
+        Faces of the wrong size, NaN, or ``lower > upper`` on a row; a bad gain.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        lower=-np.inf,
+        upper=np.inf,
+        gain: float = 10.0,
+        weight=1.0,
+        name: str = "position band",
+    ) -> None:
+        self.robot = robot
+        self.gain = _gain(gain)
+        m = robot.m
+        faces = []
+        for what, value in (("lower", lower), ("upper", upper)):
+            try:
+                arr = np.broadcast_to(np.asarray(value, dtype=float), (m,)).copy()
+            except (ValueError, TypeError):
+                arr = None
+            if arr is None or np.isnan(arr).any():
+                raise ValueError(
+                    f"PositionBand {what} must have {m} numbers (m, ±inf allowed), got {value!r}"
+                )
+            faces.append(arr)
+        self.lower, self.upper = faces
+        bad = np.flatnonzero(self.lower > self.upper)
+        if bad.size:
+            raise ValueError(
+                f"PositionBand: lower > upper on row(s) {bad.tolist()}: "
+                f"{self.lower[bad]} > {self.upper[bad]}"
+            )
+        self.task = Inequality(np.zeros((m, robot.nq)), -np.inf, np.inf, weight, name)
+
+    def _refresh(self, q, t, dt, reference) -> Inequality:
+        y, J = self.robot._kinematics(q)
+        k = self.gain
+        with np.errstate(invalid="ignore"):  # inf − y stays inf
+            return self.task._assign(k * (self.lower - y), k * (self.upper - y), C=J)
 
 
 class PostureTask(KinematicTask):

@@ -207,7 +207,11 @@ class Circle(Path):
     ) -> None:
         self.center = np.array(center, dtype=float).reshape(-1)
         if self.center.shape != (2,) or not np.all(np.isfinite(self.center)):
-            raise ValueError(f"center must be 2 finite numbers (m), got {center!r}")
+            raise ValueError(
+                f"center must be 2 finite numbers (m), got {center!r}: Circle is the planar "
+                "circle of Eq. 5.1; for a 3-D end effector use "
+                "qc.paths.HorizontalCircle(start, radius, period)"
+            )
         self.radius = _finite(radius, "radius", positive=True)
         self.period = _finite(period, "period", positive=True)
         self.phase = _finite(phase, "phase")

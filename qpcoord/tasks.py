@@ -280,11 +280,17 @@ class Inequality(_Task):
             self.matrix_version += 1
         return self
 
-    def _assign(self, lower: np.ndarray, upper: np.ndarray) -> Inequality:
-        """Trusted per-step path: new bounds of the same length (NaN and order checked)."""
+    def _assign(self, lower: np.ndarray, upper: np.ndarray, C=None) -> Inequality:
+        """Trusted per-step path: new bounds of the same length (NaN and order checked) and
+        optionally a new ``C`` of the same shape (finiteness checked)."""
         if _bad_box(lower, upper):
             _check_order(lower, upper, self.label)
             raise ValueError(f"{self.label}: bounds contain NaN or ±inf on the wrong side")
+        if C is not None:
+            if not np.isfinite(C.sum()):
+                raise ValueError(f"{self.label}: C contains a non-finite value")
+            self.C[...] = C
+            self.matrix_version += 1
         self.lower[...] = lower
         self.upper[...] = upper
         return self

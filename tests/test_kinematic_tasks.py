@@ -322,6 +322,56 @@ def test_velocity_limits_bad_limit(planar, limit):
 
 
 # ---------------------------------------------------------------------------------------
+# PositionBand
+# ---------------------------------------------------------------------------------------
+
+
+def test_position_band_rows(panda):
+    band = qc.PositionBand(panda, lower=[-np.inf, -0.1, 0.3], upper=[0.5, np.inf, np.inf], gain=4.0)
+    task = band.update(PANDA_Q)
+    y, J = panda.position(PANDA_Q), panda.jacobian(PANDA_Q)
+    np.testing.assert_array_equal(task.C, J)
+    np.testing.assert_allclose(task.lower, [-np.inf, 4.0 * (-0.1 - y[1]), 4.0 * (0.3 - y[2])])
+    np.testing.assert_allclose(task.upper, [4.0 * (0.5 - y[0]), np.inf, np.inf])
+    version = task.matrix_version
+    band.update(PANDA_Q + 0.1)
+    assert task.matrix_version > version  # C changed: a persistent workspace sees it
+
+
+@pytest.mark.parametrize(
+    ("lower", "upper", "message"),
+    [
+        ([0.0, 0.0], 1.0, "lower must have 3"),
+        (0.0, [np.nan, 1.0, 1.0], "upper must have 3"),
+        ([0.0, 2.0, 0.0], 1.0, r"lower > upper on row\(s\) \[1\]"),
+    ],
+)
+def test_position_band_bad_faces(panda, lower, upper, message):
+    with pytest.raises(ValueError, match=message):
+        qc.PositionBand(panda, lower=lower, upper=upper)
+
+
+def test_position_band_in_a_three_level_panda_stack(panda):
+    """Three levels on the Panda: z ≥ floor (priority 0), a target 5 cm below the floor
+    (priority 1), posture (priority 2). The end effector reaches the target's x and y and
+    stops on the floor."""
+    q = PANDA_Q.copy()
+    y0 = panda.position(q)
+    floor = y0[2] - 0.05
+    target = y0 + [0.05, 0.05, -0.10]  # 5 cm below the floor
+    band = qc.PositionBand(panda, lower=[-np.inf, -np.inf, floor], gain=50.0)
+    ee = qc.PositionTask(panda, target=target, gain=20.0)
+    ik = qc.IK(panda, [band, ee, qc.PostureTask(panda, q, gain=1.0)], dt=1e-3)
+    for _ in range(1500):
+        qdot, sol = ik.step(q)
+        q = q + 1e-3 * qdot
+    y = panda.position(q)
+    assert y[2] >= floor - 1e-4  # the band (priority 0) holds
+    np.testing.assert_allclose(y[:2], target[:2], atol=1e-4)  # x, y reached
+    assert abs(y[2] - floor) < 1e-3  # z stops on the floor, as close as it can
+
+
+# ---------------------------------------------------------------------------------------
 # update() input checks, for every kind of task
 # ---------------------------------------------------------------------------------------
 
@@ -332,6 +382,7 @@ TASK_FACTORIES = {
     "one-form": lambda r: qc.OneFormTask(r, [1.0, 0.0, 1.0]),
     "joint-limits": lambda r: qc.JointLimits(r, lower=-1.0, upper=1.0),
     "velocity-limits": lambda r: qc.VelocityLimits(r, 1.0),
+    "position-band": lambda r: qc.PositionBand(r, lower=[0.0, -np.inf], upper=2.0),
 }
 
 
