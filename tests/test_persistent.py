@@ -5,6 +5,8 @@ from __future__ import annotations
 import cvxpy as cp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import qpcoord as qc
 from qpcoord.persistent import PersistentQP
@@ -320,3 +322,22 @@ def test_solve_theta_needs_parametrize():
     stack, tasks, rng = build(3)
     with pytest.raises(ValueError, match="parametrize"):
         stack.persistent().solve_theta(np.zeros(2))
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    thetas=st.lists(
+        st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3), min_size=2, max_size=12
+    ),
+)
+def test_region_answers_equal_the_solver_property(seed, thetas):
+    """Any θ sequence (each θ repeated so that regions get built and then used): every
+    answer equals the daqp workspace's solution of the same QP."""
+    stack, pq, _, _ = region_problem(seed)
+    for theta in thetas:
+        theta = np.array(theta)
+        for _ in range(3):
+            x = pq.solve_theta(theta).copy()
+        np.testing.assert_allclose(x, reference_x(stack, pq, theta), atol=1e-8)
+    assert pq.fallbacks == 0
