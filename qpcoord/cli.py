@@ -6,6 +6,7 @@
 ``qpcoord bench ik``       Panda differential IK, qpcoord vs Pink, per-step times and errors
 ``qpcoord ddl track``      DDL coordinator on Kolmogorov OPD references, metrics per seed
 ``qpcoord ddl compare``    every DDL controller on the same cases: Table 6.1 and 6.2 forms
+``qpcoord reproduce``      run the chapters' reproductions, write report.md / report.html
 """
 
 from __future__ import annotations
@@ -84,7 +85,12 @@ def _cmd_ddl_track(args: argparse.Namespace) -> int:
         r = ddl.kolmogorov_opd(args.duration, args.fs, seed=seed, preset=args.preset)
         t0 = time.perf_counter()
         run = ddl.simulate(
-            ddl.DualStage(), ddl.SisoCoordinator(), r, args.fs, seed=seed, progress=True
+            ddl.DualStage(),
+            ddl.SisoCoordinator(),
+            r,
+            args.fs,
+            seed=seed,
+            progress=sys.stderr.isatty(),  # a \r progress line: terminals only
         )
         m = run.metrics
         print(
@@ -111,12 +117,46 @@ def _cmd_ddl_compare(args: argparse.Namespace) -> int:
             duration=duration,
             fs=args.fs,
             step_duration=step_duration,
-            progress=True,
+            progress=sys.stderr.isatty(),
         )
     print(format_table(rows))
     print()
     print(format_grid(rows))
     return 0
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from .reproduce import ExamplesNotFoundError, run
+
+    try:
+        report = run(
+            chapters=args.chapters or None,
+            out=args.out,
+            quick=args.quick,
+            jobs=args.jobs,
+            timeout=args.timeout,
+            examples_dir=args.examples,
+            progress=not args.no_progress,
+            bench=not args.no_bench,
+        )
+    except ExamplesNotFoundError as exc:
+        print(f"qpcoord: error: {exc}", file=sys.stderr)
+        return 2
+    c = report.counts
+    print(f"{'script':<22} {'chapter':<7} {'status':<8} {'wall s':>7} {'CPU s':>7}")
+    for r in sorted(report.results, key=lambda r: -r.seconds):
+        cpu = "-" if r.cpu_seconds is None else f"{r.cpu_seconds:.1f}"
+        print(f"{r.name:<22} {r.chapter:<7} {r.status:<8} {r.seconds:7.1f} {cpu:>7}")
+    print(
+        f"{c['ok']} of {c['scripts']} scripts ran in {report.seconds:.1f} s; claims: "
+        + ", ".join(
+            f"{c[s]} {s}" for s in ("reproduced", "differs", "inconclusive", "not in thesis")
+        )
+    )
+    for r in report.failed:
+        print(f"  {r.name}: {r.status}: {r.error}", file=sys.stderr)
+    print(f"report: {report.markdown}\n        {report.html}")
+    return 0 if report.ok else 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -158,6 +198,18 @@ def build_parser() -> argparse.ArgumentParser:
     dc.add_argument("--duration", type=float, default=10.0, help="tracking seconds (10)")
     dc.add_argument("--fs", type=float, default=8000.0, help="control rate, Hz (8000)")
     dc.set_defaults(func=_cmd_ddl_compare)
+    rp = sub.add_parser("reproduce", help="run the thesis reproductions, write one report")
+    rp.add_argument(
+        "chapters", nargs="*", help="core, 4, 5, 6, A, B, C (also ch4, appA...; default: all)"
+    )
+    rp.add_argument("--out", default="reproduce-out", help="output folder (reproduce-out)")
+    rp.add_argument("--quick", action="store_true", help="short runs (CI, < 2 min on 2 cores)")
+    rp.add_argument("--jobs", type=int, default=None, help="scripts at once (default: cores)")
+    rp.add_argument("--timeout", type=float, default=None, help="s per script (300 / 3600)")
+    rp.add_argument("--examples", default=None, help="examples folder (default: the repo's)")
+    rp.add_argument("--no-bench", action="store_true", help="skip the solver comparison")
+    rp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    rp.set_defaults(func=_cmd_reproduce)
     return p
 
 
