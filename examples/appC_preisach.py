@@ -42,7 +42,7 @@ import numpy as np
 from scipy import signal
 
 from qpcoord import hysteresis as hy
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 FS = 5000.0  # Hz, lab sampling rate (thesis §6.2)
 LEVELS = np.linspace(0.0, 10.0, 21)  # V, identification mesh
@@ -112,6 +112,129 @@ def per_sample_us(fn, values, repeats: int = 5) -> float:
             fn(v)
         times.append((time.perf_counter() - t0) / len(values))
     return float(np.median(times)) * 1e6
+
+
+def preisach_claims(summary: dict, sine_s: float, stoch_s: float) -> list[dict]:
+    """Claim rows (``qpcoord.report.claim``) for appendix C, Figs C.7–C.10.
+
+    Judged on the default synthetic stack (``RelayPiezo``, static case). The sine's error
+    is periodic after its first period, so any run with ≥ 1 period after the first decides
+    the sine rows; the stochastic rows need the full 20 s record (``--quick``: 2 s).
+    """
+    plants = summary["plants"]
+    relay = plants["relay"]
+    bw = plants.get("bouc_wen")
+    synthetic = (
+        " The plant is synthetic, not the thesis's S-325: how close the compensated error "
+        "comes to zero is set by how far the stack departs from a Preisach system, which is "
+        "our modelling choice (relay stack: 3000 relays off the mesh + 4 % Bouc–Wen)."
+    )
+    out = []
+    e = relay["sine_static"]
+    lin, comp = e["linear"]["rms_nm"], e["compensated"]["rms_nm"]
+    b = bw["sine_static"] if bw else None
+    extra = (
+        f"; pure Bouc–Wen stack {b['linear']['rms_nm']:.0f} → "
+        f"{b['compensated']['rms_nm']:.0f} nm (×{b['ratio_rms']:.1f})"
+        if b
+        else ""
+    )
+    sine_ok = sine_s >= 2.0  # the first period is excluded
+    ok = e["ratio_rms"] >= 902.0 / 79.0
+    st = ("reproduced" if ok else "differs") if sine_ok else "inconclusive"
+    out.append(
+        claim(
+            "figC.8-sine-improvement",
+            "The inverse Preisach compensator cuts the open-loop error on a 1 Hz sine by an "
+            "order of magnitude (902 → 79 nm rms, ×11.4).",
+            "App. C.3, Figs C.7–C.8: 902 → ≈ 79 nm rms, max ≈ 150 nm (hardware, piezo alone)",
+            f"relay stack {lin:.0f} → {comp:.1f} nm rms (×{e['ratio_rms']:.1f}), max "
+            f"{e['compensated']['max_abs_nm']:.0f} nm{extra}",
+            st,
+            "Criterion: reduction factor on the relay stack ≥ 902/79 = 11.4. The uncompensated "
+            "error is comparable to the thesis's (its size is set by the synthetic stack's "
+            "≈ 10 % loop width)."
+            + (
+                f" The pure Bouc–Wen stack (minor loops that do not close, harsher than a real "
+                f"stack) gains ×{b['ratio_rms']:.1f}: the result depends on the stack."
+                if b
+                else ""
+            )
+            + synthetic
+            + (
+                " This run has no full sine period after the first: a ≥ 2 s sine decides."
+                if st == "inconclusive"
+                else ""
+            ),
+        )
+    )
+    ok = abs(comp - 79.0) <= 0.3 * 79.0
+    st = ("reproduced" if ok else "differs") if sine_ok else "inconclusive"
+    out.append(
+        claim(
+            "figC.8-sine-residual",
+            "With compensation the 1 Hz sine is tracked open loop to ≈ 79 nm rms.",
+            "App. C.3, Fig C.8: ≈ 79 nm rms, max ≈ 150 nm (1.1 % of the stroke)",
+            f"{comp:.1f} nm rms, max {e['compensated']['max_abs_nm']:.0f} nm (relay stack)",
+            st,
+            "Criterion: within ±30 % of 79 nm."
+            + (
+                synthetic + " The hardware's 79 nm is a property of the real stack and is not "
+                "reproducible without it."
+                if st == "differs"
+                else ""
+            )
+            + (
+                " This run has no full sine period after the first: a ≥ 2 s sine decides."
+                if st == "inconclusive"
+                else ""
+            ),
+        )
+    )
+    e = relay["stochastic_static"]
+    lin, comp = e["linear"]["rms_nm"], e["compensated"]["rms_nm"]
+    lin_m, comp_m = e["linear"]["rms_about_mean_nm"], e["compensated"]["rms_about_mean_nm"]
+    full = stoch_s >= 20.0
+    short = f" This run's stochastic record is {stoch_s:g} s; the full run (20 s) decides."
+    ok = comp <= (1 - 0.67) * lin
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "figC.10-stochastic-improvement",
+            "On a stochastic signal (2 µm peak-to-peak) the compensator reduces the open-loop "
+            "error by about 67 %.",
+            "App. C.3, Figs C.9–C.10: 134 → 44 nm rms (−67 %), max ≈ 120 nm",
+            f"relay stack {lin:.0f} → {comp:.1f} nm rms (−{100 * (1 - comp / lin):.0f} %); "
+            f"about the mean {lin_m:.0f} → {comp_m:.1f} nm",
+            st,
+            "Criterion: compensated ≤ 33 % of uncompensated (raw rms)."
+            + synthetic
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    ok = abs(comp - 44.0) <= 0.3 * 44.0 and abs(lin - 134.0) <= 0.3 * 134.0
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "figC.10-stochastic-levels",
+            "Open-loop errors on the stochastic signal: 134 nm rms without, 44 nm with "
+            "compensation.",
+            "App. C.3, Fig C.10: 134 → 44 nm rms",
+            f"{lin:.0f} → {comp:.1f} nm rms (about the mean {lin_m:.0f} → {comp_m:.1f} nm)",
+            st,
+            "Criterion: both within ±30 % of the thesis."
+            + (
+                " Our raw uncompensated error is dominated by the static offset of the linear "
+                "command at mid-stroke (the thesis does not say how its linear command was "
+                "calibrated; ours is the line through the major loop's end points); about the "
+                f"mean it is {lin_m:.0f} nm." + synthetic
+                if st == "differs"
+                else ""
+            )
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    return out
 
 
 def main(argv=None) -> int:
@@ -233,6 +356,10 @@ def main(argv=None) -> int:
         f"evaluate {vec_us:.2f} µs (stochastic input, 10000 samples), "
         f"{timing['evaluate_vectorised_us_per_sample_sine']:.3f} µs (sine input)"
     )
+
+    summary["claims"] = preisach_claims(summary, sine_s, stoch_s)
+    for c in summary["claims"]:
+        say(f"claim {c['id']}: {c['measured']} → {c['status']}")
 
     try:
         from qpcoord.figures import _pyplot, save

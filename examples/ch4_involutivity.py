@@ -23,6 +23,12 @@ Measured (full run, 25 × 25 grids, 20 points of one period of the 5R path):
   path (not involutive); of the Thm 4.2 dual fields ≤ 5.7e-8 (the finite-difference
   floor of the Procrustes-aligned basis): involutive.
 
+Claims (``summary["claims"]``, computed from the run): Lemma 4.1's determinant is non-zero
+and equals the printed ``−(1 + q₁²)²`` up to the bracket's sign convention; Ex 4.3's
+determinant is non-zero; Eqs 4.6–4.7 against ``J⁺e₁, J⁺e₂`` (differs: Eq 4.6's third row
+has the wrong sign); the Thm 4.2 fields are involutive and the J⁺-pulled sphere basis is
+not (Ex 4.4).
+
 Run: ``python examples/ch4_involutivity.py [--quick] [--out DIR]``.
 """
 
@@ -35,9 +41,29 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord import geometry as g
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
+DET_MIN = 1e-6  # |det[f1, f2, [f1, f2]]| above this: not involutive (rounding is ~1e-15)
+DEFECT_FLOOR = 1e-6  # involutivity defect of exactly involutive fields (finite differences)
+EQ_TOL = 1e-12  # printed formula vs computed J⁺ column
+
+
+def printed_3r_fields(q) -> tuple[np.ndarray, np.ndarray]:
+    """Thesis Eqs 4.6–4.7 as printed: ``f₁, f₂`` for the 3R arm with absolute angles."""
+    q1, q2, q3 = q
+    a = -3 + np.cos(2 * q1 - 2 * q2) + np.cos(2 * q1 - 2 * q3) + np.cos(2 * q2 - 2 * q3)
+    f1 = [
+        2 * np.sin(q1) + np.sin(q1 - 2 * q2) + np.sin(q1 - 2 * q3),
+        -np.sin(2 * q1 - q2) + 2 * np.sin(q2) + np.sin(q2 - 2 * q3),
+        np.sin(2 * q1 - q3) + np.sin(2 * q2 - q3) - 2 * np.sin(q3),
+    ]
+    f2 = [
+        -2 * np.cos(q1) + np.cos(q1 - 2 * q2) + np.cos(q1 - 2 * q3),
+        np.cos(2 * q1 - q2) - 2 * np.cos(q2) + np.cos(q2 - 2 * q3),
+        np.cos(2 * q1 - q3) + np.cos(2 * q2 - q3) - 2 * np.cos(q3),
+    ]
+    return np.array(f1) / a, np.array(f2) / a
 
 
 def _lemma41_field(e):
@@ -74,7 +100,7 @@ def example_4_3(grid: np.ndarray) -> dict:
     arm = qc.robots.load("planar_3r")
     F1 = g.PseudoInverseField(arm, [1.0, 0.0])
     F2 = g.PseudoInverseField(arm, [0.0, 1.0])
-    general, aligned = [], []
+    general, aligned, printed_gap, flipped_gap = [], [], [], []
     for a in grid:
         for b in grid:
             q = np.array([0.0, a, b])  # q1 = 0 without loss: rotating the arm changes nothing
@@ -82,6 +108,10 @@ def example_4_3(grid: np.ndarray) -> dict:
             if s[-1] < 1e-2:  # stretched or folded: J⁺ undefined
                 continue
             d = abs(g.bracket_determinant(F1, F2, q))
+            p1, p2 = printed_3r_fields(q)
+            P = np.linalg.pinv(arm.jacobian(q))
+            printed_gap.append(np.abs(np.stack([p1 - P[:, 0], p2 - P[:, 1]])))
+            flipped_gap.append(np.abs(np.stack([p1 + P[:, 0], p2 + P[:, 1]])))
             gaps = np.abs(np.angle(np.exp(1j * (q[[0, 0, 1]] - q[[1, 2, 2]]))))
             (aligned if gaps.min() < 1e-9 else general).append(d)
     general, aligned = np.array(general), np.array(aligned)
@@ -91,6 +121,9 @@ def example_4_3(grid: np.ndarray) -> dict:
         "abs_det_max": float(general.max()),
         "points_with_two_parallel_links": int(aligned.size),
         "abs_det_max_with_two_parallel_links": float(aligned.max()) if aligned.size else None,
+        # [field, row]: max |printed Eq 4.6/4.7 − J⁺ column| over the grid
+        "eq46_47_printed_minus_pinv_max": np.max(printed_gap, axis=0).tolist(),
+        "eq46_47_printed_plus_pinv_max": np.max(flipped_gap, axis=0).tolist(),  # sign flip
     }
 
 
@@ -121,6 +154,81 @@ def example_4_4(samples: int) -> dict:
         "pinv_sphere_fields_defect_max": float(max(pinv_defect)),
         "thm42_fields_defect_max": float(max(thm_defect)),
     }
+
+
+def claims(l41: dict, e43: dict, e44: dict) -> list[dict]:
+    """Claim rows computed from the run's numbers (see the module docstring)."""
+    ratio = np.array(l41["printed_fields_det_over_thesis_formula"])
+    gap = np.array(e43["eq46_47_printed_minus_pinv_max"])  # [f1 rows, f2 rows]
+    flip = np.array(e43["eq46_47_printed_plus_pinv_max"])
+    wrong = [
+        f"f{i + 1} row {j + 1}"
+        + (" (matches with its sign flipped)" if flip[i, j] < EQ_TOL else "")
+        for i, j in zip(*np.nonzero(gap > EQ_TOL), strict=True)
+    ]
+    return [
+        claim(
+            "lemma4.1-not-involutive",
+            "Pulling the involutive v₁ = e₁, v₂ = e₂ back through J⁺ of x = (q₁, q₂ + q₁q₃) "
+            "gives non-involutive fields.",
+            "Lemma 4.1: det[f₁, f₂, [f₁, f₂]] = −(1 + q₁²)² ≠ 0",
+            f"|det| {l41['abs_det_min']:.3g}–{l41['abs_det_max']:.3g} on "
+            f"{len(l41['grid_q1_q3'])}² grid points (q₂ = 0.3)",
+            "reproduced" if l41["abs_det_min"] > DET_MIN else "differs",
+            f"criterion: |det| > {DET_MIN:g} at every grid point",
+        ),
+        claim(
+            "lemma4.1-formula",
+            "The determinant of the printed f₁, f₂ is −(1 + q₁²)².",
+            "Lemma 4.1 proof: det = −(1 + q₁²)²",
+            f"det / (−(1 + q₁²)²) = {ratio.min():.12g} … {ratio.max():.12g}",
+            "reproduced" if np.allclose(np.abs(ratio), 1, atol=1e-6) else "differs",
+            "criterion: |ratio| = 1 to 1e-6. The sign is the bracket's convention: qpcoord's "
+            "[f, g] = (∂g/∂q)f − (∂f/∂q)g, the thesis uses the opposite (ratio −1 expected)",
+        ),
+        claim(
+            "ex4.3-not-involutive",
+            "On the 3R arm, J⁺e₁ and J⁺e₂ are not involutive.",
+            "Ex 4.3, Eq 4.8: Det{f₁, f₂, [f₁, f₂]} ≠ 0",
+            f"|det| {e43['abs_det_min']:.3g}–{e43['abs_det_max']:.3g} on "
+            f"{e43['points_with_distinct_link_angles']} configurations with distinct link "
+            f"angles; ≤ {e43['abs_det_max_with_two_parallel_links']:.1e} on the "
+            f"{e43['points_with_two_parallel_links']} with two parallel links",
+            "reproduced" if e43["abs_det_min"] > DET_MIN else "differs",
+            f"criterion: |det| > {DET_MIN:g} wherever no two links are parallel (where two are, "
+            "it vanishes: a measure-zero set the thesis does not mention)",
+        ),
+        claim(
+            "ex4.3-eq4.6-4.7",
+            "Eqs 4.6–4.7 are the columns of J⁺ for the 3R arm.",
+            "Ex 4.3, Eqs 4.6, 4.7 (f₁ = J⁺e₁, f₂ = J⁺e₂)",
+            f"max |printed − J⁺ column|: f₁ rows {', '.join(f'{x:.1e}' for x in gap[0])}; "
+            f"f₂ rows {', '.join(f'{x:.1e}' for x in gap[1])}",
+            "reproduced" if not wrong else "differs",
+            f"criterion: every row within {EQ_TOL:g} on the grid"
+            + (f"; mismatched: {', '.join(wrong)}" if wrong else ""),
+        ),
+        claim(
+            "thm4.2-involutive",
+            "The dual fields of (ω₁, ω₄, ω₅) are involutive.",
+            "Thm 4.2, Ex 4.4: involutive by construction",
+            f"involutivity defect ≤ {e44['thm42_fields_defect_max']:.2e} at "
+            f"{e44['samples']} points of the 5R path",
+            "reproduced" if e44["thm42_fields_defect_max"] < DEFECT_FLOOR else "differs",
+            f"criterion: defect < {DEFECT_FLOOR:g} (the finite-difference floor) everywhere",
+        ),
+        claim(
+            "sec4.3.3-pinv-basis-not-involutive",
+            "The J⁺-pulled sphere basis J⁺v₁, J⁺v₂ need not be involutive.",
+            "§4.3.3 after Thm 4.1: 'f₁ and f₂ could very well not be involutive'",
+            f"involutivity defect {e44['pinv_sphere_fields_defect_min']:.2g}–"
+            f"{e44['pinv_sphere_fields_defect_max']:.2g} at {e44['samples']} points",
+            "reproduced"
+            if e44["pinv_sphere_fields_defect_max"] > 100 * DEFECT_FLOOR
+            else "differs",
+            f"criterion: defect > {100 * DEFECT_FLOOR:g} (100× the floor) at some point",
+        ),
+    ]
 
 
 def main(argv=None) -> int:
@@ -172,9 +280,13 @@ def main(argv=None) -> int:
         ax.set_ylabel("q1")
         ax.set_title("Lemma 4.1: J⁺-pulled fields, q2 = 0.3")
         save(fig, args.out / "lemma41_det.png")
+    rows = claims(l41, e43, e44)
+    for c in rows:
+        say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
     write_json(
-        args.out / "summary.json", {"lemma_4_1": l41, "example_4_3": e43, "example_4_4": e44}
+        args.out / "summary.json",
+        {"lemma_4_1": l41, "example_4_3": e43, "example_4_4": e44, "claims": rows},
     )
     print(f"wrote {args.out}")
     return 0

@@ -36,6 +36,10 @@ point keeps moving (1.28 rad from the start after 32 periods) -- consistent with
 Conjecture 5.1's "enough potential functions". The (q₂, q₄) pair settles on a cycle 2.8
 rad from the start, the (q₃, q₅) pair on one 0.26 rad from it.
 
+Claims (``summary["claims"]``, computed from the run): Fig 5.4 (every two-potential run
+with α = 5 closes for its last ≥ 3 periods; ``--quick`` has 3 periods: inconclusive) and
+our check of one potential for δ = 2 (not closed in 32 periods; full run only).
+
 Run: ``python examples/ch5_5r_potentials.py [--quick] [--out DIR]``.
 """
 
@@ -51,9 +55,12 @@ import qpcoord as qc
 from qpcoord.analysis import closure_errors
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 GAIN = 10.0  # 1/s, closed-loop correction of the main task
+CLOSED = 1e-6  # rad per period: closed
+CLOSED_PERIODS = 3  # a run has closed if its last ≥ 3 periods are below CLOSED
+FULL_PERIODS = 8  # periods of the full run (32 for the single potential)
 
 
 def periods_to_close(closure, tol: float = 1e-6):
@@ -142,6 +149,82 @@ def run(periods: int, spp: int, quick: bool) -> tuple[dict, dict]:
     }, trajs
 
 
+def claims(result: dict) -> list[dict]:
+    """Claim rows computed from the runs (see the module docstring)."""
+
+    def closed(r):
+        k = r["periods_to_closure_1e-6"]
+        return k is not None and r["periods"] - k + 1 >= CLOSED_PERIODS
+
+    def text(r):
+        k = r["periods_to_closure_1e-6"]
+        return (
+            f"{r['scheme']}: closed from period {k} of {r['periods']} "
+            f"({r['final_closure_rad']:.1e} rad)"
+            if k is not None
+            else f"{r['scheme']}: not closed in {r['periods']} periods "
+            f"({r['final_closure_rad']:.1e} rad)"
+        )
+
+    pairs = [r for r in result["rows"] if r["centred_joints"] and len(r["centred_joints"]) == 2]
+    pairs5 = [r for r in pairs if r["alpha"] == 5.0]
+    short = [r for r in pairs5 if not closed(r) and r["periods"] < FULL_PERIODS]
+    if all(closed(r) for r in pairs5):
+        status = "reproduced"
+    elif short:
+        status = "inconclusive"
+    else:
+        status = "differs"
+    out = [
+        claim(
+            "fig5.4-two-potentials",
+            "With two secondary potentials (δ = 2) the 5R joints converge to a limit cycle "
+            "on the Lissajous.",
+            "§5.3.4, Fig 5.4 (potentials and α not given: joint centring, α = 5 here)",
+            "; ".join(text(r) for r in pairs),
+            status,
+            f"criterion: every α = 5 pair closes (< {CLOSED:g} rad over the last ≥ "
+            f"{CLOSED_PERIODS} periods)"
+            + (
+                f"; {short[0]['periods']} periods: the full run ({FULL_PERIODS}) decides"
+                if status == "inconclusive"
+                else ""
+            )
+            + "".join(
+                f"; {r['scheme']} is reported, not judged (closure ×{c[-1] / c[-2]:.2f} in "
+                "its last period)"
+                for r in pairs
+                if r["alpha"] != 5.0 and len(c := r["closure_error_per_period_rad"]) > 1
+            ),
+        )
+    ]
+    one = [r for r in result["rows"] if r["centred_joints"] and len(r["centred_joints"]) == 1]
+    if one:
+        r = one[0]
+        drifts = not closed(r) and r["periods"] >= 4 * FULL_PERIODS
+        measured = text(r) + f", closure ∝ k^{r['closure_power_law_exponent']:.2f}"
+        status = "not in thesis"
+        note = (
+            f"our check: not closed in ≥ {4 * FULL_PERIODS} periods; "
+            f"{'holds' if drifts else 'does not hold'} in this run"
+        )
+    else:
+        measured = f"not run ({len(result['rows'])} schemes in --quick)"
+        status = "inconclusive"
+        note = f"the full run has the single-potential case ({4 * FULL_PERIODS} periods)"
+    out.append(
+        claim(
+            "conj5.1-one-potential",
+            "One potential is not enough for δ = 2: the 5R joints keep drifting.",
+            "not in thesis (Conjecture 5.1 asks for 'enough' potentials, says nothing of fewer)",
+            measured,
+            status,
+            note,
+        )
+    )
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="2 schemes, 3 periods at T/200 (CI)")
@@ -180,6 +263,9 @@ def main(argv=None) -> int:
         )
         for name, tag in (("J⁺ alone", "pinv"), ("g on q3, q5, α = 5", "q3q5")):
             joint_plot(trajs[name], args.out / f"joints_{tag}.png", f"5R joints: {name}", T)
+    result["claims"] = claims(result)
+    for c in result["claims"]:
+        say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
     write_json(args.out / "summary.json", result)
     print(f"wrote {args.out}")

@@ -56,6 +56,12 @@ order (1.5–2.4e-4 m against the formula's 1.2–1.8e-4 m, Euler at 2 ms).
 With 0.5 rad/s bounds (0.23 of the Panda's) the hand can no longer follow the 0.31 m/s
 circle: the bounds are hard, above every level, and the hand error grows to 2.6e-2 m.
 
+Claims (``summary["claims"]``, computed from the run): Def 5.4 on the 5R (level 3 changes
+neither the end-effector residual nor ġ₁, while it does change q̇), §5.3.5 on the Panda (the
+joint-limit level keeps the formula inside the position limits that the posture alone
+breaks), and our own checks (formula = QP where level 3 has authority; only the QP with
+``limits="robot"`` keeps the speed limits).
+
 Run: ``python examples/ch5_hierarchy.py [--quick] [--out DIR]``.
 """
 
@@ -71,7 +77,7 @@ import qpcoord as qc
 from qpcoord.analysis import closure_errors
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring, JointLimitAvoidance
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 GAIN = 10.0  # 1/s: closed-loop correction of the end-effector level
 #: 5R limits (rad): the J⁺ motion from the path start covers q ∈ [(−0.57, −0.18, 0.85,
@@ -82,6 +88,102 @@ LIMITS_5R = (
 )
 PANDA_Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
 PANDA_DT = 2e-3  # s
+RES_TOL = 1e-10  # m/s: end-effector residual of a level-1-exact step
+RATE_TOL = 1e-12  # 1/s: change of ġ₁ caused by level 3
+ACTIVE = 1e-3  # rad/s: level 3 must change q̇ by at least this for the test to bite
+QP_TOL = 1e-9  # rad/s: formula vs QP where level 3 has authority > 1e-4
+
+
+def claims(r5: dict, rows: list[dict]) -> list[dict]:
+    """Claim rows computed from the runs (see the module docstring)."""
+    active = r5["max_qdot_change_by_level3_rad_s"] > ACTIVE
+    res = max(r5["max_level1_residual_3_levels"], r5["max_level1_residual_hierarchical"])
+    rate = r5["max_g1dot_difference_3_vs_2_levels"]
+    change = f"level 3 changes q̇ by up to {r5['max_qdot_change_by_level3_rad_s']:.2g} rad/s"
+    idle = "; level 3 did not act in this run: nothing is tested" if not active else ""
+    out = [
+        claim(
+            "def5.4-level1-kept",
+            "A lower-priority potential has no impact on the end-effector task.",
+            "Def 5.4, §5.3.5: reduced null spaces, N₂ ⊂ null([J; ∇g₁])",
+            f"max ‖J q̇ − Ẏ‖ {res:.1e} m/s over {r5['samples_compared']} samples of the 5R "
+            f"run (formula and QP); {change}",
+            ("reproduced" if res < RES_TOL else "differs") if active else "inconclusive",
+            f"criterion: < {RES_TOL:g} m/s with level 3 changing q̇ by > {ACTIVE:g} rad/s" + idle,
+        ),
+        claim(
+            "def5.4-level2-kept",
+            "Level 3 (posture) does not change the rate of level 2 (joint-limit avoidance).",
+            "Def 5.4: the reduced null space of a task has no impact on any higher task",
+            f"max |ġ₁(3 levels) − ġ₁(2 levels)| {rate:.1e}/s (|ġ₁| up to "
+            f"{r5['max_abs_g1dot']:.2g}/s); {change}",
+            ("reproduced" if rate < RATE_TOL else "differs") if active else "inconclusive",
+            f"criterion: < {RATE_TOL:g}/s with level 3 changing q̇ by > {ACTIVE:g} rad/s" + idle,
+        ),
+        claim(
+            "formula-equals-qp",
+            "The Def 5.4 formula and the lexicographic QP give the same velocity.",
+            "not in thesis (qpcoord's two implementations)",
+            f"max ‖q̇ formula − q̇ QP‖ {r5['max_nullspace_vs_hierarchical_authority_gt_1e-4']:.1e}"
+            f" rad/s where level 3 has authority > 1e-4, "
+            f"{r5['max_nullspace_vs_hierarchical_authority_le_1e-4']:.1e} at the "
+            f"{r5['samples_level3_authority_le_1e-4']} samples where it has less",
+            "not in thesis",
+            f"our check: < {QP_TOL:g} rad/s where authority > 1e-4 (below it the stack damps "
+            "the level, the formula does not); "
+            + (
+                "holds"
+                if r5["max_nullspace_vs_hierarchical_authority_gt_1e-4"] < QP_TOL
+                else "does not hold"
+            )
+            + " in this run",
+        ),
+    ]
+    by = {r["run"]: r for r in rows if not r["failed"]}
+    bare = by.get("formula, EE + posture")
+    jla = by.get("formula, EE + JLA + posture")
+    qp = [r for n, r in by.items() if 'limits="robot"' in n]
+    if bare and jla:
+        exercised = bare["max_limit_excess_rad"] > 0
+        out.append(
+            claim(
+                "sec5.3.5-limits-level",
+                "A constraint expressed as a higher-priority potential keeps the arm from "
+                "violating it.",
+                "§5.3.5: 'to prevent the manipulator from violating a constraint, the latter "
+                "is expressed as a high-priority subtask'",
+                f"Panda formula: worst position-limit excess {jla['max_limit_excess_rad']:.3g} "
+                f"rad with the joint-limit level, {bare['max_limit_excess_rad']:.3g} rad "
+                f"(joint {bare['worst_joint']}) without it",
+                ("reproduced" if jla["max_limit_excess_rad"] <= 0 else "differs")
+                if exercised
+                else "inconclusive",
+                "criterion: no excess with the level, in a run where the posture alone breaks "
+                "a limit"
+                + ("" if exercised else "; the posture did not reach a limit in this run")
+                + f"; the formula's speeds reach {jla['max_speed_over_limit']:.3g}× the "
+                "Panda's limits (the thesis has no speed limits)",
+            )
+        )
+    if qp and jla:
+        worst_speed = max(r["max_speed_over_limit"] for r in qp)
+        worst_pos = max(r["max_limit_excess_rad"] for r in qp)
+        keeps = worst_speed <= 1 + 1e-9 and worst_pos <= 0
+        out.append(
+            claim(
+                "qp-hard-limits",
+                "Only the QP with hard limits keeps both the position and the speed limits.",
+                "not in thesis (qpcoord's QP vs the formula)",
+                f'QP limits="robot": max |q̇|/v {worst_speed:.4f}, position excess '
+                f"{worst_pos:.3g} rad; formula with the limit level: max |q̇|/v "
+                f"{jla['max_speed_over_limit']:.3g}",
+                "not in thesis",
+                "our check: QP |q̇|/v ≤ 1 and no excess; "
+                + ("holds" if keeps else "does not hold")
+                + " in this run",
+            )
+        )
+    return out
 
 
 def periods_to_close(closure, tol: float = 1e-6):
@@ -365,8 +467,11 @@ def main(argv=None) -> int:
         for r in rows:
             r.pop("_t", None)
             r.pop("_q7", None)
+    rows_claims = claims(r5, rows)
+    for c in rows_claims:
+        say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
-    write_json(args.out / "summary.json", {"spatial_5r": r5, "panda": rows})
+    write_json(args.out / "summary.json", {"spatial_5r": r5, "panda": rows, "claims": rows_claims})
     print(f"wrote {args.out}")
     return 0
 

@@ -52,6 +52,11 @@ J⁺     10    T/200   never: 3.9e-7 in period 6, then 3.92 rad in period 7 (and
   cycle (band 3.48 rad, tracking error 1.4e-2 m), at T/800 it stays on the 1.57 rad one,
   open loop it has not settled after 25 periods. ``band.png`` shows the jump.
 
+Claims (``summary["claims"]``, computed from the run): Thm 5.1 / Fig 5.2 per α (every
+run of that α that did not blow up closes for ≥ 3 periods; mixed outcomes are
+inconclusive), Eq 5.13's band on the closed runs (differs: fails at α = 3 and 10), Remark
+5.2 (J⁺ alone never closes in ≥ 25 periods). ``--quick`` (4 periods) decides none of them.
+
 Run: ``python examples/ch5_limit_cycle.py [--quick] [--out DIR]``.
 """
 
@@ -67,10 +72,12 @@ import qpcoord as qc
 from qpcoord.analysis import closure_errors
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9
 CLOSED = 1e-6  # rad: "closed" threshold of the closure error per period
+CLOSED_PERIODS = 3  # a run has closed if its last ≥ 3 periods are below CLOSED
+FULL_PERIODS = 25  # periods of the full run: "never closes" is only a finding this long
 
 
 def periods_to_close(closure, tol: float = CLOSED):
@@ -223,6 +230,122 @@ def figures(result, trajs, out: Path, period: float, say) -> None:
         save(fig, out / f"cycle_{tag}.png")
 
 
+def has_closed(r: dict) -> bool:
+    """The run's closure stays below CLOSED over its last ≥ CLOSED_PERIODS periods."""
+    k = r.get("periods_to_closure_1e-6")
+    return k is not None and r["periods"] - k + 1 >= CLOSED_PERIODS
+
+
+def claims(result: dict) -> list[dict]:
+    """Claim rows computed from the runs (see the module docstring)."""
+    out = []
+    pot = [r for r in result["rows"] if r["alpha"] is not None]
+    for alpha in sorted({r["alpha"] for r in pot}):
+        runs = [r for r in pot if r["alpha"] == alpha and not r["diverged"]]
+        blown = [r for r in pot if r["alpha"] == alpha and r["diverged"]]
+        closed = [r for r in runs if has_closed(r)]
+        longest = max(r["periods"] for r in runs)
+        text = "; ".join(
+            f"gain {r['gain']:g}, T/{r['steps_per_period']}: "
+            + (
+                f"closed from period {r['periods_to_closure_1e-6']} "
+                f"({r['final_closure_rad']:.1e} rad)"
+                if has_closed(r)
+                else f"not closed in {r['periods']} periods ({r['final_closure_rad']:.1e} rad)"
+            )
+            for r in runs
+        )
+        if blown:
+            text += "; " + ", ".join(f"T/{r['steps_per_period']}: RK4 diverged" for r in blown)
+        if runs and len(closed) == len(runs):
+            status, note = "reproduced", ""
+        elif closed:
+            status = "inconclusive"
+            sigma = min(r["min_sigma_J_final_cycle"] for r in runs)
+            note = (
+                "closes in some runs only: the outcome depends on the step and the gain "
+                f"(σ_min(J) on the last periods down to {sigma:.1e}); longer or "
+                "step-converged runs decide"
+            )
+        elif longest < FULL_PERIODS:
+            status = "inconclusive"
+            note = f"{longest} periods; the full run ({FULL_PERIODS} periods) decides"
+        else:
+            status, note = "differs", f"no run closes in {longest} periods"
+        out.append(
+            claim(
+                f"thm5.1-alpha{alpha:g}",
+                f"With g = α(q₁ − π/2)², α = {alpha:g}, the 3R joints converge to a limit "
+                "cycle of period T.",
+                "Thm 5.1, Fig 5.2: convergence to a T-periodic limit cycle for any α > 0",
+                text or "every run diverged",
+                status,
+                f"criterion: closure < {CLOSED:g} rad over the last ≥ {CLOSED_PERIODS} "
+                "periods of every run that did not blow up (explicit RK4 on the stiff cubic "
+                "law, a step problem)" + (f"; {note}" if note else ""),
+            )
+        )
+    decided = [r for r in pot if not r["diverged"] and has_closed(r)]
+    fails = [r for r in decided if not r["eq513_holds"]]
+    band_text = "; ".join(
+        f"α = {r['alpha']:g} (gain {r['gain']:g}, T/{r['steps_per_period']}): band "
+        f"{r['band_max_abs_q1_minus_pi2_rad']:.3f} vs bound {r['eq513_bound_rad']:.3f} rad"
+        for r in decided
+    )
+    fail_note = "; ".join(
+        f"α = {r['alpha']:g}, gain {r['gain']:g}: n₁² = {r['n1_squared_at_extremum']:.3f} "
+        "at the band's edge, "
+        f"∛(|(J⁺Ẏ)₁|/(2α²n₁²)) = {r['band_from_stationarity_rad']:.4f} rad"
+        for r in fails
+        if r["band_from_stationarity_rad"] is not None
+    )
+    out.append(
+        claim(
+            "eq5.13-band",
+            "On the limit cycle, |q₁ − π/2| stays within ∛(λ/(2α²‖N‖²)).",
+            "Thm 5.1 proof, Eq 5.13: the invariant band of the cylinder κ",
+            band_text or "no closed run to measure a final cycle on",
+            "inconclusive" if not decided else ("differs" if fails else "reproduced"),
+            "criterion: band ≤ bound (‖N‖ = 1) on every closed run"
+            + (
+                "; the thesis uses ‖∇g NNᵀ∇gᵀ‖ ≤ ‖∇g‖²‖N‖² as if it were a lower bound: at "
+                "the band's edge the factor is n₁², the squared q₁-entry of the unit "
+                f"self-motion, not ‖N‖² = 1 ({fail_note})"
+                if fails
+                else ""
+            )
+            + ("; no run closed: the full run decides" if not decided else ""),
+        )
+    )
+    pinv = next(r for r in result["rows"] if r["alpha"] is None)
+    c = np.asarray(pinv["closure_error_per_period_rad"])
+    never = pinv["periods_to_closure_1e-6"] is None
+    when = (
+        "never closed for good"
+        if never
+        else f"closed from period {pinv['periods_to_closure_1e-6']}"
+    )
+    out.append(
+        claim(
+            "rem5.2-pinv-drifts",
+            "J⁺ alone drifts along the fibre and does not become T-periodic.",
+            "Remark 5.2",
+            f"closure {c.min():.2e}–{c.max():.2e} rad per period over {len(c)} periods ({when})",
+            ("reproduced" if never else "differs")
+            if len(c) >= FULL_PERIODS or not never
+            else "inconclusive",
+            f"criterion: closure never stays < {CLOSED:g} rad in a run of ≥ {FULL_PERIODS} "
+            "periods"
+            + (
+                f"; this run has {len(c)}: the full run decides"
+                if len(c) < FULL_PERIODS and never
+                else ""
+            ),
+        )
+    )
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="α = 1 and 3, 4 periods at T/100 (CI)")
@@ -279,6 +402,9 @@ def main(argv=None) -> int:
         f"{max(pinv):.2e} rad{after}"
     )
     figures(result, trajs, args.out, period, say)
+    result["claims"] = claims(result)
+    for c in result["claims"]:
+        say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
     write_json(args.out / "summary.json", result)
     print(f"wrote {args.out}")

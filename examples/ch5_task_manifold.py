@@ -33,6 +33,11 @@ Measured (full run, N = 40 fibres, step 0.02 rad):
   the limit cycle of ``g = 3(q₁ − π/2)²`` closes to < 1e-6 rad from period 5 (5.2e-12 in
   period 8).
 
+Claims (``summary["claims"]``, computed from the run): §5.2.1's torus (differs: every
+traced fibre closes, but the singular configuration (π, 0, 0) lies on the task manifold at
+y = (1, 0), where the fibre changes winding: a pinched torus); Fig 5.1's red J⁺ curve does
+not close; Fig 5.3's limit cycle closes (``--quick``: 3 periods, inconclusive).
+
 Figures: ``task_manifold.png`` (3-D, wrapped angles), ``fibre_lengths.png``.
 
 Run: ``python examples/ch5_task_manifold.py [--quick] [--out DIR]``.
@@ -50,10 +55,15 @@ import qpcoord as qc
 from qpcoord.analysis import closure_errors
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 from qpcoord.task_manifold import fibre, wrap_angles
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9
+Q_FOLDED = np.array([np.pi, 0.0, 0.0])  # rad: the arm folded flat, |y| = 1
+SINGULAR_TOL = 1e-12  # σ_min(J) and distance to the circle (m) counted as zero
+OPEN_MIN = 1e-3  # rad: J⁺ gap after 2 periods counted as "not closed"
+CLOSED = 1e-6  # rad per period: closed
+CLOSED_PERIODS = 3  # the last ≥ 3 periods below CLOSED
 
 
 def winding(points: np.ndarray) -> list[int]:
@@ -123,6 +133,13 @@ def run(n_fibres: int, step: float, cycle_periods: int, spp: int) -> tuple[dict,
             fibres_extra.append(pts)
         pinch[tag] = entry
     lengths = np.array([r["length_rad"] for r in rows])
+    y_f = arm.position(Q_FOLDED)
+    folded = {
+        "q_rad": Q_FOLDED.tolist(),
+        "y_m": y_f.tolist(),
+        "distance_to_circle_m": float(abs(np.linalg.norm(y_f - path.center) - path.radius)),
+        "sigma_min_J": float(np.linalg.svd(arm.jacobian(Q_FOLDED), compute_uv=False)[-1]),
+    }
     p_sec = qc.analysis.poincare_section(pinv, T)
     result = {
         "robot": "planar_3r",
@@ -134,6 +151,8 @@ def run(n_fibres: int, step: float, cycle_periods: int, spp: int) -> tuple[dict,
         "fibres_closing_without_winding": int(sum(not any(r["winding"]) for r in rows)),
         "fibres": rows,
         "pinch": pinch,
+        "folded_configuration": folded,
+        "cycle_periods": cycle_periods,
         "pinv_gap_after_2_periods_rad": float(np.linalg.norm(p_sec[2] - p_sec[0])),
         "pinv_max_tracking_error_m": pinv.max_error,
         "soft_alpha": 3.0,
@@ -158,6 +177,68 @@ def periods_to_close(closure, tol: float = 1e-6):
         return 1
     k = int(above[-1]) + 2
     return k if k <= len(closure) else None
+
+
+def claims(result: dict) -> list[dict]:
+    """Claim rows computed from the run (see the module docstring)."""
+    n = result["n_fibres"]
+    windings = [tuple(r["winding"]) for r in result["fibres"]]
+    windings += [tuple(e["winding"]) for e in result["pinch"].values() if "winding" in e]
+    same = len(set(windings)) == 1
+    f = result["folded_configuration"]
+    singular_on = f["sigma_min_J"] < SINGULAR_TOL and f["distance_to_circle_m"] < SINGULAR_TOL
+    gap = result["pinv_gap_after_2_periods_rad"]
+    c = np.asarray(result["soft_closure_error_per_period_rad"])
+    k = result["soft_periods_to_closure_1e-6"]
+    closed = k is not None and len(c) - k + 1 >= CLOSED_PERIODS
+    return [
+        claim(
+            "sec5.2.1-torus",
+            "The 3R task manifold of a circle is homeomorphic to a torus S¹ × S¹.",
+            "§5.2.1, Def 5.1, Fig 5.1 (circle of Fig 5.9: c = (1.5, 0), R = 0.5)",
+            f"{result['fibres_closing_without_winding']}/{n} fibres along the path close "
+            f"without winding ({result['fibre_length_min_rad']:.2f}–"
+            f"{result['fibre_length_max_rad']:.2f} rad); windings met {sorted(set(windings))}; "
+            f"(π, 0, 0) is {f['distance_to_circle_m']:.0e} m from the circle with σ_min(J) = "
+            f"{f['sigma_min_J']:.0e}",
+            "reproduced" if same and not singular_on else "differs",
+            "criterion: every fibre closed with one winding and no singular configuration on "
+            "the task manifold"
+            + (
+                "; at y = (1, 0) the arm can fold flat: the singular (π, 0, 0) lies on the "
+                "task manifold, where the ordinary fibres meet the folded branch "
+                "q₁ = 0, q₃ = q₂ + π (the fibre traced there has another winding): a "
+                "pinched torus, not a torus"
+                if not (same and not singular_on)
+                else ""
+            ),
+        ),
+        claim(
+            "fig5.1-pinv-not-closed",
+            "J⁺ alone (Fig 5.1's red curve, 2.5 periods) does not close on the torus.",
+            "Fig 5.1, Remark 5.2",
+            f"‖q(2T) − q(0)‖ = {gap:.3f} rad (max tracking error "
+            f"{result['pinv_max_tracking_error_m']:.1e} m)",
+            "reproduced" if gap > OPEN_MIN else "differs",
+            f"criterion: gap > {OPEN_MIN:g} rad",
+        ),
+        claim(
+            "fig5.3-limit-cycle",
+            "With g = 3(q₁ − π/2)² the joints settle on a closed cycle on the torus.",
+            "Fig 5.3, Thm 5.1",
+            f"closure per period {', '.join(f'{e:.1e}' for e in c)} rad; "
+            + (f"closed from period {k}" if k is not None else f"not closed in {len(c)} periods"),
+            "reproduced"
+            if closed
+            else ("inconclusive" if result["cycle_periods"] < 8 else "differs"),
+            f"criterion: closure < {CLOSED:g} rad over the last ≥ {CLOSED_PERIODS} periods"
+            + (
+                f"; {result['cycle_periods']} periods: the full run (8) decides"
+                if not closed and result["cycle_periods"] < 8
+                else ""
+            ),
+        ),
+    ]
 
 
 def figures(result, data, out: Path, say) -> None:
@@ -236,6 +317,9 @@ def main(argv=None) -> int:
         f"closed (< 1e-6) from period {result['soft_periods_to_closure_1e-6']}"
     )
     figures(result, data, args.out, say)
+    result["claims"] = claims(result)
+    for c in result["claims"]:
+        say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
     write_json(args.out / "summary.json", result)
     print(f"wrote {args.out}")

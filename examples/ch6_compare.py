@@ -26,12 +26,13 @@ import numpy as np
 import qpcoord.ddl as ddl
 from qpcoord.ddl.compare import (
     compare,
+    default_cases,
     default_controllers,
     format_grid,
     format_table,
     qualitative_grid,
 )
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 FS = 8000.0
 
@@ -46,30 +47,302 @@ def _clean(v):
     return v
 
 
+#: Thesis Table 6.1 (hardware): RMSE, |e|max, mean |e| (nm), P (W), under our names.
+TABLE_6_1 = {
+    "coordinator": ("Direct Coil", 25.0, 308.0, 19.6, 2.25),
+    "FlatnessBased": ("Flatness based", 26.6, 147.5, 20.7, 0.016),
+    "PILinearised": ("PI-linearized", 22.8, 133.0, 17.7, 0.017),
+    "PQ": ("PQ", 40.0, 270.0, 31.0, 0.012),
+    "LQR": ("LQR", 44.8, 640.0, 30.7, 0.015),
+}
+#: Thesis Table 6.2 marks, same controller order as TABLE_6_1.
+TABLE_6_2 = {
+    "RMS error": ("++++", "++++", "++++", "++", "++"),
+    "e_max": ("+++", "++++", "++++", "++++", "+"),
+    "Power dissipation": ("-", "++++", "++++", "++++", "++++"),
+    "Step response": ("++++", "-", "+", "--", "---"),
+    "Robustness": ("++++", "--", "--", "---", "---"),
+}
+MARK_VALUE = {"++++": 4, "+++": 3, "++": 2, "+": 1, "-": 0, "--": -1, "---": -2}
+#: Why our Table 6.2 orderings differ from the thesis's, per criterion (docs/ch6.md).
+GRID_WHY = {
+    "RMS error": "Without latency the LQR ranks first: our plant is its own design model up "
+    "to friction, detent and quantisation (no unmodelled piezo modes, amplifier dynamics or "
+    "computation delay), and under the same peak-|S| ≤ 1.6 rule its observer-based loop "
+    "crosses over at ≈ 1 kHz against the PI's 234 Hz. With two periods of latency it "
+    "oscillates (row latency2-lqr), the thesis's ranking.",
+    "e_max": "Same cause as the RMS row: the LQR has the smallest peaks without latency.",
+    "Power dissipation": "Our LQR and PQ command the field phase at fixed amplitude "
+    "(direct coil, 2.25 W) like the coordinator; the thesis's global-structure controllers "
+    "commanded the current amplitude.",
+    "Step response": "Every controller here has the same 3 mm/s rate limit and enough "
+    "force (1650 N at 1.5 A against ≈ 215 N needed), so none de-synchronises or stalls; the "
+    "LQR and PQ settle as fast as the coordinator.",
+    "Robustness": "PQ here is the coordinator's fine PI plus a 2 Hz coarse path and inherits "
+    "its robustness; the LQR degrades less than the thesis's.",
+}
+
+
+def compare_claims(rows: list[dict], full: bool, size: str) -> list[dict]:
+    """Claim rows (``qpcoord.report.claim``) for Tables 6.1–6.2, Figs 6.18–6.19.
+
+    ``full``: the run is as long as the thesis's (10 s Kolmogorov, ≥ 3 seeds, 6 s steps);
+    otherwise every thesis row is ``"inconclusive"``. ``size`` describes the run.
+    """
+    names = list(TABLE_6_1)
+    short = (
+        f" This run ({size}) is shorter than the thesis's 10 s runs: the full run (10 s × 3 "
+        "seeds, 6 s steps at the centre and the extremity) decides."
+    )
+
+    def med(ctl, case, key, scale=1.0):
+        v = [r[key] for r in rows if r["controller"] == ctl and r["case"] == case]
+        v = [x for x in v if x is not None and not (isinstance(x, float) and math.isnan(x))]
+        return float(np.median(v)) * scale if v else math.nan
+
+    # carriage travel / reference travel on the Kolmogorov runs (median over seeds)
+    travel = {
+        c: float(
+            np.median(
+                [
+                    np.ptp(r["run"].y_c) / np.ptp(r["run"].r)
+                    for r in rows
+                    if r["controller"] == c and r["case"] == "kolmogorov" and "run" in r
+                ]
+                or [math.nan]
+            )
+        )
+        for c in names
+    }
+    out = []
+    for ctl, (label, t_rmse, t_max, t_mean, t_p) in TABLE_6_1.items():
+        rmse = med(ctl, "kolmogorov", "rmse", 1e9)
+        ok = abs(rmse - t_rmse) <= 0.3 * t_rmse
+        st = ("reproduced" if ok else "differs") if full else "inconclusive"
+        why = {
+            "LQR": " " + GRID_WHY["RMS error"],
+            "PQ": " PQ here is the coordinator's fine PI plus a 2 Hz coarse path, so it "
+            "tracks like the coordinator; the thesis's PQ showed static-friction stepping.",
+        }.get(ctl, " Simulation, not hardware.")
+        out.append(
+            claim(
+                f"table6.1-{ctl}",
+                f"{label}: Kolmogorov tracking RMSE {t_rmse:g} nm.",
+                f"Table 6.1, {label}: {t_rmse:g} / {t_max:g} / {t_mean:g} nm, {t_p:g} W "
+                "(RMSE / max / mean / P, hardware)",
+                f"{rmse:.1f} / {med(ctl, 'kolmogorov', 'max_abs', 1e9):.1f} / "
+                f"{med(ctl, 'kolmogorov', 'mean_abs', 1e9):.1f} nm, "
+                f"{med(ctl, 'kolmogorov', 'power'):.3g} W (median over seeds)",
+                st,
+                "Criterion: RMSE within ±30 % of the thesis (max, mean and power shown, not "
+                "judged here)."
+                + (why if st == "differs" else "")
+                + (short if st == "inconclusive" else ""),
+            )
+        )
+    siso = ("coordinator", "PILinearised", "FlatnessBased")
+    r = [med(c, "kolmogorov", "rmse", 1e9) for c in siso]
+    m = [med(c, "kolmogorov", "mean_abs", 1e9) for c in siso]
+    ok = max(r) <= 1.25 * min(r) and max(m) <= 1.25 * min(m)
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "table6.1-siso-similar",
+            "The three decoupled-SISO controllers (direct coil, PI-linearised, flatness) have "
+            "similar RMS and mean errors: they share the fine-stage controller.",
+            "§6.4.2 on Table 6.1 (RMSE 25 / 22.8 / 26.6 nm, mean 19.6 / 17.7 / 20.7 nm)",
+            "RMSE "
+            + " / ".join(f"{v:.1f}" for v in r)
+            + " nm, mean "
+            + " / ".join(f"{v:.1f}" for v in m)
+            + " nm",
+            st,
+            "Criterion: largest ≤ 1.25 × smallest, for RMSE and for mean."
+            + (" They are not similar here." if st == "differs" else "")
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    p = {c: med(c, "kolmogorov", "power") for c in siso}
+    ok = max(p["PILinearised"], p["FlatnessBased"]) <= 0.1 * p["coordinator"]
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "table6.1-linearised-power",
+            "The feedback-linearised controllers dissipate much less power than direct coil.",
+            "Table 6.1 column 4: 0.017 / 0.016 W against 2.25 W",
+            f"PI-linearised {p['PILinearised']:.2g} W, flatness {p['FlatnessBased']:.2g} W, "
+            f"direct coil {p['coordinator']:.3g} W; carriage travel / reference travel "
+            f"{travel['PILinearised']:.2f}, {travel['FlatnessBased']:.2f}, "
+            f"{travel['coordinator']:.2f}",
+            st,
+            "Criterion: both ≤ 10 % of the direct coil's. The absolute values are far below "
+            "the thesis's 16–17 mW because here the feedback-linearised controllers' force "
+            "stays inside the stiction band: their carriage hardly moves (travel ratio "
+            "shown), so the coil current is nearly zero."
+            + (" Not 10× lower here." if st == "differs" else "")
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    grid = qualitative_grid([r for r in rows if r["controller"] in names])
+    for crit, marks in TABLE_6_2.items():
+        ours = grid.get(crit, {})
+        pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
+        strict, kept = 0, 0
+        for a, b in pairs:
+            ta, tb = MARK_VALUE[marks[names.index(a)]], MARK_VALUE[marks[names.index(b)]]
+            if ta == tb:
+                continue
+            strict += 1
+            oa, ob = MARK_VALUE.get(ours.get(a)), MARK_VALUE.get(ours.get(b))
+            kept += oa is not None and ob is not None and (oa - ob) * (ta - tb) > 0
+        ok = strict > 0 and kept == strict
+        st = ("reproduced" if ok else "differs") if full else "inconclusive"
+        key = crit.split()[0].lower().replace("_", "")
+        out.append(
+            claim(
+                f"table6.2-{key}",
+                f"Table 6.2 ranks the controllers on {crit.lower()} as: "
+                + ", ".join(f"{TABLE_6_1[c][0]} {mk}" for c, mk in zip(names, marks, strict=True))
+                + ".",
+                f"Table 6.2, row {crit!r}",
+                "ours: "
+                + ", ".join(f"{TABLE_6_1[c][0]} {ours.get(c, 'n/a')}" for c in names)
+                + f"; {kept}/{strict} of the thesis's strict pairwise orders kept",
+                st,
+                "Criterion: every pair the thesis rates differently is ordered the same way by "
+                "our marks (qualitative_grid over these five controllers; a tie breaks it)."
+                + (" " + GRID_WHY[crit] if st == "differs" else "")
+                + (short if st == "inconclusive" else ""),
+            )
+        )
+    kol = [r for r in rows if r["case"] == "kolmogorov" and r["controller"] in names]
+    sat = sum(int(r["saturated_steps"] or 0) for r in kol)
+    still = [c for c in names if not travel[c] >= 0.5]
+    ok = sat == 0 and not any(r["lost_sync"] or r["error"] for r in kol) and not still
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "fig6.18b-fine-within-limits",
+            "On Kolmogorov tracking every controller's coarse stage keeps the fine stage "
+            "within its saturation limits.",
+            "Fig 6.18b and §6.4.2",
+            f"{sat} saturated steps over {len(kol)} runs of the five thesis controllers; "
+            "closest approach "
+            f"{min(med(c, 'kolmogorov', 'fine_margin_min', 1e6) for c in names):.2f} µm; "
+            "carriage travel / reference travel "
+            + ", ".join(f"{TABLE_6_1[c][0]} {travel[c]:.2f}" for c in names),
+            st,
+            "Criterion: zero saturated steps, no lost synchronism, no failed run, and each "
+            "carriage travels at least half as far as the reference (the coarse stage does "
+            "the keeping, not the reference's small excursion)."
+            + (
+                " The carriage of "
+                + ", ".join(TABLE_6_1[c][0] for c in still)
+                + " stays in stiction: the fine stage tracks alone and stays inside its "
+                "stroke only because this OPD's excursion is below its 15 µm half-stroke."
+                if st == "differs" and still
+                else (" Some controller saturated the fine stage." if st == "differs" else "")
+            )
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    steps = [r for r in rows if r["controller"] == "LQR" and r["case"].startswith("step")]
+    lost = sum(bool(r["lost_sync"]) for r in steps)
+    ok = lost > 0
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "fig6.19a-lqr-desync",
+            "On 5000 µm steps the LQR de-synchronises rotor and field (random behaviour).",
+            'Fig 6.19a and §6.4.2: LQR, "de-synchronization between rotor and the generated '
+            'magnetic field"',
+            f"LQR lost synchronism in {lost}/{len(steps)} step runs; settled in "
+            f"{med('LQR', 'step_extremity', 'settle_time'):.2f} s at the extremity",
+            st,
+            "Criterion: the LQR loses synchronism on a step."
+            + (
+                " Our LQR has the coordinator's 3 mm/s rate limit on the field phase (the "
+                "thesis says none could be introduced in its LQR), so this is not the "
+                "thesis's LQR on this point."
+                if st == "differs"
+                else ""
+            )
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    ext = {c: med(c, "step_extremity", "settle_time") for c in ("PILinearised", "FlatnessBased")}
+    ok = any(math.isnan(v) for v in ext.values())
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "fig6.19b-linearised-stall",
+            "Towards the stroke end the feedback-linearised controllers stall (current "
+            "saturated, not enough torque) and the DDL stops moving.",
+            "Fig 6.19b, Fig 6.20 and §6.4.2",
+            "settling within 100 nm at the extremity: "
+            + ", ".join(f"{c} {v:.2f} s" for c, v in ext.items())
+            + " (nan = never)",
+            st,
+            "Criterion: one of them never settles on the extremity step."
+            + (
+                " 1.5 A gives ≈ 1650 N against ≈ 215 N needed (flexure 139 N + viscous + "
+                "Coulomb at 3 mm/s): the simulated motor has the torque, what loaded the "
+                "hardware's is not modelled."
+                if st == "differs"
+                else ""
+            )
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    lat = {c: med(c, "latency2", "rmse", 1e9) for c in ("coordinator", "LQR")}
+    out.append(
+        claim(
+            "latency2-lqr",
+            "With two periods (250 µs) of command latency the LQR loses its advantage.",
+            "not in the thesis (our explanation of Table 6.1's LQR row)",
+            f"latency2 RMSE: LQR {lat['LQR']:.1f} nm, coordinator {lat['coordinator']:.1f} nm "
+            f"(nominal {med('LQR', 'kolmogorov', 'rmse', 1e9):.1f} / "
+            f"{med('coordinator', 'kolmogorov', 'rmse', 1e9):.1f} nm)",
+            "not in thesis",
+            "The LQR tolerates one extra period of delay, the coordinator's fine PI six.",
+        )
+    )
+    out.append(
+        claim(
+            "mpc-stack",
+            "The prioritised-stack MPC tracks and keeps the fine stage off its stops on steps.",
+            "not in the thesis (qpcoord's MPC)",
+            f"Kolmogorov RMSE {med('MPC', 'kolmogorov', 'rmse', 1e9):.1f} nm; fine margin "
+            f"on the extremity step {med('MPC', 'step_extremity', 'fine_margin_min', 1e6):.2f} "
+            f"µm, saturated steps {med('MPC', 'step_extremity', 'saturated_steps'):.0f}",
+            "not in thesis",
+            "Stroke margin of the MPC's hard constraint: 10 % of the stroke (3 µm).",
+        )
+    )
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true", help="short runs (CI, < 30 s)")
+    p.add_argument("--quick", action="store_true", help="1 s Kolmogorov, one 2.5 s step (CI)")
     p.add_argument("--seeds", type=int, default=None, help="number of Kolmogorov seeds")
     p.add_argument("--out", type=Path, default=Path("out/ch6_compare"))
     args = p.parse_args(argv)
     log = TextLog()
     say = log.say
-    duration, step_duration = (1.0, 3.0) if args.quick else (10.0, 6.0)
+    duration, step_duration = (1.0, 2.5) if args.quick else (10.0, 6.0)
     nseeds = args.seeds if args.seeds is not None else (1 if args.quick else 3)
     seeds = tuple(range(nseeds))
     ctls = default_controllers()
+    cases = default_cases(duration, step_duration, FS)
+    if args.quick:  # CI: one step case (the centre behaves as the extremity in every run)
+        cases = [c for c in cases if c.name != "step_centre"]
     say(
         f"DDL comparison at {FS:.0f} Hz: {', '.join(ctls)}; Kolmogorov {duration:g} s × "
-        f"{nseeds} seed(s), steps {step_duration:g} s, mismatch ±20 %, latency 2 periods"
+        f"{nseeds} seed(s), steps {step_duration:g} s ({', '.join(c.name for c in cases)}), "
+        "mismatch ±20 %, latency 2 periods"
     )
-    rows = compare(
-        ctls,
-        seeds=seeds,
-        duration=duration,
-        fs=FS,
-        step_duration=step_duration,
-        keep_runs=True,
-    )
+    rows = compare(ctls, cases, seeds=seeds, fs=FS, keep_runs=True)
     say("")
     say("Table 6.1 form (medians over seeds):")
     say(format_table(rows))
@@ -92,6 +365,13 @@ def main(argv=None) -> int:
         "PQ coarse share |PQ/(1+PQ)|: "
         + ", ".join(f"{f:g} Hz {s:.3f}" for f, s in rep["PQ"]["coarse_share"].items())
     )
+    full = duration >= 10.0 and nseeds >= 3 and step_duration >= 6.0
+    claims = compare_claims(
+        rows, full, f"{duration:g} s × {nseeds} seed(s), steps {step_duration:g} s"
+    )
+    say("claims (id: measured → status):")
+    for c in claims:
+        say(f"  {c['id']}: {c['measured']} → {c['status']}")
     # figures
     try:
         from qpcoord.figures import _pyplot, save
@@ -163,6 +443,7 @@ def main(argv=None) -> int:
         "rows": [_clean({k: r.get(k) for k in keep}) for r in rows],
         "grid": qualitative_grid(rows),
         "design": _clean(rep),
+        "claims": claims,
     }
     write_json(args.out / "summary.json", summary)
     print(f"wrote {args.out}")

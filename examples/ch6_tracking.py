@@ -27,7 +27,7 @@ from scipy import signal
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.identify import coarse_frf, fine_frf, peak_frequency
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 FS = 8000.0
 
@@ -49,6 +49,169 @@ def psd_slopes(seed: int) -> dict:
         "high_10_60_Hz": slope(ddl.kolmogorov_opd(300, 250.0, seed, L0=inf), 250.0, 10, 60),
         "theory": {"low": -2 / 3, "mid": -8 / 3, "high": -17 / 3},
     }
+
+
+def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> list[dict]:
+    """Claim rows (``qpcoord.report.claim``): each thesis number beside this run's value.
+
+    Rows on the Kolmogorov runs are decided only by a run as long as the thesis's (10 s)
+    with at least 3 seeds; shorter runs (``--quick``) give ``"inconclusive"``.
+    """
+    full = duration >= 10.0 and nseeds >= 3
+    short = (
+        f" This run ({duration:g} s × {nseeds} seeds) is shorter than the thesis's 10 s "
+        "Kolmogorov runs: the full run (10 s × 20 seeds) decides this row."
+    )
+
+    rmse, mx, mean = spread["rmse_nm"], spread["max_abs_nm"], spread["mean_abs_nm"]
+    power, margin = spread["power_w"], spread["fine_margin_min_um"]
+    sat = sum(row["saturated_steps"] for row in rows)
+    lost = sum(bool(row["lost_sync"]) for row in rows)
+    best = min(rows, key=lambda row: row["rmse"])
+    out = []
+    ok = abs(f_res - 120.0) <= 0.05 * 120.0
+    st = "reproduced" if ok else "differs"
+    out.append(
+        claim(
+            "fig6.7-coarse-resonance",
+            "The coarse stage (stepper + screw + flexure) has an electromechanical resonance "
+            "at 120 Hz.",
+            "Fig 6.7: resonant mode identified at 120 Hz",
+            f"{f_res:.1f} Hz (chirp of the field phase, 0.05 rad, stroke centre)",
+            st,
+            "Criterion: within ±5 % of 120 Hz. The rotor inertia is calibrated so that the "
+            "linearised mode is 120 Hz at the centre; the chirp checks the nonlinear plant "
+            "against that calibration (the peak falls with the chirp amplitude, docs/ch6.md)."
+            + ("" if st != "differs" else " The nonlinear peak has moved off the calibration."),
+        )
+    )
+    ok = abs(bw_fine - 300.0) <= 0.10 * 300.0
+    st = "reproduced" if ok else "differs"
+    out.append(
+        claim(
+            "fig6.6-piezo-bandwidth",
+            "The piezo fine stage (S-325) has a bandwidth of about 300 Hz.",
+            "Fig 6.6: estimated bandwidth ≈ 300 Hz, static gain ≈ 3 µm/V",
+            f"{bw_fine:.1f} Hz (−3 dB, chirp of the piezo voltage)",
+            st,
+            "Criterion: within ±10 % of 300 Hz. ωn = 300 Hz is a model input taken from "
+            "Fig 6.6 (ζ = 0.7 chosen so the −3 dB point is near ωn): this checks the "
+            "discretised model and the identification, not hardware."
+            + ("" if st != "differs" else " The identified bandwidth left the band."),
+        )
+    )
+    ok = all(row["rmse"] < 70e-9 for row in rows)
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "spec-rmse-70nm",
+            "The coordinator tracks the Kolmogorov OPD with less than 70 nm RMS residual.",
+            "§6.1.2 and §6.4.2: residual < 70 nm RMS with content up to 250 Hz",
+            f"worst RMSE {rmse['max']:.1f} nm over {nseeds} seeds ({duration:g} s each)",
+            st,
+            "Criterion: RMSE < 70 nm on every seed (paranal_250hz preset, an assumption: the "
+            "thesis's test signal is not specified)."
+            + (" Above 70 nm on some seed." if st == "differs" else "")
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    why = {
+        "rmse": " Simulation on the paranal_250hz preset, whose vibration lines (an "
+        "assumption, not tuned on results) set most of the error.",
+        "max_abs": " The simulated plant has no hardware noise sources, unmodelled modes or "
+        "amplifier hysteresis; its error peaks come from the preset's vibration lines only "
+        "(docs/ch6.md: the hardware's larger max error is not reproduced).",
+        "mean_abs": "",
+    }
+    for key, label, value, sp in (
+        ("rmse", "RMSE", 25.0, rmse),
+        ("max_abs", "maximum |e|", 308.0, mx),
+        ("mean_abs", "mean |e|", 19.6, mean),
+    ):
+        ok = abs(sp["median"] - value) <= 0.3 * value
+        st = ("reproduced" if ok else "differs") if full else "inconclusive"
+        out.append(
+            claim(
+                f"table6.1-{key.split('_')[0]}",
+                f"Direct-coil coordinator {label} on Kolmogorov tracking is {value:g} nm.",
+                f"Table 6.1, Direct Coil: {label} {value:g} nm (hardware)",
+                f"{sp['median']:.1f} nm median ({sp['min']:.1f}–{sp['max']:.1f} nm) over "
+                f"{nseeds} seeds",
+                st,
+                f"Criterion: median within ±30 % of {value:g} nm."
+                + (f" Outside ±30 %.{why[key]}" if st == "differs" else "")
+                + (short if st == "inconclusive" else ""),
+            )
+        )
+    ok = power["max"] < 5.0 and abs(power["median"] - 2.25) <= 0.01 * 2.25
+    st = "reproduced" if ok else "differs"
+    out.append(
+        claim(
+            "table6.1-power",
+            "The direct-coil coordinator dissipates 2.25 W, under the 5 W vacuum spec.",
+            "Table 6.1, Direct Coil: P = 2.25 W; §6.1.2: P < 5 W",
+            f"{power['median']:.3f} W median (max {power['max']:.3f} W)",
+            st,
+            "Criterion: every seed < 5 W and median within ±1 % of 2.25 W (Eq 6.6). Not an "
+            "independent reproduction: the field amplitude I = 1.5 A was chosen from the "
+            "thesis's 2.25 W, and at fixed amplitude P does not depend on the run length."
+            + (" Power off 2.25 W or above 5 W." if st == "differs" else ""),
+        )
+    )
+    ok = sat == 0 and lost == 0
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "fig6.16-fine-never-saturates",
+            "During Kolmogorov tracking the piezo never reaches its saturation limits.",
+            "Fig 6.16 and §6.4.2: the piezo output never reaches its saturation limits",
+            f"{sat} saturated steps, {lost} lost-sync runs over {nseeds} seeds; closest "
+            f"approach to a stop {margin['min']:.2f} µm",
+            st,
+            "Criterion: zero saturated steps and no lost synchronism on every seed."
+            + (" The fine stage saturated or the stepper slipped." if st == "differs" else "")
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    ok = best["rmse"] <= 8e-9 and best["max_abs"] <= 30e-9
+    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    out.append(
+        claim(
+            "fig6.17-best-run",
+            "The best direct-coil run tracks with less than 8 nm RMS and 30 nm maximum error.",
+            "Fig 6.17 caption: < 8 nm rms, 30 nm max (Kolmogorov up to 200 Hz)",
+            f"best seed {best['seed']}: {best['rmse'] * 1e9:.1f} nm RMS, "
+            f"{best['max_abs'] * 1e9:.1f} nm max",
+            st,
+            "Criterion: the best seed ≤ 8 nm RMS and ≤ 30 nm max."
+            + (
+                " Fig 6.17's realisation (content up to 200 Hz) is not specified; our preset "
+                "has ≈ 22 nm rms of vibration lines between 50 and 250 Hz (an assumption), "
+                "which the 234 Hz fine loop rejects by only 0–8 dB (docs/ch6.md): no seed "
+                f"goes below {best['rmse'] * 1e9:.1f} nm."
+                if st == "differs"
+                else ""
+            )
+            + (short if st == "inconclusive" else ""),
+        )
+    )
+    th = slopes["theory"]
+    got = (slopes["low_3e-4_4e-3_Hz"], slopes["mid_0.15_0.9_Hz"], slopes["high_10_60_Hz"])
+    theory = (th["low"], th["mid"], th["high"])
+    ok = all(abs(g - t) <= 0.3 for g, t in zip(got, theory, strict=True))
+    out.append(
+        claim(
+            "opd-psd-slopes",
+            "The synthesised OPD follows the −2/3, −8/3, −17/3 regimes of differential piston.",
+            "not in the thesis (§6.1.2 names a Kolmogorov signal; slopes from Conan et al.)",
+            f"slopes {got[0]:.2f} / {got[1]:.2f} / {got[2]:.2f} "
+            f"({'all' if ok else 'not all'} within ±0.3 of theory)",
+            "not in thesis",
+            "Welch PSD of the L0 = ∞ synthesis, log-binned fits in 3e-4–4e-3, 0.15–0.9 and "
+            "10–60 Hz.",
+        )
+    )
+    return out
 
 
 def main(argv=None) -> int:
@@ -124,6 +287,11 @@ def main(argv=None) -> int:
     )
     say("thesis Table 6.1 (hardware, direct coil): 25 nm, 308 nm, 19.6 nm, 2.25 W")
 
+    claims = tracking_claims(rows, summary_spread, f_res, bw_fine, slopes, duration, nseeds)
+    say("\nclaims (id: measured → status):")
+    for c in claims:
+        say(f"  {c['id']}: {c['measured']} → {c['status']}")
+
     try:
         from qpcoord.figures import _pyplot, save
     except ImportError:  # pragma: no cover
@@ -173,6 +341,7 @@ def main(argv=None) -> int:
             "spread": summary_spread,
             "spec_met_all_seeds": ok,
             "runs": rows,
+            "claims": claims,
             "thesis_table_6_1_direct_coil": {
                 "rmse_nm": 25,
                 "max_nm": 308,

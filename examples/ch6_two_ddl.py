@@ -24,9 +24,111 @@ import numpy as np
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.two_ddl import combine, two_ddl_frf, two_ddl_steps
-from qpcoord.report import TextLog, write_json
+from qpcoord.report import TextLog, claim, write_json
 
 FS = 8000.0
+
+
+def two_ddl_claims(o: dict, s: dict, k: float, gap: float, quick: bool) -> list[dict]:
+    """Claim rows (``qpcoord.report.claim``) for §6.3 / Fig 6.14 from the chosen predictor.
+
+    ``o``, ``s``: frequency-response and step results at the chosen gain ``k`` (s); ``gap``:
+    max relative gap between ``2F − F²`` of the measured single loop and the measured dual
+    loop, 5–400 Hz. The bandwidth row needs the full run (4 s FRF records, 9 predictor
+    gains); ``--quick`` (1 s, 3 gains) leaves it ``"inconclusive"``.
+    """
+    out = []
+    gain = o["gain_dual_pred"]
+    ok = abs(gain - 1.6) <= 0.10 * 1.6
+    st = "inconclusive" if quick else ("reproduced" if ok else "differs")
+    out.append(
+        claim(
+            "fig6.14a-bandwidth-gain",
+            "Two DDLs combined through their references (with the derivative predictor) "
+            "raise the −3 dB bandwidth by a factor of nearly 1.6, no controller gain changed.",
+            "§6.3 and Fig 6.14a: bandwidth enhancement by a factor of nearly 1.6",
+            f"gain {gain:.2f} with predictor (k = {k:.1e} s), {o['gain_dual']:.2f} without; "
+            f"−3 dB {o['bw_single']:.0f} / {o['bw_dual']:.0f} / {o['bw_dual_pred']:.0f} Hz "
+            "(one DDL / two / two + predictor)",
+            st,
+            "Criterion: gain with predictor within ±10 % of 1.6."
+            + (
+                " The gain is a property of the single closed loop F: the measured dual "
+                "response is 2F − F² of the measured single one (row eq-two-ddl-combination), "
+                "and for a second-order F the −3 dB gain of 2F − F² is 1.49 at ζ = 0.5, 1.71 "
+                f"at ζ = 0.7 (docs/ch6.md); our F (fine PI + piezo, no resonant peak, "
+                f"{o['bw_single']:.0f} Hz) gives {o['gain_dual']:.2f} without predictor. "
+                "The thesis's 1.6 corresponds to a second-order F with ζ ≈ 0.6; its F is not "
+                "given, so the gap comes from the loop shape, not from the scheme."
+                if st == "differs"
+                else ""
+            )
+            + (
+                " --quick uses 1 s FRF records and 3 predictor gains; the full run (4 s "
+                "records, 9 gains) decides."
+                if st == "inconclusive"
+                else ""
+            ),
+        )
+    )
+    ok = gap <= 0.05
+    st = "reproduced" if ok else ("inconclusive" if quick else "differs")
+    out.append(
+        claim(
+            "eq-two-ddl-combination",
+            "Without predictor the two-DDL response is Y/R = 2F − F² of the single-DDL "
+            "closed loop F.",
+            "§6.3: Y/R = 2F − F² − F² P₁ (P₁ = 0 without predictor)",
+            f"max relative gap {100 * gap:.1f} % between 2F − F² of the measured single "
+            "response and the measured dual response, 5–400 Hz",
+            st,
+            "Criterion: gap ≤ 5 %. Both DDLs are the full nonlinear loops (plant + "
+            "coordinator), so the formula is checked, not assumed."
+            + (
+                " Estimation noise in the 1 s --quick records only widens the gap: the full "
+                "run (4 s) decides."
+                if st == "inconclusive"
+                else ""
+            )
+            + (" The nonlinear loops do not combine linearly here." if st == "differs" else ""),
+        )
+    )
+    ok = k > 0 and s["rise_dual_pred"] < s["rise_single"] and s["rise_dual"] < s["rise_single"]
+    st = "reproduced" if ok else "differs"
+    out.append(
+        claim(
+            "fig6.14b-step-faster",
+            "The two-DDL scheme responds faster to a step than one DDL.",
+            'Fig 6.14b: "the time constant comparison of the step responses is very '
+            'conclusive" (no numbers)',
+            f"1 µm step rise time (10–90 %) {1e3 * s['rise_single']:.3f} ms one DDL, "
+            f"{1e3 * s['rise_dual']:.3f} ms two, {1e3 * s['rise_dual_pred']:.3f} ms two + "
+            "predictor",
+            st,
+            "Criterion: both two-DDL rise times shorter than the single DDL's (the step runs "
+            "are the same in --quick and full)."
+            + (" A two-DDL response is not faster." if st == "differs" else ""),
+        )
+    )
+    ok = k > 0 and s["overshoot_dual_pred"] < s["overshoot_dual"]
+    st = "reproduced" if ok else "differs"
+    out.append(
+        claim(
+            "fig6.14b-predictor-overshoot",
+            "The derivative predictor P₁ avoids the large overshoot of the combined DDLs.",
+            '§6.3: the prediction P₁ y₁ is added "to avoid ... producing large overshoots"; '
+            "Fig 6.14b (no numbers)",
+            f"1 µm step overshoot {100 * s['overshoot_single']:.1f} % one DDL, "
+            f"{100 * s['overshoot_dual']:.1f} % two, {100 * s['overshoot_dual_pred']:.1f} % two "
+            f"+ predictor (k = {k:.1e} s)",
+            st,
+            "Criterion: chosen k > 0 and overshoot with predictor below that without. k is not "
+            "in the thesis; rule: smallest overshoot among the grid gains that keep the "
+            "bandwidth at least the dual scheme's."
+            + (" The predictor did not reduce the overshoot." if st == "differs" else ""),
+        )
+    )
+    return out
 
 
 def main(argv=None) -> int:
@@ -82,6 +184,9 @@ def main(argv=None) -> int:
         )
     )
     say(f"max relative gap |(2F − F²) − measured dual| / |dual|, 5–400 Hz: {mismatch:.3f}")
+    claims = two_ddl_claims(o, s, k, mismatch, args.quick)
+    for c in claims:
+        say(f"claim {c['id']}: {c['measured']} → {c['status']}")
     try:
         from qpcoord.figures import _pyplot, save
     except ImportError:  # pragma: no cover
@@ -125,6 +230,7 @@ def main(argv=None) -> int:
             "overshoot": {n: s[f"overshoot_{n}"] for n in ("single", "dual", "dual_pred")},
             "rise_time_s": {n: s[f"rise_{n}"] for n in ("single", "dual", "dual_pred")},
             "analytic_vs_measured_dual_max_rel_gap": mismatch,
+            "claims": claims,
             "sweep": [
                 {
                     "k_s": w["k"],

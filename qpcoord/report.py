@@ -9,8 +9,9 @@ from pathlib import Path
 __all__ = ["write_json", "write_text", "TextLog", "claim", "CLAIM_STATUSES"]
 
 #: What a claim row can say about the thesis: its number or behaviour was reproduced; we
-#: measured something different (``note`` says why); the run was too short to decide (e.g.
-#: ``--quick``; ``note`` says what would decide it); or the row is ours (no thesis number).
+#: measured something different (``note`` says why); it cannot be decided -- the run was too
+#: short (e.g. ``--quick``) or the thesis gives too little to compare with (``note`` says
+#: what would decide it); or the row is ours (no thesis number).
 CLAIM_STATUSES = ("reproduced", "differs", "inconclusive", "not in thesis")
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -28,6 +29,21 @@ def test_example_quick(script, tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary
+    # every example states what it checked against the thesis (qpcoord reproduce's report)
+    from qpcoord.report import claim
+
+    rows = summary.get("claims")
+    assert rows, f"{script.name}: summary.json has no claims"
+    assert len({r["id"] for r in rows}) == len(rows), "claim ids must be unique"
+    for row in rows:
+        assert claim(**row) == row  # valid status, text fields, notes where needed
+    assert list(tmp_path.rglob("*.png")), f"{script.name} wrote no figure"
+
+
+def test_the_examples_index_lists_every_script():
+    index = (ROOT / "examples" / "README.md").read_text()
+    listed = set(re.findall(r"^\| `([\w]+\.py)` \|", index, re.M))
+    assert listed == {p.name for p in SCRIPTS}
 
 
 def test_write_json_is_atomic(tmp_path):
