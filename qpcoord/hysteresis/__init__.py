@@ -1,20 +1,18 @@
 """Piezo hysteresis: classical Preisach model and its inverse compensator (thesis appendix C).
 
-=====================================  ===============================================
-thesis                                 qpcoord.hysteresis
-=====================================  ===============================================
-Eqs C.1–C.4, C.8 (Everett function on   :class:`PreisachModel` (``levels``, ``everett``,
-a mesh, bilinear cells, Fig. C.5)       ``everett_at``, ``major_loop``)
-identification from first-order       :func:`identify`, :func:`forc_program`,
-reversal curves (Eq. C.3, Fig. C.3)     :meth:`PreisachModel.from_forc`
-Eqs C.5–C.7 + wipe-out (output with   :class:`PreisachStage` (``reset``/``step``, per
-memory of extrema)                      sample), :meth:`PreisachModel.evaluate` and
-                                        :meth:`PreisachStage.run` (vectorised)
-Eqs C.9–C.11 + descending case          :class:`PreisachCompensator` (``reset``/``step``)
-(inverse, feed-forward compensation)
-open-loop "without compensation"       :meth:`PreisachModel.linear_command`
-synthetic stacks (not the model)        :class:`RelayPiezo`, :class:`BoucWenPiezo`
-=====================================  ===============================================
+Thesis → qpcoord.hysteresis:
+
+- Eqs C.1–C.4, C.8 (Everett function on a mesh, bilinear cells, Fig. C.5):
+  :class:`PreisachModel` (``levels``, ``everett``, ``everett_at``, ``major_loop``);
+- identification from first-order reversal curves (Eq. C.3, Fig. C.3): :func:`identify`,
+  :func:`forc_program`, :meth:`PreisachModel.from_forc`;
+- Eqs C.5–C.7 + wipe-out (output with memory of extrema): :class:`PreisachStage`
+  (``reset``/``step``, per sample), :meth:`PreisachModel.evaluate` and
+  :meth:`PreisachStage.run` (vectorised);
+- Eqs C.9–C.11 + descending case (inverse, feed-forward compensation):
+  :class:`PreisachCompensator` (``reset``/``step``);
+- open-loop "without compensation": :meth:`PreisachModel.linear_command`;
+- synthetic stacks (not the model): :class:`RelayPiezo`, :class:`BoucWenPiezo`.
 
 Units: volts (V) in, metres (m) out. Per-sample objects take ``reset()`` and
 ``step(value) -> float`` (the interface of the DDL fine stage's optional hysteresis
