@@ -51,6 +51,8 @@ __all__ = [
     "ddl",
     "hysteresis",
     "musculo",
+    "reproduce",
+    "sweep",
     "geometry",
     "VelocityLimits",
     "available_solvers",
@@ -68,7 +70,7 @@ __all__ = [
 ]
 
 #: Submodules imported on first use (``qc.ddl`` pulls in scipy.signal: ~1.4 s measured).
-_LAZY = ("ddl", "hysteresis", "musculo")
+_LAZY = ("ddl", "hysteresis", "musculo", "reproduce", "sweep")
 
 
 def __getattr__(name: str):

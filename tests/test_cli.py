@@ -51,7 +51,7 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_second():
     readme = (ROOT / "README.md").read_text()
     commands = re.findall(r"^    (python3 -m venv .*)$", readme, re.M)
     assert len(commands) == 2, commands
-    assert commands[0].endswith("qpcoord demo")
+    assert commands[0].endswith("qpcoord reproduce --quick")
     assert 'pip install -e ".[test]"' in commands[1] and "pytest" in commands[1]
     ci = (ROOT / ".ci" / "run").read_text()
     pattern = re.search(r"grep -m1 -E '(.*?)' README.md", ci).group(1)
