@@ -526,7 +526,9 @@ def _collect(res: ScriptResult) -> None:
     path = res.out_dir / "summary.json"
     res.figures = sorted(p for p in res.out_dir.rglob("*.png") if ".tmp" not in p.name)
     if not path.is_file():
-        res.status, res.error = "failed", "exited 0 but wrote no summary.json"
+        last = _tail(res.log, 1).strip() if res.log else ""
+        res.status = "failed"
+        res.error = "exited 0 but wrote no summary.json" + (f" (it said: {last})" if last else "")
         return
     try:
         summary = json.loads(path.read_text(encoding="utf-8"))
