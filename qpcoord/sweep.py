@@ -54,6 +54,9 @@ worker: the cores are already busy, and a pool of pools only oversubscribes them
 
 Results are identical bit for bit between backends when ``fn`` is deterministic given its
 point (seed it from the point, e.g. with :func:`seeds`, never from global state).
+
+The module itself is callable: ``qpcoord.sweep(fn, grid_or_samples, backend=...)`` is
+:func:`sweep` (the module stays a module: ``qpcoord.sweep.grid``, ``import qpcoord.sweep``).
 """
 
 from __future__ import annotations
@@ -66,6 +69,7 @@ import reprlib
 import sys
 import threading
 import traceback
+import types
 import uuid
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -639,3 +643,13 @@ def _run_dask(client, call: _Call, points: list, collector) -> None:
             collector.add(*item)
     finally:
         client.cancel(futures)
+
+
+class _CallableModule(types.ModuleType):
+    """This module's type: calling the module calls :func:`sweep`."""
+
+    def __call__(self, fn: Callable, grid_or_samples: Any, **options: Any) -> list:
+        return sweep(fn, grid_or_samples, **options)
+
+
+sys.modules[__name__].__class__ = _CallableModule

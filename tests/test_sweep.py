@@ -415,3 +415,18 @@ def test_dask_process_cluster_runs_ddl_like_serial():
         assert sweep(blas_threads, range(2), backend=client) == [1, 1]
     for (y0, v0, e0), (y1, v1, e1) in zip(serial, out, strict=True):
         assert np.array_equal(y0, y1) and np.array_equal(v0, v1) and e0 == e1
+
+
+def test_the_module_is_callable_as_the_issue_spells_it():
+    """``qpcoord.sweep(fn, grid, backend=...)`` is ``qpcoord.sweep.sweep``; the module keeps
+    its other names and its module type."""
+    import types
+
+    import qpcoord as qc
+    import qpcoord.sweep as module
+
+    assert module is qc.sweep and isinstance(module, types.ModuleType)
+    assert qc.sweep(add, {"a": [1, 2], "b": [10]}, backend="serial") == [add(1, 10), add(2, 10)]
+    with pytest.raises(ValueError, match="backend"):
+        qc.sweep(add, [1], backend="gpu")
+    assert qc.sweep.grid(a=[1]) == [{"a": 1}]
