@@ -73,3 +73,28 @@ def test_figures_copied(site: Path) -> None:
     assert images, "no figure in the built site"
     total = sum(p.stat().st_size for p in (ROOT / "docs" / "img").glob("*.png"))
     assert total < 4_000_000, f"docs/img holds {total / 1e6:.1f} MB of figures (limit 4 MB)"
+
+
+#: Pages whose ``python`` blocks form a complete program, run in order in one namespace (as a
+#: reader pasting them would). The other pages' blocks are sketches with placeholders
+#: (``...``, a user's own ``run_control_loop``), or run long studies tested elsewhere.
+RUNNABLE_PAGES = [
+    "index.md",
+    "concepts.md",
+    "getting-started.md",
+    "kinematics.md",
+    "ch5.md",
+    "appA.md",
+    "appB.md",
+]
+
+
+@pytest.mark.parametrize("page", RUNNABLE_PAGES)
+def test_the_snippets_of_a_page_run(page, capsys):
+    import re
+
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / page).read_text(), re.S)
+    assert blocks, f"{page} has no python block"
+    namespace: dict = {}
+    for i, code in enumerate(blocks):
+        exec(compile(code, f"docs/{page} block {i}", "exec"), namespace)
