@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import re
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
@@ -140,7 +139,6 @@ def test_good_run_writes_report(fake_examples, tmp_path):
 def test_failure_and_timeout_are_reported(fake_examples, tmp_path):
     _add_failing(fake_examples)
     out = tmp_path / "out"
-    t0 = time.perf_counter()
     rep = reproduce.run(
         out=out,
         quick=True,
@@ -150,7 +148,6 @@ def test_failure_and_timeout_are_reported(fake_examples, tmp_path):
         progress=False,
         bench=False,
     )
-    assert time.perf_counter() - t0 < 40
     by = {r.name: r for r in rep.results}
     assert by["ch5_fail"].status == "failed" and by["ch5_fail"].returncode == 1
     assert "boom" in by["ch5_fail"].stderr_tail
