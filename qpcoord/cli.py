@@ -161,7 +161,15 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``qpcoord`` command."""
-    p = argparse.ArgumentParser(prog="qpcoord", description=__doc__.split("\n")[0])
+    commands = "\n".join(
+        line.replace("``", "") for line in __doc__.splitlines() if line.startswith("``qpcoord")
+    )
+    p = argparse.ArgumentParser(
+        prog="qpcoord",
+        description="qpcoord: over-actuated systems coordinated by prioritised QP stacks.",
+        epilog="commands:\n" + commands + "\n\nStart with: qpcoord reproduce --quick",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     sub = p.add_subparsers(dest="command", required=True)
     s = sub.add_parser("solvers", help="list installed QP backends with versions")
     s.set_defaults(func=_cmd_solvers)

@@ -108,3 +108,13 @@ def test_import_is_light_and_heavy_subpackages_load_on_use():
         "assert 'scipy.signal' in sys.modules"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_help_lists_every_command(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for command in ("solvers", "demo", "bench stack", "bench ik", "ddl track", "ddl compare"):
+        assert f"qpcoord {command}" in out
+    assert "qpcoord reproduce --quick" in out
