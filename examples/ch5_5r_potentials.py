@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors
+from qpcoord.analysis import closure_errors, periods_to_closure
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring
 from qpcoord.report import TextLog, claim, write_json
@@ -61,15 +61,6 @@ GAIN = 10.0  # 1/s, closed-loop correction of the main task
 CLOSED = 1e-6  # rad per period: closed
 CLOSED_PERIODS = 3  # a run has closed if its last ≥ 3 periods are below CLOSED
 FULL_PERIODS = 8  # periods of the full run (32 for the single potential)
-
-
-def periods_to_close(closure, tol: float = 1e-6):
-    """First period k (1-based) from which every closure error is < tol; None if never."""
-    above = np.flatnonzero(~(np.asarray(closure) < tol))
-    if above.size == 0:
-        return 1
-    k = int(above[-1]) + 2
-    return k if k <= len(closure) else None
 
 
 def schemes(arm, q_start, quick: bool) -> dict:
@@ -121,7 +112,7 @@ def run(periods: int, spp: int, quick: bool) -> tuple[dict, dict]:
                 "alpha": alpha,
                 "periods": longer * periods,
                 "closure_error_per_period_rad": closure.tolist(),
-                "periods_to_closure_1e-6": periods_to_close(closure),
+                "periods_to_closure_1e-6": periods_to_closure(closure),
                 "final_closure_rad": float(closure[-1]),
                 # closure ∝ k^p over the second half of the run (p from a log-log fit)
                 "closure_power_law_exponent": float(

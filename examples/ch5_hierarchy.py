@@ -74,7 +74,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors
+from qpcoord.analysis import closure_errors, periods_to_closure
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring, JointLimitAvoidance
 from qpcoord.report import TextLog, claim, write_json
@@ -186,18 +186,6 @@ def claims(r5: dict, rows: list[dict]) -> list[dict]:
     return out
 
 
-def periods_to_close(closure, tol: float = 1e-6):
-    """First period k (1-based) from which every closure error is < tol; None if never."""
-    closure = np.asarray(closure)
-    if closure.size == 0:
-        return None
-    above = np.flatnonzero(~(closure < tol))
-    if above.size == 0:
-        return 1
-    k = int(above[-1]) + 2
-    return k if k <= len(closure) else None
-
-
 def ydot_command(arm, path, q, t) -> np.ndarray:
     y_ref, v_ref = path.position_velocity(t)
     return v_ref + GAIN * (y_ref - arm.position(q))
@@ -271,7 +259,7 @@ def run_5r(periods: float, spp: int, every: int) -> tuple[dict, dict]:
         "q_final": traj.q[-1].tolist(),
         "max_tracking_error_m": traj.max_error,
         "closure_error_per_period_rad": closure.tolist(),
-        "periods_to_closure_1e-6": periods_to_close(closure),
+        "periods_to_closure_1e-6": periods_to_closure(closure) if closure.size else None,
         "runtime_simulation_s": t_sim,
     }
     return result, {"rec": rec, "traj": traj}
@@ -325,7 +313,8 @@ def run_panda(arm, duration: float) -> list[dict]:
             ),
             runtime_s=time.perf_counter() - t0,
         )
-        row["periods_to_closure_1e-6"] = periods_to_close(row["closure_error_per_period_rad"])
+        closure = row["closure_error_per_period_rad"]
+        row["periods_to_closure_1e-6"] = periods_to_closure(closure) if closure else None
         row["_t"], row["_q7"] = traj.t, traj.q[:, 6]
         rows.append(row)
     return rows

@@ -69,7 +69,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors
+from qpcoord.analysis import closure_errors, periods_to_closure
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring
 from qpcoord.report import TextLog, claim, write_json
@@ -78,16 +78,6 @@ Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9
 CLOSED = 1e-6  # rad: "closed" threshold of the closure error per period
 CLOSED_PERIODS = 3  # a run has closed if its last ≥ 3 periods are below CLOSED
 FULL_PERIODS = 25  # periods of the full run: "never closes" is only a finding this long
-
-
-def periods_to_close(closure, tol: float = CLOSED):
-    """First period k (1-based) from which every closure error is < tol; None if never."""
-    closure = np.asarray(closure)
-    above = np.flatnonzero(~(closure < tol))
-    if above.size == 0:
-        return 1
-    k = int(above[-1]) + 2
-    return k if k <= len(closure) else None
 
 
 def band_analysis(arm, path, traj, alpha: float, steps_per_period: int) -> dict:
@@ -141,7 +131,7 @@ def run_one(arm, path, scheme, periods: int, steps_per_period: int) -> tuple[dic
         "periods": periods,
         "diverged": None,
         "closure_error_per_period_rad": closure.tolist(),
-        "periods_to_closure_1e-6": periods_to_close(closure),
+        "periods_to_closure_1e-6": periods_to_closure(closure, CLOSED),
         "final_closure_rad": float(closure[-1]),
         "max_tracking_error_m": traj.max_error,
         "runtime_s": time.perf_counter() - t0,

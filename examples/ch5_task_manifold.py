@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors
+from qpcoord.analysis import closure_errors, periods_to_closure
 from qpcoord.extension import SoftExtension
 from qpcoord.potentials import JointCentring
 from qpcoord.report import TextLog, claim, write_json
@@ -157,8 +157,8 @@ def run(n_fibres: int, step: float, cycle_periods: int, spp: int) -> tuple[dict,
         "pinv_max_tracking_error_m": pinv.max_error,
         "soft_alpha": 3.0,
         "soft_closure_error_per_period_rad": soft_closure.tolist(),
-        "soft_periods_to_closure_1e-6": periods_to_close(soft_closure),
-        "pinv_periods_to_closure_1e-6": periods_to_close(closure_errors(pinv, T)),
+        "soft_periods_to_closure_1e-6": periods_to_closure(soft_closure),
+        "pinv_periods_to_closure_1e-6": periods_to_closure(closure_errors(pinv, T)),
         "runtime_simulations_s": t_sim,
         "runtime_fibres_s": t_fib,
     }
@@ -168,15 +168,6 @@ def run(n_fibres: int, step: float, cycle_periods: int, spp: int) -> tuple[dict,
         "pinv": pinv,
         "cycle": soft.q[-spp - 1 :],
     }
-
-
-def periods_to_close(closure, tol: float = 1e-6):
-    """First period k (1-based) from which every closure error is < tol; None if never."""
-    above = np.flatnonzero(~(np.asarray(closure) < tol))
-    if above.size == 0:
-        return 1
-    k = int(above[-1]) + 2
-    return k if k <= len(closure) else None
 
 
 def claims(result: dict) -> list[dict]:
