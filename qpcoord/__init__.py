@@ -9,8 +9,10 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
 """
 
 from . import analysis, geometry, paths, potentials, robots, schemes, task_manifold
-from .backends import available_solvers, default_solver, solver_versions
-from .errors import AlgorithmicSingularity, InfeasibleError, SolverError
+from .core.backends import available_solvers, default_solver, solver_versions
+from .core.errors import AlgorithmicSingularity, InfeasibleError, SolverError
+from .core.stack import METHODS, Solution, Stack, solve_stack
+from .core.tasks import Bounds, Equality, Inequality
 from .ik import IK, ik_step, inverse_kinematics
 from .kinematic_tasks import (
     JointLimits,
@@ -23,8 +25,6 @@ from .kinematic_tasks import (
 )
 from .robot import Robot
 from .simulate import Trajectory, simulate
-from .stack import METHODS, Solution, Stack, solve_stack
-from .tasks import Bounds, Equality, Inequality
 
 __version__ = "0.1.0"
 

@@ -33,10 +33,10 @@ import time
 
 import numpy as np
 
-from .backends import available_solvers
-from .errors import InfeasibleError, SolverError
-from .stack import Stack
-from .tasks import Bounds, Equality, Inequality
+from .core.backends import available_solvers
+from .core.errors import InfeasibleError, SolverError
+from .core.stack import Stack
+from .core.tasks import Bounds, Equality, Inequality
 
 __all__ = [
     "ChainScenario",

@@ -18,7 +18,7 @@ __all__ = ["main"]
 
 
 def _cmd_solvers(args: argparse.Namespace) -> int:
-    from .backends import _DIRECT, default_solver, solver_versions
+    from .core.backends import _DIRECT, default_solver, solver_versions
 
     versions = solver_versions()
     default = default_solver()

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import AlgorithmicSingularity
+from .core.errors import AlgorithmicSingularity
+from .core.linalg import null_space
 from .kinematic_tasks import PositionTask, _gain
-from .linalg import null_space
 from .robot import Robot
 
 __all__ = ["HessianDirection", "ComplementaryForm", "task_function"]
@@ -103,7 +103,7 @@ class HessianDirection(_ScalarTaskScheme):
 
     The thesis states that ``J f₁`` cannot vanish "by construction"; it can (``f₁`` may be
     a pure self-motion), so a relative ``‖J f₁‖ / ‖J‖ < tol`` raises
-    :class:`~qpcoord.errors.AlgorithmicSingularity`. ``info`` keeps, per call, ``eigenvalues``
+    :class:`~qpcoord.core.errors.AlgorithmicSingularity`. ``info`` keeps, per call, ``eigenvalues``
     and ``gap`` (``(|λ₁| − |λ₂|)/|λ₁|``: near 0 the chosen direction may jump) and
     ``min_gap`` / ``min_speed_ratio`` over the run.
 
@@ -186,7 +186,7 @@ class ComplementaryForm(_ScalarTaskScheme):
         Closed-loop gain ``K`` (1/s), default 0.
     tol : float
         Relative singular-value threshold of ``[J F]`` below which the scheme raises
-        :class:`~qpcoord.errors.AlgorithmicSingularity` (default 1e-6).
+        :class:`~qpcoord.core.errors.AlgorithmicSingularity` (default 1e-6).
     """
 
     def __init__(self, robot, q_bar, center=None, gain: float = 0.0, tol: float = 1e-6) -> None:

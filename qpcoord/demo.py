@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .stack import Stack
-from .tasks import Bounds, Equality, Inequality
+from .core.stack import Stack
+from .core.tasks import Bounds, Equality, Inequality
 
 __all__ = ["planar_3r_position", "planar_3r_jacobian", "run_demo"]
 

@@ -3,7 +3,7 @@
 - :class:`RigidExtension` -- Baillieul's extended Jacobian: ``[J; G] q̇ = [Ẏ; 0]`` with
   ``m + k = nq``, unique solution, periodic responses, but an *algorithmic singularity*
   wherever ``[J; G]`` loses rank while ``J`` does not: reported as
-  :class:`~qpcoord.errors.AlgorithmicSingularity` with the configuration.
+  :class:`~qpcoord.core.errors.AlgorithmicSingularity` with the configuration.
 - :class:`SoftExtension` -- the softly-augmented Jacobian: the main task by ``J⁺``, then
   the gradients of potentials ``g₁, g₂, …`` in strict priority in the reduced null spaces
   (``q̇ = J⁺Ẏ + N₁N₁ᵀΦ₁ + N₂N₂ᵀΦ₂ + …``, ``Φ_k = −∇g_kᵀ g_k``).
@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import AlgorithmicSingularity
+from .core.errors import AlgorithmicSingularity
+from .core.linalg import filtered_svd, null_space, svd
+from .core.tasks import Equality
 from .ik import DEFAULT_IK_DAMPING, IK
 from .kinematic_tasks import KinematicTask, OneFormTask, PositionTask, _gain
-from .linalg import filtered_svd, null_space, svd
 from .potentials import Potential
 from .robot import Robot
-from .tasks import Equality
 
 __all__ = ["RigidExtension", "SoftExtension", "SOFT_METHODS"]
 
@@ -40,7 +40,7 @@ class RigidExtension:
     Posed as a :class:`~qpcoord.Stack` (:class:`~qpcoord.IK`): the position task is the
     level, ``G q̇ = 0`` a hard constraint. After each step the relative smallest singular
     value ``σ_min/σ_max`` of ``[J; G]`` is checked; below ``tol`` the scheme raises
-    :class:`~qpcoord.errors.AlgorithmicSingularity` carrying ``q`` and ``t``.
+    :class:`~qpcoord.core.errors.AlgorithmicSingularity` carrying ``q`` and ``t``.
     ``sigma_min`` keeps the smallest value met (reset it with :meth:`reset`).
 
     Parameters

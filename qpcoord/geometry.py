@@ -26,7 +26,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .linalg import null_space, svd
+from .core.linalg import null_space, svd
 
 __all__ = [
     "field_jacobian",

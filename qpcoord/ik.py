@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .core.linalg import filtered_svd
+from .core.stack import METHODS, Solution, Stack
+from .core.tasks import Bounds, Equality, Inequality
 from .kinematic_tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
-from .linalg import filtered_svd
 from .robot import Robot
-from .stack import METHODS, Solution, Stack
-from .tasks import Bounds, Equality, Inequality
 
 __all__ = ["IK", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
 

@@ -27,9 +27,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .core.tasks import Equality, Inequality
 from .paths import Path
 from .robot import Robot
-from .tasks import Equality, Inequality
 
 __all__ = [
     "KinematicTask",

@@ -25,10 +25,10 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import linprog
 
-from .backends import check_solver, solve_dense_qp
-from .errors import InfeasibleError, SolverError
-from .stack import Solution, Stack
-from .tasks import Bounds, Equality
+from .core.backends import check_solver, solve_dense_qp
+from .core.errors import InfeasibleError, SolverError
+from .core.stack import Solution, Stack
+from .core.tasks import Bounds, Equality
 
 __all__ = [
     "Distribution",
@@ -293,7 +293,7 @@ def two_step(model, q, Q, solver: str | None = None) -> Distribution:
     ----------
     model, q, Q, solver
         As :func:`distribute`. The QP goes to the backend directly
-        (:func:`qpcoord.backends.solve_dense_qp`, the Stack's tuned settings), not through
+        (:func:`qpcoord.core.backends.solve_dense_qp`, the Stack's tuned settings), not through
         a :class:`~qpcoord.Stack`: an independent formulation of the same problem.
 
     Raises

@@ -598,7 +598,7 @@ def environment(quick: bool, jobs: int) -> dict:
     import numpy as np
 
     from . import __version__
-    from .backends import solver_versions
+    from .core.backends import solver_versions
 
     try:
         cores = len(os.sched_getaffinity(0))

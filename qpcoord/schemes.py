@@ -179,7 +179,7 @@ class InvolutiveBasis(RigidExtension):
     solver : str, optional
     tol : float
         Relative smallest singular value of ``[J; ω]`` below which
-        :class:`~qpcoord.errors.AlgorithmicSingularity` is raised (default 1e-6).
+        :class:`~qpcoord.core.errors.AlgorithmicSingularity` is raised (default 1e-6).
     """
 
     def __init__(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .linalg import null_space
+from .core.linalg import null_space
 from .robot import Robot
 
 __all__ = ["fibre", "fibre_point", "self_motion_direction", "wrap_angles"]

@@ -26,8 +26,8 @@ PAGES = {
     "ch6/index.html": "SisoCoordinator",
     "appB/index.html": "BladeFlexure",
     # API pages generated from docstrings by mkdocstrings
-    "api/core/index.html": 'id="qpcoord.stack.solve_stack"',
-    "api/persistent/index.html": 'id="qpcoord.persistent.PersistentQP"',
+    "api/core/index.html": 'id="qpcoord.core.stack.solve_stack"',
+    "api/persistent/index.html": 'id="qpcoord.core.persistent.PersistentQP"',
     "api/ddl-controllers/index.html": 'id="qpcoord.ddl.mpc.MPC"',
 }
 

@@ -19,7 +19,7 @@ The stack (``qc.Stack``):
   :data:`V_EFFORT` = 10 V: the coarse phase costs most).
 
 ``method="weighted"`` solves it as one QP on a persistent daqp workspace
-(:class:`qpcoord.persistent.PersistentQP`, hot-started); ``method="hierarchical"`` solves
+(:class:`qpcoord.core.persistent.PersistentQP`, hot-started); ``method="hierarchical"`` solves
 the strict hierarchy with :meth:`qpcoord.Stack.solve` each step (exact priorities, slower).
 If a step's QP fails (infeasible hard constraints, backend failure), the step uses the fine
 PI of a shadow :class:`~.coordinator.SisoCoordinator` (no feed-forward) with the field phase
@@ -39,9 +39,9 @@ import time
 import numpy as np
 from scipy.linalg import expm, solve_discrete_are
 
-from ..persistent import PersistentQP
-from ..stack import Stack
-from ..tasks import Bounds, Equality, Inequality
+from ..core.persistent import PersistentQP
+from ..core.stack import Stack
+from ..core.tasks import Bounds, Equality, Inequality
 from ._check import positive
 from .coordinator import SisoCoordinator
 

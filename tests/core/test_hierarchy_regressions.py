@@ -95,7 +95,7 @@ def test_pointed_cone_of_pinned_speed_bounds(solver):
     answer: level 1 cannot move the four pinned joints (residual 26.515922); inexact
     backends may gain ~2e-4 from their 1e-8 opening of the bounds.
     """
-    d = np.load(Path(__file__).parent / "data" / "panda_pinned_cone.npz")
+    d = np.load(Path(__file__).parents[1] / "data" / "panda_pinned_cone.npz")
     stack = qc.Stack(
         [qc.Equality(d["A0"], d["b0"]), qc.Equality(d["A1"], d["b1"])],
         bounds=qc.Bounds(d["lb"], d["ub"]),

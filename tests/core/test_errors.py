@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import qpcoord as qc
-import qpcoord.backends as backends
-import qpcoord.reduced as reduced
-from qpcoord.backends import FAILED, INFEASIBLE, OK, QPResult
+import qpcoord.core.backends as backends
+import qpcoord.core.elimination as reduced
+from qpcoord.core.backends import FAILED, INFEASIBLE, OK, QPResult
 
 SOLVERS = qc.available_solvers()
 Equality, Inequality, Bounds = qc.Equality, qc.Inequality, qc.Bounds

@@ -1,4 +1,4 @@
-"""Unit tests of the task objects (:mod:`qpcoord.tasks`) and of :mod:`qpcoord.linalg`."""
+"""Unit tests of the task objects (:mod:`qpcoord.core.tasks`) and of :mod:`qpcoord.core.linalg`."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import qpcoord as qc
-from qpcoord.linalg import filtered_gains, filtered_svd, null_space
+from qpcoord.core.linalg import filtered_gains, filtered_svd, null_space
 
 # ---------------------------------------------------------------------------------------
 # Equality

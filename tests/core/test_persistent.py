@@ -1,4 +1,5 @@
-"""qpcoord.persistent.PersistentQP: the weighted QP of a fixed-matrix stack, persistent daqp."""
+"""qpcoord.core.persistent.PersistentQP: the weighted QP of a fixed-matrix stack, persistent
+daqp."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import qpcoord as qc
-from qpcoord.persistent import PersistentQP
+from qpcoord.core.persistent import PersistentQP
 
 pytestmark = pytest.mark.skipif("daqp" not in qc.available_solvers(), reason="needs daqp")
 

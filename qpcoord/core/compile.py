@@ -1,0 +1,253 @@
+"""Compiled form of a stack: per-level stacked arrays, refreshed in place every solve.
+
+:class:`~qpcoord.Stack` validates the structure once (number of variables, rows per task)
+and keeps one :class:`CompiledStack`. Each solve copies the tasks' current numbers into
+the preallocated buffers (no re-stacking, no re-validation of the structure), which is the
+"structure cache" of the per-step hot path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .elimination import FEAS_TOL
+from .tasks import Bounds, Equality, Inequality
+from .tolerance import widen
+
+__all__ = ["CompiledLevel", "CompiledStack", "compile_stack"]
+
+
+@dataclass
+class CompiledLevel:
+    """Stacked rows of one priority level (or of the hard constraints).
+
+    ``Ae x ≈ be`` are the equality rows already multiplied by ``√weight``; ``lo ≤ C x ≤ hi``
+    are the inequality rows with ``sw`` = ``√weight`` of each row's violation.
+    """
+
+    eqs: list[Equality]
+    ineqs: list[Inequality]
+    n: int
+    Ae: np.ndarray = field(init=False)
+    be: np.ndarray = field(init=False)
+    C: np.ndarray = field(init=False)
+    lo: np.ndarray = field(init=False)
+    hi: np.ndarray = field(init=False)
+    sw: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        me = sum(t.A.shape[0] for t in self.eqs)
+        mi = sum(t.C.shape[0] for t in self.ineqs)
+        self.Ae = self._Ae_buf = np.zeros((me, self.n))
+        self.be = self._be_buf = np.zeros(me)
+        self.C = np.zeros((mi, self.n))
+        self.lo = np.zeros(mi)
+        self.hi = np.zeros(mi)
+        self.sw = np.ones(mi)
+        self.low = self.lo  # lo/hi widened by FEAS_TOL (the closed-form feasibility test)
+        self.hiw = self.hi
+        self._eq_shapes = [t.A.shape for t in self.eqs]
+        #: the level is exactly ``x = be`` (one unit-weight identity task, no inequalities)
+        self.identity = False
+        self._in_shapes = [t.C.shape for t in self.ineqs]
+
+    @property
+    def m_eq(self) -> int:
+        """Number of equality rows."""
+        return self.Ae.shape[0]
+
+    @property
+    def m_in(self) -> int:
+        """Number of inequality rows."""
+        return self.C.shape[0]
+
+    def refresh(self) -> None:
+        """Copy the tasks' current numbers into the buffers (checks shapes did not change).
+
+        A level made of one unit-weight equality reads that task's arrays directly; they
+        are only read, never written, by the solve methods.
+        """
+        eqs = self.eqs
+        if len(eqs) == 1 and eqs[0].unit_weight:
+            # one unit-weight task: read its arrays in place (no copy on the hot path)
+            t = eqs[0]
+            if t.A.shape != self._eq_shapes[0]:
+                raise ValueError(
+                    f"{t.label}: A changed shape from {self._eq_shapes[0]} to {t.A.shape}"
+                )
+            self.Ae, self.be = t.A, t.b
+            self.identity = t.is_identity and not self.ineqs
+            eqs = ()
+        elif eqs:
+            self.Ae, self.be = self._Ae_buf, self._be_buf
+            self.identity = False
+        i = 0
+        for t, shape in zip(eqs, self._eq_shapes, strict=False):
+            if t.A.shape != shape:
+                raise ValueError(f"{t.label}: A changed shape from {shape} to {t.A.shape}")
+            m = shape[0]
+            if t.unit_weight:
+                self.Ae[i : i + m] = t.A
+                self.be[i : i + m] = t.b
+            else:
+                sw = t.sqrt_weight
+                np.multiply(t.A, sw[:, None], out=self.Ae[i : i + m])
+                np.multiply(t.b, sw, out=self.be[i : i + m])
+            i += m
+        i = 0
+        for t, shape in zip(self.ineqs, self._in_shapes, strict=True):
+            if t.C.shape != shape:
+                raise ValueError(f"{t.label}: C changed shape from {shape} to {t.C.shape}")
+            m = shape[0]
+            self.C[i : i + m] = t.C
+            self.lo[i : i + m] = t.lower
+            self.hi[i : i + m] = t.upper
+            self.sw[i : i + m] = t.sqrt_weight
+            i += m
+        if self.ineqs:
+            self.low, self.hiw = widen(self.lo, self.hi, FEAS_TOL)
+
+    def residual(self, x: np.ndarray) -> float:
+        """Norm of the weighted equality residual and inequality violation at ``x``."""
+        total = 0.0
+        if self.m_eq:
+            r = self.Ae @ x - self.be
+            total += float(r @ r)
+        if self.m_in:
+            cx = self.C @ x
+            v = self.sw * (cx - np.clip(cx, self.lo, self.hi))
+            total += float(v @ v)
+        return float(np.sqrt(total))
+
+
+@dataclass
+class CompiledStack:
+    """All levels, hard constraints and bounds of a stack, as arrays."""
+
+    n: int
+    levels: list[CompiledLevel]
+    hard: CompiledLevel
+    bounds: Bounds | None
+    lb: np.ndarray | None = None
+    ub: np.ndarray | None = None
+    _bounds_version: int = -1
+
+    @property
+    def equalities_only(self) -> bool:
+        """No hard constraints and no inequality rows in any level (bounds allowed)."""
+        return self._equalities_only
+
+    def __post_init__(self) -> None:
+        self._equalities_only = not (
+            self.hard.m_eq or self.hard.m_in or any(L.m_in for L in self.levels)
+        )
+
+    @property
+    def capacity(self) -> int:
+        """Most inequality rows a solve can inherit."""
+        return self.hard.m_in + sum(L.m_in for L in self.levels)
+
+    def refresh(self) -> None:
+        """Re-read every task's numbers (the per-step update)."""
+        for L in self.levels:
+            L.refresh()
+        self.hard.refresh()
+        b = self.bounds
+        if b is not None and b.version != self._bounds_version:
+            self.lb, self.ub = b.resolve(self.n)
+            self._bounds_version = b.version
+
+
+def _split(tasks, where: str) -> tuple[list[Equality], list[Inequality]]:
+    eqs, ineqs = [], []
+    for j, t in enumerate(tasks):
+        if isinstance(t, Equality):
+            eqs.append(t)
+        elif isinstance(t, Inequality):
+            ineqs.append(t)
+        elif isinstance(t, Bounds):
+            raise ValueError(
+                f"{where}, task {j}: Bounds are always hard; pass them as Stack(..., bounds=...)"
+            )
+        else:
+            raise ValueError(
+                f"{where}, task {j}: expected an Equality or Inequality, got {type(t).__name__}"
+            )
+    return eqs, ineqs
+
+
+def compile_stack(levels, bounds, constraints) -> CompiledStack:
+    """Validate a stack's structure and build its buffers.
+
+    Parameters
+    ----------
+    levels : sequence
+        ``levels[0]`` is the highest priority; each item is a task or a list of tasks.
+    bounds : Bounds or None
+    constraints : sequence of tasks or None
+        Hard constraints (must hold exactly).
+
+    Raises
+    ------
+    ValueError
+        Empty stack, empty level, mixed numbers of variables, unknown task types.
+    """
+    if isinstance(levels, (Equality, Inequality)):
+        levels = [levels]
+    try:
+        levels = list(levels)
+    except TypeError:
+        raise ValueError(f"levels must be a list of tasks or task lists, got {levels!r}") from None
+    hard_tasks = [] if constraints is None else constraints
+    if isinstance(hard_tasks, (Equality, Inequality)):
+        hard_tasks = [hard_tasks]
+    hard_tasks = list(hard_tasks)
+    if not levels and not hard_tasks:
+        raise ValueError("empty stack: give at least one level with one task")
+    norm_levels = []
+    for k, lev in enumerate(levels):
+        tasks = [lev] if isinstance(lev, (Equality, Inequality, Bounds)) else lev
+        try:
+            tasks = list(tasks)
+        except TypeError:
+            raise ValueError(
+                f"level {k}: expected a task or a list of tasks, got {type(lev).__name__}"
+            ) from None
+        if not tasks:
+            raise ValueError(f"level {k} is empty: give it at least one task or remove it")
+        norm_levels.append(tasks)
+    n = None
+    first = None
+    for k, tasks in enumerate([hard_tasks, *norm_levels]):
+        where = "constraints" if k == 0 else f"level {k - 1}"
+        for t in tasks:
+            if not isinstance(t, (Equality, Inequality)):
+                continue
+            cols = t.shape[1]
+            if n is None:
+                n, first = cols, f"{where}, {t.label}"
+            elif cols != n:
+                raise ValueError(
+                    f"{where}, {t.label}: has {cols} columns but {first} has {n}: "
+                    "all tasks must act on the same variable"
+                )
+    compiled_levels = []
+    for k, tasks in enumerate(norm_levels):
+        eqs, ineqs = _split(tasks, f"level {k}")
+        compiled_levels.append((eqs, ineqs))
+    heqs, hineqs = _split(hard_tasks, "constraints")
+    if bounds is not None and not isinstance(bounds, Bounds):
+        raise ValueError(f"bounds must be a qpcoord.Bounds, got {type(bounds).__name__}")
+    if n is None:
+        raise ValueError("empty stack: no task found")
+    if bounds is not None:
+        bounds.resolve(n)  # ValueError now if the length does not match
+    out = CompiledStack(
+        n=n,
+        levels=[CompiledLevel(e, i, n) for e, i in compiled_levels],
+        hard=CompiledLevel(heqs, hineqs, n),
+        bounds=bounds,
+    )
+    return out

@@ -1,0 +1,407 @@
+"""Variable elimination state shared by the stack methods.
+
+The decision variable is parameterised as ``x = x̄ + Z z`` where ``Z`` (n × r, orthonormal
+columns, ``None`` meaning the identity) spans the freedom left by everything fixed so far,
+and ``x̄`` is the current solution. Inequality rows that must keep holding (bounds, hard
+inequalities, satisfied rows of higher levels) are *inherited*: every later QP sees them as
+constraints on ``z``. Because ``x̄`` satisfies all of them, ``z = 0`` is always feasible for a
+later level, so a strict hierarchy cannot become spuriously infeasible.
+
+One :class:`Reduced` workspace belongs to a compiled stack and is reset at every solve: the
+inherited-row buffers are allocated once (the per-step hot path).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .backends import INFEASIBLE, OK, as_rows, available_solvers, solve_dense_qp
+from .errors import InfeasibleError, SolverError
+from .linalg import null_space, numerical_rank, svd
+from .polish import polish
+from .tolerance import widen, within
+
+__all__ = ["Reduced", "FEAS_TOL", "CHECK_TOL", "within", "widen"]
+
+#: Relative tolerance under which a closed-form candidate counts as feasible
+#: (``row ≤ hi + FEAS_TOL·max(1, |hi|)``).
+FEAS_TOL = 1e-9
+#: Relative tolerance of the final check of every returned ``x`` against the hard
+#: constraints and inherited rows; beyond it a :class:`SolverError` is raised.
+CHECK_TOL = 1e-6
+#: Relative opening of inherited rows and bounds in the QPs of lower levels, per backend:
+#: active-set backends resolve a point pinned by active rows exactly; the others need a
+#: feasible set at least as wide as their tolerances (proxqp and highs reported
+#: "infeasible" on 1e-12-wide sets that daqp and quadprog solved).
+RELAX = {"daqp": 1e-12, "quadprog": 1e-12}
+RELAX_DEFAULT = 1e-8
+#: Backends tried, in order, when the requested one fails on a level QP that is feasible
+#: by construction (``z = 0`` meets every row; slacks are free). Measured case: at a
+#: point pinned by four joint-speed bounds whose cone in ``z`` is pointed (a Panda IK
+#: step), daqp 0.11 reported "infeasible" with every setting, quadprog solved it exactly.
+FALLBACKS = ("quadprog", "daqp", "proxqp")
+
+
+def _miss(G, lo, hi, lb, ub, y) -> float:
+    """Largest relative violation ``(row − bound)/max(1, |bound|)`` of a QP point
+    (``inf`` for a non-finite point; infinite bounds never count)."""
+    if not np.isfinite(y.sum()):
+        return np.inf
+    worst = 0.0
+    pairs = [(G @ y, lo, hi)] if G.shape[0] else []
+    if lb is not None:
+        pairs.append((y, lb, ub))
+    for v, low, high in pairs:
+        # |bound| capped at 1e300: an infinite bound gives ∓inf here, never NaN
+        below = (low - v) / np.maximum(1.0, np.minimum(np.abs(low), 1e300))
+        above = (v - high) / np.maximum(1.0, np.minimum(np.abs(high), 1e300))
+        worst = max(worst, float(below.max()), float(above.max()))
+    return worst
+
+
+def _lp_feasible(G, lo, hi, lb, ub) -> bool:
+    """Is ``{y : lo ≤ G y ≤ hi, lb ≤ y ≤ ub}`` non-empty? (HiGHS LP via scipy.)"""
+    from scipy.optimize import linprog
+
+    k = G.shape[1]
+    A, b = as_rows(G, lo, hi, lb, ub, k)  # the box as rows too
+    res = linprog(np.zeros(k), A_ub=A, b_ub=b, bounds=[(None, None)] * k, method="highs")
+    return res.status != 2  # 2: infeasible
+
+
+#: Active-set backends that certify infeasibility exactly and fast.
+_CERTIFYING = frozenset({"daqp", "quadprog"})
+
+
+class Reduced:
+    """Current solution ``x̄``, null-space basis ``Z`` and inherited inequality rows.
+
+    Parameters
+    ----------
+    n : int
+        Number of variables.
+    capacity : int
+        Most inherited rows a solve can collect (hard inequalities plus every level's).
+    fallback : bool
+        Retry a level QP the backend failed on with :data:`FALLBACKS` (see there).
+    """
+
+    def __init__(self, n: int, capacity: int, fallback: bool = True) -> None:
+        self.n = n
+        self.fallback = fallback
+        self._C = np.empty((capacity, n))
+        self._lo = np.empty(capacity)
+        self._hi = np.empty(capacity)
+        self._low = np.empty(capacity)  # widened by FEAS_TOL, for the closed-form test
+        self._high = np.empty(capacity)
+        self.reset(None, None, "")
+
+    def reset(self, lb: np.ndarray | None, ub: np.ndarray | None, solver: str) -> Reduced:
+        """Start a new solve at ``x̄ = 0`` with the full freedom."""
+        self.x = np.zeros(self.n)
+        self.Z: np.ndarray | None = None
+        self.k = 0
+        self.lb, self.ub = lb, ub
+        if lb is not None:
+            self.lbw, self.ubw = widen(lb, ub, FEAS_TOL)
+        self.solver = solver
+        self.relax = RELAX.get(solver, RELAX_DEFAULT)
+        self.used_relax = self.relax
+        self.qp_calls = 0
+        self.retries = 0
+        self.fallbacks: list[str] = []
+        self._in_fallback = False
+        self.polished = 0
+        self.verified = True  # x̄ passed the feasibility test (no QP output since)
+        return self
+
+    # -- inherited rows -----------------------------------------------------------------
+    @property
+    def Cin(self) -> np.ndarray:
+        """Inherited rows (k × n)."""
+        return self._C[: self.k]
+
+    @property
+    def lin(self) -> np.ndarray:
+        """Lower bounds of the inherited rows."""
+        return self._lo[: self.k]
+
+    @property
+    def uin(self) -> np.ndarray:
+        """Upper bounds of the inherited rows."""
+        return self._hi[: self.k]
+
+    def inherit(self, C: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Add inequality rows (x-space) that every later level must keep satisfied."""
+        m = C.shape[0]
+        if m == 0:
+            return
+        k = self.k
+        self._C[k : k + m] = C
+        self._lo[k : k + m] = lo
+        self._hi[k : k + m] = hi
+        self._low[k : k + m], self._high[k : k + m] = widen(lo, hi, FEAS_TOL)
+        self.k = k + m
+
+    # -- parameterisation -------------------------------------------------------------
+    @property
+    def r(self) -> int:
+        """Remaining degrees of freedom."""
+        return self.n if self.Z is None else self.Z.shape[1]
+
+    def reduce(self, M: np.ndarray) -> np.ndarray:
+        """``M Z`` (rows in x-space to rows in z-space)."""
+        return M if self.Z is None else M @ self.Z
+
+    def lift(self, z: np.ndarray) -> np.ndarray:
+        """``Z z`` (a z-space step to x-space)."""
+        return z if self.Z is None else self.Z @ z
+
+    def project(self, v: np.ndarray) -> np.ndarray:
+        """``Zᵀ v`` (an x-space vector to z-space coordinates)."""
+        return v if self.Z is None else self.Z.T @ v
+
+    def restrict(self, basis: np.ndarray) -> None:
+        """Keep only the z-directions spanned by ``basis`` (r × r', orthonormal columns)."""
+        self.Z = basis if self.Z is None else self.Z @ basis
+
+    def freeze(self, F: np.ndarray, scale: float = 0.0) -> None:
+        """Fix the z-space rows ``F z`` at their current values (restrict to null(F));
+        ``scale`` is the size of the rows before projection (see :func:`null_space`)."""
+        if F.shape[0]:
+            self.restrict(null_space(F, scale))
+
+    def move_to(self, x: np.ndarray, verified: bool) -> None:
+        """Set ``x̄``. A QP output (``verified=False``) is snapped into the bounds: that
+        removes a backend's ~1e-12 overshoot, which would make ``z = 0`` infeasible for
+        the next level."""
+        if not verified and self.lb is not None:
+            x = np.minimum(np.maximum(x, self.lb), self.ub)
+        self.x = x
+        self.verified = verified
+
+    # -- checks ---------------------------------------------------------------------
+    def feasible(self, x: np.ndarray) -> bool:
+        """Does ``x`` satisfy the bounds and inherited rows (to ``FEAS_TOL``, relative)?"""
+        if self.lb is not None and not ((x <= self.ubw).all() and (x >= self.lbw).all()):
+            return False
+        k = self.k
+        if k:
+            c = self._C[:k] @ x
+            return bool((c <= self._high[:k]).all() and (c >= self._low[:k]).all())
+        return True
+
+    # -- QP in z (plus optional slack block) -------------------------------------------
+    def _relax(self, bound: np.ndarray) -> np.ndarray:
+        """``RELAX·max(1, |bound|)``: opens the inherited rows by a hair so that a point
+        pinned by more active rows than free directions is not a degenerate vertex (daqp
+        declared such QPs infeasible). Bounds are snapped back after the solve."""
+        if self.relax == 0.0:
+            return 0.0
+        return self.relax * np.maximum(1.0, np.abs(bound))
+
+    def _assemble(self, kdim: int, D, dlo, dhi):
+        """Constraint rows of a QP in ``y = (z, w)`` (``kdim`` entries, ``w`` unbounded)."""
+        r = self.r
+        x = self.x
+        blocks, los, his = [], [], []
+        if D is not None and D.shape[0]:
+            blocks.append(D)
+            los.append(dlo)
+            his.append(dhi)
+        k = self.k
+        if k:
+            Cin = self._C[:k]
+            Cz = self.reduce(Cin)
+            cx = Cin @ x
+            if kdim > r:
+                Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
+            blocks.append(Cz)
+            # x̄ meets these rows up to the previous solve's tolerance; never ask for more
+            # than z = 0 already gives, so the QP stays feasible by construction
+            los.append(np.minimum(self._lo[:k] - cx, 0.0) - self._relax(self._lo[:k]))
+            his.append(np.maximum(self._hi[:k] - cx, 0.0) + self._relax(self._hi[:k]))
+        lb = ub = None
+        if self.lb is not None:
+            if self.Z is None:
+                lb = np.full(kdim, -np.inf)
+                ub = np.full(kdim, np.inf)
+                lb[:r] = np.minimum(self.lb - x, 0.0) - self._relax(self.lb)
+                ub[:r] = np.maximum(self.ub - x, 0.0) + self._relax(self.ub)
+            else:
+                Zr = self.Z if kdim == r else np.hstack((self.Z, np.zeros((self.n, kdim - r))))
+                blocks.append(Zr)
+                los.append(np.minimum(self.lb - x, 0.0) - self._relax(self.lb))
+                his.append(np.maximum(self.ub - x, 0.0) + self._relax(self.ub))
+        if not blocks:
+            return np.zeros((0, kdim)), np.zeros(0), np.zeros(0), lb, ub
+        if len(blocks) == 1:
+            return blocks[0], los[0], his[0], lb, ub
+        return np.vstack(blocks), np.concatenate(los), np.concatenate(his), lb, ub
+
+    def solve_qp(
+        self,
+        H: np.ndarray,
+        f: np.ndarray,
+        D: np.ndarray | None = None,
+        dlo: np.ndarray | None = None,
+        dhi: np.ndarray | None = None,
+        y0: np.ndarray | None = None,
+        where: str = "",
+    ) -> np.ndarray:
+        """Solve ``min ½yᵀHy + fᵀy`` over ``y = (z, w)`` with the inherited rows and bounds
+        on ``x̄ + Z z`` and the extra rows ``dlo ≤ D y ≤ dhi``; ``w`` (``len(y) − r`` slack
+        entries) is unbounded. Returns ``y``; raises :class:`SolverError` on failure."""
+        kdim = H.shape[0]
+        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+        opened = self.relax
+        self.qp_calls += 1
+        res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, y0)
+        if res.code != OK and y0 is not None:
+            # a warm start can mislead an active-set backend: once more from cold
+            self.qp_calls += 1
+            res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
+        if res.code != OK and (self.k or self.lb is not None):
+            # a point pinned by more active rows than free directions leaves a feasible
+            # set as thin as the opening; some backends call that infeasible: open it
+            # 100× wider once (the final check allows for it)
+            self.retries += 1
+            keep = self.relax
+            self.relax = keep * 100.0
+            G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+            self.relax = keep
+            self.used_relax = max(self.used_relax, keep * 100.0)
+            opened = keep * 100.0
+            self.qp_calls += 1
+            res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
+        if res.code != OK:
+            y = self._fallback(H, f, D, dlo, dhi, where)
+            if y is not None:
+                return y
+            raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
+        if not np.isfinite(res.y.sum()):
+            raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite solution")
+        miss = _miss(G, lo, hi, lb, ub, res.y)
+        if miss > CHECK_TOL:
+            raise SolverError(
+                f"{where}: backend {self.solver!r} returned a point that violates its QP's "
+                f"constraints by {miss:.3g} (relative)"
+            )
+        if res.exact:
+            return res.y
+        # polish against the unopened rows: the point lands exactly on the true bounds
+        keep = self.relax
+        self.relax = 0.0
+        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+        self.relax = keep
+        return polish(H, f, G, lo, hi, lb, ub, res.y, obj_slack=10.0 * opened)
+
+    def _fallback(self, H, f, D, dlo, dhi, where: str) -> np.ndarray | None:
+        """Solve a level QP the requested backend failed on with the next backend of
+        :data:`FALLBACKS` that is installed; recorded in ``self.fallbacks``."""
+        if self._in_fallback or not self.fallback:
+            return None
+        installed = set(available_solvers())
+        keep_solver, keep_relax = self.solver, self.relax
+        self._in_fallback = True
+        try:
+            for alt in FALLBACKS:
+                if alt == keep_solver or alt not in installed:
+                    continue
+                self.solver = alt
+                self.relax = RELAX.get(alt, RELAX_DEFAULT)
+                self.used_relax = max(self.used_relax, self.relax)
+                try:
+                    y = self.solve_qp(H, f, D, dlo, dhi, None, where)
+                except SolverError:
+                    continue
+                self.fallbacks.append(f"{where}: {alt}")
+                return y
+        finally:
+            self.solver, self.relax = keep_solver, keep_relax
+            self._in_fallback = False
+        return None
+
+    def hard_phase(self, hard, where: str = "constraints") -> None:
+        """Satisfy the hard constraints and bounds; start at the min-norm feasible point.
+
+        Raises
+        ------
+        InfeasibleError
+            Inconsistent hard equalities, or no point satisfies hard rows and bounds.
+        """
+        if hard.m_eq:
+            Ae, be = hard.Ae, hard.be
+            U, s, Vt = svd(Ae, full=True)
+            rank = numerical_rank(s, Ae.shape)
+            x = Vt[:rank].T @ ((U[:, :rank].T @ be) / s[:rank])
+            res = Ae @ x - be
+            scale = max(1.0, float(np.max(np.abs(be))))
+            if float(np.max(np.abs(res))) > CHECK_TOL * scale:
+                names = ", ".join(t.label for t in hard.eqs)
+                raise InfeasibleError(
+                    f"hard equality constraints are inconsistent ({names}): "
+                    f"least-squares residual {np.linalg.norm(res):.3g}"
+                )
+            self.x = x
+            self.restrict(Vt[rank:].T)
+        self.inherit(hard.C, hard.lo, hard.hi)
+        if (self.lb is None and not self.k) or self.feasible(self.x):
+            return
+        if self.lb is not None and self.Z is None and not self.k:
+            self.x = np.minimum(np.maximum(self.x, self.lb), self.ub)
+            return
+        r = self.r
+        if r == 0:
+            raise InfeasibleError(
+                f"{where}: the hard equalities fix x completely and it violates the bounds "
+                "or hard inequalities"
+            )
+        x = self.x
+        G, lo, hi, lb, ub = self._assemble(r, None, None, None)
+        # the start point need not be feasible here: use the true row bounds
+        if self.k:
+            cx = self._C[: self.k] @ x
+            lo[: self.k] = self._lo[: self.k] - cx
+            hi[: self.k] = self._hi[: self.k] - cx
+        if self.lb is not None:
+            if self.Z is None:
+                lb, ub = self.lb - x, self.ub - x
+            else:
+                lo[self.k :] = self.lb - x
+                hi[self.k :] = self.ub - x
+        if self.solver not in _CERTIFYING and not _lp_feasible(G, lo, hi, lb, ub):
+            # backends behind qpsolvers cannot say "infeasible" and proxqp needed 50–260 s
+            # to give up on a 2-variable infeasible hard part: decide it first with an LP
+            raise InfeasibleError(
+                f"{where}: bounds and hard constraints are inconsistent "
+                "(an LP feasibility test found no point)"
+            )
+        self.qp_calls += 1
+        res = solve_dense_qp(self.solver, np.eye(r), self.project(x), G, lo, hi, lb, ub, None)
+        if res.code == OK and not np.all(np.isfinite(res.y)):
+            raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite point")
+        if res.code != OK:
+            # backends behind qpsolvers cannot say "infeasible"; decide it independently
+            if res.code == INFEASIBLE or not _lp_feasible(G, lo, hi, lb, ub):
+                how = "" if res.code == INFEASIBLE else "; confirmed by an LP feasibility test"
+                raise InfeasibleError(
+                    f"{where}: bounds and hard constraints are inconsistent ({res.message}{how})"
+                )
+            raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
+        xn = x + self.lift(res.y)
+        if not (
+            (self.lb is None or within(xn, self.lb, self.ub, CHECK_TOL))
+            and within(self.Cin @ xn, self.lin, self.uin, CHECK_TOL)
+        ):
+            if _lp_feasible(G, lo, hi, lb, ub):
+                raise SolverError(
+                    f"{where}: backend {self.solver!r} returned a point violating the hard "
+                    "constraints, which an LP feasibility test shows are consistent"
+                )
+            raise InfeasibleError(
+                f"{where}: bounds and hard constraints are inconsistent "
+                f"({self.solver} returned a point violating them; confirmed by an LP "
+                "feasibility test)"
+            )
+        self.move_to(xn, verified=False)

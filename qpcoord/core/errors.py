@@ -1,0 +1,37 @@
+"""Exceptions raised by qpcoord.
+
+Bad *input* (wrong shapes, NaN/inf, ``lower > upper``, unknown solver names, an empty
+stack) raises the built-in :class:`ValueError` with a message naming the offending task.
+The two classes below are for problems that are well-formed but cannot be solved.
+"""
+
+from __future__ import annotations
+
+__all__ = ["InfeasibleError", "SolverError", "AlgorithmicSingularity"]
+
+
+class InfeasibleError(RuntimeError):
+    """The hard part of a problem (bounds and hard constraints) has no solution.
+
+    Soft levels of a stack never raise this: their violation is minimised instead.
+    """
+
+
+class SolverError(RuntimeError):
+    """A QP backend failed, returned a non-finite point, or returned a point that does
+    not satisfy the hard constraints to tolerance. qpcoord never returns such a point."""
+
+
+class AlgorithmicSingularity(ValueError):
+    """A scheme's own construction lost rank along a run (thesis §5.2.4, Def. 5.2).
+
+    Raised, for example, when the rigidly extended Jacobian ``[J; G]`` becomes singular
+    although ``J`` is not. Attributes: ``q`` (rad), ``t`` (s), ``sigma`` (the smallest
+    singular value relative to the largest, dimensionless).
+    """
+
+    def __init__(self, message: str, q=None, t: float | None = None, sigma: float | None = None):
+        super().__init__(message)
+        self.q = q
+        self.t = t
+        self.sigma = sigma

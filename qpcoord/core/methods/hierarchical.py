@@ -1,0 +1,398 @@
+"""Strict lexicographic hierarchy by variable elimination (``method="hierarchical"``).
+
+Level ``k`` is solved in the null space of everything fixed above it (Kanoun et al. 2011;
+Escande, Mansard & Wieber 2014):
+
+1. its equality rows are projected, ``M = Ae Z``, and solved in closed form with the
+   filtered pseudo-inverse of :mod:`qpcoord.core.linalg`; if the candidate satisfies the level's
+   own inequalities, the inherited rows and the bounds, it is optimal and no QP is solved;
+2. otherwise a QP in ``(z, w)`` is solved, where the slack ``w`` carries the violation of
+   the level's inequality rows (``lo ≤ C x − w ≤ hi``, minimising ``Σ weightᵢ·wᵢ²``
+   together with the damped equality residual), under the inherited rows and bounds;
+3. the optimum is frozen: the row space of ``M`` and the violated inequality rows are
+   eliminated (``Z ← Z · null(F)``), the satisfied inequality rows are inherited as
+   constraints for every lower level, and the optimal slacks never change again.
+
+After the last level the remaining freedom is spent on the minimum-norm ``x`` (subject to
+the inherited rows and bounds), so a single equality level without bounds gives ``A⁺b``.
+
+Tolerances. In a level's QP each inequality row that ``z`` can move is normalised to a
+unit row in ``z`` (its slack in units of ``z``) and the objective is scaled so that the
+level's largest curvature is 1; ``regularization·‖z‖²`` is added in the directions the
+level's equalities leave free. A row counts as violated (and is frozen as an equality) when
+its slack exceeds ``VIOLATION_TOL`` times the row's scale (``max(|bounds|, ‖Cᵢ‖·‖x‖)``); a
+row below that stays an inequality whose bounds are opened to its current value, so lower
+levels can never make it worse. The regularisation biases a row's violation by about
+``regularization × (largest / its own curvature)``: below ``VIOLATION_TOL`` unless the
+curvatures in one level spread over more than 10³ (row norms over ~30×).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..compile import CompiledStack
+from ..elimination import Reduced
+from ..linalg import filtered_svd, numerical_rank, svd
+from ..tolerance import at_bounds
+
+__all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
+
+#: Relative slack (to the row's scale) above which an inequality row is frozen as violated.
+VIOLATION_TOL = 1e-6
+#: Relative distances to a bound under which the refinement takes a row as active: the
+#: first guess, then a looser one for backends that stop ~1e-6 short (SCS).
+ACTIVE_TOL = (1e-7, 1e-5)
+#: Relative objective increase the refinement may cost over the QP's own point.
+REFINE_SLACK = 1e-7
+_ABS_FLOOR = 1e-14
+
+
+def _finite_abs(v: np.ndarray) -> np.ndarray:
+    a = np.abs(v)
+    a[~np.isfinite(a)] = 0.0
+    return a
+
+
+def _level_objective(ls_rows, ls_rhs, z) -> float:
+    """Level objective on the least-squares rows (equalities, damping, violated rows)."""
+    total = 0.0
+    for A, b in zip(ls_rows, ls_rhs, strict=True):
+        res = A @ z - b
+        total += float(res @ res)
+    return total
+
+
+def _refine(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows):
+    """Try :func:`_refine_at` with each active-set tolerance in turn."""
+    for tol in ACTIVE_TOL:
+        z = _refine_at(R, L, x, z0, ls_rows, ls_rhs, viol_rows, tol)
+        if z is not None:
+            return z
+    return None
+
+
+def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
+    """Solve the level exactly on the active set of the QP's point ``x + Z z0``.
+
+    Active inherited rows, bounds and satisfied level rows at a bound become equalities;
+    the level's equality rows (with their damping rows) and its violated rows are solved
+    in least squares on what remains, minimum-norm. Returns the refined ``z``, or ``None``
+    if the guess is inconsistent, infeasible or no better than the QP's point.
+    """
+    r = z0.shape[0]
+    xn0 = x + R.lift(z0)
+    E, t = [], []
+    if R.k:
+        Cin = R.Cin
+        a_lo, a_hi = at_bounds(Cin @ xn0, R.lin, R.uin, tol)
+        if a_lo.any() or a_hi.any():
+            act = a_lo | a_hi
+            E.append(R.reduce(Cin[act]))
+            t.append(np.where(a_lo, R.lin, R.uin)[act] - Cin[act] @ x)
+    if R.lb is not None:
+        a_lo, a_hi = at_bounds(xn0, R.lb, R.ub, tol)
+        if a_lo.any() or a_hi.any():
+            act = a_lo | a_hi
+            E.append(R.Z[act] if R.Z is not None else np.eye(r)[act])
+            t.append(np.where(a_lo, R.lb, R.ub)[act] - x[act])
+    sat = ~viol_rows
+    if L.m_in and sat.any():
+        Cs = L.C[sat]
+        a_lo, a_hi = at_bounds(Cs @ xn0, L.lo[sat], L.hi[sat], tol)
+        if a_lo.any() or a_hi.any():
+            act = a_lo | a_hi
+            E.append(R.reduce(Cs[act]))
+            t.append(np.where(a_lo, L.lo[sat], L.hi[sat])[act] - Cs[act] @ x)
+    if E:
+        Em = np.vstack(E)
+        tv = np.concatenate(t)
+        U, s, Vt = svd(Em, full=True)
+        rk = numerical_rank(s, Em.shape)
+        zp = Vt[:rk].T @ ((U[:, :rk].T @ tv) / s[:rk])
+        if np.abs(Em @ zp - tv).max() > 1e-9 * max(1.0, float(np.abs(tv).max())):
+            return None
+        N = Vt[rk:].T
+    else:
+        zp = np.zeros(r)
+        N = np.eye(r)
+    if N.shape[1] and ls_rows:
+        A = np.vstack(ls_rows)
+        b = np.concatenate(ls_rhs)
+        K = A @ N
+        U, s, Vt = svd(K, full=False)
+        rk = numerical_rank(s, K.shape, float(np.linalg.norm(A)))
+        if rk:
+            u = Vt[:rk].T @ ((U[:, :rk].T @ (b - A @ zp)) / s[:rk])
+            zp = zp + N @ u
+    xn = x + R.lift(zp)
+    if not np.isfinite(xn.sum()) or not R.feasible(xn):
+        return None
+    if L.m_in and sat.any():
+        c = L.C[sat] @ xn
+        if not ((c <= L.hiw[sat]).all() and (c >= L.low[sat]).all()):
+            return None
+    before = _level_objective(ls_rows, ls_rhs, z0)
+    after = _level_objective(ls_rows, ls_rhs, zp)
+    # the QP's point may sit outside the rows by the opening RELAX and gain ~RELAX from it
+    if after > before + max(REFINE_SLACK, 10.0 * R.used_relax) * max(1.0, before):
+        return None
+    return zp
+
+
+def _level_svd(L, M: np.ndarray, damping: float):
+    """:func:`~qpcoord.core.linalg.filtered_svd` of a level's projected rows ``M = Ae Z``.
+
+    A level that is exactly ``x = be`` (``L.identity``) has ``M = Z`` with orthonormal
+    columns: singular values 1, ``U = M``, ``Vt = I`` — no SVD (the damping threshold
+    ``τ = damping·√n`` stays below 1 unless the damping is huge).
+    """
+    n = L.Ae.shape[1]
+    if L.identity and damping * np.sqrt(n) < 1.0:
+        r = M.shape[1]
+        one = np.ones(r)
+        return M, one, np.eye(r), r, one, damping * float(np.sqrt(n))
+    return filtered_svd(M, damping, float(np.sqrt(np.vdot(L.Ae, L.Ae))))
+
+
+def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, dict]:
+    """Closed-form lexicographic solution of a stack of equality levels, bounds ignored.
+
+    The per-step fast path for stacks without inequality rows or hard constraints: each
+    level's filtered pseudo-inverse step in the null space of the levels above, then the
+    minimum-norm step. If the result satisfies the bounds it is also the solution of the
+    bounded problem (every level already reaches its unconstrained optimum, and the
+    remaining freedom its minimum norm); the caller checks that and otherwise runs
+    :func:`solve_hierarchical`.
+    """
+    x = np.zeros(P.n)
+    Z = None  # orthonormal basis of the remaining freedom (None: all of R^n)
+    r = P.n
+    ranks = []
+    moved = False
+    for L in P.levels:
+        if r == 0:
+            ranks.append(0)
+            continue
+        if L.identity and damping * np.sqrt(P.n) < 1.0:
+            # A = I: M = Z has orthonormal columns (singular values 1, above the damping
+            # threshold τ = damping·√n), so the step is Zᵀe and no SVD is needed
+            e = L.be - x
+            x = x + (e if Z is None else Z @ (Z.T @ e))
+            ranks.append(r)
+            r = 0
+            continue
+        A = L.Ae
+        M = A if Z is None else A @ Z
+        e = L.be - A @ x if moved else L.be
+        _U, _s, Vt, rank, g, _tau = filtered_svd(M, damping, float(np.sqrt(np.vdot(A, A))))
+        if rank:
+            dz = Vt[:rank].T @ (g * (_U[:, :rank].T @ e))
+            x += dz if Z is None else Z @ dz
+            r -= rank
+            if r:  # no basis needed once the freedom is used up
+                Z = Vt[rank:].T if Z is None else Z @ Vt[rank:].T
+            moved = True
+        ranks.append(rank)
+    if r and Z is not None:
+        x -= Z @ (Z.T @ x)
+    elif r:
+        x[:] = 0.0
+    info = {
+        "qp_calls": 0,
+        "retries": 0,
+        "fallbacks": [],
+        "polished": 0,
+        "level_ranks": ranks,
+        "free_dofs": r,
+    }
+    return x, info
+
+
+def solve_hierarchical(
+    P: CompiledStack,
+    R: Reduced,
+    damping: float,
+    regularization: float,
+    x_warm: np.ndarray | None = None,
+) -> dict:
+    """Solve a compiled stack lexicographically into the workspace ``R`` (already reset).
+
+    Returns solve statistics; the solution is ``R.x`` and ``R``'s inherited rows are what
+    it must satisfy.
+
+    Parameters
+    ----------
+    P : CompiledStack
+    R : Reduced
+        Workspace, reset with the bounds and the solver to use for the QPs that closed
+        forms cannot replace.
+    damping : float
+        Relative damping threshold (see :mod:`qpcoord.core.linalg`).
+    regularization : float
+        Relative weight of ``‖z‖²`` in directions a level does not determine.
+    x_warm : ndarray, optional
+        A previous solution; its projection gives each level QP a primal start.
+    """
+    R.hard_phase(P.hard)
+    ranks = []
+    for k, L in enumerate(P.levels):
+        r = R.r
+        x = R.x
+        if r == 0:
+            ranks.append(0)
+            if L.m_in:  # nothing can move: the rows are kept as they are
+                cx = L.C @ x
+                R.inherit(L.C, np.minimum(L.lo, cx), np.maximum(L.hi, cx))
+            continue
+        # ---- closed form for the equality rows --------------------------------------
+        rank = 0
+        if L.m_eq:
+            M = R.reduce(L.Ae)
+            e = L.be - L.Ae @ x
+            U, s, Vt, rank, g, tau = _level_svd(L, M, damping)
+            if rank:
+                xc = x + R.lift(Vt[:rank].T @ (g * (U[:, :rank].T @ e)))
+            else:
+                xc = x
+        else:
+            xc = x
+        if R.feasible(xc) and (
+            not L.m_in or ((L.C @ xc <= L.hiw).all() and (L.C @ xc >= L.low).all())
+        ):
+            R.move_to(xc, verified=True)
+            if rank:
+                R.restrict(Vt[rank:].T)
+            R.inherit(L.C, L.lo, L.hi)
+            ranks.append(rank)
+            continue
+        # ---- QP with slacks --------------------------------------------------------
+        # Only rows that z can move get a slack; each is normalised to a unit row in z
+        # (slack w̃ in units of z, violation = ‖Dᵢ‖·w̃ᵢ) so that the QP stays well scaled
+        # whatever the rows' units.
+        curv = []
+        if rank:
+            d = np.maximum(s[:rank] ** 2, tau * tau)
+            curv.append(d)
+        mv = 0
+        if L.m_in:
+            D = R.reduce(L.C)
+            dn = np.sqrt(np.einsum("ij,ij->i", D, D))
+            cn = np.sqrt(np.einsum("ij,ij->i", L.C, L.C))
+            movable = dn > 1e-9 * cn
+            mv = int(movable.sum())
+            if mv:
+                idx = np.flatnonzero(movable)
+                dm = dn[idx]
+                Dm = D[idx] / dm[:, None]
+                cx = L.C[idx] @ x
+                dlo = (L.lo[idx] - cx) / dm
+                dhi = (L.hi[idx] - cx) / dm
+                wcurv = (L.sw[idx] * dm) ** 2
+                curv.append(wcurv)
+        # objective scaled so the level's largest curvature is 1; the regularisation is
+        # relative to it (active-set backends lose accuracy below ~1e-10, measured)
+        cmax = max(float(c.max()) for c in curv) if curv else 1.0
+        eps = regularization
+        kdim = r + mv
+        H = np.zeros((kdim, kdim))
+        f = np.zeros(kdim)
+        if rank:
+            dd = np.full(r, eps)
+            dd[:rank] = d / cmax
+            H[:r, :r] = (Vt.T * dd) @ Vt
+            f[:r] = -(M.T @ e) / cmax
+        else:
+            H[:r, :r] = eps * np.eye(r)
+        if mv:
+            H[r:, r:] = np.diag(wcurv / cmax)
+            Dy = np.hstack((Dm, -np.eye(mv)))
+        else:
+            Dy = dlo = dhi = None
+        y0 = None
+        if x_warm is not None:
+            y0 = np.zeros(kdim)
+            y0[:r] = R.project(x_warm - x)
+        y = R.solve_qp(H, f, Dy, dlo, dhi, y0, where=f"level {k}")
+        z = y[:r]
+        xn = x + R.lift(z)
+        F = [Vt[:rank]] if rank else []
+        viol_rows = np.zeros(L.m_in, dtype=bool)
+        if mv:
+            w = y[r:] * dm  # violation, units of C x
+            xscale = max(float(np.abs(x).max()), float(np.abs(xn).max()))
+            scale = np.maximum(
+                np.maximum(_finite_abs(L.lo[idx]), _finite_abs(L.hi[idx])), cn[idx] * xscale
+            )
+            viol_rows[idx[np.abs(w) > VIOLATION_TOL * scale + _ABS_FLOOR]] = True
+            vscale = np.zeros(L.m_in)
+            vscale[idx] = scale
+        # exact refinement on the QP's active set (removes the backend's tolerance and
+        # the regularisation's bias before the level is frozen)
+        ls_rows, ls_rhs = [], []
+        if rank:
+            ls_rows.append(M)
+            ls_rhs.append(e)
+            damped = s[:rank] < tau
+            if damped.any():
+                gain = np.sqrt(tau * tau - s[:rank][damped] ** 2)
+                ls_rows.append(gain[:, None] * Vt[:rank][damped])
+                ls_rhs.append(np.zeros(int(damped.sum())))
+        if viol_rows.any():
+            Cv = L.C[viol_rows]
+            cxv = Cv @ xn
+            target = np.where(cxv > L.hi[viol_rows], L.hi[viol_rows], L.lo[viol_rows])
+            swv = L.sw[viol_rows]
+            ls_rows.append(swv[:, None] * R.reduce(Cv))
+            ls_rhs.append(swv * (target - Cv @ x))
+        # also for exact backends: their optimum carries the regularisation's ~1e-9 bias
+        zp = _refine(R, L, x, z, ls_rows, ls_rhs, viol_rows)
+        if zp is not None:
+            z = zp
+            xn = x + R.lift(z)
+            R.polished += 1
+            if viol_rows.any():
+                # classify on the refined point's own violation: a row the QP's tolerance
+                # left violated but the exact solve satisfies is not frozen
+                cv = L.C[viol_rows] @ xn
+                gap = np.maximum(L.lo[viol_rows] - cv, cv - L.hi[viol_rows])
+                still = gap > VIOLATION_TOL * vscale[viol_rows] + _ABS_FLOOR
+                viol_rows[np.flatnonzero(viol_rows)[~still]] = False
+        R.move_to(xn, verified=False)
+        fscale = 1.0  # rows of Vt are unit vectors
+        if viol_rows.any():
+            F.append(R.reduce(L.C[viol_rows]))
+            fscale = max(fscale, float(np.linalg.norm(L.C[viol_rows])))
+        if L.m_in:
+            # rows kept as inequalities are inherited with their bounds opened to the
+            # current value: a violation under the threshold may stay, never grow
+            keep = ~viol_rows
+            cxn = L.C[keep] @ R.x
+            R.inherit(L.C[keep], np.minimum(L.lo[keep], cxn), np.maximum(L.hi[keep], cxn))
+        if len(F) == 1 and rank and not viol_rows.any():
+            R.restrict(Vt[rank:].T)  # null(Vt[:rank]) is its orthonormal complement
+        elif F:
+            R.freeze(np.vstack(F) if len(F) > 1 else F[0], fscale)
+        ranks.append(r - R.r)
+    # ---- remaining freedom: minimum-norm x ----------------------------------------
+    r = R.r
+    if r:
+        x = R.x
+        if R.Z is None:
+            xc = np.zeros(P.n)
+        else:
+            xc = x - R.Z @ (R.Z.T @ x)
+        if R.feasible(xc):
+            R.move_to(xc, verified=True)
+        else:
+            y0 = None if x_warm is None else R.project(x_warm - x)
+            z = R.solve_qp(np.eye(r), R.project(x), y0=y0, where="minimum-norm step")
+            R.move_to(x + R.lift(z), verified=False)
+    return {
+        "qp_calls": R.qp_calls,
+        "retries": R.retries,
+        "fallbacks": R.fallbacks,
+        "polished": R.polished,
+        "level_ranks": ranks,
+        "free_dofs": r,
+    }

@@ -1,0 +1,703 @@
+"""A persistent fast path for stacks whose matrices do not change: :class:`PersistentQP`.
+
+In a condensed MPC, or any control loop around a fixed linear model, the task matrices
+(``A`` of every :class:`~qpcoord.Equality`, ``C`` of every :class:`~qpcoord.Inequality`, the
+hard constraints) stay the same from step to step; only the right-hand sides ``b``, the
+inequality limits and the bounds move. The weighted QP of such a stack (``method="weighted"``,
+:mod:`qpcoord.core.methods.weighted`) then has a constant Hessian and constraint matrix, so the
+backend's
+workspace -- its factorisation and its working set -- can be kept between steps: this class
+sets up one ``daqp.Model`` once and, per step, only updates the linear term and the limits and
+hot-starts from the previous working set. No Python-level QP assembly happens per step.
+
+The answer is the same QP as ``stack.solve(method="weighted")`` (levels weighted by
+``weight_ratio**k``, soft inequalities with slacks, bounds and hard constraints hard) and is
+checked like it: bounds and hard constraints to the stack's tolerance. If the backend fails,
+or the matrices have changed (checked every step against the set-up copy), the step falls
+back to ``stack.solve(method="weighted")`` -- recorded in ``Solution.info`` (``fallback``,
+``setups``) -- so an unchecked answer is never returned.
+
+In the parametric form (:meth:`PersistentQP.parametrize`, right-hand sides and limits affine
+in a parameter ``θ``) the optimum is piecewise affine in ``θ``: affine on each *critical
+region*, the set of ``θ`` with the same active constraints (Bemporad, Morari, Dua &
+Pistikopoulos 2002). :meth:`PersistentQP.solve_theta` keeps a small cache of the regions it
+has met (the on-line "partial enumeration" of Pannocchia, Rawlings & Wright 2007): the last
+region's affine law and its KKT test -- primal feasibility of every row and the sign of every
+active row's multiplier -- are one matrix-vector product each, and the QP solver is called
+only when ``θ`` has left that region.
+"""
+
+from __future__ import annotations
+
+import time
+from operator import attrgetter
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.linalg import lapack
+
+from .compile import CompiledStack
+from .elimination import CHECK_TOL
+from .solution import Solution
+from .tasks import Equality
+
+if TYPE_CHECKING:
+    from .stack import Stack
+
+__all__ = ["PersistentQP"]
+
+_INF = 1e30  # daqp's infinity
+_MATRIX_VERSION = attrgetter("matrix_version")
+
+#: daqp settings of the persistent workspace: the stack's first (exact) setting.
+DAQP_SETTINGS = dict(eps_prox=0.0, primal_tol=1e-10)
+
+#: Critical-region test tolerance: a cached region's law answers only if every row holds and
+#: every active multiplier has its sign to this absolute margin (task units); else the QP
+#: solver is called. Tighter than CHECK_TOL, so a region answer is the QP's optimum to
+#: rounding, not merely feasible.
+REGION_TOL = 1e-9
+
+#: Most critical regions kept per workspace (least recently used dropped first).
+REGION_CACHE = 64
+
+#: Regions tested per step before the QP solver is called, most recently used first (a
+#: trajectory that alternates between two or three active sets stays off the solver).
+REGION_TRIES = 8
+
+
+def _inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """``lo − CHECK_TOL·max(1,|lo|) ≤ v ≤ hi + CHECK_TOL·max(1,|hi|)`` (daqp's ±1e30 = none)."""
+    if np.maximum(lo - v, v - hi).max() <= CHECK_TOL:
+        return True
+    return bool(
+        (lo - v <= CHECK_TOL * np.maximum(1.0, np.abs(lo))).all()
+        and (v - hi <= CHECK_TOL * np.maximum(1.0, np.abs(hi))).all()
+    )
+
+
+def _region(x0, X, r0, R) -> tuple:
+    """A critical region as tested per step: ``(m, [R; X], [r0; x0])`` with ``m`` test rows
+    (``r0 + R θ ≤ REGION_TOL`` inside) and the law ``x = x0 + X θ`` below them."""
+    return (R.shape[0], np.ascontiguousarray(np.vstack((R, X))), np.concatenate((r0, x0)))
+
+
+class PersistentQP:
+    """The weighted QP of a fixed-matrix :class:`~qpcoord.Stack` on a persistent daqp workspace.
+
+    Parameters
+    ----------
+    stack : Stack
+        Its tasks' matrices must stay constant; their ``b``, limits and the bounds may change
+        between :meth:`solve` calls (change them with ``task.update(b=...)`` or the bounds'
+        ``update``).
+    weight_ratio, regularization : float, optional
+        Default: the stack's.
+
+    Raises
+    ------
+    ValueError
+        ``stack`` is not a Stack.
+    ImportError
+        daqp is not installed.
+
+    Notes
+    -----
+    Variables: ``x`` (n) and one slack per soft inequality row. Cost:
+    ``Σ_k ρᵏ (‖A_k x − b_k‖² + ‖√w_k s_k‖²) + ε‖x‖²`` with ``ρ = weight_ratio``,
+    ``ε = regularization · max(1, max diag)``, as
+    :func:`qpcoord.core.methods.weighted.solve_weighted`.
+    """
+
+    def __init__(self, stack: Stack, weight_ratio=None, regularization=None) -> None:
+        import daqp
+
+        # duck-typed on the compiled data, so that this module needs no import of
+        # qpcoord.core.stack (which imports it: Stack.persistent)
+        if not isinstance(getattr(stack, "_compiled", None), CompiledStack):
+            raise ValueError(f"stack must be a qpcoord.Stack, got {type(stack).__name__}")
+        self.stack = stack
+        self.weight_ratio = stack.weight_ratio if weight_ratio is None else float(weight_ratio)
+        self.regularization = (
+            stack.regularization if regularization is None else float(regularization)
+        )
+        if not 0 < self.weight_ratio <= 1:
+            raise ValueError(f"weight_ratio must be in (0, 1], got {self.weight_ratio!r}")
+        if not self.regularization >= 0:
+            raise ValueError(f"regularization must be >= 0, got {self.regularization!r}")
+        self._daqp = daqp
+        self.model = None
+        self.setups = 0
+        self.fallbacks = 0
+        #: :meth:`solve_theta` steps answered by a cached critical region's affine law
+        #: (the unconstrained region included) and by the QP solver.
+        self.region_steps = 0
+        self.qp_steps = 0
+        self.last: Solution | None = None
+        P = stack._compiled
+        P.refresh()
+        self._setup(P)
+
+    # ------------------------------------------------------------------ set-up
+    def _versions(self, P) -> list:
+        """Matrix versions of every task (``update``/``_assign`` of a matrix or weight bump
+        them): cheap change detection."""
+        return list(map(_MATRIX_VERSION, self._all_tasks))
+
+    def _setup(self, P) -> None:
+        self._all_tasks = [t for L in (*P.levels, P.hard) for t in (*L.eqs, *L.ineqs)]
+        n = P.n
+        soft = [L for L in P.levels if L.m_in]
+        mi = sum(L.m_in for L in soft)
+        nv = n + mi
+        H = np.zeros((nv, nv))
+        F = []  # per equality task: ρᵏ Aᵀ diag(w), so that f = −Σ F_t b_t
+        eq_tasks = []
+        beta = 1.0
+        j = n
+        for L in P.levels:
+            if L.m_eq:
+                H[:n, :n] += beta * (L.Ae.T @ L.Ae)
+                for t in L.eqs:
+                    F.append(beta * (t.A.T * t.weight))
+                    eq_tasks.append(t)
+            if L.m_in:
+                idx = np.arange(j, j + L.m_in)
+                H[idx, idx] = beta * L.sw**2
+                j += L.m_in
+            beta *= self.weight_ratio
+        H.flat[:: nv + 1][:n] += self.regularization * max(1.0, float(H.diagonal()[:n].max()))
+        hard = P.hard
+        # rows after the simple bounds: hard equalities, hard inequalities, soft rows C x − s
+        G = np.zeros((hard.m_eq + hard.m_in + mi, nv))
+        r = 0
+        if hard.m_eq:
+            G[: hard.m_eq, :n] = hard.Ae
+            r = hard.m_eq
+        if hard.m_in:
+            G[r : r + hard.m_in, :n] = hard.C
+            r += hard.m_in
+        j = n
+        for L in soft:
+            G[r : r + L.m_in, :n] = L.C
+            G[r : r + L.m_in, j : j + L.m_in] = -np.eye(L.m_in)
+            r += L.m_in
+            j += L.m_in
+        self._bounded = P.lb is not None
+        self._dummy = G.shape[0] == 0 and not self._bounded
+        if self._dummy:
+            G = np.zeros((1, nv))  # daqp needs a constraint: an always-inactive one
+        self._n, self._nv = n, nv
+        # no soft inequality: the unconstrained optimum -H⁻¹f is tried first each step (a
+        # Cholesky factor kept from here); it is the QP's answer whenever it meets the hard
+        # rows and bounds -- exact, where daqp's LDL loses accuracy on ill-conditioned H
+        self._chol = None
+        self._try_unconstrained = True
+        self._pspec = None
+        self._pz = None
+        self._fused = None
+        self._p_version = None
+        if mi == 0:
+            cho, info = lapack.dpotrf(H, lower=0, clean=1)
+            if info == 0:
+                self._chol = cho
+        self._F = np.hstack(F) if F else np.zeros((n, 0))
+        self._eq_tasks = eq_tasks
+        self._b = np.zeros(self._F.shape[1])
+        self._f = np.zeros(nv)
+        self._H, self._G = H, G
+        # limit rows filled per step: (task, attribute pair, slice of bu/bl)
+        m0 = nv if self._bounded else 0
+        rows = []
+        k = m0 + (1 if self._dummy else 0)
+        for t in hard.eqs:
+            m = t.A.shape[0]
+            rows.append((t, "eq", slice(k, k + m)))
+            k += m
+        for t in (*hard.ineqs, *(t for L in soft for t in L.ineqs)):
+            m = t.C.shape[0]
+            rows.append((t, "in", slice(k, k + m)))
+            k += m
+        self._rows = rows
+        self._bu = np.full(k, _INF)
+        self._bl = np.full(k, -_INF)
+        if self._dummy:
+            self._bu[0], self._bl[0] = 1.0, -1.0
+        self._bounds_version = None
+        self._fill_limits(P)
+        self._version = self._versions(P)
+        # hard rows (after the simple bounds in daqp's order) for a one-matvec check
+        mh = hard.m_eq + hard.m_in
+        self._G_hard = G[:mh, :n] if mh else None
+        h0 = m0 + (1 if self._dummy else 0)
+        self._hard_slice = slice(h0, h0 + mh)
+        # no slack and bounded: bounds then hard rows lead daqp's limit vectors, so one
+        # stacked matrix [I; G_hard] checks them all with one matvec
+        self._G_check = None
+        if mi == 0 and self._bounded:
+            self._G_check = np.vstack((np.eye(n), G[:mh, :n]))
+            self._check_rows = slice(0, n + mh)
+        # residual rows: the equality tasks stacked (same order as self._b), with the level
+        # of each task, for a one-matvec residual; inequality tasks one by one
+        self._nlevels = len(P.levels)
+        if eq_tasks:
+            lev_of = {id(t): k for k, L in enumerate(P.levels) for t in L.eqs}
+            sizes = [t.A.shape[0] for t in eq_tasks]
+            self._res_eq = (
+                np.vstack([t.A for t in eq_tasks]),
+                np.concatenate([t.sqrt_weight for t in eq_tasks]),
+                np.concatenate(([0], np.cumsum(sizes)[:-1])),
+                np.array([lev_of[id(t)] for t in eq_tasks]),
+            )
+        else:
+            self._res_eq = None
+        self._res_in = [(k, t) for k, L in enumerate(P.levels) for t in L.ineqs]
+        model = self._daqp.Model()
+        model.settings = dict(model.settings, **DAQP_SETTINGS)
+        flag = model.setup(H, self._f, G, self._bu, self._bl, np.zeros(k, dtype=np.int32))
+        if isinstance(flag, tuple):
+            flag = flag[0]
+        # a failed set-up (e.g. constraints daqp's presolve finds inconsistent) leaves no
+        # workspace: every step then goes to the general path, which reports the cause
+        self.model = model if flag >= 0 else None
+        self.setups += 1
+
+    def _fill_limits(self, P) -> None:
+        bu, bl = self._bu, self._bl
+        b = P.bounds
+        if self._bounded and b.version != self._bounds_version:
+            lo, hi = b.resolve(self._n)
+            np.minimum(hi, _INF, out=bu[: self._n])
+            np.maximum(lo, -_INF, out=bl[: self._n])
+            self._bounds_version = b.version
+        for t, kind, sl in self._rows:  # daqp reads |bound| ≥ 1e30 (inf too) as none
+            if kind == "eq":
+                bu[sl] = t.b
+                bl[sl] = t.b
+            else:
+                bu[sl] = t.upper
+                bl[sl] = t.lower
+
+    # ------------------------------------------------------------------ per step
+    def solve(self) -> Solution:
+        """Solve with the tasks' current numbers (one control step).
+
+        Returns
+        -------
+        Solution
+            ``method="weighted"``; ``info``: ``persistent`` (True when the persistent
+            workspace answered), ``iterations`` (daqp's; 0 when the unconstrained optimum
+            was feasible), ``setups`` (workspace set-ups so far: 1 unless the matrices,
+            weights or the presence of bounds changed), ``fallbacks`` (steps answered by
+            ``stack.solve(method="weighted")`` so far).
+
+        Raises
+        ------
+        InfeasibleError, SolverError
+            As :meth:`Stack.solve` (from the fallback), if the fallback fails too.
+        """
+        t0 = time.perf_counter()
+        x, iterations = self._solve_x()
+        if x is None:
+            sol = self._fallback()
+        else:
+            sol = Solution(
+                x=x,
+                status="optimal",
+                level_residuals=self._residuals(x),
+                solver="daqp",
+                solve_time=time.perf_counter() - t0,
+                method="weighted",
+                info={
+                    "persistent": True,
+                    "iterations": iterations,
+                    "setups": self.setups,
+                    "fallbacks": self.fallbacks,
+                    "qp_calls": 1,
+                },
+            )
+        self.last = sol
+        return sol
+
+    def solve_x(self) -> np.ndarray:
+        """:meth:`solve` for the hot loop: only the checked ``x`` (no residuals, no
+        :class:`~qpcoord.Solution`); the fallback is the same (:attr:`last` is set then)."""
+        x, _ = self._solve_x()
+        return self._fallback().x if x is None else x
+
+    def _fallback(self) -> Solution:
+        self.fallbacks += 1
+        sol = self.stack.solve(solver="daqp", method="weighted")
+        sol.info.update(persistent=False, setups=self.setups, fallbacks=self.fallbacks)
+        self.last = sol
+        return sol
+
+    def _solve_x(self) -> tuple[np.ndarray | None, int]:
+        """Checked ``x`` from the persistent workspace, or ``None`` (then: fall back)."""
+        P = self.stack._compiled
+        if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
+            P.refresh()
+            self._setup(P)
+        n = self._n
+        if self._eq_tasks:
+            i = 0
+            b = self._b
+            for t in self._eq_tasks:
+                m = t.b.shape[0]
+                b[i : i + m] = t.b
+                i += m
+            f = self._f[:n]
+            np.dot(self._F, b, out=f)
+            np.negative(f, out=f)
+        self._fill_limits(P)
+        return self._solve_current()
+
+    def _solve_current(
+        self, check=None, unconstrained_first: bool = True
+    ) -> tuple[np.ndarray | None, int]:
+        """The QP with the current ``_f``, ``_bu``, ``_bl``: unconstrained try, then daqp.
+
+        ``check(x) -> bool`` replaces :meth:`_feasible` for daqp's answer (the parametric
+        path has a cheaper, equivalent one). ``unconstrained_first=False`` skips the
+        unconstrained try (the caller made it). Sets ``_lam``: daqp's multipliers, or
+        ``None`` when the unconstrained optimum answered."""
+        check = self._feasible if check is None else check
+        n = self._n
+        self._lam = None
+        # consecutive steps are alike: the unconstrained optimum is tried first only when
+        # the previous step had no active constraint (daqp's multipliers all zero)
+        if self._chol is not None and self._try_unconstrained and unconstrained_first:
+            z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
+            if ok == 0:
+                np.negative(z, out=z)
+                if self._feasible(z):
+                    return z, 0
+        model = self.model
+        if model is None:
+            return None, 0
+        model.update(f=self._f, bupper=self._bu, blower=self._bl)
+        y, _, flag, info = model.solve()
+        if flag in (1, 2):
+            x = np.asarray(y[:n], dtype=float)
+            if check(x):
+                lam = info.get("lam")
+                self._lam = lam
+                self._try_unconstrained = lam is None or not lam.any()
+                if self._try_unconstrained and self._chol is not None:
+                    # nothing active: the exact unconstrained optimum is the answer
+                    z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
+                    if ok == 0 and self._feasible(-z):
+                        return -z, 0
+                return x, int(info.get("iterations", -1))
+        return None, 0
+
+    # ------------------------------------------------------------------ parametric form
+    def parametrize(self, size: int, maps: dict) -> None:
+        """Declare right-hand sides affine in a parameter vector ``θ`` (size ``size``).
+
+        ``maps[task]`` is ``(c, M)`` for an :class:`~qpcoord.Equality` (``b = c + M θ``) or
+        ``((c_lo, M_lo), (c_hi, M_hi))`` for an :class:`~qpcoord.Inequality` (its limits).
+        The linear term and the limits of the QP then follow ``θ`` by two matrix-vector
+        products per step (:meth:`solve_theta`), the form of a condensed MPC whose
+        parameters are the state estimate and the reference. Tasks not in ``maps`` and the
+        bounds keep the values they have now (call :meth:`parametrize` again after changing
+        them; a changed matrix or bounds object is detected and handled).
+
+        Raises
+        ------
+        ValueError
+            A task not in the stack, or maps of the wrong shapes.
+        """
+        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
+            raise ValueError(f"size must be an integer >= 1, got {size!r}")
+        P = self.stack._compiled
+        tasks = {id(t): t for t in self._all_tasks}
+        spec = {}
+        for t, m in maps.items():
+            if id(t) not in tasks:
+                raise ValueError(f"parametrize: {getattr(t, 'label', t)!r} is not in the stack")
+            parts = [m] if isinstance(t, Equality) else list(m)
+            rows = t.A.shape[0] if isinstance(t, Equality) else t.C.shape[0]
+            if len(parts) != (1 if isinstance(t, Equality) else 2):
+                raise ValueError(f"parametrize: {t.label} needs (c, M) per limit")
+            out = []
+            for c, M in parts:
+                c = np.broadcast_to(np.asarray(c, dtype=float), (rows,)).copy()
+                M = np.asarray(M, dtype=float)
+                if M.shape != (rows, size) or not np.all(np.isfinite(M)):
+                    raise ValueError(
+                        f"parametrize: {t.label}: M must be finite, shape {(rows, size)}, "
+                        f"got {M.shape}"
+                    )
+                out.append((c, M))
+            spec[id(t)] = (t, out)
+        self._pspec = (int(size), spec)
+        self._build_parametric(P)
+
+    def _build_parametric(self, P) -> None:
+        size, spec = self._pspec
+        b0 = np.zeros(self._F.shape[1])
+        Bt = np.zeros((self._F.shape[1], size))
+        i = 0
+        for t in self._eq_tasks:
+            m = t.b.shape[0]
+            if id(t) in spec:
+                ((c, M),) = spec[id(t)][1]
+                b0[i : i + m], Bt[i : i + m] = c, M
+            else:
+                b0[i : i + m] = t.b
+            i += m
+        self._f0 = -(self._F @ b0)
+        self._Ft = -(self._F @ Bt)
+        self._fill_limits(P)
+        k = self._bu.shape[0]
+        self._lu0, self._ll0 = self._bu.copy(), self._bl.copy()
+        self._Lu, self._Ll = np.zeros((k, size)), np.zeros((k, size))
+        for t, kind, sl in self._rows:
+            if id(t) not in spec:
+                continue
+            parts = spec[id(t)][1]
+            if kind == "eq":
+                ((c, M),) = parts
+                self._lu0[sl] = self._ll0[sl] = c
+                self._Lu[sl] = self._Ll[sl] = M
+            else:
+                (cl, Ml), (cu, Mu) = parts
+                self._ll0[sl], self._Ll[sl] = cl, Ml
+                self._lu0[sl], self._Lu[sl] = cu, Mu
+        # the unconstrained optimum and its margins to the bounds and hard rows are affine
+        # in θ too: z(θ) = z0 + Z θ, and [G z − u; l − G z] = e0 + E θ (one matvec each)
+        self._pz = None
+        if self._chol is not None and self._G_check is not None:
+            Z = -lapack.dpotrs(self._chol, self._Ft, lower=0)[0]
+            z0 = -lapack.dpotrs(self._chol, self._f0, lower=0)[0]  # no slack: nv = n
+            sl = self._check_rows
+            G = self._G_check
+            with np.errstate(invalid="ignore"):
+                E = np.vstack((G @ Z - self._Lu[sl], self._Ll[sl] - G @ Z))
+                e0 = np.concatenate((G @ z0 - self._lu0[sl], self._ll0[sl] - G @ z0))
+            self._pz = (z0, Z, e0, E)
+        # bounds + hard rows are every limit row (no slack, no dummy): keep them stacked as
+        # [u; −l] = lb0 + Lb θ, so that one matvec gives both and [G; −G] x − [u; −l] ≤ tol
+        # checks an answer in three operations
+        self._fused = None
+        k = self._bu.shape[0]
+        if self._G_check is not None and self._check_rows.stop == k:
+            G = self._G_check
+            self._fused = (
+                np.vstack((self._Lu, -self._Ll)),
+                np.concatenate((self._lu0, -self._ll0)),
+                np.vstack((G, -G)),
+                np.empty(2 * k),
+            )
+        # critical regions (module notes): possible when every limit row is a checked row
+        # and H has a Cholesky factor; rows with l(θ) ≡ u(θ) are equalities (no sign test)
+        self._regions: dict = {}
+        self._free = None if self._pz is None else _region(*self._pz)  # nothing active
+        self._recent: list = [self._free] if self._fused is not None and self._pz else []
+        self._seen: dict = {}  # active sets met once (an ordered set)
+        self._eq_rows = (
+            (self._lu0 == self._ll0) & (self._Lu == self._Ll).all(axis=1)
+            if self._fused is not None
+            else None
+        )
+        self._p_version = self._version
+        self._p_bounds = self._bounds_version
+
+    def _build_region(self, lam: np.ndarray):
+        """The affine law and KKT test of the critical region whose active rows are
+        ``lam``'s non-zero entries (daqp's sign: > 0 upper, < 0 lower), or ``None`` if the
+        active rows are linearly dependent (degenerate: left to the QP solver).
+
+        Null-space form, accurate when ``H`` is ill-conditioned: with ``G_Aᵀ = [Q₁ Q₂] R``
+        (QR), the active rows ``G_A x = b_A(θ) = c + M θ`` give
+        ``x = Q₁ R⁻ᵀ b_A + Q₂ y``, ``y`` minimises the cost on ``Q₂``'s span
+        (``Q₂ᵀ H Q₂ y = −Q₂ᵀ (H xₚ + f)``), and the multipliers solve
+        ``R ν = −Q₁ᵀ (H x + f)``; all are affine in θ. The region's test stacks every row's
+        margin ``[G; −G] x − [u; −l]`` and ``−sign·ν`` of every active inequality:
+        ``r0 + R θ ≤ REGION_TOL``."""
+        act = np.flatnonzero(lam)
+        if act.size == 0:
+            return self._free
+        n, k = self._n, act.size
+        if k > n:
+            return None
+        up = lam[act] > 0
+        GA = self._G_check[act]
+        c = np.where(up, self._lu0[act], self._ll0[act])
+        M = np.where(up[:, None], self._Lu[act], self._Ll[act])
+        Q, Rq = np.linalg.qr(GA.T, mode="complete")
+        Rq = Rq[:k]
+        d = np.abs(np.diag(Rq))
+        if d.min() <= 1e-9 * d.max():  # dependent active rows
+            return None
+        Q1, Q2 = Q[:, :k], Q[:, k:]
+        T = Q1 @ np.linalg.solve(Rq.T, np.eye(k))  # x_p = T b_A
+        H = self._H[:n, :n]
+        xp0, Xp = T @ c, T @ M
+        f0, Ft = self._f0, self._Ft
+        if k < n:
+            Hr = Q2.T @ H @ Q2
+            Lr, info = lapack.dpotrf(Hr, lower=0, clean=1)
+            if info != 0:
+                return None
+            y0 = -lapack.dpotrs(Lr, Q2.T @ (H @ xp0 + f0), lower=0)[0]
+            Y = -lapack.dpotrs(Lr, Q2.T @ (H @ Xp + Ft), lower=0)[0]
+            x0, X = xp0 + Q2 @ y0, Xp + Q2 @ Y
+        else:
+            x0, X = xp0, Xp
+        nu0 = -np.linalg.solve(Rq, Q1.T @ (H @ x0 + f0))
+        Nu = -np.linalg.solve(Rq, Q1.T @ (H @ X + Ft))
+        Lb, lb0, GG, _ = self._fused
+        ineq = ~self._eq_rows[act]
+        sgn = np.where(up, -1.0, 1.0)[ineq]
+        with np.errstate(invalid="ignore"):
+            R = np.vstack((GG @ X - Lb, sgn[:, None] * Nu[ineq]))
+            r0 = np.concatenate((GG @ x0 - lb0, sgn * nu0[ineq]))
+        if not (np.isfinite(R).all() and np.isfinite(x0).all() and np.isfinite(X).all()):
+            return None
+        return _region(x0, X, r0, R)
+
+    def _learn_region(self, lam: np.ndarray | None) -> None:
+        """After a QP answer: make its critical region the one tried first next step. A
+        region is built the second time its active set is met (a set met once costs
+        nothing) and kept in a small LRU cache."""
+        if lam is None or not lam.any():
+            region = self._free
+        else:
+            key = np.flatnonzero(lam).tobytes() + (lam[lam != 0] > 0).tobytes()
+            regions = self._regions
+            if key in regions:
+                region = regions.pop(key)
+                regions[key] = region  # most recently used last
+            elif key not in self._seen:  # first sighting: remembered, not built
+                self._seen[key] = None
+                if len(self._seen) > 4 * REGION_CACHE:
+                    del self._seen[next(iter(self._seen))]
+                return
+            else:
+                region = regions[key] = self._build_region(lam)
+                if len(regions) > REGION_CACHE:
+                    del regions[next(iter(regions))]
+        if region is not None:
+            self._use_region(region)
+
+    def _use_region(self, region) -> None:
+        """Put ``region`` first in the list of regions tried per step."""
+        recent = self._recent
+        for i, r in enumerate(recent):
+            if r is region:
+                del recent[i]
+                break
+        recent.insert(0, region)
+        del recent[REGION_TRIES:]
+
+    def solve_theta(self, theta: np.ndarray) -> np.ndarray:
+        """Checked ``x`` for the parameter ``θ`` declared by :meth:`parametrize` (hot loop).
+
+        The last step's critical region is tried first (module notes; counted in
+        :attr:`region_steps`), then the QP solver, hot-started (:attr:`qp_steps`). On a
+        failure the tasks are given the values ``θ`` implies and the step goes to
+        ``stack.solve(method="weighted")`` (counted in :attr:`fallbacks`).
+        """
+        if self._pspec is None:
+            raise ValueError("solve_theta: call parametrize() first")
+        P = self.stack._compiled
+        if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
+            P.refresh()
+            self._setup(P)
+        if self._p_version != self._version or (
+            self._bounded and P.bounds.version != self._p_bounds
+        ):
+            self._build_parametric(P)
+        recent = self._recent
+        for i, (m, W, w0) in enumerate(recent):
+            v = W @ theta  # [test rows; x]: one matvec gives both
+            v += w0
+            if v[:m].max() <= REGION_TOL:  # NaN fails too
+                self.region_steps += 1
+                if i:
+                    recent.insert(0, recent.pop(i))
+                return v[m:]
+        if self._fused is None and self._pz is not None and self._try_unconstrained:
+            z0, Z, e0, E = self._pz
+            if (E @ theta + e0).max() <= CHECK_TOL:
+                self.region_steps += 1
+                return z0 + Z @ theta
+        f = self._f[: self._n]
+        np.dot(self._Ft, theta, out=f)
+        f += self._f0
+        check = None
+        if self._fused is not None:
+            Lb, lb0, _, bb = self._fused
+            k = self._bu.shape[0]
+            np.dot(Lb, theta, out=bb)
+            bb += lb0
+            self._bu[:] = bb[:k]
+            np.negative(bb[k:], out=self._bl)
+            check = self._fused_check
+        else:
+            np.dot(self._Lu, theta, out=self._bu)
+            self._bu += self._lu0
+            np.dot(self._Ll, theta, out=self._bl)
+            self._bl += self._ll0
+        # the region test already covered the unconstrained optimum when there is one
+        x, _ = self._solve_current(check, unconstrained_first=self._fused is None)
+        if x is not None:
+            self.qp_steps += 1
+            if self._fused is not None and self._pz is not None:
+                self._learn_region(self._lam)
+            return x
+        self.write_tasks(theta)
+        return self._fallback().x
+
+    def _fused_check(self, x: np.ndarray) -> bool:
+        """``[G; −G] x ≤ [u; −l]`` to ``CHECK_TOL`` absolute, else the relative rule."""
+        _, _, GG, bb = self._fused
+        return (GG @ x - bb).max() <= CHECK_TOL or self._feasible(x)
+
+    def write_tasks(self, theta: np.ndarray) -> None:
+        """Give the parametrised tasks the values ``θ`` implies (the stack can then be
+        solved by any method or backend, e.g. to compare them)."""
+        if self._pspec is None:
+            raise ValueError("write_tasks: call parametrize() first")
+        for t, parts in self._pspec[1].values():
+            if isinstance(t, Equality):
+                ((c, M),) = parts
+                t.b[...] = c + M @ theta
+            else:
+                (cl, Ml), (cu, Mu) = parts
+                t.lower[...] = cl + Ml @ theta
+                t.upper[...] = cu + Mu @ theta
+
+    def _feasible(self, x: np.ndarray) -> bool:
+        """Finite, within the bounds and the hard rows to the stack's CHECK_TOL relative to
+        ``max(1, |bound|)`` (:func:`qpcoord.core.tolerance.within`'s rule; an absolute
+        ``CHECK_TOL`` test, stricter, is tried first)."""
+        if self._G_check is not None:  # NaN or inf in x fails both tests of _inside
+            sl = self._check_rows
+            return _inside(self._G_check @ x, self._bl[sl], self._bu[sl])
+        if not np.isfinite(x.sum()):
+            return False
+        n = self._n
+        if self._bounded and not _inside(x, self._bl[:n], self._bu[:n]):
+            return False
+        if self._G_hard is not None:
+            sl = self._hard_slice
+            if not _inside(self._G_hard @ x, self._bl[sl], self._bu[sl]):
+                return False
+        return True
+
+    def _residuals(self, x: np.ndarray) -> np.ndarray:
+        """Per-level residual norms (as ``CompiledLevel.residual``), one matvec per kind."""
+        sq = np.zeros(self._nlevels)
+        if self._res_eq is not None:
+            A, sw, starts, lev = self._res_eq
+            b = self._b if self._eq_tasks else None
+            r = sw * (A @ x - b)
+            sq += np.bincount(lev, np.add.reduceat(r * r, starts), minlength=self._nlevels)
+        for k, t in self._res_in:
+            cx = t.C @ x
+            v = t.sqrt_weight * (cx - np.clip(cx, t.lower, t.upper))
+            sq[k] += float(v @ v)
+        return np.sqrt(sq)

@@ -1,0 +1,265 @@
+"""The prioritised QP stack: :class:`Stack`, :class:`Solution` and :func:`solve_stack`."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .backends import check_solver
+from .compile import compile_stack
+from .elimination import CHECK_TOL, FEAS_TOL, Reduced
+from .errors import SolverError
+from .methods.hierarchical import solve_equality_chain, solve_hierarchical
+from .methods.nullspace import check_equality_only, solve_nullspace
+from .methods.weighted import solve_weighted
+from .solution import Solution
+from .tasks import Bounds
+from .tolerance import within
+
+__all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
+
+#: The solve methods a :class:`Stack` offers.
+METHODS = ("hierarchical", "nullspace", "weighted")
+
+
+class Stack:
+    """A prioritised stack of tasks, solved once per control step.
+
+    Parameters
+    ----------
+    levels : sequence
+        ``levels[0]`` is the highest priority. Each item is a task
+        (:class:`~qpcoord.Equality` / :class:`~qpcoord.Inequality`) or a list of tasks that
+        share the level (their squared residuals add up).
+    bounds : Bounds, optional
+        Box on ``x``, always hard.
+    regularization : float
+        Weight of ``‖x‖²``-type terms that keep every QP strictly convex in directions a
+        level leaves free (default ``1e-9``, relative to a unit-weight task). It does not bias
+        the strict hierarchy: those directions are handed to lower levels and finally to the
+        minimum-norm step.
+    damping : float
+        Relative singular-value threshold ``τ/s₀`` under which a level's directions are
+        damped rather than inverted exactly (default ``1e-7``; see :mod:`qpcoord.core.linalg`):
+        gains are ``1/s`` above ``τ`` and ``s/τ²`` below, so no step exceeds ``‖e‖/τ``.
+    constraints : sequence of tasks, optional
+        Hard constraints: must hold exactly (to ``1e-6`` relative). Inconsistent hard
+        constraints or bounds raise :class:`~qpcoord.InfeasibleError`.
+    weight_ratio : float
+        Cost ratio between consecutive levels for ``method="weighted"`` (default ``1e-3``).
+    fallback : bool
+        If the backend fails on a level QP (such QPs are feasible by construction, so a
+        claimed infeasibility is the backend's failure), solve that QP with the next of
+        quadprog, daqp, proxqp instead (default ``True``); reported in
+        ``Solution.info["fallbacks"]``. ``False`` raises :class:`~qpcoord.SolverError`
+        (use it to compare backends).
+
+    Notes
+    -----
+    The stack keeps references to its tasks. Change their numbers with ``task.update(...)``
+    (same shapes) and call :meth:`solve` again: the structure is validated once and the
+    buffers are reused (the per-step hot path).
+    """
+
+    def __init__(
+        self,
+        levels,
+        bounds: Bounds | None = None,
+        regularization: float = 1e-9,
+        damping: float = 1e-7,
+        constraints=None,
+        weight_ratio: float = 1e-3,
+        fallback: bool = True,
+    ) -> None:
+        if not isinstance(fallback, bool):
+            raise ValueError(f"fallback must be True or False, got {fallback!r}")
+        for name, value, lo_ok in (
+            ("regularization", regularization, False),
+            ("damping", damping, True),
+            ("weight_ratio", weight_ratio, False),
+        ):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float, np.floating, np.integer))
+                or not np.isfinite(value)
+            ):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
+            if value < 0 or (value == 0 and not lo_ok):
+                raise ValueError(f"{name} must be {'>= 0' if lo_ok else '> 0'}, got {value!r}")
+        self._compiled = compile_stack(levels, bounds, constraints)
+        self.regularization = float(regularization)
+        self.damping = float(damping)
+        self.weight_ratio = float(weight_ratio)
+        self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
+        self._work = Reduced(self._compiled.n, self._compiled.capacity, fallback)
+        self._chain_missed = False
+
+    @property
+    def n(self) -> int:
+        """Number of decision variables."""
+        return self._compiled.n
+
+    @property
+    def num_levels(self) -> int:
+        """Number of priority levels (hard constraints not counted)."""
+        return len(self._compiled.levels)
+
+    @property
+    def levels(self) -> list[list]:
+        """The tasks of each level (equalities first, then inequalities)."""
+        return [L.eqs + L.ineqs for L in self._compiled.levels]
+
+    def solve(self, solver: str | None = None, method: str = "hierarchical", warm_start=None):
+        """Solve the stack with the tasks' current numbers.
+
+        Parameters
+        ----------
+        solver : str, optional
+            QP backend name from :func:`~qpcoord.available_solvers` (default: the fastest
+            installed, ``daqp`` when present).
+        method : {"hierarchical", "nullspace", "weighted"}
+            Strict lexicographic priorities, the classic projection formula (equalities
+            only), or one weighted QP.
+        warm_start : Solution or array_like, optional
+            The previous step's solution (or its ``x``); gives the QPs a primal start.
+
+        Returns
+        -------
+        Solution
+
+        Raises
+        ------
+        ValueError
+            Unknown method or solver, bad warm start, inequalities with ``"nullspace"``.
+        InfeasibleError
+            Bounds and hard constraints are inconsistent.
+        SolverError
+            A backend failed or returned a point that violates the hard constraints.
+        """
+        t0 = time.perf_counter()
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+        P = self._compiled
+        P.refresh()
+        x_warm = self._warm(warm_start)
+        if method == "nullspace":
+            check_equality_only(P)
+            x, info = solve_nullspace(P, self.damping)
+            used = "none"
+            R = None
+        else:
+            used = self._solvers.get(solver)
+            if used is None:
+                used = self._solvers[solver] = check_solver(solver)
+            R = None
+            # equality levels only: try the closed-form chain first, unless it missed the
+            # bounds at the previous step (consecutive control steps are alike; a miss
+            # costs the chain's time on top of the general path's)
+            if method == "hierarchical" and P.equalities_only and not self._chain_missed:
+                x, info = solve_equality_chain(P, self.damping)
+                if P.lb is not None and not within(x, P.lb, P.ub, FEAS_TOL):
+                    R = self._work.reset(P.lb, P.ub, used)
+                    self._chain_missed = True
+            else:
+                R = self._work.reset(P.lb, P.ub, used)
+        if R is not None:
+            if method == "hierarchical":
+                info = solve_hierarchical(P, R, self.damping, self.regularization, x_warm)
+                if not info["qp_calls"]:
+                    self._chain_missed = False  # closed forms sufficed: chain next time
+            else:
+                info = solve_weighted(P, R, self.regularization, self.weight_ratio, x_warm)
+            x = R.x
+        if R is not None or method != "hierarchical" or not P.equalities_only:
+            self._check(x, R, used)
+        elif not np.isfinite(x.sum()):  # bounds met to FEAS_TOL already; no hard rows
+            raise SolverError("the closed-form solution is not finite")
+        residuals = np.array([L.residual(x) for L in P.levels])
+        return Solution(
+            x=x,
+            status="optimal",
+            level_residuals=residuals,
+            solver=used,
+            solve_time=time.perf_counter() - t0,
+            method=method,
+            info=info,
+        )
+
+    def persistent(self, weight_ratio: float | None = None, regularization: float | None = None):
+        """A :class:`~qpcoord.core.persistent.PersistentQP` on this stack: its weighted QP on one
+        daqp workspace kept across control steps (the tasks' matrices must stay fixed; a
+        change is detected and rebuilds the workspace)."""
+        from .persistent import PersistentQP
+
+        return PersistentQP(self, weight_ratio=weight_ratio, regularization=regularization)
+
+    def _warm(self, warm_start) -> np.ndarray | None:
+        if warm_start is None:
+            return None
+        if isinstance(warm_start, Solution) and warm_start.x.shape == (self.n,):
+            return warm_start.x  # a checked solution: finite, float, right length
+        x = warm_start.x if isinstance(warm_start, Solution) else warm_start
+        try:
+            x = np.asarray(x, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"warm_start must be a Solution or an array, got {warm_start!r}"
+            ) from None
+        if x.shape[0] != self.n or not np.all(np.isfinite(x)):
+            raise ValueError(
+                f"warm_start must be a finite array of {self.n} values, got shape {x.shape}"
+            )
+        return x
+
+    def _check(self, x: np.ndarray, R, solver: str) -> None:
+        """Never return an unchecked x: finite, bounds, hard rows, inherited rows."""
+        P = self._compiled
+        if not np.isfinite(x.sum()):
+            raise SolverError(f"backend {solver!r} produced a non-finite solution")
+        if R is not None and R.verified and not P.hard.m_eq:
+            return  # x passed the (stricter) closed-form feasibility test after the last QP
+        if P.lb is not None and not within(x, P.lb, P.ub, CHECK_TOL):  # snapped: exact
+            i = int(np.argmax(np.maximum(P.lb - x, x - P.ub)))
+            raise SolverError(
+                f"backend {solver!r} returned x[{i}] = {x[i]!r} outside the bounds "
+                f"[{P.lb[i]!r}, {P.ub[i]!r}]"
+            )
+        H = P.hard
+        if H.m_eq:
+            res = H.Ae @ x - H.be
+            scale = max(1.0, float(np.max(np.abs(H.be))))
+            if float(np.max(np.abs(res))) > CHECK_TOL * scale:
+                raise SolverError(
+                    f"backend {solver!r} returned a point violating the hard equalities "
+                    f"(residual {np.linalg.norm(res):.3g})"
+                )
+        if H.m_in and not within(H.C @ x, H.lo, H.hi, CHECK_TOL):
+            raise SolverError(
+                f"backend {solver!r} returned a point violating the hard inequalities"
+            )
+        tol = CHECK_TOL if R is None else CHECK_TOL + (len(P.levels) + 1) * R.used_relax
+        if R is not None and R.k and not within(R.Cin @ x, R.lin, R.uin, tol):
+            raise SolverError(
+                f"backend {solver!r} returned a point that breaks an inequality a higher "
+                "level had satisfied"
+            )
+
+    def __repr__(self) -> str:
+        sizes = ", ".join(f"{L.m_eq}eq+{L.m_in}in" for L in self._compiled.levels)
+        return f"Stack(n={self.n}, levels=[{sizes}], bounds={self._compiled.bounds is not None})"
+
+
+def solve_stack(
+    levels,
+    bounds: Bounds | None = None,
+    solver: str | None = None,
+    method: str = "hierarchical",
+    **options,
+) -> Solution:
+    """Build a :class:`Stack` and solve it once (function form of :meth:`Stack.solve`).
+
+    ``options`` go to :class:`Stack` (``regularization``, ``damping``, ``constraints``,
+    ``weight_ratio``).
+    """
+    return Stack(levels, bounds=bounds, **options).solve(solver=solver, method=method)

@@ -1,0 +1,390 @@
+"""Tasks: the building blocks of a :class:`~qpcoord.Stack`.
+
+A task is linear in the decision variable ``x`` (for a velocity-level IK step ``x`` is the
+joint velocity in rad/s or the joint displacement in rad; for a force-sharing problem it is
+a force in N; the units of ``A``, ``b``, ``C`` and the bounds follow from the user's choice
+of ``x``):
+
+- :class:`Equality` -- minimise ``‖diag(√w)(A x − b)‖²``;
+- :class:`Inequality` -- ``lower ≤ C x ≤ upper``; at a soft level of a stack the squared
+  violation is minimised, as a hard constraint it must hold;
+- :class:`Bounds` -- a box ``lower ≤ x ≤ upper`` that always holds.
+
+Every task validates its numbers when built and when updated with ``update(...)``, and
+raises :class:`ValueError` naming the task and what is wrong. ``update`` keeps the shape,
+so a stack built once can be re-solved every control step with new numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = ["Equality", "Inequality", "Bounds", "Task"]
+
+
+def _label(kind: str, name: str) -> str:
+    return f"{kind} {name!r}" if name else f"{kind} (unnamed)"
+
+
+def _matrix(value, what: str, label: str) -> np.ndarray:
+    try:
+        # a copy: a task never aliases the caller's array (a later in-place change would
+        # bypass validation)
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{label}: {what} is not a numeric array ({exc})") from None
+    if arr.ndim == 1:
+        arr = arr.reshape(1, -1)
+    if arr.ndim != 2:
+        raise ValueError(f"{label}: {what} must be 2-D (rows × variables), got shape {arr.shape}")
+    if arr.shape[1] == 0:
+        raise ValueError(f"{label}: {what} has no columns (shape {arr.shape})")
+    # one reduction on the hot path; NaN/inf propagate into the sum
+    if not np.isfinite(arr.sum()) and not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise ValueError(
+            f"{label}: {what} contains a non-finite value {arr[tuple(bad)]!r} "
+            f"at row {bad[0]}, column {bad[1]}"
+        )
+    return arr
+
+
+def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.ndarray:
+    """Validate a length-``rows`` vector; scalars broadcast.
+
+    ``allow_inf``: 0 forbids ±inf, +1 allows +inf only, -1 allows -inf only.
+    """
+    try:
+        arr = np.array(value, dtype=float)  # a copy, as in _matrix
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{label}: {what} is not numeric ({exc})") from None
+    if arr.ndim == 0:
+        arr = np.full(rows, float(arr))
+    elif arr.ndim == 2 and 1 in arr.shape:
+        arr = arr.reshape(-1)
+    if arr.ndim != 1 or arr.shape[0] != rows:
+        raise ValueError(f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}")
+    total = arr.sum()
+    if np.isfinite(total):
+        return arr
+    if np.any(np.isnan(arr)):
+        i = int(np.flatnonzero(np.isnan(arr))[0])
+        raise ValueError(f"{label}: {what} contains NaN at index {i}")
+    if allow_inf == 0:
+        bad = ~np.isfinite(arr)
+    elif allow_inf > 0:
+        bad = arr == -np.inf
+    else:
+        bad = arr == np.inf
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{label}: {what} has the non-allowed value {arr[i]!r} at index {i}")
+    return arr
+
+
+def _weight(value, rows: int, label: str) -> np.ndarray:
+    w = _vector(value, rows, "weight", label)
+    if w.min() <= 0:
+        i = int(np.flatnonzero(w <= 0)[0])
+        raise ValueError(f"{label}: weight must be > 0, got {w[i]!r} at row {i}")
+    return w
+
+
+def _check_order(lower: np.ndarray, upper: np.ndarray, label: str) -> None:
+    bad = lower > upper
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{label}: lower > upper at row {i} ({lower[i]!r} > {upper[i]!r})")
+
+
+def _is_identity(A: np.ndarray) -> bool:
+    """Is ``A`` exactly the identity matrix? (Posture-like tasks; lets solvers skip an SVD.)"""
+    n = A.shape[0]
+    return n == A.shape[1] and bool(np.array_equal(A, np.eye(n)))
+
+
+def _bad_box(lower: np.ndarray, upper: np.ndarray) -> bool:
+    """NaN, ``lower = +inf``, ``upper = −inf`` or ``lower > upper`` anywhere."""
+    return bool(not (lower <= upper).all() or lower.max() == np.inf or upper.min() == -np.inf)
+
+
+class _Task:
+    """What every task shares: a name, a label for messages and cached row weights."""
+
+    kind = "Task"
+    name = ""
+    #: Incremented whenever the matrix (``A`` or ``C``) or the weights change; the
+    #: right-hand sides and limits do not count. Lets a persistent solver
+    #: (:class:`qpcoord.core.persistent.PersistentQP`) keep its factorisation while it holds.
+    matrix_version = 0
+
+    @property
+    def label(self) -> str:
+        """Human-readable name used in messages."""
+        return _label(self.kind, self.name)
+
+    def _set_weight(self, w: np.ndarray) -> None:
+        self.weight = w
+        #: ``√weight`` (cached: weights rarely change between control steps)
+        self.sqrt_weight = np.sqrt(w)
+        self.unit_weight = bool((w == 1.0).all())
+
+
+class Equality(_Task):
+    """Least-squares task ``minimise ‖diag(√w)(A x − b)‖²``.
+
+    Parameters
+    ----------
+    A : array_like, shape (m, n)
+        Task matrix (a 1-D array is one row). Units: task units per unit of ``x``.
+    b : array_like, shape (m,)
+        Target, in task units (a scalar broadcasts).
+    weight : float or array_like, shape (m,)
+        Positive weight of each row inside its level (default 1). Within a strict
+        hierarchy a level's overall scale does not matter; relative row weights do.
+    name : str
+        Used in error messages and reports.
+    """
+
+    kind = "Equality"
+
+    def __init__(self, A, b, weight=1.0, name: str = "") -> None:
+        self.name = str(name)
+        label = _label(self.kind, self.name)
+        self.A = _matrix(A, "A", label)
+        self.is_identity = _is_identity(self.A)
+        self.b = _vector(b, self.A.shape[0], "b", label)
+        self._set_weight(_weight(weight, self.A.shape[0], label))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, variables)."""
+        return self.A.shape
+
+    def update(self, A=None, b=None, weight=None) -> Equality:
+        """Replace numbers in place (same shape), validating them. Returns ``self``.
+
+        All-or-nothing: if any argument is rejected, the task keeps its old numbers.
+        """
+        label = self.label
+        m = self.A.shape[0]
+        newA = newb = neww = None
+        if A is not None:
+            newA = _matrix(A, "A", label)
+            if newA.shape != self.A.shape:
+                raise ValueError(
+                    f"{label}: update changes A's shape {self.A.shape} to {newA.shape}"
+                )
+        if b is not None:
+            newb = _vector(b, m, "b", label)
+        if weight is not None:
+            neww = _weight(weight, m, label)
+        if newA is not None:
+            self.A = newA
+            self.is_identity = _is_identity(newA)
+        if newb is not None:
+            self.b = newb
+        if neww is not None:
+            self._set_weight(neww)
+        if newA is not None or neww is not None:
+            self.matrix_version += 1
+        return self
+
+    def _assign(self, A=None, b=None) -> Equality:
+        """Trusted per-step path for library-built tasks: same shapes, values copied in place.
+
+        Only finiteness is checked (one reduction); shapes are the caller's contract.
+        """
+        if A is not None:
+            if not np.isfinite(A.sum()):
+                raise ValueError(f"{self.label}: A contains a non-finite value")
+            self.A[...] = A
+            self.is_identity = False
+            self.matrix_version += 1
+        if b is not None:
+            if not np.isfinite(b.sum()):
+                raise ValueError(f"{self.label}: b contains a non-finite value")
+            self.b[...] = b
+        return self
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """Weighted residual ``diag(√w)(A x − b)`` (task units)."""
+        return np.sqrt(self.weight) * (self.A @ x - self.b)
+
+    def __repr__(self) -> str:
+        return f"Equality(rows={self.A.shape[0]}, n={self.A.shape[1]}, name={self.name!r})"
+
+
+class Inequality(_Task):
+    """Two-sided linear inequality ``lower ≤ C x ≤ upper``.
+
+    Parameters
+    ----------
+    C : array_like, shape (m, n)
+        Constraint matrix (a 1-D array is one row).
+    lower, upper : float or array_like, shape (m,), optional
+        Bounds in the units of ``C x``; ``None`` means unbounded on that side. ``-inf`` is
+        allowed in ``lower`` and ``+inf`` in ``upper``. At least one side must be given.
+    weight : float or array_like, shape (m,)
+        Positive weight of each row's squared violation within its level (default 1).
+    name : str
+        Used in error messages and reports.
+    """
+
+    kind = "Inequality"
+
+    def __init__(self, C, lower=None, upper=None, weight=1.0, name: str = "") -> None:
+        self.name = str(name)
+        label = self.label
+        if lower is None and upper is None:
+            raise ValueError(f"{label}: give lower, upper or both")
+        self.C = _matrix(C, "C", label)
+        m = self.C.shape[0]
+        self.lower = _vector(-np.inf if lower is None else lower, m, "lower", label, allow_inf=-1)
+        self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
+        _check_order(self.lower, self.upper, label)
+        self._set_weight(_weight(weight, m, label))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, variables)."""
+        return self.C.shape
+
+    def update(self, C=None, lower=None, upper=None, weight=None) -> Inequality:
+        """Replace numbers in place (same shape), validating them. Returns ``self``.
+
+        All-or-nothing: if any argument is rejected, the task keeps its old numbers.
+        """
+        label = self.label
+        m = self.C.shape[0]
+        newC = neww = None
+        if C is not None:
+            newC = _matrix(C, "C", label)
+            if newC.shape != self.C.shape:
+                raise ValueError(
+                    f"{label}: update changes C's shape {self.C.shape} to {newC.shape}"
+                )
+        lo = self.lower if lower is None else _vector(lower, m, "lower", label, allow_inf=-1)
+        hi = self.upper if upper is None else _vector(upper, m, "upper", label, allow_inf=+1)
+        _check_order(lo, hi, label)
+        if weight is not None:
+            neww = _weight(weight, m, label)
+        if newC is not None:
+            self.C = newC
+        self.lower, self.upper = lo, hi
+        if neww is not None:
+            self._set_weight(neww)
+        if newC is not None or neww is not None:
+            self.matrix_version += 1
+        return self
+
+    def _assign(self, lower: np.ndarray, upper: np.ndarray, C=None) -> Inequality:
+        """Trusted per-step path: new bounds of the same length (NaN and order checked) and
+        optionally a new ``C`` of the same shape (finiteness checked)."""
+        if _bad_box(lower, upper):
+            _check_order(lower, upper, self.label)
+            raise ValueError(f"{self.label}: bounds contain NaN or ±inf on the wrong side")
+        if C is not None:
+            if not np.isfinite(C.sum()):
+                raise ValueError(f"{self.label}: C contains a non-finite value")
+            self.C[...] = C
+            self.matrix_version += 1
+        self.lower[...] = lower
+        self.upper[...] = upper
+        return self
+
+    def violation(self, x: np.ndarray) -> np.ndarray:
+        """Weighted violation ``√w · (C x − clip(C x, lower, upper))`` (units of ``C x``)."""
+        cx = self.C @ x
+        return np.sqrt(self.weight) * (cx - np.clip(cx, self.lower, self.upper))
+
+    def __repr__(self) -> str:
+        return f"Inequality(rows={self.C.shape[0]}, n={self.C.shape[1]}, name={self.name!r})"
+
+
+class Bounds:
+    """Box ``lower ≤ x ≤ upper`` on the decision variable; always hard.
+
+    Parameters
+    ----------
+    lower, upper : float or array_like, shape (n,)
+        Bounds in the units of ``x``; ``None`` or ``∓inf`` leaves that side open. Scalars
+        broadcast to each stack's ``n`` (one scalar ``Bounds`` may serve several stacks).
+    name : str
+        Used in error messages.
+    """
+
+    kind = "Bounds"
+
+    def __init__(self, lower=None, upper=None, name: str = "bounds") -> None:
+        self.name = str(name)
+        self.version = 0  # incremented by update(): stacks re-read the bounds then
+        self._set(-np.inf if lower is None else lower, np.inf if upper is None else upper)
+
+    def _set(self, lower, upper) -> None:
+        n = None
+        for v in (lower, upper):
+            if np.ndim(v) > 0:
+                n = int(np.size(v))
+        lo, hi = self._validate(lower, upper, 1 if n is None else n)
+        self._lower_in, self._upper_in, self.n = lower, upper, n
+        if n is not None:
+            self.lower, self.upper = lo, hi
+
+    def _validate(self, lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
+        label = self.label
+        lo = _vector(lower, n, "lower", label, allow_inf=-1)
+        hi = _vector(upper, n, "upper", label, allow_inf=+1)
+        bad = lo > hi
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})")
+        return lo, hi
+
+    @property
+    def label(self) -> str:
+        """Human-readable name used in messages."""
+        return _label(self.kind, self.name)
+
+    def resolve(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Validated ``(lower, upper)`` arrays of length ``n``."""
+        if self.n is not None:
+            if self.n != n:
+                raise ValueError(
+                    f"{self.label}: has {self.n} entries but the tasks have {n} columns"
+                )
+            return self.lower, self.upper
+        return self._validate(self._lower_in, self._upper_in, n)
+
+    def update(self, lower=None, upper=None) -> Bounds:
+        """Replace the bounds, validating them (all-or-nothing). Returns ``self``.
+
+        A ``Bounds`` built with arrays keeps its length; one built with scalars may take
+        scalars or arrays.
+        """
+        new_lo = self._lower_in if lower is None else lower
+        new_hi = self._upper_in if upper is None else upper
+        if self.n is not None:
+            lo, hi = self._validate(new_lo, new_hi, self.n)  # names a wrong length
+            self._lower_in, self._upper_in = new_lo, new_hi
+            self.lower, self.upper = lo, hi
+        else:
+            self._set(new_lo, new_hi)
+        self.version += 1
+        return self
+
+    def _touch(self) -> Bounds:
+        """Mark ``lower``/``upper`` as changed after the library wrote them in place (the
+        writer guarantees ``lower ≤ upper`` and no NaN)."""
+        self._lower_in, self._upper_in = self.lower, self.upper
+        self.version += 1
+        return self
+
+    def __repr__(self) -> str:
+        return f"Bounds(n={self.n}, name={self.name!r})"
+
+
+Task = Equality | Inequality
+TaskLevel = Sequence[Task]
