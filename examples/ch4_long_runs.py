@@ -3,7 +3,7 @@
 Reproduces the experiment behind thesis Fig. 4.7, Remark 4.4 and Conjecture 4.1: a
 redundant arm tracks a periodic end-effector path with ``q̇ = J⁺ Ẏ`` (Eq. 4.1) for many
 task periods ``T``, and the joint motion is sampled once per period (Poincaré section,
-``qpcoord.analysis``). The conjecture links the degree of redundancy ``δ = nq − rows`` to
+``qpcoord.coordination.periodicity``). The conjecture links the degree of redundancy ``δ = nq − rows`` to
 the convergence of the joints to a limit cycle (``δ = 1, 2``: converges, faster for
 ``δ = 1``; ``δ > 2``: neither periodic nor convergent).
 

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors, detect_period
+from qpcoord.coordination.periodicity import closure_errors, detect_period
 from qpcoord.report import TextLog, claim, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])  # Ex 4.4

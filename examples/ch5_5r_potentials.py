@@ -52,9 +52,9 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors, periods_to_closure
-from qpcoord.extension import SoftExtension
-from qpcoord.potentials import JointCentring
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
+from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.potentials import JointCentring
 from qpcoord.report import TextLog, claim, write_json
 
 GAIN = 10.0  # 1/s, closed-loop correction of the main task

@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors, joint_path_lengths, periods_to_closure
+from qpcoord.coordination.periodicity import closure_errors, joint_path_lengths, periods_to_closure
 from qpcoord.figures import _pyplot, save
 from qpcoord.report import TextLog, claim, write_json
-from qpcoord.task_manifold import fibre, fibre_point
+from qpcoord.coordination.task_manifold import fibre, fibre_point
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])
 CLOSED = 1e-6  # rad per period: closed

@@ -3,8 +3,8 @@ joint-limit avoidance, posture -- on the 5R arm and on the Franka Panda.
 
 Def. 5.4 with Def. 5.3's gradients: ``q̇ = J⁺Ẏ + N₁N₁ᵀΦ₁ + N₂N₂ᵀΦ₂`` with
 ``Φ_k = −∇g_kᵀ g_k``; level 1 is the end effector (``Ẏ = Ẏ_ref + 10 (Y_ref − Y)``), level 2
-``g₁`` = :class:`~qpcoord.potentials.JointLimitAvoidance`, level 3 ``g₂`` =
-:class:`~qpcoord.potentials.JointCentring` toward a preferred posture. ``N₂`` spans the
+``g₁`` = :class:`~qpcoord.coordination.potentials.JointLimitAvoidance`, level 3 ``g₂`` =
+:class:`~qpcoord.coordination.potentials.JointCentring` toward a preferred posture. ``N₂`` spans the
 null space of ``[J; ∇g₁]``, so level 3 must change neither ``J q̇`` nor ``ġ₁``.
 
 **5R** (``spatial_5r`` on the Lissajous, 2 periods, RK4 ``dt = T/400``): limits chosen
@@ -74,9 +74,9 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors, periods_to_closure
-from qpcoord.extension import SoftExtension
-from qpcoord.potentials import JointCentring, JointLimitAvoidance
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
+from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.potentials import JointCentring, JointLimitAvoidance
 from qpcoord.report import TextLog, claim, write_json
 
 GAIN = 10.0  # 1/s: closed-loop correction of the end-effector level

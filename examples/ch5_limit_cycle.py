@@ -69,9 +69,9 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors, periods_to_closure
-from qpcoord.extension import SoftExtension
-from qpcoord.potentials import JointCentring
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
+from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.potentials import JointCentring
 from qpcoord.report import TextLog, claim, write_json
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9

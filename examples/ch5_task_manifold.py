@@ -3,7 +3,7 @@
 The task manifold is the union of the redundancy fibres (self-motion curves) over the
 points of the path. For the planar 3R arm (absolute angles) on the circle of Fig. 5.9
 (``qc.paths.Circle()``: c = (1.5, 0) m, R = 0.5 m, T = π s) it is a torus S¹ × S¹ (§5.2.1).
-This script traces it with :func:`qpcoord.task_manifold.fibre` through N points of the path
+This script traces it with :func:`qpcoord.coordination.task_manifold.fibre` through N points of the path
 (at ``t = (k + ½) T/N``, each configuration moved exactly onto the path point by
 ``inverse_kinematics``), and draws in the joint space (angles wrapped to (−π, π], lines
 broken at the wraps):
@@ -52,11 +52,11 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors, periods_to_closure
-from qpcoord.extension import SoftExtension
-from qpcoord.potentials import JointCentring
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
+from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.potentials import JointCentring
 from qpcoord.report import TextLog, claim, write_json
-from qpcoord.task_manifold import fibre, wrap_angles
+from qpcoord.coordination.task_manifold import fibre, wrap_angles
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9
 Q_FOLDED = np.array([np.pi, 0.0, 0.0])  # rad: the arm folded flat, |y| = 1

@@ -8,13 +8,19 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
                          bounds=qc.Bounds(-dq_max, dq_max))
 """
 
-from . import analysis, geometry, paths, potentials, robots, schemes, task_manifold
+from . import robots
+from ._version import __version__ as __version__
+from .coordination import geometry, potentials, schemes, task_manifold
+from .coordination import periodicity as analysis
 from .core.backends import available_solvers, default_solver, solver_versions
 from .core.errors import AlgorithmicSingularity, InfeasibleError, SolverError
 from .core.stack import METHODS, Solution, Stack, solve_stack
 from .core.tasks import Bounds, Equality, Inequality
-from .ik import IK, ik_step, inverse_kinematics
-from .kinematic_tasks import (
+from .kinematics import paths
+from .kinematics.ik import IK, ik_step, inverse_kinematics
+from .kinematics.robot import Robot
+from .kinematics.simulation import Trajectory, simulate
+from .kinematics.tasks import (
     JointLimits,
     OneFormTask,
     PositionBand,
@@ -23,10 +29,6 @@ from .kinematic_tasks import (
     PotentialTask,
     VelocityLimits,
 )
-from .robot import Robot
-from .simulate import Trajectory, simulate
-
-__version__ = "0.1.0"
 
 __all__ = [
     "AlgorithmicSingularity",

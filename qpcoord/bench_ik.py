@@ -33,9 +33,9 @@ import time
 
 import numpy as np
 
-from .ik import IK
-from .kinematic_tasks import JointLimits, PositionTask, PostureTask, VelocityLimits
-from .paths import HorizontalCircle, Path
+from .kinematics.ik import IK
+from .kinematics.paths import HorizontalCircle, Path
+from .kinematics.tasks import JointLimits, PositionTask, PostureTask, VelocityLimits
 from .robots import load
 
 __all__ = ["run_ik_bench", "format_ik_table", "PANDA_Q0", "pink_available"]

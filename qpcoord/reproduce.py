@@ -597,7 +597,7 @@ def environment(quick: bool, jobs: int) -> dict:
     """Date, versions (qpcoord, Python, numpy, QP backends), cores and run mode."""
     import numpy as np
 
-    from . import __version__
+    from ._version import __version__
     from .core.backends import solver_versions
 
     try:

@@ -27,7 +27,7 @@ from importlib import resources
 
 import numpy as np
 
-from ..robot import Robot
+from ..kinematics.robot import Robot
 from . import shoulder, spatial_5r
 from .builders import absolute_angle_map, planar_chain
 from .external import example_robot_data_urdf

@@ -1,4 +1,4 @@
-"""qpcoord.analysis: Poincaré sections, closure errors, period detection."""
+"""qpcoord.coordination.periodicity: Poincaré sections, closure errors, period detection."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors, detect_period, poincare_section
+from qpcoord.coordination.periodicity import closure_errors, detect_period, poincare_section
 
 
 def _traj(fn, dfn, T_end: float, dt: float) -> qc.Trajectory:
@@ -112,7 +112,7 @@ def test_not_a_trajectory():
 
 
 def test_periods_to_closure():
-    from qpcoord.analysis import periods_to_closure
+    from qpcoord.coordination.periodicity import periods_to_closure
 
     assert periods_to_closure([1e-9, 1e-9]) == 1
     assert periods_to_closure([0.1, 1e-3, 1e-8, 1e-9]) == 3
@@ -123,8 +123,8 @@ def test_periods_to_closure():
 
 
 def test_joint_path_lengths_of_a_uniform_rotation():
-    from qpcoord.analysis import joint_path_lengths
-    from qpcoord.simulate import Trajectory
+    from qpcoord.coordination.periodicity import joint_path_lengths
+    from qpcoord.kinematics.simulation import Trajectory
 
     t = np.linspace(0, 4.0, 401)
     q = np.column_stack((0.5 * t, np.zeros_like(t)))

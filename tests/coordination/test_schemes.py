@@ -1,4 +1,5 @@
-"""qpcoord.schemes (chapter 4): what each scheme computes, checked against its formula."""
+"""qpcoord.coordination.schemes (chapter 4): what each scheme computes, checked against its
+formula."""
 
 from __future__ import annotations
 

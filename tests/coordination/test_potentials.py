@@ -1,4 +1,4 @@
-"""qpcoord.potentials: values, analytic gradients and Hessians, bad input."""
+"""qpcoord.coordination.potentials: values, analytic gradients and Hessians, bad input."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""qpcoord.curvature: §5.4 Hessian direction and §5.5 complementary form; task_manifold."""
+"""qpcoord.coordination.curvature: §5.4 Hessian direction and §5.5 complementary form;
+task_manifold."""
 
 from __future__ import annotations
 
@@ -6,10 +7,10 @@ import numpy as np
 import pytest
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors
-from qpcoord.curvature import ComplementaryForm, HessianDirection, task_function
-from qpcoord.extension import RigidExtension
-from qpcoord.task_manifold import fibre, fibre_point, self_motion_direction
+from qpcoord.coordination.curvature import ComplementaryForm, HessianDirection, task_function
+from qpcoord.coordination.extensions import RigidExtension
+from qpcoord.coordination.periodicity import closure_errors
+from qpcoord.coordination.task_manifold import fibre, fibre_point, self_motion_direction
 
 ARM3 = qc.robots.load("planar_3r")
 CIRCLE = qc.paths.Circle()

@@ -1,4 +1,5 @@
-"""Tests of the differential IK layer (:mod:`qpcoord.ik`): closed forms of the pseudo-inverse
+"""Tests of the differential IK layer (:mod:`qpcoord.kinematics.ik`): closed forms of the
+pseudo-inverse
 and of the two-level null-space scheme, limits, singularities, a closed loop and errors."""
 
 from __future__ import annotations

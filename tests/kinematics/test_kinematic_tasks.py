@@ -1,4 +1,4 @@
-"""Tests of the kinematic tasks (:mod:`qpcoord.kinematic_tasks`): the numbers each task puts
+"""Tests of the kinematic tasks (:mod:`qpcoord.kinematics.tasks`): the numbers each task puts
 into its Equality / Inequality on the joint velocity, and their input checks."""
 
 from __future__ import annotations

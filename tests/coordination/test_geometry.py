@@ -1,4 +1,4 @@
-"""qpcoord.geometry: brackets, involutivity, dual fields (thesis §3.6, chapter 4)."""
+"""qpcoord.coordination.geometry: brackets, involutivity, dual fields (thesis §3.6, chapter 4)."""
 
 from __future__ import annotations
 

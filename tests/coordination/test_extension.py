@@ -1,4 +1,5 @@
-"""qpcoord.extension: Def. 5.2 (rigid), Defs. 5.3/5.4 (soft, prioritised), Prop. 5.1, Thm 5.1."""
+"""qpcoord.coordination.extensions: Def. 5.2 (rigid), Defs. 5.3/5.4 (soft, prioritised), Prop. 5.1,
+Thm 5.1."""
 
 from __future__ import annotations
 
@@ -8,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import qpcoord as qc
-from qpcoord.analysis import closure_errors
-from qpcoord.extension import RigidExtension, SoftExtension
-from qpcoord.paths import Path
-from qpcoord.potentials import FunctionPotential, JointCentring
+from qpcoord.coordination.extensions import RigidExtension, SoftExtension
+from qpcoord.coordination.periodicity import closure_errors
+from qpcoord.coordination.potentials import FunctionPotential, JointCentring
+from qpcoord.kinematics.paths import Path
 
 ARM3 = qc.robots.load("planar_3r")
 ARM5 = qc.robots.load("spatial_5r")

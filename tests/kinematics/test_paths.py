@@ -1,4 +1,5 @@
-"""Tests of the reference paths (:mod:`qpcoord.paths`): geometry, derivatives against finite
+"""Tests of the reference paths (:mod:`qpcoord.kinematics.paths`): geometry, derivatives against
+finite
 differences, periodicity, arc length, vectorised evaluation and parameter checks."""
 
 from __future__ import annotations

@@ -1,0 +1,318 @@
+"""Per-step differential inverse kinematics on a prioritised stack.
+
+:class:`IK` builds one :class:`~qpcoord.Stack` over the joint velocity ``q̇`` (rad/s) from
+kinematic tasks (:mod:`qpcoord.kinematics.tasks`) and re-solves it every control step:
+
+>>> import numpy as np, qpcoord as qc
+>>> arm = qc.robots.load("planar_3r")
+>>> ee = qc.PositionTask(arm, target=[1.5, 1.0], gain=10.0)
+>>> ik = qc.IK(arm, [ee, qc.PostureTask(arm, [0.0, 0.5, 1.0])], dt=0.01)
+>>> qdot, sol = ik.step(np.array([0.1, 0.6, 1.2]))
+
+Limits (:class:`~qpcoord.JointLimits`, :class:`~qpcoord.VelocityLimits`) are boxes on
+``q̇``; they are merged into one hard :class:`~qpcoord.Bounds` (by default the robot's own
+finite limits are used).
+
+:func:`ik_step` is the one-call form; :func:`inverse_kinematics` solves the position IK
+``ζ(q) = y`` from a start configuration (Gauss–Newton with minimum-norm steps).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.linalg import filtered_svd
+from ..core.stack import METHODS, Solution, Stack
+from ..core.tasks import Bounds, Equality, Inequality
+from .robot import Robot
+from .tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
+
+__all__ = ["IK", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
+
+#: Default relative damping of the IK stacks: a singular value below ``1e-4 · s₀`` is
+#: damped, so no joint speed exceeds ``‖task error‖ / (1e-4 s₀)``.
+DEFAULT_IK_DAMPING = 1e-4
+
+
+def _default_limits(robot: Robot) -> list[Limit]:
+    limits: list[Limit] = []
+    if np.any(np.isfinite(robot.lower)) or np.any(np.isfinite(robot.upper)):
+        limits.append(JointLimits(robot))
+    if np.any(np.isfinite(robot.velocity_limit)):
+        limits.append(VelocityLimits(robot))
+    return limits
+
+
+class IK:
+    """A differential-IK stack for one robot, built once and stepped every control period.
+
+    Parameters
+    ----------
+    robot : Robot
+    levels : sequence
+        Priority levels, highest first. Each item is a task or a list of tasks; a task is a
+        :class:`~qpcoord.kinematics.tasks.KinematicTask` (refreshed every step) or a
+        constant :class:`~qpcoord.Equality` / :class:`~qpcoord.Inequality` on ``q̇``.
+    dt : float
+        Control period (s): used by :class:`~qpcoord.JointLimits`.
+    limits : "robot", sequence of Limit, or None
+        Hard boxes on ``q̇``. ``"robot"`` (default): the robot's finite position limits
+        (:class:`~qpcoord.JointLimits`) and speed limits (:class:`~qpcoord.VelocityLimits`).
+    constraints : sequence, optional
+        Hard tasks (kinematic or constant), e.g. a 1-form that must hold exactly.
+    method : {"hierarchical", "nullspace", "weighted"}
+        Stack method (default strict priorities).
+    solver : str, optional
+        QP backend (default: the fastest installed).
+    damping : float
+        Relative singular-value damping of the stack (default :data:`DEFAULT_IK_DAMPING`).
+    regularization, weight_ratio : float
+        Passed to :class:`~qpcoord.Stack`.
+    fallback : bool
+        Passed to :class:`~qpcoord.Stack`: solve a level QP the backend failed on with
+        another backend (reported in ``Solution.info["fallbacks"]``).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        levels,
+        dt: float,
+        limits="robot",
+        constraints=None,
+        method: str = "hierarchical",
+        solver: str | None = None,
+        damping: float = DEFAULT_IK_DAMPING,
+        regularization: float = 1e-9,
+        weight_ratio: float = 1e-3,
+        fallback: bool = True,
+    ) -> None:
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+        if not isinstance(robot, Robot):
+            raise ValueError(f"robot must be a qpcoord.Robot, got {type(robot).__name__}")
+        self.robot = robot
+        self.dt = _check_dt(dt)
+        self.method = method
+        self.solver = solver
+        if isinstance(limits, str):
+            if limits != "robot":
+                raise ValueError(
+                    f"limits must be 'robot', a list of limits or None, got {limits!r}"
+                )
+            limits = _default_limits(robot)
+        limits = list(limits or [])
+        for lim in limits:
+            if not isinstance(lim, Limit):
+                raise ValueError(f"limits must be JointLimits/VelocityLimits objects, got {lim!r}")
+            if lim.robot is not robot:
+                raise ValueError(f"limit {lim.task.name!r} belongs to another robot")
+        if method == "nullspace" and limits:
+            raise ValueError(
+                "method='nullspace' takes no inequalities: pass limits=None (the robot's "
+                "limits are used by default)"
+            )
+        self.limits = limits
+        self._dynamic: list[KinematicTask] = []
+        stack_levels = [self._collect(level, f"levels[{i}]") for i, level in enumerate(levels)]
+        stack_constraints = self._collect(list(constraints or []), "constraints")
+        self.bounds = Bounds(np.full(robot.nq, -np.inf), np.full(robot.nq, np.inf), "limits")
+        self.stack = Stack(
+            stack_levels,
+            bounds=self.bounds if limits else None,
+            regularization=regularization,
+            damping=damping,
+            constraints=stack_constraints or None,
+            weight_ratio=weight_ratio,
+            fallback=fallback,
+        )
+        self.last: Solution | None = None
+
+    def _collect(self, level, where: str) -> list:
+        items = level if isinstance(level, (list, tuple)) else [level]
+        out = []
+        for task in items:
+            if isinstance(task, KinematicTask):
+                if task.robot is not self.robot:
+                    raise ValueError(f"{where}: task {task.name!r} belongs to another robot")
+                self._dynamic.append(task)
+                out.append(task.task)
+            elif isinstance(task, (Equality, Inequality)):
+                if task.shape[1] != self.robot.nq:
+                    raise ValueError(
+                        f"{where}: {task.label} has {task.shape[1]} columns, the robot "
+                        f"{self.robot.nq} joints"
+                    )
+                out.append(task)
+            else:
+                raise ValueError(
+                    f"{where}: expected kinematic tasks, Equality or Inequality, got {task!r}"
+                )
+        return out
+
+    def refresh(self, q: np.ndarray, t: float = 0.0, reference=None) -> None:
+        """Update every task and the bounds for a validated configuration ``q`` (rad)
+        (float array of shape (nq,)) at time ``t`` (s)."""
+        for task in self._dynamic:
+            task._refresh(q, t, self.dt, reference)
+        if self.limits:
+            # written straight into the stack's Bounds (same arrays), then marked changed
+            lo, hi = self.bounds.lower, self.bounds.upper
+            first, *rest = self.limits
+            a, b = first.box(q, self.dt)
+            np.copyto(lo, a)
+            np.copyto(hi, b)
+            for lim in rest:
+                a, b = lim.box(q, self.dt)
+                np.maximum(lo, a, out=lo)
+                np.minimum(hi, b, out=hi)
+            # outside a joint limit the box that pushes back may lie beyond the speed
+            # limit: the boxes do not meet, and the speed limit (which contains 0) wins:
+            # move back at full speed, i.e. take the end nearer to 0
+            bad = lo > hi
+            if bad.any():
+                back = np.where(np.abs(lo) < np.abs(hi), lo, hi)
+                lo[bad] = hi[bad] = back[bad]
+            self.bounds._touch()
+
+    def step(
+        self, q, t: float = 0.0, reference=None, warm_start=None
+    ) -> tuple[np.ndarray, Solution]:
+        """Solve one control step.
+
+        Parameters
+        ----------
+        q : array_like, shape (nq,)
+            Current configuration (rad).
+        t : float
+            Time (s), for tasks that follow a path.
+        reference : Path, optional
+            End-effector path for position tasks built without a target.
+        warm_start : Solution or array, optional
+            Previous step's solution (default: the last one of this IK).
+
+        Returns
+        -------
+        qdot : numpy.ndarray, shape (nq,)
+            Joint velocity (rad/s).
+        solution : Solution
+            The stack's solution (``info["level_ranks"]`` shows a rank loss near a
+            singularity).
+        """
+        q = self.robot.check_configuration(q)
+        self.refresh(q, t, reference)
+        sol = self.stack.solve(
+            solver=self.solver,
+            method=self.method,
+            warm_start=self.last if warm_start is None else warm_start,
+        )
+        self.last = sol
+        return sol.x, sol
+
+    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+        """Joint velocity (rad/s) at ``(q, t)``: the scheme interface used by :func:`simulate`."""
+        return self.step(q, t, reference)[0]
+
+
+def ik_step(
+    robot: Robot, q, levels, dt: float, solver: str | None = None, t: float = 0.0, **options
+) -> tuple[np.ndarray, Solution]:
+    """Build an :class:`IK` and solve one step (convenience; a control loop keeps the IK).
+
+    ``options`` go to :class:`IK` (``limits``, ``constraints``, ``method``, ``damping``…).
+    Returns ``(qdot, solution)`` with ``qdot`` in rad/s.
+    """
+    return IK(robot, levels, dt, solver=solver, **options).step(q, t)
+
+
+def inverse_kinematics(
+    robot: Robot,
+    target,
+    q0,
+    tol: float = 1e-12,
+    max_iter: int = 200,
+    max_step: float = 0.5,
+) -> np.ndarray:
+    """Configuration ``q`` with ``ζ(q) = target``, closest to ``q0`` (locally).
+
+    Two phases (filtered pseudo-inverse, step norm capped at ``max_step`` rad): Gauss–Newton
+    minimum-norm steps ``q ← q + J⁺ (target − ζ(q))`` until the target is reached, then
+    projected steps ``q ← q + J⁺ (target − ζ(q)) + (I − J⁺J)(q0 − q)`` that slide along the
+    self-motion toward ``q0``. At convergence ``q − q0`` is orthogonal to the self-motion, so
+    ``q`` is a local minimum of ``‖q − q0‖`` among configurations that reach ``target``
+    (otherwise the on-target configuration closest to ``q0`` met is returned). A singular
+    configuration met in the first phase is left by a fixed 0.01 rad step. Joint limits are
+    not enforced.
+
+    Parameters
+    ----------
+    robot : Robot
+    target : array_like, shape (rows,)
+        End-effector position (m).
+    q0 : array_like, shape (nq,)
+        Start configuration (rad).
+    tol : float
+        Stop when ``‖ζ(q) − target‖ ≤ tol · max(1, ‖target‖)`` (m) and the null-space part
+        of ``q0 − q`` is below ``1e3 · tol`` (rad).
+    max_iter : int
+    max_step : float
+        Largest joint step per iteration (rad).
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, or the target is not reached (out of reach, or a singularity).
+    """
+    q_ref = robot.check_configuration(q0, "q0").copy()
+    y_target = np.asarray(target, dtype=float).reshape(-1)
+    if y_target.shape != (robot.m,) or not np.all(np.isfinite(y_target)):
+        raise ValueError(f"target must be {robot.m} finite coordinates (m), got {target!r}")
+    goal = tol * max(1.0, float(np.linalg.norm(y_target)))
+
+    # a fixed small kick out of a singular configuration (e.g. a stretched arm, where
+    # minimum-norm steps keep it stretched forever)
+    kick = 1e-2 * np.where(np.arange(robot.nq) % 2 == 0, 1.0, -1.0) / np.sqrt(robot.nq)
+
+    def step(q: np.ndarray, toward_q0: bool):
+        y, J = robot._kinematics(q)
+        e = y_target - y
+        U, s_, Vt, rank, g, _tau = filtered_svd(J, 1e-6)
+        if not toward_q0 and (rank < robot.m or s_[rank - 1] < 1e-6 * s_[0]):
+            return float(np.linalg.norm(e)), 0.0, kick
+        dq = Vt[:rank].T @ (g * (U[:, :rank].T @ e))
+        drift = np.zeros_like(q)
+        if toward_q0:
+            N = Vt[rank:]  # rows: orthonormal basis of the self-motion directions
+            drift = N.T @ (N @ (q_ref - q))
+            dq = dq + drift
+        norm = float(np.linalg.norm(dq))
+        if norm > max_step:
+            dq *= max_step / norm
+        return float(np.linalg.norm(e)), float(np.linalg.norm(drift)), dq
+
+    # phase 1: reach the target by minimum-norm steps
+    q = q_ref.copy()
+    err = np.inf
+    for _ in range(max_iter):
+        err, _, dq = step(q, False)
+        if err <= goal:
+            break
+        q = q + dq
+    if err <= goal:
+        # phase 2: slide along the self-motion toward q0, staying on the target; keep the
+        # on-target configuration closest to q0 seen
+        best, best_d = q.copy(), float(np.linalg.norm(q - q_ref))
+        for _ in range(max_iter):
+            err, drift, dq = step(q, True)
+            if err <= goal:
+                d = float(np.linalg.norm(q - q_ref))
+                if d < best_d:
+                    best, best_d = q.copy(), d
+                if drift <= 1e3 * tol:
+                    break
+            q = q + dq
+        return best
+    raise ValueError(
+        f"inverse_kinematics: target {y_target.tolist()} not reached from q0 "
+        f"(residual {err:.3g} m after {max_iter} iterations; out of reach or singular)"
+    )
