@@ -1,6 +1,7 @@
 """Per-step solve time of a 3-level stack (7 and 30 variables), every method and backend.
 
-Thin wrapper around :func:`qpcoord.bench.run_stack_bench` (same as ``qpcoord bench stack``)::
+Thin wrapper around :func:`qpcoord.studies.bench_stack.run_stack_bench` (same as ``qpcoord bench
+stack``)::
 
     python benchmarks/stack_bench.py                 # full run, all installed backends (~1 min)
     python benchmarks/stack_bench.py --quick         # smoke run, a few seconds
@@ -24,7 +25,7 @@ import time
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.bench import format_table, run_loops, run_stack_bench
+from qpcoord.studies.bench_stack import format_table, run_loops, run_stack_bench
 
 
 def profile(n: int, solver: str, steps: int, top: int = 25) -> str:

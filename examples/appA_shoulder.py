@@ -36,8 +36,9 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord import musculo
-from qpcoord.report import TextLog, claim, write_json
 from qpcoord.robots import shoulder
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 Q_START = np.zeros(3)
 Q_END = np.radians([-80.0, 40.0, 20.0])  # θ < 0 is abduction (see qpcoord.robots.shoulder)
@@ -173,7 +174,7 @@ def moment_arm_table(model) -> dict:
 
 
 def shoulder_claims(res: dict, sweep: dict) -> list[dict]:
-    """Claim rows (``qpcoord.report.claim``) for appendix A from the motion and the sweep.
+    """Claim rows (``qpcoord.studies.claims.claim``) for appendix A from the motion and the sweep.
 
     The per-sample checks hold or fail sample by sample, so the ``--quick`` motion (121
     samples of the same movement, against 601) decides them too.
@@ -324,7 +325,7 @@ def main(argv=None) -> int:
         say(f"claim {c['id']}: {c['measured']} → {c['status']}")
 
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
     else:

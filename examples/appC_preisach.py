@@ -42,7 +42,8 @@ import numpy as np
 from scipy import signal
 
 from qpcoord import hysteresis as hy
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 FS = 5000.0  # Hz, lab sampling rate (thesis §6.2)
 LEVELS = np.linspace(0.0, 10.0, 21)  # V, identification mesh
@@ -115,7 +116,7 @@ def per_sample_us(fn, values, repeats: int = 5) -> float:
 
 
 def preisach_claims(summary: dict, sine_s: float, stoch_s: float) -> list[dict]:
-    """Claim rows (``qpcoord.report.claim``) for appendix C, Figs C.7–C.10.
+    """Claim rows (``qpcoord.studies.claims.claim``) for appendix C, Figs C.7–C.10.
 
     Judged on the default synthetic stack (``RelayPiezo``, static case). The sine's error
     is periodic after its first period, so any run with ≥ 1 period after the first decides
@@ -362,7 +363,7 @@ def main(argv=None) -> int:
         say(f"claim {c['id']}: {c['measured']} → {c['status']}")
 
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
     else:

@@ -41,7 +41,8 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord import geometry as g
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
 DET_MIN = 1e-6  # |det[f1, f2, [f1, f2]]| above this: not involutive (rounding is ~1e-15)
@@ -263,7 +264,7 @@ def main(argv=None) -> int:
         f"{e44['thm42_fields_defect_max']:.3g}"
     )
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
     else:

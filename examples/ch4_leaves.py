@@ -31,7 +31,8 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.coordination.periodicity import closure_errors
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
 SMIN_TOL = 1e-3  # smallest singular value of [J; ω₄; ω₅]: invertible
@@ -154,7 +155,7 @@ def main(argv=None) -> int:
         )
     trajs = [r.pop("_traj") for r in rows]
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
     else:

@@ -3,7 +3,8 @@
 Reproduces the experiment behind thesis Fig. 4.7, Remark 4.4 and Conjecture 4.1: a
 redundant arm tracks a periodic end-effector path with ``q̇ = J⁺ Ẏ`` (Eq. 4.1) for many
 task periods ``T``, and the joint motion is sampled once per period (Poincaré section,
-``qpcoord.coordination.periodicity``). The conjecture links the degree of redundancy ``δ = nq − rows`` to
+``qpcoord.coordination.periodicity``). The conjecture links the degree of redundancy ``δ = nq −
+rows`` to
 the convergence of the joints to a limit cycle (``δ = 1, 2``: converges, faster for
 ``δ = 1``; ``δ > 2``: neither periodic nor convergent).
 
@@ -100,8 +101,9 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.figures import closure_plot, joint_plot
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.figures import closure_plot, joint_plot
+from qpcoord.studies.files import TextLog, write_json
 
 ZIGZAG = np.array([0.0, np.pi / 3, -np.pi / 3, 2 * np.pi / 3, -2 * np.pi / 3])  # rad
 CLIK_GAIN = 1.0  # 1/s

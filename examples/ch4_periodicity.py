@@ -43,7 +43,8 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.coordination.periodicity import closure_errors, detect_period
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])  # Ex 4.4
 TRACK_TOL = 1e-5  # m: "perfectly realized" Lissajous (sphere radius 1.5 m)
@@ -178,7 +179,7 @@ def main(argv=None) -> int:
         f"{result['fig44_minus_fig43_max_joint_difference_rad']:.2e} rad"
     )
     try:
-        from qpcoord.figures import closure_plot, joint_plot
+        from qpcoord.studies.figures import closure_plot, joint_plot
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
     else:

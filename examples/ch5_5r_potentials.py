@@ -52,10 +52,11 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.potentials import JointCentring
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 GAIN = 10.0  # 1/s, closed-loop correction of the main task
 CLOSED = 1e-6  # rad per period: closed
@@ -243,7 +244,7 @@ def main(argv=None) -> int:
             f"{r['closure_power_law_exponent']:6.2f}  {c}"
         )
     try:
-        from qpcoord.figures import closure_plot, joint_plot
+        from qpcoord.studies.figures import closure_plot, joint_plot
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
     else:

@@ -11,7 +11,8 @@ reduces to Eq. 5.5, ``q̇ = NNᵀ(−∇gᵀ g)``. Two convex potentials:
   at y₀: its minimum is off the fibre, so ``min g > 0`` on it);
 
 each from three starts on the fibre through q0 (arc length ``s = 0, ±3.2`` rad along it,
-:func:`qpcoord.coordination.task_manifold.fibre_point`), for 2000 s, integrated with scipy's adaptive
+:func:`qpcoord.coordination.task_manifold.fibre_point`), for 2000 s, integrated with scipy's
+adaptive
 Radau (rtol 1e-11) calling the scheme's ``velocity``: the largest rate of the flow is
 0.7–7.1/s at the starts but only 0.033/s (A) and 0.136/s (B) at the minimum (the factor
 ``g`` in ``Φ = −∇gᵀg`` is small there), and adaptive steps follow both.
@@ -63,7 +64,8 @@ from scipy.optimize import minimize
 import qpcoord as qc
 from qpcoord.coordination.extensions import SoftExtension
 from qpcoord.coordination.potentials import JointCentring
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9: tip at (2, 0)
 DURATION = 2000.0  # s: the slowest run (A) converges at ~0.02/s near its minimum
@@ -220,7 +222,7 @@ def run(names, starts, duration: float, rtol: float) -> tuple[dict, dict]:
 
 def figures(result, extra, out: Path, say) -> None:
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
         return

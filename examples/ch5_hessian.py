@@ -42,9 +42,10 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.coordination.periodicity import closure_errors, joint_path_lengths, periods_to_closure
-from qpcoord.figures import _pyplot, save
-from qpcoord.report import TextLog, claim, write_json
 from qpcoord.coordination.task_manifold import fibre, fibre_point, wrap_angles
+from qpcoord.studies.claims import claim
+from qpcoord.studies.figures import _pyplot, save
+from qpcoord.studies.files import TextLog, write_json
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])
 FULL_PERIODS = 20  # the full run

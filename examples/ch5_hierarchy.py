@@ -74,10 +74,11 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.potentials import JointCentring, JointLimitAvoidance
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 GAIN = 10.0  # 1/s: closed-loop correction of the end-effector level
 #: 5R limits (rad): the J⁺ motion from the path start covers q ∈ [(−0.57, −0.18, 0.85,
@@ -322,7 +323,7 @@ def run_panda(arm, duration: float) -> list[dict]:
 
 def figures(r5, data, out: Path, say) -> None:
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
         return
@@ -371,7 +372,7 @@ def figures(r5, data, out: Path, say) -> None:
 
 def panda_figure(rows, out: Path) -> None:
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         return
     plt = _pyplot()

@@ -69,10 +69,11 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.potentials import JointCentring
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9
 CLOSED = 1e-6  # rad: "closed" threshold of the closure error per period
@@ -172,7 +173,7 @@ def run(cases, periods: int, pinv_periods: int) -> tuple[dict, dict]:
 
 def figures(result, trajs, out: Path, period: float, say) -> None:
     try:
-        from qpcoord.figures import _pyplot, closure_plot, joint_plot, save
+        from qpcoord.studies.figures import _pyplot, closure_plot, joint_plot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
         return

@@ -3,7 +3,8 @@
 The task manifold is the union of the redundancy fibres (self-motion curves) over the
 points of the path. For the planar 3R arm (absolute angles) on the circle of Fig. 5.9
 (``qc.paths.Circle()``: c = (1.5, 0) m, R = 0.5 m, T = π s) it is a torus S¹ × S¹ (§5.2.1).
-This script traces it with :func:`qpcoord.coordination.task_manifold.fibre` through N points of the path
+This script traces it with :func:`qpcoord.coordination.task_manifold.fibre` through N points of the
+path
 (at ``t = (k + ½) T/N``, each configuration moved exactly onto the path point by
 ``inverse_kinematics``), and draws in the joint space (angles wrapped to (−π, π], lines
 broken at the wraps):
@@ -52,11 +53,12 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.extensions import SoftExtension
+from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.potentials import JointCentring
-from qpcoord.report import TextLog, claim, write_json
 from qpcoord.coordination.task_manifold import fibre, wrap_angles
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 Q0 = np.array([0.0, np.pi / 3, -np.pi / 3])  # thesis Fig. 5.9
 Q_FOLDED = np.array([np.pi, 0.0, 0.0])  # rad: the arm folded flat, |y| = 1
@@ -234,7 +236,7 @@ def claims(result: dict) -> list[dict]:
 
 def figures(result, data, out: Path, say) -> None:
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover - matplotlib missing
         say("matplotlib not installed: figures skipped")
         return

@@ -32,7 +32,8 @@ from qpcoord.ddl.compare import (
     format_table,
     qualitative_grid,
 )
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 FS = 8000.0
 
@@ -84,7 +85,7 @@ GRID_WHY = {
 
 
 def compare_claims(rows: list[dict], full: bool, size: str) -> list[dict]:
-    """Claim rows (``qpcoord.report.claim``) for Tables 6.1–6.2, Figs 6.18–6.19.
+    """Claim rows (``qpcoord.studies.claims.claim``) for Tables 6.1–6.2, Figs 6.18–6.19.
 
     ``full``: the run is as long as the thesis's (10 s Kolmogorov, ≥ 3 seeds, 6 s steps);
     otherwise every thesis row is ``"inconclusive"``. ``size`` describes the run.
@@ -374,7 +375,7 @@ def main(argv=None) -> int:
         say(f"  {c['id']}: {c['measured']} → {c['status']}")
     # figures
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover
         say("matplotlib not installed: figures skipped")
     else:

@@ -20,11 +20,12 @@ import numpy as np
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.identify import coarse_frf, peak_frequency
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 
 def flexure_claims(fl, x, f_flex, f_em, ripple, chirp) -> list[dict]:
-    """Claim rows (``qpcoord.report.claim``) for appendix B from the curves over the stroke.
+    """Claim rows (``qpcoord.studies.claims.claim``) for appendix B from the curves over the stroke.
 
     ``x``: positions (m, symmetric grid with the centre in the middle); ``f_flex``: flexure
     resonance (Hz); ``f_em``: linearised electromechanical mode (Hz); ``ripple``: that mode
@@ -135,7 +136,7 @@ def main(argv=None) -> int:
     for c in claims:
         say(f"claim {c['id']}: {c['measured']} → {c['status']}")
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover
         say("matplotlib not installed: figures skipped")
     else:

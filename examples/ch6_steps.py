@@ -22,7 +22,8 @@ import numpy as np
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.references import fig619_steps
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 FS = 8000.0
 
@@ -38,7 +39,7 @@ def settle_time(run, tol: float, t0: float) -> float:
 
 
 def step_claims(rows: dict, duration: float, t0: float, quick: bool) -> list[dict]:
-    """Claim rows (``qpcoord.report.claim``) for Fig 6.19 from the two step cases.
+    """Claim rows (``qpcoord.studies.claims.claim``) for Fig 6.19 from the two step cases.
 
     A step "is followed" when the stepper never loses synchronism and the output comes
     within 100 nm for good with at least 0.5 s of the run left to see it hold.
@@ -140,7 +141,7 @@ def main(argv=None) -> int:
     for c in claims:
         say(f"claim {c['id']}: {c['measured']} → {c['status']}")
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover
         say("matplotlib not installed: figures skipped")
     else:

@@ -27,7 +27,8 @@ from scipy import signal
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.identify import coarse_frf, fine_frf, peak_frequency
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 FS = 8000.0
 
@@ -52,7 +53,7 @@ def psd_slopes(seed: int) -> dict:
 
 
 def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> list[dict]:
-    """Claim rows (``qpcoord.report.claim``): each thesis number beside this run's value.
+    """Claim rows (``qpcoord.studies.claims.claim``): each thesis number beside this run's value.
 
     Rows on the Kolmogorov runs are decided only by a run as long as the thesis's (10 s)
     with at least 3 seeds; shorter runs (``--quick``) give ``"inconclusive"``.
@@ -293,7 +294,7 @@ def main(argv=None) -> int:
         say(f"  {c['id']}: {c['measured']} → {c['status']}")
 
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover
         say("matplotlib not installed: figures skipped")
     else:

@@ -24,13 +24,14 @@ import numpy as np
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.two_ddl import combine, two_ddl_frf, two_ddl_steps
-from qpcoord.report import TextLog, claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
 
 FS = 8000.0
 
 
 def two_ddl_claims(o: dict, s: dict, k: float, gap: float, quick: bool) -> list[dict]:
-    """Claim rows (``qpcoord.report.claim``) for §6.3 / Fig 6.14 from the chosen predictor.
+    """Claim rows (``qpcoord.studies.claims.claim``) for §6.3 / Fig 6.14 from the chosen predictor.
 
     ``o``, ``s``: frequency-response and step results at the chosen gain ``k`` (s); ``gap``:
     max relative gap between ``2F − F²`` of the measured single loop and the measured dual
@@ -188,7 +189,7 @@ def main(argv=None) -> int:
     for c in claims:
         say(f"claim {c['id']}: {c['measured']} → {c['status']}")
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover
         say("matplotlib not installed: figures skipped")
     else:

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.report import claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import write_json
 
 TOL = 1e-9  # main-task residual: strict stack vs main task alone, same bounds
 
@@ -84,7 +85,7 @@ def claims(rows: list[dict]) -> list[dict]:
 
 def figure(rows: list[dict], path: Path) -> Path:
     """Main-task residual vs speed limit: strict, weighted, main task alone."""
-    from qpcoord.figures import _pyplot, save
+    from qpcoord.studies.figures import _pyplot, save
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.6))

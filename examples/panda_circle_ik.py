@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.report import claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import write_json
 
 DT = 1e-3  # s, control period
 Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
@@ -96,7 +97,7 @@ def claims(rows: list[dict]) -> list[dict]:
 
 def figure(rows: list[dict], path: Path) -> Path:
     """Position error (m, log) over time, one line per run."""
-    from qpcoord.figures import _pyplot, save
+    from qpcoord.studies.figures import _pyplot, save
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 3.8))

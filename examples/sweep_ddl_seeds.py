@@ -1,11 +1,11 @@
 """Sweep: the DDL coordinator over seeds × plant mismatch, serial vs worker processes.
 
-A study of the kind run by the thousand, written with ``qpcoord.sweep``: the thesis
+A study of the kind run by the thousand, written with ``qpcoord.studies.sweep``: the thesis
 coordinator (``SisoCoordinator``, designed on and initialised from the nominal PRIMA plant, as
 ``qpcoord.ddl.compare.DesignedOn``) tracks the ``paranal_250hz`` Kolmogorov OPD at 8 kHz on
 plants that are off nominal — piezo gain alone ±20 %, or piezo gain, flexure stiffness and
 friction all ±20 % (``qpcoord.ddl.compare.mismatched_plant``, the ``mismatch±`` cases of
-``ch6_compare.py``) — for independent seeds from ``qpcoord.sweep.seeds``. The grid
+``ch6_compare.py``) — for independent seeds from ``qpcoord.studies.sweep.seeds``. The grid
 seed × case runs with ``sweep(..., backend="processes")``, then again serially: the results
 must be equal bit for bit, and the wall times give the parallel speed-up on this machine
 (reported, not asserted; ``--dask`` also times a 2-worker Dask ``LocalCluster``).
@@ -29,8 +29,9 @@ import numpy as np
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.compare import DesignedOn, mismatched_plant
-from qpcoord.report import TextLog, claim, write_json
-from qpcoord.sweep import grid, seeds, sweep
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import TextLog, write_json
+from qpcoord.studies.sweep import grid, seeds, sweep
 
 FS = 8000.0
 #: Plant cases: name -> (what is scaled, factor).
@@ -159,7 +160,7 @@ def make_claims(table, results, times, identical, duration, nseeds, n_jobs) -> l
             "sweep-processes-deterministic",
             "A sweep over worker processes returns the serial results, bit for bit, in input "
             "order.",
-            "Not in the thesis: a property of qpcoord.sweep",
+            "Not in the thesis: a property of qpcoord.studies.sweep",
             f"identical: {identical}; serial {times['serial']:.2f} s, processes "
             f"{times['processes']:.2f} s with {n_jobs} workers (×{speed:.2f}; "
             f"{times['processes (cold)']:.2f} s when starting the workers)",
@@ -231,7 +232,7 @@ def main(argv=None) -> int:
     claims = make_claims(table, results, times, identical, duration, nseeds, n_jobs)
 
     try:
-        from qpcoord.figures import _pyplot, save
+        from qpcoord.studies.figures import _pyplot, save
     except ImportError:  # pragma: no cover
         say("matplotlib not installed: figure skipped")
     else:

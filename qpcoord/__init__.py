@@ -71,13 +71,19 @@ __all__ = [
     "task_manifold",
 ]
 
-#: Submodules imported on first use (``qc.ddl`` pulls in scipy.signal: ~1.4 s measured).
-_LAZY = ("ddl", "hysteresis", "musculo", "reproduce", "sweep")
+#: Names imported on first use -> their module (``qc.ddl`` pulls in scipy.signal: ~1.4 s).
+_LAZY = {
+    "ddl": "qpcoord.ddl",
+    "hysteresis": "qpcoord.hysteresis",
+    "musculo": "qpcoord.musculo",
+    "reproduce": "qpcoord.studies.reproduce",
+    "sweep": "qpcoord.studies.sweep",
+}
 
 
 def __getattr__(name: str):
     if name in _LAZY:
         import importlib
 
-        return importlib.import_module(f".{name}", __name__)
+        return importlib.import_module(_LAZY[name])
     raise AttributeError(f"module 'qpcoord' has no attribute {name!r}")

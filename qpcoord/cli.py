@@ -31,7 +31,7 @@ def _cmd_solvers(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from .demo import run_demo
+    from .studies.demo import run_demo
 
     print(run_demo(solver=args.solver, steps=args.steps))
     return 0
@@ -40,7 +40,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
-    from .bench import format_table, run_stack_bench
+    from .studies.bench_stack import format_table, run_stack_bench
 
     solvers = [args.solver] if args.solver else None
     with threadpool_limits(limits=1):
@@ -52,7 +52,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def _cmd_bench_ik(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
-    from .bench_ik import format_ik_table, pink_available, run_ik_bench
+    from .studies.bench_ik import format_ik_table, pink_available, run_ik_bench
 
     if not pink_available():
         print("note: pin-pink is not installed (pip install 'qpcoord[bench]'): qpcoord rows only")
@@ -126,7 +126,7 @@ def _cmd_ddl_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from .reproduce import ExamplesNotFoundError, run
+    from .studies.reproduce import ExamplesNotFoundError, run
 
     try:
         report = run(

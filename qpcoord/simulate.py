@@ -9,14 +9,19 @@ import sys
 from types import ModuleType
 
 from ._deprecated import warn_moved
-from .kinematics.simulation import Trajectory, simulate
+from .kinematics import simulation as _new
+from .kinematics.simulation import *  # noqa: F403
 
-__all__ = ["Trajectory", "simulate"]
+__all__ = list(_new.__all__)
+
+
+def __getattr__(name: str):
+    return getattr(_new, name)
 
 
 class _CallableAlias(ModuleType):
     def __call__(self, *args, **kwargs):
-        return simulate(*args, **kwargs)
+        return _new.simulate(*args, **kwargs)
 
 
 warn_moved(__name__, "qpcoord.kinematics.simulation")

@@ -26,9 +26,9 @@ PAGES = {
     "ch6/index.html": "SisoCoordinator",
     "appB/index.html": "BladeFlexure",
     # API pages generated from docstrings by mkdocstrings
-    "api/core/index.html": 'id="qpcoord.core.stack.solve_stack"',
-    "api/persistent/index.html": 'id="qpcoord.core.persistent.PersistentQP"',
-    "api/ddl-controllers/index.html": 'id="qpcoord.ddl.mpc.MPC"',
+    "api/core/stack/index.html": 'id="qpcoord.core.stack.solve_stack"',
+    "api/core/persistent/index.html": 'id="qpcoord.core.persistent.PersistentQP"',
+    "api/ddl/controllers/index.html": 'id="qpcoord.ddl.mpc.MPC"',
 }
 
 

@@ -30,7 +30,7 @@ def test_example_quick(script, tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary
     # every example states what it checked against the thesis (qpcoord reproduce's report)
-    from qpcoord.report import claim
+    from qpcoord.studies.claims import claim
 
     rows = summary.get("claims")
     assert rows, f"{script.name}: summary.json has no claims"
@@ -47,7 +47,7 @@ def test_the_examples_index_lists_every_script():
 
 
 def test_write_json_is_atomic(tmp_path):
-    from qpcoord.report import write_json
+    from qpcoord.studies.files import write_json
 
     target = tmp_path / "sub" / "summary.json"
     write_json(target, {"a": 1})
@@ -59,7 +59,7 @@ def test_write_json_is_atomic(tmp_path):
 
 
 def test_claim_rows_are_checked():
-    from qpcoord.report import claim
+    from qpcoord.studies.claims import claim
 
     row = claim("x", "a claim", "Fig 1: 3", "3.0", "reproduced")
     assert row["status"] == "reproduced" and row["note"] == ""

@@ -20,18 +20,26 @@ The inverse (Eqs C.9–C.11) is :class:`qpcoord.hysteresis.inverse.PreisachCompe
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from .preisach import PreisachModel
+if TYPE_CHECKING:  # the model runs its signals through a stage: no import back at run time
+    from .preisach import PreisachModel
 
 __all__ = ["PreisachStage"]
+
+
+#: What the memory reads of a :class:`~qpcoord.hysteresis.preisach.PreisachModel` (checked
+#: by attribute, so that this module needs no import of the model's, which imports it).
+_MODEL_ATTRIBUTES = ("_X", "_everett", "_check_range", "u_min", "u_max", "x_min", "x_max", "offset")
 
 
 class _Memory:
     """State machine (extrema stack) shared by :class:`PreisachStage` and the compensator."""
 
     def __init__(self, model: PreisachModel, clip: bool = False) -> None:
-        if not isinstance(model, PreisachModel):
+        if not all(hasattr(model, a) for a in _MODEL_ATTRIBUTES):
             raise ValueError(f"model must be a PreisachModel, got {type(model).__name__}")
         self.model = model
         self.clip = bool(clip)

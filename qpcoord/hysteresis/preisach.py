@@ -302,7 +302,7 @@ class PreisachModel:
         ValueError
             If ``u`` holds NaN or leaves ``[u_min, u_max]`` (the value is named).
         """
-        from .memory import PreisachStage  # memory builds on this module
+        from .memory import PreisachStage  # the stage that runs a model's signals
 
         return PreisachStage(self).run(u)
 

@@ -31,6 +31,7 @@ from ..kinematics.robot import Robot
 from . import shoulder, spatial_5r
 from .builders import absolute_angle_map, planar_chain
 from .external import example_robot_data_urdf
+from .files import description_path
 
 __all__ = [
     "load",
@@ -48,14 +49,6 @@ _NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5", "shoulder")
 def names() -> tuple[str, ...]:
     """Names accepted by :func:`load`."""
     return _NAMES
-
-
-def description_path(filename: str):
-    """Path of a description file shipped in ``robots/`` (a :mod:`importlib.resources` path)."""
-    path = resources.files("qpcoord.robots.descriptions").joinpath(filename)
-    if not path.is_file():
-        raise ValueError(f"no robot description file {filename!r} is installed")
-    return path
 
 
 def load(name: str, **options) -> Robot:

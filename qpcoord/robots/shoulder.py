@@ -491,7 +491,7 @@ def _array(value, shape, what: str) -> np.ndarray:
 
 
 def _load_table() -> dict:
-    from . import description_path  # package data: works from a non-editable install
+    from .files import description_path  # package data: works from a non-editable install
 
     return json.loads(description_path("shoulder_muscles.json").read_text())
 

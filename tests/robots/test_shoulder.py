@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import qpcoord as qc
 from qpcoord.robots import shoulder
 
-DATA_MD = Path(__file__).resolve().parents[2] / "shared" / "data" / "shoulder-muscles.md"
+DATA_MD = Path(__file__).resolve().parents[3] / "shared" / "data" / "shoulder-muscles.md"
 
 
 @pytest.fixture(scope="module")

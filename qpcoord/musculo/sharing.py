@@ -25,10 +25,10 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import linprog
 
-from .core.backends import check_solver, solve_dense_qp
-from .core.errors import InfeasibleError, SolverError
-from .core.stack import Solution, Stack
-from .core.tasks import Bounds, Equality
+from ..core.backends import check_solver, solve_dense_qp
+from ..core.errors import InfeasibleError, SolverError
+from ..core.stack import Solution, Stack
+from ..core.tasks import Bounds, Equality
 
 __all__ = [
     "Distribution",

@@ -1,4 +1,4 @@
-"""Smoke tests of the stack benchmark (qpcoord.bench). No timing assertions, ever:
+"""Smoke tests of the stack benchmark (qpcoord.studies.bench_stack). No timing assertions, ever:
 only the shape of the rows and the validity of the per-step solutions are checked."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 from scipy.optimize import lsq_linear
 
 import qpcoord as qc
-from qpcoord.bench import (
+from qpcoord.studies.bench_stack import (
     METHOD_ORDER,
     SLOW_SOLVERS,
     ChainScenario,

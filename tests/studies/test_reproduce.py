@@ -12,13 +12,14 @@ import pytest
 from qpcoord import reproduce
 from qpcoord.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 GOOD = '''
 """A fake chapter 4 reproduction: one claim, one figure."""
 import argparse, sys
 from pathlib import Path
-from qpcoord.report import claim, write_json
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import write_json
 
 p = argparse.ArgumentParser()
 p.add_argument("--quick", action="store_true")
@@ -44,7 +45,7 @@ NO_CLAIMS = '''
 """A fake core example without claims."""
 import argparse
 from pathlib import Path
-from qpcoord.report import write_json
+from qpcoord.studies.files import write_json
 p = argparse.ArgumentParser()
 p.add_argument("--quick", action="store_true")
 p.add_argument("--out", type=Path)
@@ -179,7 +180,7 @@ def test_report_files_stay_whole_when_rendering_fails(fake_examples, tmp_path, m
     def broken(report):
         raise RuntimeError("renderer broke")
 
-    import qpcoord.reproduce_report as rr
+    import qpcoord.studies.render as rr
 
     monkeypatch.setattr(rr, "render_html", broken)
     with pytest.raises(RuntimeError, match="renderer broke"):
@@ -222,7 +223,7 @@ COMPARE = '''
 """A fake ch6_compare: per-step controller times."""
 import argparse
 from pathlib import Path
-from qpcoord.report import write_json
+from qpcoord.studies.files import write_json
 p = argparse.ArgumentParser()
 p.add_argument("--quick", action="store_true")
 p.add_argument("--out", type=Path)
@@ -237,7 +238,7 @@ write_json(a.out / "summary.json", {"rows": rows})
 
 
 def test_timing_tables(fake_examples, tmp_path, monkeypatch):
-    import qpcoord.bench
+    import qpcoord.studies.bench_stack
 
     (fake_examples / "ch6_compare.py").write_text(textwrap.dedent(COMPARE))
     fake_rows = [
@@ -246,7 +247,7 @@ def test_timing_tables(fake_examples, tmp_path, monkeypatch):
          "limits_active": float("nan"), "failures": 0, "note": "", "failure_messages": []}
         for m, us in (("hierarchical", 300.0), ("weighted", 200.0))
     ]  # fmt: skip
-    monkeypatch.setattr(qpcoord.bench, "run_stack_bench", lambda **kw: fake_rows)
+    monkeypatch.setattr(qpcoord.studies.bench_stack, "run_stack_bench", lambda **kw: fake_rows)
     rep = reproduce.run(["core", "6"], out=tmp_path, examples_dir=fake_examples, progress=False)
     assert rep.ok, rep.bench.get("traceback")
     assert rep.bench["rows"][0]["limits_active"] is None  # NaN → null in JSON

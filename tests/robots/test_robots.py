@@ -16,7 +16,7 @@ import pytest
 import qpcoord as qc
 from qpcoord.robots import planar_chain
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 KNOWN_NAMES = ("planar_3r", "spatial_5r", "planar_nr", "panda", "ur5", "shoulder")
 
 

@@ -1,4 +1,4 @@
-"""Smoke tests of the Panda IK benchmark (qpcoord.bench_ik). No timing assertions: only
+"""Smoke tests of the Panda IK benchmark (qpcoord.studies.bench_ik). No timing assertions: only
 the rows' shape and what the controllers achieve are checked."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qpcoord.bench_ik import format_ik_table, pink_available, run_ik_bench
 from qpcoord.cli import main
+from qpcoord.studies.bench_ik import format_ik_table, pink_available, run_ik_bench
 
 KEYS = {
     "controller",

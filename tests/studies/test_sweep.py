@@ -1,4 +1,4 @@
-"""qpcoord.sweep: order, grid semantics, errors, progress, seeds, backends (incl. Dask)."""
+"""qpcoord.studies.sweep: order, grid semantics, errors, progress, seeds, backends (incl. Dask)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from qpcoord.sweep import BACKENDS, SweepError, grid, seeds, sweep
+from qpcoord.studies.sweep import BACKENDS, SweepError, grid, seeds, sweep
 
 # Module-level functions: picklable by reference for worker processes.
 
@@ -418,12 +418,13 @@ def test_dask_process_cluster_runs_ddl_like_serial():
 
 
 def test_the_module_is_callable_as_the_issue_spells_it():
-    """``qpcoord.sweep(fn, grid, backend=...)`` is ``qpcoord.sweep.sweep``; the module keeps
+    """``qpcoord.studies.sweep(fn, grid, backend=...)`` is ``qpcoord.studies.sweep.sweep``; the
+    module keeps
     its other names and its module type."""
     import types
 
     import qpcoord as qc
-    import qpcoord.sweep as module
+    import qpcoord.studies.sweep as module
 
     assert module is qc.sweep and isinstance(module, types.ModuleType)
     assert qc.sweep(add, {"a": [1, 2], "b": [10]}, backend="serial") == [add(1, 10), add(2, 10)]

@@ -1,0 +1,222 @@
+"""The package layout: one-way layers, no import circle, the old module paths as aliases.
+
+The layers (``pyproject.toml``, ``[tool.importlinter]``) are checked with import-linter's
+``layers`` contract; circles with grimp's import graph (the one import-linter builds), run-time
+imports only: an import under ``if TYPE_CHECKING:`` is for annotations and is never executed.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import grimp
+import pytest
+import tomllib
+from importlinter import api as importlinter_api  # noqa: F401  (the dependency is present)
+
+import qpcoord
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = Path(qpcoord.__file__).resolve().parent
+
+#: Module paths of qpcoord 0.1 -> their home in the layered layout (kept as warning aliases).
+MOVED = {
+    "qpcoord.tasks": "qpcoord.core.tasks",
+    "qpcoord.problem": "qpcoord.core.compile",
+    "qpcoord.stack": "qpcoord.core.stack",
+    "qpcoord.hierarchical": "qpcoord.core.methods.hierarchical",
+    "qpcoord.nullspace": "qpcoord.core.methods.nullspace",
+    "qpcoord.weighted": "qpcoord.core.methods.weighted",
+    "qpcoord.reduced": "qpcoord.core.elimination",
+    "qpcoord.polish": "qpcoord.core.polish",
+    "qpcoord.backends": "qpcoord.core.backends",
+    "qpcoord.persistent": "qpcoord.core.persistent",
+    "qpcoord.linalg": "qpcoord.core.linalg",
+    "qpcoord.tolerance": "qpcoord.core.tolerance",
+    "qpcoord.errors": "qpcoord.core.errors",
+    "qpcoord.robot": "qpcoord.kinematics.robot",
+    "qpcoord.kinematic_tasks": "qpcoord.kinematics.tasks",
+    "qpcoord.ik": "qpcoord.kinematics.ik",
+    "qpcoord.paths": "qpcoord.kinematics.paths",
+    "qpcoord.simulate": "qpcoord.kinematics.simulation",
+    "qpcoord.geometry": "qpcoord.coordination.geometry",
+    "qpcoord.potentials": "qpcoord.coordination.potentials",
+    "qpcoord.extension": "qpcoord.coordination.extensions",
+    "qpcoord.curvature": "qpcoord.coordination.curvature",
+    "qpcoord.schemes": "qpcoord.coordination.schemes",
+    "qpcoord.task_manifold": "qpcoord.coordination.task_manifold",
+    "qpcoord.analysis": "qpcoord.coordination.periodicity",
+    "qpcoord.reproduce": "qpcoord.studies.reproduce",
+    "qpcoord.reproduce_report": "qpcoord.studies.render",
+    "qpcoord.report": "qpcoord.studies.claims",  # and qpcoord.studies.files
+    "qpcoord.figures": "qpcoord.studies.figures",
+    "qpcoord.sweep": "qpcoord.studies.sweep",
+    "qpcoord.bench": "qpcoord.studies.bench_stack",
+    "qpcoord.bench_ik": "qpcoord.studies.bench_ik",
+    "qpcoord.demo": "qpcoord.studies.demo",
+}
+
+#: ``qc.__all__`` of qpcoord 0.1: every name must stay.
+PUBLIC_0_1 = """AlgorithmicSingularity Bounds Equality IK InfeasibleError Inequality JointLimits
+METHODS OneFormTask PositionBand PositionTask PostureTask PotentialTask Robot Solution
+SolverError Stack Trajectory analysis ddl hysteresis musculo reproduce sweep geometry
+VelocityLimits available_solvers default_solver ik_step inverse_kinematics paths potentials
+robots schemes simulate solve_stack solver_versions task_manifold""".split()
+
+
+def _cycles(graph: grimp.ImportGraph) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    found: list[list[str]] = []
+    counter = 0
+    for root in sorted(graph.modules):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph.find_modules_directly_imported_by(root))))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            advanced = False
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append(
+                        (child, iter(sorted(graph.find_modules_directly_imported_by(child))))
+                    )
+                    advanced = True
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            if advanced:
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    m = stack.pop()
+                    on_stack.discard(m)
+                    component.append(m)
+                    if m == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+@pytest.fixture(scope="module")
+def graph() -> grimp.ImportGraph:
+    return grimp.build_graph("qpcoord", exclude_type_checking_imports=True, cache_dir=None)
+
+
+def test_no_import_circle(graph):
+    """No two modules of qpcoord import each other, directly or through others (imports
+    inside functions count: they run too)."""
+    assert _cycles(graph) == []
+
+
+def test_cycle_finder_finds_a_circle():
+    """The check above can fail: a graph with a 3-module circle is reported."""
+    g = grimp.ImportGraph()
+    for a, b in [("p.a", "p.b"), ("p.b", "p.c"), ("p.c", "p.a"), ("p.c", "p.d")]:
+        g.add_import(importer=a, imported=b)
+    assert _cycles(g) == [["p.a", "p.b", "p.c"]]
+
+
+def test_layers_contract_is_kept():
+    """import-linter's ``layers`` contract of pyproject.toml: cli > studies > robots |
+    coordination | ddl | musculo | hysteresis > kinematics > core."""
+    exe = Path(sys.executable).with_name("lint-imports")
+    proc = subprocess.run(
+        [str(exe) if exe.exists() else "lint-imports", "--no-cache"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "1 kept, 0 broken" in proc.stdout
+
+
+def test_every_package_is_installed():
+    """Every folder of qpcoord/ with an ``__init__.py`` is listed in pyproject's packages
+    (a wheel built without -e would miss it otherwise)."""
+    listed = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    found = {
+        ".".join(("qpcoord",) + p.parent.relative_to(PACKAGE).parts)
+        for p in PACKAGE.rglob("__init__.py")
+    }
+    assert found - listed == set()
+
+
+def test_public_names_of_0_1_are_kept():
+    """``import qpcoord as qc`` still exposes every name of 0.1, and each resolves."""
+    import qpcoord as qc
+
+    missing = [n for n in PUBLIC_0_1 if n not in qc.__all__]
+    assert missing == []
+    for name in PUBLIC_0_1:
+        assert getattr(qc, name) is not None
+
+
+_ALIAS_PROBE = """
+import importlib, json, sys, warnings
+import qpcoord as qc
+out = {}
+for old, new in json.loads(sys.argv[1]).items():
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        mod = importlib.import_module(old)
+    dep = [str(x.message) for x in w if issubclass(x.category, DeprecationWarning)]
+    target = importlib.import_module(new)
+    public = [n for n in getattr(target, "__all__", []) if not n.startswith("_")]
+    same = all(getattr(mod, n) is getattr(target, n) for n in public)
+    out[old] = {"warned": dep, "same": same, "n_public": len(public),
+                "simulate_callable": callable(qc.simulate)}
+print(json.dumps(out))
+"""
+
+
+def test_old_module_paths_are_warning_aliases():
+    """Each module path of 0.1 still imports, warns once (DeprecationWarning naming the new
+    path) and gives the same objects as the new module. Run in a fresh interpreter, so the
+    first import of each alias really happens there."""
+    proc = subprocess.run(
+        [sys.executable, "-c", _ALIAS_PROBE, json.dumps(MOVED)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    result = json.loads(proc.stdout)
+    assert set(result) == set(MOVED)
+    for old, r in result.items():
+        assert len(r["warned"]) == 1, (old, r["warned"])
+        assert MOVED[old] in r["warned"][0], (old, r["warned"][0])
+        assert r["same"], old
+        assert r["n_public"] > 0, old
+        assert r["simulate_callable"], old  # qc.simulate(...) survives `import qpcoord.simulate`
+
+
+def test_new_paths_do_not_warn():
+    """Importing qpcoord and every new module raises no DeprecationWarning."""
+    modules = sorted(set(MOVED.values()) | {"qpcoord.studies.files", "qpcoord.musculo"})
+    code = (
+        "import importlib, warnings\n"
+        "warnings.simplefilter('error', DeprecationWarning)\n"
+        f"for m in {modules!r}: importlib.import_module(m)\n"
+    )
+    subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code], check=True)
