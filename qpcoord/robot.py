@@ -152,7 +152,8 @@ class Robot:
         limits when ``coordinate_map`` is the identity, else unlimited.
     velocity_limit : array_like, shape (nv,), optional
         Joint speed limits (rad/s or m/s). Default: the model's when ``coordinate_map`` is
-        the identity, else unlimited.
+        the identity (a zero there -- a URDF joint without a velocity limit -- reads as
+        unlimited), else unlimited.
     name : str
         Label used in messages.
 
@@ -245,9 +246,11 @@ class Robot:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"lower > upper at joint {i} ({self.lower[i]} > {self.upper[i]})")
+        # a URDF joint without a velocity limit reads as 0 in Pinocchio: no limit
+        model_speed = np.where(model.velocityLimit > 0, model.velocityLimit, np.inf)
         self.velocity_limit = self._limit(
             velocity_limit,
-            model.velocityLimit if identity else inf_v,
+            model_speed if identity else inf_v,
             "velocity_limit",
             allow=1,
             size=self.nv,
@@ -503,6 +506,8 @@ class Robot:
     def frame_index(self, frame: str | int, what: str = "frame") -> int:
         """Pinocchio index of ``frame`` (a name, or an index that is returned checked).
 
+        When a joint and a link share the name (URDF allows it), the link's frame is meant.
+
         Raises
         ------
         ValueError
@@ -517,8 +522,13 @@ class Robot:
             )
         if not isinstance(frame, str):
             raise ValueError(f"{what} must be a frame name (str), got {frame!r}")
-        if self.model.existFrame(frame):
-            return int(self.model.getFrameId(frame))
+        matches = [i for i, n in enumerate(self._frame_names) if n == frame]
+        if len(matches) == 1:
+            return matches[0]
+        if matches:  # a joint and a link of one name (URDF allows it): the link wins
+            order = (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT)
+            rank = {t: k for k, t in enumerate(order)}
+            return min(matches, key=lambda i: rank.get(self.model.frames[i].type, len(order)))
         raise ValueError(f"{what}: {self._unknown_frame(frame)}")
 
     def _unknown_frame(self, frame: str) -> str:
