@@ -198,6 +198,14 @@ class Robot:
         self._rows = slice(0, len(rows)) if rows == tuple(range(len(rows))) else self.rows
         self.m = len(rows)
         self._frame_names = [f.name for f in model.frames]
+        # name -> index; when a joint and a link share a name (URDF allows it) the link wins
+        order = (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT)
+        rank = {t: k for k, t in enumerate(order)}
+        self._frame_ids: dict[str, int] = {}
+        for i, f in enumerate(model.frames):
+            j = self._frame_ids.get(f.name)
+            if j is None or rank.get(f.type, 9) < rank.get(model.frames[j].type, 9):
+                self._frame_ids[f.name] = i
         if frame is None:
             self.frame: str | None = None
             self.frame_id: int | None = None
@@ -513,6 +521,10 @@ class Robot:
         ValueError
             Unknown frame: the message names the argument ``what`` and lists close names.
         """
+        if type(frame) is str:  # the common case first
+            index = self._frame_ids.get(frame)
+            if index is not None:
+                return index
         if isinstance(frame, (int, np.integer)) and not isinstance(frame, bool):
             if 0 <= int(frame) < len(self._frame_names):
                 return int(frame)
@@ -522,13 +534,9 @@ class Robot:
             )
         if not isinstance(frame, str):
             raise ValueError(f"{what} must be a frame name (str), got {frame!r}")
-        matches = [i for i, n in enumerate(self._frame_names) if n == frame]
-        if len(matches) == 1:
-            return matches[0]
-        if matches:  # a joint and a link of one name (URDF allows it): the link wins
-            order = (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT)
-            rank = {t: k for k, t in enumerate(order)}
-            return min(matches, key=lambda i: rank.get(self.model.frames[i].type, len(order)))
+        index = self._frame_ids.get(frame)
+        if index is not None:
+            return index
         raise ValueError(f"{what}: {self._unknown_frame(frame)}")
 
     def _unknown_frame(self, frame: str) -> str:
