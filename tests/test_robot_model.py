@@ -496,3 +496,19 @@ def test_zero_urdf_velocity_limits_read_as_unlimited():
 
 def test_repr_shows_nv_when_it_differs(talos):
     assert repr(talos) == "Robot('talos', nq=39, nv=38, frame=None, rows=(0, 1, 2))"
+
+
+def test_the_robots_page_snippets_run():
+    """Every ``python`` block of docs/robots.md runs, in order, in one namespace."""
+    import contextlib
+    import io
+    import re
+    from pathlib import Path
+
+    page = Path(__file__).resolve().parents[1] / "docs" / "robots.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
+    assert len(blocks) >= 4
+    namespace: dict = {}
+    with contextlib.redirect_stdout(io.StringIO()):
+        for block in blocks:
+            exec(compile(block, str(page), "exec"), namespace)  # noqa: S102
