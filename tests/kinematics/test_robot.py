@@ -415,12 +415,31 @@ def test_model_without_joints_is_rejected():
         qc.Robot(model, "tip")
 
 
-def test_free_flyer_joint_is_rejected():
+def free_flyer_model() -> pin.Model:
     model = pin.Model()
     joint = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
-    model.addFrame(pin.Frame("tip", joint, 0, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
-    with pytest.raises(ValueError, match="nq = 7 ≠ nv = 6"):
-        qc.Robot(model, "tip")
+    model.appendBodyToJoint(joint, pin.Inertia.FromSphere(1.0, 0.1), pin.SE3.Identity())
+    tip = placement((0.0, 0.0, 0.0), (0.3, 0.0, 0.0))
+    model.addFrame(pin.Frame("tip", joint, 0, tip, pin.FrameType.OP_FRAME))
+    return model
+
+
+def test_free_flyer_joint_is_accepted_with_nv_columns():
+    """A free-flyer root (nq = 7, nv = 6) is a whole model now; the one-point API gives
+    nv columns."""
+    robot = qc.Robot(free_flyer_model(), "tip")
+    assert (robot.nq, robot.nv) == (7, 6)
+    q = robot.neutral()
+    np.testing.assert_allclose(robot.position(q), [0.3, 0.0, 0.0], atol=1e-15)
+    assert robot.jacobian(q).shape == (3, 6)
+
+
+def test_coordinate_map_and_hessian_need_a_vector_space():
+    with pytest.raises(ValueError, match=r"coordinate_map needs .*nq = 7, nv = 6"):
+        qc.Robot(free_flyer_model(), "tip", coordinate_map=np.eye(7))
+    robot = qc.Robot(free_flyer_model(), "tip")
+    with pytest.raises(ValueError, match=r"hessian\(\) needs a vector-space"):
+        robot.hessian(robot.neutral())
 
 
 @pytest.mark.parametrize("rows", [(), (0, 0), (3,), (0, 1, 2, 0), (-1,)])
