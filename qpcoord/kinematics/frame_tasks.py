@@ -838,8 +838,8 @@ class ComBand(_BandTask):
     def _refresh(self, q, t, dt, reference) -> Inequality:
         c, J = self._evaluate(q)
         k = self.gain
-        with np.errstate(invalid="ignore"):  # inf − c stays inf
-            return self.task._assign(k * (self.lower - c), k * (self.upper - c), C=J)
+        # c is finite: ±inf − c stays ±inf (no NaN)
+        return self.task._assign(k * (self.lower - c), k * (self.upper - c), C=J)
 
 
 def _hull(points: np.ndarray) -> list[int]:
@@ -847,23 +847,22 @@ def _hull(points: np.ndarray) -> list[int]:
 
     Collinear points on an edge are dropped; fewer than 3 indices means a degenerate hull.
     """
-    order = sorted(range(len(points)), key=lambda i: (points[i, 0], points[i, 1]))
+    pts = points.tolist()
+    order = sorted(range(len(pts)), key=lambda i: (pts[i][0], pts[i][1]))
 
-    def cross(o: int, a: int, b: int) -> float:
-        pa, pb, po = points[a], points[b], points[o]
-        return (pa[0] - po[0]) * (pb[1] - po[1]) - (pa[1] - po[1]) * (pb[0] - po[0])
+    def chain(indices) -> list[int]:
+        out: list[int] = []
+        for i in indices:
+            px, py = pts[i]
+            while len(out) >= 2:
+                (ox, oy), (ax, ay) = pts[out[-2]], pts[out[-1]]
+                if (ax - ox) * (py - oy) - (ay - oy) * (px - ox) > 0:
+                    break
+                out.pop()
+            out.append(i)
+        return out
 
-    lower: list[int] = []
-    for i in order:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], i) <= 0:
-            lower.pop()
-        lower.append(i)
-    upper: list[int] = []
-    for i in reversed(order):
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], i) <= 0:
-            upper.pop()
-        upper.append(i)
-    return lower[:-1] + upper[:-1]
+    return chain(order)[:-1] + chain(reversed(order))[:-1]
 
 
 class SupportPolygon(_BandTask):
@@ -961,6 +960,8 @@ class SupportPolygon(_BandTask):
         self._J = np.zeros((self.rows, robot.nv))
         self._lower = np.full(self.rows, -np.inf)
         self._upper = np.full(self.rows, np.inf)
+        #: number of hull edges at the last evaluation (the rows ``[:edges]`` are live)
+        self.edges = 0
 
     def contact_positions(self, q: Any) -> np.ndarray:
         """World positions (m) of every contact point, shape (rows, 3)."""
@@ -980,10 +981,10 @@ class SupportPolygon(_BandTask):
             if jacobians:
                 J = _jacobian(robot, fid, pin.LOCAL_WORLD_ALIGNED)
                 Jv, Jw = J[:3], J[3:]
-                for i, r in enumerate(offsets):
-                    # velocity of the point o + r: v_o + ω × r = J_v v − [r]× J_ω v
-                    Js[f * k + i, 0] = Jv[0] - (r[1] * Jw[2] - r[2] * Jw[1])
-                    Js[f * k + i, 1] = Jv[1] - (r[2] * Jw[0] - r[0] * Jw[2])
+                rx, ry, rz = offsets[:, 0:1], offsets[:, 1:2], offsets[:, 2:3]
+                # velocity of the point o + r: v_o + ω × r = J_v v − [r]× J_ω v
+                Js[f * k : (f + 1) * k, 0] = Jv[0] - (ry * Jw[2] - rz * Jw[1])
+                Js[f * k : (f + 1) * k, 1] = Jv[1] - (rz * Jw[0] - rx * Jw[2])
         return P, Js
 
     def _evaluate(self, q):
@@ -994,28 +995,33 @@ class SupportPolygon(_BandTask):
         Jc = robot._mapped(np.asarray(robot.data.Jcom).reshape(3, robot.nv))[:2]
         pts = P[:, :2]
         hull = _hull(pts)
-        if len(hull) < 3:
+        h = len(hull)
+        if h < 3:
             raise ValueError(
                 f"{self.task.label}: the ground projections of the contact points of "
                 f"{self.contact_frames} are collinear: they span no polygon"
             )
+        ia = np.array(hull)
+        ib = np.roll(ia, -1)
+        A = pts[ia]
+        T = pts[ib] - A
+        L = np.hypot(T[:, 0], T[:, 1])
+        U = T / L[:, None]
+        N = np.column_stack([U[:, 1], -U[:, 0]])  # outward normals of a counter-clockwise hull
+        D = c - A
         e, J = self._e, self._J
         e[:] = 0.0
-        J[:] = 0.0
-        h = len(hull)
-        for i in range(h):
-            ia, ib = hull[i], hull[(i + 1) % h]
-            a = pts[ia]
-            t = pts[ib] - a
-            length = float(np.hypot(t[0], t[1]))
-            u = t / length
-            n = np.array([u[1], -u[0]])  # outward normal of a counter-clockwise hull
-            d = c - a
-            e[i] = n @ d
-            # dn = u uᵀ R dt / L with R t = (t_y, −t_x): uᵀ R w = u_x w_y − u_y w_x
-            s = (u @ d) / length
-            dt_ = Js[ib] - Js[ia]
-            J[i] = n @ (Jc - Js[ia]) + s * (u[0] * dt_[1] - u[1] * dt_[0])
+        J[h:] = 0.0
+        e[:h] = (N * D).sum(axis=1)
+        # e = nᵀ(c − a): de = nᵀ(dc − da) + (c − a)ᵀ dn, dn = u uᵀ R dt / L where R t =
+        # (t_y, −t_x), so (c − a)ᵀ dn = s (u_x dt_y − u_y dt_x) with s = uᵀ(c − a) / L
+        s = ((U * D).sum(axis=1) / L)[:, None]
+        Ja, dT = Js[ia], Js[ib] - Js[ia]
+        J[:h] = (
+            N[:, 0:1] * (Jc[0] - Ja[:, 0])
+            + N[:, 1:2] * (Jc[1] - Ja[:, 1])
+            + s * (U[:, 0:1] * dT[:, 1] - U[:, 1:2] * dT[:, 0])
+        )
         self.edges = h
         return e, J
 
