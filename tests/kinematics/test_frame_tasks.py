@@ -459,8 +459,10 @@ def test_support_polygon_holds_the_com_with_feet_fixed(talos_standing):
         for f in feet:
             assert np.abs(f.compute_error(q)).max() <= 1e-6
         if pull:
-            assert max(violations) <= 1e-4  # first-order steps: a small overshoot at most
-            assert abs(violations[-1]) <= 1e-4  # resting on the shrunk edge
+            # measured: the CoM approaches the shrunk front edge monotonically and rests on
+            # it (max violation -2e-16 m); the issue asks for at most 1e-9 m at any step
+            assert max(violations) <= 1e-9
+            assert abs(violations[-1]) <= 1e-6  # resting on the shrunk edge
         else:
             assert violations[0] > 0.1  # started far outside
             assert violations[-1] <= 1e-6  # pushed back in
