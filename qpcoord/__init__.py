@@ -17,6 +17,18 @@ from .core.errors import AlgorithmicSingularity, InfeasibleError, SolverError
 from .core.stack import METHODS, Solution, Stack, solve_stack
 from .core.tasks import Bounds, Equality, Inequality
 from .kinematics import paths
+from .kinematics.frame_tasks import (
+    ComBand,
+    ComTask,
+    DampingTask,
+    FramePositionTask,
+    FrameTask,
+    JointCouplingTask,
+    LowAccelerationTask,
+    OrientationTask,
+    RelativeFrameTask,
+    SupportPolygon,
+)
 from .kinematics.ik import IK, ik_step, inverse_kinematics
 from .kinematics.robot import Robot
 from .kinematics.simulation import Trajectory, simulate
@@ -31,6 +43,16 @@ from .kinematics.tasks import (
 )
 
 __all__ = [
+    "ComBand",
+    "ComTask",
+    "DampingTask",
+    "FramePositionTask",
+    "FrameTask",
+    "JointCouplingTask",
+    "LowAccelerationTask",
+    "OrientationTask",
+    "RelativeFrameTask",
+    "SupportPolygon",
     "AlgorithmicSingularity",
     "Bounds",
     "Equality",
