@@ -152,6 +152,10 @@ class KinematicTask(ABC):
     attribute): put it at any level of an :class:`~qpcoord.IK`, beside others in a level, or
     as a hard constraint (``IK(..., constraints=[task])``).
 
+    Built-in tasks (:class:`PositionTask`, :class:`PostureTask`, …) also override the per-step
+    hook ``_refresh(q, t, dt, reference)`` (library-internal: time-dependent targets,
+    feed-forward terms, no extra copies); a subclass may too, instead of the two methods.
+
     Parameters
     ----------
     robot : Robot
@@ -169,10 +173,6 @@ class KinematicTask(ABC):
         ``kind="band"``.
     name : str, optional
         Used in messages and reports (default: the class name).
-
-    Built-in tasks (:class:`PositionTask`, :class:`PostureTask`, …) also override the per-step
-    hook ``_refresh(q, t, dt, reference)`` (library-internal: time-dependent targets,
-    feed-forward terms, no extra copies); a subclass may too, instead of the two methods.
 
     Raises
     ------
