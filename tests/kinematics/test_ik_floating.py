@@ -460,3 +460,45 @@ def test_simulate_a_floating_base(solo, integrator):
     assert traj.q.shape == (21, 19) and traj.qdot.shape == (21, 18)
     np.testing.assert_allclose(np.linalg.norm(traj.q[:, 3:7], axis=1), 1.0, atol=1e-12)
     assert traj.max_error < 5e-3
+
+
+# ---------------------------------------------------------------------------------------
+# the built-in tasks' public error / Jacobian: finite differences, and J v = −K e
+# ---------------------------------------------------------------------------------------
+
+FRAMES = {"panda": "panda_hand_tcp", "solo12": "FR_FOOT", "talos": "gripper_left_base_link"}
+
+
+@pytest.mark.parametrize("name", sorted(FRAMES))
+def test_builtin_jacobians_match_finite_differences(name):
+    robot = qc.robots.load(name).with_frame(FRAMES[name])
+    q = robot.random_configuration(11)
+    q_ref = robot.random_configuration(12)
+    tasks = [
+        PositionTask(robot, target=robot.position(q_ref)),
+        PositionBand(robot, lower=-1.0, upper=1.0),
+        PostureTask(robot, q_ref),
+        Height(robot, FRAMES[name], z=0.1),
+    ]
+    for task in tasks:
+        J = task.compute_jacobian(q)
+        assert J.shape == (task.task.shape[0], robot.nv)
+        fd = _fd_jacobian(robot, task.compute_error, q)
+        np.testing.assert_allclose(J, fd, atol=2e-6, err_msg=task.name)
+
+
+def test_builtin_tasks_are_minus_k_e(panda):
+    target = panda.position(PANDA_Q) + [0.1, 0.0, -0.1]
+    pos = PositionTask(panda, target=target, gain=7.0)
+    eq = pos.update(PANDA_Q)
+    np.testing.assert_allclose(eq.b, -7.0 * pos.compute_error(PANDA_Q), atol=1e-14)
+    np.testing.assert_allclose(eq.A, pos.compute_jacobian(PANDA_Q), atol=1e-15)
+    band = PositionBand(panda, lower=[-np.inf, -np.inf, 0.3], gain=5.0)
+    ineq = band.update(PANDA_Q)
+    np.testing.assert_allclose(ineq.lower[2], 5.0 * (0.3 - band.compute_error(PANDA_Q)[2]))
+    # a path target: the error at time t
+    circle = qc.paths.HorizontalCircle(target, radius=0.05, period=2.0)
+    pos.set_target(circle)
+    np.testing.assert_allclose(
+        pos.compute_error(PANDA_Q, t=0.5), panda.position(PANDA_Q) - circle.position(0.5)
+    )
