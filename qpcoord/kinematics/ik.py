@@ -1,7 +1,10 @@
 """Per-step differential inverse kinematics on a prioritised stack.
 
-:class:`IK` builds one :class:`~qpcoord.Stack` over the joint velocity ``q̇`` (rad/s) from
-kinematic tasks (:mod:`qpcoord.kinematics.tasks`) and re-solves it every control step:
+:class:`IK` builds one :class:`~qpcoord.Stack` over the robot's velocity ``v`` (size
+``robot.nv``; ``q̇`` in rad/s for the thesis arms, where ``nq == nv``) from kinematic tasks
+(:mod:`qpcoord.kinematics.tasks`) and re-solves it every control step; the next configuration
+is ``robot.integrate(q, v, dt)`` (on the configuration manifold: a floating base's quaternion
+stays unit):
 
 >>> import numpy as np, qpcoord as qc
 >>> arm = qc.robots.load("planar_3r")
@@ -9,9 +12,13 @@ kinematic tasks (:mod:`qpcoord.kinematics.tasks`) and re-solves it every control
 >>> ik = qc.IK(arm, [ee, qc.PostureTask(arm, [0.0, 0.5, 1.0])], dt=0.01)
 >>> qdot, sol = ik.step(np.array([0.1, 0.6, 1.2]))
 
-Limits (:class:`~qpcoord.JointLimits`, :class:`~qpcoord.VelocityLimits`) are boxes on
-``q̇``; they are merged into one hard :class:`~qpcoord.Bounds` (by default the robot's own
-finite limits are used).
+Limits (:class:`~qpcoord.JointLimits`, :class:`~qpcoord.VelocityLimits`,
+:class:`~qpcoord.kinematics.tasks.AccelerationLimits`, or your own
+:class:`~qpcoord.kinematics.tasks.Limit`) are boxes on ``v``; they are merged into one hard
+:class:`~qpcoord.Bounds` (by default the robot's own finite position and speed limits).
+
+Tasks may be built on ``robot`` or on another :class:`~qpcoord.Robot` of the same Pinocchio
+model (``robot.with_frame("elbow")``: several frames of one robot in one IK).
 
 :func:`ik_step` is the one-call form; :func:`inverse_kinematics` solves the position IK
 ``ζ(q) = y`` from a start configuration (Gauss–Newton with minimum-norm steps).
@@ -35,12 +42,29 @@ DEFAULT_IK_DAMPING = 1e-4
 
 
 def _default_limits(robot: Robot) -> list[Limit]:
+    """The robot's finite joint position limits and speed limits (floating-base and
+    ±1.8e308 entries are unlimited)."""
     limits: list[Limit] = []
-    if np.any(np.isfinite(robot.lower)) or np.any(np.isfinite(robot.upper)):
-        limits.append(JointLimits(robot))
-    if np.any(np.isfinite(robot.velocity_limit)):
-        limits.append(VelocityLimits(robot))
+    joint_limits = JointLimits(robot)
+    if joint_limits.joints.size:
+        limits.append(joint_limits)
+    speed = VelocityLimits(robot)
+    if np.any(np.isfinite(speed.limit)):
+        limits.append(speed)
     return limits
+
+
+def _same_robot(task_robot, robot: Robot) -> bool:
+    return task_robot is robot or getattr(task_robot, "model", None) is robot.model
+
+
+def _other_robot(what: str, robot: Robot, task_robot) -> str:
+    other = getattr(task_robot, "name", type(task_robot).__name__)
+    return (
+        f"{what} belongs to another robot ({other!r}: another Pinocchio model than "
+        f"{robot.name!r}'s); build it on this robot or on robot.with_frame(...), which "
+        "shares the model"
+    )
 
 
 class IK:
@@ -51,13 +75,18 @@ class IK:
     robot : Robot
     levels : sequence
         Priority levels, highest first. Each item is a task or a list of tasks; a task is a
-        :class:`~qpcoord.kinematics.tasks.KinematicTask` (refreshed every step) or a
-        constant :class:`~qpcoord.Equality` / :class:`~qpcoord.Inequality` on ``q̇``.
+        :class:`~qpcoord.kinematics.tasks.KinematicTask` (refreshed every step; built on
+        ``robot`` or on a robot sharing its Pinocchio model) or a constant
+        :class:`~qpcoord.Equality` / :class:`~qpcoord.Inequality` with ``nv`` columns.
     dt : float
-        Control period (s): used by :class:`~qpcoord.JointLimits`.
+        Control period (s): used by :class:`~qpcoord.JointLimits` (look-ahead) and
+        :class:`~qpcoord.kinematics.tasks.AccelerationLimits`.
     limits : "robot", sequence of Limit, or None
-        Hard boxes on ``q̇``. ``"robot"`` (default): the robot's finite position limits
-        (:class:`~qpcoord.JointLimits`) and speed limits (:class:`~qpcoord.VelocityLimits`).
+        Hard boxes on ``v``. ``"robot"`` (default): the robot's finite position limits
+        (:class:`~qpcoord.JointLimits`, revolute and prismatic joints) and speed limits
+        (:class:`~qpcoord.VelocityLimits`). Add an acceleration limit with
+        ``limits=[qc.JointLimits(robot), qc.VelocityLimits(robot),
+        AccelerationLimits(robot, a_max)]``.
     constraints : sequence, optional
         Hard tasks (kinematic or constant), e.g. a 1-form that must hold exactly.
     method : {"hierarchical", "nullspace", "weighted"}
@@ -71,6 +100,12 @@ class IK:
     fallback : bool
         Passed to :class:`~qpcoord.Stack`: solve a level QP the backend failed on with
         another backend (reported in ``Solution.info["fallbacks"]``).
+
+    Attributes
+    ----------
+    v_prev : numpy.ndarray, shape (nv,)
+        Velocity returned by the last :meth:`step` (zero before the first, and after
+        :meth:`reset`): the ``v_prev`` of acceleration limits.
     """
 
     def __init__(
@@ -104,9 +139,12 @@ class IK:
         limits = list(limits or [])
         for lim in limits:
             if not isinstance(lim, Limit):
-                raise ValueError(f"limits must be JointLimits/VelocityLimits objects, got {lim!r}")
-            if lim.robot is not robot:
-                raise ValueError(f"limit {lim.task.name!r} belongs to another robot")
+                raise ValueError(
+                    "limits must be JointLimits/VelocityLimits objects (or other Limit "
+                    f"subclasses), got {lim!r}"
+                )
+            if not _same_robot(lim.robot, robot):
+                raise ValueError(_other_robot(f"limit {lim.task.name!r}", robot, lim.robot))
         if method == "nullspace" and limits:
             raise ValueError(
                 "method='nullspace' takes no inequalities: pass limits=None (the robot's "
@@ -116,7 +154,14 @@ class IK:
         self._dynamic: list[KinematicTask] = []
         stack_levels = [self._collect(level, f"levels[{i}]") for i, level in enumerate(levels)]
         stack_constraints = self._collect(list(constraints or []), "constraints")
-        self.bounds = Bounds(np.full(robot.nq, -np.inf), np.full(robot.nq, np.inf), "limits")
+        # limits that keep state across steps (acceleration limits): told the step's v
+        self._recorders = [
+            lim
+            for lim in [*limits, *self._dynamic]
+            if isinstance(lim, Limit) and type(lim).record is not Limit.record
+        ]
+        self.v_prev = np.zeros(robot.nv)
+        self.bounds = Bounds(np.full(robot.nv, -np.inf), np.full(robot.nv, np.inf), "limits")
         self.stack = Stack(
             stack_levels,
             bounds=self.bounds if limits else None,
@@ -131,17 +176,25 @@ class IK:
     def _collect(self, level, where: str) -> list:
         items = level if isinstance(level, (list, tuple)) else [level]
         out = []
+        nv = self.robot.nv
         for task in items:
             if isinstance(task, KinematicTask):
-                if task.robot is not self.robot:
-                    raise ValueError(f"{where}: task {task.name!r} belongs to another robot")
+                if not _same_robot(task.robot, self.robot):
+                    raise ValueError(
+                        _other_robot(f"{where}: task {task.name!r}", self.robot, task.robot)
+                    )
+                if task.task.shape[1] != nv:
+                    raise ValueError(
+                        f"{where}: task {task.name!r} has {task.task.shape[1]} columns, the "
+                        f"robot {nv} velocity variables (nv)"
+                    )
                 self._dynamic.append(task)
                 out.append(task.task)
             elif isinstance(task, (Equality, Inequality)):
-                if task.shape[1] != self.robot.nq:
+                if task.shape[1] != nv:
                     raise ValueError(
                         f"{where}: {task.label} has {task.shape[1]} columns, the robot "
-                        f"{self.robot.nq} joints"
+                        f"{nv} velocity variables (nv)"
                     )
                 out.append(task)
             else:
@@ -152,7 +205,12 @@ class IK:
 
     def refresh(self, q: np.ndarray, t: float = 0.0, reference=None) -> None:
         """Update every task and the bounds for a validated configuration ``q`` (rad)
-        (float array of shape (nq,)) at time ``t`` (s)."""
+        (float array of shape (nq,)) at time ``t`` (s).
+
+        The limits' boxes are intersected. Where they do not meet (a joint outside its
+        position limit pushed back faster than its speed limit allows, or a position limit
+        that needs a harder brake than an acceleration limit allows), the end nearer to 0
+        is kept: the speed limit, and the position limit, win."""
         for task in self._dynamic:
             task._refresh(q, t, self.dt, reference)
         if self.limits:
@@ -183,7 +241,8 @@ class IK:
         Parameters
         ----------
         q : array_like, shape (nq,)
-            Current configuration (rad).
+            Current configuration (rad, m; unit quaternions), checked by
+            :meth:`~qpcoord.Robot.check_configuration` (``ValueError`` naming ``q``).
         t : float
             Time (s), for tasks that follow a path.
         reference : Path, optional
@@ -193,8 +252,8 @@ class IK:
 
         Returns
         -------
-        qdot : numpy.ndarray, shape (nq,)
-            Joint velocity (rad/s).
+        v : numpy.ndarray, shape (nv,)
+            Velocity (rad/s, m/s): ``q_next = robot.integrate(q, v, dt)``.
         solution : Solution
             The stack's solution (``info["level_ranks"]`` shows a rank loss near a
             singularity).
@@ -207,10 +266,23 @@ class IK:
             warm_start=self.last if warm_start is None else warm_start,
         )
         self.last = sol
-        return sol.x, sol
+        v = sol.x
+        self.v_prev[...] = v
+        for lim in self._recorders:
+            lim.record(v)
+        return v, sol
+
+    def reset(self, v_prev=None) -> None:
+        """Forget the previous step: ``v_prev`` (and that of the acceleration limits) back to
+        zero, or to the given velocity (nv,); no warm start for the next solve."""
+        v = np.zeros(self.robot.nv) if v_prev is None else self.robot._check_velocity(v_prev)
+        self.v_prev[...] = v
+        for lim in self._recorders:
+            lim.record(v)
+        self.last = None
 
     def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
-        """Joint velocity (rad/s) at ``(q, t)``: the scheme interface used by :func:`simulate`."""
+        """Velocity ``v`` (nv,) at ``(q, t)``: the scheme interface used by :func:`simulate`."""
         return self.step(q, t, reference)[0]
 
 
@@ -220,7 +292,7 @@ def ik_step(
     """Build an :class:`IK` and solve one step (convenience; a control loop keeps the IK).
 
     ``options`` go to :class:`IK` (``limits``, ``constraints``, ``method``, ``damping``…).
-    Returns ``(qdot, solution)`` with ``qdot`` in rad/s.
+    Returns ``(v, solution)`` with ``v`` (nv,) in rad/s.
     """
     return IK(robot, levels, dt, solver=solver, **options).step(q, t)
 
@@ -242,7 +314,9 @@ def inverse_kinematics(
     ``q`` is a local minimum of ``‖q − q0‖`` among configurations that reach ``target``
     (otherwise the on-target configuration closest to ``q0`` met is returned). A singular
     configuration met in the first phase is left by a fixed 0.01 rad step. Joint limits are
-    not enforced.
+    not enforced. On a floating base (``nq ≠ nv``) the steps are velocities of size ``nv``
+    applied with :meth:`~qpcoord.Robot.integrate`, and distances are
+    :meth:`~qpcoord.Robot.difference` norms.
 
     Parameters
     ----------
@@ -271,7 +345,22 @@ def inverse_kinematics(
 
     # a fixed small kick out of a singular configuration (e.g. a stretched arm, where
     # minimum-norm steps keep it stretched forever)
-    kick = 1e-2 * np.where(np.arange(robot.nq) % 2 == 0, 1.0, -1.0) / np.sqrt(robot.nq)
+    kick = 1e-2 * np.where(np.arange(robot.nv) % 2 == 0, 1.0, -1.0) / np.sqrt(robot.nv)
+    if robot.euclidean:
+
+        def toward(q: np.ndarray, q1: np.ndarray) -> np.ndarray:
+            return q1 - q
+
+        def advance(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+            return q + dq
+
+    else:
+
+        def toward(q: np.ndarray, q1: np.ndarray) -> np.ndarray:
+            return robot.difference(q, q1)
+
+        def advance(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+            return robot.integrate(q, dq, 1.0)
 
     def step(q: np.ndarray, toward_q0: bool):
         y, J = robot._kinematics(q)
@@ -280,10 +369,10 @@ def inverse_kinematics(
         if not toward_q0 and (rank < robot.m or s_[rank - 1] < 1e-6 * s_[0]):
             return float(np.linalg.norm(e)), 0.0, kick
         dq = Vt[:rank].T @ (g * (U[:, :rank].T @ e))
-        drift = np.zeros_like(q)
+        drift = np.zeros(robot.nv)
         if toward_q0:
             N = Vt[rank:]  # rows: orthonormal basis of the self-motion directions
-            drift = N.T @ (N @ (q_ref - q))
+            drift = N.T @ (N @ toward(q, q_ref))
             dq = dq + drift
         norm = float(np.linalg.norm(dq))
         if norm > max_step:
@@ -297,20 +386,20 @@ def inverse_kinematics(
         err, _, dq = step(q, False)
         if err <= goal:
             break
-        q = q + dq
+        q = advance(q, dq)
     if err <= goal:
         # phase 2: slide along the self-motion toward q0, staying on the target; keep the
         # on-target configuration closest to q0 seen
-        best, best_d = q.copy(), float(np.linalg.norm(q - q_ref))
+        best, best_d = q.copy(), float(np.linalg.norm(toward(q_ref, q)))
         for _ in range(max_iter):
             err, drift, dq = step(q, True)
             if err <= goal:
-                d = float(np.linalg.norm(q - q_ref))
+                d = float(np.linalg.norm(toward(q_ref, q)))
                 if d < best_d:
                     best, best_d = q.copy(), d
                 if drift <= 1e3 * tol:
                     break
-            q = q + dq
+            q = advance(q, dq)
         return best
     raise ValueError(
         f"inverse_kinematics: target {y_target.tolist()} not reached from q0 "

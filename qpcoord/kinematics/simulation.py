@@ -1,6 +1,7 @@
 """Run a coordination scheme along a reference path: :func:`simulate` → :class:`Trajectory`.
 
-A *scheme* is anything with ``velocity(q, t, reference) -> q̇`` (rad/s): an
+A *scheme* is anything with ``velocity(q, t, reference) -> v`` (size ``robot.nv``; ``q̇`` in
+rad/s for the thesis arms): an
 :class:`~qpcoord.IK` stack, or the thesis schemes of later chapters. A list of levels is
 turned into an :class:`~qpcoord.IK` for you.
 
@@ -11,6 +12,13 @@ classical Runge–Kutta method (four scheme evaluations per step): the end-effec
 the thesis tasks stays within 1e-6 of the path length (see ``tests/test_simulate.py``).
 ``integrator="euler"`` applies one scheme evaluation per step, ``q ← q + dt q̇``, as a
 real control loop at period ``dt`` does.
+
+Every update goes through :meth:`~qpcoord.Robot.integrate`: on a vector-space configuration
+(``nq == nv``) it is the plain sum above, bit for bit; on a floating base the quaternion stays
+unit. RK4 then takes its stages at ``integrate(q, k_i, c_i dt)`` and its step with the
+weighted mean of the four velocities, all in the tangent space at ``q`` (exact for a vector
+space, an approximation of order < 4 on a curved configuration space: use ``"euler"`` for a
+control loop).
 """
 
 from __future__ import annotations
@@ -39,8 +47,8 @@ class Trajectory:
         Sample times (s).
     q : ndarray, shape (N, nq)
         Configurations (rad).
-    qdot : ndarray, shape (N, nq)
-        Scheme output at each sample (rad/s).
+    qdot : ndarray, shape (N, nv)
+        Scheme output ``v`` at each sample (rad/s).
     y : ndarray, shape (N, rows)
         End-effector positions (m).
     y_ref : ndarray, shape (N, rows)
@@ -135,12 +143,14 @@ def simulate(
     N = steps + 1
     t = np.arange(N) * dt
     Q = np.empty((N, robot.nq))
-    QD = np.empty((N, robot.nq))
+    QD = np.empty((N, robot.nv))
     Y = np.empty((N, robot.m))
+
+    euclidean = robot.euclidean
 
     def f(qq: np.ndarray, tt: float) -> np.ndarray:
         v = np.asarray(scheme.velocity(qq, tt, target), dtype=float)
-        if v.shape != (robot.nq,) or not np.all(np.isfinite(v)):
+        if v.shape != (robot.nv,) or not np.all(np.isfinite(v)):
             raise ValueError(f"scheme returned an invalid velocity at t = {tt:.6g} s: {v!r}")
         return v
 
@@ -152,13 +162,21 @@ def simulate(
         QD[k] = k1
         if k == steps:
             break
-        if integrator == "euler":
-            q = q + dt * k1
+        if euclidean:  # q + v dt: robot.integrate's arithmetic, without its checks
+            if integrator == "euler":
+                q = q + dt * k1
+            else:
+                k2 = f(q + 0.5 * dt * k1, tk + 0.5 * dt)
+                k3 = f(q + 0.5 * dt * k2, tk + 0.5 * dt)
+                k4 = f(q + dt * k3, tk + dt)
+                q = q + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        elif integrator == "euler":
+            q = robot.integrate(q, k1, dt)
         else:
-            k2 = f(q + 0.5 * dt * k1, tk + 0.5 * dt)
-            k3 = f(q + 0.5 * dt * k2, tk + 0.5 * dt)
-            k4 = f(q + dt * k3, tk + dt)
-            q = q + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            k2 = f(robot.integrate(q, k1, 0.5 * dt), tk + 0.5 * dt)
+            k3 = f(robot.integrate(q, k2, 0.5 * dt), tk + 0.5 * dt)
+            k4 = f(robot.integrate(q, k3, dt), tk + dt)
+            q = robot.integrate(q, (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0, dt)
     return Trajectory(
         t=t,
         q=Q,

@@ -1,21 +1,28 @@
 """Tasks built from a :class:`~qpcoord.Robot` at the current configuration.
 
-The decision variable of every task here is the **joint velocity** ``q̇`` (rad/s for
-revolute joints). Each task owns one :class:`~qpcoord.Equality` or
-:class:`~qpcoord.Inequality` (its ``task`` attribute) and refreshes its numbers in place
-with ``update(q, t, dt, reference)``, so a stack built once is re-solved every control step.
+The decision variable of every task here is the robot's **velocity** ``v`` (size
+``robot.nv``; rad/s for revolute joints, m/s for prismatic ones, and for a free-flyer root its
+linear and angular velocity in the base frame), so that ``q_next = robot.integrate(q, v, dt)``.
+For the thesis arms (``nq == nv``) ``v`` is simply ``q̇``. Each task owns one
+:class:`~qpcoord.Equality` or :class:`~qpcoord.Inequality` (its ``task`` attribute, with
+``robot.nv`` columns) and refreshes its numbers in place with ``update(q, t, dt, reference)``,
+so a stack built once is re-solved every control step.
 
-=====================  =============================================================
-:class:`PositionTask`  ``J q̇ = ẏ_ref + K (y_ref − y)`` (closed-loop IK, CLIK)
-:class:`PositionBand`  ``K (y_lo − y) ≤ J q̇ ≤ K (y_hi − y)`` (stay in a box, any level)
-:class:`PostureTask`   ``q̇ = K (q_ref − q)``
-:class:`PotentialTask` ``q̇ = −K ∇p(q)`` (gradient descent on a potential, chapter 5)
-:class:`OneFormTask`   ``ω(q) q̇ = rate`` (a 1-form, chapter 4; default rate 0)
-:class:`JointLimits`   ``K (q_min − q)/dt ≤ q̇ ≤ K (q_max − q)/dt``
-:class:`VelocityLimits` ``−v_max ≤ q̇ ≤ v_max``
-=====================  =============================================================
+=========================  =========================================================
+:class:`KinematicTask`     base class of your own tasks: ``compute_error(q)``,
+                           ``compute_jacobian(q)``; ``J v = −K e`` or a band
+:class:`PositionTask`      ``J v = ẏ_ref + K (y_ref − y)`` (closed-loop IK, CLIK)
+:class:`PositionBand`      ``K (y_lo − y) ≤ J v ≤ K (y_hi − y)`` (stay in a box, any level)
+:class:`PostureTask`       ``v_a = K (q_ref ⊖ q)_a`` (actuated joints ``a``)
+:class:`PotentialTask`     ``v = −K ∇p(q)`` (gradient descent on a potential, chapter 5)
+:class:`OneFormTask`       ``ω(q) v = rate`` (a 1-form, chapter 4; default rate 0)
+:class:`Limit`             base class of boxes ``lower(q) ≤ v ≤ upper(q)``: ``box(q, dt)``
+:class:`JointLimits`       ``K (q_min − q)/dt ≤ v ≤ K (q_max − q)/dt`` (1-DoF joints)
+:class:`VelocityLimits`    ``−v_max ≤ v ≤ v_max``
+:class:`AccelerationLimits` ``v_prev − a_max dt ≤ v ≤ v_prev + a_max dt``
+=========================  =========================================================
 
-The two limits are boxes on ``q̇``: :class:`~qpcoord.IK` merges them into the stack's
+The limits are boxes on ``v``: :class:`~qpcoord.IK` merges them into the stack's
 :class:`~qpcoord.Bounds` (always hard); their ``task`` (an Inequality) can also be placed at
 a soft level.
 """
@@ -24,8 +31,10 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from ..core.tasks import Equality, Inequality
 from .paths import Path
@@ -38,10 +47,23 @@ __all__ = [
     "PostureTask",
     "PotentialTask",
     "OneFormTask",
+    "Limit",
     "JointLimits",
     "VelocityLimits",
-    "Limit",
+    "AccelerationLimits",
+    "TASK_KINDS",
 ]
+
+#: The two forms of a :class:`KinematicTask`: ``"equality"`` (``J v = −K e``) and ``"band"``
+#: (``K (lower − e) ≤ J v ≤ K (upper − e)``).
+TASK_KINDS = ("equality", "band")
+
+#: Limits at least this large in magnitude mean "unlimited" (Pinocchio stores ±DBL_MAX for
+#: the free-flyer and for joints without limits).
+_HUGE = 1e300
+
+#: Root joints that make a floating base (their velocity rows are not "actuated").
+_FLOATING_ROOTS = ("JointModelFreeFlyer", "JointModelPlanar")
 
 
 def _gain(value, what: str = "gain") -> float:
@@ -60,18 +82,192 @@ def _check_dt(dt) -> float:
     return float(dt)
 
 
-class KinematicTask(ABC):
-    """Base class: a task whose numbers depend on the configuration ``q`` and time ``t``.
+def _check_robot(robot: Any, who: str) -> Robot:
+    if not isinstance(robot, Robot):
+        raise ValueError(f"{who}: robot must be a qpcoord.Robot, got {type(robot).__name__}")
+    return robot
 
-    Subclasses set ``self.task`` (an :class:`Equality` or :class:`Inequality` on ``q̇``)
-    in ``__init__`` and refresh it in :meth:`update`.
+
+def _faces(lower: Any, upper: Any, rows: int, who: str) -> tuple[np.ndarray, np.ndarray]:
+    """Band faces ``(lower, upper)`` of ``rows`` entries each (scalars broadcast, ±inf
+    allowed on its own side), checked ``lower ≤ upper``."""
+    faces = []
+    for what, value, wrong in (("lower", lower, np.inf), ("upper", upper, -np.inf)):
+        try:
+            arr = np.broadcast_to(np.asarray(value, dtype=float), (rows,)).copy()
+        except (ValueError, TypeError):
+            arr = None
+        if arr is None or np.isnan(arr).any() or (arr == wrong).any():
+            raise ValueError(
+                f"{who} {what} must have {rows} numbers (task units, ±inf allowed), got {value!r}"
+            )
+        faces.append(arr)
+    lo, hi = faces
+    bad = np.flatnonzero(lo > hi)
+    if bad.size:
+        raise ValueError(f"{who}: lower > upper on row(s) {bad.tolist()}: {lo[bad]} > {hi[bad]}")
+    return lo, hi
+
+
+def _unlimited(values: np.ndarray) -> np.ndarray:
+    """``values`` with ±DBL_MAX-like entries (|x| ≥ 1e300) read as ±inf (a copy)."""
+    out = np.array(values, dtype=float)
+    out[out >= _HUGE] = np.inf
+    out[out <= -_HUGE] = -np.inf
+    return out
+
+
+def floating_base_velocity_indices(robot: Robot) -> np.ndarray:
+    """Velocity indices of a floating root (free-flyer: 6, planar: 3), empty on a fixed base."""
+    model = robot.model
+    if model.njoints > 1 and model.parents[1] == 0:
+        joint = model.joints[1]
+        if joint.shortname() in _FLOATING_ROOTS:
+            return np.arange(joint.idx_v, joint.idx_v + joint.nv)
+    return np.zeros(0, dtype=int)
+
+
+def actuated_velocity_indices(robot: Robot) -> np.ndarray:
+    """Velocity indices of every joint but a floating root (all ``nv`` on a fixed base)."""
+    return np.setdiff1d(np.arange(robot.nv), floating_base_velocity_indices(robot))
+
+
+class KinematicTask(ABC):
+    """A task on the robot's velocity ``v`` (size ``robot.nv``), refreshed every control step.
+
+    **Writing your own task.** Subclass it, call ``super().__init__(robot, rows, ...)`` and
+    implement two methods of the configuration ``q`` (shape ``(nq,)``, already validated):
+
+    - ``compute_error(q) -> e``, shape ``(rows,)``, in task units (m, rad, …);
+    - ``compute_jacobian(q) -> J``, shape ``(rows, nv)``, with ``ė = J v`` (task units per
+      unit of ``v``).
+
+    Every step the task then holds
+
+    - ``kind="equality"`` (default): ``J v = −K e`` (the error decays at rate ``K``);
+    - ``kind="band"``: ``K (lower − e) ≤ J v ≤ K (upper − e)`` (the error is kept in
+      ``[lower, upper]``; outside it is pushed back at rate ``K``).
+
+    The task is an :class:`~qpcoord.Equality` / :class:`~qpcoord.Inequality` (its ``task``
+    attribute): put it at any level of an :class:`~qpcoord.IK`, beside others in a level, or
+    as a hard constraint (``IK(..., constraints=[task])``).
+
+    Built-in tasks (:class:`PositionTask`, :class:`PostureTask`, …) also override the per-step
+    hook ``_refresh(q, t, dt, reference)`` (library-internal: time-dependent targets,
+    feed-forward terms, no extra copies); a subclass may too, instead of the two methods.
+
+    Parameters
+    ----------
+    robot : Robot
+        Its ``model`` must be the IK's (``robot.with_frame(...)`` gives another default frame
+        on the same model: accepted).
+    rows : int
+        Number of task rows (the size of ``e``).
+    kind : {"equality", "band"}
+    gain : float
+        ``K`` (1/s), default 1; > 0 for a band.
+    weight : float or array_like, shape (rows,)
+        Row weights inside the level (default 1).
+    lower, upper : float or array_like, shape (rows,)
+        Band faces (task units; ``-inf`` / ``inf`` for a free side); only for
+        ``kind="band"``.
+    name : str, optional
+        Used in messages and reports (default: the class name).
+
+    Raises
+    ------
+    TypeError
+        A subclass that implements neither both methods nor ``_refresh`` is instantiated.
+    ValueError
+        Bad rows, kind, gain, weight or faces.
+
+    Examples
+    --------
+    Keep a frame's height (see ``docs/custom-task.md``)::
+
+        class Height(qc.KinematicTask):
+            def __init__(self, robot, frame, z, gain=10.0):
+                super().__init__(robot, 1, gain=gain, name="height")
+                self.frame, self.z = frame, z
+
+            def compute_error(self, q):
+                return self.robot.frame_pose(q, self.frame)[2:3, 3] - self.z
+
+            def compute_jacobian(self, q):
+                return self.robot.frame_jacobian(q, self.frame)[2:3]
     """
 
     task: Equality | Inequality
     robot: Robot
+    gain: float = 1.0
+    kind: str = "equality"
+
+    def __new__(cls, *args: Any, **kwargs: Any):
+        base = KinematicTask
+        if cls._refresh is base._refresh and (
+            cls.compute_error is base.compute_error or cls.compute_jacobian is base.compute_jacobian
+        ):
+            raise TypeError(
+                f"Can't instantiate {cls.__name__}: a KinematicTask subclass implements "
+                "compute_error(q) -> e (rows,) and compute_jacobian(q) -> J (rows, nv)"
+            )
+        return super().__new__(cls)
+
+    def __init__(
+        self,
+        robot: Robot,
+        rows: int,
+        *,
+        kind: str = "equality",
+        gain: float = 1.0,
+        weight=1.0,
+        lower=-np.inf,
+        upper=np.inf,
+        name: str | None = None,
+    ) -> None:
+        who = name or type(self).__name__
+        self.robot = _check_robot(robot, who)
+        if isinstance(rows, bool) or not isinstance(rows, (int, np.integer)) or rows < 1:
+            raise ValueError(f"{who}: rows must be a positive integer, got {rows!r}")
+        if kind not in TASK_KINDS:
+            raise ValueError(f"{who}: kind must be 'equality' or 'band', got {kind!r}")
+        self.kind = kind
+        self.gain = _gain(gain)
+        rows = int(rows)
+        zeros = np.zeros((rows, robot.nv))
+        if kind == "equality":
+            if np.any(np.asarray(lower) != -np.inf) or np.any(np.asarray(upper) != np.inf):
+                raise ValueError(f"{who}: lower/upper are for kind='band'")
+            self.task = Equality(zeros, np.zeros(rows), weight, who)
+        else:
+            if self.gain <= 0:
+                raise ValueError(f"{who}: a band needs gain > 0 (1/s), got {gain!r}")
+            self.lower, self.upper = _faces(lower, upper, rows, who)
+            self.task = Inequality(zeros, -np.inf, np.inf, weight, who)
+
+    # -- the two methods of a user task ------------------------------------------------
+    def compute_error(self, q: np.ndarray) -> np.ndarray:
+        """Task error ``e(q)``, shape ``(rows,)`` (task units) at configuration ``q`` (nq,)."""
+        raise NotImplementedError
+
+    def compute_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Task Jacobian ``J(q)``, shape ``(rows, nv)``, with ``ė = J v``."""
+        raise NotImplementedError
+
+    # -- public per-step API -----------------------------------------------------------
+    def set_band(self, lower=None, upper=None) -> None:
+        """Replace the band faces (task units; ``None`` keeps a side). Only for bands."""
+        if self.kind != "band":
+            raise ValueError(f"{self.name}: set_band is for kind='band' tasks")
+        self.lower, self.upper = _faces(
+            self.lower if lower is None else lower,
+            self.upper if upper is None else upper,
+            self.task.shape[0],
+            self.name,
+        )
 
     def update(self, q, t: float = 0.0, dt: float = 1e-3, reference=None):
-        """Refresh ``self.task`` for configuration ``q`` (rad) at time ``t`` (s); return it.
+        """Refresh ``self.task`` for configuration ``q`` (nq,) at time ``t`` (s); return it.
 
         ``dt`` is the control period (s); ``reference`` is the run's end-effector path
         (used by tasks built without their own target).
@@ -79,22 +275,61 @@ class KinematicTask(ABC):
         Raises
         ------
         ValueError
-            ``q`` of the wrong size or not finite, ``dt`` not positive.
+            ``q`` of the wrong size, not finite or with a non-unit quaternion (named ``q``),
+            ``dt`` not positive, a user method returning a wrong shape or a non-finite value.
         """
         q = self.robot.check_configuration(q)
         return self._refresh(q, float(t), _check_dt(dt), reference)
 
-    @abstractmethod
     def _refresh(self, q: np.ndarray, t: float, dt: float, reference):
-        """:meth:`update` for an already validated ``q`` (the per-step path of IK)."""
+        """:meth:`update` for an already validated ``q`` (the per-step path of IK).
+
+        Default: ``J v = −K e`` or ``K (lower − e) ≤ J v ≤ K (upper − e)`` from
+        :meth:`compute_error` and :meth:`compute_jacobian`.
+        """
+        e, J = self._checked(self.compute_error(q), self.compute_jacobian(q))
+        k = self.gain
+        if self.kind == "equality":
+            return self.task._assign(J, -k * e)
+        with np.errstate(invalid="ignore"):  # inf − e stays inf
+            return self.task._assign(k * (self.lower - e), k * (self.upper - e), C=J)
+
+    def _checked(self, e: Any, J: Any) -> tuple[np.ndarray, np.ndarray]:
+        rows, nv = self.task.shape
+        e = np.asarray(e, dtype=float)
+        if e.shape != (rows,):
+            if e.size != rows:
+                raise ValueError(
+                    f"{self.task.label}: compute_error(q) must return {rows} values, "
+                    f"got shape {e.shape}"
+                )
+            e = e.reshape(rows)
+        J = np.asarray(J, dtype=float)
+        if J.shape != (rows, nv):
+            if not (J.ndim == 1 and rows == 1 and J.size == nv):
+                raise ValueError(
+                    f"{self.task.label}: compute_jacobian(q) must return shape ({rows}, {nv}) "
+                    f"(rows, nv), got {J.shape}"
+                )
+            J = J.reshape(1, nv)
+        if not np.isfinite(e.sum()):
+            raise ValueError(f"{self.task.label}: compute_error(q) returned a non-finite value")
+        return e, J
 
     @property
     def name(self) -> str:
         return self.task.name
 
+    def __repr__(self) -> str:
+        rows, nv = self.task.shape
+        return f"{type(self).__name__}(name={self.name!r}, rows={rows}, nv={nv})"
+
 
 class PositionTask(KinematicTask):
-    """End-effector position tracking with a closed loop: ``J q̇ = ẏ_ref + K (y_ref − y)``.
+    """End-effector position tracking with a closed loop: ``J v = ẏ_ref + K (y_ref − y)``.
+
+    The point is the robot's default frame (:meth:`~qpcoord.Robot.position`); its error is
+    ``e = y − y_ref`` (m) and its Jacobian ``J = robot.jacobian(q)`` (rows × nv).
 
     Parameters
     ----------
@@ -104,7 +339,7 @@ class PositionTask(KinematicTask):
         ``None``, the ``reference`` given to :meth:`update` (e.g. by
         :func:`~qpcoord.simulate`) is used.
     gain : float
-        ``K`` (1/s), default 10. ``0`` gives the open-loop velocity map ``J q̇ = ẏ_ref``
+        ``K`` (1/s), default 10. ``0`` gives the open-loop velocity map ``J v = ẏ_ref``
         (thesis Eq. 4.1).
     weight : float or array_like
         Row weights inside the level.
@@ -114,12 +349,10 @@ class PositionTask(KinematicTask):
     def __init__(
         self, robot: Robot, target=None, gain: float = 10.0, weight=1.0, name: str = "position"
     ) -> None:
-        self.robot = robot
-        self.gain = _gain(gain)
+        super().__init__(_check_robot(robot, name), robot.m, gain=gain, weight=weight, name=name)
         self.target = None
         if target is not None:
             self.set_target(target)
-        self.task = Equality(np.zeros((robot.m, robot.nq)), np.zeros(robot.m), weight, name)
         self._zero = np.zeros(robot.m)
 
     def set_target(self, target) -> None:
@@ -163,6 +396,16 @@ class PositionTask(KinematicTask):
             target = arr
         return target, self._zero
 
+    def compute_error(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+        """``e = y(q) − y_ref(t)`` (m), shape (rows,)."""
+        q = self.robot.check_configuration(q)
+        y_ref, _ = self.reference_at(float(t), reference)
+        return self.robot.position(q) - y_ref
+
+    def compute_jacobian(self, q) -> np.ndarray:
+        """``J = ∂y/∂q`` (m per unit of ``v``), shape (rows, nv)."""
+        return self.robot.jacobian(q)
+
     def _refresh(self, q, t, dt, reference) -> Equality:
         y_ref, v_ref = self.reference_at(t, reference)
         y, J = self.robot._kinematics(q)
@@ -170,13 +413,13 @@ class PositionTask(KinematicTask):
 
 
 class PositionBand(KinematicTask):
-    """Keep the end effector in a box: ``K (y_lo − y) ≤ J q̇ ≤ K (y_hi − y)`` per row.
+    """Keep the end effector in a box: ``K (y_lo − y) ≤ J v ≤ K (y_hi − y)`` per row.
 
     An :class:`~qpcoord.Inequality` task: at a soft level it is met when the levels above
     allow it (its violation is minimised, strictly below them and above the levels
     under it); as a hard constraint (``IK(..., constraints=[band])``) it always holds. With
     ``K·dt = 1`` one Euler step lands at most on the face; a point already outside is
-    pushed back at rate ``K``.
+    pushed back at rate ``K``. Its error is ``e = y`` (m), its Jacobian ``robot.jacobian(q)``.
 
     Parameters
     ----------
@@ -205,28 +448,26 @@ class PositionBand(KinematicTask):
         weight=1.0,
         name: str = "position band",
     ) -> None:
-        self.robot = robot
-        self.gain = _gain(gain)
-        m = robot.m
-        faces = []
-        for what, value in (("lower", lower), ("upper", upper)):
-            try:
-                arr = np.broadcast_to(np.asarray(value, dtype=float), (m,)).copy()
-            except (ValueError, TypeError):
-                arr = None
-            if arr is None or np.isnan(arr).any():
-                raise ValueError(
-                    f"PositionBand {what} must have {m} numbers (m, ±inf allowed), got {value!r}"
-                )
-            faces.append(arr)
-        self.lower, self.upper = faces
-        bad = np.flatnonzero(self.lower > self.upper)
-        if bad.size:
-            raise ValueError(
-                f"PositionBand: lower > upper on row(s) {bad.tolist()}: "
-                f"{self.lower[bad]} > {self.upper[bad]}"
-            )
-        self.task = Inequality(np.zeros((m, robot.nq)), -np.inf, np.inf, weight, name)
+        robot = _check_robot(robot, name)
+        lower, upper = _faces(lower, upper, robot.m, "PositionBand")
+        super().__init__(
+            robot,
+            robot.m,
+            kind="band",
+            gain=gain,
+            weight=weight,
+            lower=lower,
+            upper=upper,
+            name=name,
+        )
+
+    def compute_error(self, q) -> np.ndarray:
+        """``e = y(q)`` (m), shape (rows,)."""
+        return self.robot.position(q)
+
+    def compute_jacobian(self, q) -> np.ndarray:
+        """``J = ∂y/∂q``, shape (rows, nv)."""
+        return self.robot.jacobian(q)
 
     def _refresh(self, q, t, dt, reference) -> Inequality:
         y, J = self.robot._kinematics(q)
@@ -236,38 +477,76 @@ class PositionBand(KinematicTask):
 
 
 class PostureTask(KinematicTask):
-    """Joint-space regulation ``q̇ = K (q_ref − q)``.
+    """Joint-space regulation toward ``q_ref``: ``v_a = K (q_ref ⊖ q)_a``.
+
+    ``q_ref ⊖ q = robot.difference(q, q_ref)`` (``q_ref − q`` for a vector-space
+    configuration). The rows ``a`` are the **actuated** joints: on a floating base the root's
+    velocity rows (6 for a free-flyer, 3 for a planar root) are left out (the base is moved
+    by the other tasks, not pulled to ``q_ref``); on a fixed base every joint (``nv`` rows,
+    the task matrix is the identity). Error ``e = (q ⊖ q_ref)_a``, Jacobian the selection of
+    those rows (shape ``(rows, nv)``).
 
     Parameters
     ----------
     robot : Robot
     q_ref : array_like, shape (nq,)
-        Preferred configuration (rad).
+        Preferred configuration (rad, m; quaternions unit).
     gain : float
         ``K`` (1/s), default 1.
-    weight : float or array_like
-        Per-joint weights.
+    weight : float or array_like, shape (rows,)
+        Per-joint weights (``nv`` on a fixed base, ``nv − 6`` under a free-flyer).
     name : str
     """
 
     def __init__(self, robot: Robot, q_ref, gain: float = 1.0, weight=1.0, name="posture"):
-        self.robot = robot
-        self.q_ref = robot.check_configuration(q_ref, "q_ref").copy()
-        self.gain = _gain(gain)
-        self.task = Equality(np.eye(robot.nq), np.zeros(robot.nq), weight, name)
+        robot = _check_robot(robot, name)
+        q_ref = robot.check_configuration(q_ref, "q_ref").copy()
+        self.joints = actuated_velocity_indices(robot)
+        rows = int(self.joints.size)
+        if rows == 0:
+            raise ValueError(f"{name}: robot {robot.name!r} has no actuated joint")
+        super().__init__(robot, rows, gain=gain, weight=weight, name=name)
+        self.q_ref = q_ref
+        self._full = rows == robot.nv
+        S = np.eye(robot.nv) if self._full else np.eye(robot.nv)[self.joints]
+        self.task = Equality(S, np.zeros(rows), weight, name)
+
+    def set_target(self, q_ref) -> None:
+        """Replace the preferred configuration ``q_ref`` (nq,)."""
+        self.q_ref = self.robot.check_configuration(q_ref, "q_ref").copy()
+
+    def compute_error(self, q) -> np.ndarray:
+        """``e = (q ⊖ q_ref)_a`` (rad, m), shape (rows,)."""
+        d = self.robot.difference(self.q_ref, q)
+        return d if self._full else d[self.joints]
+
+    def compute_jacobian(self, q) -> np.ndarray:
+        """The selection of the actuated rows of the identity, shape (rows, nv)."""
+        self.robot.check_configuration(q)
+        return self.task.A.copy()
 
     def _refresh(self, q, t, dt, reference) -> Equality:
-        return self.task._assign(b=self.gain * (self.q_ref - q))
+        robot = self.robot
+        if robot.euclidean:
+            d = self.q_ref - q
+        else:
+            d = pin.difference(robot.model, q, self.q_ref)
+        if not self._full:
+            d = d[self.joints]
+        return self.task._assign(b=self.gain * d)
 
 
 class PotentialTask(KinematicTask):
-    """Descend a potential: ``q̇ = −K ∇p(q)`` (thesis chapter 5).
+    """Descend a potential: ``v = −K ∇p(q)`` (thesis chapter 5).
+
+    A thesis task: the gradient is taken along ``v`` (size ``nv``); on a vector-space
+    configuration (``nq == nv``) that is the usual ``∇p(q)``.
 
     Parameters
     ----------
     robot : Robot
     gradient : callable
-        ``gradient(q) -> ∇p(q)``, shape (nq,), in potential units per rad. An object with
+        ``gradient(q) -> ∇p(q)``, shape (nv,), in potential units per rad. An object with
         a ``gradient`` method is accepted too.
     gain : float
         ``K`` (rad²/(s · potential unit)), default 1.
@@ -279,48 +558,53 @@ class PotentialTask(KinematicTask):
         fn = getattr(gradient, "gradient", gradient)
         if not callable(fn):
             raise ValueError(f"gradient must be callable (q -> ∇p(q)), got {gradient!r}")
-        self.robot = robot
+        robot = _check_robot(robot, name)
+        super().__init__(robot, robot.nv, gain=gain, weight=weight, name=name)
         self.gradient = fn
-        self.gain = _gain(gain)
-        self.task = Equality(np.eye(robot.nq), np.zeros(robot.nq), weight, name)
+        self.task = Equality(np.eye(robot.nv), np.zeros(robot.nv), weight, name)
 
     def _refresh(self, q, t, dt, reference) -> Equality:
         g = np.asarray(self.gradient(q), dtype=float).reshape(-1)
-        if g.shape != (self.robot.nq,):
+        if g.shape != (self.robot.nv,):
             raise ValueError(
-                f"{self.task.label}: gradient(q) must return {self.robot.nq} values, "
+                f"{self.task.label}: gradient(q) must return {self.robot.nv} values, "
                 f"got shape {g.shape}"
             )
         return self.task._assign(b=-self.gain * g)
 
 
 class OneFormTask(KinematicTask):
-    """Annihilate (or prescribe) 1-forms: ``ω(q) q̇ = rate`` (thesis chapter 4).
+    """Annihilate (or prescribe) 1-forms: ``ω(q) v = rate`` (thesis chapter 4).
+
+    A thesis task: the forms act on ``v`` (``nv`` columns; ``q̇`` when ``nq == nv``).
 
     Parameters
     ----------
     robot : Robot
-    form : array_like, shape (k, nq), or callable
+    form : array_like, shape (k, nv), or callable
         Constant 1-forms (rows, e.g. ``ω₄ = dq₁ + dq₅`` is ``[1, 0, 0, 0, 1]``) or
-        ``form(q) -> (k, nq)`` array.
+        ``form(q) -> (k, nv)`` array.
     rate : float or array_like, shape (k,)
-        Prescribed ``ω(q) q̇`` (default 0: motion stays on the leaf ``ω = 0``).
+        Prescribed ``ω(q) v`` (default 0: motion stays on the leaf ``ω = 0``).
     weight : float or array_like
     name : str
     """
 
     def __init__(self, robot: Robot, form, rate=0.0, weight=1.0, name: str = "one-form"):
-        self.robot = robot
+        self.robot = robot = _check_robot(robot, name)
         if callable(form):
             self.form: Callable | None = form
-            W = np.asarray(form(np.zeros(robot.nq)), dtype=float)
+            q0 = np.zeros(robot.nq) if robot.euclidean else robot.neutral()
+            W = np.asarray(form(q0), dtype=float)
         else:
             self.form = None
             W = np.asarray(form, dtype=float)
         if W.ndim == 1:
             W = W.reshape(1, -1)
-        if W.ndim != 2 or W.shape[1] != robot.nq:
-            raise ValueError(f"form must have {robot.nq} columns, got shape {W.shape}")
+        if W.ndim != 2 or W.shape[1] != robot.nv:
+            raise ValueError(f"form must have {robot.nv} columns, got shape {W.shape}")
+        self.kind = "equality"
+        self.gain = 0.0
         self.task = Equality(W, rate, weight, name)
         self.rate = self.task.b.copy()
 
@@ -331,11 +615,34 @@ class OneFormTask(KinematicTask):
 
 
 class Limit(KinematicTask):
-    """A box ``lower(q) ≤ q̇ ≤ upper(q)``: :meth:`box` gives it, ``task`` holds it."""
+    """A box ``lower(q) ≤ v ≤ upper(q)`` on the velocity (size ``nv``).
+
+    **Writing your own limit.** Subclass it, call ``super().__init__(robot, name)`` and
+    implement ``box(q, dt) -> (lower, upper)`` (each of shape ``(nv,)``, ``v`` units;
+    ``-inf`` / ``inf`` where a joint is free). :class:`~qpcoord.IK` intersects every limit's
+    box into its hard :class:`~qpcoord.Bounds` each step; ``task`` (an Inequality on the
+    identity) holds the same box for use at a soft level. A limit that depends on the
+    previous velocity overrides :meth:`record`, which the IK calls after each step.
+
+    Parameters
+    ----------
+    robot : Robot
+    name : str
+    """
+
+    def __init__(self, robot: Robot, name: str = "limit") -> None:
+        self.robot = robot = _check_robot(robot, name)
+        self.kind = "band"
+        self.task = Inequality(np.eye(robot.nv), -np.inf, np.inf, name=name)
 
     @abstractmethod
     def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(lower, upper)`` on ``q̇`` (rad/s) at configuration ``q`` (rad), period ``dt`` (s)."""
+        """``(lower, upper)`` on ``v`` (rad/s, m/s), shape (nv,) each, at configuration
+        ``q`` (nq,) for the control period ``dt`` (s)."""
+
+    def record(self, v: np.ndarray) -> None:  # noqa: B027 - a hook, empty on purpose
+        """Called by :class:`~qpcoord.IK` after each step with the velocity it returned
+        (nv,). Stateless limits ignore it."""
 
     def _refresh(self, q, t, dt, reference) -> Inequality:
         lo, hi = self.box(q, dt)
@@ -343,55 +650,136 @@ class Limit(KinematicTask):
 
 
 class JointLimits(Limit):
-    """Joint position limits at velocity level: ``K (q_min − q)/dt ≤ q̇ ≤ K (q_max − q)/dt``.
+    """Joint position limits at velocity level: ``K (q_min − q)/dt ≤ v ≤ K (q_max − q)/dt``.
 
-    With ``K = 1`` one Euler step ``q + dt q̇`` lands at most on the limit; ``K < 1`` slows
+    With ``K = 1`` one Euler step ``q + dt v`` lands at most on the limit; ``K < 1`` slows
     the approach. A configuration already outside a limit gets a box that pushes it back.
+
+    Only joints with one position variable per velocity (revolute, prismatic; ``q`` index
+    ``model.joints[j].idx_q`` ↔ ``v`` index ``idx_v``) are limited. A free-flyer, planar,
+    spherical or continuous joint is unlimited, and so is a side whose limit is infinite or
+    ``±1.8e308`` (Pinocchio's "no limit"): its box entries are ``∓inf``.
 
     Parameters
     ----------
     robot : Robot
     gain : float
         ``K`` in ``(0, 1]``, default 1.
-    lower, upper : array_like, optional
-        Limits (rad); default the robot's.
+    lower, upper : array_like, shape (nq,), optional
+        Limits (rad, m) in ``q``'s layout; default the robot's.
+
+    Attributes
+    ----------
+    joints : ndarray of int
+        Velocity indices of the limited joints.
     """
 
     def __init__(self, robot: Robot, gain: float = 1.0, lower=None, upper=None):
-        self.robot = robot
+        super().__init__(robot, "joint limits")
         self.gain = _gain(gain)
         if not 0 < self.gain <= 1:
             raise ValueError(f"JointLimits gain must be in (0, 1], got {gain!r}")
-        self.lower = robot.lower if lower is None else robot._limit(lower, None, "lower", -1)
-        self.upper = robot.upper if upper is None else robot._limit(upper, None, "upper", 1)
-        if np.any(self.lower > self.upper):
+        lower = robot.lower if lower is None else robot._limit(lower, None, "lower", -1)
+        upper = robot.upper if upper is None else robot._limit(upper, None, "upper", 1)
+        if np.any(lower > upper):
             raise ValueError("JointLimits: lower > upper")
-        n = robot.nq
-        self.task = Inequality(np.eye(n), -np.inf, np.inf, name="joint limits")
+        self.lower, self.upper = _unlimited(lower), _unlimited(upper)
+        bounded = np.isfinite(self.lower) | np.isfinite(self.upper)
+        if robot.euclidean:
+            # q and v share one layout (q index = v index): the box is computed on all of q
+            self._q_index = self._v_index = None
+            self.joints = np.flatnonzero(bounded)
+        else:
+            pairs = [
+                (int(joint.idx_q), int(joint.idx_v))
+                for joint in robot.model.joints[1:]
+                if joint.nq == 1 and joint.nv == 1 and bounded[joint.idx_q]
+            ]
+            self._q_index = np.array([p[0] for p in pairs], dtype=int)
+            self._v_index = np.array([p[1] for p in pairs], dtype=int)
+            self.joints = self._v_index.copy()
+            self._lower_q = self.lower[self._q_index]
+            self._upper_q = self.upper[self._q_index]
 
     def box(self, q, dt):
         k = self.gain / dt
-        # lower ≤ upper, so lo ≤ hi; outside a limit both have the sign that moves back
-        return k * (self.lower - q), k * (self.upper - q)
+        if self._q_index is None:
+            # lower ≤ upper, so lo ≤ hi; outside a limit both have the sign that moves back
+            return k * (self.lower - q), k * (self.upper - q)
+        nv = self.robot.nv
+        lo, hi = np.full(nv, -np.inf), np.full(nv, np.inf)
+        qq = q[self._q_index]
+        lo[self._v_index] = k * (self._lower_q - qq)
+        hi[self._v_index] = k * (self._upper_q - qq)
+        return lo, hi
 
 
 class VelocityLimits(Limit):
-    """Joint speed limits ``−v_max ≤ q̇ ≤ v_max``.
+    """Joint speed limits ``−v_max ≤ v ≤ v_max``.
 
     Parameters
     ----------
     robot : Robot
-    limit : float or array_like, optional
-        ``v_max`` (rad/s), default the robot's ``velocity_limit``.
+    limit : float or array_like, shape (nv,), optional
+        ``v_max`` (rad/s, m/s), default the robot's ``velocity_limit`` (a floating base's
+        ``±1.8e308`` entries read as unlimited).
     """
 
     def __init__(self, robot: Robot, limit=None):
-        self.robot = robot
-        v = robot.velocity_limit if limit is None else robot._limit(limit, None, "limit", 1)
+        super().__init__(robot, "velocity limits")
+        v = (
+            robot.velocity_limit
+            if limit is None
+            else robot._limit(limit, None, "limit", 1, size=robot.nv)
+        )
         if np.any(v <= 0):
             raise ValueError(f"VelocityLimits: limit must be > 0 (rad/s), got {v}")
-        self.limit = v
-        self.task = Inequality(np.eye(robot.nq), -v, v, name="velocity limits")
+        self.limit = _unlimited(v)
+        self.task = Inequality(np.eye(robot.nv), -self.limit, self.limit, name="velocity limits")
 
     def box(self, q, dt):
         return -self.limit, self.limit
+
+
+class AccelerationLimits(Limit):
+    """Joint acceleration limits ``v_prev − a_max dt ≤ v ≤ v_prev + a_max dt``.
+
+    ``v_prev`` is the velocity of the previous control step: the :class:`~qpcoord.IK` that
+    holds this limit records the ``v`` it returns after every :meth:`~qpcoord.IK.step`
+    (:meth:`record`); it is zero at the start (the robot at rest) and after
+    :meth:`reset`. Meant for one ``step`` per control period (a real loop, or
+    :func:`~qpcoord.simulate` with ``integrator="euler"``: RK4 calls the IK four times a step).
+
+    If a joint position limit needs a harder brake than ``a_max`` allows, the two boxes do
+    not meet: the IK then keeps the position limit (see :meth:`~qpcoord.IK.refresh`).
+
+    Parameters
+    ----------
+    robot : Robot
+    limit : float or array_like, shape (nv,)
+        ``a_max`` (rad/s², m/s²), > 0; ``inf`` for an unlimited entry (e.g. a floating base's
+        six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``).
+    """
+
+    def __init__(self, robot: Robot, limit):
+        super().__init__(robot, "acceleration limits")
+        a = robot._limit(limit, None, "limit", 1, size=robot.nv)
+        if np.any(a <= 0):
+            raise ValueError(f"AccelerationLimits: limit must be > 0 (rad/s²), got {a}")
+        self.limit = _unlimited(a)
+        self.v_prev = np.zeros(robot.nv)
+
+    def box(self, q, dt):
+        step = self.limit * dt
+        return self.v_prev - step, self.v_prev + step
+
+    def record(self, v: np.ndarray) -> None:
+        """Keep ``v`` (nv,) as the previous step's velocity."""
+        self.v_prev[...] = v
+
+    def reset(self, v_prev=None) -> None:
+        """Start again from rest (``v_prev = 0``) or from the given velocity (nv,)."""
+        if v_prev is None:
+            self.v_prev[...] = 0.0
+        else:
+            self.v_prev[...] = self.robot._check_velocity(v_prev, "v_prev")
