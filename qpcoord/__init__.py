@@ -33,7 +33,10 @@ from .kinematics.ik import IK, ik_step, inverse_kinematics
 from .kinematics.robot import Robot
 from .kinematics.simulation import Trajectory, simulate
 from .kinematics.tasks import (
+    AccelerationLimits,
     JointLimits,
+    KinematicTask,
+    Limit,
     OneFormTask,
     PositionBand,
     PositionTask,
@@ -43,6 +46,9 @@ from .kinematics.tasks import (
 )
 
 __all__ = [
+    "AccelerationLimits",
+    "KinematicTask",
+    "Limit",
     "ComBand",
     "ComTask",
     "DampingTask",

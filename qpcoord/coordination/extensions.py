@@ -112,7 +112,7 @@ class _RateTask(KinematicTask):
         self.robot = scheme.robot
         self.scheme = scheme
         self.k = k
-        self.task = Equality(np.zeros((1, self.robot.nq)), np.zeros(1), name=name)
+        self.task = Equality(np.zeros((1, self.robot.nv)), np.zeros(1), name=name)
 
     def _refresh(self, q, t, dt, reference) -> Equality:
         s = self.scheme
