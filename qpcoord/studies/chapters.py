@@ -29,5 +29,7 @@ SCRIPT_CHAPTERS: tuple[tuple[str, str], ...] = (
     ("appC_", "C"),
     ("core_", "core"),
     ("panda_", "core"),
+    ("talos_", "core"),
+    ("solo12_", "core"),
     ("sweep_", "core"),
 )
