@@ -310,7 +310,13 @@ def claims(rows: list[dict], lowacc: dict) -> list[dict]:
             "not in thesis",
             "our check: ours is nv × nv = 18 × 18; "
             + ("holds" if lowacc["ours_shape"] == [18, 18] else "does not hold")
-            + ("; Pink's crashes as reported" if crashed else "; Pink's did not crash here"),
+            + (
+                "; Pink not installed"
+                if lowacc["pink"] == "not installed"
+                else "; Pink's crashes as reported"
+                if crashed
+                else "; Pink's did not crash here"
+            ),
         )
     )
     return out
