@@ -52,8 +52,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ._check import positive
 
 __all__ = [
@@ -61,6 +59,7 @@ __all__ = [
     "fine_speed_bound",
     "carriage_speed_bound",
     "max_jump",
+    "describe_bounds",
     "guard_arg",
 ]
 
@@ -202,8 +201,10 @@ class MeasurementGuard:
         return y, r
 
 
-def _describe(plant, fs: float) -> dict:
-    """Numbers of the rule for ``plant`` at ``fs`` (m, m/s), for documentation and tests."""
+def describe_bounds(plant, fs: float, safety: float = 1.5) -> dict:
+    """The numbers of the rule for ``plant`` at ``fs`` Hz: ``fine_speed_bound``,
+    ``carriage_speed_bound`` (m/s), ``fine_jump``, ``carriage_jump``, ``max_jump`` (m per
+    period) and ``output_range`` (m)."""
     fp = plant.fine
     vf = fine_speed_bound(fp)
     vc = carriage_speed_bound(plant)
@@ -212,8 +213,8 @@ def _describe(plant, fs: float) -> dict:
         "fine_jump": min(fp.stroke_max - fp.stroke_min, vf / fs),
         "carriage_speed_bound": vc,
         "carriage_jump": vc / fs,
-        "max_jump": max_jump(plant, fs),
-        "output_range": tuple(float(v) for v in np.asarray(plant.output_range)),
+        "max_jump": max_jump(plant, fs, safety),
+        "output_range": tuple(float(v) for v in plant.output_range),
     }
 
 
