@@ -10,15 +10,18 @@ Quick start::
     run.metrics["rmse"]   # m
 
 Controllers follow a two-method interface — ``reset(plant, fs, y0, r0)`` and
-``step(y, r) -> (v, i_a, i_b)`` — documented in :mod:`qpcoord.ddl.coordinator`.
+``step(y, r) -> (v, i_a, i_b)`` — documented in :mod:`qpcoord.ddl.coordinator`. Every
+controller passes its measurement through a :class:`MeasurementGuard` (``ctl.guard``);
+``simulate(..., faults=...)`` injects metrology faults (:mod:`qpcoord.ddl.faults`).
 """
 
-from . import identify, references, two_ddl
+from . import faults, identify, references, two_ddl
 from .compare import compare, format_grid, format_table
 from .coordinator import SisoCoordinator
 from .fine import FineParams
 from .flatness import FlatnessBased
 from .flexure import BladeFlexure
+from .guard import MeasurementGuard
 from .identify import bandwidth_3db, coarse_frf, fine_frf, peak_frequency
 from .lqr import LQR, DesignModel, design_model
 from .metrics import power, tracking_metrics
@@ -38,6 +41,7 @@ __all__ = [
     "FlatnessBased",
     "LQR",
     "MPC",
+    "MeasurementGuard",
     "PILinearised",
     "PQ",
     "PRESETS",
@@ -48,6 +52,7 @@ __all__ = [
     "coarse_frf",
     "compare",
     "design_model",
+    "faults",
     "fine_frf",
     "format_grid",
     "format_table",

@@ -238,6 +238,11 @@ class DesignedOn:
     def y_c_hat(self):
         return self.inner.y_c_hat
 
+    @property
+    def guard(self):
+        """The wrapped controller's measurement guard (read by :func:`.simulate`)."""
+        return getattr(self.inner, "guard", None)
+
 
 def _settle_time(err: np.ndarray, fs: float, t_step: float) -> float:
     """Time after ``t_step`` (s) from which |err| stays within SETTLE_BAND; NaN if never."""

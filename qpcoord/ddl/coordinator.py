@@ -55,6 +55,7 @@ import math
 from ._check import finite, nonnegative, positive
 from .biquad import butterworth_sections, filter_sample
 from .fine import FineParams, fine_zoh
+from .guard import MeasurementGuard, guard_arg
 from .pi import clamp_with_antiwindup
 
 __all__ = ["SisoCoordinator"]
@@ -87,6 +88,11 @@ class SisoCoordinator:
     fine_model : FineParams, optional
         Fine-stage model used by the coordinator (default: the plant's own parameters —
         pass different ones to study model mismatch).
+    guard : MeasurementGuard, optional
+        Measurement guard (default: a new :class:`.guard.MeasurementGuard` with the plant's
+        physical bounds). A rejected measurement is replaced by the a-priori prediction
+        ``ŷ_c(k−1) + Δα lead/(2π p) + ŷ_f(k)`` (carriage estimate moved with the field
+        phase, fine model advanced).
     literal_eq61 : bool
         Use Eq 6.1 exactly as printed (``e_i`` accumulates the error, is clamped to the rate
         limit, and α integrates ``e_i``: a double integrator). Unstable — kept only to show
@@ -96,6 +102,8 @@ class SisoCoordinator:
     ----------
     y_c_hat : float
         Latest carriage estimate, m.
+    guard : MeasurementGuard
+        The measurement guard (``guard.rejected``: measurements rejected).
     """
 
     def __init__(
@@ -110,6 +118,7 @@ class SisoCoordinator:
         feedforward: bool = True,
         fine_model: FineParams | None = None,
         literal_eq61: bool = False,
+        guard: MeasurementGuard | None = None,
     ):
         self.fine_kp = nonnegative("fine_kp", fine_kp)
         self.fine_ki = nonnegative("fine_ki", fine_ki)
@@ -125,6 +134,7 @@ class SisoCoordinator:
             raise ValueError(f"fine_model must be a FineParams, got {fine_model!r}")
         self.fine_model = fine_model
         self.literal_eq61 = bool(literal_eq61)
+        self.guard = guard_arg(guard)
         self.y_c_hat = 0.0
 
     def reset(self, plant, fs: float, y0: float, r0: float) -> None:
@@ -171,9 +181,12 @@ class SisoCoordinator:
         self._alpha0 = self._alpha
         self._yc0 = y0 - self._mf
         self.y_c_hat = self._yc0
+        self._dyc = 0.0  # carriage motion predicted for the coming period (m)
+        self.guard.reset(plant, fs, y0, r0)
 
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One control period: measurement ``y`` (m), reference ``r`` (m) → (V, A, A)."""
+        y, r = self.guard.filter(y, r, self.y_c_hat + self._dyc + self._mf)
         # coarse reference: Butterworth low-pass, minus the fine mid-stroke offset
         x = filter_sample(self._bq, r)
         rc = x - self._yf_mid
@@ -190,6 +203,7 @@ class SisoCoordinator:
         elif d < -dmax:
             d = -dmax
         self._ei = d
+        self._dyc = d * self._m_per_rad
         alpha = self._alpha + d
         self._alpha = alpha
         cur = self.current

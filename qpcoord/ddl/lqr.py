@@ -83,6 +83,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ._check import finite, nonnegative, positive
+from .guard import MeasurementGuard, guard_arg
 
 __all__ = [
     "DesignModel",
@@ -607,6 +608,10 @@ class LQR:
         Plant whose parameters the design uses (default: the plant given to :meth:`reset`).
     y_c_op : float, optional
         Linearisation carriage position, m (default: the carriage position at reset).
+    guard : MeasurementGuard, optional
+        Measurement guard (default: a new :class:`.guard.MeasurementGuard` with the plant's
+        physical bounds). A rejected measurement is replaced by the observer's
+        predicted output (the measurement update is skipped).
 
     Attributes (after :meth:`reset`)
     --------------------------------
@@ -623,6 +628,8 @@ class LQR:
         Carriage estimate, m (absolute).
     clipped_steps : int
         Steps in which the voltage clipped or the phase was rate-limited.
+    guard : MeasurementGuard
+        The measurement guard (``guard.rejected``: measurements rejected).
     """
 
     def __init__(
@@ -635,6 +642,7 @@ class LQR:
         sigma_v: float = 0.05,
         design_plant=None,
         y_c_op: float | None = None,
+        guard: MeasurementGuard | None = None,
     ):
         if (Q is None) != (R is None):
             raise ValueError("give both Q and R, or neither (defaults from default_weights)")
@@ -648,6 +656,7 @@ class LQR:
         self.sigma_v = nonnegative("sigma_v", sigma_v)
         self.design_plant = design_plant
         self.y_c_op = None if y_c_op is None else finite("y_c_op", y_c_op)
+        self.guard = guard_arg(guard)
         self.y_c_hat = 0.0
         self.model = None
 
@@ -789,12 +798,14 @@ class LQR:
         self._xi = 0.0
         self.clipped_steps = 0
         self.y_c_hat = y0 - yf0
+        self.guard.reset(plant, fs, y0, r0)
 
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One period: measured output ``y`` (m), reference ``r`` (m) → (V, A, A)."""
         xb = self._xbar
         mg = self._m
         x0, x1, x2, x3 = xb
+        y, r = self.guard.filter(y, r, self._y_op + x0 + x2)
         innov = (y - self._y_op) - (x0 + x2)
         x0 += mg[0] * innov
         x1 += mg[1] * innov

@@ -44,6 +44,7 @@ from ..core.stack import Stack
 from ..core.tasks import Bounds, Equality, Inequality
 from ._check import positive
 from .coordinator import SisoCoordinator
+from .guard import MeasurementGuard, guard_arg
 
 __all__ = ["MPC", "prediction_model", "condense", "lq_first_move", "DEFAULT_BLOCKS"]
 
@@ -195,6 +196,11 @@ class MPC:
         later uses the shadow fine PI's command with the phase held, as a failed step does,
         and is counted in :attr:`late_steps`. Default ``None``: no deadline, so that a
         simulation does not depend on the machine's speed.
+    guard : MeasurementGuard, optional
+        Measurement guard (default: a new :class:`.guard.MeasurementGuard` with the plant's
+        physical bounds). A rejected measurement is replaced by the Kalman
+        filter's predicted output (the measurement update is skipped); the shadow fine PI
+        receives the same guarded value.
 
     Attributes
     ----------
@@ -204,6 +210,8 @@ class MPC:
         Steps whose QP missed ``deadline`` (the shadow fine PI answered).
     solve_times : list of float
         Wall time of each step's ``step`` call, s (state update + QP).
+    guard : MeasurementGuard
+        The measurement guard (``guard.rejected``: measurements rejected).
     """
 
     def __init__(
@@ -216,6 +224,7 @@ class MPC:
         max_speed: float = 3.0e-3,
         solver: str = "daqp",
         deadline: float | None = None,
+        guard: MeasurementGuard | None = None,
     ) -> None:
         if method not in ("weighted", "hierarchical"):
             raise ValueError(f"method must be 'weighted' or 'hierarchical', got {method!r}")
@@ -234,6 +243,7 @@ class MPC:
         if deadline is not None:
             deadline = positive("deadline", deadline)
         self.deadline = deadline
+        self.guard = guard_arg(guard)
         self.late_steps = 0
         self.y_c_hat = 0.0
         self.fallback_steps = 0
@@ -356,6 +366,7 @@ class MPC:
         self._shadow = SisoCoordinator(current=self.current, feedforward=False)
         self._shadow.reset(plant, fs, y0, r0)
         self.y_c_hat = y0 - self._xf[0]
+        self.guard.reset(plant, fs, y0, r0)
         self.fallback_steps = 0
         self.late_steps = 0
         self.solve_times = []
@@ -378,6 +389,7 @@ class MPC:
         # estimate: fine model (prior for this sample) and carriage Kalman update
         xf = self._xf
         xc = self._xc
+        y, r = self.guard.filter(y, r, self._yc0 + xc[0] + xf[0])
         z = y - xf[0] - self._yc0
         xc += self._K * (z - xc[0])
         self.y_c_hat = self._yc0 + xc[0]

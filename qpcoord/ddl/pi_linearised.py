@@ -41,6 +41,7 @@ from scipy.linalg import expm
 from ._check import finite, nonnegative, positive
 from .biquad import butterworth_sections, filter_sample
 from .fine import fine_zoh
+from .guard import MeasurementGuard, guard_arg
 from .pi import clamp_with_antiwindup
 
 __all__ = ["PILinearised"]
@@ -67,11 +68,19 @@ class PILinearised:
         Rate limit of the coarse reference, m/s.
     feedforward : bool
         Pre-compensate the predicted coarse motion into the fine voltage.
+    guard : MeasurementGuard, optional
+        Measurement guard (default: a new :class:`.guard.MeasurementGuard` with the plant's
+        physical bounds). A rejected measurement is replaced by the a-priori prediction
+        ``2 ŷ_c(k−1) − ŷ_c(k−2) + ŷ_f(k)`` (carriage estimate extrapolated at its last
+        speed, fine model advanced; the nominal coarse closed loop is a worse predictor:
+        in stiction the carriage does not follow it).
 
     Attributes
     ----------
     y_c_hat : float
         Carriage estimate, m.
+    guard : MeasurementGuard
+        The measurement guard (``guard.rejected``: measurements rejected).
     """
 
     flat_feedforward = False
@@ -87,6 +96,7 @@ class PILinearised:
         d_current: float = 0.01,
         max_speed: float = 3.0e-3,
         feedforward: bool = True,
+        guard: MeasurementGuard | None = None,
     ):
         self.fine_kp = nonnegative("fine_kp", fine_kp)
         self.fine_ki = nonnegative("fine_ki", fine_ki)
@@ -97,6 +107,7 @@ class PILinearised:
         self.d_current = nonnegative("d_current", d_current)
         self.max_speed = positive("max_speed", max_speed)
         self.feedforward = bool(feedforward)
+        self.guard = guard_arg(guard)
         self.y_c_hat = 0.0
 
     def coarse_gains(self, mass: float, damping: float) -> tuple[float, float]:
@@ -165,9 +176,12 @@ class PILinearised:
         self._pp = yc0
         self._pv = 0.0
         self._pint = 0.0
+        self._dyc = 0.0  # carriage motion predicted for the coming period (m)
+        self.guard.reset(plant, fs, y0, r0)
 
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One period: measured output ``y`` (m), reference ``r`` (m) → (V, A, A)."""
+        y, r = self.guard.filter(y, r, self.y_c_hat + self._dyc + self._mf)
         x = filter_sample(self._bq, r)
         rc = x - self._yf_mid
         # rate-limited coarse reference and its differences (flat outputs' derivatives)
@@ -190,6 +204,7 @@ class PILinearised:
             f_ff = 0.0
         # carriage estimate and the linearising torque command
         yc = y - self._mf
+        self._dyc = yc - self.y_c_hat
         self.y_c_hat = yc
         ec = rcl - yc
         fv = self._ckp * ec + self._cki * self._cint + f_ff

@@ -47,6 +47,7 @@ import math
 import numpy as np
 
 from ._check import finite, nonnegative, positive
+from .guard import MeasurementGuard, guard_arg
 from .lqr import delay_margin, design_model, loop_margins
 from .pi import clamp_with_antiwindup
 
@@ -75,12 +76,19 @@ class PQ:
     design_plant : DualStage, optional
         Plant whose parameters define ``G1``, ``G2`` (default: the plant given to
         :meth:`reset`).
+    guard : MeasurementGuard, optional
+        Measurement guard (default: a new :class:`.guard.MeasurementGuard` with the plant's
+        physical bounds). A rejected measurement is replaced by the a-priori prediction
+        ``ŷ_c(k−1) + Δα lead/(2π p) + ŷ_f(k)`` (carriage estimate moved with the field
+        phase, fine model advanced).
 
     Attributes
     ----------
     y_c_hat : float
         Carriage estimate ``y − ŷ_f`` (fine-stage model driven by the applied voltage), m —
         logged only; the PQ law itself uses the output error alone.
+    guard : MeasurementGuard
+        The measurement guard (``guard.rejected``: measurements rejected).
     """
 
     def __init__(
@@ -93,6 +101,7 @@ class PQ:
         current: float = 1.5,
         max_speed: float = 3.0e-3,
         design_plant=None,
+        guard: MeasurementGuard | None = None,
     ):
         self.pq_crossover = positive("pq_crossover", pq_crossover)
         self.lowpass = positive("lowpass", lowpass)
@@ -106,6 +115,7 @@ class PQ:
         self.current = positive("current", current)
         self.max_speed = positive("max_speed", max_speed)
         self.design_plant = design_plant
+        self.guard = guard_arg(guard)
         self.y_c_hat = 0.0
         self.model = None
 
@@ -278,9 +288,13 @@ class PQ:
         self._yf_op = mo.y_f_op
         self.y_c_hat = y0 - fp.gain * plant.v_applied
         self.clipped_steps = 0
+        self._m_per_rad = st.screw_radius / st.pole_pairs
+        self._dyc = 0.0  # carriage motion predicted for the coming period (m)
+        self.guard.reset(plant, fs, y0, r0)
 
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One period: measured output ``y`` (m), reference ``r`` (m) → (V, A, A)."""
+        y, r = self.guard.filter(y, r, self.y_c_hat + self._dyc + self._yf_op + self._mf)
         e = r - y
         self.y_c_hat = y - self._yf_op - self._mf
         # C2: PI with conditional integration
@@ -306,6 +320,7 @@ class PQ:
             self.clipped_steps += 1
         alpha = self._alpha + d
         self._alpha = alpha
+        self._dyc = d * self._m_per_rad
         # fine model for the logged carriage estimate
         fa = self._fa
         dv = v - self._vmid

@@ -25,7 +25,11 @@ class Run:
     t, r : ndarray
         Time (s) and reference (m).
     y : ndarray
-        Measured output at each sample (before that sample's command), m.
+        Measured output at each sample (before that sample's command), m: the plant's
+        metrology reading, *without* the injected faults.
+    y_sensor : ndarray
+        With ``simulate(..., faults=...)``: the value delivered to the controller at each
+        sample (the reading with the faults applied; may hold NaN), m. Else empty.
     y_f, y_c : ndarray
         True fine extension and carriage position at the same instants, m.
     y_c_hat : ndarray
@@ -36,7 +40,9 @@ class Run:
     fine_saturated : ndarray of bool
         Fine stage at a stroke limit at the end of the period.
     metrics : dict
-        See :func:`.metrics.tracking_metrics`, plus ``lost_sync`` (bool),
+        See :func:`.metrics.tracking_metrics`, plus ``rejected_samples`` (int: measurements
+        the controller's :class:`.guard.MeasurementGuard` rejected; 0 for a controller
+        without ``guard``), ``rejected_references`` (int), ``lost_sync`` (bool),
         ``sync_slip_steps``, ``coarse_stop_steps`` (int), ``rmse_true`` (m, error of the
         true output), ``fine_excursion`` (max |y_f − mid-stroke|, m), ``wall_time`` (s);
         with ``simulate(..., timing=True)`` also ``step_time_median`` and ``step_time_p99``
@@ -59,6 +65,7 @@ class Run:
     fine_saturated: np.ndarray
     metrics: dict = field(default_factory=dict)
     step_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    y_sensor: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def error(self) -> np.ndarray:
@@ -104,6 +111,7 @@ def simulate(
     seed: int = 0,
     progress: bool = False,
     timing: bool = False,
+    faults=None,
 ) -> Run:
     """Run ``controller`` on ``plant`` tracking ``reference`` at ``fs`` Hz.
 
@@ -162,6 +170,22 @@ def simulate(
             record(clock() - t_)
             return out
 
+    if faults is None:
+        fault = None
+    elif isinstance(faults, dict):
+        table = {int(k): float(v) for k, v in faults.items()}
+        bad = [k for k in table if not 0 <= k < n]
+        if bad:
+            raise ValueError(f"faults: sample index {bad[0]} outside 0..{n - 1}")
+
+        def fault(k_, y_):
+            return table.get(k_, y_)
+
+    elif callable(faults):
+        fault = faults
+    else:
+        raise ValueError(f"faults must be a dict or a callable (k, y) -> y, got {faults!r}")
+    sensor = [0.0] * n if fault is not None else []
     pstep = plant.step
     rl = r.tolist()
     chunk = max(1, n // 10)
@@ -170,7 +194,12 @@ def simulate(
         ys[k] = y
         yfs[k] = plant.y_f
         ycs[k] = plant.y_c
-        v, ia, ib = cstep(y, rl[k])
+        if fault is not None:
+            ym = float(fault(k, y))
+            sensor[k] = ym
+            v, ia, ib = cstep(ym, rl[k])
+        else:
+            v, ia, ib = cstep(y, rl[k])
         if has_hat:
             hats[k] = controller.y_c_hat
         vs[k] = v
@@ -198,6 +227,7 @@ def simulate(
         i_a=np.array(ias),
         i_b=np.array(ibs),
         fine_saturated=np.array(sats, dtype=bool),
+        y_sensor=np.array(sensor),
     )
     fp = plant.fine
     m = tracking_metrics(
@@ -209,6 +239,9 @@ def simulate(
         run.fine_saturated,
         plant.stepper.resistance,
     )
+    guard = getattr(controller, "guard", None)
+    m["rejected_samples"] = int(getattr(guard, "rejected", 0))
+    m["rejected_references"] = int(getattr(guard, "rejected_references", 0))
     m["lost_sync"] = bool(plant.lost_sync)
     m["sync_slip_steps"] = int(plant.sync_slip_steps)
     m["coarse_stop_steps"] = int(stops)
