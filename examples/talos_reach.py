@@ -311,7 +311,9 @@ def figures(rows: list[dict], out: Path) -> None:
     for r in rows:
         s = r["series"]
         t = DT * np.arange(1, len(s["hand_m"]) + 1)
-        ax.plot(t, 100 * (np.array(s["com_beyond_sole_m"]) + MARGIN), lw=1.0, label=r["run"])
+        style = "--" if r["method"] == "weighted" else "-"
+        y = 100 * (np.array(s["com_beyond_sole_m"]) + MARGIN)
+        ax.plot(t, y, ls=style, lw=1.2, label=r["run"])
     ax.axhline(0.0, color="k", lw=0.6)
     ax.axhline(100 * MARGIN, color="k", lw=0.6, ls=":")
     ax.set_xlabel("t (s)")
@@ -327,7 +329,7 @@ def figures(rows: list[dict], out: Path) -> None:
         axes[0].semilogy(t, np.maximum(s["feet_m"], 1e-12), lw=0.9, label=r["run"])
         axes[1].semilogy(t, np.maximum(s["hand_m"], 1e-12), lw=0.9, label=r["run"])
     axes[0].set_ylabel("feet drift (m)")
-    axes[1].set_ylabel("hand distance to the final target (m)")
+    axes[1].set_ylabel("hand to final target (m)")
     for ax in axes:
         ax.set_xlabel("t (s)")
     axes[1].legend(fontsize=6)
