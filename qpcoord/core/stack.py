@@ -13,6 +13,7 @@ from .errors import SolverError
 from .methods.hierarchical import solve_equality_chain, solve_hierarchical
 from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
+from .polish import KKT_TOL
 from .solution import Solution
 from .tasks import Bounds
 from .tolerance import within
@@ -110,7 +111,13 @@ class Stack:
         """The tasks of each level (equalities first, then inequalities)."""
         return [L.eqs + L.ineqs for L in self._compiled.levels]
 
-    def solve(self, solver: str | None = None, method: str = "hierarchical", warm_start=None):
+    def solve(
+        self,
+        solver: str | None = None,
+        method: str = "hierarchical",
+        warm_start=None,
+        strict: bool = False,
+    ):
         """Solve the stack with the tasks' current numbers.
 
         Parameters
@@ -123,6 +130,10 @@ class Stack:
             only), or one weighted QP.
         warm_start : Solution or array_like, optional
             The previous step's solution (or its ``x``); gives the QPs a primal start.
+        strict : bool
+            Raise :class:`~qpcoord.SolverError` instead of returning a solution whose
+            ``status`` is ``"inaccurate"`` (a level whose optimality conditions could not be
+            certified, ``method="hierarchical"``).
 
         Returns
         -------
@@ -135,9 +146,12 @@ class Stack:
         InfeasibleError
             Bounds and hard constraints are inconsistent.
         SolverError
-            A backend failed or returned a point that violates the hard constraints.
+            A backend failed or returned a point that violates the hard constraints; with
+            ``strict=True`` also a level that could not be certified.
         """
         t0 = time.perf_counter()
+        if not isinstance(strict, bool):
+            raise ValueError(f"strict must be True or False, got {strict!r}")
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
         P = self._compiled
@@ -176,9 +190,21 @@ class Stack:
         elif not np.isfinite(x.sum()):  # bounds met to FEAS_TOL already; no hard rows
             raise SolverError("the closed-form solution is not finite")
         residuals = np.array([L.residual(x) for L in P.levels])
+        status = "optimal"
+        bad = info.get("uncertified")
+        if bad:
+            status = "inaccurate"
+            k, kkt = bad[0]
+            info["inaccurate"] = {"level": k, "kkt_residual": kkt}
+            if strict:
+                raise SolverError(
+                    f"level {k}: the answer could not be certified optimal (KKT residual "
+                    f"{kkt:.3g}, relative; tolerance {KKT_TOL:g}) with backend {used!r}"
+                    + (" or its fallbacks" if self._work.fallback else "")
+                )
         return Solution(
             x=x,
-            status="optimal",
+            status=status,
             level_residuals=residuals,
             solver=used,
             solve_time=time.perf_counter() - t0,
