@@ -133,7 +133,7 @@ def _polish_at(H, f, G, lo, hi, lb, ub, y, tol, slack, prox: float = 0.0):
 #: Relative KKT residual (stationarity with sign-constrained multipliers, in the
 #: column-equilibrated space, per unit of the level's residual norm) under which a level is
 #: certified optimal.
-KKT_TOL = 1e-7
+KKT_TOL = 1e-9
 #: Relative primal feasibility (to the row scale ``max(1, |bound|, ‖y‖∞)``, rows of unit norm)
 #: certified point, and distance under which a row counts as active.
 KKT_FEAS_TOL = 1e-9

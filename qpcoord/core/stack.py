@@ -172,9 +172,12 @@ class Stack:
             # costs the chain's time on top of the general path's)
             if method == "hierarchical" and P.equalities_only and not self._chain_missed:
                 x, info = solve_equality_chain(P, self.damping)
-                if P.lb is not None and not within(x, P.lb, P.ub, FEAS_TOL):
-                    R = self._work.reset(P.lb, P.ub, used)
-                    self._chain_missed = True
+                if P.lb is not None:
+                    if not within(x, P.lb, P.ub, FEAS_TOL):
+                        R = self._work.reset(P.lb, P.ub, used)
+                        self._chain_missed = True
+                    else:  # met to FEAS_TOL: snapped, a returned x never leaves its box
+                        np.clip(x, P.lb, P.ub, out=x)
             else:
                 R = self._work.reset(P.lb, P.ub, used)
         if R is not None:
