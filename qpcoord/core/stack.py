@@ -38,8 +38,9 @@ class Stack:
     regularization : float
         Weight of ``‖x‖²``-type terms that keep every QP strictly convex in directions a
         level leaves free (default ``1e-9``, relative to a unit-weight task). It does not bias
-        the strict hierarchy: those directions are handed to lower levels and finally to the
-        minimum-norm step.
+        the strict hierarchy: every level is certified on its own problem without it (a
+        point it biased is made exact by an active-set continuation), and those directions
+        are handed to lower levels and finally to the minimum-norm step.
     damping : float
         Relative singular-value threshold ``τ/s₀`` under which a level's directions are
         damped rather than inverted exactly (default ``1e-7``; see :mod:`qpcoord.core.linalg`):
