@@ -112,6 +112,9 @@ class Reduced:
         self.fallbacks: list[str] = []
         self._in_fallback = False
         self.polished = 0
+        self.continued = 0  # levels made exact by the active-set continuation
+        self.certificates: list[float] = []  # KKT residual of each level that ran a QP
+        self.uncertified: list[tuple[int, float]] = []  # (level, KKT residual)
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
         return self
 
@@ -172,10 +175,10 @@ class Reduced:
             self.restrict(null_space(F, scale))
 
     def move_to(self, x: np.ndarray, verified: bool) -> None:
-        """Set ``x̄``. A QP output (``verified=False``) is snapped into the bounds: that
-        removes a backend's ~1e-12 overshoot, which would make ``z = 0`` infeasible for
-        the next level."""
-        if not verified and self.lb is not None:
+        """Set ``x̄``, snapped into the bounds: that removes a backend's ~1e-12 overshoot,
+        which would make ``z = 0`` infeasible for the next level, and a closed form's
+        ``FEAS_TOL`` one, so a returned ``x`` never leaves its box."""
+        if self.lb is not None:
             x = np.minimum(np.maximum(x, self.lb), self.ub)
         self.x = x
         self.verified = verified
@@ -239,6 +242,24 @@ class Reduced:
             return blocks[0], los[0], his[0], lb, ub
         return np.vstack(blocks), np.concatenate(los), np.concatenate(his), lb, ub
 
+    def exact_rows(self, kdim: int, D=None, dlo=None, dhi=None):
+        """The QP's rows in ``y = (z, w)`` without any opening, the bounds as rows too:
+        ``(G, lo, hi)`` with ``y = 0`` feasible (what certification checks against)."""
+        keep = self.relax
+        self.relax = 0.0
+        try:
+            G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+        finally:
+            self.relax = keep
+        if lb is not None:
+            fin = np.isfinite(lb) | np.isfinite(ub)
+            if fin.any():
+                E = np.eye(kdim)[fin]
+                G = np.vstack((G, E)) if G.shape[0] else E
+                lo = np.concatenate((lo, lb[fin]))
+                hi = np.concatenate((hi, ub[fin]))
+        return G, lo, hi
+
     def solve_qp(
         self,
         H: np.ndarray,
@@ -283,6 +304,11 @@ class Reduced:
             raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite solution")
         miss = _miss(G, lo, hi, lb, ub, res.y)
         if miss > CHECK_TOL:
+            # a point outside the QP's own rows is a failure of the backend: the next
+            # backend gets the QP (the issue-22 Panda IK: daqp 4.9e-6 outside, every step)
+            y = self._fallback(H, f, D, dlo, dhi, where)
+            if y is not None:
+                return y
             raise SolverError(
                 f"{where}: backend {self.solver!r} returned a point that violates its QP's "
                 f"constraints by {miss:.3g} (relative)"
@@ -295,6 +321,29 @@ class Reduced:
         G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
         self.relax = keep
         return polish(H, f, G, lo, hi, lb, ub, res.y, obj_slack=10.0 * opened)
+
+    def alternatives(self) -> list[str]:
+        """Installed backends of :data:`FALLBACKS` other than the requested one (empty with
+        ``fallback=False``)."""
+        if not self.fallback:
+            return []
+        installed = set(available_solvers())
+        return [s for s in FALLBACKS if s != self.solver and s in installed]
+
+    def solve_qp_with(self, solver: str, H, f, D=None, dlo=None, dhi=None, where: str = ""):
+        """:meth:`solve_qp` with another backend (no further fallback); ``None`` if it
+        fails. Used when a level's answer could not be certified."""
+        keep_solver, keep_relax, keep_fb = self.solver, self.relax, self._in_fallback
+        self.solver = solver
+        self.relax = RELAX.get(solver, RELAX_DEFAULT)
+        self.used_relax = max(self.used_relax, self.relax)
+        self._in_fallback = True
+        try:
+            return self.solve_qp(H, f, D, dlo, dhi, None, where)
+        except SolverError:
+            return None
+        finally:
+            self.solver, self.relax, self._in_fallback = keep_solver, keep_relax, keep_fb
 
     def _fallback(self, H, f, D, dlo, dhi, where: str) -> np.ndarray | None:
         """Solve a level QP the requested backend failed on with the next backend of

@@ -119,3 +119,232 @@ def _polish_at(H, f, G, lo, hi, lb, ub, y, tol, slack, prox: float = 0.0):
     if fn > fy + slack * max(1.0, abs(fy)):
         return None
     return yn
+
+
+# ---- certification and exact continuation of a least-squares level ---------------------
+#
+# A level of the hierarchy is ``min ½‖Q y − c‖²`` subject to ``lo ≤ G y ≤ hi`` (``Q`` the
+# level's equality rows in the remaining freedom, with its damping rows and the weighted
+# slacks of its inequality rows; ``G`` the inherited rows, the bounds and the level's own
+# rows with their slacks). :func:`kkt_residual` checks its optimality conditions at a point;
+# :func:`active_set_ls` solves it exactly by a primal active-set method started from a
+# feasible point (the backend's answer, pulled back into the rows if needed).
+
+#: Relative KKT residual (stationarity with sign-constrained multipliers, in the
+#: column-equilibrated space, per unit of the level's residual norm) under which a level is
+#: certified optimal.
+KKT_TOL = 1e-9
+#: Relative primal feasibility (to the row scale ``max(1, |bound|, ‖y‖∞)``, rows of unit norm)
+#: certified point, and distance under which a row counts as active.
+KKT_FEAS_TOL = 1e-9
+#: A level whose residual norm is under this fraction of its scale ``‖c‖ + ‖Q y‖`` is
+#: certified by its value (its objective cannot go below 0).
+VALUE_TOL = 1e-10
+#: Misses of a row (relative to ``max(1, |bound|)``) that :func:`pull_back` leaves alone: the
+#: opening of the rows in the QPs of the active-set backends.
+PULL_TOL = 1e-12
+#: Iterations of :func:`active_set_ls`, per row and variable.
+AS_ITER = 4
+
+
+def _row_scale(Gn, lo, hi, y):
+    ny = float(np.abs(y).max()) if y.size else 0.0
+    b = np.maximum(
+        np.where(np.isfinite(lo), np.abs(lo), 0.0), np.where(np.isfinite(hi), np.abs(hi), 0.0)
+    )
+    return np.maximum(np.maximum(b, ny), 1.0)
+
+
+def _normalise_rows(G, lo, hi):
+    """Rows of ``G`` scaled to unit norm (zero rows dropped) with their bounds."""
+    if G.shape[0] == 0:
+        return G, lo, hi
+    nr = np.sqrt(np.einsum("ij,ij->i", G, G))
+    keep = nr > 0.0
+    nr = nr[keep]
+    return G[keep] / nr[:, None], lo[keep] / nr, hi[keep] / nr
+
+
+def _col_scale(Q, Gn):
+    """Jacobi column scaling: ``1/max(‖Q_:j‖, ‖Gn_:j‖)`` (1 for an empty column)."""
+    cq = np.sqrt(np.einsum("ij,ij->j", Q, Q)) if Q.shape[0] else np.zeros(Q.shape[1])
+    cg = np.sqrt(np.einsum("ij,ij->j", Gn, Gn)) if Gn.shape[0] else np.zeros(Q.shape[1])
+    c = np.maximum(cq, cg)
+    c[c == 0.0] = 1.0
+    return 1.0 / c
+
+
+def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
+    """Optimality of ``y`` for ``min ½‖Q y − c‖², lo ≤ G y ≤ hi``.
+
+    Returns ``(stationarity, infeasibility)``, both dimensionless:
+
+    - *infeasibility*: the largest violation of a row, relative to its scale
+      ``max(1, |bound|, ‖y‖∞)`` after the rows are normalised to unit norm (the library's
+      ``max(1, |bound|)`` rule);
+    - *stationarity*: with the columns equilibrated (``S = diag(1/max(‖Q_:j‖, ‖G_:j‖))``,
+      so that variables in any units count alike), the distance of the scaled gradient
+      ``S Qᵀ(Q y − c)`` from the cone of the active rows' normals with multipliers of the
+      right sign (non-negative least squares: dual sign and complementarity are part of it,
+      only rows within ``KKT_FEAS_TOL`` of a bound may carry a multiplier), divided by
+      ``max(‖Q y − c‖, 1e-8·(‖c‖ + ‖Q y‖))``.
+
+    A point with both under their tolerances (:data:`KKT_TOL`, :data:`KKT_FEAS_TOL`) is
+    optimal up to an objective gap of order ``KKT_TOL²`` times the level's value in
+    well-scaled directions.
+    """
+    from scipy.optimize import nnls
+
+    Gn, lon, hin = _normalise_rows(G, lo, hi)
+    qy = Q @ y
+    res = qy - c
+    # a level met to rounding has a gradient of rounding noise: its floor is 1e-8 of the
+    # level's scale ‖c‖ + ‖Q y‖, and one met to VALUE_TOL of it is certified by its value
+    # (the objective is ≥ 0)
+    nres = float(np.linalg.norm(res))
+    lscale = float(np.linalg.norm(c)) + float(np.linalg.norm(qy))
+    den = max(nres, 1e-8 * lscale, 1e-300)
+    by_value = nres <= VALUE_TOL * lscale
+    S = _col_scale(Q, Gn)
+    gs = S * (Q.T @ res)
+    infeas = 0.0
+    if Gn.shape[0]:
+        gy = Gn @ y
+        sc = _row_scale(Gn, lon, hin, y)
+        below = (lon - gy) / sc
+        above = (gy - hin) / sc
+        below[~np.isfinite(below)] = -np.inf
+        above[~np.isfinite(above)] = -np.inf
+        infeas = max(0.0, float(below.max()), float(above.max()))
+        if by_value:
+            return 0.0, infeas
+        a_lo = np.isfinite(lon) & (gy - lon <= KKT_FEAS_TOL * sc)
+        a_hi = np.isfinite(hin) & (hin - gy <= KKT_FEAS_TOL * sc)
+        cols = []
+        if a_lo.any():
+            cols.append(Gn[a_lo] * S)  # g = Σ μ_i G_i, μ ≥ 0 at a lower bound
+        if a_hi.any():
+            cols.append(-Gn[a_hi] * S)  # μ ≤ 0 at an upper bound
+        if cols:
+            B = np.vstack(cols).T
+            gmax = float(np.abs(gs).max())
+            if gmax == 0.0:
+                return 0.0, infeas
+            _mu, rn = nnls(B / gmax, gs / gmax, maxiter=50 * B.shape[1] + 50)
+            return rn * gmax / den, infeas
+    return (0.0 if by_value else float(np.linalg.norm(gs)) / den), infeas
+
+
+def pull_back(G, lo, hi, y, y_safe=None):
+    """The point of the segment from ``y_safe`` (default 0, feasible by assumption) to ``y``
+    farthest along it that meets ``lo ≤ G y ≤ hi`` exactly (a ratio test on the rows ``y``
+    violates: each row's half-space holds both ends of the segment otherwise)."""
+    if G.shape[0] == 0:
+        return y
+    gy = G @ y
+    # misses at the active-set backends' opening (1e-12·max(1, |bound|)) or at rounding
+    # level are not violations
+    tol = 1e-13 * np.sqrt(np.einsum("ij,ij->i", G, G)) * float(np.abs(y).max()) + PULL_TOL * (
+        np.maximum(
+            1.0,
+            np.maximum(
+                np.where(np.isfinite(lo), np.abs(lo), 0.0),
+                np.where(np.isfinite(hi), np.abs(hi), 0.0),
+            ),
+        )
+    )
+    over, under = gy > hi + tol, gy < lo - tol
+    if not (over.any() or under.any()):
+        return y
+    base = np.zeros_like(y) if y_safe is None else y_safe
+    gb = G @ base
+    gd = gy - gb
+    t = 1.0
+    if over.any():
+        t = min(t, float(np.min((hi[over] - gb[over]) / gd[over])))
+    if under.any():
+        t = min(t, float(np.min((lo[under] - gb[under]) / gd[under])))
+    return base + max(t, 0.0) * (y - base)
+
+
+def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None):
+    """Solve ``min ½‖Q y − c‖², lo ≤ G y ≤ hi`` exactly from a feasible ``y0``.
+
+    A primal active-set method (Nocedal & Wright, Alg. 16.3) on the least-squares form:
+    each iteration solves the objective on the working set's null space in minimum-norm
+    least squares (an SVD, no Hessian is formed: a semidefinite ``QᵀQ`` is fine), steps
+    as far as the inactive rows allow, adds the blocking row, or, when the point is
+    stationary on its working set, drops the row whose multiplier has the wrong sign.
+    Returns ``(y, converged)``; ``y`` is feasible whenever ``y0`` is.
+    """
+    k = y0.shape[0]
+    Gn, lon, hin = _normalise_rows(G, lo, hi)
+    m = Gn.shape[0]
+    S = _col_scale(Q, Gn)
+    y = y0.astype(float).copy()
+    Qs = Q * S  # work in the equilibrated variables u = y / S
+    Gs = Gn * S
+    u = y / S
+    if max_iter is None:
+        max_iter = AS_ITER * (m + k) + 10
+    eq = np.isfinite(lon) & (lon == hin)
+    gy = Gn @ y if m else np.zeros(0)
+    sc = _row_scale(Gn, lon, hin, y) if m else np.zeros(0)
+    W_lo = np.isfinite(lon) & (gy - lon <= KKT_FEAS_TOL * sc)
+    W_hi = np.isfinite(hin) & (hin - gy <= KKT_FEAS_TOL * sc) & ~W_lo
+    W_lo |= eq
+    cn = float(np.linalg.norm(c))
+    for _ in range(max_iter):
+        W = W_lo | W_hi
+        if W.any():
+            Uw, sw, Vw = svd(Gs[W], full=True)
+            rw = numerical_rank(sw, Gs[W].shape)
+            N = Vw[rw:].T
+        else:
+            N = np.eye(k)
+        res = Qs @ u - c
+        if N.shape[1]:
+            K = Qs @ N
+            Uk, sk, Vk = svd(K, full=False)
+            rk = numerical_rank(sk, K.shape)
+            step = N @ (Vk[:rk].T @ ((Uk[:, :rk].T @ -res) / sk[:rk])) if rk else np.zeros(k)
+        else:
+            step = np.zeros(k)
+        # stationary on W when the step no longer decreases the objective measurably
+        dres = Qs @ step
+        gain = -(2.0 * float(res @ dres) + float(dres @ dres))
+        if gain <= 1e-15 * max(float(res @ res), 1e-30 * cn * cn) or not np.any(step):
+            g = Qs.T @ res
+            if not W.any():
+                return u * S, True
+            idx = np.flatnonzero(W)
+            sign = np.where(W_lo[idx], 1.0, -1.0)
+            mu = np.linalg.lstsq(Gs[idx].T * sign, g, rcond=None)[0]
+            mu[eq[idx]] = np.inf  # equalities are never dropped
+            j = int(np.argmin(mu))
+            gref = max(float(np.abs(g).max()), 1e-300)
+            if mu[j] >= -KKT_TOL * gref:
+                return u * S, True
+            W_lo[idx[j]] = W_hi[idx[j]] = False
+            continue
+        # ratio test on the rows outside the working set
+        if m:
+            gp = Gs @ step
+            gu = Gs @ u
+            tiny = 1e-13 * float(np.abs(step).max())
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_hi = np.where(~W & (gp > tiny), (hin - gu) / gp, np.inf)
+                t_lo = np.where(~W & (gp < -tiny), (lon - gu) / gp, np.inf)
+            t_hi = np.maximum(t_hi, 0.0)
+            t_lo = np.maximum(t_lo, 0.0)
+            jh, jl = int(np.argmin(t_hi)), int(np.argmin(t_lo))
+            alpha = min(1.0, float(t_hi[jh]), float(t_lo[jl]))
+        else:
+            alpha = 1.0
+        u = u + alpha * step
+        if alpha < 1.0:
+            if t_hi[jh] <= t_lo[jl]:
+                W_hi[jh] = True
+            else:
+                W_lo[jl] = True
+    return u * S, False

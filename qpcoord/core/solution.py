@@ -18,7 +18,10 @@ class Solution:
     x : numpy.ndarray, shape (n,)
         The solution, checked against the bounds and hard constraints.
     status : str
-        ``"optimal"``.
+        ``"optimal"`` when every level's optimality conditions were checked on ``x``
+        (``method="hierarchical"``: its KKT residual, see ``docs/stack.md``);
+        ``"inaccurate"`` when a level could not be certified (``info["inaccurate"]`` names
+        the level and its KKT residual; ``Stack.solve(strict=True)`` raises instead).
     level_residuals : numpy.ndarray, shape (levels,)
         Per level, ``√(‖√w (A x − b)‖² + ‖√w · violation(C x)‖²)`` over its tasks, in task
         units (weights included).
@@ -32,8 +35,11 @@ class Solution:
         ``qp_calls`` (QPs actually solved), ``fallbacks`` (level QPs the requested
         backend failed on and another backend solved, e.g. ``"level 1: quadprog"``),
         ``level_ranks`` (dimensions each level fixed;
-        hierarchical and nullspace methods) and ``free_dofs`` (freedom left to the
-        minimum-norm step; hierarchical).
+        hierarchical and nullspace methods), ``free_dofs`` (freedom left to the
+        minimum-norm step; hierarchical), and for the hierarchical method ``kkt`` (the
+        certified KKT residual of each level that ran a QP), ``continued`` (levels made
+        exact by the active-set continuation), ``uncertified`` (``(level, residual)``) and,
+        when ``status == "inaccurate"``, ``inaccurate`` (``{"level", "kkt_residual"}``).
     """
 
     x: np.ndarray

@@ -13,6 +13,7 @@ from .errors import SolverError
 from .methods.hierarchical import solve_equality_chain, solve_hierarchical
 from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
+from .polish import KKT_TOL
 from .solution import Solution
 from .tasks import Bounds
 from .tolerance import within
@@ -37,8 +38,9 @@ class Stack:
     regularization : float
         Weight of ``‖x‖²``-type terms that keep every QP strictly convex in directions a
         level leaves free (default ``1e-9``, relative to a unit-weight task). It does not bias
-        the strict hierarchy: those directions are handed to lower levels and finally to the
-        minimum-norm step.
+        the strict hierarchy: every level is certified on its own problem without it (a
+        point it biased is made exact by an active-set continuation), and those directions
+        are handed to lower levels and finally to the minimum-norm step.
     damping : float
         Relative singular-value threshold ``τ/s₀`` under which a level's directions are
         damped rather than inverted exactly (default ``1e-7``; see :mod:`qpcoord.core.linalg`):
@@ -110,7 +112,13 @@ class Stack:
         """The tasks of each level (equalities first, then inequalities)."""
         return [L.eqs + L.ineqs for L in self._compiled.levels]
 
-    def solve(self, solver: str | None = None, method: str = "hierarchical", warm_start=None):
+    def solve(
+        self,
+        solver: str | None = None,
+        method: str = "hierarchical",
+        warm_start=None,
+        strict: bool = False,
+    ):
         """Solve the stack with the tasks' current numbers.
 
         Parameters
@@ -123,6 +131,10 @@ class Stack:
             only), or one weighted QP.
         warm_start : Solution or array_like, optional
             The previous step's solution (or its ``x``); gives the QPs a primal start.
+        strict : bool
+            Raise :class:`~qpcoord.SolverError` instead of returning a solution whose
+            ``status`` is ``"inaccurate"`` (a level whose optimality conditions could not be
+            certified, ``method="hierarchical"``).
 
         Returns
         -------
@@ -135,9 +147,12 @@ class Stack:
         InfeasibleError
             Bounds and hard constraints are inconsistent.
         SolverError
-            A backend failed or returned a point that violates the hard constraints.
+            A backend failed or returned a point that violates the hard constraints; with
+            ``strict=True`` also a level that could not be certified.
         """
         t0 = time.perf_counter()
+        if not isinstance(strict, bool):
+            raise ValueError(f"strict must be True or False, got {strict!r}")
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
         P = self._compiled
@@ -158,9 +173,12 @@ class Stack:
             # costs the chain's time on top of the general path's)
             if method == "hierarchical" and P.equalities_only and not self._chain_missed:
                 x, info = solve_equality_chain(P, self.damping)
-                if P.lb is not None and not within(x, P.lb, P.ub, FEAS_TOL):
-                    R = self._work.reset(P.lb, P.ub, used)
-                    self._chain_missed = True
+                if P.lb is not None:
+                    if not within(x, P.lb, P.ub, FEAS_TOL):
+                        R = self._work.reset(P.lb, P.ub, used)
+                        self._chain_missed = True
+                    else:  # met to FEAS_TOL: snapped, a returned x never leaves its box
+                        np.clip(x, P.lb, P.ub, out=x)
             else:
                 R = self._work.reset(P.lb, P.ub, used)
         if R is not None:
@@ -176,9 +194,21 @@ class Stack:
         elif not np.isfinite(x.sum()):  # bounds met to FEAS_TOL already; no hard rows
             raise SolverError("the closed-form solution is not finite")
         residuals = np.array([L.residual(x) for L in P.levels])
+        status = "optimal"
+        bad = info.get("uncertified")
+        if bad:
+            status = "inaccurate"
+            k, kkt = bad[0]
+            info["inaccurate"] = {"level": k, "kkt_residual": kkt}
+            if strict:
+                raise SolverError(
+                    f"level {k}: the answer could not be certified optimal (KKT residual "
+                    f"{kkt:.3g}, relative; tolerance {KKT_TOL:g}) with backend {used!r}"
+                    + (" or its fallbacks" if self._work.fallback else "")
+                )
         return Solution(
             x=x,
-            status="optimal",
+            status=status,
             level_residuals=residuals,
             solver=used,
             solve_time=time.perf_counter() - t0,

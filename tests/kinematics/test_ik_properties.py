@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -49,13 +48,6 @@ def test_strict_ik_respects_bounds_and_is_never_worse_on_its_first_level(case):
         np.testing.assert_allclose(J @ strict, b, atol=1e-8 * scale)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=qc.SolverError,
-    reason="issue 22 (core accuracy): found by the property above; the posture level's QP "
-    "point from daqp is rejected (constraint violation 1.07e-6 relative) and the backends "
-    "disagree on that level (27.08-27.17)",
-)
 def test_strict_ik_near_singular_speed_limited_case_solves():
     """Planar 3R stretched near a singularity (q3 = 1e-7), the position task beyond the speed
     limits: level 0 saturates the bounds and the posture level must still be solved."""
@@ -64,13 +56,6 @@ def test_strict_ik_near_singular_speed_limited_case_solves():
     test_strict_ik_respects_bounds_and_is_never_worse_on_its_first_level.hypothesis.inner_test(case)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="issue 22 (core accuracy): found by the property above; the strict answer from daqp "
-    "exceeds the 0.125 rad/s speed bound by 2.7e-10 (inside the library's max(1, |bound|)·1e-9 "
-    "feasibility tolerance, outside this test's 1e-9 relative); quadprog/proxqp stay inside",
-)
 def test_strict_ik_small_speed_bound_is_not_exceeded():
     """Planar 3R almost stretched, a 0.125 rad/s speed limit that the position task saturates:
     the bound must hold to 1e-9 relative."""

@@ -34,6 +34,7 @@ import numpy as np
 from ..compile import CompiledStack
 from ..elimination import Reduced
 from ..linalg import filtered_svd, numerical_rank, svd
+from ..polish import KKT_FEAS_TOL, KKT_TOL, active_set_ls, kkt_residual, pull_back
 from ..tolerance import at_bounds
 
 __all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
@@ -140,6 +141,105 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     return zp
 
 
+class _Certifier:
+    """Certify a level's point, and make it exact where it is not.
+
+    The level, in ``y = (z, w)`` (``w`` the slacks of its movable inequality rows, in units
+    of ``z``), is ``min ½‖Q y − c‖²`` under the inherited rows, the bounds and its own rows
+    ``dlo ≤ D z − w ≤ dhi``, none of them opened: ``Q`` holds the projected equality rows
+    ``M``, the damping rows ``√(τ² − s²)·vᵢᵀ`` of the damped directions (the damping is
+    part of the level's objective: a damped level is certified as the damped problem it
+    is) and ``diag(√weight·‖Dᵢ‖)`` on the slacks. The regularisation of the QP is not: the
+    certificate is of the level's own problem.
+
+    :meth:`run` tries the candidate points in turn (pulled back into the rows if a backend
+    left them by its tolerance), then the exact active-set continuation from the best one,
+    then each fallback backend's QP point (with the continuation). Returns the first
+    certified point, else the best feasible one with ``ok = False``.
+    """
+
+    def __init__(self, R, r, rank, M, e, s, tau, Vt, mv, Dm, dlo, dhi, wdiag):
+        self.R, self.r, self.mv = R, r, mv
+        kdim = r + mv
+        blocks, rhs = [], []
+        if rank:
+            blocks.append(np.hstack((M, np.zeros((M.shape[0], mv)))) if mv else M)
+            rhs.append(e)
+            damped = s[:rank] < tau
+            if damped.any():
+                gain = np.sqrt(tau * tau - s[:rank][damped] ** 2)
+                Dr = gain[:, None] * Vt[:rank][damped]
+                blocks.append(np.hstack((Dr, np.zeros((Dr.shape[0], mv)))) if mv else Dr)
+                rhs.append(np.zeros(Dr.shape[0]))
+        if mv:
+            blocks.append(np.hstack((np.zeros((mv, r)), np.diag(wdiag))))
+            rhs.append(np.zeros(mv))
+        self.Q = np.vstack(blocks) if blocks else np.zeros((0, kdim))
+        self.c = np.concatenate(rhs) if rhs else np.zeros(0)
+        self.Dm, self.dlo, self.dhi = Dm, dlo, dhi
+        Dy = None if not mv else np.hstack((Dm, -np.eye(mv)))
+        self.G, self.lo, self.hi = R.exact_rows(kdim, Dy, dlo, dhi)
+        self.y_safe = self._with_slacks(np.zeros(r))
+
+    def _with_slacks(self, z):
+        if not self.mv:
+            return z
+        dz = self.Dm @ z
+        return np.concatenate((z, dz - np.clip(dz, self.dlo, self.dhi)))
+
+    def _feasible_point(self, z):
+        y = pull_back(self.G, self.lo, self.hi, self._with_slacks(z), self.y_safe)
+        return self._with_slacks(y[: self.r])
+
+    def _obj(self, y):
+        d = self.Q @ y - self.c
+        return float(d @ d)
+
+    def _check(self, y):
+        st, infeas = kkt_residual(self.Q, self.c, self.G, self.lo, self.hi, y)
+        return st <= KKT_TOL and infeas <= KKT_FEAS_TOL, st
+
+    def run(self, candidates, H, f, Dy, where):
+        best, best_obj, best_kkt = None, np.inf, np.inf
+        for z in candidates:
+            y = self._feasible_point(z)
+            ok, kkt = self._check(y)
+            if ok:
+                return y[: self.r], True, kkt
+            o = self._obj(y)
+            if o < best_obj:
+                best, best_obj, best_kkt = y, o, kkt
+        # exact continuation from the best point, then from other backends' points
+        starts = [best]
+        alts = iter(self.R.alternatives())
+        while starts:
+            y0 = starts.pop()
+            y, _conv = active_set_ls(self.Q, self.c, self.G, self.lo, self.hi, y0)
+            y = self._feasible_point(y[: self.r])
+            ok, kkt = self._check(y)
+            self.R.continued += 1
+            if ok:
+                return y[: self.r], True, kkt
+            o = self._obj(y)
+            if o < best_obj:
+                best, best_obj, best_kkt = y, o, kkt
+            for alt in alts:
+                ya = self.R.solve_qp_with(alt, H, f, Dy, self.dlo, self.dhi, where)
+                if ya is None:
+                    continue
+                self.R.fallbacks.append(f"{where}: {alt} (not certified)")
+                ya = self._feasible_point(ya[: self.r])
+                ok, kkt = self._check(ya)
+                if ok:
+                    return ya[: self.r], True, kkt
+                o = self._obj(ya)
+                if o < best_obj:
+                    best, best_obj, best_kkt = ya, o, kkt
+                starts.append(ya)
+                break
+        return best[: self.r], False, best_kkt
+
+
 def _level_svd(L, M: np.ndarray, damping: float):
     """:func:`~qpcoord.core.linalg.filtered_svd` of a level's projected rows ``M = Ae Z``.
 
@@ -205,6 +305,9 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
         "polished": 0,
         "level_ranks": ranks,
         "free_dofs": r,
+        "continued": 0,
+        "kkt": [],
+        "uncertified": [],
     }
     return x, info
 
@@ -247,6 +350,8 @@ def solve_hierarchical(
             continue
         # ---- closed form for the equality rows --------------------------------------
         rank = 0
+        M = e = s = Vt = None
+        tau = 0.0
         if L.m_eq:
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
@@ -313,11 +418,13 @@ def solve_hierarchical(
         if x_warm is not None:
             y0 = np.zeros(kdim)
             y0[:r] = R.project(x_warm - x)
-        y = R.solve_qp(H, f, Dy, dlo, dhi, y0, where=f"level {k}")
+        where = f"level {k}"
+        y = R.solve_qp(H, f, Dy, dlo, dhi, y0, where=where)
         z = y[:r]
         xn = x + R.lift(z)
         F = [Vt[:rank]] if rank else []
         viol_rows = np.zeros(L.m_in, dtype=bool)
+        vscale = np.zeros(L.m_in)
         if mv:
             w = y[r:] * dm  # violation, units of C x
             xscale = max(float(np.abs(x).max()), float(np.abs(xn).max()))
@@ -325,7 +432,6 @@ def solve_hierarchical(
                 np.maximum(_finite_abs(L.lo[idx]), _finite_abs(L.hi[idx])), cn[idx] * xscale
             )
             viol_rows[idx[np.abs(w) > VIOLATION_TOL * scale + _ABS_FLOOR]] = True
-            vscale = np.zeros(L.m_in)
             vscale[idx] = scale
         # exact refinement on the QP's active set (removes the backend's tolerance and
         # the regularisation's bias before the level is frozen)
@@ -348,16 +454,35 @@ def solve_hierarchical(
         # also for exact backends: their optimum carries the regularisation's ~1e-9 bias
         zp = _refine(R, L, x, z, ls_rows, ls_rhs, viol_rows)
         if zp is not None:
-            z = zp
-            xn = x + R.lift(z)
             R.polished += 1
-            if viol_rows.any():
-                # classify on the refined point's own violation: a row the QP's tolerance
-                # left violated but the exact solve satisfies is not frozen
-                cv = L.C[viol_rows] @ xn
-                gap = np.maximum(L.lo[viol_rows] - cv, cv - L.hi[viol_rows])
-                still = gap > VIOLATION_TOL * vscale[viol_rows] + _ABS_FLOOR
-                viol_rows[np.flatnonzero(viol_rows)[~still]] = False
+        # ---- certification: the level's KKT conditions at the point kept -------------
+        cert = _Certifier(
+            R,
+            r,
+            rank,
+            M,
+            e,
+            s,
+            tau,
+            Vt,
+            mv,
+            Dm if mv else None,
+            dlo,
+            dhi,
+            (L.sw[idx] * dm) if mv else None,
+        )
+        z, ok, kkt = cert.run([zp, z] if zp is not None else [z], H, f, Dy, where)
+        R.certificates.append(kkt)
+        if not ok:
+            R.uncertified.append((k, kkt))
+        xn = x + R.lift(z)
+        if mv:
+            # classify on the kept point's own violation (a row the QP's tolerance left
+            # violated but the exact point satisfies is not frozen)
+            cxk = L.C[idx] @ xn
+            gap = np.maximum(L.lo[idx] - cxk, cxk - L.hi[idx])
+            viol_rows[:] = False
+            viol_rows[idx[gap > VIOLATION_TOL * vscale[idx] + _ABS_FLOOR]] = True
         R.move_to(xn, verified=False)
         fscale = 1.0  # rows of Vt are unit vectors
         if viol_rows.any():
@@ -387,6 +512,13 @@ def solve_hierarchical(
         else:
             y0 = None if x_warm is None else R.project(x_warm - x)
             z = R.solve_qp(np.eye(r), R.project(x), y0=y0, where="minimum-norm step")
+            # never let the step slip through a row a level above kept (an opened QP)
+            G, lo, hi = R.exact_rows(r)
+            zb = pull_back(G, lo, hi, z)
+            if zb is not z:  # pulled back: finish the step exactly from there
+                zb, _ = active_set_ls(np.eye(r), -R.project(x), G, lo, hi, zb)
+                z = pull_back(G, lo, hi, zb)
+                R.continued += 1
             R.move_to(x + R.lift(z), verified=False)
     return {
         "qp_calls": R.qp_calls,
@@ -395,4 +527,7 @@ def solve_hierarchical(
         "polished": R.polished,
         "level_ranks": ranks,
         "free_dofs": r,
+        "continued": R.continued,
+        "kkt": R.certificates,
+        "uncertified": R.uncertified,
     }

@@ -1,0 +1,113 @@
+"""The certified hierarchy (issue 22, "A certified hierarchy"): every level's KKT conditions
+are checked on the returned point; where they fail the level is made exact (active-set
+continuation, fallback backends) or the solution says ``status="inaccurate"``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import lsq_linear
+
+import qpcoord as qc
+import qpcoord.core.methods.hierarchical as hier
+from qpcoord.core.polish import active_set_ls, kkt_residual
+
+SOLVERS = qc.available_solvers()
+FAST = [s for s in ("daqp", "quadprog", "piqp", "clarabel", "highs", "osqp") if s in SOLVERS]
+
+# issue 22, item 1: one equality level, two active bounds, condition 5e3
+A1 = np.array(
+    [
+        [0.3, 1e3, -10, 700, -0.01],
+        [0.5, -500, 100, 600, 1e-3],
+        [-0.6, -200, -100, -300, -3e-3],
+        [-0.4, 500, -40, -50, -0.1],
+    ]
+)
+B1, W1 = np.array([4.0, 7, 0.6, 3]), np.array([7.0, 2, 2, 8])
+LO1 = [-np.inf, -np.inf, -0.02, -np.inf, -np.inf]
+UP1 = [np.inf, np.inf, np.inf, 0.006, np.inf]
+
+
+@pytest.mark.parametrize("solver", FAST)
+def test_one_level_two_active_bounds_is_exact(solver):
+    """Was 33.36 on every backend (the regularisation, one scalar for columns from 0.1 to
+    1e3, pulled x5 from -57 to -25); bvls finds 19.32."""
+    sol = qc.Stack([qc.Equality(A1, B1, weight=W1)], bounds=qc.Bounds(LO1, UP1)).solve(
+        solver=solver
+    )
+    sw = np.sqrt(W1)
+    ref = lsq_linear(sw[:, None] * A1, sw * B1, bounds=(LO1, UP1), method="bvls", tol=1e-14)
+    value = sol.level_residuals[0] ** 2
+    ref_value = float(np.sum((sw * (A1 @ ref.x - B1)) ** 2))
+    assert ref_value == pytest.approx(19.32, abs=5e-3)
+    assert value == pytest.approx(ref_value, rel=1e-9)
+    assert sol.status == "optimal"
+    assert sol.x[2] == pytest.approx(-0.02, abs=1e-9) and sol.x[3] <= 0.006
+    assert sol.info["kkt"][0] <= 1e-7
+
+
+def test_uncertified_level_is_inaccurate_and_strict_raises(monkeypatch):
+    """A level whose certificate cannot be met is reported, never silently returned."""
+    monkeypatch.setattr(hier, "KKT_TOL", -1.0)  # nothing can be certified
+    stack = qc.Stack([qc.Equality(A1, B1, weight=W1)], bounds=qc.Bounds(LO1, UP1), fallback=False)
+    sol = stack.solve(solver="quadprog")
+    assert sol.status == "inaccurate"
+    assert sol.info["inaccurate"]["level"] == 0
+    assert np.isfinite(sol.info["inaccurate"]["kkt_residual"])
+    with pytest.raises(qc.SolverError, match="level 0"):
+        stack.solve(solver="quadprog", strict=True)
+    with pytest.raises(ValueError, match="strict"):
+        stack.solve(strict="yes")
+
+
+def test_strict_solve_returns_certified_answers():
+    sol = qc.Stack([qc.Equality(A1, B1, weight=W1)], bounds=qc.Bounds(LO1, UP1)).solve(strict=True)
+    assert sol.status == "optimal" and not sol.info["uncertified"]
+
+
+def test_closed_form_levels_stay_inside_their_box():
+    """A closed-form candidate accepted to FEAS_TOL is snapped into the bounds (the IK's
+    0.125 rad/s bound was exceeded by 2.7e-10)."""
+    ub = 0.125
+    A = np.array([[1.0, 1.0, 1.0]])
+    b = np.array([3 * ub * (1 + 5e-10)])
+    sol = qc.Stack([qc.Equality(A, b)], bounds=qc.Bounds(-ub, ub)).solve()
+    assert np.all(sol.x <= ub)
+
+
+def test_kkt_residual_sees_a_wrong_active_set():
+    """Independent of the library's method: at the regularised point of the 1-level case
+    the certificate fails; at bvls's optimum it holds."""
+    sw = np.sqrt(W1)
+    Q, c = sw[:, None] * A1, sw * B1
+    G = np.eye(5)[[2, 3]]
+    lo, hi = np.array([-0.02, -np.inf]), np.array([np.inf, 0.006])
+    ref = lsq_linear(Q, c, bounds=(LO1, UP1), method="bvls", tol=1e-14).x
+    st, inf = kkt_residual(Q, c, G, lo, hi, ref)
+    assert st < 1e-7 and inf == 0.0
+    biased = np.array([-2.84646682, 1.62352538e-04, 1.84091980e-02, 6e-3, -25.3437253])
+    assert kkt_residual(Q, c, G, lo, hi, biased)[0] > 1e-3
+    y, ok = active_set_ls(Q, c, G, lo, hi, biased)
+    assert ok
+    np.testing.assert_allclose(y, ref, rtol=1e-8, atol=1e-10)
+
+
+def test_fallback_on_a_point_outside_its_rows(monkeypatch):
+    """A backend point outside its QP's rows by more than CHECK_TOL goes to the fallback
+    chain (issue 22, item 2: daqp 4.9e-6 outside, SolverError at every step)."""
+    import qpcoord.core.elimination as elim
+
+    real = elim.solve_dense_qp
+
+    def bad_daqp(solver, H, f, G, lo, hi, lb, ub, y0):
+        res = real(solver, H, f, G, lo, hi, lb, ub, y0)
+        if solver == "daqp":
+            res.y = res.y + 1.0  # far outside
+        return res
+
+    monkeypatch.setattr(elim, "solve_dense_qp", bad_daqp)
+    stack = qc.Stack([qc.Equality(A1, B1, weight=W1)], bounds=qc.Bounds(LO1, UP1))
+    sol = stack.solve(solver="daqp")
+    assert sol.info["fallbacks"] and sol.status == "optimal"
+    assert sol.level_residuals[0] ** 2 == pytest.approx(19.3248, rel=1e-4)
