@@ -319,7 +319,9 @@ class CollisionAvoidance(KinematicTask):
     first-order step never crosses ``d_s`` (see the module docstring). Like every task it can
     be hard (``IK(..., constraints=[task])``), the top level, or a lower level; a pair already
     closer than ``d_s`` gets a positive lower bound (pushed apart at most at
-    ``(d_s − d)/dt``).
+    ``(d_s − d)/dt``). Hard, such rows can conflict with the joint speed limits (an
+    ``InfeasibleError``, e.g. when starting in contact); at level 0 their violation is
+    minimised instead, the robust choice.
 
     Parameters
     ----------
