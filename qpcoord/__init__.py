@@ -17,6 +17,7 @@ from .core.errors import AlgorithmicSingularity, InfeasibleError, SolverError
 from .core.stack import METHODS, Solution, Stack, solve_stack
 from .core.tasks import Bounds, Equality, Inequality
 from .kinematics import paths
+from .kinematics.collision import Box, Capsule, CollisionAvoidance, Obstacle, Sphere
 from .kinematics.frame_tasks import (
     ComBand,
     ComTask,
@@ -46,6 +47,11 @@ from .kinematics.tasks import (
 )
 
 __all__ = [
+    "Box",
+    "Capsule",
+    "CollisionAvoidance",
+    "Obstacle",
+    "Sphere",
     "AccelerationLimits",
     "KinematicTask",
     "Limit",
