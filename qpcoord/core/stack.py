@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
 
-from .backends import check_solver
+from .backends import check_solver, check_time_limit, deadline
 from .compile import compile_stack
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
 from .errors import SolverError
@@ -21,6 +22,28 @@ __all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
 
 #: The solve methods a :class:`Stack` offers.
 METHODS = ("hierarchical", "nullspace", "weighted")
+
+
+def _time_limited(solve):
+    """Run ``solve`` under ``time_limit`` (s; keyword): every QP it starts gets the time left
+    (:class:`qpcoord.core.backends.deadline`); a backend failure once it has passed is a
+    :class:`SolverError` that says so."""
+
+    @functools.wraps(solve)
+    def wrapper(self, *args, time_limit=None, **kwargs):
+        limit = check_time_limit(time_limit)
+        with deadline(limit) as budget:
+            try:
+                return solve(self, *args, **kwargs)
+            except SolverError as exc:
+                if budget.expired() or "time limit" in str(exc):
+                    raise SolverError(
+                        f"time limit of {limit:g} s reached before the solve ended "
+                        f"(time_limit=...; math.inf lifts it): {exc}"
+                    ) from exc
+                raise
+
+    return wrapper
 
 
 class Stack:
@@ -110,7 +133,15 @@ class Stack:
         """The tasks of each level (equalities first, then inequalities)."""
         return [L.eqs + L.ineqs for L in self._compiled.levels]
 
-    def solve(self, solver: str | None = None, method: str = "hierarchical", warm_start=None):
+    @_time_limited
+    def solve(
+        self,
+        solver: str | None = None,
+        method: str = "hierarchical",
+        warm_start=None,
+        *,
+        time_limit: float | None = None,
+    ):
         """Solve the stack with the tasks' current numbers.
 
         Parameters
@@ -123,6 +154,11 @@ class Stack:
             only), or one weighted QP.
         warm_start : Solution or array_like, optional
             The previous step's solution (or its ``x``); gives the QPs a primal start.
+        time_limit : float, optional
+            Bound (s) on the whole solve, fallbacks included: no QP starts after it and
+            each backend gets the time left (``None``: ``DEFAULT_TIME_LIMIT`` = 10 s of
+            :mod:`qpcoord.core.backends`; ``math.inf``: no limit). The linear algebra
+            between QPs is not interrupted.
 
         Returns
         -------
@@ -131,11 +167,13 @@ class Stack:
         Raises
         ------
         ValueError
-            Unknown method or solver, bad warm start, inequalities with ``"nullspace"``.
+            Unknown method or solver, bad warm start, inequalities with ``"nullspace"``,
+            bad ``time_limit``, a non-finite number in a task or the bounds (naming it).
         InfeasibleError
             Bounds and hard constraints are inconsistent.
         SolverError
-            A backend failed or returned a point that violates the hard constraints.
+            A backend failed or returned a point that violates the hard constraints, or
+            the time limit was reached.
         """
         t0 = time.perf_counter()
         if method not in METHODS:
@@ -159,10 +197,10 @@ class Stack:
             if method == "hierarchical" and P.equalities_only and not self._chain_missed:
                 x, info = solve_equality_chain(P, self.damping)
                 if P.lb is not None and not within(x, P.lb, P.ub, FEAS_TOL):
-                    R = self._work.reset(P.lb, P.ub, used)
+                    R = self._reset(used)
                     self._chain_missed = True
             else:
-                R = self._work.reset(P.lb, P.ub, used)
+                R = self._reset(used)
         if R is not None:
             if method == "hierarchical":
                 info = solve_hierarchical(P, R, self.damping, self.regularization, x_warm)
@@ -174,6 +212,7 @@ class Stack:
         if R is not None or method != "hierarchical" or not P.equalities_only:
             self._check(x, R, used)
         elif not np.isfinite(x.sum()):  # bounds met to FEAS_TOL already; no hard rows
+            P.check_finite()  # names a NaN/inf that reached the tasks' arrays
             raise SolverError("the closed-form solution is not finite")
         residuals = np.array([L.residual(x) for L in P.levels])
         return Solution(
@@ -193,6 +232,14 @@ class Stack:
         from .persistent import PersistentQP
 
         return PersistentQP(self, weight_ratio=weight_ratio, regularization=regularization)
+
+    def _reset(self, solver: str):
+        """The workspace for a solve with QPs, after checking that no NaN or wrong-sided
+        infinity is in the data (``ValueError`` naming the task): nothing non-finite reaches
+        a backend. The closed-form paths check their result instead (cheaper)."""
+        P = self._compiled
+        P.check_finite()
+        return self._work.reset(P.lb, P.ub, solver)
 
     def _warm(self, warm_start) -> np.ndarray | None:
         if warm_start is None:
@@ -216,6 +263,7 @@ class Stack:
         """Never return an unchecked x: finite, bounds, hard rows, inherited rows."""
         P = self._compiled
         if not np.isfinite(x.sum()):
+            P.check_finite()  # names a NaN/inf that reached the tasks' arrays
             raise SolverError(f"backend {solver!r} produced a non-finite solution")
         if R is not None and R.verified and not P.hard.m_eq:
             return  # x passed the (stricter) closed-form feasibility test after the last QP
@@ -255,11 +303,13 @@ def solve_stack(
     bounds: Bounds | None = None,
     solver: str | None = None,
     method: str = "hierarchical",
+    time_limit: float | None = None,
     **options,
 ) -> Solution:
     """Build a :class:`Stack` and solve it once (function form of :meth:`Stack.solve`).
 
     ``options`` go to :class:`Stack` (``regularization``, ``damping``, ``constraints``,
-    ``weight_ratio``).
+    ``weight_ratio``); ``time_limit`` (s) to :meth:`Stack.solve`.
     """
-    return Stack(levels, bounds=bounds, **options).solve(solver=solver, method=method)
+    stack = Stack(levels, bounds=bounds, **options)
+    return stack.solve(solver=solver, method=method, time_limit=time_limit)
