@@ -12,11 +12,32 @@ are called directly (no conversion layer: a small control-loop QP costs ≈ 10�
 than through :func:`qpsolvers.solve_qp`, see ``benchmarks/README.md``); every other backend
 that :mod:`qpsolvers` can import goes through :func:`qpsolvers.solve_problem` with tight
 tolerances.
+
+Quiet and bounded
+-----------------
+No backend writes to stdout or stderr: every one gets its verbosity option (``verbose=False``;
+HiGHS also ``output_flag=False``; OSQP runs without its own polishing, whose "Polishing not
+needed" line ignores ``verbose``, the stack polishes every non-active-set point itself), and
+HiGHS's banner, which its constructor prints once per process before any option can be set, is
+sent to ``/dev/null`` at file-descriptor level the first time qpcoord creates a HiGHS object.
+
+Every QP runs under a deadline (:func:`deadline`, set by :meth:`qpcoord.Stack.solve`'s
+``time_limit``): :func:`solve_dense_qp` refuses to start a QP after it, and passes the time left
+to each backend -- daqp ``time_limit`` (its iterations; its set-up, ``O(m n²)``, is not
+counted), HiGHS ``time_limit``, OSQP ``time_limit``, Clarabel ``time_limit``, SCS
+``time_limit_secs``. proxqp has no time limit: it runs in chunks of iterations, each sized to
+the time left from the previous chunk's measured speed. quadprog and piqp cannot be stopped
+once started: they are refused when an estimate of their cost (:func:`_estimate`,
+conservative) exceeds the time left, and piqp's iteration cap is sized to it.
 """
 
 from __future__ import annotations
 
+import contextvars
 import math
+import os
+import sys
+import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -33,7 +54,73 @@ __all__ = [
     "solver_versions",
     "solve_dense_qp",
     "check_solver",
+    "deadline",
+    "DEFAULT_TIME_LIMIT",
 ]
+
+#: Time limit (s) of a solve when none is given (``Stack.solve(time_limit=None)``): generous
+#: for any control step (those take micro- to milliseconds); ``time_limit=math.inf`` lifts it.
+DEFAULT_TIME_LIMIT = 10.0
+
+#: Absolute ``time.perf_counter()`` by which the current solve must end (``None``: no limit).
+#: A context variable: each thread (and each asyncio task) has its own.
+_DEADLINE: contextvars.ContextVar[float | None] = contextvars.ContextVar(
+    "qpcoord_deadline", default=None
+)
+
+
+class deadline:  # noqa: N801 (a context manager used like a function)
+    """Run the enclosed QPs under a time limit of ``seconds`` (``None``/``inf``: none).
+
+    Nested limits keep the earlier deadline. Used by :meth:`qpcoord.Stack.solve`::
+
+        with deadline(0.01):
+            ...  # every solve_dense_qp call here gets the time left
+    """
+
+    __slots__ = ("_at", "_token")
+
+    def __init__(self, seconds: float | None) -> None:
+        at = None
+        if seconds is not None and seconds != math.inf:
+            at = time.perf_counter() + seconds
+        outer = _DEADLINE.get()
+        if outer is not None and (at is None or outer < at):
+            at = outer
+        self._at = at
+        self._token = None
+
+    @property
+    def at(self) -> float | None:
+        """The absolute deadline (``time.perf_counter()`` clock), or ``None``."""
+        return self._at
+
+    def expired(self) -> bool:
+        """Has the deadline passed?"""
+        return self._at is not None and time.perf_counter() >= self._at
+
+    def __enter__(self) -> deadline:
+        self._token = _DEADLINE.set(self._at)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        _DEADLINE.reset(self._token)
+
+
+def check_time_limit(time_limit) -> float:
+    """Validate a ``time_limit`` argument (s): ``None`` gives :data:`DEFAULT_TIME_LIMIT`,
+    ``math.inf`` no limit; anything else must be a positive number (``ValueError``)."""
+    if time_limit is None:
+        return DEFAULT_TIME_LIMIT
+    if isinstance(time_limit, bool) or not isinstance(
+        time_limit, (int, float, np.integer, np.floating)
+    ):
+        raise ValueError(f"time_limit must be a number of seconds or None, got {time_limit!r}")
+    value = float(time_limit)
+    if not value > 0:  # NaN too
+        raise ValueError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+    return value
+
 
 OK, INFEASIBLE, FAILED = 0, 1, 2
 
@@ -67,7 +154,7 @@ _DISTRIBUTION = {
 #: Accuracy settings passed to the generic (qpsolvers) path. Our stacks need ~1e-9.
 _GENERIC_SETTINGS: dict[str, dict] = {
     # 1e-10 did not converge on a 3-variable level QP; 1e-9 plus the exact refinement does
-    "osqp": dict(eps_abs=1e-9, eps_rel=1e-9, max_iter=200_000, polishing=True, verbose=False),
+    "osqp": dict(eps_abs=1e-9, eps_rel=1e-9, max_iter=200_000, polishing=False, verbose=False),
     "clarabel": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10, verbose=False),
     "piqp": dict(eps_abs=1e-10, eps_rel=1e-10, verbose=False),
     # a first-order method: reaching 1e-10 can take 10⁵ iterations (a hard control step
@@ -76,8 +163,22 @@ _GENERIC_SETTINGS: dict[str, dict] = {
     # HiGHS drops Hessian entries ≤ small_matrix_value (default 1e-9): our regularisation
     # small_matrix_value at its lower limit; iteration and time caps: its QP solver ran for
     # minutes on some degenerate level QPs
-    "highs": dict(small_matrix_value=1e-12, qp_iteration_limit=20_000, time_limit=2.0),
-    "cvxopt": dict(),
+    "highs": dict(
+        small_matrix_value=1e-12,
+        qp_iteration_limit=20_000,
+        time_limit=2.0,
+        output_flag=False,
+        log_to_console=False,
+    ),
+    "cvxopt": dict(show_progress=False),
+}
+
+#: Name of each generic backend's time-limit setting (seconds).
+_TIME_OPTION = {
+    "osqp": "time_limit",
+    "clarabel": "time_limit",
+    "highs": "time_limit",
+    "scs": "time_limit_secs",
 }
 
 
@@ -180,6 +281,67 @@ def as_rows(G, lo, hi, lb, ub, k):
     return np.vstack(rows), np.concatenate(rhs)
 
 
+def _left(at: float | None) -> float | None:
+    """Seconds left before the deadline ``at`` (``None``: no deadline)."""
+    return None if at is None else at - time.perf_counter()
+
+
+def _out_of_time(solver: str, left: float) -> QPResult:
+    return QPResult(None, FAILED, f"{solver}: time limit reached ({left:.3g} s left)")
+
+
+#: Seconds per ``n²·(n + m)`` of quadprog's dual active-set method, an upper estimate
+#: (measured 1.2e-9…2.6e-9 on dense QPs of n = m = 300…1600, one BLAS thread).
+_QUADPROG_RATE = 5e-9
+
+
+def _estimate(solver: str, n: int, m: int) -> float:
+    """Upper estimate (s) of an uninterruptible backend's run on ``n`` variables and ``m``
+    rows: quadprog's whole solve; piqp's one interior-point iteration."""
+    if solver == "quadprog":
+        return 1e-3 + _QUADPROG_RATE * n * n * (n + m)
+    return 1e-4 + 1e-9 * (n + m) ** 3  # piqp: one factorisation of the KKT matrix
+
+
+_highs_primed = False
+
+
+def _prime_highs() -> None:
+    """Create one HiGHS object with stdout and stderr sent to /dev/null at file-descriptor
+    level: HiGHS prints its banner from the constructor, once per process, before any option
+    can be set. Later objects print nothing (``output_flag=False``)."""
+    global _highs_primed
+    if _highs_primed:
+        return
+    _highs_primed = True
+    import ctypes
+
+    import highspy
+
+    saved = []
+    try:
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None:
+                stream.flush()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            for fd in (1, 2):
+                saved.append((fd, os.dup(fd)))
+                os.dup2(devnull, fd)
+            highspy.Highs()
+            try:  # the banner may sit in the C library's buffer: flush it into /dev/null
+                ctypes.CDLL(None).fflush(None)
+            except (OSError, AttributeError):
+                pass
+        finally:
+            for fd, keep in saved:
+                os.dup2(keep, fd)
+                os.close(keep)
+            os.close(devnull)
+    except OSError:  # no usable file descriptors (embedded interpreter): nothing to hide
+        highspy.Highs()
+
+
 # --------------------------------------------------------------------------------------
 # Direct backends
 # --------------------------------------------------------------------------------------
@@ -195,9 +357,12 @@ _DAQP_SETTINGS = (
     dict(eps_prox=1e-4, eta_prox=1e-12, primal_tol=1e-10),
     dict(),
 )
+#: daqp's exit flag when its ``time_limit`` stopped it.
+_DAQP_TIME_LIMIT = -7
 
 
 def _solve_daqp(H, f, G, lo, hi, lb, ub, y0):
+    at = _DEADLINE.get()
     import daqp
 
     n = H.shape[0]
@@ -222,12 +387,19 @@ def _solve_daqp(H, f, G, lo, hi, lb, ub, y0):
     # default proximal stopping (eta_prox) left level optima 2e-3 off in x.
     attempt = 0
     for attempt, settings in enumerate(_DAQP_SETTINGS):  # noqa: B007 (used after the loop)
+        left = _left(at)
+        if left is not None:
+            if left <= 0:
+                return _out_of_time("daqp", left)
+            settings = dict(settings, time_limit=left)  # seconds of iterations
         if y0 is None:
             x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense, **settings)
         else:
             x, _, flag, _ = daqp.solve(H, f, G, bupper, blower, sense, primal_start=y0, **settings)
         if flag in (1, 2):
             break
+        if flag == _DAQP_TIME_LIMIT:
+            return QPResult(None, FAILED, "daqp: time limit reached (exitflag -7)")
     if flag in (1, 2):
         return QPResult(np.asarray(x, dtype=float), OK, f"daqp exitflag {flag}", attempt == 0)
     if flag == -1:
@@ -236,9 +408,21 @@ def _solve_daqp(H, f, G, lo, hi, lb, ub, y0):
 
 
 def _solve_quadprog(H, f, G, lo, hi, lb, ub, y0):
+    at = _DEADLINE.get()
     import quadprog
 
     n = H.shape[0]
+    left = _left(at)
+    if left is not None:
+        need = _estimate("quadprog", n, G.shape[0] + (0 if lb is None else 2 * n))
+        if need > left:
+            # quadprog cannot be interrupted: do not start what may not end in time
+            return QPResult(
+                None,
+                FAILED,
+                f"quadprog: not started, it cannot be interrupted and may need ~{need:.3g} s "
+                f"({left:.3g} s left before the time limit)",
+            )
     # rows with lo == hi are equalities (quadprog's dual method called the two opposite
     # inequalities of such a row inconsistent); quadprog takes them first (meq)
     eq = np.isfinite(lo) & (lo == hi)
@@ -263,7 +447,52 @@ def _solve_quadprog(H, f, G, lo, hi, lb, ub, y0):
     return QPResult(np.asarray(x, dtype=float), OK, "quadprog solved", True)
 
 
+#: Most proxqp iterations per QP (1e5 took ~5 s on a 1-variable QP).
+_PROXQP_MAX_ITER = 10_000
+
+
+def _proxqp_run(qp, proxqp, at, y0, n: int, m: int) -> None:
+    """``qp.solve()`` in chunks of iterations that fit the time left before ``at`` (proxqp
+    has no time limit of its own). The first chunk is all of ``_PROXQP_MAX_ITER`` unless a
+    generous per-iteration estimate says it would not fit; each next chunk is sized from the
+    measured speed and resumes from the previous chunk's state."""
+    st = qp.settings
+    if at is None:
+        st.max_iter = _PROXQP_MAX_ITER
+        if y0 is None:
+            qp.solve()
+        else:
+            qp.solve(y0, None, None)
+        return
+    per_iter = 2e-5 + 2e-9 * (n + m) * n  # generous: a matvec-dominated iteration
+    done = 0
+    first = True
+    while True:
+        left = at - time.perf_counter()
+        if left <= 0:
+            return
+        chunk = int(min(_PROXQP_MAX_ITER - done, max(10, left / per_iter)))
+        st.max_iter = chunk
+        t0 = time.perf_counter()
+        if first and y0 is not None:
+            qp.solve(y0, None, None)
+        elif first:
+            qp.solve()
+        else:
+            st.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            qp.solve()
+        first = False
+        iters = max(1, int(qp.results.info.iter))
+        done += iters
+        if qp.results.info.status != proxqp.QPSolverOutput.PROXQP_MAX_ITER_REACHED:
+            return
+        if done >= _PROXQP_MAX_ITER:
+            return
+        per_iter = max(per_iter * 0.1, (time.perf_counter() - t0) / iters)
+
+
 def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
+    at = _DEADLINE.get()
     from proxsuite import proxqp
 
     n = H.shape[0]
@@ -276,7 +505,7 @@ def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
     # the default infeasibility threshold (1e-4) declared feasible level QPs infeasible
     st.eps_primal_inf = 1e-9
     st.eps_dual_inf = 1e-9
-    st.max_iter = 10_000  # 1e5 iterations took ~5 s on a 1-variable QP
+    st.max_iter = _PROXQP_MAX_ITER
     st.verbose = False
     if y0 is not None:
         st.initial_guess = proxqp.InitialGuess.WARM_START
@@ -287,13 +516,13 @@ def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
         qp.init(H, f, None, None, C, lo_c, hi_c, np.maximum(lb, -1e20), np.minimum(ub, 1e20))
     else:
         qp.init(H, f, None, None, C, lo_c, hi_c)
-    if y0 is not None:
-        qp.solve(y0, None, None)
-    else:
-        qp.solve()
+    _proxqp_run(qp, proxqp, at, y0, n, m + n * box)
     res = qp.results
     status = res.info.status
     if status == proxqp.QPSolverOutput.PROXQP_PRIMAL_INFEASIBLE:
+        left = _left(at)
+        if left is not None and left <= 0:
+            return _out_of_time("proxqp", left)
         # proxqp 0.8 declared feasible, nearly degenerate level QPs infeasible; its
         # closest-feasible mode solves them (a feasible problem's solution is unchanged)
         st.primal_infeasibility_solving = True
@@ -302,7 +531,7 @@ def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
             qp.init(H, f, None, None, C, lo_c, hi_c, np.maximum(lb, -1e20), np.minimum(ub, 1e20))
         else:
             qp.init(H, f, None, None, C, lo_c, hi_c)
-        qp.solve()
+        _proxqp_run(qp, proxqp, at, None, n, m + n * box)
         res = qp.results
         status = res.info.status
     name = str(status).split(".")[-1]
@@ -320,6 +549,9 @@ def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
         x = np.array(res.x, dtype=float).reshape(n)
         if np.all(np.isfinite(x)) and _meets_rows(G, lo, hi, lb, ub, x, 1e-7):
             return QPResult(x, OK, "proxqp: max_iter reached, point accepted")
+        left = _left(at)
+        if left is not None and left <= 0:
+            return _out_of_time("proxqp", left)
     return QPResult(None, FAILED, f"proxqp: {name}")
 
 
@@ -328,11 +560,27 @@ def _solve_proxqp(H, f, G, lo, hi, lb, ub, y0):
 _ALMOST_OK = frozenset({"clarabel", "scs", "osqp"})
 
 
-def _generic_once(name, H, f, G, lo, hi, lb, ub, y0) -> QPResult:
+def _generic_once(name, H, f, G, lo, hi, lb, ub, y0, at=None) -> QPResult:
     import qpsolvers
 
     k = H.shape[0]
     Gq, hq = as_rows(G, lo, hi, lb, ub, k)
+    opts = _GENERIC_SETTINGS.get(name, {})
+    left = _left(at)
+    if left is not None:
+        if left <= 0:
+            return _out_of_time(name, left)
+        opts = dict(opts)
+        key = _TIME_OPTION.get(name)
+        if key is not None:
+            opts[key] = min(opts.get(key, math.inf), left)
+        elif name == "piqp":  # no time limit: cap its iterations instead
+            per_iter = _estimate("piqp", k, 0 if Gq is None else Gq.shape[0])
+            if per_iter > left:
+                return _out_of_time(name, left)
+            opts["max_iter"] = int(min(250, left / per_iter))
+    if name == "highs":
+        _prime_highs()
     Hq = H
     if name not in qpsolvers.dense_solvers:
         from scipy import sparse
@@ -344,13 +592,14 @@ def _generic_once(name, H, f, G, lo, hi, lb, ub, y0) -> QPResult:
         with warnings.catch_warnings():
             # e.g. osqp 1.x's PendingDeprecationWarning about raise_error
             warnings.simplefilter("ignore")
-            sol = qpsolvers.solve_problem(
-                problem, solver=name, initvals=y0, **_GENERIC_SETTINGS.get(name, {})
-            )
+            sol = qpsolvers.solve_problem(problem, solver=name, initvals=y0, **opts)
     except Exception as exc:  # backends raise a zoo of exception types
         return QPResult(None, FAILED, f"{name}: {type(exc).__name__}: {exc}")
     x = sol.x
     if x is None or x.shape != (k,) or not np.all(np.isfinite(x)):
+        left = _left(at)
+        if left is not None and left <= 0:
+            return _out_of_time(name, left)
         return QPResult(None, FAILED, f"{name}: no solution found")
     if sol.found:
         return QPResult(np.asarray(x, dtype=float), OK, f"{name} solved")
@@ -361,7 +610,8 @@ def _generic_once(name, H, f, G, lo, hi, lb, ub, y0) -> QPResult:
 
 def _solve_generic(name: str):
     def solve(H, f, G, lo, hi, lb, ub, y0):
-        res = _generic_once(name, H, f, G, lo, hi, lb, ub, y0)
+        at = _DEADLINE.get()
+        res = _generic_once(name, H, f, G, lo, hi, lb, ub, y0, at)
         if res.code == OK or name != "highs":
             return res
         # HiGHS 1.15 returned NaN for free variables (our slacks) of some QPs; with every
@@ -372,7 +622,7 @@ def _solve_generic(name: str):
         big = 1e6 * max(1.0, float(np.abs(finite).max()) if finite.size else 1.0)
         lb2 = np.full(k, -big) if lb is None else np.where(np.isfinite(lb), lb, -big)
         ub2 = np.full(k, big) if ub is None else np.where(np.isfinite(ub), ub, big)
-        res = _generic_once(name, H, f, G, lo, hi, lb2, ub2, y0)
+        res = _generic_once(name, H, f, G, lo, hi, lb2, ub2, y0, at)
         if res.code == OK and np.abs(res.y).max() >= 0.99 * big:
             return QPResult(None, FAILED, f"{name}: solution reached the artificial box")
         return res
@@ -420,8 +670,13 @@ def solve_dense_qp(
     Returns
     -------
     QPResult
-        The solution is returned unchecked here; :class:`~qpcoord.Stack` checks it.
+        The solution is returned unchecked here; :class:`~qpcoord.Stack` checks it. Under a
+        :class:`deadline` that has passed, or that the backend hit, ``code`` is ``FAILED``
+        and ``message`` says "time limit reached".
     """
+    at = _DEADLINE.get()
+    if at is not None and time.perf_counter() >= at:
+        return _out_of_time(solver, at - time.perf_counter())
     fn = _DIRECT.get(solver)
     if fn is None:
         fn = _solve_generic(solver)

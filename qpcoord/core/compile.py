@@ -8,12 +8,13 @@ the preallocated buffers (no re-stacking, no re-validation of the structure), wh
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .elimination import FEAS_TOL
-from .tasks import Bounds, Equality, Inequality
+from .tasks import Bounds, Equality, Inequality, _bad_box, find_bad_value
 from .tolerance import widen
 
 __all__ = ["CompiledLevel", "CompiledStack", "compile_stack"]
@@ -109,6 +110,21 @@ class CompiledLevel:
         if self.ineqs:
             self.low, self.hiw = widen(self.lo, self.hi, FEAS_TOL)
 
+    def check_finite(self) -> None:
+        """``ValueError`` naming the task and argument if a number is NaN or a wrong-sided
+        infinity (a solve-time check: tasks validate what they are given, this catches
+        what reached their arrays another way). Three reductions per kind of row."""
+        bad = False
+        if self.m_eq and not math.isfinite(float(self.Ae.sum()) + float(self.be.sum())):
+            bad = True
+        if self.m_in and (not math.isfinite(float(self.C.sum())) or _bad_box(self.lo, self.hi)):
+            bad = True
+        if bad:
+            for t in (*self.eqs, *self.ineqs):
+                problem = find_bad_value(t)
+                if problem is not None:
+                    raise ValueError(f"{problem} (found at solve time)")
+
     def residual(self, x: np.ndarray) -> float:
         """Norm of the weighted equality residual and inequality violation at ``x``."""
         total = 0.0
@@ -148,6 +164,18 @@ class CompiledStack:
     def capacity(self) -> int:
         """Most inequality rows a solve can inherit."""
         return self.hard.m_in + sum(L.m_in for L in self.levels)
+
+    def check_finite(self) -> None:
+        """``ValueError`` naming the task (or the bounds) and the argument if a NaN or a
+        wrong-sided infinity is in the data about to be solved."""
+        for L in self.levels:
+            L.check_finite()
+        self.hard.check_finite()
+        if self.lb is not None and _bad_box(self.lb, self.ub):
+            problem = find_bad_value(self.bounds)
+            raise ValueError(
+                f"{problem or self.bounds.label + ': bounds contain NaN'} (found at solve time)"
+            )
 
     def refresh(self) -> None:
         """Re-read every task's numbers (the per-step update)."""

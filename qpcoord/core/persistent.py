@@ -29,6 +29,7 @@ only when ``θ`` has left that region.
 
 from __future__ import annotations
 
+import math
 import time
 from operator import attrgetter
 from typing import TYPE_CHECKING
@@ -36,6 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.linalg import lapack
 
+from .backends import DEFAULT_TIME_LIMIT
 from .compile import CompiledStack
 from .elimination import CHECK_TOL
 from .solution import Solution
@@ -49,8 +51,9 @@ __all__ = ["PersistentQP"]
 _INF = 1e30  # daqp's infinity
 _MATRIX_VERSION = attrgetter("matrix_version")
 
-#: daqp settings of the persistent workspace: the stack's first (exact) setting.
-DAQP_SETTINGS = dict(eps_prox=0.0, primal_tol=1e-10)
+#: daqp settings of the persistent workspace: the stack's first (exact) setting, and the
+#: default time limit of a solve (s; :data:`qpcoord.core.backends.DEFAULT_TIME_LIMIT`).
+DAQP_SETTINGS = dict(eps_prox=0.0, primal_tol=1e-10, time_limit=DEFAULT_TIME_LIMIT)
 
 #: Critical-region test tolerance: a cached region's law answers only if every row holds and
 #: every active multiplier has its sign to this absolute margin (task units); else the QP
@@ -166,7 +169,15 @@ class PersistentQP:
                 H[idx, idx] = beta * L.sw**2
                 j += L.m_in
             beta *= self.weight_ratio
-        H.flat[:: nv + 1][:n] += self.regularization * max(1.0, float(H.diagonal()[:n].max()))
+        # ε‖x‖² only where the levels leave H singular (its Cholesky fails): on a positive
+        # definite H the QP is solved exactly, without ε's bias. (Until this was fixed the
+        # line wrote into a copy -- ``H.flat[::k][:n] += ε`` -- so ε was never added and a
+        # singular H sent every step to the fallback.)
+        self.regularized = False
+        if lapack.dpotrf(H[:n, :n], lower=0, clean=0)[1] != 0:
+            i = np.arange(n)
+            H[i, i] += self.regularization * max(1.0, float(H.diagonal()[:n].max()))
+            self.regularized = True
         hard = P.hard
         # rows after the simple bounds: hard equalities, hard inequalities, soft rows C x − s
         G = np.zeros((hard.m_eq + hard.m_in + mi, nv))
@@ -610,6 +621,15 @@ class PersistentQP:
             self._bounded and P.bounds.version != self._p_bounds
         ):
             self._build_parametric(P)
+        # θ real, finite, of the declared size (one dot product); else _theta names the
+        # problem (a NaN θ once went on to the fallback's proxqp for 72 s)
+        try:
+            d = len(theta) == self._pspec[0] and theta @ theta
+            ok = isinstance(d, float) and math.isfinite(d)  # np.float64 is a float; complex not
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            theta = self._theta(theta, "solve_theta")  # raises unless merely huge or a list
         recent = self._recent
         for i, (m, W, w0) in enumerate(recent):
             v = W @ theta  # [test rows; x]: one matvec gives both
@@ -661,14 +681,35 @@ class PersistentQP:
         solved by any method or backend, e.g. to compare them)."""
         if self._pspec is None:
             raise ValueError("write_tasks: call parametrize() first")
+        theta = self._theta(theta, "write_tasks")
         for t, parts in self._pspec[1].values():
+            # the tasks' checked, version-keeping write path (their arrays are read-only)
             if isinstance(t, Equality):
                 ((c, M),) = parts
-                t.b[...] = c + M @ theta
+                t._assign(b=c + M @ theta)
             else:
                 (cl, Ml), (cu, Mu) = parts
-                t.lower[...] = cl + Ml @ theta
-                t.upper[...] = cu + Mu @ theta
+                t._assign(cl + Ml @ theta, cu + Mu @ theta)
+
+    def _theta(self, theta, where: str) -> np.ndarray:
+        """θ as a finite float vector of the declared size, else ``ValueError``/``TypeError``
+        naming it (off the hot path: called once a step has left the cached regions)."""
+        size = self._pspec[0]
+        if np.iscomplexobj(theta):
+            raise TypeError(f"{where}: theta is complex; it must be real")
+        try:
+            arr = np.asarray(theta, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: theta must be a numeric vector, got {theta!r}") from None
+        if arr.shape != (size,):
+            raise ValueError(
+                f"{where}: theta must have shape ({size},) as declared by parametrize(), "
+                f"got {np.shape(theta)}"
+            )
+        if not np.isfinite(arr).all():
+            i = int(np.flatnonzero(~np.isfinite(arr))[0])
+            raise ValueError(f"{where}: theta[{i}] = {float(arr[i])!r} is not finite")
+        return arr
 
     def _feasible(self, x: np.ndarray) -> bool:
         """Finite, within the bounds and the hard rows to the stack's CHECK_TOL relative to

@@ -204,7 +204,7 @@ def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
     nres = float(np.linalg.norm(res))
     lscale = float(np.linalg.norm(c)) + float(np.linalg.norm(qy))
     den = max(nres, 1e-8 * lscale, 1e-300)
-    by_value = nres <= VALUE_TOL * lscale
+    by_value = nres <= VALUE_TOL * max(1.0, lscale)  # the library's max(1, scale) rule
     S = _col_scale(Q, Gn)
     gs = S * (Q.T @ res)
     infeas = 0.0

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
 
-from .backends import check_solver
+from .backends import check_solver, check_time_limit, deadline
 from .compile import compile_stack
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
 from .errors import SolverError
@@ -22,6 +23,28 @@ __all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
 
 #: The solve methods a :class:`Stack` offers.
 METHODS = ("hierarchical", "nullspace", "weighted")
+
+
+def _time_limited(solve):
+    """Run ``solve`` under ``time_limit`` (s; keyword): every QP it starts gets the time left
+    (:class:`qpcoord.core.backends.deadline`); a backend failure once it has passed is a
+    :class:`SolverError` that says so."""
+
+    @functools.wraps(solve)
+    def wrapper(self, *args, time_limit=None, **kwargs):
+        limit = check_time_limit(time_limit)
+        with deadline(limit) as budget:
+            try:
+                return solve(self, *args, **kwargs)
+            except SolverError as exc:
+                if budget.expired() or "time limit" in str(exc):
+                    raise SolverError(
+                        f"time limit of {limit:g} s reached before the solve ended "
+                        f"(time_limit=...; math.inf lifts it): {exc}"
+                    ) from exc
+                raise
+
+    return wrapper
 
 
 class Stack:
@@ -112,12 +135,15 @@ class Stack:
         """The tasks of each level (equalities first, then inequalities)."""
         return [L.eqs + L.ineqs for L in self._compiled.levels]
 
+    @_time_limited
     def solve(
         self,
         solver: str | None = None,
         method: str = "hierarchical",
         warm_start=None,
         strict: bool = False,
+        *,
+        time_limit: float | None = None,
     ):
         """Solve the stack with the tasks' current numbers.
 
@@ -135,6 +161,11 @@ class Stack:
             Raise :class:`~qpcoord.SolverError` instead of returning a solution whose
             ``status`` is ``"inaccurate"`` (a level whose optimality conditions could not be
             certified, ``method="hierarchical"``).
+        time_limit : float, optional
+            Bound (s) on the whole solve, fallbacks included: no QP starts after it and
+            each backend gets the time left (``None``: ``DEFAULT_TIME_LIMIT`` = 10 s of
+            :mod:`qpcoord.core.backends`; ``math.inf``: no limit). The linear algebra
+            between QPs is not interrupted.
 
         Returns
         -------
@@ -143,12 +174,14 @@ class Stack:
         Raises
         ------
         ValueError
-            Unknown method or solver, bad warm start, inequalities with ``"nullspace"``.
+            Unknown method or solver, bad warm start, inequalities with ``"nullspace"``,
+            bad ``time_limit``, a non-finite number in a task or the bounds (naming it).
         InfeasibleError
             Bounds and hard constraints are inconsistent.
         SolverError
-            A backend failed or returned a point that violates the hard constraints; with
-            ``strict=True`` also a level that could not be certified.
+            A backend failed or returned a point that violates the hard constraints, or
+            the time limit was reached; with ``strict=True`` also a level that could not be
+            certified.
         """
         t0 = time.perf_counter()
         if not isinstance(strict, bool):
@@ -175,12 +208,12 @@ class Stack:
                 x, info = solve_equality_chain(P, self.damping)
                 if P.lb is not None:
                     if not within(x, P.lb, P.ub, FEAS_TOL):
-                        R = self._work.reset(P.lb, P.ub, used)
+                        R = self._reset(used)
                         self._chain_missed = True
                     else:  # met to FEAS_TOL: snapped, a returned x never leaves its box
                         np.clip(x, P.lb, P.ub, out=x)
             else:
-                R = self._work.reset(P.lb, P.ub, used)
+                R = self._reset(used)
         if R is not None:
             if method == "hierarchical":
                 info = solve_hierarchical(P, R, self.damping, self.regularization, x_warm)
@@ -192,6 +225,7 @@ class Stack:
         if R is not None or method != "hierarchical" or not P.equalities_only:
             self._check(x, R, used)
         elif not np.isfinite(x.sum()):  # bounds met to FEAS_TOL already; no hard rows
+            P.check_finite()  # names a NaN/inf that reached the tasks' arrays
             raise SolverError("the closed-form solution is not finite")
         residuals = np.array([L.residual(x) for L in P.levels])
         status = "optimal"
@@ -224,6 +258,14 @@ class Stack:
 
         return PersistentQP(self, weight_ratio=weight_ratio, regularization=regularization)
 
+    def _reset(self, solver: str):
+        """The workspace for a solve with QPs, after checking that no NaN or wrong-sided
+        infinity is in the data (``ValueError`` naming the task): nothing non-finite reaches
+        a backend. The closed-form paths check their result instead (cheaper)."""
+        P = self._compiled
+        P.check_finite()
+        return self._work.reset(P.lb, P.ub, solver)
+
     def _warm(self, warm_start) -> np.ndarray | None:
         if warm_start is None:
             return None
@@ -246,6 +288,7 @@ class Stack:
         """Never return an unchecked x: finite, bounds, hard rows, inherited rows."""
         P = self._compiled
         if not np.isfinite(x.sum()):
+            P.check_finite()  # names a NaN/inf that reached the tasks' arrays
             raise SolverError(f"backend {solver!r} produced a non-finite solution")
         if R is not None and R.verified and not P.hard.m_eq:
             return  # x passed the (stricter) closed-form feasibility test after the last QP
@@ -285,11 +328,13 @@ def solve_stack(
     bounds: Bounds | None = None,
     solver: str | None = None,
     method: str = "hierarchical",
+    time_limit: float | None = None,
     **options,
 ) -> Solution:
     """Build a :class:`Stack` and solve it once (function form of :meth:`Stack.solve`).
 
     ``options`` go to :class:`Stack` (``regularization``, ``damping``, ``constraints``,
-    ``weight_ratio``).
+    ``weight_ratio``); ``time_limit`` (s) to :meth:`Stack.solve`.
     """
-    return Stack(levels, bounds=bounds, **options).solve(solver=solver, method=method)
+    stack = Stack(levels, bounds=bounds, **options)
+    return stack.solve(solver=solver, method=method, time_limit=time_limit)

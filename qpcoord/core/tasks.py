@@ -13,6 +13,14 @@ of ``x``):
 Every task validates its numbers when built and when updated with ``update(...)``, and
 raises :class:`ValueError` naming the task and what is wrong. ``update`` keeps the shape,
 so a stack built once can be re-solved every control step with new numbers.
+
+In-place rule. The arrays a task keeps (``A``, ``b``, ``C``, ``lower``, ``upper``, ``weight``
+and a :class:`Bounds`' ``lower``/``upper``) are read-only views: ``task.b[0] = 1.0`` raises
+numpy's "assignment destination is read-only", and ``task.update(...)`` / ``bounds.update(...)``
+is the one way to change them (validated, and counted in ``matrix_version`` / ``version`` so
+that every cached solver sees the change). Library code that must write per step without
+allocating uses the private, explicit paths: ``Equality._assign``, ``Inequality._assign``
+(checked, version-bumping) and ``Bounds._writable()`` followed by ``Bounds._touch()``.
 """
 
 from __future__ import annotations
@@ -28,19 +36,62 @@ def _label(kind: str, name: str) -> str:
     return f"{kind} {name!r}" if name else f"{kind} (unnamed)"
 
 
-def _matrix(value, what: str, label: str) -> np.ndarray:
+#: Smallest and largest non-zero magnitude accepted in a task matrix: the QPs square the
+#: matrices (``AᵀA``), so entries outside would under- or overflow (1e-320 made quadprog
+#: fail with an IndexError). Rescale the units of ``x`` or of the task instead.
+MATRIX_RANGE = (1e-150, 1e150)
+
+
+def _readonly(arr: np.ndarray) -> np.ndarray:
+    """A read-only view of a fresh array (the array itself, its ``base``, stays writable
+    for the library's explicit in-place paths)."""
+    if not arr.flags.owndata or not arr.flags.c_contiguous:
+        arr = np.array(arr, order="C")
+    view = arr.view()
+    view.flags.writeable = False
+    return view
+
+
+def _w(view: np.ndarray) -> np.ndarray:
+    """The writable array behind a task's read-only view (library-internal writes only). An
+    attribute rebound to a writable array of the caller's (``task.b = buffer[:m]``, which
+    some per-step code does) is returned as it is."""
+    if view.flags.writeable:
+        return view
+    base = view.base
+    if base is None or base.shape != view.shape or not base.flags.writeable:
+        raise ValueError("internal: a task array with no writable buffer behind it")
+    return base
+
+
+def _numeric(value, what: str, label: str, noun: str = "numeric") -> np.ndarray:
+    """``value`` as a new float array; complex input is a ``TypeError`` and non-numeric input
+    a ``ValueError``, both naming ``what`` (numpy would drop an imaginary part)."""
     try:
-        # a copy: a task never aliases the caller's array (a later in-place change would
-        # bypass validation)
-        arr = np.array(value, dtype=float)
+        complex_in = np.iscomplexobj(value)
+    except (TypeError, ValueError):  # ragged lists: let np.array name the problem
+        complex_in = False
+    if complex_in:
+        raise TypeError(f"{label}: {what} is complex; tasks take real numbers")
+    try:
+        return np.array(value, dtype=float)  # a copy: a task never aliases the caller's array
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{label}: {what} is not a numeric array ({exc})") from None
+        raise ValueError(f"{label}: {what} is not {noun} ({exc})") from None
+
+
+def _matrix(value, what: str, label: str) -> np.ndarray:
+    arr = _numeric(value, what, label, "a numeric array")
     if arr.ndim == 1:
         arr = arr.reshape(1, -1)
     if arr.ndim != 2:
         raise ValueError(f"{label}: {what} must be 2-D (rows × variables), got shape {arr.shape}")
     if arr.shape[1] == 0:
         raise ValueError(f"{label}: {what} has no columns (shape {arr.shape})")
+    if arr.shape[0] == 0:
+        raise ValueError(
+            f"{label}: {what} has no rows (shape {arr.shape}); a task needs at least one row "
+            "(leave an empty task out of the stack)"
+        )
     # one reduction on the hot path; NaN/inf propagate into the sum
     if not np.isfinite(arr.sum()) and not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
@@ -48,7 +99,15 @@ def _matrix(value, what: str, label: str) -> np.ndarray:
             f"{label}: {what} contains a non-finite value {arr[tuple(bad)]!r} "
             f"at row {bad[0]}, column {bad[1]}"
         )
-    return arr
+    mag = np.abs(arr)
+    lo_mag, hi_mag = MATRIX_RANGE
+    if mag.max() > hi_mag or ((mag < lo_mag) & (mag > 0)).any():
+        i, j = np.argwhere((mag > hi_mag) | ((mag < lo_mag) & (mag > 0)))[0]
+        raise ValueError(
+            f"{label}: {what}[{i}, {j}] = {arr[i, j]!r} is outside the magnitudes a QP can "
+            f"square ({lo_mag:g} … {hi_mag:g}, or exactly 0): rescale the units"
+        )
+    return _readonly(arr)
 
 
 def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.ndarray:
@@ -56,10 +115,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
 
     ``allow_inf``: 0 forbids ±inf, +1 allows +inf only, -1 allows -inf only.
     """
-    try:
-        arr = np.array(value, dtype=float)  # a copy, as in _matrix
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{label}: {what} is not numeric ({exc})") from None
+    arr = _numeric(value, what, label)  # a copy, as in _matrix
     if arr.ndim == 0:
         arr = np.full(rows, float(arr))
     elif arr.ndim == 2 and 1 in arr.shape:
@@ -68,7 +124,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
         raise ValueError(f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}")
     total = arr.sum()
     if np.isfinite(total):
-        return arr
+        return _readonly(arr)
     if np.any(np.isnan(arr)):
         i = int(np.flatnonzero(np.isnan(arr))[0])
         raise ValueError(f"{label}: {what} contains NaN at index {i}")
@@ -81,7 +137,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{label}: {what} has the non-allowed value {arr[i]!r} at index {i}")
-    return arr
+    return _readonly(arr)
 
 
 def _weight(value, rows: int, label: str) -> np.ndarray:
@@ -128,7 +184,7 @@ class _Task:
     def _set_weight(self, w: np.ndarray) -> None:
         self.weight = w
         #: ``√weight`` (cached: weights rarely change between control steps)
-        self.sqrt_weight = np.sqrt(w)
+        self.sqrt_weight = _readonly(np.sqrt(w))
         self.unit_weight = bool((w == 1.0).all())
 
 
@@ -200,13 +256,13 @@ class Equality(_Task):
         if A is not None:
             if not np.isfinite(A.sum()):
                 raise ValueError(f"{self.label}: A contains a non-finite value")
-            self.A[...] = A
+            _w(self.A)[...] = A
             self.is_identity = False
             self.matrix_version += 1
         if b is not None:
             if not np.isfinite(b.sum()):
                 raise ValueError(f"{self.label}: b contains a non-finite value")
-            self.b[...] = b
+            _w(self.b)[...] = b
         return self
 
     def residual(self, x: np.ndarray) -> np.ndarray:
@@ -282,17 +338,18 @@ class Inequality(_Task):
 
     def _assign(self, lower: np.ndarray, upper: np.ndarray, C=None) -> Inequality:
         """Trusted per-step path: new bounds of the same length (NaN and order checked) and
-        optionally a new ``C`` of the same shape (finiteness checked)."""
+        optionally a new ``C`` of the same shape (finiteness checked). Scalars broadcast."""
+        lower, upper = np.asarray(lower), np.asarray(upper)
         if _bad_box(lower, upper):
             _check_order(lower, upper, self.label)
             raise ValueError(f"{self.label}: bounds contain NaN or ±inf on the wrong side")
         if C is not None:
             if not np.isfinite(C.sum()):
                 raise ValueError(f"{self.label}: C contains a non-finite value")
-            self.C[...] = C
+            _w(self.C)[...] = C
             self.matrix_version += 1
-        self.lower[...] = lower
-        self.upper[...] = upper
+        _w(self.lower)[...] = lower
+        _w(self.upper)[...] = upper
         return self
 
     def violation(self, x: np.ndarray) -> np.ndarray:
@@ -331,6 +388,8 @@ class Bounds:
         lo, hi = self._validate(lower, upper, 1 if n is None else n)
         self._lower_in, self._upper_in, self.n = lower, upper, n
         if n is not None:
+            # the validated copies, not the caller's arrays (a later update re-reads them)
+            self._lower_in, self._upper_in = lo, hi
             self.lower, self.upper = lo, hi
 
     def _validate(self, lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -368,12 +427,20 @@ class Bounds:
         new_hi = self._upper_in if upper is None else upper
         if self.n is not None:
             lo, hi = self._validate(new_lo, new_hi, self.n)  # names a wrong length
-            self._lower_in, self._upper_in = new_lo, new_hi
+            self._lower_in, self._upper_in = lo, hi
             self.lower, self.upper = lo, hi
         else:
             self._set(new_lo, new_hi)
         self.version += 1
         return self
+
+    def _writable(self) -> tuple[np.ndarray, np.ndarray]:
+        """Writable arrays behind ``lower`` and ``upper`` (same memory), for library code that
+        fills the box in place every step (the IK's joint limits); the writer must call
+        :meth:`_touch` afterwards. Bounds built from scalars have none (``ValueError``)."""
+        if self.n is None:
+            raise ValueError(f"{self.label}: built from scalars, it has no arrays to write")
+        return _w(self.lower), _w(self.upper)
 
     def _touch(self) -> Bounds:
         """Mark ``lower``/``upper`` as changed after the library wrote them in place (the
@@ -384,6 +451,48 @@ class Bounds:
 
     def __repr__(self) -> str:
         return f"Bounds(n={self.n}, name={self.name!r})"
+
+
+def _first_bad(arr: np.ndarray, bad: np.ndarray, what: str, label: str) -> str | None:
+    if not bad.any():
+        return None
+    idx = tuple(int(i) for i in np.argwhere(bad)[0])
+    where = f"index {idx[0]}" if len(idx) == 1 else f"row {idx[0]}, column {idx[1]}"
+    return f"{label}: {what} contains {float(arr[idx])!r} at {where}"
+
+
+def find_bad_value(task) -> str | None:
+    """Message naming the first NaN, wrong-sided infinity or ``lower > upper`` in a task's or
+    a :class:`Bounds`' arrays, or ``None`` if there is none (used by the solve-time check)."""
+    label = task.label
+    if isinstance(task, Equality):
+        checks = [(task.A, "A"), (task.b, "b"), (task.weight, "weight")]
+        for arr, what in checks:
+            msg = _first_bad(arr, ~np.isfinite(arr), what, label)
+            if msg:
+                return msg
+        return None
+    if isinstance(task, Inequality):
+        msg = _first_bad(task.C, ~np.isfinite(task.C), "C", label)
+        if msg:
+            return msg
+        lo, hi = task.lower, task.upper
+    elif isinstance(task, Bounds):
+        if task.n is None:
+            return None
+        lo, hi = task.lower, task.upper
+    else:
+        return None
+    msg = _first_bad(lo, np.isnan(lo) | (lo == np.inf), "lower", label) or _first_bad(
+        hi, np.isnan(hi) | (hi == -np.inf), "upper", label
+    )
+    if msg:
+        return msg
+    bad = lo > hi
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        return f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})"
+    return None
 
 
 Task = Equality | Inequality

@@ -411,8 +411,7 @@ class MPC:
                 np.dot(self._Pfree, z7, out=rhs)
                 rhs += self._rhs_off
                 rhs += r * self._rhs_r
-                self.volts.lower[:] = self._vmin - self._v
-                self.volts.upper[:] = self._vmax - self._v
+                self.volts._assign(self._vmin - self._v, self._vmax - self._v)
                 x = self.stack.solve(solver=self.solver, method="hierarchical").x
             if self.deadline is not None and time.perf_counter() - t0 > self.deadline:
                 self.late_steps += 1

@@ -214,8 +214,9 @@ class IK:
         for task in self._dynamic:
             task._refresh(q, t, self.dt, reference)
         if self.limits:
-            # written straight into the stack's Bounds (same arrays), then marked changed
-            lo, hi = self.bounds.lower, self.bounds.upper
+            # written straight into the stack's Bounds (the writable arrays behind its
+            # read-only lower/upper), then marked changed
+            lo, hi = self.bounds._writable()
             first, *rest = self.limits
             a, b = first.box(q, self.dt)
             np.copyto(lo, a)

@@ -111,3 +111,22 @@ def test_fallback_on_a_point_outside_its_rows(monkeypatch):
     sol = stack.solve(solver="daqp")
     assert sol.info["fallbacks"] and sol.status == "optimal"
     assert sol.level_residuals[0] ** 2 == pytest.approx(19.3248, rel=1e-4)
+
+
+@pytest.mark.parametrize("solver", ["daqp", "quadprog", "proxqp"])
+def test_a_level_met_exactly_with_zero_targets_is_certified(solver):
+    """An inequality level with lower == upper met to rounding (slack objective: c = 0 and
+    Q y ≈ 0, so the level's own scale is ~1e-16) is certified by its value on the library's
+    max(1, scale) rule. Found at the merge: every backend returned "inaccurate" (KKT 0.79 on
+    level 0) and proxqp spent 3 s in fallbacks on this 5-variable stack."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_properties import _retry_leak_case
+
+    head, extra, options = _retry_leak_case()
+    sol = qc.solve_stack([*head, extra], solver=solver, **options)
+    assert sol.status == "optimal", sol.info
+    assert sol.info["fallbacks"] == []
+    assert sol.level_residuals[0] < 1e-12
