@@ -105,7 +105,8 @@ class _Recorder:
     """Stands in for meshcat's ``ViewerWindow``: keeps the scene instead of sending it.
 
     ``send`` applies a command to the tree exactly as the server's ``handle_zmq`` does;
-    ``html`` renders the page exactly as the server's ``get_scene`` does.
+    ``html`` renders the page exactly as the server's ``get_scene`` does, plus ``script``
+    (JavaScript run after the commands are issued).
     """
 
     def __init__(self, umsgpack) -> None:
@@ -135,7 +136,7 @@ class _Recorder:
         else:  # pragma: no cover - meshcat 0.3 sends nothing else from Python
             raise RuntimeError(f"unexpected meshcat command {kind!r}")
 
-    def html(self) -> str:
+    def html(self, script: str = "") -> str:
         commands = []
         for node in self.tree.walk():
             blobs = [node.object, *node.properties, node.transform, node.animation]
@@ -149,7 +150,7 @@ class _Recorder:
                         "new Uint8Array(buffer)));\n"
                     )
         js = resources.files("meshcat").joinpath("viewer/dist/main.min.js").read_text("utf-8")
-        return _PAGE.format(mainminjs=js, commands="".join(commands))
+        return _PAGE.format(mainminjs=js, commands="".join(commands) + script)
 
 
 _PAGE = """<!DOCTYPE html>
@@ -526,27 +527,28 @@ def animate(
             points.extend(np.array(M.translation) for M in viz.visual_data.oMg)
         viz.viewer = root
         root.set_animation(anim, play=True, repetitions=2**31 - 1 if loop else 1)
-    _frame_camera(root, np.array(points))
+    aim = _frame_camera(root, np.array(points))
 
-    _write_atomically(out, recorder.html())
+    _write_atomically(out, recorder.html(aim))
     return out
 
 
-def _frame_camera(root: Any, points: np.ndarray) -> None:
-    """Point meshcat's orbiting camera at the centre of ``points`` (m) from a distance that
-    shows them all (meshcat's default looks at the origin from 3 m)."""
+def _frame_camera(root: Any, points: np.ndarray) -> str:
+    """Aim meshcat's orbiting camera at the centre of ``points`` (m), from a distance that
+    shows them all (meshcat's default looks at the origin from 3 m). Returns the line of
+    JavaScript that moves the orbit's centre (meshcat 0.3 has no command for it)."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     centre = 0.5 * (lo + hi)
     extent = float(np.max(hi - lo)) + 0.4  # link origins only: leave room for the meshes
     direction = np.array([1.0, 0.6, 0.45])  # front right, above (world, z up)
-    eye = max(1.0, 1.1 * extent) * direction / np.linalg.norm(direction)
-    rig = np.eye(4)
-    rig[:3, 3] = centre
-    root["/Cameras/default"].set_transform(rig)
-    # the camera's own axes are three.js's (y up): world (x, y, z) -> (x, z, -y)
-    root["/Cameras/default/rotated/<object>"].set_property(
-        "position", [float(eye[0]), float(eye[2]), float(-eye[1])]
-    )
+    eye = centre + max(1.0, 1.1 * extent) * direction / np.linalg.norm(direction)
+
+    def three(v: np.ndarray) -> list[float]:  # the camera's axes are three.js's (y up)
+        return [float(v[0]), float(v[2]), float(-v[1])]
+
+    root["/Cameras/default/rotated/<object>"].set_property("position", three(eye))
+    x, y, z = three(centre)
+    return f"viewer.controls.target.set({x!r}, {y!r}, {z!r}); viewer.controls.update();"
 
 
 def _write_atomically(path: Path, text: str) -> None:

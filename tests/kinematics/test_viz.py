@@ -137,7 +137,7 @@ def test_failure_leaves_nothing_at_path(panda, tmp_path, monkeypatch):
     target = tmp_path / "page.html"
     target.write_text("previous run")
 
-    def broken(self):
+    def broken(self, *args):
         raise RuntimeError("disk full")
 
     monkeypatch.setattr(viz._Recorder, "html", broken)
@@ -342,3 +342,12 @@ def test_the_page_renders_the_robot_offline_in_headless_chromium(panda, tmp_path
     assert ((g > r + 40) & (g > b + 20)).sum() > 20  # the green target
     schemes = {u.split(":", 1)[0] for u in requests}
     assert schemes <= {"file", "data", "blob"}, f"network requests: {requests[:5]}"
+
+
+def test_no_browser_skips_with_a_reason_or_fails_where_ci_promised_one(monkeypatch):
+    monkeypatch.delenv("QPCOORD_REQUIRE_BROWSER", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="no Chromium"):
+        _need("no Chromium browser found")
+    monkeypatch.setenv("QPCOORD_REQUIRE_BROWSER", "1")
+    with pytest.raises(pytest.fail.Exception, match="QPCOORD_REQUIRE_BROWSER is set"):
+        _need("no Chromium browser found")
