@@ -16,19 +16,20 @@ tree as that server and writes the same page (meshcat's ``main.min.js`` then one
 ``handle_command_bytearray`` call per scene node, in the server's order). Nothing is left
 running, nothing listens, nothing is printed, and the time is bounded by the work itself.
 
-File size and time (pin 4.1, meshcat 0.3.2, one core of a loaded 2-core machine)
---------------------------------------------------------------------------------
-The meshes dominate; each animation frame adds about 0.2 kB per visual geometry::
+File size and time (pin 4.1, meshcat 0.3.2, a loaded 2-core machine)
+--------------------------------------------------------------------
+The meshes and the viewer dominate; each animation frame adds about 0.14 kB per visual
+geometry (the Panda: 1.5 kB, Talos: 7.5 kB)::
 
-    robot   geometries  frames  HTML size  write time
-    panda   11          61      15.3 MB    0.5 s
-    panda   11          600     16.6 MB    0.8 s
-    talos   52          61      21.4 MB    1.6 s
-    talos   52          600     27.4 MB    2.9 s
+    robot   visual geometries   frames   HTML size (gzipped)   write time
+    panda   11 (.dae)           61       15.1 MB (5.2 MB)      0.5-1.0 s
+    panda   11                  600      15.9 MB (5.5 MB)      1.2 s
+    talos   52 (.stl)           61       12.0 MB (5.8 MB)      0.8 s
+    talos   52                  600      16.0 MB (7.6 MB)      2.1-2.8 s
 
-(gzip divides the sizes by about 3.) Frames are subsampled to ``fps`` (default 30 per
-second of trajectory time) and at most ``max_frames`` (default 600); three.js interpolates
-between frames when it plays.
+Frames are subsampled to ``fps`` (default 30 per second of trajectory time) and at most
+``max_frames`` (default 600: 20 s at 30 fps; a longer run is shown at a lower rate); three.js
+interpolates between frames when it plays.
 """
 
 from __future__ import annotations
@@ -443,9 +444,9 @@ def animate(
     t : array_like, shape (N,), optional
         Sample times (s) of an array ``trajectory`` (increasing).
     max_frames : int
-        At most this many frames are kept (default 600): the page grows by ~0.2 kB per
-        frame and visual geometry (Panda: 11 geometries, 600 frames ≈ 1.3 MB over the
-        15 MB of meshes).
+        At most this many frames are kept (default 600): the page grows by ~0.14 kB per
+        frame and visual geometry (Panda: 600 frames add 0.8 MB to 15 MB of meshes and
+        viewer).
     loop : bool
         Replay the animation for ever (default) or play it once.
     visual_model : pinocchio.GeometryModel, optional
@@ -468,8 +469,9 @@ def animate(
 
     Notes
     -----
-    Size: the Panda's page is 15 MB (meshes and viewer) plus ~2 kB per frame; Talos's
-    21 MB plus ~10 kB per frame. Time: 0.5–3 s (see the module docstring).
+    Size: the Panda's page is 15 MB (meshes and viewer) plus 1.5 kB per frame (600 frames:
+    15.9 MB, 5.5 MB gzipped); Talos's 11.6 MB plus 7.5 kB per frame (600 frames: 16 MB).
+    Write time 0.5–3 s (see the module docstring). Opening it takes a browser 2–4 s.
     """
     if not isinstance(robot, Robot):
         raise ValueError(f"robot must be a qpcoord.Robot, got {type(robot).__name__}")

@@ -98,6 +98,51 @@ def test_the_page_is_meshcats_static_export_format(panda, tmp_path):
     assert [k["time"] for k in keys] == pytest.approx([0.0, 3.0, 6.0, 9.0, 12.0])  # 30 fps
 
 
+def test_the_recorder_writes_the_page_meshcats_server_writes(panda, tmp_path):
+    """Guard on meshcat's internals: every command also goes to a real meshcat server
+    (subprocess), whose static export must equal the recorder's page (whitespace aside)."""
+    import contextlib
+
+    import meshcat
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        window = meshcat.Visualizer().window  # starts meshcat's server and prints its URL
+    recorders = []
+
+    class Both(viz._Recorder):
+        def __init__(self, *args):
+            super().__init__(*args)
+            recorders.append(self)
+
+        def send(self, command):
+            super().send(command)
+            window.send(command)
+
+    try:
+        original, viz._Recorder = viz._Recorder, Both
+        try:
+            viz.animate(
+                panda,
+                _swing(panda, 4),
+                tmp_path / "a.html",
+                dt=0.1,
+                targets=[np.eye(4)],
+                obstacles=[{"centre": (0.5, 0, 0.2), "half_extents": (0.1, 0.1, 0.1)}],
+            )
+        finally:
+            viz._Recorder = original
+        theirs = window.get_scene()
+    finally:
+        window.zmq_socket.close(linger=0)  # else zmq waits for it when the interpreter exits
+        window.server_proc.kill()
+        window.server_proc.wait(timeout=10)
+
+    def lines(page: str) -> list[str]:
+        return [line.strip() for line in page.splitlines() if line.strip()]
+
+    assert lines(recorders[0].html()) == lines(theirs)
+
+
 def test_frames_are_subsampled_to_fps_and_max_frames():
     fine = np.arange(1001) * 0.001  # 1 s at 1 kHz
     keep = viz._frames(fine, 30.0, 600)
