@@ -419,7 +419,8 @@ def animate(
         A robot read from a URDF (``qc.robots.load``, ``Robot.from_urdf``): its visual
         meshes are read with ``package_dirs``. Locked joints (the Panda's fingers, Talos's
         upper body) are drawn at their locked configuration. A robot without a URDF needs
-        ``visual_model``.
+        ``visual_model``. A visual geometry meshcat cannot draw (an unknown mesh format) is
+        left out; when none can be drawn, ``ValueError``.
     trajectory : qpcoord.Trajectory or array_like, shape (N, nq)
         Configurations in the robot's coordinates (rad, m), one per row. A
         :class:`~qpcoord.Trajectory` brings its times ``.t`` (s); an array needs ``dt`` or
