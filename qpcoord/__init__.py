@@ -103,6 +103,7 @@ __all__ = [
     "solve_stack",
     "solver_versions",
     "task_manifold",
+    "viz",
 ]
 
 #: Names imported on first use -> their module (``qc.ddl`` pulls in scipy.signal: ~1.4 s).
@@ -112,6 +113,7 @@ _LAZY = {
     "musculo": "qpcoord.musculo",
     "reproduce": "qpcoord.studies.reproduce",
     "sweep": "qpcoord.studies.sweep",
+    "viz": "qpcoord.kinematics.viz",
 }
 
 
