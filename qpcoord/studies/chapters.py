@@ -31,5 +31,6 @@ SCRIPT_CHAPTERS: tuple[tuple[str, str], ...] = (
     ("panda_", "core"),
     ("talos_", "core"),
     ("solo12_", "core"),
+    ("bimanual", "core"),
     ("sweep_", "core"),
 )
