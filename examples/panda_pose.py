@@ -27,7 +27,10 @@ only, 1 s): 2.0e-9 m and 1.1e-8 rad vs Pink 2.0e-7 m and 1.2e-7 rad, ≈ 140 µs
 Claims (``summary["claims"]``): thesis Def. 5.4 (a lower level does not disturb a higher
 one) checked as "the hand never goes under the table while the pose asks for it", and our
 own checks (pose error ≤ 1e-6 with hard limits, no limit violation, Pink side by side).
-Figure: ``pose_error.png``.
+Figures: ``pose_error.png``; ``panda_pose.html``, the qpcoord run as one self-contained
+animation (``qc.viz.animate``: the Panda, the hand targets in green, the table plane in red;
+≈ 15 MB, ``summary["html_mb"]``; ``null`` with the reason when meshcat or the meshes are
+missing).
 
 Needs the ``robots`` extra (example-robot-data); Pink (``pip install pin-pink``) for the
 comparison.
@@ -52,6 +55,8 @@ DT = 1e-3  # s, control period (1 kHz)
 FRAME = "panda_hand_tcp"
 Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad; hand at (0.45, 0, 0.45) m
 TABLE_Z = 0.2  # m, table plane: the hand stays above it
+#: The table drawn in the animation (m): a 1 cm slab whose top is the plane z = TABLE_Z.
+TABLE = qc.Box([0.5, 0.0, TABLE_Z - 0.005], [0.3, 0.45, 0.005])
 HAND_GAIN = 20.0  # 1/s
 BAND_GAIN = 200.0  # 1/s (K dt = 0.2: the face is approached geometrically)
 POSTURE_GAIN = 1.0  # 1/s
@@ -124,6 +129,7 @@ def run(solver: str, phases: list[tuple[str, int]]) -> dict:
             hand.set_target(pin.SE3(T))
 
     q = Q0.copy()
+    path = [q]  # the configurations, animated (recorded only: the loop does not read them)
     times, pos_err, rot_err, under, qviol, vviol, phase_end = [], [], [], [], [], [], {}
     at_speed = 0
     for name, steps in phases:
@@ -139,6 +145,7 @@ def run(solver: str, phases: list[tuple[str, int]]) -> dict:
             vviol.append(b)
             at_speed += bool(np.any(np.abs(v) >= arm.velocity_limit * (1 - 1e-6)))
             q = q_next
+            path.append(q)
             e = pose_error(arm, q, T)
             pos_err.append(e[0])
             rot_err.append(e[1])
@@ -163,6 +170,7 @@ def run(solver: str, phases: list[tuple[str, int]]) -> dict:
         "step_p99_us": float(np.percentile(t_us, 99)),
         "position_error_m": pos_err,  # per step; plotted, not written to summary.json
         "orientation_error_rad": rot_err,
+        "q": np.array(path),  # (steps + 1, nq), animated, not written to summary.json
     }
 
 
@@ -264,6 +272,36 @@ def figure(rows: list[dict], phases: list[tuple[str, int]], path: Path) -> Path:
     return save(fig, path)
 
 
+def animation(ours: dict, phases: list[tuple[str, int]], path: Path, quick: bool) -> dict:
+    """Write the qpcoord run as one HTML animation; ``{"html": name, "html_mb": size}``, or
+    ``{"html": None, "html_reason": why}`` when meshcat or the robot's meshes are missing."""
+    arm = qc.robots.load("panda")
+    goals = targets(arm)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        html = qc.viz.animate(
+            arm,
+            ours["q"],
+            path,
+            dt=DT,
+            targets=[goals[name] for name, _ in phases],
+            obstacles=[TABLE],
+            fps=25,
+            max_frames=11 if quick else 600,
+        )
+    except ImportError as exc:  # meshcat missing (the ``viz`` extra)
+        print(f"meshcat not installed: animation skipped ({exc})")
+        return {"html": None, "html_reason": str(exc)}
+    except ValueError as exc:
+        if not str(exc).startswith("robot "):  # only the robot's visual meshes are excused
+            raise
+        print(f"animation skipped: {exc}")
+        return {"html": None, "html_reason": str(exc)}
+    mb = html.stat().st_size / 1e6
+    print(f"wrote {html} ({mb:.1f} MB)")
+    return {"html": html.name, "html_mb": round(mb, 2)}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="reach phase only, 1 s (CI)")
@@ -315,11 +353,18 @@ def main(argv=None) -> int:
         figure(rows, phases, args.out / "pose_error.png")
     except ImportError:  # matplotlib missing (the ``plots`` extra)
         print("matplotlib not installed: figure skipped")
-    keep = ("position_error_m", "orientation_error_rad")
+    html = animation(ours, phases, args.out / "panda_pose.html", args.quick)
+    keep = ("position_error_m", "orientation_error_rad", "q")
     rows = [{k: v for k, v in r.items() if k not in keep} for r in rows]
     write_json(
         args.out / "summary.json",
-        {"phases": phases, "rows": rows, "pink": pink_row is not None, "claims": rows_claims},
+        {
+            "phases": phases,
+            "rows": rows,
+            "pink": pink_row is not None,
+            **html,
+            "claims": rows_claims,
+        },
     )
     print(f"wrote {args.out / 'summary.json'}")
     return 0
