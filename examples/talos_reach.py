@@ -25,7 +25,10 @@ most 1e-5 m; the CoM never leaves the sole polygon by more than 1e-9 m at any st
 overshoot of the 2 cm-shrunk boundary, the Euler step's second-order error, is reported
 beside it); the inequality binds; the hand reaches its target; the weighted QP and Pink
 compared with the strict stack. Figures: ``com.png`` (CoM beyond the shrunk front edge
-over time), ``errors.png`` (feet drift and hand error over time).
+over time), ``errors.png`` (feet drift and hand error over time); ``talos_reach.html``, the
+strict run as one self-contained animation (``qc.viz.animate``: Talos and the hand's final
+target in green; ≈ 12 MB, ``summary["html_mb"]``; ``null`` with the reason when meshcat
+or the meshes are missing).
 
 Needs the ``robots`` extra (example-robot-data); Pink (``pip install pin-pink``) is
 optional.
@@ -141,6 +144,7 @@ def run_qpcoord(method: str, polygon: bool, duration: float, reach: float) -> di
     posture = qc.PostureTask(robot, q, gain=POSTURE_GAIN)
     levels = [feet, support, hand, posture] if polygon else [feet, hand, posture]
     ik = qc.IK(robot, levels, DT, method=method)  # limits="robot": position and speed, hard
+    path = [q]  # the configurations, animated (recorded only: the loop does not read them)
     times, active, row_excess, level0 = [], 0, 0.0, 0.0
     for k in range(int(round(duration / DT))):
         hand.set_target(*min_jerk(p0, p0 + OFFSET, k * DT, reach))
@@ -154,6 +158,7 @@ def run_qpcoord(method: str, polygon: bool, duration: float, reach: float) -> di
             active += bool(gap.max() >= -ACTIVE_TOL)
             row_excess = max(row_excess, float(gap.max()))
         q = robot.integrate(q, v, DT)
+        path.append(q)
         meter(q)
     label = f"{method}{'' if polygon else ', no polygon'}"
     extra = {
@@ -162,6 +167,7 @@ def run_qpcoord(method: str, polygon: bool, duration: float, reach: float) -> di
         "steps_polygon_active": active,
         "polygon_row_excess_m_s": row_excess,
         "feet_level_residual_m_s": level0,
+        "q": np.array(path),  # (steps + 1, nq), animated, not written to summary.json
     }
     return meter.summary(label, times, extra)
 
@@ -336,6 +342,30 @@ def figures(rows: list[dict], out: Path) -> None:
     save(fig, out / "errors.png")
 
 
+def animation(strict: dict, path: Path, quick: bool) -> dict:
+    """Write the strict run as one HTML animation; ``{"html": name, "html_mb": size}``, or
+    ``{"html": None, "html_reason": why}`` when meshcat or the robot's meshes are missing."""
+    robot = qc.robots.load("talos")
+    q0 = robot.reference_configuration("half_sitting")
+    goal = robot.frame_pose(q0, HAND)[:3, 3] + OFFSET
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        html = qc.viz.animate(
+            robot, strict["q"], path, dt=DT, targets=[goal], fps=25, max_frames=11 if quick else 600
+        )
+    except ImportError as exc:  # meshcat missing (the ``viz`` extra)
+        print(f"meshcat not installed: animation skipped ({exc})")
+        return {"html": None, "html_reason": str(exc)}
+    except ValueError as exc:
+        if not str(exc).startswith("robot "):  # only the robot's visual meshes are excused
+            raise
+        print(f"animation skipped: {exc}")
+        return {"html": None, "html_reason": str(exc)}
+    mb = html.stat().st_size / 1e6
+    print(f"wrote {html} ({mb:.1f} MB)")
+    return {"html": html.name, "html_mb": round(mb, 2)}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="1 s run, 0.7 s reach (CI)")
@@ -376,9 +406,10 @@ def main(argv=None) -> int:
         figures(rows, args.out)
     except ImportError:  # matplotlib missing (the ``plots`` extra)
         print("matplotlib not installed: figures skipped")
-    rows = [{k: v for k, v in r.items() if k != "series"} for r in rows]
+    html = animation(rows[0], args.out / "talos_reach.html", args.quick)  # the strict run
+    rows = [{k: v for k, v in r.items() if k not in ("series", "q")} for r in rows]
     meta = {"dt_s": DT, "duration_s": duration, "reach_s": reach, "margin_m": MARGIN}
-    write_json(args.out / "summary.json", {**meta, "rows": rows, "claims": rows_claims})
+    write_json(args.out / "summary.json", {**meta, "rows": rows, **html, "claims": rows_claims})
     print(f"wrote {args.out / 'summary.json'}")
     return 0
 
