@@ -42,7 +42,10 @@ from 12)``; ours is 18 × 18 and runs at level 2. ``--quick`` (0.5 s): feet drif
 
 Claims (``summary["claims"]``): thesis Def. 5.4 checked as "moving the base (level 1) does
 not move the feet (level 0)"; our own checks (base tracking, unit quaternion, Pink's feet
-drift with a cost, Pink's low-acceleration crash vs ours). Figure: ``feet_base.png``.
+drift with a cost, Pink's low-acceleration crash vs ours). Figures: ``feet_base.png``;
+``solo12_body.html``, the qpcoord run (target held per step) as one self-contained
+animation (``qc.viz.animate``: Solo-12 and the four feet's positions in green; ≈ 4.3 MB,
+``summary["html_mb"]``; ``null`` with the reason when meshcat or the meshes are missing).
 
 Needs the ``robots`` extra (example-robot-data); Pink (``pip install pin-pink``) for the
 comparison.
@@ -155,6 +158,7 @@ def run(variant: str, steps: int) -> dict:
             return v, config.q.copy()
 
     q = q0.copy()
+    path = [q]  # the configurations, animated (recorded only: the loop does not read them)
     times, drift, z_err, att_err, quat, speed = [], [], [], [], [], 0.0
     qviol = 0.0
     for k in range(steps):
@@ -162,6 +166,7 @@ def run(variant: str, steps: int) -> dict:
         t0 = time.perf_counter()
         v, q = step(q, T, twist)
         times.append(time.perf_counter() - t0)
+        path.append(q)
         T_next, _ = base_target(T0, (k + 1) * DT)
         e = attitude_error(solo.frame_pose(q, BASE), T_next)
         z_err.append(e[0])
@@ -194,6 +199,7 @@ def run(variant: str, steps: int) -> dict:
         "step_p99_us": float(np.percentile(t_us, 99)),
         "drift_m": drift,  # per step; plotted, not written to summary.json
         "height_error_m": z_err,
+        "q": np.array(path),  # (steps + 1, nq), animated, not written to summary.json
     }
 
 
@@ -341,6 +347,30 @@ def figure(rows: list[dict], path: Path) -> Path:
     return save(fig, path)
 
 
+def animation(ours: dict, path: Path, quick: bool) -> dict:
+    """Write the qpcoord run as one HTML animation; ``{"html": name, "html_mb": size}``, or
+    ``{"html": None, "html_reason": why}`` when meshcat or the robot's meshes are missing."""
+    solo = qc.robots.load("solo12")
+    q0 = solo.reference_configuration("standing")
+    feet = np.array([solo.frame_pose(q0, f)[:3, 3] for f in FEET])  # (4, 3), m
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        html = qc.viz.animate(
+            solo, ours["q"], path, dt=DT, targets=feet, fps=25, max_frames=11 if quick else 600
+        )
+    except ImportError as exc:  # meshcat missing (the ``viz`` extra)
+        print(f"meshcat not installed: animation skipped ({exc})")
+        return {"html": None, "html_reason": str(exc)}
+    except ValueError as exc:
+        if not str(exc).startswith("robot "):  # only the robot's visual meshes are excused
+            raise
+        print(f"animation skipped: {exc}")
+        return {"html": None, "html_reason": str(exc)}
+    mb = html.stat().st_size / 1e6
+    print(f"wrote {html} ({mb:.1f} MB)")
+    return {"html": html.name, "html_mb": round(mb, 2)}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="0.5 s (CI)")
@@ -380,10 +410,12 @@ def main(argv=None) -> int:
         figure(rows, args.out / "feet_base.png")
     except ImportError:  # matplotlib missing (the ``plots`` extra)
         print("matplotlib not installed: figure skipped")
-    rows = [{k: v for k, v in r.items() if k not in ("drift_m", "height_error_m")} for r in rows]
+    html = animation(rows[0], args.out / "solo12_body.html", args.quick)  # variant "qpcoord"
+    drop = ("drift_m", "height_error_m", "q")
+    rows = [{k: v for k, v in r.items() if k not in drop} for r in rows]
     write_json(
         args.out / "summary.json",
-        {"rows": rows, "low_acceleration": lowacc, "claims": rows_claims},
+        {"rows": rows, "low_acceleration": lowacc, **html, "claims": rows_claims},
     )
     print(f"wrote {args.out / 'summary.json'}")
     return 0
