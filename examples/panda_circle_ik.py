@@ -10,7 +10,11 @@ weighted QP trades circle error for posture, and more so when the bounds bind.
 Claims (``summary["claims"]``): thesis Def. 5.4 / §5.3.5 (a lower-priority task has no
 impact on the higher ones) checked at the velocity level, where the thesis states it: the
 end-effector level's residual ``‖J q̇ − ẋ‖`` of every strict-hierarchy step; and our own
-comparison of the closed-loop position errors. Figure: ``errors.png``.
+comparison of the closed-loop position errors. Figures: ``errors.png``;
+``panda_circle_ik.html``, the strict hierarchy with posture gain 50/s and the 0.7 rad/s
+speed bound as one self-contained animation (``qc.viz.animate``: the Panda and 24 points
+of the circle in green; ≈ 15 MB, ``summary["html_mb"]``; ``null`` with the reason when
+meshcat or the meshes are missing).
 
 Needs the ``robots`` extra (``pip install 'qpcoord[robots]'``: example-robot-data).
 
@@ -31,21 +35,29 @@ from qpcoord.studies.files import write_json
 DT = 1e-3  # s, control period
 Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
 LEVEL0_TOL = 1e-9  # m/s, end-effector level residual of a strict-hierarchy step
+ANIMATED = ("hierarchical", 50.0, 0.7)  # method, posture gain (1/s), speed bound (rad/s)
+
+
+def circle_of(arm) -> qc.paths.HorizontalCircle:
+    """The end effector's reference: a 0.1 m circle in 2 s through its start position."""
+    return qc.paths.HorizontalCircle(arm.position(Q0), radius=0.1, period=2.0)
 
 
 def run_loop(method: str, speed, steps: int, posture_gain: float) -> dict:
     arm = qc.robots.load("panda")
-    circle = qc.paths.HorizontalCircle(arm.position(Q0), radius=0.1, period=2.0)
+    circle = circle_of(arm)
     ee = qc.PositionTask(arm, target=circle, gain=50.0)
     posture = qc.PostureTask(arm, Q0 + 0.3, gain=posture_gain)  # pulls away from the start
     limits = [qc.JointLimits(arm, gain=0.5), qc.VelocityLimits(arm, speed)]
     ik = qc.IK(arm, [ee, posture], DT, limits=limits, method=method)
     q = Q0.copy()
+    path = [q]  # the configurations, animated (recorded only: the loop does not read them)
     errors, at_bound, level0 = [], 0, 0.0
     for k in range(steps):
         qdot, sol = ik.step(q, k * DT)
         level0 = max(level0, float(sol.level_residuals[0]))
         q = q + DT * qdot
+        path.append(q)
         errors.append(float(np.linalg.norm(arm.position(q) - circle.position((k + 1) * DT))))
         at_bound += bool(np.any(np.abs(qdot) >= ik.limits[1].limit * (1 - 1e-6)))
     return {
@@ -58,6 +70,7 @@ def run_loop(method: str, speed, steps: int, posture_gain: float) -> dict:
         "max_level0_residual_m_s": level0,
         "steps": steps,
         "errors_m": errors,  # per step; plotted, not written to summary.json
+        "q": np.array(path),  # (steps + 1, nq), animated, not written to summary.json
     }
 
 
@@ -118,6 +131,37 @@ def figure(rows: list[dict], path: Path) -> Path:
     return save(fig, path)
 
 
+def animation(rows: list[dict], path: Path, quick: bool) -> dict:
+    """Write the :data:`ANIMATED` run as one HTML animation; ``{"html": name, "html_mb":
+    size}``, or ``{"html": None, "html_reason": why}`` when meshcat or the robot's meshes are
+    missing."""
+    method, gain, speed = ANIMATED
+    run = next(
+        r
+        for r in rows
+        if (r["method"], r["posture_gain_per_s"], r["speed_limit_rad_s"]) == (method, gain, speed)
+    )
+    arm = qc.robots.load("panda")
+    circle = circle_of(arm)
+    points = np.array([circle.position(t) for t in np.linspace(0.0, 2.0, 24, endpoint=False)])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        html = qc.viz.animate(
+            arm, run["q"], path, dt=DT, targets=points, fps=25, max_frames=11 if quick else 600
+        )
+    except ImportError as exc:  # meshcat missing (the ``viz`` extra)
+        print(f"meshcat not installed: animation skipped ({exc})")
+        return {"html": None, "html_reason": str(exc)}
+    except ValueError as exc:
+        if not str(exc).startswith("robot "):  # only the robot's visual meshes are excused
+            raise
+        print(f"animation skipped: {exc}")
+        return {"html": None, "html_reason": str(exc)}
+    mb = html.stat().st_size / 1e6
+    print(f"wrote {html} ({mb:.1f} MB)")
+    return {"html": html.name, "html_mb": round(mb, 2)}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="200 steps (CI)")
@@ -149,8 +193,9 @@ def main(argv=None) -> int:
         figure(rows, args.out / "errors.png")
     except ImportError:  # matplotlib missing (the ``plots`` extra)
         print("matplotlib not installed: figure skipped")
-    rows = [{k: v for k, v in r.items() if k != "errors_m"} for r in rows]
-    write_json(args.out / "summary.json", {"rows": rows, "claims": rows_claims})  # atomic
+    html = animation(rows, args.out / "panda_circle_ik.html", args.quick)
+    rows = [{k: v for k, v in r.items() if k not in ("errors_m", "q")} for r in rows]
+    write_json(args.out / "summary.json", {"rows": rows, **html, "claims": rows_claims})  # atomic
     print(f"wrote {args.out / 'summary.json'}")
     return 0
 
