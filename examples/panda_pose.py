@@ -56,7 +56,7 @@ FRAME = "panda_hand_tcp"
 Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad; hand at (0.45, 0, 0.45) m
 TABLE_Z = 0.2  # m, table plane: the hand stays above it
 #: The table drawn in the animation (m): a 1 cm slab whose top is the plane z = TABLE_Z.
-TABLE = qc.Box([0.5, 0.0, TABLE_Z - 0.005], [0.3, 0.45, 0.005])
+TABLE = qc.Box([0.55, 0.0, TABLE_Z - 0.005], [0.25, 0.4, 0.005])
 HAND_GAIN = 20.0  # 1/s
 BAND_GAIN = 200.0  # 1/s (K dt = 0.2: the face is approached geometrically)
 POSTURE_GAIN = 1.0  # 1/s
