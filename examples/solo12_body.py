@@ -44,7 +44,7 @@ Claims (``summary["claims"]``): thesis Def. 5.4 checked as "moving the base (lev
 not move the feet (level 0)"; our own checks (base tracking, unit quaternion, Pink's feet
 drift with a cost, Pink's low-acceleration crash vs ours). Figures: ``feet_base.png``;
 ``solo12_body.html``, the qpcoord run (target held per step) as one self-contained
-animation (``qc.viz.animate``: Solo-12 and the four feet's positions in green; ≈ 4.3 MB,
+animation (``qc.viz.animate``: Solo-12 and the four feet's positions in green; 4.3–4.5 MB,
 ``summary["html_mb"]``; ``null`` with the reason when meshcat or the meshes are missing).
 
 Needs the ``robots`` extra (example-robot-data); Pink (``pip install pin-pink``) for the
