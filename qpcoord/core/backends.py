@@ -55,6 +55,7 @@ __all__ = [
     "solve_dense_qp",
     "check_solver",
     "deadline",
+    "time_left",
     "DEFAULT_TIME_LIMIT",
 ]
 
@@ -284,6 +285,12 @@ def as_rows(G, lo, hi, lb, ub, k):
 def _left(at: float | None) -> float | None:
     """Seconds left before the deadline ``at`` (``None``: no deadline)."""
     return None if at is None else at - time.perf_counter()
+
+
+def time_left() -> float | None:
+    """Seconds left before the current solve's :class:`deadline` (``None``: no limit); for
+    the solves qpcoord runs outside :func:`solve_dense_qp` (the hard phase's LP)."""
+    return _left(_DEADLINE.get())
 
 
 def _out_of_time(solver: str, left: float) -> QPResult:
