@@ -161,6 +161,7 @@ class Reduced:
         self.certificates: list[float] = []  # KKT residual of each level that ran a QP
         self.uncertified: list[tuple[int, float]] = []  # (level, KKT residual)
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
+        self._asm = None  # (kdim, D, k, Z, G): the last QP matrix built by _assemble
         return self
 
     # -- inherited rows -----------------------------------------------------------------
@@ -249,22 +250,41 @@ class Reduced:
         return self.relax * np.maximum(1.0, np.abs(bound))
 
     def _assemble(self, kdim: int, D, dlo, dhi):
-        """Constraint rows of a QP in ``y = (z, w)`` (``kdim`` entries, ``w`` unbounded)."""
+        """Constraint rows of a QP in ``y = (z, w)`` (``kdim`` entries, ``w`` unbounded).
+
+        The matrix depends only on ``(kdim, D, k, Z)``; it is kept and reused while those
+        are the same objects (a level's QP, its retries, polish and certificate share it),
+        only the bounds are recomputed."""
         r = self.r
         x = self.x
-        blocks, los, his = [], [], []
+        k = self.k
+        box_rows = self.lb is not None and self.Z is not None
+        c = self._asm
+        if c is not None and c[0] == kdim and c[1] is D and c[2] == k and c[3] is self.Z:
+            G = c[4]
+        else:
+            blocks = []
+            if D is not None and D.shape[0]:
+                blocks.append(D)
+            if k:
+                Cz = self.reduce(self._C[:k])
+                if kdim > r:
+                    Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
+                blocks.append(Cz)
+            if box_rows:
+                Zr = self.Z if kdim == r else np.hstack((self.Z, np.zeros((self.n, kdim - r))))
+                blocks.append(Zr)
+            if not blocks:
+                G = np.zeros((0, kdim))
+            else:
+                G = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
+            self._asm = (kdim, D, k, self.Z, G)
+        los, his = [], []
         if D is not None and D.shape[0]:
-            blocks.append(D)
             los.append(dlo)
             his.append(dhi)
-        k = self.k
         if k:
-            Cin = self._C[:k]
-            Cz = self.reduce(Cin)
-            cx = Cin @ x
-            if kdim > r:
-                Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
-            blocks.append(Cz)
+            cx = self._C[:k] @ x
             # x̄ meets these rows up to the previous solve's tolerance; never ask for more
             # than z = 0 already gives, so the QP stays feasible by construction
             los.append(np.minimum(self._lo[:k] - cx, 0.0) - self._relax(self._lo[:k]))
@@ -277,15 +297,13 @@ class Reduced:
                 lb[:r] = np.minimum(self.lb - x, 0.0) - self._relax(self.lb)
                 ub[:r] = np.maximum(self.ub - x, 0.0) + self._relax(self.ub)
             else:
-                Zr = self.Z if kdim == r else np.hstack((self.Z, np.zeros((self.n, kdim - r))))
-                blocks.append(Zr)
                 los.append(np.minimum(self.lb - x, 0.0) - self._relax(self.lb))
                 his.append(np.maximum(self.ub - x, 0.0) + self._relax(self.ub))
-        if not blocks:
-            return np.zeros((0, kdim)), np.zeros(0), np.zeros(0), lb, ub
-        if len(blocks) == 1:
-            return blocks[0], los[0], his[0], lb, ub
-        return np.vstack(blocks), np.concatenate(los), np.concatenate(his), lb, ub
+        if not los:
+            return G, np.zeros(0), np.zeros(0), lb, ub
+        if len(los) == 1:
+            return G, los[0], his[0], lb, ub
+        return G, np.concatenate(los), np.concatenate(his), lb, ub
 
     def exact_rows(self, kdim: int, D=None, dlo=None, dhi=None):
         """The QP's rows in ``y = (z, w)`` without any opening, the bounds as rows too:

@@ -26,7 +26,7 @@ import numpy as np
 from .linalg import numerical_rank, svd
 from .tolerance import at_bounds, within
 
-__all__ = ["polish"]
+__all__ = ["polish", "prepare", "kkt_residual", "active_set_ls", "pull_back"]
 
 #: Relative distances to a bound under which a row is taken as active (tried in turn).
 ACTIVE_TOLS = (1e-7, 1e-5)
@@ -174,7 +174,22 @@ def _col_scale(Q, Gn):
     return 1.0 / c
 
 
-def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
+def prepare(Q, G, lo, hi):
+    """The level's rows normalised to unit norm (with their norms), computed once per level
+    and passed to :func:`kkt_residual`, :func:`active_set_ls` and :func:`pull_back` as
+    ``prepared`` (they would otherwise normalise the same rows at every call). The column
+    scaling is left to the first call that needs it (a level met exactly does not)."""
+    if G.shape[0] == 0:
+        return G, lo, hi, None, np.zeros(0)
+    nr = np.sqrt(np.einsum("ij,ij->i", G, G))
+    keep = nr > 0.0
+    if keep.all():
+        return G / nr[:, None], lo / nr, hi / nr, None, nr
+    k = nr[keep]
+    return G[keep] / k[:, None], lo[keep] / k, hi[keep] / k, None, nr
+
+
+def kkt_residual(Q, c, G, lo, hi, y, prepared=None) -> tuple[float, float]:
     """Optimality of ``y`` for ``min ½‖Q y − c‖², lo ≤ G y ≤ hi``.
 
     Returns ``(stationarity, infeasibility)``, both dimensionless:
@@ -193,9 +208,11 @@ def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
     optimal up to an objective gap of order ``KKT_TOL²`` times the level's value in
     well-scaled directions.
     """
-    from scipy.optimize import nnls
-
-    Gn, lon, hin = _normalise_rows(G, lo, hi)
+    if prepared is None:
+        Gn, lon, hin = _normalise_rows(G, lo, hi)
+        S = None
+    else:
+        Gn, lon, hin, S, _norms = prepared
     qy = Q @ y
     res = qy - c
     # a level met to rounding has a gradient of rounding noise: its floor is 1e-8 of the
@@ -205,8 +222,6 @@ def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
     lscale = float(np.linalg.norm(c)) + float(np.linalg.norm(qy))
     den = max(nres, 1e-8 * lscale, 1e-300)
     by_value = nres <= VALUE_TOL * max(1.0, lscale)  # the library's max(1, scale) rule
-    S = _col_scale(Q, Gn)
-    gs = S * (Q.T @ res)
     infeas = 0.0
     if Gn.shape[0]:
         gy = Gn @ y
@@ -217,7 +232,15 @@ def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
         above[~np.isfinite(above)] = -np.inf
         infeas = max(0.0, float(below.max()), float(above.max()))
         if by_value:
-            return 0.0, infeas
+            return 0.0, infeas  # met exactly: no column scaling, no NNLS
+        if S is None:
+            S = _col_scale(Q, Gn)
+        gs = S * (Q.T @ res)
+        # μ = 0 is a feasible multiplier: a gradient already under the tolerance certifies
+        # the level without the NNLS (its residual can only be smaller)
+        g0 = float(np.linalg.norm(gs)) / den
+        if g0 <= KKT_TOL:
+            return g0, infeas
         a_lo = np.isfinite(lon) & (gy - lon <= KKT_FEAS_TOL * sc)
         a_hi = np.isfinite(hin) & (hin - gy <= KKT_FEAS_TOL * sc)
         cols = []
@@ -230,12 +253,18 @@ def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
             gmax = float(np.abs(gs).max())
             if gmax == 0.0:
                 return 0.0, infeas
+            from scipy.optimize import nnls
+
             _mu, rn = nnls(B / gmax, gs / gmax, maxiter=50 * B.shape[1] + 50)
             return rn * gmax / den, infeas
-    return (0.0 if by_value else float(np.linalg.norm(gs)) / den), infeas
+    if by_value:
+        return 0.0, infeas
+    if S is None:
+        S = _col_scale(Q, Gn)
+    return float(np.linalg.norm(S * (Q.T @ res))) / den, infeas
 
 
-def pull_back(G, lo, hi, y, y_safe=None):
+def pull_back(G, lo, hi, y, y_safe=None, norms=None):
     """The point of the segment from ``y_safe`` (default 0, feasible by assumption) to ``y``
     farthest along it that meets ``lo ≤ G y ≤ hi`` exactly (a ratio test on the rows ``y``
     violates: each row's half-space holds both ends of the segment otherwise)."""
@@ -244,7 +273,9 @@ def pull_back(G, lo, hi, y, y_safe=None):
     gy = G @ y
     # misses at the active-set backends' opening (1e-12·max(1, |bound|)) or at rounding
     # level are not violations
-    tol = 1e-13 * np.sqrt(np.einsum("ij,ij->i", G, G)) * float(np.abs(y).max()) + PULL_TOL * (
+    if norms is None:
+        norms = np.sqrt(np.einsum("ij,ij->i", G, G))
+    tol = 1e-13 * norms * float(np.abs(y).max()) + PULL_TOL * (
         np.maximum(
             1.0,
             np.maximum(
@@ -267,7 +298,7 @@ def pull_back(G, lo, hi, y, y_safe=None):
     return base + max(t, 0.0) * (y - base)
 
 
-def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None):
+def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None, prepared=None):
     """Solve ``min ½‖Q y − c‖², lo ≤ G y ≤ hi`` exactly from a feasible ``y0``.
 
     A primal active-set method (Nocedal & Wright, Alg. 16.3) on the least-squares form:
@@ -278,9 +309,13 @@ def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None):
     Returns ``(y, converged)``; ``y`` is feasible whenever ``y0`` is.
     """
     k = y0.shape[0]
-    Gn, lon, hin = _normalise_rows(G, lo, hi)
+    if prepared is None:
+        Gn, lon, hin = _normalise_rows(G, lo, hi)
+        S = _col_scale(Q, Gn)
+    else:
+        Gn, lon, hin, _s, _norms = prepared
+        S = _col_scale(Q, Gn)
     m = Gn.shape[0]
-    S = _col_scale(Q, Gn)
     y = y0.astype(float).copy()
     Qs = Q * S  # work in the equilibrated variables u = y / S
     Gs = Gn * S
