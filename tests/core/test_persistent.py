@@ -247,11 +247,15 @@ def region_problem(seed: int, n: int = 8, p: int = 3):
     )
     pq = stack.persistent()
     M = rng.normal(size=(5, p))
+    # upper = 1 + U θ with |θ_i| ≤ 2 (the property test): kept above the lower limit -1
+    # (hypothesis found a seed whose upper limit crossed it, a ValueError)
+    U = 0.2 * rng.normal(size=(3, p))
+    U /= max(1.0, 2.0 * float(np.abs(U).sum(axis=1).max()) / 1.5)
     pq.parametrize(
         p,
         {
             track: (np.zeros(5), M),
-            hard: ((-np.ones(3), np.zeros((3, p))), (np.ones(3), 0.2 * rng.normal(size=(3, p)))),
+            hard: ((-np.ones(3), np.zeros((3, p))), (np.ones(3), U)),
         },
     )
     return stack, pq, rng, hard
