@@ -195,7 +195,7 @@ class _Certifier:
 
     def _feasible_point(self, z):
         y = pull_back(
-            self.G, self.lo, self.hi, self._with_slacks(z), self.y_safe, norms=self.prep[4]
+            self.G, self.lo, self.hi, self._with_slacks(z), self.y_safe, norms=self.prep.norms
         )
         return self._with_slacks(y[: self.r])
 
