@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .backends import INFEASIBLE, OK, as_rows, available_solvers, solve_dense_qp
+from .backends import OK, as_rows, available_solvers, solve_dense_qp, time_left
 from .errors import InfeasibleError, SolverError
 from .linalg import null_space, numerical_rank, svd
 from .polish import polish
@@ -59,14 +59,59 @@ def _miss(G, lo, hi, lb, ub, y) -> float:
     return worst
 
 
-def _lp_feasible(G, lo, hi, lb, ub) -> bool:
-    """Is ``{y : lo ≤ G y ≤ hi, lb ≤ y ≤ ub}`` non-empty? (HiGHS LP via scipy.)"""
+#: Relative violation (``max(1, |bound|)`` rule) under which the hard part counts as
+#: feasible: the optimum of the elastic LP of :func:`_lp_violation`. Far above rounding of
+#: a point met exactly (a box of width 0 at 1e3 with a hard equality through it: ~1e-16),
+#: far below anything :data:`CHECK_TOL` would let pass.
+INFEAS_TOL = 1e-9
+#: HiGHS's primal and dual feasibility tolerances in that LP (its smallest allowed values).
+_LP_TOL = 1e-10
+
+
+def _lp_violation(G, lo, hi, lb, ub):
+    """Smallest uniform relative violation of ``lo ≤ G y ≤ hi, lb ≤ y ≤ ub``.
+
+    The elastic LP ``min t`` over ``(y, t ≥ 0)`` with every one-sided row divided by
+    ``max(1, |bound|)`` (the library's tolerance rule) and opened by ``t``, solved by HiGHS
+    (``scipy.optimize.linprog``) with the solve's time left (:func:`deadline`). The LP
+    always has a solution, so the answer does not depend on HiGHS's absolute tolerances:
+    a box 1.6e-8 wide at 1e3, or of width 0 on a hard equality, is feasible to rounding
+    (``t`` ~1e-16), and HiGHS's own feasibility test (absolute 1e-7 by default, 1e-10 at
+    best) called such sets infeasible.
+
+    Returns ``(t, y)`` with ``t`` recomputed at the LP's point ``y``, or ``(None, None)`` when
+    the LP did not finish (time limit).
+    """
     from scipy.optimize import linprog
 
     k = G.shape[1]
     A, b = as_rows(G, lo, hi, lb, ub, k)  # the box as rows too
-    res = linprog(np.zeros(k), A_ub=A, b_ub=b, bounds=[(None, None)] * k, method="highs")
-    return res.status != 2  # 2: infeasible
+    if A is None:
+        return 0.0, np.zeros(k)
+    s = np.maximum(1.0, np.abs(b))
+    A = A / s[:, None]
+    b = b / s
+    m = A.shape[0]
+    options = {"primal_feasibility_tolerance": _LP_TOL, "dual_feasibility_tolerance": _LP_TOL}
+    left = time_left()
+    if left is not None:
+        if left <= 0.0:
+            return None, None
+        options["time_limit"] = left
+    cost = np.zeros(k + 1)
+    cost[k] = 1.0
+    res = linprog(
+        cost,
+        A_ub=np.hstack((A, -np.ones((m, 1)))),
+        b_ub=b,
+        bounds=[(None, None)] * k + [(0.0, None)],
+        method="highs",
+        options=options,
+    )
+    if res.status != 0 or res.x is None:
+        return None, None
+    y = np.asarray(res.x[:k], dtype=float)
+    return max(0.0, float((A @ y - b).max())), y
 
 
 #: Active-set backends that certify infeasibility exactly and fast.
@@ -116,6 +161,7 @@ class Reduced:
         self.certificates: list[float] = []  # KKT residual of each level that ran a QP
         self.uncertified: list[tuple[int, float]] = []  # (level, KKT residual)
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
+        self._asm = None  # (kdim, D, k, Z, G): the last QP matrix built by _assemble
         return self
 
     # -- inherited rows -----------------------------------------------------------------
@@ -204,22 +250,41 @@ class Reduced:
         return self.relax * np.maximum(1.0, np.abs(bound))
 
     def _assemble(self, kdim: int, D, dlo, dhi):
-        """Constraint rows of a QP in ``y = (z, w)`` (``kdim`` entries, ``w`` unbounded)."""
+        """Constraint rows of a QP in ``y = (z, w)`` (``kdim`` entries, ``w`` unbounded).
+
+        The matrix depends only on ``(kdim, D, k, Z)``; it is kept and reused while those
+        are the same objects (a level's QP, its retries, polish and certificate share it),
+        only the bounds are recomputed."""
         r = self.r
         x = self.x
-        blocks, los, his = [], [], []
+        k = self.k
+        box_rows = self.lb is not None and self.Z is not None
+        c = self._asm
+        if c is not None and c[0] == kdim and c[1] is D and c[2] == k and c[3] is self.Z:
+            G = c[4]
+        else:
+            blocks = []
+            if D is not None and D.shape[0]:
+                blocks.append(D)
+            if k:
+                Cz = self.reduce(self._C[:k])
+                if kdim > r:
+                    Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
+                blocks.append(Cz)
+            if box_rows:
+                Zr = self.Z if kdim == r else np.hstack((self.Z, np.zeros((self.n, kdim - r))))
+                blocks.append(Zr)
+            if not blocks:
+                G = np.zeros((0, kdim))
+            else:
+                G = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
+            self._asm = (kdim, D, k, self.Z, G)
+        los, his = [], []
         if D is not None and D.shape[0]:
-            blocks.append(D)
             los.append(dlo)
             his.append(dhi)
-        k = self.k
         if k:
-            Cin = self._C[:k]
-            Cz = self.reduce(Cin)
-            cx = Cin @ x
-            if kdim > r:
-                Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
-            blocks.append(Cz)
+            cx = self._C[:k] @ x
             # x̄ meets these rows up to the previous solve's tolerance; never ask for more
             # than z = 0 already gives, so the QP stays feasible by construction
             los.append(np.minimum(self._lo[:k] - cx, 0.0) - self._relax(self._lo[:k]))
@@ -232,15 +297,13 @@ class Reduced:
                 lb[:r] = np.minimum(self.lb - x, 0.0) - self._relax(self.lb)
                 ub[:r] = np.maximum(self.ub - x, 0.0) + self._relax(self.ub)
             else:
-                Zr = self.Z if kdim == r else np.hstack((self.Z, np.zeros((self.n, kdim - r))))
-                blocks.append(Zr)
                 los.append(np.minimum(self.lb - x, 0.0) - self._relax(self.lb))
                 his.append(np.maximum(self.ub - x, 0.0) + self._relax(self.ub))
-        if not blocks:
-            return np.zeros((0, kdim)), np.zeros(0), np.zeros(0), lb, ub
-        if len(blocks) == 1:
-            return blocks[0], los[0], his[0], lb, ub
-        return np.vstack(blocks), np.concatenate(los), np.concatenate(his), lb, ub
+        if not los:
+            return G, np.zeros(0), np.zeros(0), lb, ub
+        if len(los) == 1:
+            return G, los[0], his[0], lb, ub
+        return G, np.concatenate(los), np.concatenate(his), lb, ub
 
     def exact_rows(self, kdim: int, D=None, dlo=None, dhi=None):
         """The QP's rows in ``y = (z, w)`` without any opening, the bounds as rows too:
@@ -419,38 +482,89 @@ class Reduced:
             else:
                 lo[self.k :] = self.lb - x
                 hi[self.k :] = self.ub - x
-        if self.solver not in _CERTIFYING and not _lp_feasible(G, lo, hi, lb, ub):
+        lp_t = None
+        if self.solver not in _CERTIFYING:
             # backends behind qpsolvers cannot say "infeasible" and proxqp needed 50–260 s
             # to give up on a 2-variable infeasible hard part: decide it first with an LP
-            raise InfeasibleError(
-                f"{where}: bounds and hard constraints are inconsistent "
-                "(an LP feasibility test found no point)"
-            )
+            lp_t = self._lp_check(G, lo, hi, lb, ub, where, "")
         self.qp_calls += 1
         res = solve_dense_qp(self.solver, np.eye(r), self.project(x), G, lo, hi, lb, ub, None)
         if res.code == OK and not np.all(np.isfinite(res.y)):
             raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite point")
-        if res.code != OK:
-            # backends behind qpsolvers cannot say "infeasible"; decide it independently
-            if res.code == INFEASIBLE or not _lp_feasible(G, lo, hi, lb, ub):
-                how = "" if res.code == INFEASIBLE else "; confirmed by an LP feasibility test"
-                raise InfeasibleError(
-                    f"{where}: bounds and hard constraints are inconsistent ({res.message}{how})"
-                )
-            raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
-        xn = x + self.lift(res.y)
-        if not (
-            (self.lb is None or within(xn, self.lb, self.ub, CHECK_TOL))
-            and within(self.Cin @ xn, self.lin, self.uin, CHECK_TOL)
-        ):
-            if _lp_feasible(G, lo, hi, lb, ub):
+        if res.code == OK and self._hard_ok(x + self.lift(res.y)):
+            self.move_to(x + self.lift(res.y), verified=False)
+            return
+        # the backend failed, called the hard part infeasible or returned a point outside
+        # it: an "infeasible" is only believed when an LP confirms it (proxqp, quadprog and
+        # the LP's own absolute tolerances called feasible sets 1.6e-8 wide infeasible)
+        if lp_t is None:
+            lp_t = self._lp_check(G, lo, hi, lb, ub, where, f"{res.message}; ")
+        # consistent (to INFEAS_TOL): the set is thinner than the backend's tolerances;
+        # open it by a hair, relative to the true bounds, then try the other backends
+        y = self._hard_retry(r, x, G, lo, hi, lb, ub, lp_t)
+        if y is None:
+            if res.code == OK:
                 raise SolverError(
                     f"{where}: backend {self.solver!r} returned a point violating the hard "
                     "constraints, which an LP feasibility test shows are consistent"
                 )
-            raise InfeasibleError(
-                f"{where}: bounds and hard constraints are inconsistent "
-                f"({self.solver} returned a point violating them; confirmed by an LP "
-                "feasibility test)"
+            raise SolverError(
+                f"{where}: backend {self.solver!r} failed ({res.message}) on hard "
+                "constraints that an LP feasibility test shows are consistent"
             )
-        self.move_to(xn, verified=False)
+        self.move_to(x + self.lift(y), verified=False)
+
+    def _hard_ok(self, xn: np.ndarray) -> bool:
+        """Does ``xn`` meet the bounds and hard rows to :data:`CHECK_TOL`?"""
+        return bool(
+            np.isfinite(xn.sum())
+            and (self.lb is None or within(xn, self.lb, self.ub, CHECK_TOL))
+            and within(self.Cin @ xn, self.lin, self.uin, CHECK_TOL)
+        )
+
+    def _lp_check(self, G, lo, hi, lb, ub, where: str, said: str) -> float:
+        """:func:`_lp_violation` of the hard part; raises :class:`InfeasibleError` above
+        :data:`INFEAS_TOL`, :class:`SolverError` when the LP ran out of time."""
+        t, _y = _lp_violation(G, lo, hi, lb, ub)
+        if t is None:
+            raise SolverError(
+                f"{where}: the LP feasibility test of the hard constraints did not finish "
+                "(time limit reached)"
+            )
+        if t > INFEAS_TOL:
+            raise InfeasibleError(
+                f"{where}: bounds and hard constraints are inconsistent ({said}confirmed by an "
+                f"LP feasibility test: no point within {t:.3g} of them, relative)"
+            )
+        return t
+
+    def _hard_retry(self, r, x, G, lo, hi, lb, ub, t):
+        """Points for a consistent hard part a backend failed on: the requested backend and
+        then :data:`FALLBACKS` (unless ``fallback=False``), each with the rows and box opened
+        by ``δ·max(1, |bound|)`` (``δ`` its :data:`RELAX`, at least ``10·t``, then ×100). The
+        first point meeting the hard part to :data:`CHECK_TOL` is returned, else ``None``."""
+        k = self.k
+        olo, ohi = self._lo[:k], self._hi[:k]  # the true bounds set the opening's scale
+        if self.lb is not None and self.Z is not None:
+            olo, ohi = np.concatenate((olo, self.lb)), np.concatenate((ohi, self.ub))
+        slo, shi = np.maximum(1.0, np.abs(olo)), np.maximum(1.0, np.abs(ohi))
+        if lb is not None:
+            blo, bhi = np.maximum(1.0, np.abs(self.lb)), np.maximum(1.0, np.abs(self.ub))
+        solvers = [self.solver] + [s for s in self.alternatives() if s != self.solver]
+        f = self.project(x)
+        for solver in solvers:
+            base = max(RELAX.get(solver, RELAX_DEFAULT), 10.0 * t)
+            for delta in (base, 100.0 * base):
+                lb2 = ub2 = None
+                if lb is not None:
+                    lb2, ub2 = lb - delta * blo, ub + delta * bhi
+                self.qp_calls += 1
+                self.retries += 1
+                res = solve_dense_qp(
+                    solver, np.eye(r), f, G, lo - delta * slo, hi + delta * shi, lb2, ub2, None
+                )
+                if res.code == OK and self._hard_ok(x + self.lift(res.y)):
+                    if solver != self.solver:
+                        self.fallbacks.append(f"constraints: {solver}")
+                    return res.y
+        return None

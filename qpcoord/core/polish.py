@@ -21,12 +21,14 @@ quadprog) are exact already and are not polished.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .linalg import numerical_rank, svd
 from .tolerance import at_bounds, within
 
-__all__ = ["polish"]
+__all__ = ["polish", "prepare", "kkt_residual", "active_set_ls", "pull_back"]
 
 #: Relative distances to a bound under which a row is taken as active (tried in turn).
 ACTIVE_TOLS = (1e-7, 1e-5)
@@ -174,7 +176,50 @@ def _col_scale(Q, Gn):
     return 1.0 / c
 
 
-def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
+class Prepared:
+    """A level's rows prepared once for its certificate (:func:`prepare`)."""
+
+    __slots__ = ("Gn", "lo", "hi", "bscale", "norms", "S")
+
+    def __init__(self, Gn, lo, hi, norms):
+        self.Gn, self.lo, self.hi, self.norms = Gn, lo, hi, norms
+        # the bound part of the row scale max(1, |bound|, ‖y‖∞): fixed for the level
+        self.bscale = np.maximum(
+            np.maximum(
+                np.where(np.isfinite(lo), np.abs(lo), 0.0),
+                np.where(np.isfinite(hi), np.abs(hi), 0.0),
+            ),
+            1.0,
+        )
+        self.S = None  # column scaling, computed by the first call that needs it
+
+    def col_scale(self, Q):
+        if self.S is None:
+            self.S = _col_scale(Q, self.Gn)
+        return self.S
+
+
+def prepare(Q, G, lo, hi) -> Prepared:
+    """The level's rows normalised to unit norm (with their norms and the bound part of
+    their scale), computed once per level and passed to :func:`kkt_residual`,
+    :func:`active_set_ls` and :func:`pull_back` as ``prepared`` (they would otherwise
+    normalise the same rows at every call). The column scaling is left to the first call
+    that needs it (a level met exactly does not)."""
+    if G.shape[0] == 0:
+        return Prepared(G, lo, hi, np.zeros(0))
+    nr = np.sqrt(np.einsum("ij,ij->i", G, G))
+    keep = nr > 0.0
+    if keep.all():
+        return Prepared(G / nr[:, None], lo / nr, hi / nr, nr)
+    k = nr[keep]
+    return Prepared(G[keep] / k[:, None], lo[keep] / k, hi[keep] / k, nr)
+
+
+def _norm(v) -> float:
+    return math.sqrt(float(v @ v))
+
+
+def kkt_residual(Q, c, G, lo, hi, y, prepared=None) -> tuple[float, float]:
     """Optimality of ``y`` for ``min ½‖Q y − c‖², lo ≤ G y ≤ hi``.
 
     Returns ``(stationarity, infeasibility)``, both dimensionless:
@@ -191,51 +236,66 @@ def kkt_residual(Q, c, G, lo, hi, y) -> tuple[float, float]:
 
     A point with both under their tolerances (:data:`KKT_TOL`, :data:`KKT_FEAS_TOL`) is
     optimal up to an objective gap of order ``KKT_TOL²`` times the level's value in
-    well-scaled directions.
-    """
-    from scipy.optimize import nnls
+    well-scaled directions. ``prepared`` (:func:`prepare` of the same ``Q, G, lo, hi``)
+    saves the row normalisation; the verdict is the same.
 
-    Gn, lon, hin = _normalise_rows(G, lo, hi)
+    Cheap paths (same verdict): a level met to :data:`VALUE_TOL` of its scale is certified
+    by its value (no column scaling, no NNLS); a gradient already under :data:`KKT_TOL`
+    needs no NNLS (``μ = 0`` is a feasible multiplier).
+    """
+    if prepared is None:
+        Gn, lon, hin = _normalise_rows(G, lo, hi)
+        prepared = Prepared(Gn, lon, hin, None)
+    Gn, lon, hin = prepared.Gn, prepared.lo, prepared.hi
     qy = Q @ y
     res = qy - c
     # a level met to rounding has a gradient of rounding noise: its floor is 1e-8 of the
     # level's scale ‖c‖ + ‖Q y‖, and one met to VALUE_TOL of it is certified by its value
     # (the objective is ≥ 0)
-    nres = float(np.linalg.norm(res))
-    lscale = float(np.linalg.norm(c)) + float(np.linalg.norm(qy))
+    nres = _norm(res)
+    lscale = _norm(c) + _norm(qy)
     den = max(nres, 1e-8 * lscale, 1e-300)
     by_value = nres <= VALUE_TOL * max(1.0, lscale)  # the library's max(1, scale) rule
-    S = _col_scale(Q, Gn)
-    gs = S * (Q.T @ res)
     infeas = 0.0
     if Gn.shape[0]:
         gy = Gn @ y
-        sc = _row_scale(Gn, lon, hin, y)
-        below = (lon - gy) / sc
-        above = (gy - hin) / sc
-        below[~np.isfinite(below)] = -np.inf
-        above[~np.isfinite(above)] = -np.inf
-        infeas = max(0.0, float(below.max()), float(above.max()))
+        ny = float(np.abs(y).max()) if y.size else 0.0
+        sc = np.maximum(prepared.bscale, ny)
+        # an infinite bound gives −inf here (y is finite)
+        infeas = max(0.0, float((np.maximum(lon - gy, gy - hin) / sc).max()))
         if by_value:
-            return 0.0, infeas
-        a_lo = np.isfinite(lon) & (gy - lon <= KKT_FEAS_TOL * sc)
-        a_hi = np.isfinite(hin) & (hin - gy <= KKT_FEAS_TOL * sc)
-        cols = []
-        if a_lo.any():
-            cols.append(Gn[a_lo] * S)  # g = Σ μ_i G_i, μ ≥ 0 at a lower bound
-        if a_hi.any():
-            cols.append(-Gn[a_hi] * S)  # μ ≤ 0 at an upper bound
-        if cols:
-            B = np.vstack(cols).T
+            return 0.0, infeas  # met exactly: no column scaling, no NNLS
+        S = prepared.col_scale(Q)
+        gs = S * (Q.T @ res)
+        # μ = 0 is a feasible multiplier: a gradient already under the tolerance certifies
+        # the level without the NNLS (its residual can only be smaller)
+        g0 = _norm(gs) / den
+        if g0 <= KKT_TOL:
+            return g0, infeas
+        a_lo = gy - lon <= KKT_FEAS_TOL * sc  # False for an infinite bound
+        a_hi = hin - gy <= KKT_FEAS_TOL * sc
+        act = a_lo | a_hi
+        if act.any():
+            # g = Σ μ_i G_i, μ ≥ 0 at a lower bound, μ ≤ 0 at an upper bound (a row at
+            # both, an equality, gets both columns)
+            idx = np.concatenate((np.flatnonzero(a_lo), np.flatnonzero(a_hi)))
+            sign = np.ones(idx.size)
+            sign[int(a_lo.sum()) :] = -1.0
+            B = (Gn[idx] * S).T * sign
             gmax = float(np.abs(gs).max())
             if gmax == 0.0:
                 return 0.0, infeas
+            from scipy.optimize import nnls
+
             _mu, rn = nnls(B / gmax, gs / gmax, maxiter=50 * B.shape[1] + 50)
             return rn * gmax / den, infeas
-    return (0.0 if by_value else float(np.linalg.norm(gs)) / den), infeas
+        return g0, infeas
+    if by_value:
+        return 0.0, infeas
+    return _norm(prepared.col_scale(Q) * (Q.T @ res)) / den, infeas
 
 
-def pull_back(G, lo, hi, y, y_safe=None):
+def pull_back(G, lo, hi, y, y_safe=None, norms=None):
     """The point of the segment from ``y_safe`` (default 0, feasible by assumption) to ``y``
     farthest along it that meets ``lo ≤ G y ≤ hi`` exactly (a ratio test on the rows ``y``
     violates: each row's half-space holds both ends of the segment otherwise)."""
@@ -244,7 +304,9 @@ def pull_back(G, lo, hi, y, y_safe=None):
     gy = G @ y
     # misses at the active-set backends' opening (1e-12·max(1, |bound|)) or at rounding
     # level are not violations
-    tol = 1e-13 * np.sqrt(np.einsum("ij,ij->i", G, G)) * float(np.abs(y).max()) + PULL_TOL * (
+    if norms is None:
+        norms = np.sqrt(np.einsum("ij,ij->i", G, G))
+    tol = 1e-13 * norms * float(np.abs(y).max()) + PULL_TOL * (
         np.maximum(
             1.0,
             np.maximum(
@@ -267,7 +329,7 @@ def pull_back(G, lo, hi, y, y_safe=None):
     return base + max(t, 0.0) * (y - base)
 
 
-def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None):
+def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None, prepared=None):
     """Solve ``min ½‖Q y − c‖², lo ≤ G y ≤ hi`` exactly from a feasible ``y0``.
 
     A primal active-set method (Nocedal & Wright, Alg. 16.3) on the least-squares form:
@@ -278,9 +340,13 @@ def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None):
     Returns ``(y, converged)``; ``y`` is feasible whenever ``y0`` is.
     """
     k = y0.shape[0]
-    Gn, lon, hin = _normalise_rows(G, lo, hi)
+    if prepared is None:
+        Gn, lon, hin = _normalise_rows(G, lo, hi)
+        S = _col_scale(Q, Gn)
+    else:
+        Gn, lon, hin = prepared.Gn, prepared.lo, prepared.hi
+        S = prepared.col_scale(Q)
     m = Gn.shape[0]
-    S = _col_scale(Q, Gn)
     y = y0.astype(float).copy()
     Qs = Q * S  # work in the equilibrated variables u = y / S
     Gs = Gn * S

@@ -188,11 +188,12 @@ def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0
     from oracle import OracleError
 
     counts = {
-        s: dict(stacks=0, silent=0, inaccurate=0, errors=0, worsened=0, better=0, t=[])
+        s: dict(stacks=0, silent=0, inaccurate=0, errors=0, worsened=0, better=0, over10=0, t=[])
         for s in solvers
     }
     by_kind = {s: {k: 0 for k in KINDS} for s in solvers}
     bad = []
+    worsened = []  # (solver, kind, seed)
     for kind in KINDS:
         for seed in range(seed0, seed0 + n_per_kind):
             spec = make_stack(kind, seed)
@@ -208,6 +209,7 @@ def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0
                 c = counts[s]
                 c["stacks"] += 1
                 c["t"].append(v.time)
+                c["over10"] += v.time > 10.0
                 if v.status.startswith("error"):
                     c["errors"] += 1
                 elif v.wrong_level is not None:
@@ -220,6 +222,8 @@ def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0
                 elif v.status != "optimal":
                     c["inaccurate"] += 1
                 c["worsened"] += v.worsened
+                if v.worsened:
+                    worsened.append((s, kind, seed))
                 c["better"] += v.better
     if log is not None:
         for s, c in counts.items():
@@ -228,10 +232,14 @@ def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0
                 f"{s:9s} stacks {c['stacks']:5d} silent-wrong {c['silent']:4d} "
                 f"inaccurate {c['inaccurate']:4d} errors {c['errors']:3d} "
                 f"worsened {c['worsened']:3d} ref-beaten {c['better']:3d} "
+                f"over-10s {c['over10']} "
                 f"median {np.median(t) * 1e3:.2f} ms max {t.max() * 1e3:.1f} ms  "
                 f"by kind {by_kind[s]}",
                 file=log,
             )
+    if log is not None:
+        for w in worsened:
+            print("worsened", w, file=log)
     return counts, by_kind, bad
 
 

@@ -130,3 +130,46 @@ def test_a_level_met_exactly_with_zero_targets_is_certified(solver):
     assert sol.status == "optimal", sol.info
     assert sol.info["fallbacks"] == []
     assert sol.level_residuals[0] < 1e-12
+
+
+def test_certificate_skips_the_nnls_when_the_gradient_is_zero(monkeypatch):
+    """Issue 22 (certification cost): μ = 0 certifies a point whose gradient is already
+    under the tolerance, so no NNLS runs, active rows or not; a level met exactly needs
+    neither the column scaling nor the NNLS. Same verdicts with the rows prepared once."""
+    import scipy.optimize
+
+    from qpcoord.core.polish import prepare
+
+    def no_nnls(*a, **k):
+        raise AssertionError("NNLS called")
+
+    monkeypatch.setattr(scipy.optimize, "nnls", no_nnls)
+    Q = np.array([[1.0, 0.0], [1.0, 0.0]])
+    c = np.array([1.0, -1.0])  # residual (−1, 1) at y = 0, gradient Qᵀr = 0
+    G = np.array([[0.0, 1.0]])
+    lo, hi = np.array([-np.inf]), np.array([0.0])  # active at y = 0
+    y = np.zeros(2)
+    st, inf = kkt_residual(Q, c, G, lo, hi, y)
+    assert st == 0.0 and inf == 0.0
+    assert kkt_residual(Q, c, G, lo, hi, y, prepare(Q, G, lo, hi)) == (st, inf)
+    # met exactly (value 0) with the row active
+    c0 = np.zeros(2)
+    assert kkt_residual(Q, c0, G, lo, hi, y, prepare(Q, G, lo, hi)) == (0.0, 0.0)
+
+
+def test_prepared_rows_give_the_same_certificate():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        Q = rng.normal(size=(4, 5))
+        c = rng.normal(size=4)
+        G = rng.normal(size=(6, 5)) * 10.0 ** rng.uniform(-3, 3, (6, 1))
+        G[2] = 0.0  # a zero row is dropped
+        y = rng.normal(size=5)
+        gy = G @ y
+        lo = gy - rng.uniform(0, 1, 6) * (rng.uniform(size=6) < 0.5)
+        hi = gy + rng.uniform(0, 1, 6)
+        from qpcoord.core.polish import prepare
+
+        a = kkt_residual(Q, c, G, lo, hi, y)
+        b = kkt_residual(Q, c, G, lo, hi, y, prepare(Q, G, lo, hi))
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-15)

@@ -636,30 +636,53 @@ def test_fallback_option_is_validated():
         qc.Stack([Equality(np.eye(2), [0.0, 0.0])], fallback="yes")
 
 
-@pytest.mark.parametrize("fake_name", ["failed", "nan", "far_outside"])
-def test_misbehaving_backend_in_the_hard_phase(fake_name, patch_backend, request):
-    """The hard phase (finding a point that satisfies bounds and hard rows) needs a QP here;
-    the hard part *is* feasible (x = (0.5, 0.5)), so a bad backend answer is a SolverError."""
-    patch_backend(FAKES[fake_name])
-    stack = qc.Stack(
+def _hard_stack(fallback: bool = True):
+    return qc.Stack(
         [Equality(np.eye(2), [5.0, 5.0], name="goal")],
         constraints=[Inequality([[1.0, 1.0]], lower=1.0, name="wall")],  # x = 0 violates it
         bounds=Bounds(-1.0, 1.0),
+        fallback=fallback,
     )
-    with pytest.raises(qc.SolverError, match=r"constraints: backend 'daqp'"):
-        stack.solve(solver="daqp")
+
+
+@pytest.mark.parametrize("fake_name", ["failed", "nan", "far_outside", "infeasible"])
+def test_misbehaving_backend_in_the_hard_phase(fake_name, patch_backend, request):
+    """The hard phase (finding a point that satisfies bounds and hard rows) needs a QP here;
+    the hard part *is* feasible (x = (0.5, 0.5)), so a bad backend answer is a SolverError
+    without fallback -- an "infeasible" too: an LP shows the hard part consistent."""
+    patch_backend(FAKES[fake_name])
+    with pytest.raises(qc.SolverError, match=r"constraints: .*daqp") as info:
+        _hard_stack(fallback=False).solve(solver="daqp")
+    if fake_name == "infeasible":
+        assert "LP feasibility test shows are consistent" in str(info.value)
+
+
+@pytest.mark.parametrize("fake_name", ["failed", "infeasible"])
+def test_hard_phase_falls_back(fake_name, monkeypatch):
+    """With the fallback on, a consistent hard part the backend fails on (or calls
+    infeasible) is solved by the next backend, and the Solution says so."""
+    monkeypatch.setitem(
+        backends._DIRECT,
+        "daqp",
+        lambda H, f, G, lo, hi, lb, ub, y0: FAKES[fake_name]("daqp", H, f, G, lo, hi, lb, ub, y0),
+    )
+    sol = _hard_stack().solve(solver="daqp")
+    np.testing.assert_allclose(sol.x, [1.0, 1.0], atol=1e-9)
+    assert "constraints: quadprog" in sol.info["fallbacks"]
 
 
 def test_infeasible_code_in_the_hard_phase_is_infeasible_error(patch_backend):
+    """An "infeasible" from the backend on an inconsistent hard part, confirmed by the LP."""
     patch_backend(_infeasible)
     stack = qc.Stack(
         [Equality(np.eye(2), [5.0, 5.0], name="goal")],
-        constraints=[Inequality([[1.0, 1.0]], lower=1.0, name="wall")],
+        constraints=[Inequality([[1.0, 1.0]], lower=3.0, name="wall")],  # box: x1 + x2 ≤ 2
         bounds=Bounds(-1.0, 1.0),
     )
     with pytest.raises(
         qc.InfeasibleError,
-        match=r"constraints: bounds and hard constraints are inconsistent \(.*fake: infeasible\)",
+        match=r"constraints: bounds and hard constraints are inconsistent \(.*fake: infeasible; "
+        r"confirmed by an LP",
     ):
         stack.solve(solver="daqp")
 

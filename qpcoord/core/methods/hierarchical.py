@@ -34,7 +34,7 @@ import numpy as np
 from ..compile import CompiledStack
 from ..elimination import Reduced
 from ..linalg import filtered_svd, numerical_rank, svd
-from ..polish import KKT_FEAS_TOL, KKT_TOL, active_set_ls, kkt_residual, pull_back
+from ..polish import KKT_FEAS_TOL, KKT_TOL, active_set_ls, kkt_residual, prepare, pull_back
 from ..tolerance import at_bounds
 
 __all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
@@ -55,25 +55,33 @@ def _finite_abs(v: np.ndarray) -> np.ndarray:
     return a
 
 
-def _level_objective(ls_rows, ls_rhs, z) -> float:
+def _level_objective(A, b, z) -> float:
     """Level objective on the least-squares rows (equalities, damping, violated rows)."""
-    total = 0.0
-    for A, b in zip(ls_rows, ls_rhs, strict=True):
-        res = A @ z - b
-        total += float(res @ res)
-    return total
+    if A is None:
+        return 0.0
+    res = A @ z - b
+    return float(res @ res)
 
 
 def _refine(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows):
-    """Try :func:`_refine_at` with each active-set tolerance in turn."""
+    """Try :func:`_refine_at` with each active-set tolerance in turn (the level's
+    least-squares rows stacked once)."""
+    if ls_rows:
+        A = ls_rows[0] if len(ls_rows) == 1 else np.vstack(ls_rows)
+        b = ls_rhs[0] if len(ls_rhs) == 1 else np.concatenate(ls_rhs)
+        nA = float(np.linalg.norm(A))
+    else:
+        A = b = None
+        nA = 0.0
+    before = _level_objective(A, b, z0)
     for tol in ACTIVE_TOL:
-        z = _refine_at(R, L, x, z0, ls_rows, ls_rhs, viol_rows, tol)
+        z = _refine_at(R, L, x, z0, A, b, nA, before, viol_rows, tol)
         if z is not None:
             return z
     return None
 
 
-def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
+def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
     """Solve the level exactly on the active set of the QP's point ``x + Z z0``.
 
     Active inherited rows, bounds and satisfied level rows at a bound become equalities;
@@ -117,12 +125,10 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
     else:
         zp = np.zeros(r)
         N = np.eye(r)
-    if N.shape[1] and ls_rows:
-        A = np.vstack(ls_rows)
-        b = np.concatenate(ls_rhs)
+    if N.shape[1] and A is not None:
         K = A @ N
         U, s, Vt = svd(K, full=False)
-        rk = numerical_rank(s, K.shape, float(np.linalg.norm(A)))
+        rk = numerical_rank(s, K.shape, nA)
         if rk:
             u = Vt[:rk].T @ ((U[:, :rk].T @ (b - A @ zp)) / s[:rk])
             zp = zp + N @ u
@@ -133,8 +139,7 @@ def _refine_at(R: Reduced, L, x, z0, ls_rows, ls_rhs, viol_rows, tol):
         c = L.C[sat] @ xn
         if not ((c <= L.hiw[sat]).all() and (c >= L.low[sat]).all()):
             return None
-    before = _level_objective(ls_rows, ls_rhs, z0)
-    after = _level_objective(ls_rows, ls_rhs, zp)
+    after = _level_objective(A, b, zp)
     # the QP's point may sit outside the rows by the opening RELAX and gain ~RELAX from it
     if after > before + max(REFINE_SLACK, 10.0 * R.used_relax) * max(1.0, before):
         return None
@@ -179,6 +184,7 @@ class _Certifier:
         self.Dm, self.dlo, self.dhi = Dm, dlo, dhi
         Dy = None if not mv else np.hstack((Dm, -np.eye(mv)))
         self.G, self.lo, self.hi = R.exact_rows(kdim, Dy, dlo, dhi)
+        self.prep = prepare(self.Q, self.G, self.lo, self.hi)  # once per level
         self.y_safe = self._with_slacks(np.zeros(r))
 
     def _with_slacks(self, z):
@@ -188,7 +194,9 @@ class _Certifier:
         return np.concatenate((z, dz - np.clip(dz, self.dlo, self.dhi)))
 
     def _feasible_point(self, z):
-        y = pull_back(self.G, self.lo, self.hi, self._with_slacks(z), self.y_safe)
+        y = pull_back(
+            self.G, self.lo, self.hi, self._with_slacks(z), self.y_safe, norms=self.prep.norms
+        )
         return self._with_slacks(y[: self.r])
 
     def _obj(self, y):
@@ -196,7 +204,7 @@ class _Certifier:
         return float(d @ d)
 
     def _check(self, y):
-        st, infeas = kkt_residual(self.Q, self.c, self.G, self.lo, self.hi, y)
+        st, infeas = kkt_residual(self.Q, self.c, self.G, self.lo, self.hi, y, self.prep)
         return st <= KKT_TOL and infeas <= KKT_FEAS_TOL, st
 
     def run(self, candidates, H, f, Dy, where):
@@ -214,7 +222,9 @@ class _Certifier:
         alts = iter(self.R.alternatives())
         while starts:
             y0 = starts.pop()
-            y, _conv = active_set_ls(self.Q, self.c, self.G, self.lo, self.hi, y0)
+            y, _conv = active_set_ls(
+                self.Q, self.c, self.G, self.lo, self.hi, y0, prepared=self.prep
+            )
             y = self._feasible_point(y[: self.r])
             ok, kkt = self._check(y)
             self.R.continued += 1

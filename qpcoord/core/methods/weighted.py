@@ -17,6 +17,11 @@ from ..elimination import Reduced
 
 __all__ = ["solve_weighted"]
 
+#: ``H`` counts as singular when a Cholesky pivot² is under this fraction of its largest
+#: diagonal entry: rounding-level pivots (~1e-16) of a rank-deficient ``H`` pass LAPACK's
+#: test and then fail quadprog's; a level weighted ``weight_ratio**4 = 1e-12`` stays above.
+_SINGULAR = 1e-14
+
 
 def solve_weighted(
     P: CompiledStack,
@@ -38,18 +43,33 @@ def solve_weighted(
     f = np.zeros(r)
     soft = []
     beta = 1.0
+    hdiag = 0.0  # largest diagonal entry of the x-space Hessian Σ βₖ Aₖᵀ Aₖ
+    dx = None
     for L in P.levels:
         if L.m_eq:
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
             H += beta * (M.T @ M)
             f -= beta * (M.T @ e)
+            d = beta * np.einsum("ij,ij->j", L.Ae, L.Ae)
+            dx = d if dx is None else dx + d
         if L.m_in:
             soft.append((L, np.sqrt(beta)))
         beta *= weight_ratio
-    H.flat[:: r + 1] += regularization * max(1.0, float(H.diagonal().max()))
-    # unconstrained optimum first: if it violates nothing it is the QP's optimum
+    if dx is not None:
+        hdiag = float(dx.max())
+    # ε‖x‖² only where the levels leave H singular, as PersistentQP: with ε scaled by the
+    # x-space Hessian and centred on x = 0 (not on the hard phase's point, in the reduced
+    # coordinates, where 1e-9·max diag pulled a last level weighted 1e-6 by ~1 %: 2e-3 in x)
     cho, info = lapack.dpotrf(H, lower=0, clean=1)
+    if info != 0 or float(cho.diagonal().min()) ** 2 <= _SINGULAR * max(
+        float(H.diagonal().max()), 1e-300
+    ):
+        eps = regularization * max(1.0, hdiag)
+        H.flat[:: r + 1] += eps
+        f += eps * R.project(x)
+        cho, info = lapack.dpotrf(H, lower=0, clean=1)
+    # unconstrained optimum first: if it violates nothing it is the QP's optimum
     if info == 0:
         z, info = lapack.dpotrs(cho, -f, lower=0)
     if info == 0:
