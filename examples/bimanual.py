@@ -63,6 +63,7 @@ import pinocchio as pin
 
 import qpcoord as qc
 from qpcoord.studies.claims import claim
+from qpcoord.studies.figures import animation as write_animation
 from qpcoord.studies.files import write_json
 
 DT = 0.01  # s, control period (100 Hz)
@@ -378,20 +379,17 @@ def main(argv=None) -> int:
         figure(list(by.values()), steps, args.out / "bimanual.png")
     except ImportError:  # matplotlib missing (the ``plots`` extra)
         print("matplotlib not installed: figure skipped")
-    html = None
-    try:
-        robot, _, phases = setup()
-        html = qc.viz.animate(
-            robot,
-            by["qpcoord"]["q"],
-            args.out / "bimanual.html",
-            dt=DT,
-            targets=[phases[0][1], phases[1][1]],
-            fps=5 if args.quick else 25,
-        )
-        print(f"wrote {html} ({html.stat().st_size / 1e6:.1f} MB)")
-    except ImportError as exc:  # meshcat missing (the ``viz`` extra)
-        print(f"meshcat not installed: animation skipped ({exc})")
+    robot, _, phases = setup()
+    html = write_animation(
+        robot,
+        by["qpcoord"]["q"],
+        args.out / "bimanual.html",
+        dt=DT,
+        targets=[phases[0][1], phases[1][1]],
+        fps=5 if args.quick else 25,
+    )
+    done = f"wrote {html['html']} ({html['html_mb']} MB)" if html["html"] else None
+    print(done or f"animation skipped: {html['html_reason']}")
     rows = [{k: v for k, v in r.items() if k not in ("series", "q")} for r in by.values()]
     write_json(
         args.out / "summary.json",
@@ -399,7 +397,7 @@ def main(argv=None) -> int:
             "steps_per_phase": steps,
             "rows": rows,
             "pink": "pink" in by,
-            "html_bytes": html.stat().st_size if html else None,
+            **html,
             "claims": rows_claims,
         },
     )

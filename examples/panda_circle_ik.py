@@ -30,6 +30,7 @@ import numpy as np
 
 import qpcoord as qc
 from qpcoord.studies.claims import claim
+from qpcoord.studies.figures import animation as write_animation
 from qpcoord.studies.files import write_json
 
 DT = 1e-3  # s, control period
@@ -144,22 +145,12 @@ def animation(rows: list[dict], path: Path, quick: bool) -> dict:
     arm = qc.robots.load("panda")
     circle = circle_of(arm)
     points = np.array([circle.position(t) for t in np.linspace(0.0, 2.0, 24, endpoint=False)])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        html = qc.viz.animate(
-            arm, run["q"], path, dt=DT, targets=points, fps=25, max_frames=11 if quick else 600
-        )
-    except ImportError as exc:  # meshcat missing (the ``viz`` extra)
-        print(f"meshcat not installed: animation skipped ({exc})")
-        return {"html": None, "html_reason": str(exc)}
-    except ValueError as exc:
-        if not str(exc).startswith("robot "):  # only the robot's visual meshes are excused
-            raise
-        print(f"animation skipped: {exc}")
-        return {"html": None, "html_reason": str(exc)}
-    mb = html.stat().st_size / 1e6
-    print(f"wrote {html} ({mb:.1f} MB)")
-    return {"html": html.name, "html_mb": round(mb, 2)}
+    info = write_animation(
+        arm, run["q"], path, dt=DT, targets=points, fps=25, max_frames=11 if quick else 600
+    )
+    done = f"wrote {path} ({info['html_mb']} MB)" if info["html"] else None
+    print(done or f"animation skipped: {info['html_reason']}")
+    return info
 
 
 def main(argv=None) -> int:

@@ -68,6 +68,7 @@ import pinocchio as pin
 
 import qpcoord as qc
 from qpcoord.studies.claims import claim
+from qpcoord.studies.figures import animation as write_animation
 from qpcoord.studies.files import write_json
 
 DT = 0.01  # s, control period (100 Hz)
@@ -389,21 +390,18 @@ def main(argv=None) -> int:
         figure(list(by.values()), phases, args.out / "distance.png")
     except ImportError:  # matplotlib missing (the ``plots`` extra)
         print("matplotlib not installed: figure skipped")
-    html = None
-    try:
-        arm, _, goals = setup()
-        html = qc.viz.animate(
-            arm,
-            by["qpcoord"]["q"],
-            args.out / "panda_obstacle.html",
-            dt=DT,
-            targets=list(goals.values()),
-            obstacles=[qc.Sphere(SPHERE_CENTRE, SPHERE_RADIUS)],
-            fps=5 if args.quick else 25,
-        )
-        print(f"wrote {html} ({html.stat().st_size / 1e6:.1f} MB)")
-    except ImportError as exc:  # meshcat missing (the ``viz`` extra)
-        print(f"meshcat not installed: animation skipped ({exc})")
+    arm, _, goals = setup()
+    html = write_animation(
+        arm,
+        by["qpcoord"]["q"],
+        args.out / "panda_obstacle.html",
+        dt=DT,
+        targets=list(goals.values()),
+        obstacles=[qc.Sphere(SPHERE_CENTRE, SPHERE_RADIUS)],
+        fps=5 if args.quick else 25,
+    )
+    done = f"wrote {html['html']} ({html['html_mb']} MB)" if html["html"] else None
+    print(done or f"animation skipped: {html['html_reason']}")
     rows = [{k: v for k, v in r.items() if k not in ("series", "q")} for r in by.values()]
     write_json(
         args.out / "summary.json",
@@ -411,7 +409,7 @@ def main(argv=None) -> int:
             "phases": phases,
             "rows": rows,
             "pink": "pink" in by,
-            "html_bytes": html.stat().st_size if html else None,
+            **html,
             "claims": rows_claims,
         },
     )

@@ -61,6 +61,7 @@ without the rotation rows use ``error="split"`` (see :class:`FrameTask`).
 from __future__ import annotations
 
 import re
+from abc import abstractmethod
 from collections.abc import Sequence
 from typing import Any
 
@@ -274,8 +275,10 @@ class _ErrorTask(KinematicTask):
             np.zeros((self._sel.size, robot.nv)), np.zeros(self._sel.size), w, name
         )
 
+    @abstractmethod
     def _evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        raise NotImplementedError
+        """``(e, J, ff)`` over all rows for a validated ``q``: the error (task units), its
+        Jacobian against ``v`` and the target's feed-forward velocity (or ``None``)."""
 
     def compute_error(self, q: Any) -> np.ndarray:
         """Task error ``e(q)`` of the kept rows (m for translation, rad for rotation)."""
@@ -754,8 +757,10 @@ class _BandTask(KinematicTask):
     robot: Robot
     gain: float
 
+    @abstractmethod
     def _evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        raise NotImplementedError
+        """``(y, J)`` for a validated ``q``: the banded quantity (task units) and its
+        Jacobian against ``v``."""
 
     def compute_error(self, q: Any) -> np.ndarray:
         """The measured quantity ``e(q)`` of every row (m)."""

@@ -247,12 +247,23 @@ class KinematicTask(ABC):
 
     # -- the two methods of a user task ------------------------------------------------
     def compute_error(self, q: np.ndarray) -> np.ndarray:
-        """Task error ``e(q)``, shape ``(rows,)`` (task units) at configuration ``q`` (nq,)."""
-        raise NotImplementedError
+        """Task error ``e(q)``, shape ``(rows,)`` (task units) at configuration ``q`` (nq,).
+
+        The method a user task writes (with :meth:`compute_jacobian`); a task that builds
+        its rows in ``_refresh`` instead has no error of this form and raises."""
+        raise NotImplementedError(
+            f"{type(self).__name__} builds its rows directly (_refresh): it has no "
+            "compute_error; a user task must define compute_error and compute_jacobian"
+        )
 
     def compute_jacobian(self, q: np.ndarray) -> np.ndarray:
-        """Task Jacobian ``J(q)``, shape ``(rows, nv)``, with ``ė = J v``."""
-        raise NotImplementedError
+        """Task Jacobian ``J(q)``, shape ``(rows, nv)``, with ``ė = J v``.
+
+        The method a user task writes (with :meth:`compute_error`)."""
+        raise NotImplementedError(
+            f"{type(self).__name__} builds its rows directly (_refresh): it has no "
+            "compute_jacobian; a user task must define compute_error and compute_jacobian"
+        )
 
     # -- public per-step API -----------------------------------------------------------
     def set_band(self, lower=None, upper=None) -> None:

@@ -51,7 +51,14 @@ import pinocchio as pin
 
 from .robot import Robot
 
-__all__ = ["animate", "DEFAULT_FPS", "DEFAULT_MAX_FRAMES"]
+__all__ = ["animate", "NoVisualGeometry", "DEFAULT_FPS", "DEFAULT_MAX_FRAMES"]
+
+
+class NoVisualGeometry(ValueError):
+    """The robot has no visual geometry that can be drawn (not read from a URDF, meshes not
+    found, or none of a kind meshcat draws). A :class:`ValueError`, so existing handlers
+    still catch it; callers that can go on without a picture catch this one alone."""
+
 
 #: Frames per second of trajectory time kept in the page (1/s).
 DEFAULT_FPS = 30.0
@@ -261,7 +268,7 @@ def _visual_model(robot: Robot, visual_model: Any) -> pin.GeometryModel:
     else:
         urdf = getattr(robot, "urdf_path", None)
         if urdf is None:
-            raise ValueError(
+            raise NoVisualGeometry(
                 f"robot {robot.name!r} was not read from a URDF: it has no visual geometry; "
                 "pass visual_model=pin.buildGeomFromUrdf(robot.model, urdf, "
                 "pin.GeometryType.VISUAL, package_dirs=...)"
@@ -276,12 +283,12 @@ def _visual_model(robot: Robot, visual_model: Any) -> pin.GeometryModel:
                 package_dirs=list(robot.package_dirs),
             )
         except Exception as exc:  # pinocchio raises ValueError/RuntimeError by version
-            raise ValueError(
+            raise NoVisualGeometry(
                 f"robot {robot.name!r}: its visual geometry could not be read from "
                 f"{str(urdf)!r} (package_dirs={list(robot.package_dirs)}): {exc}"
             ) from None
     if geom.ngeoms == 0:
-        raise ValueError(f"robot {robot.name!r} has no visual geometry to draw")
+        raise NoVisualGeometry(f"robot {robot.name!r} has no visual geometry to draw")
     return geom
 
 
@@ -498,7 +505,7 @@ def animate(
         viz.loadViewerModel(rootNodeName="robot")
     skipped = [str(w.message).splitlines()[0] for w in caught]
     if skipped and len(skipped) >= geom.ngeoms:
-        raise ValueError(
+        raise NoVisualGeometry(
             f"robot {robot.name!r}: none of its visual geometries could be drawn ({skipped[0]})"
         )
 

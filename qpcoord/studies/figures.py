@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["joint_plot", "closure_plot", "save"]
+__all__ = ["joint_plot", "closure_plot", "save", "animation"]
 
 
 def _pyplot():
@@ -66,3 +66,28 @@ def closure_plot(errors: dict, path, title: str, floor: float = 1e-16) -> Path:
     ax.set_title(title)
     ax.legend(fontsize=8)
     return save(fig, path)
+
+
+def animation(robot, trajectory, path, **options) -> dict:
+    """Write ``trajectory`` of ``robot`` as one HTML animation (:func:`qpcoord.viz.animate`,
+    ``options`` passed on) for an example's ``summary.json``.
+
+    Returns
+    -------
+    dict
+        ``{"html": file name, "html_mb": size (MB)}``, or ``{"html": None, "html_reason":
+        why}`` when meshcat (the ``viz`` extra) is missing or the robot has no visual geometry
+        (:class:`~qpcoord.kinematics.viz.NoVisualGeometry`); any other error propagates (a
+        bad trajectory or target is the script's bug).
+    """
+    from ..kinematics import viz  # meshcat itself is imported by animate
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        html = viz.animate(robot, trajectory, path, **options)
+    except ImportError as exc:  # meshcat missing
+        return {"html": None, "html_reason": f"meshcat not installed: {exc}"}
+    except viz.NoVisualGeometry as exc:
+        return {"html": None, "html_reason": str(exc)}
+    return {"html": html.name, "html_mb": round(html.stat().st_size / 1e6, 2)}
