@@ -175,8 +175,10 @@ class NativeHierarchy:
         self._mod = mod
         self._solved = False
 
-    def solve(self, P: CompiledStack) -> tuple[np.ndarray, dict]:
+    def solve(self, P: CompiledStack, warm: bool = True) -> tuple[np.ndarray, dict]:
         """Solve with the numbers ``P`` holds (already refreshed and checked finite).
+
+        ``warm=False`` ignores the stored working sets (a cold solve, for benchmarks).
 
         Returns
         -------
@@ -218,7 +220,7 @@ class NativeHierarchy:
             self.sw,
             self.lb,
             self.ub,
-            self._solved,
+            self._solved and warm,
             self.x,
             self.stats,
             self.detail,
@@ -247,6 +249,11 @@ class NativeHierarchy:
             raise InfeasibleError(
                 f"hard equality constraints are inconsistent ({names}): "
                 f"least-squares residual {d[0]:.3g}"
+            )
+        if code == mod.INFEASIBLE_HARD and np.isinf(d[1]):
+            raise InfeasibleError(
+                "constraints: the hard equalities fix x completely and it violates the bounds "
+                "or hard inequalities"
             )
         if code == mod.INFEASIBLE_HARD:
             raise InfeasibleError(

@@ -89,7 +89,8 @@ def test_explicit_native_without_extension_raises(missing_extension):
         _small_stack().solve(engine="native")
 
 
-def test_python_default_never_warns(missing_extension):
+def test_python_default_never_warns(missing_extension, monkeypatch):
+    monkeypatch.setattr(native, "DEFAULT_ENGINE", "python")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert _small_stack().solve().solver != "native"
