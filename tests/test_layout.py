@@ -151,16 +151,25 @@ def test_layers_contract_is_kept():
 
 
 def test_every_package_is_installed():
-    """Every folder of qpcoord/ with an ``__init__.py`` is listed in pyproject's packages
-    (a wheel built without -e would miss it otherwise)."""
-    listed = set(
-        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
-    )
-    found = {
-        ".".join(("qpcoord",) + p.parent.relative_to(PACKAGE).parts)
-        for p in PACKAGE.rglob("__init__.py")
-    }
-    assert found - listed == set()
+    """Every folder of qpcoord/ with an ``__init__.py`` lies under a folder that pyproject's
+    ``[tool.scikit-build] wheel.packages`` copies into the wheel, and ``robots/`` (with every
+    kind of data file it holds) is installed as ``qpcoord.robots.descriptions`` by
+    CMakeLists.txt (a wheel built without -e would miss them otherwise)."""
+    roots = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["scikit-build"]["wheel"][
+        "packages"
+    ]
+    roots = [roots] if isinstance(roots, str) else list(roots)
+    for root in roots:
+        assert (ROOT / root / "__init__.py").is_file(), root
+    found = {p.parent.relative_to(ROOT).as_posix() for p in PACKAGE.rglob("__init__.py")}
+    missed = {f for f in found if not any(f == r or f.startswith(r + "/") for r in roots)}
+    assert missed == set()
+    cmake = (ROOT / "CMakeLists.txt").read_text()
+    assert "DIRECTORY robots/\n  DESTINATION qpcoord/robots/descriptions" in cmake
+    suffixes = {p.suffix for p in (ROOT / "robots").iterdir() if p.is_file()}
+    assert suffixes, "robots/ is empty"
+    for suffix in suffixes:
+        assert f'PATTERN "*{suffix}"' in cmake, f"robots/*{suffix} is not installed"
 
 
 def test_public_names_of_0_1_are_kept():

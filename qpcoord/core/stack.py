@@ -14,6 +14,7 @@ from .errors import SolverError
 from .methods.hierarchical import solve_equality_chain, solve_hierarchical
 from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
+from .native import NativeHierarchy, resolve_engine
 from .polish import KKT_TOL
 from .solution import Solution
 from .tasks import Bounds
@@ -119,6 +120,7 @@ class Stack:
         self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
         self._work = Reduced(self._compiled.n, self._compiled.capacity, fallback)
         self._chain_missed = False
+        self._native: NativeHierarchy | None = None  # built at the first native solve
 
     @property
     def n(self) -> int:
@@ -144,6 +146,7 @@ class Stack:
         strict: bool = False,
         *,
         time_limit: float | None = None,
+        engine: str | None = None,
     ):
         """Solve the stack with the tasks' current numbers.
 
@@ -166,6 +169,12 @@ class Stack:
             each backend gets the time left (``None``: ``DEFAULT_TIME_LIMIT`` = 10 s of
             :mod:`qpcoord.core.backends`; ``math.inf``: no limit). The linear algebra
             between QPs is not interrupted.
+        engine : {None, "native", "python"}
+            ``"native"``: the compiled solver of :mod:`qpcoord.core.native` (method
+            ``"hierarchical"`` only, no ``solver``; warm-started from the previous call's
+            working sets). ``"python"``: the methods of :mod:`qpcoord.core.methods`. ``None``:
+            :data:`qpcoord.core.native.DEFAULT_ENGINE` where the native engine applies, else
+            Python (one warning per process if the default is native but not built).
 
         Returns
         -------
@@ -174,8 +183,11 @@ class Stack:
         Raises
         ------
         ValueError
-            Unknown method or solver, bad warm start, inequalities with ``"nullspace"``,
-            bad ``time_limit``, a non-finite number in a task or the bounds (naming it).
+            Unknown method, solver or engine, bad warm start, inequalities with
+            ``"nullspace"``, bad ``time_limit``, a non-finite number in a task or the bounds
+            (naming it), ``engine="native"`` with another method or an explicit solver.
+        NativeUnavailableError
+            ``engine="native"`` but the extension is not built (an ``ImportError``).
         InfeasibleError
             Bounds and hard constraints are inconsistent.
         SolverError
@@ -188,6 +200,8 @@ class Stack:
             raise ValueError(f"strict must be True or False, got {strict!r}")
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+        if resolve_engine(engine, method, solver) == "native":
+            return self._solve_native(t0, warm_start)
         P = self._compiled
         P.refresh()
         x_warm = self._warm(warm_start)
@@ -247,6 +261,26 @@ class Stack:
             solver=used,
             solve_time=time.perf_counter() - t0,
             method=method,
+            info=info,
+        )
+
+    def _solve_native(self, t0: float, warm_start) -> Solution:
+        """``method="hierarchical"`` with the native engine (checked like the Python one)."""
+        P = self._compiled
+        P.refresh()
+        self._warm(warm_start)  # validated; the engine warm-starts from its working sets
+        P.check_finite()
+        if self._native is None:
+            self._native = NativeHierarchy(P, self.damping)
+        x, info = self._native.solve(P)
+        self._check(x, None, "native")
+        return Solution(
+            x=x,
+            status="optimal",
+            level_residuals=np.array([L.residual(x) for L in P.levels]),
+            solver="native",
+            solve_time=time.perf_counter() - t0,
+            method="hierarchical",
             info=info,
         )
 
@@ -329,12 +363,13 @@ def solve_stack(
     solver: str | None = None,
     method: str = "hierarchical",
     time_limit: float | None = None,
+    engine: str | None = None,
     **options,
 ) -> Solution:
     """Build a :class:`Stack` and solve it once (function form of :meth:`Stack.solve`).
 
     ``options`` go to :class:`Stack` (``regularization``, ``damping``, ``constraints``,
-    ``weight_ratio``); ``time_limit`` (s) to :meth:`Stack.solve`.
+    ``weight_ratio``); ``time_limit`` (s) and ``engine`` to :meth:`Stack.solve`.
     """
     stack = Stack(levels, bounds=bounds, **options)
-    return stack.solve(solver=solver, method=method, time_limit=time_limit)
+    return stack.solve(solver=solver, method=method, time_limit=time_limit, engine=engine)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fnmatch
 import importlib.resources
 import sys
 from pathlib import Path
@@ -23,5 +24,11 @@ def test_py_typed_is_in_the_package():
 
 
 def test_py_typed_is_package_data():
+    """scikit-build-core copies the whole qpcoord/ folder (wheel.packages), py.typed with it,
+    unless a wheel.exclude pattern drops it."""
     config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    assert "py.typed" in config["tool"]["setuptools"]["package-data"]["qpcoord"]
+    wheel = config["tool"]["scikit-build"]["wheel"]
+    assert "qpcoord" in wheel["packages"]
+    assert (ROOT / "qpcoord" / "py.typed").is_file()
+    excluded = [p for p in wheel["exclude"] if fnmatch.fnmatch("qpcoord/py.typed", p)]
+    assert excluded == []

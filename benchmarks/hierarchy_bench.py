@@ -1,0 +1,197 @@
+"""Strict hierarchies: Python engine vs native engine (cold, warm) vs DAQP's hierarchical mode.
+
+Scenarios (seeded):
+
+* ``random50``: 50 variables, 10 levels of 20 rows (8 equality rows, 12 inequality rows, one-
+  or two-sided), box ``|x| ≤ 1``; every row has unit norm, so DAQP's row-normalised soft
+  penalty is the same lexicographic problem as qpcoord's. Per step the targets move a little.
+* ``panda9``: the Panda's size, 9 variables: a 3-row position task above a 9-row posture task,
+  box on the velocities (random well-conditioned 3 × 9 Jacobian, moving target).
+
+Per step (interleaved, one BLAS thread): ``Stack.solve(engine="python")``, the native engine
+cold (stored working sets ignored) and warm (``Stack.solve(engine="native")``), and
+``daqp.solve(..., break_points=...)`` with ``H = I`` (minimum-norm completion; a positive-
+definite H avoids its −8 "unsupported" flag). Each engine's level values are checked against
+the Python engine's (``max |Δr| / max(1, r)``). Then the one-shot cost: ``qc.solve_stack`` of
+a 7-variable, 3-level stack (each engine) vs one direct ``daqp.solve`` of the weighted QP.
+
+    python benchmarks/hierarchy_bench.py            # ~1–2 min
+    python benchmarks/hierarchy_bench.py --quick    # a few seconds
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+
+import daqp
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+import qpcoord as qc
+from qpcoord.core.native import NativeHierarchy
+
+
+def _unit_rows(M: np.ndarray) -> np.ndarray:
+    return M / np.linalg.norm(M, axis=1)[:, None]
+
+
+def random50(rng, n=50, levels=10, m_eq=8, m_in=12):
+    """Tasks of the 50-variable, 10-level stack and a function that moves its targets."""
+    tasks = []
+    for _ in range(levels):
+        eq = qc.Equality(_unit_rows(rng.standard_normal((m_eq, n))), rng.standard_normal(m_eq))
+        C = _unit_rows(rng.standard_normal((m_in, n)))
+        lo = rng.uniform(-1.5, 0.5, m_in)
+        hi = lo + rng.uniform(0.2, 1.5, m_in)
+        hi[: m_in // 2] = np.inf  # one-sided half
+        tasks.append([eq, qc.Inequality(C, lo, hi)])
+    bounds = qc.Bounds(-np.ones(n), np.ones(n))
+
+    def move(step):
+        for eq, _ in tasks:
+            eq.update(b=eq.b + 0.01 * np.sin(0.1 * step + np.arange(eq.b.shape[0])))
+
+    return tasks, bounds, move
+
+
+def panda9(rng, n=9):
+    J = _unit_rows(rng.standard_normal((3, n)))
+    pos = qc.Equality(J, np.zeros(3))
+    q_ref = rng.uniform(-0.5, 0.5, n)
+    posture = qc.Equality(np.eye(n), q_ref)
+    bounds = qc.Bounds(-0.3 * np.ones(n), 0.3 * np.ones(n))
+
+    def move(step):
+        pos.update(b=np.array([np.sin(0.05 * step), np.cos(0.05 * step), 0.3]))
+
+    return [pos, posture], bounds, move
+
+
+def daqp_problem(levels, bounds, n):
+    """DAQP's hierarchical form: bounds hard (first n simple bounds), one block per level."""
+    A, bu, bl, breaks = [], [bounds.upper * np.ones(n)], [bounds.lower * np.ones(n)], [n]
+    count = n
+    for lev in levels:
+        lev = lev if isinstance(lev, list) else [lev]
+        for t in lev:
+            if isinstance(t, qc.Equality):
+                A.append(t.A)
+                bu.append(t.b)
+                bl.append(t.b)
+                count += t.A.shape[0]
+            else:
+                A.append(t.C)
+                bu.append(np.minimum(t.upper, 1e30))
+                bl.append(np.maximum(t.lower, -1e30))
+                count += t.C.shape[0]
+        breaks.append(count)
+    return (
+        np.vstack(A),
+        np.concatenate(bu),
+        np.concatenate(bl),
+        np.zeros(count, dtype=np.int32),
+        np.array(breaks, dtype=np.int32),
+    )
+
+
+def _levels_residuals(stack: qc.Stack, x: np.ndarray) -> np.ndarray:
+    return np.array([L.residual(x) for L in stack._compiled.levels])
+
+
+def run(name, build, steps, seed=0):
+    rng = np.random.default_rng(seed)
+    levels, bounds, move = build(rng)
+    stack = qc.Stack(levels, bounds=bounds)
+    n = stack.n
+    cold = NativeHierarchy(stack._compiled, stack.damping)
+    times = {k: [] for k in ("python", "native cold", "native warm", "daqp hierarchical")}
+    worst = dict.fromkeys(times, 0.0)
+    flags = set()
+    for step in range(steps):
+        move(step)
+        t = time.perf_counter()
+        sp = stack.solve(engine="python")
+        times["python"].append(time.perf_counter() - t)
+        ref = sp.level_residuals
+        t = time.perf_counter()
+        P = stack._compiled
+        P.refresh()
+        xc, _ = cold.solve(P, warm=False)
+        times["native cold"].append(time.perf_counter() - t)
+        t = time.perf_counter()
+        sw = stack.solve(engine="native")
+        times["native warm"].append(time.perf_counter() - t)
+        t = time.perf_counter()
+        A, bu, bl, sense, breaks = daqp_problem(levels, bounds, n)
+        xd, _f, flag, _info = daqp.solve(
+            np.eye(n), np.zeros(n), A, bu, bl, sense, break_points=breaks
+        )
+        times["daqp hierarchical"].append(time.perf_counter() - t)
+        flags.add(int(flag))
+        for key, x in (
+            ("python", sp.x),
+            ("native cold", xc),
+            ("native warm", sw.x),
+            ("daqp hierarchical", np.asarray(xd)),
+        ):
+            r = _levels_residuals(stack, x)
+            worst[key] = max(worst[key], float(np.max(np.abs(r - ref) / np.maximum(1.0, ref))))
+    rows = []
+    for key, ts in times.items():
+        us = np.array(ts[2:]) * 1e6
+        rows.append((name, key, *np.percentile(us, [50, 90, 99]), worst[key]))
+    return rows, flags
+
+
+def one_shot(steps):
+    rng = np.random.default_rng(1)
+    n = 7
+    A = [rng.standard_normal((m, n)) for m in (3, 3, 7)]
+    b = [rng.standard_normal(m) for m in (3, 3, 7)]
+    lb, ub = -np.ones(n), np.ones(n)
+    times = {"solve_stack python": [], "solve_stack native": [], "daqp.solve weighted QP": []}
+    w = (1.0, 1e-3, 1e-6)
+    for _ in range(steps):
+        for engine in ("python", "native"):
+            t = time.perf_counter()
+            qc.solve_stack(
+                [qc.Equality(Ai, bi) for Ai, bi in zip(A, b, strict=True)],
+                bounds=qc.Bounds(lb, ub),
+                engine=engine,
+            )
+            times[f"solve_stack {engine}"].append(time.perf_counter() - t)
+        t = time.perf_counter()
+        H = sum(wi * Ai.T @ Ai for wi, Ai in zip(w, A, strict=True)) + 1e-9 * np.eye(n)
+        f = -sum(wi * Ai.T @ bi for wi, Ai, bi in zip(w, A, b, strict=True))
+        daqp.solve(H, f, np.zeros((0, n)), ub, lb, np.zeros(n, dtype=np.int32))
+        times["daqp.solve weighted QP"].append(time.perf_counter() - t)
+    return [(k, *np.percentile(np.array(v[2:]) * 1e6, [50, 90, 99])) for k, v in times.items()]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="few steps (smoke run)")
+    ap.add_argument("--steps", type=int, default=None)
+    args = ap.parse_args(argv)
+    steps = args.steps or (20 if args.quick else 300)
+    print(f"# hierarchy_bench: {steps} steps per scenario, interleaved, 1 BLAS thread")
+    print(f"# {platform.python_version()}, numpy {np.__version__}, {platform.machine()}")
+    with threadpool_limits(1):
+        print("\n| scenario | engine | median µs | p90 µs | p99 µs | max level diff vs python |")
+        print("|---|---|---|---|---|---|")
+        for name, build in (("random50 (n=50, 10×20 rows)", random50), ("panda9", panda9)):
+            rows, flags = run(name, build, steps if "random" not in name else max(steps // 3, 5))
+            for r in rows:
+                print(f"| {r[0]} | {r[1]} | {r[2]:.1f} | {r[3]:.1f} | {r[4]:.1f} | {r[5]:.1e} |")
+            print(f"<!-- {name}: daqp exit flags {sorted(flags)} -->")
+        print("\n| one-shot, 7 variables, 3 levels | median µs | p90 µs | p99 µs |")
+        print("|---|---|---|---|")
+        for r in one_shot(steps):
+            print(f"| {r[0]} | {r[1]:.1f} | {r[2]:.1f} | {r[3]:.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

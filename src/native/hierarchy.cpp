@@ -1,0 +1,694 @@
+// qpcoord native engine: dense exact strict-hierarchy least squares (implementation).
+#include "hierarchy.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace qpcoord {
+namespace {
+
+constexpr double kEps = std::numeric_limits<double>::epsilon();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kFeasTol = 1e-9;       // FEAS_TOL: closed-form feasibility test, relative
+constexpr double kInfeasTol = 1e-9;     // INFEAS_TOL: hard part violation, relative
+constexpr double kCheckTol = 1e-6;      // CHECK_TOL: hard equality consistency, relative
+constexpr double kKktTol = 1e-9;        // multiplier sign tolerance, relative to |g|
+constexpr double kViolationTol = 1e-6;  // VIOLATION_TOL: a row counts as violated
+constexpr double kAbsFloor = 1e-14;
+constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every row to this
+constexpr int kIterFactor = 6;
+
+inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
+inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
+inline bool in_box(double v, double lo, double hi) {
+  return v >= widen_lo(lo) && v <= widen_hi(hi);
+}
+inline double finite_abs(double v) { return std::isfinite(v) ? std::abs(v) : 0.0; }
+
+/// Numerical rank of sorted singular values (as qpcoord.core.linalg.numerical_rank).
+int numerical_rank(const Vec& s, int rows, int cols, double scale) {
+  if (s.size() == 0) return 0;
+  const double ref = std::max(s(0), scale);
+  if (ref == 0.0) return 0;
+  const double tol = std::max(rows, cols) * kEps * ref;
+  int rank = 0;
+  for (Eigen::Index i = 0; i < s.size(); ++i)
+    if (s(i) > tol) ++rank;
+  return rank;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+void LsqProblem::resize(int max_qrows, int max_grows, int max_cols) {
+  Q.resize(max_qrows, max_cols);
+  c.resize(max_qrows);
+  G.resize(max_grows, max_cols);
+  lo.resize(max_grows);
+  hi.resize(max_grows);
+  id.assign(max_grows, -1);
+}
+
+void LsqProblem::start(int qrows_, int cols_) {
+  qrows = qrows_;
+  cols = cols_;
+  rows = 0;
+  Q.topLeftCorner(qrows, cols).setZero();
+  c.head(qrows).setZero();
+}
+
+void LsqProblem::add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid,
+                         double ref_norm) {
+  if (!std::isfinite(l) && !std::isfinite(u)) return;
+  const double nrm = g.norm();
+  if (!(nrm > 1e-12 * std::max(ref_norm, 1e-300))) return;  // cannot bind: constant row
+  G.row(rows).head(cols) = g.transpose() / nrm;
+  lo(rows) = l / nrm;
+  hi(rows) = u / nrm;
+  id[rows] = gid;
+  ++rows;
+}
+
+// ---------------------------------------------------------------------------------------
+Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has_bounds,
+                     double damping)
+    : n_(n), meq_(std::move(meq)), min_(std::move(min)), has_bounds_(has_bounds),
+      damping_(damping) {
+  const int blocks = static_cast<int>(meq_.size());
+  eq0_.assign(blocks, 0);
+  in0_.assign(blocks, 0);
+  int e = 0, c = 0, max_eq = 0, max_in = 0;
+  for (int b = 0; b < blocks; ++b) {
+    eq0_[b] = e;
+    in0_[b] = c;
+    e += meq_[b];
+    c += min_[b];
+    max_eq = std::max(max_eq, meq_[b]);
+    max_in = std::max(max_in, min_[b]);
+  }
+  capacity_ = c;
+  x_.resize(n);
+  Z_.resize(n, n);
+  Cin_.resize(std::max(capacity_, 1), n);
+  lin_.resize(std::max(capacity_, 1));
+  uin_.resize(std::max(capacity_, 1));
+  inid_.assign(std::max(capacity_, 1), -1);
+  lb_.resize(n);
+  ub_.resize(n);
+  // largest stage: (z, w) with w over a level's rows, or the hard phase (slack per hard row
+  // and per bound); Q holds equalities, damping rows and slack rows (or Z for the min norm)
+  const int hard_cols = n + min_[0] + (has_bounds ? n : 0);
+  const int max_cols = std::max(n + max_in, hard_cols);
+  const int max_qrows = std::max({max_eq + n + max_in, n, min_[0] + (has_bounds ? n : 0)});
+  const int max_grows = capacity_ + (has_bounds ? n : 0) + max_in + 1;
+  P_.resize(std::max(max_qrows, 1), max_grows, std::max(max_cols, 1));
+  y_.resize(std::max(max_cols, 1));
+  W_.assign(max_grows, 0);
+  working_.resize(blocks + 1);
+}
+
+bool Hierarchy::feasible(const Vec& x) const {
+  if (has_bounds_)
+    for (int j = 0; j < n_; ++j)
+      if (!in_box(x(j), lb_(j), ub_(j))) return false;
+  for (int i = 0; i < k_; ++i)
+    if (!in_box(Cin_.row(i).dot(x), lin_(i), uin_(i))) return false;
+  return true;
+}
+
+void Hierarchy::snap(Vec& x) const {
+  if (has_bounds_) x = x.cwiseMax(lb_).cwiseMin(ub_);
+}
+
+void Hierarchy::inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0,
+                        int m, const std::vector<char>* skip) {
+  for (int i = 0; i < m; ++i) {
+    if (skip && (*skip)[i]) continue;
+    const int g = row0 + i;
+    if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
+    const double v = C.row(g).dot(x_);
+    Cin_.row(k_) = C.row(g);
+    lin_(k_) = std::min(lo(g), v);  // opened to the current value: may stay, never grow
+    uin_(k_) = std::max(hi(g), v);
+    inid_[k_] = g;
+    ++k_;
+  }
+}
+
+void Hierarchy::add_inherited_rows(LsqProblem& P, int col0) {
+  (void)col0;
+  Vec g(r_);
+  for (int i = 0; i < k_; ++i) {
+    g.noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
+    const double v = Cin_.row(i).dot(x_);
+    const double l = std::min(lin_(i) - v, 0.0);
+    const double u = std::max(uin_(i) - v, 0.0);
+    const int before = P.rows;
+    Vec full = Vec::Zero(P.cols);
+    full.head(r_) = g;
+    P.add_row(full, l, u, inid_[i], Cin_.row(i).norm());
+    (void)before;
+  }
+}
+
+void Hierarchy::add_bound_rows(LsqProblem& P, int col0) {
+  (void)col0;
+  if (!has_bounds_) return;
+  Vec full = Vec::Zero(P.cols);
+  for (int j = 0; j < n_; ++j) {
+    full.head(r_) = Z_.row(j).head(r_).transpose();
+    const double l = std::min(lb_(j) - x_(j), 0.0);
+    const double u = std::max(ub_(j) - x_(j), 0.0);
+    P.add_row(full, l, u, capacity_ + j, 1.0);
+  }
+}
+
+void Hierarchy::freeze(const Mat& F, double scale) {
+  if (F.rows() == 0 || r_ == 0) return;
+  Eigen::JacobiSVD<Mat> svd(F, Eigen::ComputeFullV);
+  const int rank =
+      numerical_rank(svd.singularValues(), static_cast<int>(F.rows()), r_, scale);
+  if (rank == 0) return;
+  const Mat N = svd.matrixV().rightCols(r_ - rank);
+  Mat Zn = Z_.leftCols(r_) * N;
+  r_ -= rank;
+  Z_.leftCols(r_) = Zn;
+}
+
+// ---------------------------------------------------------------------------------------
+void Hierarchy::null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, Mat& N) {
+  const int k = P.cols;
+  int kw = 0;
+  for (int i = 0; i < P.rows; ++i)
+    if (W[i]) ++kw;
+  if (kw == 0) {
+    N = Mat::Identity(k, k);
+    return;
+  }
+  Mat GwT(k, kw);
+  int j = 0;
+  for (int i = 0; i < P.rows; ++i)
+    if (W[i]) GwT.col(j++) = P.G.row(i).head(k).transpose();
+  Eigen::ColPivHouseholderQR<Mat> qr(GwT);
+  qr.setThreshold(std::max(k, kw) * kEps * 10.0);
+  const int rank = static_cast<int>(qr.rank());
+  const Mat Qf = qr.householderQ();
+  N = Qf.rightCols(k - rank);
+}
+
+bool Hierarchy::multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
+                               int* drop) {
+  const int k = P.cols;
+  const Vec res = P.Q.topLeftCorner(P.qrows, k) * y - P.c.head(P.qrows);
+  const Vec g = P.Q.topLeftCorner(P.qrows, k).transpose() * res;
+  std::vector<int> idx;
+  for (int i = 0; i < P.rows; ++i)
+    if (W[i]) idx.push_back(i);
+  if (idx.empty()) return true;
+  Mat A(k, static_cast<int>(idx.size()));
+  for (size_t j = 0; j < idx.size(); ++j) {
+    const double sign = (W[idx[j]] == 1) ? -1.0 : 1.0;
+    A.col(static_cast<int>(j)) = sign * P.G.row(idx[j]).head(k).transpose();
+  }
+  const Vec mu = A.completeOrthogonalDecomposition().solve(g);
+  const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
+  int jmin = -1;
+  double mmin = kInf;
+  for (size_t j = 0; j < idx.size(); ++j) {
+    if (W[idx[j]] == 2) continue;  // equalities are never dropped
+    if (mu(static_cast<int>(j)) < mmin) {
+      mmin = mu(static_cast<int>(j));
+      jmin = idx[j];
+    }
+  }
+  if (jmin < 0 || mmin >= -kKktTol * gref) return true;
+  if (drop) *drop = jmin;
+  return false;
+}
+
+bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, int& iters) {
+  const int k = P.cols;
+  const int m = P.rows;
+  const auto Q = P.Q.topLeftCorner(P.qrows, k);
+  const auto c = P.c.head(P.qrows);
+  const double cn = c.norm();
+  const int max_iter = kIterFactor * (m + k) + 10;
+  Mat N;
+  Vec step(k), res, dres, gy(m), gp(m);
+  for (int it = 0; it < max_iter; ++it) {
+    ++iters;
+    null_of_rows(P, W, N);
+    res = Q * y - c;
+    if (N.cols() > 0) {
+      const Mat K = Q * N;
+      const Vec s = K.completeOrthogonalDecomposition().solve(-res);
+      step.noalias() = N * s;
+    } else {
+      step.setZero();
+    }
+    dres = Q * step;
+    const double gain = -(2.0 * res.dot(dres) + dres.squaredNorm());
+    const double smax = step.cwiseAbs().maxCoeff();
+    // stationary on W: the step no longer decreases the objective measurably (relative to
+    // its value, with a floor at rounding of the data's scale), or it is rounding itself
+    const double floor = 1e-28 * std::max(cn * cn, (Q * y).squaredNorm());
+    if (gain <= 1e-15 * res.squaredNorm() + floor ||
+        smax <= 1e-15 * std::max(1.0, y.cwiseAbs().maxCoeff())) {
+      int drop = -1;
+      if (multipliers_ok(P, y, W, &drop)) return true;
+      W[drop] = 0;
+      continue;
+    }
+    // ratio test on the rows outside the working set
+    double alpha = 1.0;
+    int block = -1;
+    int8_t side = 0;
+    if (m) {
+      gp.head(m).noalias() = P.G.topLeftCorner(m, k) * step;
+      gy.head(m).noalias() = P.G.topLeftCorner(m, k) * y;
+      const double tiny = 1e-13 * smax;
+      for (int i = 0; i < m; ++i) {
+        if (W[i]) continue;
+        double t = kInf;
+        int8_t sd = 0;
+        if (gp(i) > tiny && std::isfinite(P.hi(i))) {
+          t = std::max((P.hi(i) - gy(i)) / gp(i), 0.0);
+          sd = 1;
+        } else if (gp(i) < -tiny && std::isfinite(P.lo(i))) {
+          t = std::max((P.lo(i) - gy(i)) / gp(i), 0.0);
+          sd = -1;
+        }
+        if (t < alpha) {
+          alpha = t;
+          block = i;
+          side = sd;
+        }
+      }
+    }
+    y += alpha * step;
+    if (block >= 0) W[block] = side;
+  }
+  return false;
+}
+
+bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Vec& y,
+                                std::vector<int8_t>& W) {
+  if (ws.id.empty()) return false;
+  const int k = P.cols;
+  std::fill(W.begin(), W.begin() + P.rows, 0);
+  int kw = 0;
+  for (size_t j = 0; j < ws.id.size(); ++j) {
+    for (int i = 0; i < P.rows; ++i) {
+      if (P.id[i] == ws.id[j]) {
+        W[i] = ws.side[j];
+        ++kw;
+        break;
+      }
+    }
+  }
+  if (kw != static_cast<int>(ws.id.size())) return false;
+  Mat Gw(kw, k);
+  Vec t(kw);
+  int j = 0;
+  for (int i = 0; i < P.rows; ++i) {
+    if (!W[i]) continue;
+    Gw.row(j) = P.G.row(i).head(k);
+    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    if (!std::isfinite(t(j))) return false;
+    ++j;
+  }
+  const Eigen::CompleteOrthogonalDecomposition<Mat> cod(Gw);
+  Vec yp = cod.solve(t);
+  if ((Gw * yp - t).cwiseAbs().maxCoeff() > 1e-10 * std::max(1.0, t.cwiseAbs().maxCoeff()))
+    return false;
+  Mat N;
+  null_of_rows(P, W, N);
+  if (N.cols() > 0) {
+    const auto Q = P.Q.topLeftCorner(P.qrows, k);
+    const Vec res = Q * yp - P.c.head(P.qrows);
+    const Mat K = Q * N;
+    yp += N * K.completeOrthogonalDecomposition().solve(-res);
+  }
+  const Vec gy = P.G.topLeftCorner(P.rows, k) * yp;
+  for (int i = 0; i < P.rows; ++i) {
+    const double sl = kWarmFeasTol * std::max(1.0, finite_abs(P.lo(i)));
+    const double su = kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)));
+    if (gy(i) < P.lo(i) - sl || gy(i) > P.hi(i) + su) return false;
+  }
+  if (!multipliers_ok(P, yp, W, nullptr)) return false;
+  y.head(k) = yp;
+  return true;
+}
+
+void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>& W,
+                                  Working& ws) {
+  ws.id.clear();
+  ws.side.clear();
+  for (int i = 0; i < P.rows; ++i) {
+    if (W[i] == 1 || W[i] == -1) {
+      ws.id.push_back(P.id[i]);
+      ws.side.push_back(W[i]);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                          const CRef<Vec>& lo, const CRef<Vec>& hi, MRef<Mat> stats,
+                          MRef<Vec> detail, bool warm) {
+  x_.setZero();
+  Z_.setIdentity();
+  r_ = n_;
+  k_ = 0;
+  const int me = meq_[0];
+  if (me) {
+    const auto A = Aeq.topRows(me);
+    const auto b = beq.head(me);
+    Eigen::JacobiSVD<Mat> svd(A, Eigen::ComputeThinU | Eigen::ComputeFullV);
+    const Vec& s = svd.singularValues();
+    const int rank = numerical_rank(s, me, n_, 0.0);
+    Vec coef = svd.matrixU().leftCols(rank).transpose() * b;
+    coef.array() /= s.head(rank).array();
+    x_ = svd.matrixV().leftCols(rank) * coef;
+    const Vec res = A * x_ - b;
+    const double scale = std::max(1.0, b.cwiseAbs().maxCoeff());
+    if (res.cwiseAbs().maxCoeff() > kCheckTol * scale) {
+      detail(0) = res.norm();
+      return kInfeasibleEq;
+    }
+    r_ = n_ - rank;
+    Z_.leftCols(r_) = svd.matrixV().rightCols(r_);
+  }
+  // hard inequality rows with their true bounds, then: is x already feasible?
+  const int mi = min_[0];
+  for (int i = 0; i < mi; ++i) {
+    if (!std::isfinite(lo(i)) && !std::isfinite(hi(i))) continue;
+    Cin_.row(k_) = C.row(i);
+    lin_(k_) = lo(i);
+    uin_(k_) = hi(i);
+    inid_[k_] = i;
+    ++k_;
+  }
+  if (feasible(x_)) return kOk;
+  if (r_ == 0) {
+    detail(1) = kInf;
+    return kInfeasibleHard;
+  }
+  // phase 1: min sum of squared violations of the hard rows and bounds, in (z, w)
+  const int nb = has_bounds_ ? n_ : 0;
+  const int cols = r_ + k_ + nb;
+  LsqProblem& P = P_;
+  P.start(k_ + nb, cols);
+  for (int i = 0; i < k_ + nb; ++i) P.Q(i, r_ + i) = 1.0;
+  Vec g = Vec::Zero(cols);
+  Vec y = Vec::Zero(cols);
+  double worst_fixed = 0.0;
+  for (int i = 0; i < k_; ++i) {
+    const double v = Cin_.row(i).dot(x_);
+    g.setZero();
+    g.head(r_) = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
+    const double gap = std::max({lin_(i) - v, v - uin_(i), 0.0});
+    if (g.head(r_).norm() <= 1e-12 * Cin_.row(i).norm()) {  // fixed by the hard equalities
+      worst_fixed = std::max(
+          worst_fixed, gap / std::max({1.0, finite_abs(lin_(i)), finite_abs(uin_(i))}));
+      continue;
+    }
+    g(r_ + i) = -1.0;
+    y(r_ + i) = (v > uin_(i)) ? v - uin_(i) : ((v < lin_(i)) ? v - lin_(i) : 0.0);
+    P.add_row(g, lin_(i) - v, uin_(i) - v, inid_[i], Cin_.row(i).norm());
+  }
+  for (int j = 0; j < nb; ++j) {
+    g.setZero();
+    g.head(r_) = Z_.row(j).head(r_).transpose();
+    const double v = x_(j);
+    g(r_ + k_ + j) = -1.0;
+    if (g.head(r_).norm() <= 1e-12) {
+      const double gap = std::max({lb_(j) - v, v - ub_(j), 0.0});
+      worst_fixed =
+          std::max(worst_fixed, gap / std::max({1.0, finite_abs(lb_(j)), finite_abs(ub_(j))}));
+      continue;
+    }
+    y(r_ + k_ + j) = (v > ub_(j)) ? v - ub_(j) : ((v < lb_(j)) ? v - lb_(j) : 0.0);
+    P.add_row(g, lb_(j) - v, ub_(j) - v, capacity_ + j, 1.0);
+  }
+  if (worst_fixed > kInfeasTol) {
+    detail(1) = worst_fixed;
+    return kInfeasibleHard;
+  }
+  int iters = 0;
+  const bool hit = warm && try_working_set(P, working_[0], y, W_);
+  if (!hit) {
+    std::fill(W_.begin(), W_.begin() + P.rows, 0);
+    for (int i = 0; i < P.rows; ++i)
+      if (P.lo(i) == P.hi(i)) W_[i] = 2;
+    if (!active_set(P, y, W_, iters)) {
+      detail(2) = 0;
+      return kNotConverged;
+    }
+  }
+  store_working_set(P, W_, working_[0]);
+  stats(0, 0) = iters;
+  stats(0, 1) = hit ? 1.0 : 0.0;
+  x_ += Z_.leftCols(r_) * y.head(r_);
+  // the violation left, relative to each row's scale
+  double worst = 0.0;
+  for (int i = 0; i < k_; ++i) {
+    const double v = Cin_.row(i).dot(x_);
+    const double gap = std::max({lin_(i) - v, v - uin_(i), 0.0});
+    worst = std::max(worst,
+                     gap / std::max({1.0, finite_abs(lin_(i)), finite_abs(uin_(i))}));
+  }
+  for (int j = 0; j < nb; ++j) {
+    const double gap = std::max({lb_(j) - x_(j), x_(j) - ub_(j), 0.0});
+    worst = std::max(worst, gap / std::max({1.0, finite_abs(lb_(j)), finite_abs(ub_(j))}));
+  }
+  if (worst > kInfeasTol) {
+    detail(1) = worst;
+    return kInfeasibleHard;
+  }
+  snap(x_);
+  for (int i = 0; i < k_; ++i) {  // opened to the point's value (rounding)
+    const double v = Cin_.row(i).dot(x_);
+    lin_(i) = std::min(lin_(i), v);
+    uin_(i) = std::max(uin_(i), v);
+  }
+  return kOk;
+}
+
+int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                     const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                     MRef<Mat> stats, bool warm) {
+  const int b = k + 1;
+  const int me = meq_[b], mi = min_[b], e0 = eq0_[b], i0 = in0_[b];
+  const int stage = b;
+  if (r_ == 0) {
+    inherit(C, lo, hi, i0, mi, nullptr);
+    return kOk;
+  }
+  const auto Zr = Z_.leftCols(r_);
+  // ---- damped closed form of the projected equalities
+  int rank = 0;
+  double tau = 0.0;
+  Mat M, V;
+  Vec s, e, Ut_e;
+  Vec xc = x_;
+  if (me) {
+    const auto A = Aeq.middleRows(e0, me);
+    M.noalias() = A * Zr;
+    e = beq.segment(e0, me) - A * x_;
+    Eigen::JacobiSVD<Mat> svd(M, Eigen::ComputeThinU | Eigen::ComputeFullV);
+    s = svd.singularValues();
+    const double scale = A.norm();
+    rank = numerical_rank(s, me, r_, scale);
+    if (rank) {
+      tau = damping_ * std::max(s(0), scale);
+      Ut_e = svd.matrixU().leftCols(rank).transpose() * e;
+      Vec gz(rank);
+      for (int i = 0; i < rank; ++i) gz(i) = (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
+      V = svd.matrixV();
+      xc.noalias() += Zr * (V.leftCols(rank) * gz.cwiseProduct(Ut_e));
+    }
+  }
+  bool ok = feasible(xc);
+  if (ok)
+    for (int i = 0; i < mi && ok; ++i) ok = in_box(C.row(i0 + i).dot(xc), lo(i0 + i), hi(i0 + i));
+  if (ok) {
+    x_ = xc;
+    snap(x_);
+    inherit(C, lo, hi, i0, mi, nullptr);
+    if (rank) {
+      const Mat Vn = V.rightCols(r_ - rank);
+      Mat Zn = Zr * Vn;
+      r_ -= rank;
+      Z_.leftCols(r_) = Zn;
+    }
+    stats(stage, 2) = 1.0;
+    return kOk;
+  }
+  // ---- exact active-set least squares in y = (z, w)
+  std::vector<int> mov;  // level rows z can move, with a finite side
+  for (int i = 0; i < mi; ++i) {
+    const int g = i0 + i;
+    if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
+    const double cn = C.row(g).norm();
+    const double dn = (Zr.transpose() * C.row(g).transpose()).norm();
+    if (dn > 1e-9 * cn) mov.push_back(i);
+  }
+  const int mv = static_cast<int>(mov.size());
+  int ndamp = 0;
+  for (int i = 0; i < rank; ++i)
+    if (s(i) < tau) ++ndamp;
+  const int cols = r_ + mv;
+  LsqProblem& P = P_;
+  P.start(me + ndamp + mv, cols);
+  if (me) {
+    P.Q.topLeftCorner(me, r_) = M;
+    P.c.head(me) = e;
+  }
+  {
+    int d = me;
+    for (int i = 0; i < rank; ++i)
+      if (s(i) < tau) P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * V.col(i);
+  }
+  Vec y = Vec::Zero(cols);
+  add_inherited_rows(P, 0);
+  add_bound_rows(P, 0);
+  Vec g = Vec::Zero(cols);
+  for (int j = 0; j < mv; ++j) {
+    const int row = i0 + mov[j];
+    const double v = C.row(row).dot(x_);
+    P.Q(me + ndamp + j, r_ + j) = sw(row);
+    g.setZero();
+    g.head(r_) = Zr.transpose() * C.row(row).transpose();
+    g(r_ + j) = -1.0;
+    y(r_ + j) = (v > hi(row)) ? v - hi(row) : ((v < lo(row)) ? v - lo(row) : 0.0);
+    P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
+  }
+  int iters = 0;
+  const bool hit = warm && try_working_set(P, working_[stage], y, W_);
+  if (!hit) {
+    std::fill(W_.begin(), W_.begin() + P.rows, 0);
+    for (int i = 0; i < P.rows; ++i)
+      if (P.lo(i) == P.hi(i)) W_[i] = 2;
+    y.setZero();
+    for (int j = 0; j < mv; ++j) {
+      const int row = i0 + mov[j];
+      const double v = C.row(row).dot(x_);
+      y(r_ + j) = (v > hi(row)) ? v - hi(row) : ((v < lo(row)) ? v - lo(row) : 0.0);
+    }
+    if (!active_set(P, y, W_, iters)) return kNotConverged;
+  }
+  store_working_set(P, W_, working_[stage]);
+  stats(stage, 0) = iters;
+  stats(stage, 1) = hit ? 1.0 : 0.0;
+  const Vec x_old = x_;
+  x_ += Zr * y.head(r_);
+  snap(x_);
+  // ---- classify the level's rows on the new point; freeze
+  std::vector<char> viol(mi, 0);
+  const double xscale = std::max(x_old.cwiseAbs().maxCoeff(), x_.cwiseAbs().maxCoeff());
+  int nviol = 0;
+  for (int j = 0; j < mv; ++j) {
+    const int i = mov[j], row = i0 + i;
+    const double v = C.row(row).dot(x_);
+    const double gap = std::max(lo(row) - v, v - hi(row));
+    const double scale = std::max({finite_abs(lo(row)), finite_abs(hi(row)),
+                                   C.row(row).norm() * xscale});
+    if (gap > kViolationTol * scale + kAbsFloor) {
+      viol[i] = 1;
+      ++nviol;
+    }
+  }
+  Mat F(rank + nviol, r_);
+  double fscale = 1.0;
+  for (int i = 0; i < rank; ++i) F.row(i) = V.col(i).transpose();
+  {
+    int f = rank;
+    double fro = 0.0;
+    for (int i = 0; i < mi; ++i) {
+      if (!viol[i]) continue;
+      F.row(f++) = (Zr.transpose() * C.row(i0 + i).transpose()).transpose();
+      fro += C.row(i0 + i).squaredNorm();
+    }
+    fscale = std::max(fscale, std::sqrt(fro));
+  }
+  inherit(C, lo, hi, i0, mi, &viol);
+  freeze(F, fscale);
+  return kOk;
+}
+
+int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
+  const int stage = static_cast<int>(meq_.size());
+  if (r_ == 0) return kOk;
+  const auto Zr = Z_.leftCols(r_);
+  const Vec xc = x_ - Zr * (Zr.transpose() * x_);
+  if (feasible(xc)) {
+    x_ = xc;
+    snap(x_);
+    stats(stage, 2) = 1.0;
+    return kOk;
+  }
+  LsqProblem& P = P_;
+  P.start(n_, r_);
+  P.Q.topLeftCorner(n_, r_) = Zr;
+  P.c.head(n_) = -x_;
+  add_inherited_rows(P, 0);
+  add_bound_rows(P, 0);
+  Vec y = Vec::Zero(r_);
+  int iters = 0;
+  const bool hit = warm && try_working_set(P, working_[stage], y, W_);
+  if (!hit) {
+    std::fill(W_.begin(), W_.begin() + P.rows, 0);
+    for (int i = 0; i < P.rows; ++i)
+      if (P.lo(i) == P.hi(i)) W_[i] = 2;
+    y.setZero();
+    if (!active_set(P, y, W_, iters)) return kNotConverged;
+  }
+  store_working_set(P, W_, working_[stage]);
+  stats(stage, 0) = iters;
+  stats(stage, 1) = hit ? 1.0 : 0.0;
+  x_ += Zr * y;
+  snap(x_);
+  return kOk;
+}
+
+int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                     const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                     const CRef<Vec>& lb, const CRef<Vec>& ub, bool warm, MRef<Vec> x_out,
+                     MRef<Mat> stats, MRef<Vec> detail) {
+  const int L = num_levels();
+  const int me = eq0_.back() + meq_.back();
+  const int mi = in0_.back() + min_.back();
+  if (Aeq.rows() != me || Aeq.cols() != n_ || beq.size() != me || C.rows() != mi ||
+      C.cols() != n_ || lo.size() != mi || hi.size() != mi || sw.size() != mi ||
+      lb.size() != n_ || ub.size() != n_ || x_out.size() != n_ || stats.rows() != L + 2 ||
+      stats.cols() != 3 || detail.size() < 4)
+    return kBadInput;
+  if (!Aeq.allFinite() || !beq.allFinite() || !C.allFinite() || !sw.allFinite() ||
+      lo.hasNaN() || hi.hasNaN() || lb.hasNaN() || ub.hasNaN())
+    return kBadInput;
+  stats.setZero();
+  detail.setZero();
+  lb_ = lb;
+  ub_ = ub;
+  int st = hard_phase(Aeq, beq, C, lo, hi, stats, detail, warm);
+  if (st != kOk) return st;
+  for (int k = 0; k < L; ++k) {
+    st = level(k, Aeq, beq, C, lo, hi, sw, stats, warm);
+    if (st != kOk) {
+      detail(2) = k + 1;
+      return st;
+    }
+  }
+  st = min_norm(stats, warm);
+  if (st != kOk) {
+    detail(2) = L + 1;
+    return st;
+  }
+  if (!x_.allFinite()) return kNonFinite;
+  x_out = x_;
+  return kOk;
+}
+
+}  // namespace qpcoord

@@ -1,0 +1,129 @@
+// qpcoord native engine: dense exact strict-hierarchy (lexicographic) least squares.
+//
+// Same problem and semantics as qpcoord.core.methods.hierarchical (the Python engine):
+//   bounds lb <= x <= ub and the hard rows always hold; level k minimises
+//   ||Ae_k x - be_k||^2 + sum_i sw_i^2 dist(C_i x, [lo_i, hi_i])^2 over the optimal set of the
+//   levels above; then the minimum-norm x over the last optimal set.
+//
+// Algorithm: variable elimination. x = xbar + Z z with Z an orthonormal basis of the freedom
+// left. Per level: the damped closed form of the projected equalities (SVD, min-norm); if it
+// meets the level's inequalities, the inherited rows and the bounds it is the optimum.
+// Otherwise an exact primal active-set least-squares solve in y = (z, w), w the slacks of the
+// level's inequality rows, from a feasible start (z = 0, w = the rows' current violation),
+// warm-started from the previous call's working set of that level. The optimum is frozen:
+// Z <- Z null([Vt_rank; violated rows]), satisfied rows are inherited (opened to their value).
+#pragma once
+
+#include <Eigen/Dense>
+#include <cstdint>
+#include <vector>
+
+namespace qpcoord {
+
+inline constexpr int kAbiVersion = 1;
+
+using Mat = Eigen::MatrixXd;
+using Vec = Eigen::VectorXd;
+template <typename T>
+using CRef = Eigen::Ref<const T, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+template <typename T>
+using MRef = Eigen::Ref<T, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+
+/// Status codes of Hierarchy::solve (qpcoord/core/native.py turns them into exceptions).
+enum Status : int {
+  kOk = 0,
+  kInfeasibleEq = 1,    ///< inconsistent hard equalities (detail[0]: residual norm)
+  kInfeasibleHard = 2,  ///< hard inequalities and bounds inconsistent (detail[1]: violation)
+  kNonFinite = 3,       ///< a non-finite number in the result
+  kNotConverged = 4,    ///< an active-set solve hit its iteration limit (detail[2]: stage)
+  kBadInput = 5,        ///< wrong shapes or non-finite data
+};
+
+/// min 1/2 ||Q y - c||^2  s.t.  lo <= G y <= hi  (rows of G normalised), with row ids.
+struct LsqProblem {
+  Mat Q;
+  Vec c;
+  Mat G;
+  Vec lo, hi;
+  std::vector<int> id;  ///< global id of each row of G (warm start)
+  int rows = 0;         ///< rows of G in use
+  int cols = 0;
+  int qrows = 0;
+  void resize(int max_qrows, int max_grows, int max_cols);
+  void start(int qrows_, int cols_);
+  /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind.
+  void add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm);
+};
+
+/// The strict-hierarchy solver of one stack structure (sizes fixed at construction).
+class Hierarchy {
+ public:
+  /// n variables; block 0 = hard constraints, block k+1 = level k; meq/min = rows per block.
+  Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has_bounds, double damping);
+
+  /// Solve with the current numbers. Rows are stacked block after block (hard first).
+  /// stats: (levels + 2) x 3 doubles, per stage (hard, levels..., min-norm):
+  ///   active-set iterations, warm-start hit (0/1), closed form accepted (0/1).
+  /// detail: 4 doubles (hard eq residual, hard violation, failing stage, unused).
+  int solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C, const CRef<Vec>& lo,
+            const CRef<Vec>& hi, const CRef<Vec>& sw, const CRef<Vec>& lb, const CRef<Vec>& ub,
+            bool warm, MRef<Vec> x_out, MRef<Mat> stats, MRef<Vec> detail);
+
+  int n() const { return n_; }
+  int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
+  double damping() const { return damping_; }
+
+ private:
+  struct Working {  ///< a stage's final working set: (row id, side)
+    std::vector<int> id;
+    std::vector<int8_t> side;
+  };
+
+  int hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                 const CRef<Vec>& lo, const CRef<Vec>& hi, MRef<Mat> stats, MRef<Vec> detail,
+                 bool warm);
+  int level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+            const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw, MRef<Mat> stats,
+            bool warm);
+  int min_norm(MRef<Mat> stats, bool warm);
+
+  bool feasible(const Vec& x) const;
+  void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
+               const std::vector<char>* skip);
+  void add_inherited_rows(LsqProblem& P, int col0);
+  void add_bound_rows(LsqProblem& P, int col0);
+  void freeze(const Mat& F, double scale);
+  void snap(Vec& x) const;
+
+  /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
+  bool active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, int& iters);
+  /// Try a stored working set: solve on it, check feasibility and multiplier signs.
+  bool try_working_set(const LsqProblem& P, const Working& ws, Vec& y, std::vector<int8_t>& W);
+  void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  bool multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
+                      int* drop);
+  void null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, Mat& N);
+
+  int n_;
+  std::vector<int> meq_, min_, eq0_, in0_;
+  bool has_bounds_;
+  double damping_;
+  int capacity_;
+
+  // state of one solve
+  Vec x_;
+  Mat Z_;  ///< n x r orthonormal basis of the remaining freedom
+  int r_ = 0;
+  Mat Cin_;  ///< inherited rows (capacity x n)
+  Vec lin_, uin_;
+  std::vector<int> inid_;
+  int k_ = 0;
+  Vec lb_, ub_;
+
+  std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
+  LsqProblem P_;
+  Vec y_;
+  std::vector<int8_t> W_;
+};
+
+}  // namespace qpcoord
