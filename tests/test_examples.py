@@ -36,7 +36,12 @@ def test_example_quick(script, tmp_path):
     assert rows, f"{script.name}: summary.json has no claims"
     assert len({r["id"] for r in rows}) == len(rows), "claim ids must be unique"
     for row in rows:
-        assert claim(**row) == row  # valid status, text fields, notes where needed
+        # valid status, text fields, notes where needed ("not in thesis" reads "own check")
+        assert claim(**row) == {
+            **row,
+            "status": claim(**row)["status"],
+            "cause": row.get("cause", ""),
+        }
     assert list(tmp_path.rglob("*.png")), f"{script.name} wrote no figure"
 
 
@@ -69,3 +74,45 @@ def test_claim_rows_are_checked():
         claim("x", "a claim", "Fig 1", "3", "differs")
     with pytest.raises(ValueError, match="measured"):
         claim("x", "a claim", "Fig 1", " ", "reproduced")
+    with pytest.raises(ValueError, match="note"):
+        claim("x", "a claim", "Fig 1", "3", "calibrated")
+    with pytest.raises(ValueError, match="cause"):
+        claim("x", "a claim", "Fig 1", "3", "differs", "why", cause="bad luck")
+    with pytest.raises(ValueError, match="only given for 'differs'"):
+        claim("x", "a claim", "Fig 1", "3", "reproduced", cause="our model")
+    assert claim("x", "a claim", "Fig 1", "3", "not in thesis")["status"] == "own check"
+    row = claim("x", "a claim", "Fig 1", "3", "differs", "why", cause="thesis error")
+    assert row["cause"] == "thesis error"
+
+
+def test_thesis_claims_count_once():
+    from qpcoord.studies.claims import claim, count_claims, thesis_claims
+
+    rep = claim("table6.1-rmse", "c", "T6.1", "25 nm", "reproduced")
+    dif = claim("table6.1-coordinator", "c", "T6.1", "40 nm", "differs", "why")
+    inc = claim("table6.1-rmse-nominal", "c", "T6.1", "?", "inconclusive", "short")
+    cal = claim("fig6.6-piezo-bandwidth", "c", "F6.6", "300 Hz", "reproduced")
+    own = claim("mine", "c", "n/a", "1", "not in thesis")
+    rows = [
+        ("6", "ch6_tracking", rep),
+        ("6", "ch6_compare", dif),
+        ("6", "sweep_ddl_seeds", inc),
+        ("6", "ch6_tracking", cal),
+        ("6", "ch6_tracking", own),
+    ]
+    claims = thesis_claims(rows)
+    assert set(claims) == {
+        "T6.1-direct-coil-rmse",
+        "Fig6.6-piezo-300Hz",
+        "own:ch6_tracking:mine",
+    }
+    rmse = claims["T6.1-direct-coil-rmse"]
+    assert rmse["status"] == "differs" and rmse["cause"] == "hardware data"  # register default
+    assert len(rmse["rows"]) == 3
+    assert claims["Fig6.6-piezo-300Hz"]["status"] == "calibrated"  # an input, not a result
+    counts = count_claims(claims.values())
+    assert counts["differs"] == 1 and counts["differs: hardware data"] == 1
+    assert counts["calibrated"] == 1 and counts["own check"] == 1 and counts["reproduced"] == 0
+    # without the differing row the claim is reproduced once, not twice
+    again = thesis_claims([rows[0], rows[2]])
+    assert count_claims(again.values())["reproduced"] == 1
