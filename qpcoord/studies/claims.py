@@ -100,9 +100,11 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
         ``ID → {"id", "chapter", "status", "cause", "rows"}``, where ``rows`` lists
         ``{"script", "id", "status"}`` of the rows checking it. The status of a claim: an
         own check's own; ``"calibrated"`` for an input taken from the thesis; otherwise
-        ``"differs"`` if any row differs, else ``"reproduced"`` if any row reproduced it,
-        else ``"inconclusive"``. The chapter is the first registered row's, else the first
-        row's. ``cause`` (for ``"differs"``) is the first differing row's, else the
+        ``"differs"`` if any row differs; else ``"reproduced"`` if every row of the claim's
+        *home* script (the script of its first registered row, where the claim is judged in
+        full, e.g. with a sensitivity sweep) reproduced it -- or, the home script not run,
+        if any row did; else ``"inconclusive"``. The chapter is the home row's, else the
+        first row's. ``cause`` (for ``"differs"``) is the first differing row's, else the
         register's, else ``"unclassified"``.
     """
     home = {}
@@ -121,13 +123,14 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
     for cid, c in out.items():
         entry = next((e for e in REGISTER.values() if e.id == cid), None)
         statuses = [r["status"] for r in c["rows"]]
+        at_home = [r["status"] for r in c["rows"] if r["script"] == home.get(cid)]
         if cid.startswith("own:"):
             status = statuses[0]
         elif (entry is not None and entry.calibrated) or "calibrated" in statuses:
             status = "calibrated"
         elif "differs" in statuses:
             status = "differs"
-        elif "reproduced" in statuses:
+        elif all(s == "reproduced" for s in at_home) if at_home else "reproduced" in statuses:
             status = "reproduced"
         elif all(s in CLAIM_STATUSES for s in statuses):
             status = "inconclusive"
