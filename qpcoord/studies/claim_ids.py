@@ -73,7 +73,7 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch5_limit_cycle", "thm5.1-alpha1"): _c("Thm5.1-limit-cycle"),
     ("ch5_limit_cycle", "thm5.1-alpha3"): _c("Thm5.1-limit-cycle"),
     ("ch5_task_manifold", "fig5.3-limit-cycle"): _c("Thm5.1-limit-cycle"),
-    ("ch5_limit_cycle", "eq5.13-band"): _c("Eq5.13-band"),
+    ("ch5_limit_cycle", "eq5.13-band"): _c("Eq5.13-band", "thesis error"),
     ("ch5_fixed_point", "prop5.1-lyapunov"): _c("Prop5.1-lyapunov"),
     ("ch5_fixed_point", "prop5.1-fixed-point"): _c("Prop5.1-fixed-point"),
     ("ch5_5r_potentials", "fig5.4-two-potentials"): _c("Fig5.4-two-potentials", "our model"),

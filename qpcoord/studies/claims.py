@@ -7,11 +7,21 @@ check. :func:`thesis_claims` merges rows into claims: the report counts claims, 
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable
+from pathlib import Path
 
 from .claim_ids import CAUSES, REGISTER, claim_id
 
-__all__ = ["claim", "thesis_claims", "CLAIM_STATUSES", "CAUSES", "count_claims"]
+__all__ = [
+    "claim",
+    "thesis_claims",
+    "CLAIM_STATUSES",
+    "CAUSES",
+    "count_claims",
+    "load_verdicts",
+    "verdict_mismatches",
+]
 
 #: What a claim row can say about the thesis: its number or behaviour was reproduced; we
 #: measured something different (``note`` says why, ``cause`` classes it, :data:`CAUSES`); it
@@ -156,4 +166,71 @@ def count_claims(claims: Iterable[dict]) -> dict[str, int]:
         if c["status"] == "differs":
             key = f"differs: {c['cause']}"
             out[key] = out.get(key, 0) + 1
+    return out
+
+
+def load_verdicts(path) -> dict[str, dict]:
+    """Read a verdict file: a JSON object ``{"<claim ID>": {"quick": ..., "full": ...}}`` of
+    expected statuses, with an optional ``cause`` (of a ``"differs"``) and ``why`` (text).
+    Keys starting with ``"_"`` are comments.
+
+    Raises
+    ------
+    ValueError
+        If a status is not one of :data:`CLAIM_STATUSES`, a cause not one of :data:`CAUSES`,
+        or a ``"differs"`` entry has no cause.
+    """
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    data = {k: v for k, v in data.items() if not k.startswith("_")}
+    for cid, entry in data.items():
+        if not isinstance(entry, dict):
+            raise ValueError(f"verdict {cid!r} must be a table, got {entry!r}")
+        for mode in ("quick", "full"):
+            st = entry.get(mode)
+            if st not in CLAIM_STATUSES:
+                raise ValueError(
+                    f"verdict {cid!r}: {mode} must be one of {CLAIM_STATUSES}, got {st!r}"
+                )
+        cause = entry.get("cause", "")
+        if cause and cause not in CAUSES:
+            raise ValueError(f"verdict {cid!r}: cause must be one of {CAUSES}, got {cause!r}")
+        if "differs" in (entry["quick"], entry["full"]) and not cause:
+            raise ValueError(f"verdict {cid!r} differs but gives no cause")
+    return data
+
+
+def verdict_mismatches(claims: dict[str, dict], verdicts: dict[str, dict], mode: str) -> list[str]:
+    """What differs between a run's thesis claims and the verdict file, one line each.
+
+    Parameters
+    ----------
+    claims : dict
+        :func:`thesis_claims` of a run (own checks are ignored).
+    verdicts : dict
+        :func:`load_verdicts`.
+    mode : {"quick", "full"}
+        Which expected status to compare with.
+
+    Returns
+    -------
+    list of str
+        Empty if every claim of the run has the expected status (and cause), every claim is
+        in the file and every claim of the file was checked by the run.
+    """
+    if mode not in ("quick", "full"):
+        raise ValueError(f"mode must be 'quick' or 'full', got {mode!r}")
+    out = []
+    for cid, c in sorted(claims.items()):
+        if c["status"] == "own check":
+            continue
+        want = verdicts.get(cid)
+        if want is None:
+            out.append(f"{cid}: {c['status']} in this run, not in the verdict file")
+            continue
+        if c["status"] != want[mode]:
+            out.append(f"{cid}: {c['status']} in this run, the verdict file says {want[mode]}")
+        elif c["status"] == "differs" and c["cause"] != want.get("cause", ""):
+            out.append(f"{cid}: cause {c['cause']!r}, the verdict file says {want.get('cause')!r}")
+    for cid in sorted(set(verdicts) - set(claims)):
+        out.append(f"{cid}: in the verdict file, not checked by this run")
     return out
