@@ -2,8 +2,8 @@
 Ex. 4.3); the dual fields of Thm 4.2 keep it (Ex. 4.4).
 
 1. Lemma 4.1: the submersion ``x₁ = q₁, x₂ = q₂ + q₁q₃`` and the trivially involutive
-   ``v₁ = (1, 0)``, ``v₂ = (0, 1)``: ``det[f₁, f₂, [f₁, f₂]]`` of ``fᵢ = J⁺vᵢ`` on a grid.
-   Also the thesis's printed fields and determinant ``−(1 + q₁²)²``.
+   ``v₁ = (1, 0)``, ``v₂ = (0, 1)``: ``det[f₁, f₂, [f₁, f₂]]`` of ``fᵢ = J⁺vᵢ`` on a grid,
+   against the thesis's printed fields and determinant ``−(1 + q₁²)²``.
 2. Ex. 4.3: the 3R arm (absolute angles), ``fᵢ = J⁺eᵢ``: the same determinant on a grid of
    ``(q₁, q₂, q₃)``.
 3. Ex. 4.4: the 5R arm along the Lissajous of Ex. 4.1: involutivity defect (Def. 3.13) of
@@ -12,10 +12,13 @@ Ex. 4.3); the dual fields of Thm 4.2 keep it (Ex. 4.4).
 
 Measured (full run, 25 × 25 grids, 20 points of one period of the 5R path):
 
-- Lemma 4.1, exact J⁺ fields: ``|det|`` between 0.04 and 1.0 on the grid (q₂ = 0.3),
-  never 0. The thesis's printed fields give exactly ``+(1 + q₁²)²``, i.e. −1 times its
-  printed ``−(1 + q₁²)²``: our bracket is ``[f, g] = (∂g/∂q)f − (∂f/∂q)g``, the thesis
-  uses the opposite sign.
+- Lemma 4.1, exact J⁺ fields ``J⁺e₁ = (1 + q₁², −q₃, −q₁q₃)/(1 + q₁²)``,
+  ``J⁺e₂ = (0, 1, q₁)/(1 + q₁²)``: ``det = 1/(1 + q₁²)²`` (to 1e-15; ``−1/(1 + q₁²)²`` in
+  the thesis's bracket sign), between 0.04 and 1.0 on the grid, never 0: the lemma holds.
+  The printed fields ``(1 + q₃², q₃, q₁q₃)``, … are not ``J⁺eᵢ``; they give ``+(1 + q₁²)²``,
+  the printed ``−(1 + q₁²)²`` up to the sign convention (our bracket is
+  ``[f, g] = (∂g/∂q)f − (∂f/∂q)g``, the thesis uses the opposite): the printed formula is a
+  thesis error (issue 18, finding 7).
 - Ex. 4.3 (3R): ``|det|`` between 0.052 and 28.8 on the 550 grid points whose link
   angles are distinct; it vanishes (≤ 3.4e-15) exactly where two links are parallel
   (``qᵢ = qⱼ``, 66 points): a set of measure zero, not involutivity.
@@ -23,8 +26,8 @@ Measured (full run, 25 × 25 grids, 20 points of one period of the 5R path):
   path (not involutive); of the Thm 4.2 dual fields ≤ 5.7e-8 (the finite-difference
   floor of the Procrustes-aligned basis): involutive.
 
-Claims (``summary["claims"]``, computed from the run): Lemma 4.1's determinant is non-zero
-and equals the printed ``−(1 + q₁²)²`` up to the bracket's sign convention; Ex 4.3's
+Claims (``summary["claims"]``, computed from the run): Lemma 4.1's determinant is non-zero;
+the printed fields and ``−(1 + q₁²)²`` are not J⁺'s (differs, thesis error); Ex 4.3's
 determinant is non-zero; Eqs 4.6–4.7 against ``J⁺e₁, J⁺e₂`` (differs: Eq 4.6's third row
 has the wrong sign); the Thm 4.2 fields are involutive and the J⁺-pulled sphere basis is
 not (Ex 4.4).
@@ -76,8 +79,15 @@ def _lemma41_field(e):
 
 
 def lemma_4_1(grid: np.ndarray) -> dict:
+    """Lemma 4.1's example on J⁺'s own fields ``fᵢ = J⁺eᵢ`` (grid of q₁, q₃ at q₂ = 0.3), and
+    the thesis's printed fields and determinant against them."""
     f1, f2 = _lemma41_field([1.0, 0.0]), _lemma41_field([0.0, 1.0])
+    pts = [(a, b) for a in grid for b in grid]
     dets = np.array([[g.bracket_determinant(f1, f2, [a, 0.3, b]) for b in grid] for a in grid])
+    # the true determinant: +1/(1 + q₁²)² in qpcoord's bracket sign, −1/(1 + q₁²)² in the
+    # thesis's (geometry.lie_bracket's docstring)
+    true_det = 1.0 / (1.0 + grid[:, None] ** 2) ** 2
+    printed_det = -((1.0 + grid[:, None] ** 2) ** 2)
 
     def t1(q):
         return np.array([1 + q[2] ** 2, q[2], q[0] * q[2]])
@@ -86,12 +96,26 @@ def lemma_4_1(grid: np.ndarray) -> dict:
         s = 1 + q[0] ** 2 + q[2] ** 2
         return np.array([q[2] * (2 + q[0] ** 2 + q[2] ** 2), s, q[0] * s])
 
+    # printed fields vs J⁺e₁, J⁺e₂, up to a positive factor per point (direction only)
+    def direction_gap(printed, exact):
+        gaps = []
+        for a, b in pts:
+            q = np.array([a, 0.3, b])
+            u, v = printed(q), exact(q)
+            gaps.append(np.linalg.norm(u / np.linalg.norm(u) - v / np.linalg.norm(v)))
+        return float(max(gaps))
+
     printed = np.array([g.bracket_determinant(t1, t2, [a, 0.3, 0.7]) for a in grid])
     formula = -((1 + grid**2) ** 2)
     return {
         "grid_q1_q3": grid.tolist(),
         "abs_det_min": float(np.abs(dets).min()),
         "abs_det_max": float(np.abs(dets).max()),
+        "det_over_true_formula_max_dev": float(np.abs(dets / true_det - 1.0).max()),
+        "det_over_printed_formula_min": float((dets / printed_det).min()),
+        "det_over_printed_formula_max": float((dets / printed_det).max()),
+        "printed_f1_vs_pinv_e1_direction_gap": direction_gap(t1, f1),
+        "printed_f2_vs_pinv_e2_direction_gap": direction_gap(t2, f2),
         "printed_fields_det_over_thesis_formula": (printed / formula).tolist(),
         "_dets": dets,
     }
@@ -160,6 +184,10 @@ def example_4_4(samples: int) -> dict:
 def claims(l41: dict, e43: dict, e44: dict) -> list[dict]:
     """Claim rows computed from the run's numbers (see the module docstring)."""
     ratio = np.array(l41["printed_fields_det_over_thesis_formula"])
+    on_pinv = (l41["det_over_printed_formula_min"], l41["det_over_printed_formula_max"])
+    lemma_formula_status = (
+        "reproduced" if np.allclose(np.abs(on_pinv), 1.0, atol=1e-6) else "differs"
+    )
     gap = np.array(e43["eq46_47_printed_minus_pinv_max"])  # [f1 rows, f2 rows]
     flip = np.array(e43["eq46_47_printed_plus_pinv_max"])
     wrong = [
@@ -180,12 +208,30 @@ def claims(l41: dict, e43: dict, e44: dict) -> list[dict]:
         ),
         claim(
             "lemma4.1-formula",
-            "The determinant of the printed f₁, f₂ is −(1 + q₁²)².",
-            "Lemma 4.1 proof: det = −(1 + q₁²)²",
-            f"det / (−(1 + q₁²)²) = {ratio.min():.12g} … {ratio.max():.12g}",
-            "reproduced" if np.allclose(np.abs(ratio), 1, atol=1e-6) else "differs",
-            "criterion: |ratio| = 1 to 1e-6. The sign is the bracket's convention: qpcoord's "
-            "[f, g] = (∂g/∂q)f − (∂f/∂q)g, the thesis uses the opposite (ratio −1 expected)",
+            "For x = (q₁, q₂ + q₁q₃), f₁ = J⁺e₁ = (1 + q₃², q₃, q₁q₃) and f₂ = J⁺e₂ as "
+            "printed, and det[f₁, f₂, [f₁, f₂]] = −(1 + q₁²)².",
+            "Lemma 4.1 proof: printed f₁, f₂ and det = −(1 + q₁²)²",
+            f"J⁺'s own fields: det = 1/(1 + q₁²)² (qpcoord's bracket sign; max relative "
+            f"deviation {l41['det_over_true_formula_max_dev']:.1e}), i.e. det / (−(1 + q₁²)²) "
+            f"from {l41['det_over_printed_formula_min']:.3g} to "
+            f"{l41['det_over_printed_formula_max']:.3g}; the printed fields' directions are "
+            f"{l41['printed_f1_vs_pinv_e1_direction_gap']:.2f} (f₁) and "
+            f"{l41['printed_f2_vs_pinv_e2_direction_gap']:.2f} (f₂) from J⁺e₁, J⁺e₂ "
+            "(unit vectors, max over the grid)",
+            lemma_formula_status,
+            "Criterion: the lemma's determinant, computed on J⁺'s own fields "
+            "J⁺e₁ = (1 + q₁², −q₃, −q₁q₃)/(1 + q₁²), J⁺e₂ = (0, 1, q₁)/(1 + q₁²), equals "
+            "±(1 + q₁²)² to 1e-6 (± for the bracket's sign convention). "
+            + (
+                "It does not: the printed f₁, f₂ are not J⁺e₁, J⁺e₂ and the true determinant "
+                "is ±1/(1 + q₁²)² (−1/(1 + q₁²)² in the thesis's sign); it is still non-zero, "
+                "so the lemma's conclusion stands (row lemma4.1-not-involutive). The printed "
+                "fields do give −(1 + q₁²)² up to the sign convention (ratio "
+                f"{ratio.min():.6g} … {ratio.max():.6g})."
+                if lemma_formula_status == "differs"
+                else ""
+            ),
+            cause="thesis error" if lemma_formula_status == "differs" else "",
         ),
         claim(
             "ex4.3-not-involutive",

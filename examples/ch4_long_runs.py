@@ -83,10 +83,25 @@ periods and depends sensitively on the step (dt and dt/2 apart after 35 periods)
 closing "over a very high multiple" of Fig. 4.7 is not reproduced with this 5R model (whose
 axes are qpcoord's choice, not the thesis's).
 
-Claims (``summary["claims"]``, computed from the cases): Fig 4.7 / Remark 4.4 on the 5R
-and the three clauses of Conjecture 4.1 (δ = 1, 2 converge; δ = 3 does not). "No cycle" is
-only a finding after ≥ 100 periods at both dt and dt/2; a cycle at one step only is
-step-dependent (inconclusive). ``--quick`` has no dt/2 runs and decides nothing.
+Conjecture 4.1 is judged on many starts, not one (issue 18, finding 4: a random 4R start,
+q0 = (0.312, −2.968, 1.593, 0.240), closes on a 36·T cycle): 10 seeded random starts per δ
+(uniform in (−π, π]ⁿ, seed n, moved onto the circle's start point by the start IK), 300
+periods at T/200 and again at T/400, integrated for all starts at once
+(:func:`batch_pinv_sections`, the same scheme and RK4 as ``qc.simulate``, agreeing with it to
+4e-16 rad). A start converges when, for some m ≤ 60, the wrapped gap
+``‖p_k − p_(k−m)‖`` ends at ≤ 1e-9 rad or decays geometrically by ≥ 2 decades over the last
+half of the run (ending ≤ 1e-3 rad). Measured (full run)::
+
+    δ = 1 (3R): 100 % converge at T/200 (all on 30·T cycles), 20 % at T/400
+    δ = 2 (4R):  10 % at T/200 and at T/400 (one start on a 36·T cycle; nine drift)
+    δ = 3 (5R):   0 % at both steps
+
+Claims (``summary["claims"]``): Fig 4.7 / Remark 4.4 on the 5R (single run, as above) and the
+three clauses of Conjecture 4.1 from the multi-start study (criteria in
+:func:`conjecture_claims`): δ = 1 inconclusive (step-dependent), δ = 2 differs (a thesis
+error: 9 of 10 starts never converge), δ = 3 reproduced. ``--quick`` (3 starts, 10 periods,
+no T/400) decides none of them. The single planar runs above are kept for their figures
+(no dt/2 check any more: they no longer decide anything).
 
 Run: ``python examples/ch4_long_runs.py [--quick] [--out DIR]``
 (``--planar-periods`` / ``--spatial-periods`` change the run lengths).
@@ -261,6 +276,200 @@ def cycle_outcome(r: dict) -> tuple[str, str]:
     return ("none" if r["periods"] >= DECIDE else "short", text)
 
 
+CONJ_STARTS = 10  # seeded random starts per δ (issue 18, finding 4)
+CONJ_MAX_MULTIPLE = 60  # cycles up to 60·T are looked for (a 4R start closes on 36·T)
+CONJ_FLOOR = 1e-9  # rad: a gap this small has reached the round-off floor
+CONJ_DECADES = 2.0  # decades of geometric decay over the last half of the run
+CONJ_BELOW = 1e-3  # rad: ... and a final gap at most this
+
+
+def batch_pinv_sections(q_start, path, periods: int, steps: int) -> np.ndarray:
+    """Poincaré sections of ``q̇ = J⁺(Ẏ_ref + K(Y_ref − Y))`` (K = CLIK_GAIN) for many starts
+    at once on planar unit-link arms in absolute angles, classical RK4 with ``steps`` per period.
+
+    The same scheme and integrator as ``qc.simulate(arm, qc.schemes.PseudoInverse(arm,
+    gain=CLIK_GAIN), ...)`` (agrees with it to 4e-16 rad after one period), vectorised over the
+    starts: ``J = [−sin q; cos q]``, ``J⁺ = Jᵀ(JJᵀ)⁻¹`` with the 2×2 inverse in closed form.
+
+    Returns
+    -------
+    numpy.ndarray, shape (periods + 1, starts, n)
+        Joint angles (rad) at t = kT.
+    """
+    q = np.array(q_start, dtype=float)
+    dt = path.period / steps
+    out = np.empty((periods + 1, *q.shape))
+    out[0] = q
+
+    def f(q, t):
+        yr, vr = path.position(t), path.velocity(t)
+        c, s = np.cos(q), np.sin(q)
+        e = vr + CLIK_GAIN * (yr - np.stack([c.sum(1), s.sum(1)], axis=1))
+        a, b, d = (s * s).sum(1), -(s * c).sum(1), (c * c).sum(1)  # JJᵀ = [[a, b], [b, d]]
+        det = a * d - b * b
+        u = (d * e[:, 0] - b * e[:, 1]) / det
+        v = (a * e[:, 1] - b * e[:, 0]) / det
+        return -s * u[:, None] + c * v[:, None]
+
+    for k in range(periods):
+        for i in range(steps):
+            t = (k * steps + i) * dt
+            k1 = f(q, t)
+            k2 = f(q + 0.5 * dt * k1, t + 0.5 * dt)
+            k3 = f(q + 0.5 * dt * k2, t + 0.5 * dt)
+            k4 = f(q + dt * k3, t + dt)
+            q = q + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        out[k + 1] = q
+    return out
+
+
+def geometric_convergence(sections: np.ndarray, max_multiple: int) -> dict:
+    """Does one start's section sequence converge to a cycle, judged by the decay of its gap?
+
+    For each multiple ``m``, ``g_m(k) = ‖wrap(p_k − p_{k−m})‖``. The start converges to an
+    ``m·T`` cycle if ``g_m`` ends at the round-off floor (≤ CONJ_FLOOR), or if a least-squares
+    line through ``log10 g_m`` over the last half of the run falls by ≥ CONJ_DECADES decades
+    and ``g_m`` ends ≤ CONJ_BELOW (geometric decay under way). The smallest such ``m`` is
+    the period. Criteria set before the runs (issue 18, finding 4).
+    """
+    K = len(sections) - 1
+    best = None
+    for m in range(1, min(max_multiple, K // 2) + 1):
+        g = np.linalg.norm(wrap(sections[m:] - sections[:-m]), axis=1)
+        tail = g[len(g) // 2 :]
+        x = np.arange(tail.size)
+        slope = np.polyfit(x, np.log10(np.maximum(tail, 1e-300)), 1)[0]
+        decades = float(-slope * (tail.size - 1))
+        if g[-1] <= CONJ_FLOOR or (decades >= CONJ_DECADES and g[-1] <= CONJ_BELOW):
+            return {"converges": True, "multiple": m, "final_gap_rad": float(g[-1]),
+                    "decades_last_half": decades}  # fmt: skip
+        if best is None or g[-1] < best["final_gap_rad"]:
+            best = {"converges": False, "multiple": m, "final_gap_rad": float(g[-1]),
+                    "decades_last_half": decades}  # fmt: skip
+    return best
+
+
+def random_starts(n: int, count: int, path) -> np.ndarray:
+    """``count`` seeded random configurations of the planar nR moved onto the path's start by
+    ``qc.inverse_kinematics`` (as ``qc.simulate(start="ik")``); seed ``n``."""
+    arm = qc.robots.load("planar_nr", n=n)
+    rng = np.random.default_rng(n)
+    out = []
+    while len(out) < count:
+        q0 = rng.uniform(-np.pi, np.pi, n)
+        try:
+            q = qc.inverse_kinematics(arm, path.position(0.0), q0)
+        except ValueError:  # unreachable from there: draw again
+            continue
+        if np.linalg.norm(arm.position(q) - path.position(0.0)) < 1e-9:
+            out.append(q)
+    return np.array(out)
+
+
+def conjecture_study(periods: int, starts: int, step_check: bool) -> list[dict]:
+    """Conjecture 4.1 on planar 3R, 4R, 5R (δ = 1, 2, 3): the fraction of seeded random starts
+    that converge to a cycle at T/200 (and at T/400 with ``step_check``)."""
+    path = qc.paths.Circle(center=(1.5, 0.0), radius=0.5, period=np.pi)
+    out = []
+    for n in (3, 4, 5):
+        t0 = time.perf_counter()
+        q_start = random_starts(n, starts, path)
+        row = {"n": n, "delta": n - 2, "periods": periods, "starts": starts}
+        for steps in (200, 400) if step_check else (200,):
+            sec = batch_pinv_sections(q_start, path, periods, steps)
+            per = [geometric_convergence(sec[:, j], CONJ_MAX_MULTIPLE) for j in range(starts)]
+            row[f"T/{steps}"] = {
+                "fraction_converging": sum(p["converges"] for p in per) / starts,
+                "per_start": per,
+            }
+        row["q_start_rad"] = q_start.tolist()
+        row["runtime_s"] = time.perf_counter() - t0
+        out.append(row)
+    return out
+
+
+def conjecture_claims(study: list[dict]) -> list[dict]:
+    """Claim rows for Conjecture 4.1's three clauses from :func:`conjecture_study`.
+
+    Criteria (set before the runs): a δ = 1 or 2 clause ("converges") is reproduced if at least
+    90 % of the starts converge at both T/200 and T/400, differs if at most 50 % do at both;
+    the δ = 3 clause ("neither periodic nor converges") is reproduced if at most 10 % converge
+    at both steps, differs if at least 50 % do at both; anything else, or a run without the
+    T/400 check or shorter than DECIDE periods, is inconclusive.
+    """
+    out = []
+    thesis = {
+        1: "Conjecture 4.1: δ = 1 or 2 converges (faster for δ = 1)",
+        2: "Conjecture 4.1: δ = 1 or 2 converges to a limit cycle",
+        3: "Conjecture 4.1: δ > 2 neither periodic nor converges",
+    }
+    for row in study:
+        d = row["delta"]
+        fr = {k: v["fraction_converging"] for k, v in row.items() if k.startswith("T/")}
+        cyc = sorted({p["multiple"] for p in row["T/200"]["per_start"] if p["converges"]})
+        want = d <= 2
+        decided = "T/400" in fr and row["periods"] >= DECIDE
+        vals = list(fr.values())
+        if not decided:
+            st = "inconclusive"
+        elif want:
+            st = (
+                "reproduced"
+                if min(vals) >= 0.9
+                else ("differs" if max(vals) <= 0.5 else "inconclusive")
+            )
+        else:
+            st = (
+                "reproduced"
+                if max(vals) <= 0.1
+                else ("differs" if min(vals) >= 0.5 else "inconclusive")
+            )
+        measured = (
+            ", ".join(f"{100 * v:.0f} % at {k}" for k, v in fr.items())
+            + f" of {row['starts']} seeded random starts converge in {row['periods']} periods"
+            + (f" (cycles of {', '.join(f'{m}T' for m in cyc)})" if cyc else "")
+        )
+        note = (
+            f"criterion: converging = the gap ‖wrap(p_k − p_(k−m))‖ for some m ≤ "
+            f"{CONJ_MAX_MULTIPLE} ends ≤ {CONJ_FLOOR:g} rad or decays geometrically by ≥ "
+            f"{CONJ_DECADES:g} decades over the last half of the run (ending ≤ {CONJ_BELOW:g} "
+            "rad); "
+            + (
+                "≥ 90 % converging at T/200 and T/400 reproduces the clause, ≤ 50 % refutes it"
+                if want
+                else "≤ 10 % converging at T/200 and T/400 reproduces the clause, ≥ 50 % refutes it"
+            )
+            + "; planar unit-link arm in absolute angles on the circle c = (1.5, 0), R = 0.5, "
+            "J⁺ with a 1/s position feedback (the thesis gives no planar experiment)"
+        )
+        if not decided:
+            note += (
+                f"; this run ({row['periods']} periods"
+                + ("" if "T/400" in fr else ", no T/400 check")
+                + f") is too short: the full run ({DECIDE}+ periods, both steps) decides"
+            )
+        elif st == "differs":
+            note += (
+                "; the conjecture's clause fails on this arm: a counterexample to a general "
+                "statement about serial rotary arms"
+            )
+        elif st == "inconclusive":
+            note += "; a mixed outcome: convergence depends on the start (or on the step)"
+        out.append(
+            claim(
+                f"conj4.1-delta{d}",
+                f"With q̇ = J⁺Ẏ on a planar arm with δ = {d}, the joints "
+                + ("converge to a limit cycle." if want else "find no cycle."),
+                thesis[d],
+                measured,
+                st,
+                note,
+                cause="thesis error" if st == "differs" else "",
+            )
+        )
+    return out
+
+
 def claims(rows: list[dict]) -> list[dict]:
     """Claim rows computed from the cases (Fig 4.7 / Remark 4.4 and Conjecture 4.1)."""
     by = {r["case"]: cycle_outcome(r) for r in rows}
@@ -306,37 +515,6 @@ def claims(rows: list[dict]) -> list[dict]:
             + ("; found at one step only" if o[0] == "step-dependent" else ""),
         )
     )
-    for name, clause, want, thesis in (
-        ("planar_3r", "δ = 1", "cycle", "Conjecture 4.1: δ = 1 or 2 converges (faster for δ = 1)"),
-        ("planar_4r", "δ = 2", "cycle", "Conjecture 4.1: δ = 1 or 2 converges to a limit cycle"),
-        ("planar_5r", "δ = 3", "none", "Conjecture 4.1: δ > 2 neither periodic nor converges"),
-    ):
-        oc, text = by[name]
-        note = crit
-        if oc == "short":
-            note += short
-        elif oc == "step-dependent":
-            note += (
-                f"; the outcome changes with the step (σ_min(J) down to "
-                f"{case[name]['min_sigma_J']:.1e} on the run): a step-converged study "
-                "would decide"
-            )
-        elif oc != want:
-            note += "; wrapped closure of the last period: " + ", ".join(
-                f"{c} {case[c]['closure_last_wrapped_rad']:.2g} rad"
-                for c in ("planar_4r", "planar_5r")
-            )
-        rows_out.append(
-            claim(
-                f"conj4.1-delta{clause[-1]}",
-                f"With q̇ = J⁺Ẏ on a planar arm with {clause}, the joints "
-                + ("converge to a limit cycle." if want == "cycle" else "find no cycle."),
-                thesis,
-                text,
-                status([oc], want),
-                note,
-            )
-        )
     return rows_out
 
 
@@ -352,6 +530,12 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=Path("out/ch4_long_runs"))
     p.add_argument("--planar-periods", type=int, default=None, help="default 300 (quick: 10)")
     p.add_argument("--spatial-periods", type=int, default=None, help="default 100 (quick: 3)")
+    p.add_argument(
+        "--conjecture-periods",
+        type=int,
+        default=None,
+        help="Conjecture 4.1 study, periods per start (default 300; quick: 10)",
+    )
     args = p.parse_args(argv)
     planar = args.planar_periods or (10 if args.quick else 300)
     spatial = args.spatial_periods or (3 if args.quick else 100)
@@ -359,10 +543,21 @@ def main(argv=None) -> int:
         p.error("each run needs at least 2 periods")
 
     t0 = time.perf_counter()
+    # single-start runs (figures, Remark 4.4); the planar ones no longer decide Conjecture 4.1
+    # (the multi-start study below does), so only the spatial 5R gets the dt/2 check
     rows = [
-        run_case(name, spatial if name == "spatial_5r" else planar, args.out, not args.quick)
+        run_case(
+            name,
+            spatial if name == "spatial_5r" else planar,
+            args.out,
+            name == "spatial_5r" and not args.quick,
+        )
         for name in ("planar_3r", "planar_4r", "planar_5r", "spatial_5r")
     ]
+    conj_periods = args.conjecture_periods or (10 if args.quick else 300)
+    study = conjecture_study(
+        conj_periods, 3 if args.quick else CONJ_STARTS, step_check=not args.quick
+    )
     total = time.perf_counter() - t0
 
     log = TextLog()
@@ -384,13 +579,27 @@ def main(argv=None) -> int:
             f"{r['max_tracking_error_m']:9.1e} {r['min_sigma_J']:8.1e} "
             f"{'never' if apart is None else apart:>10} {r['runtime_s']:6.1f}"
         )
+    say(f"\nConjecture 4.1: seeded random starts, J⁺ (K = {CLIK_GAIN:g}/s), {conj_periods} periods")
+    for row in study:
+        for key in (k for k in row if k.startswith("T/")):
+            per = row[key]["per_start"]
+            say(
+                f"  δ = {row['delta']} ({row['n']}R) at {key}: "
+                f"{100 * row[key]['fraction_converging']:.0f} % converge; per start "
+                + ", ".join(
+                    (f"{p['multiple']}T" if p["converges"] else "no")
+                    + f"({p['final_gap_rad']:.0e})"
+                    for p in per
+                )
+            )
     say(f"total {total:.1f} s (including the dt/2 runs)")
-    rows_claims = claims(rows)
+    rows_claims = claims(rows) + conjecture_claims(study)
     for c in rows_claims:
         say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
     write_json(
-        args.out / "summary.json", {"cases": rows, "total_runtime_s": total, "claims": rows_claims}
+        args.out / "summary.json",
+        {"cases": rows, "conjecture_4_1": study, "total_runtime_s": total, "claims": rows_claims},
     )
     print(f"wrote {args.out / 'summary.json'} and closure_*.png, joints_*.png")
     return 0

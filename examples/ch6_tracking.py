@@ -3,12 +3,13 @@
 The DDL plant (``qpcoord.ddl.DualStage``, PRIMA defaults) is driven by the thesis coordinator
 (``SisoCoordinator``: fine PI on the output, direct-coil integral phase control of the stepper on
 a 10 Hz Butterworth reference, model-based carriage estimate and pre-compensation) at 8 kHz on
-the ``paranal_250hz`` OPD preset (10 s, 20 seeds; ``--quick``: 1 s, 2 seeds). Reported per seed
+the ``paranal_250hz`` OPD preset (10 s, 20 seeds; ``--quick``: 10 s, 3 seeds). Reported per seed
 and as a spread: RMSE / max / mean error (Eqs 6.3–6.5), power (Eq 6.6), closest approach of
 the piezo to a stroke limit, saturated steps, lost synchronism. Also: the chirp
 identification of the coarse-stage resonance at the stroke centre (Fig 6.7; thesis: 120 Hz) and
 the piezo bandwidth (Fig 6.6; thesis ≈ 300 Hz), and the PSD slopes of the reference in the
-three atmospheric regimes.
+three atmospheric regimes. Table 6.1's RMSE is judged over the preset's vibration lines absent,
+as shipped and doubled (10 seeds; ``--quick`` 3): the lines are an assumption, not the thesis's.
 
 Spec (§6.1.2): RMSE < 70 nm, power < 5 W, fine stage never saturates. Thesis Table 6.1
 (hardware, direct coil): 25 nm RMSE, 308 nm max, 19.6 nm mean, 2.25 W.
@@ -52,11 +53,39 @@ def psd_slopes(seed: int) -> dict:
     }
 
 
-def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> list[dict]:
+def lines_sweep(duration: float, seeds: list[int], shipped: list[float]) -> dict:
+    """Direct-coil RMSE (nm) per seed with the ``paranal_250hz`` vibration lines scaled by
+    0 (none), 1 (as shipped: ``shipped``, the main run's values) and 2 (doubled).
+
+    The lines are an assumption of the preset (the thesis's test signal is not given), so
+    Table 6.1's RMSE is judged over this plausible range of them (issue 18, finding 4).
+    """
+    from dataclasses import replace
+
+    base = ddl.PRESETS["paranal_250hz"]["lines"]
+    out = {"as shipped": list(shipped)}
+    for name, scale in (("none", 0.0), ("doubled", 2.0)):
+        lines = tuple(replace(v, rms=scale * v.rms) for v in base) if scale else ()
+        vals = []
+        for seed in seeds:
+            r = ddl.kolmogorov_opd(duration, FS, seed=seed, preset="paranal_250hz", lines=lines)
+            run = ddl.simulate(ddl.DualStage(), ddl.SisoCoordinator(), r, FS, seed=seed)
+            vals.append(run.metrics["rmse"] * 1e9)
+        out[name] = vals
+    return {k: out[k] for k in ("none", "as shipped", "doubled")}
+
+
+def tracking_claims(
+    rows, spread, f_res, bw_fine, slopes, duration, nseeds, sweep=None
+) -> list[dict]:
     """Claim rows (``qpcoord.studies.claims.claim``): each thesis number beside this run's value.
 
     Rows on the Kolmogorov runs are decided only by a run as long as the thesis's (10 s)
-    with at least 3 seeds; shorter runs (``--quick``) give ``"inconclusive"``.
+    with at least 3 seeds; shorter runs give ``"inconclusive"``. ``sweep`` (from
+    :func:`lines_sweep`): the RMSE row is reproduced only if the median RMSE is within ±30 %
+    of 25 nm with the preset's vibration lines absent, as shipped and doubled; it differs if
+    it is outside in all three; otherwise the result depends on the unknown test signal and
+    the row is inconclusive (criterion set before the sweep was run, issue 18).
     """
     full = duration >= 10.0 and nseeds >= 3
     short = (
@@ -71,7 +100,7 @@ def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> l
     best = min(rows, key=lambda row: row["rmse"])
     out = []
     ok = abs(f_res - 120.0) <= 0.05 * 120.0
-    st = "reproduced" if ok else "differs"
+    st = "calibrated" if ok else "differs"  # an input: shown, never counted as reproduced
     out.append(
         claim(
             "fig6.7-coarse-resonance",
@@ -84,10 +113,11 @@ def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> l
             "linearised mode is 120 Hz at the centre; the chirp checks the nonlinear plant "
             "against that calibration (the peak falls with the chirp amplitude, docs/ch6.md)."
             + ("" if st != "differs" else " The nonlinear peak has moved off the calibration."),
+            cause="our model" if st == "differs" else "",
         )
     )
     ok = abs(bw_fine - 300.0) <= 0.10 * 300.0
-    st = "reproduced" if ok else "differs"
+    st = "calibrated" if ok else "differs"  # ωn = 300 Hz is an input
     out.append(
         claim(
             "fig6.6-piezo-bandwidth",
@@ -99,6 +129,7 @@ def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> l
             "Fig 6.6 (ζ = 0.7 chosen so the −3 dB point is near ωn): this checks the "
             "discretised model and the identification, not hardware."
             + ("" if st != "differs" else " The identified bandwidth left the band."),
+            cause="our model" if st == "differs" else "",
         )
     )
     ok = all(row["rmse"] < 70e-9 for row in rows)
@@ -131,21 +162,53 @@ def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> l
     ):
         ok = abs(sp["median"] - value) <= 0.3 * value
         st = ("reproduced" if ok else "differs") if full else "inconclusive"
+        measured = (
+            f"{sp['median']:.1f} nm median ({sp['min']:.1f}–{sp['max']:.1f} nm) over {nseeds} seeds"
+        )
+        note = f"Criterion: median within ±30 % of {value:g} nm."
+        if key == "rmse" and sweep is not None:
+            med = {k: float(np.median(v)) for k, v in sweep.items()}
+            inside = {k: abs(m - value) <= 0.3 * value for k, m in med.items()}
+            measured += "; vibration lines of the preset " + ", ".join(
+                f"{k}: {m:.1f} nm" for k, m in med.items()
+            )
+            measured += f" (median over {len(next(iter(sweep.values())))} seeds)"
+            note = (
+                f"Criterion: median within ±30 % of {value:g} nm with the preset's vibration "
+                "lines absent, as shipped and doubled (the lines are our assumption, the "
+                "thesis's test signal is not given): reproduced if inside for all three, "
+                "differs if outside for all three, else inconclusive."
+            )
+            if full:
+                if all(inside.values()):
+                    st = "reproduced"
+                elif not any(inside.values()):
+                    st = "differs"
+                else:
+                    st = "inconclusive"
+                    note += (
+                        " Inside for "
+                        + ", ".join(k for k, v in inside.items() if v)
+                        + ", outside for "
+                        + ", ".join(k for k, v in inside.items() if not v)
+                        + ": the RMSE is set by the unknown test signal's vibration content, "
+                        "so Table 6.1's 25 nm can be neither confirmed nor refuted."
+                    )
         out.append(
             claim(
                 f"table6.1-{key.split('_')[0]}",
                 f"Direct-coil coordinator {label} on Kolmogorov tracking is {value:g} nm.",
                 f"Table 6.1, Direct Coil: {label} {value:g} nm (hardware)",
-                f"{sp['median']:.1f} nm median ({sp['min']:.1f}–{sp['max']:.1f} nm) over "
-                f"{nseeds} seeds",
+                measured,
                 st,
-                f"Criterion: median within ±30 % of {value:g} nm."
+                note
                 + (f" Outside ±30 %.{why[key]}" if st == "differs" else "")
-                + (short if st == "inconclusive" else ""),
+                + (short if st == "inconclusive" and not full else ""),
+                cause="hardware data" if st == "differs" else "",
             )
         )
     ok = power["max"] < 5.0 and abs(power["median"] - 2.25) <= 0.01 * 2.25
-    st = "reproduced" if ok else "differs"
+    st = "calibrated" if ok else "differs"  # the current was chosen from the 2.25 W
     out.append(
         claim(
             "table6.1-power",
@@ -157,6 +220,7 @@ def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> l
             "independent reproduction: the field amplitude I = 1.5 A was chosen from the "
             "thesis's 2.25 W, and at fixed amplitude P does not depend on the run length."
             + (" Power off 2.25 W or above 5 W." if st == "differs" else ""),
+            cause="our model" if st == "differs" else "",
         )
     )
     ok = sat == 0 and lost == 0
@@ -217,14 +281,14 @@ def tracking_claims(rows, spread, f_res, bw_fine, slopes, duration, nseeds) -> l
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true", help="1 s runs, 2 seeds (CI)")
+    p.add_argument("--quick", action="store_true", help="3 seeds (10 s each, as the thesis), CI")
     p.add_argument("--out", type=Path, default=Path("out/ch6_tracking"))
     p.add_argument("--seeds", type=int, default=None, help="number of seeds (default 20)")
     args = p.parse_args(argv)
     log = TextLog()
     say = log.say
-    duration = 1.0 if args.quick else 10.0
-    nseeds = args.seeds or (2 if args.quick else 20)
+    duration = 10.0  # the thesis's run length; one 10 s run takes about 0.5 s
+    nseeds = args.seeds or (3 if args.quick else 20)
 
     plant = ddl.DualStage()
     f, h, _ = coarse_frf(plant, fs=FS, y_c=0.0)
@@ -288,7 +352,14 @@ def main(argv=None) -> int:
     )
     say("thesis Table 6.1 (hardware, direct coil): 25 nm, 308 nm, 19.6 nm, 2.25 W")
 
-    claims = tracking_claims(rows, summary_spread, f_res, bw_fine, slopes, duration, nseeds)
+    sweep_seeds = list(range(min(nseeds, 3 if args.quick else 10)))
+    sweep = lines_sweep(duration, sweep_seeds, [rows[i]["rmse"] * 1e9 for i in sweep_seeds])
+    say(
+        "RMSE vs the preset's vibration lines (median nm over seeds "
+        f"{sweep_seeds[0]}–{sweep_seeds[-1]}): "
+        + ", ".join(f"{k} {np.median(v):.1f}" for k, v in sweep.items())
+    )
+    claims = tracking_claims(rows, summary_spread, f_res, bw_fine, slopes, duration, nseeds, sweep)
     say("\nclaims (id: measured → status):")
     for c in claims:
         say(f"  {c['id']}: {c['measured']} → {c['status']}")
@@ -341,6 +412,7 @@ def main(argv=None) -> int:
             "opd_psd_slopes": slopes,
             "spread": summary_spread,
             "spec_met_all_seeds": ok,
+            "rmse_nm_vs_vibration_lines": sweep,
             "runs": rows,
             "claims": claims,
             "thesis_table_6_1_direct_coil": {

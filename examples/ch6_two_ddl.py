@@ -6,7 +6,9 @@ thesis coordinator, 8 kHz). Frequency responses are measured (H1, white-noise re
 0.2 µm rms) for one DDL, two DDLs (k = 0) and two DDLs + predictor; the −3 dB bandwidths and
 their ratios are the "bandwidth gain" (thesis ≈ 1.6). Step responses (1 µm) give overshoot and
 rise time (Fig 6.14b). The analytic combination ``2F − F² − k s F²`` of the measured single
-response is compared with the measured dual response.
+response is compared with the measured dual response, and the thesis's own model -- a
+second-order F (ωn = 300 Hz) -- gives the gain of ``2F − F²`` against ζ (1.49 at ζ 0.5, 1.58
+at 0.6, 1.71 at 0.7): Fig 6.6's data are not available to fit ζ, so the 1.6 is judged over ζ.
 
 The predictor gain k is not given in the thesis. It is chosen here by a stated rule: on a
 grid, the k with the smallest step overshoot among those whose −3 dB bandwidth is not below
@@ -23,53 +25,93 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord.ddl as ddl
-from qpcoord.ddl.two_ddl import combine, two_ddl_frf, two_ddl_steps
+from qpcoord.ddl.two_ddl import analytic_gain, combine, two_ddl_frf, two_ddl_steps
 from qpcoord.studies.claims import claim
 from qpcoord.studies.files import TextLog, write_json
 
 FS = 8000.0
+ZETAS = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)  # damping grid of the analytic gain
+THESIS_GAIN = 1.6
+GAIN_TOL = 0.10  # relative
 
 
-def two_ddl_claims(o: dict, s: dict, k: float, gap: float, quick: bool) -> list[dict]:
+def zeta_sweep(fn: float) -> dict:
+    """Analytic gain of ``2F − F²`` for a second-order ``F`` (ωn = ``fn`` Hz) against ζ, and
+    the ζ interval (bisection on the monotone gain) where it is within ±10 % of 1.6."""
+    table = {z: analytic_gain(z, fn)["gain"] for z in ZETAS}
+
+    def solve(target):
+        lo, hi = 0.05, 2.0  # the gain rises monotonically with ζ on this interval
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if analytic_gain(mid, fn)["gain"] < target else (lo, mid)
+        return 0.5 * (lo + hi)
+
+    band = (solve((1 - GAIN_TOL) * THESIS_GAIN), solve((1 + GAIN_TOL) * THESIS_GAIN))
+    return {"gain_by_zeta": table, "zeta_band": band}
+
+
+def two_ddl_claims(
+    o: dict, s: dict, k: float, gap: float, quick: bool, analytic: dict
+) -> list[dict]:
     """Claim rows (``qpcoord.studies.claims.claim``) for §6.3 / Fig 6.14 from the chosen predictor.
 
     ``o``, ``s``: frequency-response and step results at the chosen gain ``k`` (s); ``gap``:
     max relative gap between ``2F − F²`` of the measured single loop and the measured dual
-    loop, 5–400 Hz. The bandwidth row needs the full run (4 s FRF records, 9 predictor
-    gains); ``--quick`` (1 s, 3 gains) leaves it ``"inconclusive"``.
+    loop, 5–400 Hz; ``analytic``: :func:`zeta_sweep` plus ``fn``, ``fine_damping`` and
+    ``gain_at_fine_damping``. The bandwidth row needs the full run (4 s FRF records, 9
+    predictor gains); ``--quick`` (1 s, 3 gains) leaves it ``"inconclusive"``.
     """
     out = []
     gain = o["gain_dual_pred"]
-    ok = abs(gain - 1.6) <= 0.10 * 1.6
-    st = "inconclusive" if quick else ("reproduced" if ok else "differs")
+    lo, hi = analytic["zeta_band"]
+    zf, gf = analytic["fine_damping"], analytic["gain_at_fine_damping"]
+    table = ", ".join(f"{g:.2f} at ζ {z:g}" for z, g in analytic["gain_by_zeta"].items())
+    ok = abs(gain - THESIS_GAIN) <= GAIN_TOL * THESIS_GAIN
+    # judged on the thesis's own model (issue 18, finding 6): a second-order F; its ζ is not
+    # given and Fig 6.6's data are not available to fit it, so the claim is decided only if
+    # our measured loop meets it or no ζ in 0.3–1.0 does
+    if ok:
+        st = "reproduced"
+    elif not quick and not any(
+        abs(g - THESIS_GAIN) <= GAIN_TOL * THESIS_GAIN for g in analytic["gain_by_zeta"].values()
+    ):
+        st = "differs"
+    else:
+        st = "inconclusive"
     out.append(
         claim(
             "fig6.14a-bandwidth-gain",
             "Two DDLs combined through their references (with the derivative predictor) "
             "raise the −3 dB bandwidth by a factor of nearly 1.6, no controller gain changed.",
             "§6.3 and Fig 6.14a: bandwidth enhancement by a factor of nearly 1.6",
-            f"gain {gain:.2f} with predictor (k = {k:.1e} s), {o['gain_dual']:.2f} without; "
-            f"−3 dB {o['bw_single']:.0f} / {o['bw_dual']:.0f} / {o['bw_dual_pred']:.0f} Hz "
-            "(one DDL / two / two + predictor)",
+            f"our loops: gain {gain:.2f} with predictor (k = {k:.1e} s), {o['gain_dual']:.2f} "
+            f"without; −3 dB {o['bw_single']:.0f} / {o['bw_dual']:.0f} / "
+            f"{o['bw_dual_pred']:.0f} Hz (one DDL / two / two + predictor). Analytic 2F − F² "
+            f"with a second-order F ({analytic['fn']:g} Hz): {table}; within ±10 % of 1.6 "
+            f"for ζ in {lo:.2f}–{hi:.2f}; our piezo model's ζ = {zf:g} gives {gf:.2f}",
             st,
-            "Criterion: gain with predictor within ±10 % of 1.6."
+            f"Criterion: gain within ±{100 * GAIN_TOL:g} % of 1.6 on our loops (reproduced), "
+            "else judged on the thesis's model, a second-order F with the fine stage's "
+            "characteristics (§6.3): differs if no ζ in 0.3–1.0 gives it, otherwise "
+            "inconclusive. (Changed with issue 18 finding 6: before, only our loop was "
+            "judged, giving 'differs'.)"
             + (
-                " The gain is a property of the single closed loop F: the measured dual "
-                "response is 2F − F² of the measured single one (row eq-two-ddl-combination), "
-                "and for a second-order F the −3 dB gain of 2F − F² is 1.49 at ζ = 0.5, 1.71 "
-                f"at ζ = 0.7 (docs/ch6.md); our F (fine PI + piezo, no resonant peak, "
-                f"{o['bw_single']:.0f} Hz) gives {o['gain_dual']:.2f} without predictor. "
-                "The thesis's 1.6 corresponds to a second-order F with ζ ≈ 0.6; its F is not "
-                "given, so the gap comes from the loop shape, not from the scheme."
-                if st == "differs"
+                f" Our F (fine PI + piezo, no resonant peak) is not second order and gives "
+                f"{gain:.2f}. The thesis's F is a second-order system whose ζ it does not give "
+                "and Fig 6.6's data (not available to us, only its caption: ≈ 300 Hz, gain ≈ 3) "
+                f"cannot be fitted: 1.6 follows from its formula for ζ ≈ {lo:.2f}–{hi:.2f}, "
+                "so the number is plausible but neither confirmed nor refuted."
+                if st == "inconclusive" and not quick
                 else ""
             )
             + (
                 " --quick uses 1 s FRF records and 3 predictor gains; the full run (4 s "
                 "records, 9 gains) decides."
-                if st == "inconclusive"
+                if st == "inconclusive" and quick
                 else ""
             ),
+            cause="our model" if st == "differs" else "",
         )
     )
     ok = gap <= 0.05
@@ -185,7 +227,17 @@ def main(argv=None) -> int:
         )
     )
     say(f"max relative gap |(2F − F²) − measured dual| / |dual|, 5–400 Hz: {mismatch:.3f}")
-    claims = two_ddl_claims(o, s, k, mismatch, args.quick)
+    fine = ddl.DualStage().fine
+    analytic = zeta_sweep(fine.natural_frequency)
+    analytic["fn"] = fine.natural_frequency
+    analytic["fine_damping"] = fine.damping
+    analytic["gain_at_fine_damping"] = analytic_gain(fine.damping, fine.natural_frequency)["gain"]
+    say(
+        f"analytic 2F − F², second-order F at {fine.natural_frequency:g} Hz: "
+        + ", ".join(f"ζ {z:g}: {g:.2f}" for z, g in analytic["gain_by_zeta"].items())
+        + " (within ±10 % of 1.6 for ζ {:.2f}–{:.2f})".format(*analytic["zeta_band"])
+    )
+    claims = two_ddl_claims(o, s, k, mismatch, args.quick, analytic)
     for c in claims:
         say(f"claim {c['id']}: {c['measured']} → {c['status']}")
     try:
@@ -231,6 +283,12 @@ def main(argv=None) -> int:
             "overshoot": {n: s[f"overshoot_{n}"] for n in ("single", "dual", "dual_pred")},
             "rise_time_s": {n: s[f"rise_{n}"] for n in ("single", "dual", "dual_pred")},
             "analytic_vs_measured_dual_max_rel_gap": mismatch,
+            "analytic_second_order": {
+                "natural_frequency_hz": analytic["fn"],
+                "gain_by_zeta": {str(z): g for z, g in analytic["gain_by_zeta"].items()},
+                "zeta_band_within_10pct_of_1.6": list(analytic["zeta_band"]),
+                "gain_at_fine_damping": analytic["gain_at_fine_damping"],
+            },
             "claims": claims,
             "sweep": [
                 {

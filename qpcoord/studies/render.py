@@ -16,15 +16,34 @@ import re
 from pathlib import Path
 
 from .chapters import CHAPTERS
-from .claims import CLAIM_STATUSES
+from .claim_ids import lookup
+from .claims import CAUSES, CLAIM_STATUSES, count_claims
 from .timing import step_timing
 
 __all__ = ["render_html", "render_markdown", "summary_rows"]
 
-#: Claim-count columns of the summary table.
-SUMMARY_COLUMNS = ("scripts", "ok", "failed") + CLAIM_STATUSES + ("no claims recorded",)
+#: Columns of the summary table: scripts, claim rows, then *thesis claims* (one per ID) per
+#: status, ``differs`` also split by cause class.
+SUMMARY_COLUMNS = (
+    ("scripts", "ok", "failed", "rows")
+    + CLAIM_STATUSES[:2]
+    + tuple(f"differs: {c}" for c in CAUSES)
+    + CLAIM_STATUSES[2:]
+    + ("no claims recorded",)
+)
 
-_CLAIM_HEAD = ("claim", "thesis", "measured", "status", "note")
+_CLAIM_HEAD = ("claim ID", "claim", "thesis", "measured", "status", "note")
+
+_ID_HEAD = ("claim ID", "status", "cause", "rows (script: row → status)")
+
+_STATUS_TEXT = (
+    "Every thesis claim has one ID (several scripts may check it; it is counted once). "
+    "Statuses: reproduced (the thesis number or behaviour is met; the note gives the "
+    "criterion); differs (we measured something else; the note says why, and the cause class "
+    "says whose: thesis error, hardware data, our model); inconclusive (this run cannot "
+    "decide: see the note); calibrated (an input taken from the thesis: shown, not counted as "
+    "reproduced); own check (no thesis number). docs/reproduce.md explains the classes."
+)
 
 
 # --------------------------------------------------------------------------- shared data
@@ -86,12 +105,16 @@ def _script_status(r) -> str:
 def summary_rows(report) -> list[tuple[str, dict[str, int]]]:
     """Counts per chapter for the summary table, then a ``"total"`` row.
 
+    Scripts and rows are counted per chapter of the script; thesis claims once each, in the
+    chapter of their home row (:func:`qpcoord.studies.claims.thesis_claims`).
+
     Returns
     -------
     list of (str, dict)
         ``(chapter key or "total", {column: count})`` with the columns of
         :data:`SUMMARY_COLUMNS`.
     """
+    claims = list(report.claims.values())
     rows = []
     total = dict.fromkeys(SUMMARY_COLUMNS, 0)
     for c in report.chapters:
@@ -101,16 +124,45 @@ def summary_rows(report) -> list[tuple[str, dict[str, int]]]:
                 continue
             counts["scripts"] += 1
             counts["ok" if r.ok else "failed"] += 1
+            counts["rows"] += len(r.claims)
             if r.ok and not r.claims:
                 counts["no claims recorded"] += 1
-            for row in r.claims:
-                if row.get("status") in counts:
-                    counts[row["status"]] += 1
+        by_status = count_claims(x for x in claims if x["chapter"] == c)
+        for k in SUMMARY_COLUMNS:
+            if k in by_status:
+                counts[k] = by_status[k]
         rows.append((c, counts))
         for k, v in counts.items():
             total[k] += v
     rows.append(("total", total))
     return rows
+
+
+def _row_cells(r, row: dict) -> list[str]:
+    """A script's claim row for the tables: its thesis-claim ID first, the cause with
+    ``differs``, and ``calibrated`` for an input the register marks so."""
+    from .claim_ids import claim_id
+
+    entry = lookup(r.name, row["id"])
+    cid = claim_id(r.name, row["id"], row["status"])
+    status = row["status"]
+    if entry is not None and entry.calibrated and status != "calibrated":
+        status = f"calibrated (row: {status})"
+    elif status == "differs":
+        cause = row.get("cause") or (entry.cause if entry else "") or "unclassified"
+        status = f"differs ({cause})"
+    return [cid, row["claim"], row["thesis"], row["measured"], status, row["note"]]
+
+
+def _id_rows(report) -> list[list[str]]:
+    """One line per thesis claim (own checks left out): ID, status, cause, its rows."""
+    out = []
+    for c in sorted(report.claims.values(), key=lambda x: (x["chapter"], x["id"])):
+        if c["status"] == "own check":
+            continue
+        rows = "; ".join(f"{x['script']}: {x['id']} → {x['status']}" for x in c["rows"])
+        out.append([c["id"], c["status"], c["cause"], rows])
+    return out
 
 
 def _header_items(report) -> list[tuple[str, str]]:
@@ -281,19 +333,14 @@ def render_markdown(report) -> str:
     L = ["# qpcoord: reproduction of *Overactuated Systems Coordination*", ""]
     L += _md_table(["", ""], [[k, v] for k, v in _header_items(report)])
     L += ["", f"**Result:** {_verdict(report)}", ""]
-    L += [
-        "Each example states what the thesis claims and what it measured now; status "
-        "`reproduced` (the thesis number or behaviour is met), `differs` (the note says why), "
-        "`inconclusive` (this run cannot decide: see the note), `not in thesis` (our own check).",
-        "",
-        "## Summary of claims",
-        "",
-    ]
+    L += [_STATUS_TEXT, "", "## Summary of claims", ""]
     body = []
     for key, counts in summary_rows(report):
         name = "total" if key == "total" else _chapter_title(key)
         body.append([name] + [str(counts[c]) for c in SUMMARY_COLUMNS])
     L += _md_table(["chapter", *SUMMARY_COLUMNS], body)
+    L += ["", "## Thesis claims by ID", ""]
+    L += _md_table(_ID_HEAD, _id_rows(report))
     if report.unmapped:
         L += [
             "",
@@ -322,7 +369,7 @@ def render_markdown(report) -> str:
                 why = "empty list" if r.has_claims else "no `claims` in its summary.json"
                 L += [f"*No claims recorded* ({why}).", ""]
             else:
-                L += _md_table(_CLAIM_HEAD, [[row[k] for k in _CLAIM_HEAD] for row in r.claims])
+                L += _md_table(_CLAIM_HEAD, [_row_cells(r, row) for row in r.claims])
                 L += [""]
             for f in r.figures:
                 L += [f"![{_md(f.name)}]({_rel(f, base)})", ""]
@@ -384,7 +431,7 @@ table{border-collapse:collapse;margin:.6em 0;font-size:.9em}
 th,td{border:1px solid #ccc;padding:.25em .5em;vertical-align:top;text-align:left}
 th{background:#f0f0f0}td.num{text-align:right}
 .reproduced{background:#e3f5e1}.differs{background:#fde2e1}.inconclusive{background:#fff5d6}
-.not-in-thesis{background:#e8eef9}.ok{color:#1a7f37;font-weight:600}
+.own-check{background:#e8eef9}.calibrated{background:#eeeeee}.ok{color:#1a7f37;font-weight:600}
 .failed,.timed-out{color:#c62828;font-weight:600}
 img{max-width:100%;border:1px solid #ddd;margin:.4em 0}figure{margin:.8em 0}
 figcaption{font-size:.85em;color:#555}.muted{color:#666}
@@ -444,18 +491,16 @@ def render_html(report) -> str:
     ]
     H += _h_table(["", ""], [[k, v.replace("`", "")] for k, v in _header_items(report)])
     H += [f"<p><strong>Result:</strong> {_e(_verdict(report))}</p>"]
-    H += [
-        "<p>Each example states what the thesis claims and what it measured now; status "
-        "<em>reproduced</em> (the thesis number or behaviour is met), <em>differs</em> (the "
-        "note says why), <em>inconclusive</em> (this run cannot decide: see the note), "
-        "<em>not in thesis</em> (our own check).</p>"
-    ]
+    H += [f"<p>{_e(_STATUS_TEXT)}</p>"]
     H += ['<h2 id="summary">Summary of claims</h2>']
     body = []
     for key, counts in summary_rows(report):
         name = "total" if key == "total" else _chapter_title(key)
         body.append([name] + [str(counts[c]) for c in SUMMARY_COLUMNS])
     H += _h_table(["chapter", *SUMMARY_COLUMNS], body, num_cols=range(1, 1 + len(SUMMARY_COLUMNS)))
+    H += ['<h2 id="claim-ids">Thesis claims by ID</h2>']
+    ids = _id_rows(report)
+    H += _h_table(_ID_HEAD, ids, row_classes=[_css_class(x[1]) for x in ids])
     if report.unmapped:
         H += [
             "<p>Not run (no chapter for their name in <code>SCRIPT_CHAPTERS</code>): "
@@ -508,7 +553,7 @@ def render_html(report) -> str:
             else:
                 H += _h_table(
                     _CLAIM_HEAD,
-                    [[row[k] for k in _CLAIM_HEAD] for row in r.claims],
+                    [_row_cells(r, row) for row in r.claims],
                     row_classes=[_css_class(row["status"]) for row in r.claims],
                 )
             H += [_img(f) for f in r.figures]

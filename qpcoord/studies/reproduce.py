@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .chapters import CHAPTERS, SCRIPT_CHAPTERS
-from .claims import CLAIM_STATUSES
+from .claims import count_claims, thesis_claims
 from .timing import step_timing
 
 __all__ = [
@@ -355,18 +355,30 @@ class Report:
         return not self.failed
 
     @property
+    def claims(self) -> dict[str, dict]:
+        """Thesis claims by ID, merged from every script's rows
+        (:func:`qpcoord.studies.claims.thesis_claims`)."""
+        return thesis_claims(
+            (r.chapter, r.name, row) for r in self.results if r.ok for row in r.claims
+        )
+
+    @property
     def counts(self) -> dict[str, int]:
-        """Number of scripts ``ok`` / ``failed`` / ``timeout`` and of claims per status."""
+        """Scripts ``ok`` / ``failed`` / ``timeout``, claim ``rows``, and *thesis claims* (by ID,
+        each counted once) per status, with ``"differs: <cause>"`` per cause class.
+
+        ``"not in thesis"`` repeats ``"own check"`` (its older name, read by callers).
+        """
         out = {"scripts": len(self.results), "ok": 0, "failed": 0, "timeout": 0}
-        out.update({s: 0 for s in CLAIM_STATUSES})
         out["no claims"] = 0
+        out["rows"] = 0
         for r in self.results:
             out[r.status] = out.get(r.status, 0) + 1
             if r.ok and not r.claims:
                 out["no claims"] += 1
-            for c in r.claims:
-                s = c.get("status") if c.get("status") in CLAIM_STATUSES else "invalid"
-                out[s] = out.get(s, 0) + 1
+            out["rows"] += len(r.claims)
+        out.update(count_claims(self.claims.values()))
+        out["not in thesis"] = out["own check"]
         return out
 
     def to_dict(self) -> dict:
@@ -377,6 +389,7 @@ class Report:
             "seconds": round(self.seconds, 3),
             "environment": self.environment,
             "counts": self.counts,
+            "claims": sorted(self.claims.values(), key=lambda c: (c["chapter"], c["id"])),
             "results": [r.to_dict() for r in self.results],
             "unmapped": [str(p) for p in self.unmapped],
             "bench": self.bench,
@@ -515,10 +528,13 @@ def _collect(res: ScriptResult) -> None:
     claims = res.summary.get("claims")
     if isinstance(claims, list):
         res.has_claims = True
-        keys = ("id", "claim", "thesis", "measured", "status", "note")
+        keys = ("id", "claim", "thesis", "measured", "status", "note", "cause")
         for row in claims:
             if isinstance(row, dict):
-                res.claims.append({k: str(row.get(k, "") or "") for k in keys})
+                row = {k: str(row.get(k, "") or "") for k in keys}
+                if row["status"] == "not in thesis":  # the older name of "own check"
+                    row["status"] = "own check"
+                res.claims.append(row)
             else:
                 res.claims.append(
                     {
@@ -528,6 +544,7 @@ def _collect(res: ScriptResult) -> None:
                         "measured": "",
                         "status": "invalid",
                         "note": "malformed claim row",
+                        "cause": "",
                     }
                 )
 

@@ -53,3 +53,22 @@ def test_linear_fine_loop_model_matches_measured_single(frf):
     lin = np.array([f_lin(zi) for zi in z]).ravel()
     rel = np.abs(lin - frf["single"][band]) / np.abs(lin)
     assert rel.max() < 0.05
+
+
+def test_analytic_gain_of_a_second_order_loop():
+    from qpcoord.ddl.two_ddl import analytic_gain, second_order
+
+    # closed form: a second-order F with ζ = 1/√2 has its −3 dB point at ωn exactly
+    r = analytic_gain(1 / np.sqrt(2), 300.0)
+    assert r["bw_single"] == pytest.approx(300.0, rel=1e-3)
+    # without predictor the gain depends on ζ only, and rises with it (issue 18, finding 6)
+    g = [analytic_gain(z, 300.0)["gain"] for z in (0.5, 0.6, 0.7)]
+    assert g == pytest.approx([1.49, 1.58, 1.71], abs=0.01)
+    assert analytic_gain(0.6, 50.0)["gain"] == pytest.approx(g[1], rel=1e-3)
+    # the predictor term −k s F² changes the combined bandwidth (here it narrows it)
+    assert analytic_gain(0.6, 300.0, k=2e-4)["gain"] == pytest.approx(1.537, abs=0.01)
+    assert second_order(0.0, 300.0, 0.6) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="damping"):
+        analytic_gain(0.0)
+    with pytest.raises(ValueError, match="points"):
+        analytic_gain(0.5, points=10)

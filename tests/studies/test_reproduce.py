@@ -11,6 +11,7 @@ import pytest
 
 from qpcoord import reproduce
 from qpcoord.cli import main
+from qpcoord.studies import render
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -269,3 +270,46 @@ def test_real_chapter_quick(tmp_path):
     assert [r.name for r in rep.results] == ["ch6_flexure"]
     assert rep.results[0].figures
     assert "Appendix B" in rep.markdown.read_text()
+
+
+DUPLICATE = '''
+"""A fake {name}: Table 6.1's direct-coil RMSE (a claim several scripts check)."""
+import argparse
+from pathlib import Path
+from qpcoord.studies.claims import claim
+from qpcoord.studies.files import write_json
+p = argparse.ArgumentParser()
+p.add_argument("--quick", action="store_true")
+p.add_argument("--out", type=Path)
+a = p.parse_args()
+rows = [claim("{row}", "RMSE 25 nm", "Table 6.1", "24 nm", "reproduced")]
+rows += [claim("fig6.6-piezo-bandwidth", "300 Hz", "Fig 6.6", "301 Hz", "reproduced")] * {extra}
+write_json(a.out / "summary.json", {{"claims": rows}})
+'''
+
+
+def test_a_thesis_claim_is_counted_once(tmp_path):
+    """Two scripts check T6.1-direct-coil-rmse: one claim, two rows; an input the register
+    marks calibrated is shown as such, never as reproduced."""
+    d = tmp_path / "examples"
+    d.mkdir()
+    (d / "ch6_tracking.py").write_text(
+        DUPLICATE.format(name="ch6_tracking", row="table6.1-rmse", extra=1)
+    )
+    (d / "sweep_ddl_seeds.py").write_text(
+        DUPLICATE.format(name="sweep", row="table6.1-rmse-nominal", extra=0)
+    )  # fmt: skip
+    rep = reproduce.run("6", out=tmp_path / "out", examples_dir=d, progress=False, bench=False)
+    assert rep.ok
+    c = rep.counts
+    assert (c["rows"], c["reproduced"], c["calibrated"], c["differs"]) == (3, 1, 1, 0)
+    assert set(rep.claims) == {"T6.1-direct-coil-rmse", "Fig6.6-piezo-300Hz"}
+    md = rep.markdown.read_text()
+    assert "## Thesis claims by ID" in md
+    assert (
+        "| T6.1-direct-coil-rmse | reproduced |  | ch6_tracking: table6.1-rmse → reproduced;" in md
+    )
+    assert "calibrated (row: reproduced)" in md
+    total = next(row for key, row in render.summary_rows(rep) if key == "total")
+    assert total["reproduced"] == 1 and total["rows"] == 3 and total["calibrated"] == 1
+    assert json.loads(rep.json.read_text())["counts"]["reproduced"] == 1

@@ -1,0 +1,67 @@
+"""The verdict file (tests/studies/verdicts.json) and the full reproduction's verdicts.
+
+The quick verdicts are compared in tests/test_examples.py (the quick run happens once
+there); here: the file's consistency with the claim register, and (slow) the full run.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from qpcoord.studies.claim_ids import REGISTER
+from qpcoord.studies.claims import claim, load_verdicts, thesis_claims, verdict_mismatches
+
+VERDICTS = Path(__file__).with_name("verdicts.json")
+
+
+def test_verdict_file_matches_the_register():
+    verdicts = load_verdicts(VERDICTS)
+    ids = {e.id for e in REGISTER.values()}
+    assert set(verdicts) == ids, (sorted(ids - set(verdicts)), sorted(set(verdicts) - ids))
+    for entry in REGISTER.values():
+        v = verdicts[entry.id]
+        if entry.calibrated:  # an input is never "reproduced"
+            assert v["quick"] == v["full"] == "calibrated", entry.id
+        else:
+            assert "calibrated" not in (v["quick"], v["full"]), entry.id
+
+
+def test_a_changed_verdict_is_reported(tmp_path):
+    verdicts = {
+        "T6.1-direct-coil-rmse": {"quick": "reproduced", "full": "reproduced"},
+        "Fig6.6-piezo-300Hz": {"quick": "calibrated", "full": "calibrated"},
+    }
+    piezo = claim("fig6.6-piezo-bandwidth", "c", "F6.6", "300 Hz", "calibrated", "input")
+    rows = [
+        ("6", "ch6_tracking", claim("table6.1-rmse", "c", "T6.1", "40 nm", "differs", "why")),
+        ("6", "ch6_tracking", piezo),
+        ("6", "ch6_tracking", claim("mine", "c", "n/a", "1", "own check")),
+    ]
+    problems = verdict_mismatches(thesis_claims(rows), verdicts, "full")
+    assert problems == [
+        "T6.1-direct-coil-rmse: differs in this run, the verdict file says reproduced"
+    ]
+    assert verdict_mismatches(thesis_claims(rows[1:]), verdicts, "quick") == [
+        "T6.1-direct-coil-rmse: in the verdict file, not checked by this run"
+    ]
+    bad = tmp_path / "v.json"
+    bad.write_text(json.dumps({"X": {"quick": "differs", "full": "differs"}}))
+    with pytest.raises(ValueError, match="no cause"):
+        load_verdicts(bad)
+    bad.write_text(json.dumps({"X": {"quick": "ok", "full": "differs"}}))
+    with pytest.raises(ValueError, match="quick must be one of"):
+        load_verdicts(bad)
+
+
+@pytest.mark.slow
+def test_full_verdicts(tmp_path):
+    """The full reproduction (minutes): every verdict is the file's."""
+    from qpcoord.studies.reproduce import run
+
+    report = run(out=tmp_path, quick=False, jobs=2, progress=False, bench=False)
+    assert report.ok, [(r.name, r.error) for r in report.failed]
+    problems = verdict_mismatches(report.claims, load_verdicts(VERDICTS), "full")
+    assert not problems, "\n".join(problems)
