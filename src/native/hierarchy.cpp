@@ -18,6 +18,8 @@ constexpr double kViolationTol = 1e-6;  // VIOLATION_TOL: a row counts as violat
 constexpr double kAbsFloor = 1e-14;
 constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every row to this
 constexpr int kIterFactor = 6;
+constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
+constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
@@ -197,11 +199,31 @@ void Hierarchy::null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, 
   N = Qf.rightCols(k - rank);
 }
 
+/// The minimum-norm least-squares step in span(N): min ||Q (y + N s) - c||, res = Q y - c.
+/// Numerical rank as qpcoord.core.linalg.numerical_rank with the scale of Q before
+/// projection: a K = Q N whose columns are rounding noise (the working set's rows span what
+/// Q can change) is rank 0, not a full-rank matrix of size 1e-16.
+static void subspace_step(const Eigen::Ref<const Mat>& Q, const Mat& N, const Vec& res, double qscale,
+                   Vec& step) {
+  const Mat K = Q * N;
+  const double kmax = K.colwise().norm().maxCoeff();  // the first pivot of a pivoted QR
+  const double tol = std::max(K.rows(), K.cols()) * kEps * std::max(kmax, qscale);
+  if (kmax > tol) {
+    Eigen::CompleteOrthogonalDecomposition<Mat> cod;
+    cod.setThreshold(tol / kmax);
+    cod.compute(K);
+    step.noalias() = N * cod.solve(-res);
+  } else {
+    step.setZero();
+  }
+}
+
 bool Hierarchy::multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
-                               int* drop) {
+                               int* drop, const std::vector<char>* keep, bool bland) {
   const int k = P.cols;
-  const Vec res = P.Q.topLeftCorner(P.qrows, k) * y - P.c.head(P.qrows);
-  const Vec g = P.Q.topLeftCorner(P.qrows, k).transpose() * res;
+  const auto Q = P.Q.topLeftCorner(P.qrows, k);
+  const Vec res = Q * y - P.c.head(P.qrows);
+  const Vec g = Q.transpose() * res;
   std::vector<int> idx;
   for (int i = 0; i < P.rows; ++i)
     if (W[i]) idx.push_back(i);
@@ -211,18 +233,34 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Vec& y, const std::vec
     const double sign = (W[idx[j]] == 1) ? -1.0 : 1.0;
     A.col(static_cast<int>(j)) = sign * P.G.row(idx[j]).head(k).transpose();
   }
-  const Vec mu = A.completeOrthogonalDecomposition().solve(g);
+  Eigen::CompleteOrthogonalDecomposition<Mat> cod(A);
+  cod.setThreshold(std::max(k, static_cast<int>(idx.size())) * kEps);
+  const Vec mu = cod.solve(g);
+  // a multiplier counts as negative beyond the sign tolerance (relative to the gradient) and
+  // beyond the rounding of the gradient itself (g = Q^T (Q y - c) in floating point)
+  const double qn = Q.norm();
   const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
+  const double round =
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c.head(P.qrows).norm());
+  const double tol = kKktTol * gref + round;
   int jmin = -1;
   double mmin = kInf;
   for (size_t j = 0; j < idx.size(); ++j) {
-    if (W[idx[j]] == 2) continue;  // equalities are never dropped
-    if (mu(static_cast<int>(j)) < mmin) {
-      mmin = mu(static_cast<int>(j));
-      jmin = idx[j];
+    const int i = idx[j];
+    if (W[i] == 2) continue;            // equalities are never dropped
+    if (keep && (*keep)[i]) continue;   // re-blocked right after a drop: multiplier is zero
+    const double v = mu(static_cast<int>(j));
+    if (v >= -tol) continue;
+    if (bland) {  // degenerate stretch: the lowest index with a negative multiplier
+      jmin = i;
+      break;
+    }
+    if (v < mmin) {
+      mmin = v;
+      jmin = i;
     }
   }
-  if (jmin < 0 || mmin >= -kKktTol * gref) return true;
+  if (jmin < 0) return true;
   if (drop) *drop = jmin;
   return false;
 }
@@ -233,34 +271,41 @@ bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, 
   const auto Q = P.Q.topLeftCorner(P.qrows, k);
   const auto c = P.c.head(P.qrows);
   const double cn = c.norm();
+  const double qscale = Q.norm();
   const int max_iter = kIterFactor * (m + k) + 10;
   Mat N;
   Vec step(k), res, dres, gy(m), gp(m);
+  // anti-cycling: a row dropped for a negative multiplier that blocks the very next step at
+  // once had a multiplier that is zero to rounding; it is put back and kept ("keep") until
+  // the point moves. After several steps of length zero in a row, Bland's rule (lowest
+  // index) chooses the row to drop; ties in the ratio test go to the lowest index always.
+  std::vector<char> keep(m, 0);
+  int last_drop = -1;
+  int zero_steps = 0;
   for (int it = 0; it < max_iter; ++it) {
     ++iters;
     null_of_rows(P, W, N);
     res = Q * y - c;
     if (N.cols() > 0) {
-      const Mat K = Q * N;
-      const Vec s = K.completeOrthogonalDecomposition().solve(-res);
-      step.noalias() = N * s;
+      subspace_step(Q, N, res, qscale, step);
     } else {
       step.setZero();
     }
     dres = Q * step;
     const double gain = -(2.0 * res.dot(dres) + dres.squaredNorm());
     const double smax = step.cwiseAbs().maxCoeff();
+    const double yscale = std::max(1.0, y.cwiseAbs().maxCoeff());
     // stationary on W: the step no longer decreases the objective measurably (relative to
     // its value, with a floor at rounding of the data's scale), or it is rounding itself
     const double floor = 1e-28 * std::max(cn * cn, (Q * y).squaredNorm());
-    if (gain <= 1e-15 * res.squaredNorm() + floor ||
-        smax <= 1e-15 * std::max(1.0, y.cwiseAbs().maxCoeff())) {
+    if (gain <= 1e-15 * res.squaredNorm() + floor || smax <= 1e-15 * yscale) {
       int drop = -1;
-      if (multipliers_ok(P, y, W, &drop)) return true;
+      if (multipliers_ok(P, y, W, &drop, &keep, zero_steps > kBlandAfter)) return true;
       W[drop] = 0;
+      last_drop = drop;
       continue;
     }
-    // ratio test on the rows outside the working set
+    // ratio test on the rows outside the working set (ties: the lowest index)
     double alpha = 1.0;
     int block = -1;
     int8_t side = 0;
@@ -285,6 +330,20 @@ bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, 
           side = sd;
         }
       }
+    }
+    const bool moved = alpha * smax > 1e-14 * yscale;
+    if (!moved && block >= 0 && block == last_drop) {
+      W[block] = side;  // its multiplier was zero to rounding: back, and kept
+      keep[block] = 1;
+      last_drop = -1;
+      continue;
+    }
+    last_drop = -1;
+    if (moved) {
+      std::fill(keep.begin(), keep.end(), 0);
+      zero_steps = 0;
+    } else {
+      ++zero_steps;
     }
     y += alpha * step;
     if (block >= 0) W[block] = side;
@@ -327,8 +386,9 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Vec& y,
   if (N.cols() > 0) {
     const auto Q = P.Q.topLeftCorner(P.qrows, k);
     const Vec res = Q * yp - P.c.head(P.qrows);
-    const Mat K = Q * N;
-    yp += N * K.completeOrthogonalDecomposition().solve(-res);
+    Vec step(k);
+    subspace_step(Q, N, res, Q.norm(), step);
+    yp += step;
   }
   const Vec gy = P.G.topLeftCorner(P.rows, k) * yp;
   for (int i = 0; i < P.rows; ++i) {
@@ -336,7 +396,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Vec& y,
     const double su = kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)));
     if (gy(i) < P.lo(i) - sl || gy(i) > P.hi(i) + su) return false;
   }
-  if (!multipliers_ok(P, yp, W, nullptr)) return false;
+  if (!multipliers_ok(P, yp, W, nullptr, nullptr, false)) return false;
   y.head(k) = yp;
   return true;
 }

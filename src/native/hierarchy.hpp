@@ -100,8 +100,10 @@ class Hierarchy {
   /// Try a stored working set: solve on it, check feasibility and multiplier signs.
   bool try_working_set(const LsqProblem& P, const Working& ws, Vec& y, std::vector<int8_t>& W);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// Multiplier signs on W; else the row to drop in *drop (the most negative multiplier, or
+  /// with bland the lowest index); rows flagged in keep are not dropped.
   bool multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
-                      int* drop);
+                      int* drop, const std::vector<char>* keep, bool bland);
   void null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, Mat& N);
 
   int n_;
