@@ -23,6 +23,8 @@ constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in ep
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
+inline double widen_lo_by(double lo, double tol) { return lo - tol * std::max(1.0, std::abs(lo)); }
+inline double widen_hi_by(double hi, double tol) { return hi + tol * std::max(1.0, std::abs(hi)); }
 inline bool in_box(double v, double lo, double hi) {
   return v >= widen_lo(lo) && v <= widen_hi(hi);
 }
@@ -91,6 +93,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   }
   capacity_ = c;
   x_.resize(n);
+  frozen_value_.setZero(std::max(blocks - 1, 1));
   Z_.resize(n, n);
   Cin_.resize(std::max(capacity_, 1), n);
   lin_.resize(std::max(capacity_, 1));
@@ -283,6 +286,10 @@ bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, 
   int last_drop = -1;
   int zero_steps = 0;
   for (int it = 0; it < max_iter; ++it) {
+    if (out_of_time()) {
+      timed_out_ = true;
+      return false;
+    }
     ++iters;
     null_of_rows(P, W, N);
     res = Q * y - c;
@@ -504,7 +511,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
     if (!active_set(P, y, W_, iters)) {
       detail(2) = 0;
-      return kNotConverged;
+      return timed_out_ ? kTimeLimit : kNotConverged;
     }
   }
   store_working_set(P, W_, working_[0]);
@@ -637,7 +644,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       const double v = C.row(row).dot(x_);
       y(r_ + j) = (v > hi(row)) ? v - hi(row) : ((v < lo(row)) ? v - lo(row) : 0.0);
     }
-    if (!active_set(P, y, W_, iters)) return kNotConverged;
+    if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
   }
   store_working_set(P, W_, working_[stage]);
   stats(stage, 0) = iters;
@@ -703,7 +710,7 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
     for (int i = 0; i < P.rows; ++i)
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
     y.setZero();
-    if (!active_set(P, y, W_, iters)) return kNotConverged;
+    if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
   }
   store_working_set(P, W_, working_[stage]);
   stats(stage, 0) = iters;
@@ -713,23 +720,48 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   return kOk;
 }
 
+double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
+                              const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi,
+                              const CRef<Vec>& sw, const Vec& x) const {
+  const int b = k + 1;
+  double total = 0.0;
+  if (meq_[b]) total += (Aeq.middleRows(eq0_[b], meq_[b]) * x - beq.segment(eq0_[b], meq_[b]))
+                            .squaredNorm();
+  for (int i = in0_[b]; i < in0_[b] + min_[b]; ++i) {
+    const double v = C.row(i).dot(x);
+    const double gap = sw(i) * (v - std::min(std::max(v, lo(i)), hi(i)));
+    total += gap * gap;
+  }
+  return std::sqrt(total);
+}
+
 int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                      const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
-                     const CRef<Vec>& lb, const CRef<Vec>& ub, bool warm, MRef<Vec> x_out,
-                     MRef<Mat> stats, MRef<Vec> detail) {
+                     const CRef<Vec>& lb, const CRef<Vec>& ub, bool warm, double time_left,
+                     MRef<Vec> x_out, MRef<Vec> res_out, MRef<Mat> stats, MRef<Vec> detail) {
   const int L = num_levels();
   const int me = eq0_.back() + meq_.back();
   const int mi = in0_.back() + min_.back();
   if (Aeq.rows() != me || Aeq.cols() != n_ || beq.size() != me || C.rows() != mi ||
       C.cols() != n_ || lo.size() != mi || hi.size() != mi || sw.size() != mi ||
-      lb.size() != n_ || ub.size() != n_ || x_out.size() != n_ || stats.rows() != L + 2 ||
-      stats.cols() != 3 || detail.size() < 4)
+      lb.size() != n_ || ub.size() != n_ || x_out.size() != n_ || res_out.size() != L ||
+      stats.rows() != L + 2 || stats.cols() != 3 || detail.size() < 8)
     return kBadInput;
   if (!Aeq.allFinite() || !beq.allFinite() || !C.allFinite() || !sw.allFinite() ||
       lo.hasNaN() || hi.hasNaN() || lb.hasNaN() || ub.hasNaN())
     return kBadInput;
+  for (int i = 0; i < mi; ++i)  // wrong-sided infinities
+    if (lo(i) == kInf || hi(i) == -kInf) return kBadInput;
+  for (int j = 0; j < n_; ++j)
+    if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
   stats.setZero();
   detail.setZero();
+  timed_out_ = false;
+  has_deadline_ = std::isfinite(time_left);
+  if (has_deadline_)
+    deadline_ = std::chrono::steady_clock::now() +
+                std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                    std::chrono::duration<double>(std::max(time_left, 0.0)));
   lb_ = lb;
   ub_ = ub;
   int st = hard_phase(Aeq, beq, C, lo, hi, stats, detail, warm);
@@ -740,6 +772,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
       detail(2) = k + 1;
       return st;
     }
+    frozen_value_(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_);
   }
   st = min_norm(stats, warm);
   if (st != kOk) {
@@ -747,6 +780,42 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     return st;
   }
   if (!x_.allFinite()) return kNonFinite;
+  // the check of every returned x (as Stack._check): bounds, hard equalities, hard rows
+  for (int j = 0; has_bounds_ && j < n_; ++j) {
+    if (!(x_(j) >= widen_lo_by(lb_(j), kCheckTol) && x_(j) <= widen_hi_by(ub_(j), kCheckTol))) {
+      detail(3) = 1;
+      detail(4) = j;
+      x_out = x_;
+      return kCheckFailed;
+    }
+  }
+  if (meq_[0]) {
+    const double scale = std::max(1.0, beq.head(meq_[0]).cwiseAbs().maxCoeff());
+    const Vec r = Aeq.topRows(meq_[0]) * x_ - beq.head(meq_[0]);
+    if (r.cwiseAbs().maxCoeff() > kCheckTol * scale) {
+      detail(3) = 2;
+      detail(4) = r.norm();
+      return kCheckFailed;
+    }
+  }
+  for (int i = 0; i < min_[0]; ++i) {
+    const double v = C.row(i).dot(x_);
+    if (!(v >= widen_lo_by(lo(i), kCheckTol) && v <= widen_hi_by(hi(i), kCheckTol))) {
+      detail(3) = 3;
+      detail(4) = i;
+      return kCheckFailed;
+    }
+  }
+  // each level keeps the value it was frozen with (lower levels move in its optimal set
+  // only): the worst deviation, relative, is reported (Python: status "inaccurate")
+  for (int k = 0; k < L; ++k) {
+    res_out(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_);
+    const double dev = std::abs(res_out(k) - frozen_value_(k)) / std::max(1.0, frozen_value_(k));
+    if (dev > detail(5)) {
+      detail(5) = dev;
+      detail(6) = k;
+    }
+  }
   x_out = x_;
   return kOk;
 }
