@@ -118,7 +118,7 @@ def run(name, build, steps, seed=0):
         t = time.perf_counter()
         P = stack._compiled
         P.refresh()
-        xc, _ = cold.solve(P, warm=False)
+        xc, _, _ = cold.solve(P, warm=False)
         times["native cold"].append(time.perf_counter() - t)
         t = time.perf_counter()
         sw = stack.solve(engine="native")

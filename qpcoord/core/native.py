@@ -27,6 +27,7 @@ import numpy as np
 
 from .compile import CompiledStack
 from .errors import InfeasibleError, SolverError
+from .polish import KKT_TOL
 
 __all__ = [
     "ENGINES",
@@ -45,6 +46,8 @@ ENGINES = ("native", "python")
 DEFAULT_ENGINE = "python"
 #: Name of the extension module.
 MODULE = "qpcoord._native"
+#: The interface version this module speaks (``ABI_VERSION`` of the extension).
+ABI_VERSION = 2
 
 
 class NativeUnavailableError(ImportError):
@@ -75,6 +78,15 @@ def load() -> ModuleType:
             "the native engine (qpcoord._native) is not built: reinstall qpcoord with a C++17 "
             f"compiler present (pip install -e .), or use engine='python' ({exc})"
         ) from exc
+    if getattr(mod, "ABI_VERSION", None) != ABI_VERSION:
+        _load_error = (
+            f"the built extension speaks interface {getattr(mod, 'ABI_VERSION', None)}, "
+            f"this qpcoord needs {ABI_VERSION}: a stale build"
+        )
+        raise NativeUnavailableError(
+            f"the native engine (qpcoord._native) is out of date ({_load_error}): rebuild it "
+            "(pip install -e .), or use engine='python'"
+        )
     _module = mod
     return mod
 
@@ -140,7 +152,9 @@ class NativeHierarchy:
     """The native solver of one compiled stack: structure and buffers built once.
 
     Each :meth:`solve` copies the levels' current numbers into preallocated stacked arrays
-    and makes one native call; the solver keeps each level's final working set and tries it
+    and makes one native call, which also checks the data (finite, no wrong-sided
+    infinity), checks the returned ``x`` (bounds, hard rows: as ``Stack._check``) and
+    computes the level values; the solver keeps each level's final working set and tries it
     first at the next call (warm start).
 
     Parameters
@@ -153,64 +167,87 @@ class NativeHierarchy:
     def __init__(self, P: CompiledStack, damping: float) -> None:
         mod = load()
         blocks = [P.hard, *P.levels]
-        self._blocks = blocks
         meq = [B.m_eq for B in blocks]
         mins = [B.m_in for B in blocks]
         n = P.n
         self.n = n
-        self._eq = np.cumsum([0, *meq])
-        self._in = np.cumsum([0, *mins])
-        self.Aeq = np.zeros((int(self._eq[-1]), n))
-        self.beq = np.zeros(int(self._eq[-1]))
-        self.C = np.zeros((int(self._in[-1]), n))
-        self.lo = np.zeros(int(self._in[-1]))
-        self.hi = np.zeros(int(self._in[-1]))
-        self.sw = np.ones(int(self._in[-1]))
+        eq = np.cumsum([0, *meq])
+        ineq = np.cumsum([0, *mins])
+        self.Aeq = np.zeros((int(eq[-1]), n))
+        self.beq = np.zeros(int(eq[-1]))
+        self.C = np.zeros((int(ineq[-1]), n))
+        self.lo = np.zeros(int(ineq[-1]))
+        self.hi = np.zeros(int(ineq[-1]))
+        self.sw = np.ones(int(ineq[-1]))
         self.lb = np.full(n, -np.inf)
         self.ub = np.full(n, np.inf)
         self.x = np.zeros(n)
+        self.res = np.zeros(len(P.levels))
         self.stats = np.zeros((len(P.levels) + 2, 3))
-        self.detail = np.zeros(4)
+        self.detail = np.zeros(8)
+        # (source block, destination slices) pairs: the per-step copy is one loop of views
+        self._eq_copies = [
+            (B, self.Aeq[eq[j] : eq[j + 1]], self.beq[eq[j] : eq[j + 1]])
+            for j, B in enumerate(blocks)
+            if meq[j]
+        ]
+        self._in_copies = [
+            (
+                B,
+                self.C[ineq[j] : ineq[j + 1]],
+                self.lo[ineq[j] : ineq[j + 1]],
+                self.hi[ineq[j] : ineq[j + 1]],
+                self.sw[ineq[j] : ineq[j + 1]],
+            )
+            for j, B in enumerate(blocks)
+            if mins[j]
+        ]
         self._solver = mod.Hierarchy(n, meq, mins, P.bounds is not None, float(damping))
         self._mod = mod
         self._solved = False
 
-    def solve(self, P: CompiledStack, warm: bool = True) -> tuple[np.ndarray, dict]:
-        """Solve with the numbers ``P`` holds (already refreshed and checked finite).
+    def solve(
+        self, P: CompiledStack, warm: bool = True, time_left: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray, dict]:
+        """Solve with the numbers ``P`` holds (already refreshed).
 
-        ``warm=False`` ignores the stored working sets (a cold solve, for benchmarks).
+        ``warm=False`` ignores the stored working sets (a cold solve, for benchmarks);
+        ``time_left`` (s, ``None``: no limit) bounds the active-set iterations.
 
         Returns
         -------
         x : ndarray, shape (n,)
             A new array (the solution).
+        residuals : ndarray, shape (levels,)
+            A new array: each level's value at ``x``.
         info : dict
             ``engine``, ``active_set_iterations`` (per level), ``hard_iterations``,
             ``min_norm_iterations``, ``warm_start_hits`` (stages whose stored working set
-            was optimal), ``closed_form_levels``.
+            was optimal), ``closed_form_levels``, ``uncertified`` (``[(level, deviation)]``
+            when a level's value at ``x`` moved from the one it was frozen with by more
+            than ``KKT_TOL`` relative: the lower levels left its optimal set by rounding).
 
         Raises
         ------
+        ValueError
+            A NaN or wrong-sided infinity in a task or the bounds (naming it).
         InfeasibleError
             Inconsistent hard equalities, or hard rows and bounds with no common point.
         SolverError
-            An active-set solve did not converge or the result is not finite.
+            An active-set solve did not converge or ran out of time, the result is not
+            finite, or it fails the check of the bounds and hard rows.
         """
-        for j, B in enumerate(self._blocks):
-            e0, e1 = self._eq[j], self._eq[j + 1]
-            if e1 > e0:
-                self.Aeq[e0:e1] = B.Ae
-                self.beq[e0:e1] = B.be
-            i0, i1 = self._in[j], self._in[j + 1]
-            if i1 > i0:
-                self.C[i0:i1] = B.C
-                self.lo[i0:i1] = B.lo
-                self.hi[i0:i1] = B.hi
-                self.sw[i0:i1] = B.sw
+        for B, A, b in self._eq_copies:
+            A[...] = B.Ae
+            b[...] = B.be
+        for B, C, lo, hi, sw in self._in_copies:
+            C[...] = B.C
+            lo[...] = B.lo
+            hi[...] = B.hi
+            sw[...] = B.sw
         if P.lb is not None:
-            self.lb[:] = P.lb
-            self.ub[:] = P.ub
-        mod = self._mod
+            self.lb[...] = P.lb
+            self.ub[...] = P.ub
         code = self._solver.solve(
             self.Aeq,
             self.beq,
@@ -221,29 +258,36 @@ class NativeHierarchy:
             self.lb,
             self.ub,
             self._solved and warm,
+            np.inf if time_left is None else time_left,
             self.x,
+            self.res,
             self.stats,
             self.detail,
         )
-        if code != mod.OK:
+        if code:
             self._solved = False  # the stored working sets may be from another problem
             self._raise(code, P)
         self._solved = True
         st = self.stats
+        iters = st[:, 0].tolist()
+        dev = float(self.detail[5])
         info = {
             "engine": "native",
-            "hard_iterations": int(st[0, 0]),
-            "active_set_iterations": [int(v) for v in st[1:-1, 0]],
-            "min_norm_iterations": int(st[-1, 0]),
+            "hard_iterations": int(iters[0]),
+            "active_set_iterations": [int(v) for v in iters[1:-1]],
+            "min_norm_iterations": int(iters[-1]),
             "warm_start_hits": int(st[:, 1].sum()),
-            "closed_form_levels": [int(k) for k in np.flatnonzero(st[1:-1, 2])],
-            "uncertified": [],
+            "closed_form_levels": np.flatnonzero(st[1:-1, 2]).tolist(),
+            "uncertified": [(int(self.detail[6]), dev)] if dev > KKT_TOL else [],
         }
-        return self.x.copy(), info
+        return self.x.copy(), self.res.copy(), info
 
     def _raise(self, code: int, P: CompiledStack) -> None:
         mod = self._mod
         d = self.detail
+        if code == mod.BAD_INPUT:
+            P.check_finite()  # names the NaN/inf (task or bounds) that reached the arrays
+            raise ValueError(f"native engine rejected the data (status {code})")
         if code == mod.INFEASIBLE_EQ:
             names = ", ".join(t.label for t in P.hard.eqs)
             raise InfeasibleError(
@@ -260,15 +304,29 @@ class NativeHierarchy:
                 "constraints: bounds and hard constraints are inconsistent (native engine's "
                 f"least-violation phase: no point within {d[1]:.3g} of them, relative)"
             )
+        k = int(d[2])
+        where = (
+            "the hard constraints"
+            if k == 0
+            else ("the minimum-norm step" if k == len(P.levels) + 1 else f"level {k - 1}")
+        )
         if code == mod.NOT_CONVERGED:
-            k = int(d[2])
-            where = (
-                "the hard constraints"
-                if k == 0
-                else ("the minimum-norm step" if k == len(P.levels) + 1 else f"level {k - 1}")
-            )
             raise SolverError(f"native engine: the active set of {where} did not converge")
+        if code == mod.TIME_LIMIT:
+            raise SolverError(f"native engine: time limit reached in the active set of {where}")
         if code == mod.NON_FINITE:
             raise SolverError("native engine produced a non-finite solution")
-        P.check_finite()  # names a NaN/inf that reached the tasks' arrays
-        raise ValueError(f"native engine rejected the data (status {code})")
+        if code == mod.CHECK_FAILED:  # the messages of Stack._check
+            if d[3] == 1:
+                i = int(d[4])
+                raise SolverError(
+                    f"backend 'native' returned x[{i}] = {self.x[i]!r} outside the bounds "
+                    f"[{P.lb[i]!r}, {P.ub[i]!r}]"
+                )
+            if d[3] == 2:
+                raise SolverError(
+                    "backend 'native' returned a point violating the hard equalities "
+                    f"(residual {d[4]:.3g})"
+                )
+            raise SolverError("backend 'native' returned a point violating the hard inequalities")
+        raise SolverError(f"native engine: unknown status {code}")

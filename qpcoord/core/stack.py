@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from .backends import check_solver, check_time_limit, deadline
+from .backends import check_solver, check_time_limit, deadline, time_left
 from .compile import compile_stack
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
 from .errors import SolverError
@@ -163,12 +163,16 @@ class Stack:
         strict : bool
             Raise :class:`~qpcoord.SolverError` instead of returning a solution whose
             ``status`` is ``"inaccurate"`` (a level whose optimality conditions could not be
-            certified, ``method="hierarchical"``).
+            certified, ``method="hierarchical"``). The native engine is exact (each level's
+            active set ends only on a working set whose multipliers have the right signs);
+            its own check is that every level keeps, at the returned ``x``, the value it was
+            frozen with (to ``KKT_TOL`` relative): ``"inaccurate"`` / ``SolverError`` if not.
         time_limit : float, optional
             Bound (s) on the whole solve, fallbacks included: no QP starts after it and
             each backend gets the time left (``None``: ``DEFAULT_TIME_LIMIT`` = 10 s of
             :mod:`qpcoord.core.backends`; ``math.inf``: no limit). The linear algebra
-            between QPs is not interrupted.
+            between QPs is not interrupted. The native engine checks it at every active-set
+            iteration (the same ``SolverError`` message).
         engine : {None, "native", "python"}
             ``"native"``: the compiled solver of :mod:`qpcoord.core.native` (method
             ``"hierarchical"`` only, no ``solver``; warm-started from the previous call's
@@ -201,7 +205,7 @@ class Stack:
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
         if resolve_engine(engine, method, solver) == "native":
-            return self._solve_native(t0, warm_start)
+            return self._solve_native(t0, warm_start, strict)
         P = self._compiled
         P.refresh()
         x_warm = self._warm(warm_start)
@@ -264,20 +268,33 @@ class Stack:
             info=info,
         )
 
-    def _solve_native(self, t0: float, warm_start) -> Solution:
-        """``method="hierarchical"`` with the native engine (checked like the Python one)."""
+    def _solve_native(self, t0: float, warm_start, strict: bool) -> Solution:
+        """``method="hierarchical"`` with the native engine. The native call checks the data
+        (finite), the returned ``x`` (bounds and hard rows, as :meth:`_check`) and computes
+        the level values: no per-call Python pass over the levels here."""
         P = self._compiled
         P.refresh()
-        self._warm(warm_start)  # validated; the engine warm-starts from its working sets
-        P.check_finite()
+        if warm_start is not None:
+            self._warm(warm_start)  # validated; the engine warm-starts from its working sets
         if self._native is None:
             self._native = NativeHierarchy(P, self.damping)
-        x, info = self._native.solve(P)
-        self._check(x, None, "native")
+        x, residuals, info = self._native.solve(P, time_left=time_left())
+        status = "optimal"
+        bad = info["uncertified"]
+        if bad:
+            status = "inaccurate"
+            k, dev = bad[0]
+            info["inaccurate"] = {"level": k, "kkt_residual": dev}
+            if strict:
+                raise SolverError(
+                    f"level {k}: the answer could not be certified optimal (its value moved "
+                    f"by {dev:.3g}, relative, after it was frozen; tolerance {KKT_TOL:g}) "
+                    "with backend 'native'"
+                )
         return Solution(
             x=x,
-            status="optimal",
-            level_residuals=np.array([L.residual(x) for L in P.levels]),
+            status=status,
+            level_residuals=residuals,
             solver="native",
             solve_time=time.perf_counter() - t0,
             method="hierarchical",

@@ -19,6 +19,8 @@ NB_MODULE(_native, m) {
   m.attr("NON_FINITE") = static_cast<int>(qpcoord::kNonFinite);
   m.attr("NOT_CONVERGED") = static_cast<int>(qpcoord::kNotConverged);
   m.attr("BAD_INPUT") = static_cast<int>(qpcoord::kBadInput);
+  m.attr("TIME_LIMIT") = static_cast<int>(qpcoord::kTimeLimit);
+  m.attr("CHECK_FAILED") = static_cast<int>(qpcoord::kCheckFailed);
 
   nb::class_<Hierarchy>(m, "Hierarchy",
                         "Strict-hierarchy least squares of one stack structure (sizes fixed).")
@@ -29,16 +31,19 @@ NB_MODULE(_native, m) {
           [](Hierarchy& h, nb::DRef<const Mat> Aeq, nb::DRef<const Vec> beq,
              nb::DRef<const Mat> C, nb::DRef<const Vec> lo, nb::DRef<const Vec> hi,
              nb::DRef<const Vec> sw, nb::DRef<const Vec> lb, nb::DRef<const Vec> ub, bool warm,
-             nb::DRef<Vec> x_out, nb::DRef<Mat> stats, nb::DRef<Vec> detail) {
+             double time_left, nb::DRef<Vec> x_out, nb::DRef<Vec> res_out, nb::DRef<Mat> stats,
+             nb::DRef<Vec> detail) {
             try {
-              return h.solve(Aeq, beq, C, lo, hi, sw, lb, ub, warm, x_out, stats, detail);
+              return h.solve(Aeq, beq, C, lo, hi, sw, lb, ub, warm, time_left, x_out, res_out,
+                             stats, detail);
             } catch (const std::bad_alloc&) {
               return static_cast<int>(qpcoord::kBadInput);
             }
           },
           nb::arg("Aeq"), nb::arg("beq"), nb::arg("C"), nb::arg("lo"), nb::arg("hi"),
-          nb::arg("sw"), nb::arg("lb"), nb::arg("ub"), nb::arg("warm"), nb::arg("x_out"),
-          nb::arg("stats"), nb::arg("detail"))
+          nb::arg("sw"), nb::arg("lb"), nb::arg("ub"), nb::arg("warm"),
+          nb::arg("time_left"), nb::arg("x_out"), nb::arg("res_out"), nb::arg("stats"),
+          nb::arg("detail"))
       .def_prop_ro("n", &Hierarchy::n)
       .def_prop_ro("num_levels", &Hierarchy::num_levels)
       .def_prop_ro("damping", &Hierarchy::damping);

@@ -18,9 +18,13 @@ constexpr double kViolationTol = 1e-6;  // VIOLATION_TOL: a row counts as violat
 constexpr double kAbsFloor = 1e-14;
 constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every row to this
 constexpr int kIterFactor = 6;
+constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
+constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
+inline double widen_lo_by(double lo, double tol) { return lo - tol * std::max(1.0, std::abs(lo)); }
+inline double widen_hi_by(double hi, double tol) { return hi + tol * std::max(1.0, std::abs(hi)); }
 inline bool in_box(double v, double lo, double hi) {
   return v >= widen_lo(lo) && v <= widen_hi(hi);
 }
@@ -89,6 +93,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   }
   capacity_ = c;
   x_.resize(n);
+  frozen_value_.setZero(std::max(blocks - 1, 1));
   Z_.resize(n, n);
   Cin_.resize(std::max(capacity_, 1), n);
   lin_.resize(std::max(capacity_, 1));
@@ -197,11 +202,31 @@ void Hierarchy::null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, 
   N = Qf.rightCols(k - rank);
 }
 
+/// The minimum-norm least-squares step in span(N): min ||Q (y + N s) - c||, res = Q y - c.
+/// Numerical rank as qpcoord.core.linalg.numerical_rank with the scale of Q before
+/// projection: a K = Q N whose columns are rounding noise (the working set's rows span what
+/// Q can change) is rank 0, not a full-rank matrix of size 1e-16.
+static void subspace_step(const Eigen::Ref<const Mat>& Q, const Mat& N, const Vec& res, double qscale,
+                   Vec& step) {
+  const Mat K = Q * N;
+  const double kmax = K.colwise().norm().maxCoeff();  // the first pivot of a pivoted QR
+  const double tol = std::max(K.rows(), K.cols()) * kEps * std::max(kmax, qscale);
+  if (kmax > tol) {
+    Eigen::CompleteOrthogonalDecomposition<Mat> cod;
+    cod.setThreshold(tol / kmax);
+    cod.compute(K);
+    step.noalias() = N * cod.solve(-res);
+  } else {
+    step.setZero();
+  }
+}
+
 bool Hierarchy::multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
-                               int* drop) {
+                               int* drop, const std::vector<char>* keep, bool bland) {
   const int k = P.cols;
-  const Vec res = P.Q.topLeftCorner(P.qrows, k) * y - P.c.head(P.qrows);
-  const Vec g = P.Q.topLeftCorner(P.qrows, k).transpose() * res;
+  const auto Q = P.Q.topLeftCorner(P.qrows, k);
+  const Vec res = Q * y - P.c.head(P.qrows);
+  const Vec g = Q.transpose() * res;
   std::vector<int> idx;
   for (int i = 0; i < P.rows; ++i)
     if (W[i]) idx.push_back(i);
@@ -211,18 +236,34 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Vec& y, const std::vec
     const double sign = (W[idx[j]] == 1) ? -1.0 : 1.0;
     A.col(static_cast<int>(j)) = sign * P.G.row(idx[j]).head(k).transpose();
   }
-  const Vec mu = A.completeOrthogonalDecomposition().solve(g);
+  Eigen::CompleteOrthogonalDecomposition<Mat> cod(A);
+  cod.setThreshold(std::max(k, static_cast<int>(idx.size())) * kEps);
+  const Vec mu = cod.solve(g);
+  // a multiplier counts as negative beyond the sign tolerance (relative to the gradient) and
+  // beyond the rounding of the gradient itself (g = Q^T (Q y - c) in floating point)
+  const double qn = Q.norm();
   const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
+  const double round =
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c.head(P.qrows).norm());
+  const double tol = kKktTol * gref + round;
   int jmin = -1;
   double mmin = kInf;
   for (size_t j = 0; j < idx.size(); ++j) {
-    if (W[idx[j]] == 2) continue;  // equalities are never dropped
-    if (mu(static_cast<int>(j)) < mmin) {
-      mmin = mu(static_cast<int>(j));
-      jmin = idx[j];
+    const int i = idx[j];
+    if (W[i] == 2) continue;            // equalities are never dropped
+    if (keep && (*keep)[i]) continue;   // re-blocked right after a drop: multiplier is zero
+    const double v = mu(static_cast<int>(j));
+    if (v >= -tol) continue;
+    if (bland) {  // degenerate stretch: the lowest index with a negative multiplier
+      jmin = i;
+      break;
+    }
+    if (v < mmin) {
+      mmin = v;
+      jmin = i;
     }
   }
-  if (jmin < 0 || mmin >= -kKktTol * gref) return true;
+  if (jmin < 0) return true;
   if (drop) *drop = jmin;
   return false;
 }
@@ -233,34 +274,45 @@ bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, 
   const auto Q = P.Q.topLeftCorner(P.qrows, k);
   const auto c = P.c.head(P.qrows);
   const double cn = c.norm();
+  const double qscale = Q.norm();
   const int max_iter = kIterFactor * (m + k) + 10;
   Mat N;
   Vec step(k), res, dres, gy(m), gp(m);
+  // anti-cycling: a row dropped for a negative multiplier that blocks the very next step at
+  // once had a multiplier that is zero to rounding; it is put back and kept ("keep") until
+  // the point moves. After several steps of length zero in a row, Bland's rule (lowest
+  // index) chooses the row to drop; ties in the ratio test go to the lowest index always.
+  std::vector<char> keep(m, 0);
+  int last_drop = -1;
+  int zero_steps = 0;
   for (int it = 0; it < max_iter; ++it) {
+    if (out_of_time()) {
+      timed_out_ = true;
+      return false;
+    }
     ++iters;
     null_of_rows(P, W, N);
     res = Q * y - c;
     if (N.cols() > 0) {
-      const Mat K = Q * N;
-      const Vec s = K.completeOrthogonalDecomposition().solve(-res);
-      step.noalias() = N * s;
+      subspace_step(Q, N, res, qscale, step);
     } else {
       step.setZero();
     }
     dres = Q * step;
     const double gain = -(2.0 * res.dot(dres) + dres.squaredNorm());
     const double smax = step.cwiseAbs().maxCoeff();
+    const double yscale = std::max(1.0, y.cwiseAbs().maxCoeff());
     // stationary on W: the step no longer decreases the objective measurably (relative to
     // its value, with a floor at rounding of the data's scale), or it is rounding itself
     const double floor = 1e-28 * std::max(cn * cn, (Q * y).squaredNorm());
-    if (gain <= 1e-15 * res.squaredNorm() + floor ||
-        smax <= 1e-15 * std::max(1.0, y.cwiseAbs().maxCoeff())) {
+    if (gain <= 1e-15 * res.squaredNorm() + floor || smax <= 1e-15 * yscale) {
       int drop = -1;
-      if (multipliers_ok(P, y, W, &drop)) return true;
+      if (multipliers_ok(P, y, W, &drop, &keep, zero_steps > kBlandAfter)) return true;
       W[drop] = 0;
+      last_drop = drop;
       continue;
     }
-    // ratio test on the rows outside the working set
+    // ratio test on the rows outside the working set (ties: the lowest index)
     double alpha = 1.0;
     int block = -1;
     int8_t side = 0;
@@ -285,6 +337,20 @@ bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, 
           side = sd;
         }
       }
+    }
+    const bool moved = alpha * smax > 1e-14 * yscale;
+    if (!moved && block >= 0 && block == last_drop) {
+      W[block] = side;  // its multiplier was zero to rounding: back, and kept
+      keep[block] = 1;
+      last_drop = -1;
+      continue;
+    }
+    last_drop = -1;
+    if (moved) {
+      std::fill(keep.begin(), keep.end(), 0);
+      zero_steps = 0;
+    } else {
+      ++zero_steps;
     }
     y += alpha * step;
     if (block >= 0) W[block] = side;
@@ -327,8 +393,9 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Vec& y,
   if (N.cols() > 0) {
     const auto Q = P.Q.topLeftCorner(P.qrows, k);
     const Vec res = Q * yp - P.c.head(P.qrows);
-    const Mat K = Q * N;
-    yp += N * K.completeOrthogonalDecomposition().solve(-res);
+    Vec step(k);
+    subspace_step(Q, N, res, Q.norm(), step);
+    yp += step;
   }
   const Vec gy = P.G.topLeftCorner(P.rows, k) * yp;
   for (int i = 0; i < P.rows; ++i) {
@@ -336,7 +403,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Vec& y,
     const double su = kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)));
     if (gy(i) < P.lo(i) - sl || gy(i) > P.hi(i) + su) return false;
   }
-  if (!multipliers_ok(P, yp, W, nullptr)) return false;
+  if (!multipliers_ok(P, yp, W, nullptr, nullptr, false)) return false;
   y.head(k) = yp;
   return true;
 }
@@ -444,7 +511,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
     if (!active_set(P, y, W_, iters)) {
       detail(2) = 0;
-      return kNotConverged;
+      return timed_out_ ? kTimeLimit : kNotConverged;
     }
   }
   store_working_set(P, W_, working_[0]);
@@ -577,7 +644,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       const double v = C.row(row).dot(x_);
       y(r_ + j) = (v > hi(row)) ? v - hi(row) : ((v < lo(row)) ? v - lo(row) : 0.0);
     }
-    if (!active_set(P, y, W_, iters)) return kNotConverged;
+    if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
   }
   store_working_set(P, W_, working_[stage]);
   stats(stage, 0) = iters;
@@ -643,7 +710,7 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
     for (int i = 0; i < P.rows; ++i)
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
     y.setZero();
-    if (!active_set(P, y, W_, iters)) return kNotConverged;
+    if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
   }
   store_working_set(P, W_, working_[stage]);
   stats(stage, 0) = iters;
@@ -653,23 +720,48 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   return kOk;
 }
 
+double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
+                              const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi,
+                              const CRef<Vec>& sw, const Vec& x) const {
+  const int b = k + 1;
+  double total = 0.0;
+  if (meq_[b]) total += (Aeq.middleRows(eq0_[b], meq_[b]) * x - beq.segment(eq0_[b], meq_[b]))
+                            .squaredNorm();
+  for (int i = in0_[b]; i < in0_[b] + min_[b]; ++i) {
+    const double v = C.row(i).dot(x);
+    const double gap = sw(i) * (v - std::min(std::max(v, lo(i)), hi(i)));
+    total += gap * gap;
+  }
+  return std::sqrt(total);
+}
+
 int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                      const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
-                     const CRef<Vec>& lb, const CRef<Vec>& ub, bool warm, MRef<Vec> x_out,
-                     MRef<Mat> stats, MRef<Vec> detail) {
+                     const CRef<Vec>& lb, const CRef<Vec>& ub, bool warm, double time_left,
+                     MRef<Vec> x_out, MRef<Vec> res_out, MRef<Mat> stats, MRef<Vec> detail) {
   const int L = num_levels();
   const int me = eq0_.back() + meq_.back();
   const int mi = in0_.back() + min_.back();
   if (Aeq.rows() != me || Aeq.cols() != n_ || beq.size() != me || C.rows() != mi ||
       C.cols() != n_ || lo.size() != mi || hi.size() != mi || sw.size() != mi ||
-      lb.size() != n_ || ub.size() != n_ || x_out.size() != n_ || stats.rows() != L + 2 ||
-      stats.cols() != 3 || detail.size() < 4)
+      lb.size() != n_ || ub.size() != n_ || x_out.size() != n_ || res_out.size() != L ||
+      stats.rows() != L + 2 || stats.cols() != 3 || detail.size() < 8)
     return kBadInput;
   if (!Aeq.allFinite() || !beq.allFinite() || !C.allFinite() || !sw.allFinite() ||
       lo.hasNaN() || hi.hasNaN() || lb.hasNaN() || ub.hasNaN())
     return kBadInput;
+  for (int i = 0; i < mi; ++i)  // wrong-sided infinities
+    if (lo(i) == kInf || hi(i) == -kInf) return kBadInput;
+  for (int j = 0; j < n_; ++j)
+    if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
   stats.setZero();
   detail.setZero();
+  timed_out_ = false;
+  has_deadline_ = std::isfinite(time_left);
+  if (has_deadline_)
+    deadline_ = std::chrono::steady_clock::now() +
+                std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                    std::chrono::duration<double>(std::max(time_left, 0.0)));
   lb_ = lb;
   ub_ = ub;
   int st = hard_phase(Aeq, beq, C, lo, hi, stats, detail, warm);
@@ -680,6 +772,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
       detail(2) = k + 1;
       return st;
     }
+    frozen_value_(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_);
   }
   st = min_norm(stats, warm);
   if (st != kOk) {
@@ -687,6 +780,42 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     return st;
   }
   if (!x_.allFinite()) return kNonFinite;
+  // the check of every returned x (as Stack._check): bounds, hard equalities, hard rows
+  for (int j = 0; has_bounds_ && j < n_; ++j) {
+    if (!(x_(j) >= widen_lo_by(lb_(j), kCheckTol) && x_(j) <= widen_hi_by(ub_(j), kCheckTol))) {
+      detail(3) = 1;
+      detail(4) = j;
+      x_out = x_;
+      return kCheckFailed;
+    }
+  }
+  if (meq_[0]) {
+    const double scale = std::max(1.0, beq.head(meq_[0]).cwiseAbs().maxCoeff());
+    const Vec r = Aeq.topRows(meq_[0]) * x_ - beq.head(meq_[0]);
+    if (r.cwiseAbs().maxCoeff() > kCheckTol * scale) {
+      detail(3) = 2;
+      detail(4) = r.norm();
+      return kCheckFailed;
+    }
+  }
+  for (int i = 0; i < min_[0]; ++i) {
+    const double v = C.row(i).dot(x_);
+    if (!(v >= widen_lo_by(lo(i), kCheckTol) && v <= widen_hi_by(hi(i), kCheckTol))) {
+      detail(3) = 3;
+      detail(4) = i;
+      return kCheckFailed;
+    }
+  }
+  // each level keeps the value it was frozen with (lower levels move in its optimal set
+  // only): the worst deviation, relative, is reported (Python: status "inaccurate")
+  for (int k = 0; k < L; ++k) {
+    res_out(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_);
+    const double dev = std::abs(res_out(k) - frozen_value_(k)) / std::max(1.0, frozen_value_(k));
+    if (dev > detail(5)) {
+      detail(5) = dev;
+      detail(6) = k;
+    }
+  }
   x_out = x_;
   return kOk;
 }

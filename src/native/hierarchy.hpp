@@ -15,12 +15,13 @@
 #pragma once
 
 #include <Eigen/Dense>
+#include <chrono>
 #include <cstdint>
 #include <vector>
 
 namespace qpcoord {
 
-inline constexpr int kAbiVersion = 1;
+inline constexpr int kAbiVersion = 2;
 
 using Mat = Eigen::MatrixXd;
 using Vec = Eigen::VectorXd;
@@ -37,6 +38,10 @@ enum Status : int {
   kNonFinite = 3,       ///< a non-finite number in the result
   kNotConverged = 4,    ///< an active-set solve hit its iteration limit (detail[2]: stage)
   kBadInput = 5,        ///< wrong shapes or non-finite data
+  kTimeLimit = 6,       ///< the time limit passed during an active-set solve (detail[2]: stage)
+  kCheckFailed = 7,     ///< the final x fails the check of the bounds or hard rows
+                        ///< (detail[3]: 1 bounds, 2 hard equalities, 3 hard inequalities;
+                        ///< detail[4]: the offending index or residual norm)
 };
 
 /// min 1/2 ||Q y - c||^2  s.t.  lo <= G y <= hi  (rows of G normalised), with row ids.
@@ -64,10 +69,15 @@ class Hierarchy {
   /// Solve with the current numbers. Rows are stacked block after block (hard first).
   /// stats: (levels + 2) x 3 doubles, per stage (hard, levels..., min-norm):
   ///   active-set iterations, warm-start hit (0/1), closed form accepted (0/1).
-  /// detail: 4 doubles (hard eq residual, hard violation, failing stage, unused).
+  /// detail: 8 doubles (hard eq residual, hard violation, failing stage, check kind, check
+  /// index or residual, worst level consistency deviation (relative), its level, unused).
+  /// res_out: each level's value at x (norm of the weighted equality residual and
+  /// inequality violation, as CompiledLevel.residual). time_left: seconds (inf: none),
+  /// checked at every active-set iteration.
   int solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C, const CRef<Vec>& lo,
             const CRef<Vec>& hi, const CRef<Vec>& sw, const CRef<Vec>& lb, const CRef<Vec>& ub,
-            bool warm, MRef<Vec> x_out, MRef<Mat> stats, MRef<Vec> detail);
+            bool warm, double time_left, MRef<Vec> x_out, MRef<Vec> res_out, MRef<Mat> stats,
+            MRef<Vec> detail);
 
   int n() const { return n_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
@@ -100,8 +110,10 @@ class Hierarchy {
   /// Try a stored working set: solve on it, check feasibility and multiplier signs.
   bool try_working_set(const LsqProblem& P, const Working& ws, Vec& y, std::vector<int8_t>& W);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// Multiplier signs on W; else the row to drop in *drop (the most negative multiplier, or
+  /// with bland the lowest index); rows flagged in keep are not dropped.
   bool multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
-                      int* drop);
+                      int* drop, const std::vector<char>* keep, bool bland);
   void null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, Mat& N);
 
   int n_;
@@ -119,6 +131,18 @@ class Hierarchy {
   std::vector<int> inid_;
   int k_ = 0;
   Vec lb_, ub_;
+
+  double level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                     const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                     const Vec& x) const;
+  bool out_of_time() const {
+    return has_deadline_ && std::chrono::steady_clock::now() >= deadline_;
+  }
+
+  bool has_deadline_ = false;
+  bool timed_out_ = false;
+  std::chrono::steady_clock::time_point deadline_;
+  Vec frozen_value_;  ///< each level's value when it was frozen
 
   std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
   LsqProblem P_;

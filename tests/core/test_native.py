@@ -12,6 +12,7 @@ they simulate a missing extension.
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
 
@@ -288,3 +289,66 @@ def test_solve_stack_engine():
     sol = qc.solve_stack([qc.Equality(np.eye(2), [3.0, -3.0])], engine="native")
     assert sol.solver == "native"
     np.testing.assert_allclose(sol.x, [3.0, -3.0])
+
+
+@needs_native
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_wrong_sided_infinity_in_the_bounds_is_named(engine):
+    s = qc.Stack([qc.Equality(np.eye(2), [1.0, 1.0])], bounds=qc.Bounds(-2.0, 2.0))
+    s.solve(engine=engine)
+    _force_write(s._compiled.lb, (0,), np.inf)  # reached the array without a setter
+    with pytest.raises(ValueError, match="found at solve time"):
+        s.solve(engine=engine)
+
+
+def _hard_random_stack(seed: int, n: int = 40, levels: int = 8) -> qc.Stack:
+    """Levels of unit inequality rows that conflict: many active-set iterations."""
+    rng = np.random.default_rng(seed)
+    tasks = []
+    for _ in range(levels):
+        C = rng.standard_normal((15, n))
+        C /= np.linalg.norm(C, axis=1)[:, None]
+        lo = rng.uniform(0.2, 1.0, 15)
+        tasks.append(
+            [
+                qc.Equality(rng.standard_normal((4, n)), rng.standard_normal(4)),
+                qc.Inequality(C, lo, lo + 0.1),
+            ]
+        )
+    return qc.Stack(tasks, bounds=qc.Bounds(-np.ones(n), np.ones(n)))
+
+
+@needs_native
+def test_time_limit_gives_the_python_engines_error():
+    """An expired deadline ends the native active set with the Python engine's message."""
+    s = _hard_random_stack(0)
+    with pytest.raises(qc.SolverError, match=r"time limit of 1e-09 s reached.*native engine"):
+        s.solve(engine="native", time_limit=1e-9)
+    sn = s.solve(engine="native", time_limit=math.inf)  # not poisoned: a cold solve
+    _same(s.solve(engine="python"), sn)
+
+
+@needs_native
+def test_level_values_are_computed_natively():
+    """The level values the native call returns are each level's residual at x."""
+    s = _hard_random_stack(1)
+    sol = s.solve(engine="native")
+    ref = np.array([L.residual(sol.x) for L in s._compiled.levels])
+    np.testing.assert_allclose(sol.level_residuals, ref, rtol=1e-12, atol=1e-14)
+    assert sol.status == "optimal" and not sol.info["uncertified"]
+    assert s.solve(engine="native", strict=True).status == "optimal"
+
+
+@needs_native
+def test_repeated_calls_reuse_the_buffers():
+    """The per-step path writes into the buffers built at the first call: the arrays the
+    native call receives are the same objects every step (no per-call allocation on the
+    Python side beyond the returned copies)."""
+    s = _hard_random_stack(2)
+    s.solve(engine="native")
+    nh = s._native
+    ids = [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)]
+    for _ in range(5):
+        s.solve(engine="native")
+    assert s._native is nh
+    assert [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)] == ids

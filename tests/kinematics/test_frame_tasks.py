@@ -432,9 +432,14 @@ def test_support_polygon_rows(talos_standing):
     np.testing.assert_allclose(t.upper[:4], 10.0 * (-0.01 - e[:4]), atol=1e-12)
 
 
-def test_support_polygon_holds_the_com_with_feet_fixed(talos_standing):
+@pytest.mark.parametrize("engine", ["default", "native"])
+def test_support_polygon_holds_the_com_with_feet_fixed(talos_standing, engine, monkeypatch):
     """Feet (level 0), polygon (level 1), CoM pulled 30 cm forward (level 2): the CoM
-    stops at the shrunk front edge; a polygon ahead of the CoM pulls it in."""
+    stops at the shrunk front edge; a polygon ahead of the CoM pulls it in. The native
+    variant is a regression test: its active set cycled on the CoM level (a working set
+    numerically rank-deficient to 6e-16 relative, counted as full rank)."""
+    if engine == "native":
+        _native_default(monkeypatch)
     robot, q0 = talos_standing
     soles = ["left_sole_link", "right_sole_link"]
     dt = 0.01
@@ -467,6 +472,15 @@ def test_support_polygon_holds_the_com_with_feet_fixed(talos_standing):
             assert violations[0] > 0.1  # started far outside
             assert violations[-1] <= 1e-6  # pushed back in
             assert np.all(np.diff(violations[:50]) < 0)
+
+
+def _native_default(monkeypatch) -> None:
+    """Make the native engine the default of every ``Stack.solve`` (skip if not built)."""
+    from qpcoord.core import native
+
+    if not native.available():
+        pytest.skip(f"the native engine is not built: {native._load_error}")
+    monkeypatch.setattr(native, "DEFAULT_ENGINE", "native")
 
 
 def test_hull():

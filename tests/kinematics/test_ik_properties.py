@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -56,9 +57,17 @@ def test_strict_ik_near_singular_speed_limited_case_solves():
     test_strict_ik_respects_bounds_and_is_never_worse_on_its_first_level.hypothesis.inner_test(case)
 
 
-def test_strict_ik_small_speed_bound_is_not_exceeded():
+@pytest.mark.parametrize("engine", ["default", "native"])
+def test_strict_ik_small_speed_bound_is_not_exceeded(engine, monkeypatch):
     """Planar 3R almost stretched, a 0.125 rad/s speed limit that the position task saturates:
-    the bound must hold to 1e-9 relative."""
+    the bound must hold to 1e-9 relative. The native variant is a regression test: its
+    active set cycled (a multiplier zero to rounding dropped, the row re-blocking at once)."""
+    if engine == "native":
+        from qpcoord.core import native
+
+        if not native.available():
+            pytest.skip(f"the native engine is not built: {native._load_error}")
+        monkeypatch.setattr(native, "DEFAULT_ENGINE", "native")
     case = (
         3,
         np.array([0.0, 6.10351562e-05, 1e-8]),
