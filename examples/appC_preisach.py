@@ -181,8 +181,11 @@ def preisach_claims(summary: dict, sine_s: float, stoch_s: float) -> list[dict]:
             "Criterion: reduction factor ≥ 902/79 = 11.4 on each stack. The uncompensated "
             "error (straight line through the major loop's end points: the sine spans the "
             "stroke) is comparable to the thesis's."
-            + (" The stack decides: the result is not a property of the method." if st ==
-               "inconclusive" and sine_ok else "")
+            + (
+                " The stack decides: the result is not a property of the method."
+                if st == "inconclusive" and sine_ok
+                else ""
+            )
             + synthetic
             + after
             + (
@@ -245,8 +248,11 @@ def preisach_claims(summary: dict, sine_s: float, stoch_s: float) -> list[dict]:
             "Criterion: level-matched compensated ≤ 33 % of level-matched uncompensated on "
             "each stack (uncompensated command: see preisach_claims; before issue 18 the raw "
             "error with our uncalibrated offset was judged)."
-            + (" The stack decides: the result is not a property of the method." if st ==
-               "inconclusive" and full else "")
+            + (
+                " The stack decides: the result is not a property of the method."
+                if st == "inconclusive" and full
+                else ""
+            )
             + synthetic
             + after
             + (short if not full else ""),

@@ -125,9 +125,7 @@ def simulate(
     if s.shape != (times.size, m):
         raise ValueError(f"excitations must have shape {(times.size, m)}, got {s.shape}")
     if not np.all(np.isfinite(s)) or s.min() < -1e-9 or s.max() > 1.0 + 1e-9:
-        raise ValueError(
-            f"excitations must lie in [0, 1], got min {s.min()!r}, max {s.max()!r}"
-        )
+        raise ValueError(f"excitations must lie in [0, 1], got min {s.min()!r}, max {s.max()!r}")
     for what, v in (("dt", dt), ("tau", tau)):
         if not (np.isfinite(v) and v > 0.0):
             raise ValueError(f"{what} must be a positive time (s), got {v!r}")

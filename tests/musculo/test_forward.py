@@ -55,8 +55,10 @@ def test_open_loop_follows_the_static_optimum_at_first(model):
     qdds = np.gradient(qds, t, axis=0)
     share = musculo.MuscleSharing(model)
     s = np.array(
-        [share.solve(qs[k], model.generalised_forces(qs[k], qds[k], qdds[k])).activations
-         for k in range(len(t))]
+        [
+            share.solve(qs[k], model.generalised_forces(qs[k], qds[k], qdds[k])).activations
+            for k in range(len(t))
+        ]
     )
     run = simulate(model, t, np.clip(s, 0, 1), qs[0], qds[0], dt=5e-4)
     k = np.searchsorted(run.t, 0.1)
@@ -75,9 +77,7 @@ def test_open_loop_follows_the_static_optimum_at_first(model):
     ],
 )
 def test_bad_input(model, kw, match):
-    args = dict(
-        times=[0.0, 0.1], excitations=np.zeros((2, 11)), q0=np.zeros(3), qd0=np.zeros(3)
-    )
+    args = dict(times=[0.0, 0.1], excitations=np.zeros((2, 11)), q0=np.zeros(3), qd0=np.zeros(3))
     args.update(kw)
     with pytest.raises(ValueError, match=match):
         simulate(model, **args)
