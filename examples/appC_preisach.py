@@ -115,124 +115,169 @@ def per_sample_us(fn, values, repeats: int = 5) -> float:
     return float(np.median(times)) * 1e6
 
 
+#: How the claims are judged on two synthetic stacks (issue 18, finding 9; chosen after the
+#: audit had measured both): the thesis's S-325 departs from a Preisach system by an unknown
+#: amount, and our two stacks bracket it -- the relay stack (3000 relays off the mesh + 4 %
+#: Bouc–Wen, close to Preisach) and the pure Bouc–Wen stack (minor loops that do not close,
+#: harsher than a real stack). A claim is reproduced if it holds on both, differs if it fails
+#: on both, and is inconclusive if the stack decides.
+STACKS = ("relay", "bouc_wen")
+STACK_NAMES = {"relay": "relay stack", "bouc_wen": "Bouc–Wen stack"}
+
+
+def _both(oks: dict) -> str:
+    if all(oks.values()):
+        return "reproduced"
+    if not any(oks.values()):
+        return "differs"
+    return "inconclusive"
+
+
 def preisach_claims(summary: dict, sine_s: float, stoch_s: float) -> list[dict]:
     """Claim rows (``qpcoord.studies.claims.claim``) for appendix C, Figs C.7–C.10.
 
-    Judged on the default synthetic stack (``RelayPiezo``, static case). The sine's error
+    Judged on both synthetic stacks (:data:`STACKS`, static case): reproduced if the claim
+    holds on both, differs if on neither, inconclusive if the stack decides. The sine's error
     is periodic after its first period, so any run with ≥ 1 period after the first decides
-    the sine rows; the stochastic rows need the full 20 s record (``--quick``: 2 s).
+    the sine rows; the stochastic rows are judged on the 20 s record (quick and full runs).
+
+    The stochastic rows compare the *level-matched* uncompensated command, as the thesis's
+    numbers imply: its "simple open-loop control" (§C.3) gives 134 nm rms on a 2 µm
+    peak-to-peak signal (6.7 % of it), which excludes an uncalibrated static offset (ours,
+    the straight line through the major loop's end points, is 1.7 µm off at mid-stroke);
+    the thesis does not say how the operating point was set, so both commands are trimmed
+    by a constant output offset (the error about its mean). The raw numbers are shown too.
     """
     plants = summary["plants"]
-    relay = plants["relay"]
-    bw = plants.get("bouc_wen")
+    missing = [k for k in STACKS if k not in plants]
+    if missing:
+        raise ValueError(f"appendix C claims need the stacks {STACKS}; missing {missing}")
     synthetic = (
-        " The plant is synthetic, not the thesis's S-325: how close the compensated error "
-        "comes to zero is set by how far the stack departs from a Preisach system, which is "
-        "our modelling choice (relay stack: 3000 relays off the mesh + 4 % Bouc–Wen)."
+        " The stacks are synthetic, not the thesis's S-325: how close the compensated error "
+        "comes to zero is set by how far the stack departs from a Preisach system (our "
+        "modelling choice), so both stacks are judged."
+    )
+    after = (
+        " The two-stack rule was set after the audit had measured both stacks (issue 18, "
+        "finding 9); before, only the relay stack was judged."
     )
     out = []
-    e = relay["sine_static"]
-    lin, comp = e["linear"]["rms_nm"], e["compensated"]["rms_nm"]
-    b = bw["sine_static"] if bw else None
-    extra = (
-        f"; pure Bouc–Wen stack {b['linear']['rms_nm']:.0f} → "
-        f"{b['compensated']['rms_nm']:.0f} nm (×{b['ratio_rms']:.1f})"
-        if b
-        else ""
-    )
     sine_ok = sine_s >= 2.0  # the first period is excluded
-    ok = e["ratio_rms"] >= 902.0 / 79.0
-    st = ("reproduced" if ok else "differs") if sine_ok else "inconclusive"
+    sine = {k: plants[k]["sine_static"] for k in STACKS}
+    oks = {k: e["ratio_rms"] >= 902.0 / 79.0 for k, e in sine.items()}
+    st = _both(oks) if sine_ok else "inconclusive"
     out.append(
         claim(
             "figC.8-sine-improvement",
             "The inverse Preisach compensator cuts the open-loop error on a 1 Hz sine by an "
             "order of magnitude (902 → 79 nm rms, ×11.4).",
             "App. C.3, Figs C.7–C.8: 902 → ≈ 79 nm rms, max ≈ 150 nm (hardware, piezo alone)",
-            f"relay stack {lin:.0f} → {comp:.1f} nm rms (×{e['ratio_rms']:.1f}), max "
-            f"{e['compensated']['max_abs_nm']:.0f} nm{extra}",
+            "; ".join(
+                f"{STACK_NAMES[k]} {e['linear']['rms_nm']:.0f} → {e['compensated']['rms_nm']:.1f}"
+                f" nm rms (×{e['ratio_rms']:.1f}), max {e['compensated']['max_abs_nm']:.0f} nm"
+                for k, e in sine.items()
+            ),
             st,
-            "Criterion: reduction factor on the relay stack ≥ 902/79 = 11.4. The uncompensated "
-            "error is comparable to the thesis's (its size is set by the synthetic stack's "
-            "≈ 10 % loop width)."
+            "Criterion: reduction factor ≥ 902/79 = 11.4 on each stack. The uncompensated "
+            "error (straight line through the major loop's end points: the sine spans the "
+            "stroke) is comparable to the thesis's."
             + (
-                f" The pure Bouc–Wen stack (minor loops that do not close, harsher than a real "
-                f"stack) gains ×{b['ratio_rms']:.1f}: the result depends on the stack."
-                if b
+                " The stack decides: the result is not a property of the method."
+                if st == "inconclusive" and sine_ok
                 else ""
             )
             + synthetic
+            + after
             + (
                 " This run has no full sine period after the first: a ≥ 2 s sine decides."
-                if st == "inconclusive"
+                if not sine_ok
                 else ""
             ),
+            cause="our model" if st == "differs" else "",
         )
     )
-    ok = abs(comp - 79.0) <= 0.3 * 79.0
-    st = ("reproduced" if ok else "differs") if sine_ok else "inconclusive"
+    oks = {k: abs(e["compensated"]["rms_nm"] - 79.0) <= 0.3 * 79.0 for k, e in sine.items()}
+    st = _both(oks) if sine_ok else "inconclusive"
     out.append(
         claim(
             "figC.8-sine-residual",
             "With compensation the 1 Hz sine is tracked open loop to ≈ 79 nm rms.",
             "App. C.3, Fig C.8: ≈ 79 nm rms, max ≈ 150 nm (1.1 % of the stroke)",
-            f"{comp:.1f} nm rms, max {e['compensated']['max_abs_nm']:.0f} nm (relay stack)",
+            "; ".join(
+                f"{STACK_NAMES[k]} {e['compensated']['rms_nm']:.1f} nm rms, max "
+                f"{e['compensated']['max_abs_nm']:.0f} nm"
+                for k, e in sine.items()
+            ),
             st,
-            "Criterion: within ±30 % of 79 nm."
-            + (
-                synthetic + " The hardware's 79 nm is a property of the real stack and is not "
-                "reproducible without it."
-                if st == "differs"
-                else ""
-            )
+            "Criterion: within ±30 % of 79 nm on each stack."
+            + synthetic
+            + " The hardware's 79 nm is a property of the real stack."
+            + after
             + (
                 " This run has no full sine period after the first: a ≥ 2 s sine decides."
-                if st == "inconclusive"
+                if not sine_ok
                 else ""
             ),
+            cause="our model" if st == "differs" else "",
         )
     )
-    e = relay["stochastic_static"]
-    lin, comp = e["linear"]["rms_nm"], e["compensated"]["rms_nm"]
-    lin_m, comp_m = e["linear"]["rms_about_mean_nm"], e["compensated"]["rms_about_mean_nm"]
+    stoch = {k: plants[k]["stochastic_static"] for k in STACKS}
     full = stoch_s >= 20.0
-    short = f" This run's stochastic record is {stoch_s:g} s; the full run (20 s) decides."
-    ok = comp <= (1 - 0.67) * lin
-    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    short = f" This run's stochastic record is {stoch_s:g} s; a 20 s record decides."
+
+    def level(e, name):
+        return e[name]["rms_about_mean_nm"]
+
+    meas = "; ".join(
+        f"{STACK_NAMES[k]} level-matched {level(e, 'linear'):.0f} → "
+        f"{level(e, 'compensated'):.1f} nm rms "
+        f"(−{100 * (1 - level(e, 'compensated') / level(e, 'linear')):.0f} %; raw "
+        f"{e['linear']['rms_nm']:.0f} → {e['compensated']['rms_nm']:.0f} nm)"
+        for k, e in stoch.items()
+    )
+    oks = {k: level(e, "compensated") <= (1 - 0.67) * level(e, "linear") for k, e in stoch.items()}
+    st = _both(oks) if full else "inconclusive"
     out.append(
         claim(
             "figC.10-stochastic-improvement",
             "On a stochastic signal (2 µm peak-to-peak) the compensator reduces the open-loop "
             "error by about 67 %.",
             "App. C.3, Figs C.9–C.10: 134 → 44 nm rms (−67 %), max ≈ 120 nm",
-            f"relay stack {lin:.0f} → {comp:.1f} nm rms (−{100 * (1 - comp / lin):.0f} %); "
-            f"about the mean {lin_m:.0f} → {comp_m:.1f} nm",
+            meas,
             st,
-            "Criterion: compensated ≤ 33 % of uncompensated (raw rms)."
+            "Criterion: level-matched compensated ≤ 33 % of level-matched uncompensated on "
+            "each stack (uncompensated command: see preisach_claims; before issue 18 the raw "
+            "error with our uncalibrated offset was judged)."
+            + (
+                " The stack decides: the result is not a property of the method."
+                if st == "inconclusive" and full
+                else ""
+            )
             + synthetic
-            + (short if st == "inconclusive" else ""),
+            + after
+            + (short if not full else ""),
+            cause="our model" if st == "differs" else "",
         )
     )
-    ok = abs(comp - 44.0) <= 0.3 * 44.0 and abs(lin - 134.0) <= 0.3 * 134.0
-    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    oks = {
+        k: abs(level(e, "compensated") - 44.0) <= 0.3 * 44.0
+        and abs(level(e, "linear") - 134.0) <= 0.3 * 134.0
+        for k, e in stoch.items()
+    }
+    st = _both(oks) if full else "inconclusive"
     out.append(
         claim(
             "figC.10-stochastic-levels",
             "Open-loop errors on the stochastic signal: 134 nm rms without, 44 nm with "
             "compensation.",
             "App. C.3, Fig C.10: 134 → 44 nm rms",
-            f"{lin:.0f} → {comp:.1f} nm rms (about the mean {lin_m:.0f} → {comp_m:.1f} nm)",
+            meas,
             st,
-            "Criterion: both within ±30 % of the thesis."
-            + (
-                " Our raw uncompensated error is dominated by the static offset of the linear "
-                "command at mid-stroke (the thesis does not say how its linear command was "
-                "calibrated; ours is the line through the major loop's end points); about the "
-                f"mean it is {lin_m:.0f} nm." + synthetic
-                if st == "differs"
-                else ""
-            )
-            + (short if st == "inconclusive" else ""),
+            "Criterion: both within ±30 % of the thesis on each stack (level-matched)."
+            + synthetic
+            + after
+            + (short if not full else ""),
+            cause="our model" if st == "differs" else "",
         )
     )
     return out
@@ -240,14 +285,17 @@ def preisach_claims(summary: dict, sine_s: float, stoch_s: float) -> list[dict]:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--quick", action="store_true", help="short signals, one plant (CI)")
+    p.add_argument(
+        "--quick", action="store_true", help="2 s sine, two stacks, static stage only (CI)"
+    )
     p.add_argument("--out", type=Path, default=Path("out/appC"))
     p.add_argument("--seed", type=int, default=1, help="seed of the stochastic reference")
     args = p.parse_args(argv)
     log = TextLog()
     say = log.say
 
-    sine_s, stoch_s = (2.0, 2.0) if args.quick else (5.0, 20.0)
+    # the stochastic record is 20 s in both modes: its claims decide in the quick run
+    sine_s, stoch_s = (2.0, 20.0) if args.quick else (5.0, 20.0)
     t = np.arange(int(sine_s * FS)) / FS
     sine = CENTRE + AMPLITUDE * np.sin(2 * np.pi * t - np.pi / 2)
     sine_mask = t >= 1.0  # after the first period (initial rise from negative saturation)
@@ -262,10 +310,9 @@ def main(argv=None) -> int:
         "thesis": {"sine_rms_nm": [902, 79], "stochastic_rms_nm": [134, 44]},
         "plants": {},
     }
-    plants = {"relay": hy.RelayPiezo(seed=0)}
+    plants = {"relay": hy.RelayPiezo(seed=0), "bouc_wen": hy.BoucWenPiezo()}
     if not args.quick:
         plants["relay_without_bouc_wen"] = hy.RelayPiezo(seed=0, bouc_wen=0.0)
-        plants["bouc_wen"] = hy.BoucWenPiezo()
     figs = {}
     for pname, plant in plants.items():
         u_loop = np.r_[np.linspace(0, 10, 401), np.linspace(10, 0, 401)]

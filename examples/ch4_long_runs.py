@@ -470,8 +470,43 @@ def conjecture_claims(study: list[dict]) -> list[dict]:
     return out
 
 
-def claims(rows: list[dict]) -> list[dict]:
-    """Claim rows computed from the cases (Fig 4.7 / Remark 4.4 and Conjecture 4.1)."""
+#: Geometry search for the thesis's 5R (issue 18, finding 5): seeded starts and the threshold
+#: on σ_min([J; ω₄; ω₅]) along the Thm 4.2 motion (qpcoord's arm keeps 0.18), fixed before
+#: the first search run.
+GEOMETRY_STARTS = 100
+GEOMETRY_SIGMA = 0.05
+
+
+def geometry_search(starts: int) -> dict:
+    """Search general 5R geometries (``qpcoord.robots.spatial_5r_search``) for one with the
+    thesis's q0 on the Lissajous start and Thm 4.2's hypothesis along one period."""
+    from qpcoord.robots.spatial_5r_search import search
+
+    t0 = time.perf_counter()
+    cands = search(starts=starts, seed=0)
+    on = [c for c in cands if c.start_gap_m <= 1e-6]
+    sig = np.array([c.sigma_min_thm42 for c in on])
+    ok = [c for c in on if c.sigma_min_thm42 >= GEOMETRY_SIGMA]
+    return {
+        "starts": starts,
+        "seed": 0,
+        "q0_on_path": len(on),
+        "sigma_threshold": GEOMETRY_SIGMA,
+        "passing": len(ok),
+        "sigma_min_thm42_quantiles": (
+            np.percentile(sig, [0, 50, 90, 100]).tolist() if sig.size else []
+        ),
+        "best_params": (max(on, key=lambda c: c.sigma_min_thm42).params.tolist() if on else []),
+        "runtime_s": time.perf_counter() - t0,
+    }
+
+
+def claims(rows: list[dict], geometry: dict | None = None) -> list[dict]:
+    """Claim rows computed from the cases (Fig 4.7 / Remark 4.4 and Conjecture 4.1).
+
+    ``geometry`` (the full run's :func:`geometry_search`): if no general 5R geometry puts the
+    thesis's q0 on the path with Thm 4.2's hypothesis, the 5R claim cannot be judged on the
+    thesis's arm, and is inconclusive rather than "differs"."""
     by = {r["case"]: cycle_outcome(r) for r in rows}
     case = {r["case"]: r for r in rows}
 
@@ -496,14 +531,27 @@ def claims(rows: list[dict]) -> list[dict]:
 
     rows_out = []
     o = [by["spatial_5r"][0]]
+    st = status(o, "cycle")
+    geo = ""
+    if geometry is not None:
+        q = geometry["sigma_min_thm42_quantiles"]
+        geo = (
+            f"; thesis arm search: {geometry['starts']} seeded general 5R geometries (27 "
+            f"parameters, thesis link lengths), q0 on the Lissajous start for "
+            f"{geometry['q0_on_path']}, Thm 4.2's σ_min([J; ω₄; ω₅]) ≥ {GEOMETRY_SIGMA:g} over "
+            f"one period for {geometry['passing']} (largest "
+            f"{(q[-1] if q else float('nan')):.3f})"
+        )
+        if geometry["passing"] == 0 and st == "differs":
+            st = "inconclusive"
     rows_out.append(
         claim(
             "rem4.4-fig4.7-5r-closes",
             "Long J⁺ runs of the 5R3D on the Lissajous close, over a high multiple of T.",
             "Remark 4.4, Fig 4.7: 'the joints trajectory is finally closed but over a very "
             "high multiple of the initial period'",
-            by["spatial_5r"][1],
-            status(o, "cycle"),
+            by["spatial_5r"][1] + geo,
+            st,
             crit
             + (
                 "; this 5R's axes are qpcoord's choice (the thesis gives none); its dt and "
@@ -512,7 +560,20 @@ def claims(rows: list[dict]) -> list[dict]:
                 else ""
             )
             + (short if o[0] == "short" else "")
-            + ("; found at one step only" if o[0] == "step-dependent" else ""),
+            + ("; found at one step only" if o[0] == "step-dependent" else "")
+            + (
+                "; no 5R geometry in the search has the thesis's q0 on the path with Thm "
+                "4.2's hypothesis, so the thesis's arm is unknown and this run on ours cannot "
+                "judge the remark (inconclusive, issue 18 finding 5)"
+                if geometry is not None and geometry["passing"] == 0
+                else (
+                    "; the search found geometries on which q0 lies on the path with Thm "
+                    "4.2's hypothesis, so this verdict is on qpcoord's arm only: the remark is "
+                    "not yet run on those (issue 18 finding 5, open)"
+                    if geometry is not None
+                    else ""
+                )
+            ),
         )
     )
     return rows_out
@@ -558,6 +619,7 @@ def main(argv=None) -> int:
     study = conjecture_study(
         conj_periods, 3 if args.quick else CONJ_STARTS, step_check=not args.quick
     )
+    geometry = None if args.quick else geometry_search(GEOMETRY_STARTS)
     total = time.perf_counter() - t0
 
     log = TextLog()
@@ -593,13 +655,27 @@ def main(argv=None) -> int:
                 )
             )
     say(f"total {total:.1f} s (including the dt/2 runs)")
-    rows_claims = claims(rows) + conjecture_claims(study)
+    if geometry is not None:
+        say(
+            f"5R geometry search: {geometry['starts']} starts, q0 on the path for "
+            f"{geometry['q0_on_path']}, σ_min([J; ω₄; ω₅]) ≥ {GEOMETRY_SIGMA:g} for "
+            f"{geometry['passing']}; quantiles (0, 50, 90, 100 %) "
+            f"{np.round(geometry['sigma_min_thm42_quantiles'], 4).tolist()} "
+            f"({geometry['runtime_s']:.0f} s)"
+        )
+    rows_claims = claims(rows, geometry) + conjecture_claims(study)
     for c in rows_claims:
         say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
     write_json(
         args.out / "summary.json",
-        {"cases": rows, "conjecture_4_1": study, "total_runtime_s": total, "claims": rows_claims},
+        {
+            "cases": rows,
+            "conjecture_4_1": study,
+            "geometry_search_5r": geometry,
+            "total_runtime_s": total,
+            "claims": rows_claims,
+        },
     )
     print(f"wrote {args.out / 'summary.json'} and closure_*.png, joints_*.png")
     return 0

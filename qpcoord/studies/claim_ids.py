@@ -130,6 +130,7 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("appA_shoulder", "A.24-force-bounds"): _c("EqA.24-force-bounds"),
     ("appA_shoulder", "A.22-pseudo-inverse-pushes"): _c("SecA.3.2-pinv-pushes"),
     ("appA_shoulder", "A.28-stress-optimal"): _c("EqA.28-stress-optimal"),
+    ("appA_shoulder", "A.3-forward-tracking"): _c("FigA.3-forward-tracking", "our model"),
     ("ch6_flexure", "appB-flexure-load"): _c("AppB-flexure-150N", calibrated=True),
     ("ch6_flexure", "figB.2-shape"): _c("FigB.2-shape"),
     ("ch6_flexure", "figB.2-magnitude"): _c("FigB.2-magnitude", "our model"),
