@@ -93,6 +93,19 @@ class SisoCoordinator:
         physical bounds). A rejected measurement is replaced by the a-priori prediction
         ``ŷ_c(k−1) + Δα lead/(2π p) + ŷ_f(k)`` (carriage estimate moved with the field
         phase, fine model advanced).
+    saturation_guard : float, optional
+        Saturation guard threshold, m (default ``None``: off, the thesis coordinator). When
+        the fine-stage model's distance to a stop falls under it, the coarse loop takes more
+        of the reference: with ``w = 1 − distance/threshold`` (0 → 1), its error becomes
+        ``(1 − w) e_c + w (ŷ_f − centre)`` (the fine stage's offset, which the coarse stage
+        must absorb for the piezo to return to mid-stroke) and its gain is multiplied by
+        ``1 + (guard_gain − 1) w``; the phase increment stays rate-limited (``max_speed``).
+        Steps in which it acted are counted in :attr:`saturation_guard_steps` (reported by
+        :func:`.simulate.simulate` as the metric ``saturation_guard_steps``).
+    guard_gain : float
+        Largest multiplier of the coarse gain under the saturation guard (≥ 1). The boosted
+        loop has less gain margin at the carriage mode (÷ ``guard_gain``), but only while
+        the fine stage is near a stop.
     literal_eq61 : bool
         Use Eq 6.1 exactly as printed (``e_i`` accumulates the error, is clamped to the rate
         limit, and α integrates ``e_i``: a double integrator). Unstable — kept only to show
@@ -104,6 +117,8 @@ class SisoCoordinator:
         Latest carriage estimate, m.
     guard : MeasurementGuard
         The measurement guard (``guard.rejected``: measurements rejected).
+    saturation_guard_steps : int
+        Steps in which the saturation guard acted since :meth:`reset`.
     """
 
     def __init__(
@@ -119,6 +134,8 @@ class SisoCoordinator:
         fine_model: FineParams | None = None,
         literal_eq61: bool = False,
         guard: MeasurementGuard | None = None,
+        saturation_guard: float | None = None,
+        guard_gain: float = 3.0,
     ):
         self.fine_kp = nonnegative("fine_kp", fine_kp)
         self.fine_ki = nonnegative("fine_ki", fine_ki)
@@ -135,6 +152,13 @@ class SisoCoordinator:
         self.fine_model = fine_model
         self.literal_eq61 = bool(literal_eq61)
         self.guard = guard_arg(guard)
+        self.saturation_guard = (
+            None if saturation_guard is None else positive("saturation_guard", saturation_guard)
+        )
+        self.guard_gain = positive("guard_gain", guard_gain)
+        if self.guard_gain < 1.0:
+            raise ValueError(f"guard_gain must be >= 1, got {guard_gain!r}")
+        self.saturation_guard_steps = 0
         self.y_c_hat = 0.0
 
     def reset(self, plant, fs: float, y0: float, r0: float) -> None:
@@ -183,6 +207,9 @@ class SisoCoordinator:
         self.y_c_hat = self._yc0
         self._dyc = 0.0  # carriage motion predicted for the coming period (m)
         self.guard.reset(plant, fs, y0, r0)
+        self._fmin = fm.stroke_min
+        self._fmax = fm.stroke_max
+        self.saturation_guard_steps = 0
 
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One control period: measurement ``y`` (m), reference ``r`` (m) → (V, A, A)."""
@@ -194,7 +221,19 @@ class SisoCoordinator:
         yc_hat = y - self._mf
         self.y_c_hat = yc_hat
         # direct-coil integral phase control with rate limit (Eq 6.1)
-        d = self._g * (rc - yc_hat)
+        sg = self.saturation_guard
+        if sg is None:
+            d = self._g * (rc - yc_hat)
+        else:
+            mf = self._mf
+            dist = min(mf - self._fmin, self._fmax - mf)
+            if dist < sg:
+                w = 1.0 if dist <= 0.0 else 1.0 - dist / sg
+                ec = (1.0 - w) * (rc - yc_hat) + w * (mf - self._yf_mid)
+                d = self._g * (1.0 + (self.guard_gain - 1.0) * w) * ec
+                self.saturation_guard_steps += 1
+            else:
+                d = self._g * (rc - yc_hat)
         if self.literal_eq61:
             d += self._ei
         dmax = self._dmax

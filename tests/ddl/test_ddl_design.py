@@ -162,3 +162,34 @@ def test_design_from_a_psd_pair_says_when_the_margin_cannot_be_met():
     assert not rep.met
     assert "no candidate" in rep.reason
     assert rep.predicted_probability < 0.99
+
+
+def test_saturation_guard_is_off_by_default_and_keeps_a_strong_wander_off_the_stops():
+    plant = ddl.DualStage()
+    r = ddl.kolmogorov_opd(4.0, FS, seed=102, preset="paranal_250hz", low_freq_gain=100.0)
+    off = ddl.simulate(plant, ddl.SisoCoordinator(), r, FS).metrics
+    on = ddl.simulate(plant, ddl.SisoCoordinator(saturation_guard=4e-6), r, FS).metrics
+    assert ddl.SisoCoordinator().saturation_guard is None
+    assert off["saturation_guard_steps"] == 0
+    assert off["saturated_steps"] > 0  # the thesis tuning hits the stops here
+    assert on["saturated_steps"] == 0
+    assert on["saturation_guard_steps"] > 0
+    assert on["rmse"] < 70e-9 < off["rmse"]
+    assert not on["lost_sync"]
+
+
+def test_saturation_guard_never_acts_on_the_default_turbulence():
+    r = ddl.kolmogorov_opd(2.0, FS, seed=4, preset="paranal_250hz")
+    a = ddl.simulate(ddl.DualStage(), ddl.SisoCoordinator(), r, FS)
+    b = ddl.simulate(ddl.DualStage(), ddl.SisoCoordinator(saturation_guard=4e-6), r, FS)
+    assert b.metrics["saturation_guard_steps"] == 0
+    assert np.array_equal(a.v, b.v)
+
+
+@pytest.mark.parametrize(
+    ("kw", "word"),
+    [({"saturation_guard": -1e-6}, "saturation_guard"), ({"guard_gain": 0.5}, "guard_gain")],
+)
+def test_saturation_guard_bad_arguments(kw, word):
+    with pytest.raises(ValueError, match=word):
+        ddl.SisoCoordinator(**kw)
