@@ -18,7 +18,7 @@ controller passes its measurement through a :class:`MeasurementGuard` (``ctl.gua
 from . import faults, identify, references, two_ddl
 from .compare import compare, format_grid, format_table
 from .coordinator import SisoCoordinator
-from .design import DesignReport, design_coordinator
+from .design import DesignReport, LqrDesignReport, design_coordinator, design_lqr
 from .envelope import ReferenceCheck, check_reference
 from .fine import FineParams
 from .flatness import FlatnessBased
@@ -44,6 +44,7 @@ __all__ = [
     "FineParams",
     "FlatnessBased",
     "LQR",
+    "LqrDesignReport",
     "MPC",
     "MeasurementGuard",
     "OpdPsd",
@@ -59,6 +60,7 @@ __all__ = [
     "coarse_frf",
     "compare",
     "design_coordinator",
+    "design_lqr",
     "design_model",
     "faults",
     "fine_frf",

@@ -43,13 +43,17 @@ from .psd import OpdPsd, psd_arg
 
 __all__ = [
     "DesignReport",
+    "LqrDesignReport",
     "design_coordinator",
+    "design_lqr",
     "excursion_probability",
     "fine_loop_margins",
     "predict",
     "BANDWIDTHS",
     "CUTOFFS",
     "FINE_PI",
+    "CENTRE_MAX",
+    "INTEGRAL_CORNERS",
 ]
 
 #: Candidate coarse-loop bandwidths, Hz (filtered by the carriage-mode gain margin).
@@ -206,29 +210,47 @@ def predict(ctl: SisoCoordinator, psd: OpdPsd, plant, fs: float) -> dict:
     return {"sigma_f": sf, "sigma_rate": sv, "rmse": math.sqrt(se * se + q * q / 12.0)}
 
 
-def _simulate_check(ctl_kw: dict, psd: OpdPsd, plant, fs: float, seeds, duration: float):
+def _simulate_check(make, psd: OpdPsd, plant, fs: float, seeds, duration: float) -> dict:
+    """Run ``make()`` (a fresh controller) on references synthesised from ``psd``, one per
+    seed; the summary dict of :attr:`DesignReport.simulated`."""
     from .simulate import simulate
 
-    out = {"seeds": list(seeds), "duration": duration, "rmse": [], "margin": [], "sat": []}
-    power = []
+    rmse, margin, sat, power = [], [], [], []
     for seed in seeds:
         r = psd.synthesize(duration, fs, seed=seed)
-        run = simulate(plant, SisoCoordinator(**ctl_kw), r, fs, seed=seed)
-        m = run.metrics
-        out["rmse"].append(m["rmse"])
-        out["margin"].append(m["fine_margin_min"])
-        out["sat"].append(m["saturated_steps"])
+        m = simulate(plant, make(), r, fs, seed=seed).metrics
+        rmse.append(m["rmse"])
+        margin.append(m["fine_margin_min"])
+        sat.append(m["saturated_steps"])
         power.append(m["power"])
     return {
-        "seeds": out["seeds"],
+        "seeds": list(seeds),
         "duration": duration,
-        "rmse": out["rmse"],
-        "rmse_mean": float(np.mean(out["rmse"])),
-        "rmse_max": float(np.max(out["rmse"])),
-        "margin_min": float(np.min(out["margin"])),
-        "saturated_steps": int(np.sum(out["sat"])),
+        "rmse": rmse,
+        "rmse_mean": float(np.mean(rmse)),
+        "rmse_max": float(np.max(rmse)),
+        "margin_min": float(np.min(margin)),
+        "saturated_steps": int(np.sum(sat)),
         "power": float(np.mean(power)),
     }
+
+
+def _margin_arg(margin, plant) -> tuple[float, float]:
+    """``(margin, half stroke)`` in m: default 10 % of the half stroke, else in (0, half)."""
+    half = 0.5 * (plant.fine.stroke_max - plant.fine.stroke_min)
+    margin = 0.1 * half if margin is None else margin
+    if isinstance(margin, bool) or not (math.isfinite(float(margin)) and 0 < margin < half):
+        raise ValueError(
+            f"margin must be in (0, {half!r}) m (half the fine stroke), got {margin!r}"
+        )
+    return float(margin), half
+
+
+def _check_args(check_seeds, check_duration) -> tuple[tuple[int, ...], float]:
+    check_seeds = tuple(int(s) for s in check_seeds)
+    if not check_seeds:
+        raise ValueError("check_seeds must not be empty")
+    return check_seeds, positive("check_duration", check_duration)
 
 
 def design_coordinator(
@@ -285,13 +307,7 @@ def design_coordinator(
     fs = positive("fs", fs)
     plant = DualStage() if plant is None else plant
     psd, _ = psd_arg(reference, fs)
-    half = 0.5 * (plant.fine.stroke_max - plant.fine.stroke_min)
-    margin = 0.1 * half if margin is None else margin
-    if isinstance(margin, bool) or not (math.isfinite(float(margin)) and 0 < margin < half):
-        raise ValueError(
-            f"margin must be in (0, {half!r}) m (half the fine stroke), got {margin!r}"
-        )
-    margin = float(margin)
+    margin, half = _margin_arg(margin, plant)
     probability = float(probability)
     if not 0.0 < probability < 1.0:
         raise ValueError(f"probability must be in (0, 1), got {probability!r}")
@@ -299,10 +315,7 @@ def design_coordinator(
     min_gain_margin = positive("min_gain_margin", min_gain_margin)
     if min_gain_margin <= 1.0:
         raise ValueError(f"min_gain_margin must be > 1 (absolute), got {min_gain_margin!r}")
-    check_seeds = tuple(int(s) for s in check_seeds)
-    if not check_seeds:
-        raise ValueError("check_seeds must not be empty")
-    check_duration = positive("check_duration", check_duration)
+    check_seeds, check_duration = _check_args(check_seeds, check_duration)
     n_check = int(n_check)
     if n_check < 1:
         raise ValueError(f"n_check must be >= 1, got {n_check!r}")
@@ -357,7 +370,9 @@ def design_coordinator(
     checked = pool[:n_check]
     for c in checked:
         kw = {k: c[k] for k in ("coarse_bandwidth", "coarse_cutoff", "fine_kp", "fine_ki")}
-        c["simulated"] = sim = _simulate_check(kw, psd, plant, fs, check_seeds, check_duration)
+        c["simulated"] = sim = _simulate_check(
+            lambda kw=kw: SisoCoordinator(**kw), psd, plant, fs, check_seeds, check_duration
+        )
         c["sim_ok"] = sim["saturated_steps"] == 0 and sim["margin_min"] >= margin
     good = [c for c in checked if c["sim_ok"]]
     if good:
@@ -405,3 +420,219 @@ def design_coordinator(
         psd=psd,
     )
     return SisoCoordinator(**kw), report
+
+
+# ---------------------------------------------------------------------------- LQR
+#: Candidate fine-stage centring scales ``centre_max`` of the LQR weights, m.
+CENTRE_MAX = (3e-6, 5e-6, 10e-6, 20e-6)
+#: Candidate integral corner frequencies of the LQR weights, Hz.
+INTEGRAL_CORNERS = (10.0, 20.0, 30.0, 40.0, 50.0, 60.0)
+
+
+@dataclass
+class LqrDesignReport:
+    """What :func:`design_lqr` chose and why (SI units).
+
+    Attributes
+    ----------
+    centre_max : float
+        Chosen fine-stage centring scale of :func:`.lqr.default_weights`, m.
+    integral_corner : float
+        Chosen integral corner, Hz.
+    error_max : float
+        Output-error scale (fixed by the robustness rule, not searched), m.
+    margin : float
+        Required distance of the fine stage from its stops, m.
+    peak_sensitivity : float
+        Peak |S| of the chosen design's loop broken at the measurement (absolute).
+    gain_margin_db, phase_margin_deg : float
+        Its margins (dB, degrees).
+    delay_margin_samples : int
+        Extra periods of latency it tolerates.
+    simulated : dict
+        As :attr:`DesignReport.simulated` (fresh references synthesised from the PSD).
+    met : bool
+        Some admissible candidate kept ``margin`` with no saturated step in every run.
+    reason : str
+        One line.
+    candidates : list of dict
+        Every candidate: its weights, its loop margins, whether it was admissible and its
+        simulation.
+    psd : OpdPsd
+        The spectrum designed for.
+    """
+
+    centre_max: float
+    integral_corner: float
+    error_max: float
+    margin: float
+    peak_sensitivity: float
+    gain_margin_db: float
+    phase_margin_deg: float
+    delay_margin_samples: int
+    simulated: dict
+    met: bool
+    reason: str
+    candidates: list = field(default_factory=list, repr=False)
+    psd: OpdPsd | None = field(default=None, repr=False)
+
+    def summary(self) -> str:
+        """A few lines for a terminal (nm, µm, Hz)."""
+        s = self.simulated
+        return "\n".join(
+            [
+                f"LQR weights: centre_max {self.centre_max * 1e6:g} µm, integral corner "
+                f"{self.integral_corner:g} Hz, error_max {self.error_max * 1e6:g} µm",
+                f"loop: peak |S| {self.peak_sensitivity:.3f}, GM {self.gain_margin_db:.1f} dB, "
+                f"PM {self.phase_margin_deg:.1f}°, delay margin {self.delay_margin_samples} "
+                "period(s)",
+                f"simulated on {len(s['seeds'])} fresh {s['duration']:g}-s references: RMSE "
+                f"{s['rmse_mean'] * 1e9:.1f} nm mean, {s['rmse_max'] * 1e9:.1f} nm max; "
+                f"min margin {s['margin_min'] * 1e6:.2f} µm (required "
+                f"{self.margin * 1e6:.2f}); saturated steps {s['saturated_steps']}; power "
+                f"{s['power']:.3f} W",
+                f"{'met' if self.met else 'NOT met'}: {self.reason}",
+            ]
+        )
+
+
+def design_lqr(
+    reference,
+    fs: float,
+    plant=None,
+    margin: float | None = None,
+    *,
+    check_seeds=(1001, 1002, 1003),
+    check_duration: float = 2.0,
+    centre_max=CENTRE_MAX,
+    integral_corners=INTEGRAL_CORNERS,
+    error_max: float = 1.3e-6,
+    max_peak_sensitivity: float = 1.6,
+    min_delay_margin: int = 1,
+):
+    """Tune the :class:`.lqr.LQR` weights for the statistics of ``reference``.
+
+    The LQR's output-error scale ``error_max`` is fixed by its robustness rule (the most
+    aggressive value keeping peak |S| ≤ 1.6, :func:`.lqr.tune_error_max`); its remaining
+    knobs are the fine-stage centring scale ``centre_max`` (how much the fine stage is pulled
+    to mid-stroke, i.e. how much of the reference the carriage takes) and the integral
+    corner. No closed-form excursion bound is used: every candidate of the grid
+    ``centre_max × integral_corners`` whose loop keeps peak |S| ≤ ``max_peak_sensitivity``,
+    tolerates ``min_delay_margin`` extra periods of latency and is stable is **simulated**
+    on fresh references synthesised from the reference's PSD (``check_seeds``,
+    ``check_duration`` s each); the smallest mean RMSE among those with no saturated step
+    and the fine stage at least ``margin`` from its stops in every run is chosen. If none
+    kept the margin, the admissible one with the largest simulated margin is returned and
+    the report says **NOT met**.
+
+    Parameters
+    ----------
+    reference : array_like or OpdPsd or (f, S)
+        As :func:`design_coordinator`.
+    fs : float
+        Control rate, Hz.
+    plant : DualStage, optional
+        Default ``DualStage()``.
+    margin : float, optional
+        Distance to keep between the fine stage and each stop, m, in (0, half stroke);
+        default 10 % of the half stroke (1.5 µm).
+    check_seeds : sequence of int
+        Seeds of the fresh references (non-empty).
+    check_duration : float
+        Length of each, s.
+    centre_max : sequence of float
+        Candidate centring scales, m (> 0).
+    integral_corners : sequence of float
+        Candidate integral corners, Hz (> 0).
+    error_max : float
+        Output-error scale of the weights, m (default: :class:`.lqr.LQR`'s 1.3 µm).
+    max_peak_sensitivity : float
+        Robustness rule: largest peak |S| (> 1).
+    min_delay_margin : int
+        Extra periods of latency a candidate must tolerate (≥ 0).
+
+    Returns
+    -------
+    (LQR, LqrDesignReport)
+    """
+    from .lqr import LQR, default_weights, design_model
+    from .plant import DualStage
+
+    fs = positive("fs", fs)
+    plant = DualStage() if plant is None else plant
+    psd, _ = psd_arg(reference, fs)
+    margin, _ = _margin_arg(margin, plant)
+    check_seeds, check_duration = _check_args(check_seeds, check_duration)
+    cms = tuple(positive("centre_max", c) for c in centre_max)
+    ics = tuple(positive("integral_corners", c) for c in integral_corners)
+    if not cms:
+        raise ValueError("centre_max must not be empty")
+    if not ics:
+        raise ValueError("integral_corners must not be empty")
+    error_max = positive("error_max", error_max)
+    max_peak_sensitivity = positive("max_peak_sensitivity", max_peak_sensitivity)
+    if max_peak_sensitivity <= 1.0:
+        raise ValueError(f"max_peak_sensitivity must be > 1, got {max_peak_sensitivity!r}")
+    if int(min_delay_margin) != min_delay_margin or min_delay_margin < 0:
+        raise ValueError(f"min_delay_margin must be an integer >= 0, got {min_delay_margin!r}")
+
+    model = design_model(plant, fs)
+    cands = []
+    for cm in cms:
+        for ic in ics:
+            q, r = default_weights(model, error_max=error_max, centre_max=cm, integral_corner=ic)
+            rep = LQR(q, r).design(plant, fs).report()
+            ok = (
+                rep["peak_sensitivity"] <= max_peak_sensitivity
+                and rep["delay_margin_samples"] >= min_delay_margin
+                and rep["max_pole_modulus"] < 1.0
+            )
+            c = {"centre_max": cm, "integral_corner": ic, "loop": rep, "admissible": ok}
+            if ok:
+                c["simulated"] = sim = _simulate_check(
+                    lambda q=q, r=r: LQR(q, r), psd, plant, fs, check_seeds, check_duration
+                )
+                c["sim_ok"] = sim["saturated_steps"] == 0 and sim["margin_min"] >= margin
+            cands.append(c)
+    admissible = [c for c in cands if c["admissible"]]
+    if not admissible:
+        raise ValueError(
+            f"no LQR candidate keeps peak |S| ≤ {max_peak_sensitivity} and a delay margin of "
+            f"{min_delay_margin} period(s)"
+        )
+    good = [c for c in admissible if c["sim_ok"]]
+    if good:
+        best = min(good, key=lambda c: c["simulated"]["rmse_mean"])
+        reason = (
+            f"smallest simulated RMSE of the {len(good)} admissible candidates that kept "
+            f"{margin * 1e6:.2f} µm ({len(admissible)} of {len(cands)} admissible)"
+        )
+    else:
+        best = max(admissible, key=lambda c: c["simulated"]["margin_min"])
+        reason = (
+            f"no admissible candidate kept {margin * 1e6:.2f} µm in simulation; the one with "
+            "the largest margin is returned"
+        )
+    q, r = default_weights(
+        model,
+        error_max=error_max,
+        centre_max=best["centre_max"],
+        integral_corner=best["integral_corner"],
+    )
+    loop = best["loop"]
+    report = LqrDesignReport(
+        centre_max=best["centre_max"],
+        integral_corner=best["integral_corner"],
+        error_max=error_max,
+        margin=margin,
+        peak_sensitivity=loop["peak_sensitivity"],
+        gain_margin_db=loop["gain_margin_db"],
+        phase_margin_deg=loop["phase_margin_deg"],
+        delay_margin_samples=int(loop["delay_margin_samples"]),
+        simulated=best["simulated"],
+        met=bool(good),
+        reason=reason,
+        candidates=cands,
+        psd=psd,
+    )
+    return LQR(q, r), report

@@ -193,3 +193,85 @@ def test_saturation_guard_never_acts_on_the_default_turbulence():
 def test_saturation_guard_bad_arguments(kw, word):
     with pytest.raises(ValueError, match=word):
         ddl.SisoCoordinator(**kw)
+
+
+# ---------------------------------------------------------------------------- design_lqr
+def test_design_lqr_keeps_the_robustness_rule_and_picks_the_smallest_rmse(ref_lf10):
+    plant = ddl.DualStage()
+    ctl, rep = ddl.design_lqr(
+        ref_lf10,
+        FS,
+        plant,
+        check_seeds=(1001,),
+        check_duration=1.0,
+        centre_max=(5e-6, 20e-6),
+        integral_corners=(10.0, 40.0, 80.0),
+    )
+    assert isinstance(ctl, ddl.LQR)
+    assert rep.met, rep.summary()
+    by = {(c["centre_max"], c["integral_corner"]): c for c in rep.candidates}
+    assert len(by) == 6
+    # an 80 Hz integral corner breaks the peak-|S| rule (1.6): never simulated, never chosen
+    assert not by[(5e-6, 80.0)]["admissible"] and "simulated" not in by[(5e-6, 80.0)]
+    assert by[(5e-6, 80.0)]["loop"]["peak_sensitivity"] > 1.6
+    assert rep.integral_corner != 80.0
+    assert rep.peak_sensitivity <= 1.6 and rep.delay_margin_samples >= 1
+    # the choice is the smallest simulated RMSE among the candidates that kept the margin
+    kept = [c for c in rep.candidates if c.get("sim_ok")]
+    assert rep.simulated["rmse_mean"] == min(c["simulated"]["rmse_mean"] for c in kept)
+    assert rep.simulated["margin_min"] >= rep.margin
+    # the returned controller is the chosen one: re-simulating reproduces the report
+    psd = rep.psd
+    run = ddl.simulate(plant, ctl, psd.synthesize(1.0, FS, seed=1001), FS, seed=1001)
+    assert run.metrics["rmse"] == rep.simulated["rmse"][0]
+    # and it meets the spec on an unseen reference of the same sky
+    r = ddl.kolmogorov_opd(2.0, FS, seed=778, preset="paranal_250hz_lf10")
+    m = ddl.simulate(plant, ctl, r, FS).metrics
+    assert m["rmse"] < 70e-9 and m["saturated_steps"] == 0
+    assert "centre_max" in rep.summary()
+
+
+def test_design_lqr_says_when_the_margin_cannot_be_met(ref_lf10):
+    # the LQR keeps its fine stage within ≈ 0.5 µm of mid-stroke: 14.9 µm of 15 cannot hold
+    ctl, rep = ddl.design_lqr(
+        ref_lf10,
+        FS,
+        margin=14.9e-6,
+        check_seeds=(1001,),
+        check_duration=0.5,
+        centre_max=(3e-6, 20e-6),
+        integral_corners=(20.0,),
+    )
+    assert not rep.met
+    assert "NOT met" in rep.summary()
+    sims = [c["simulated"]["margin_min"] for c in rep.candidates]
+    assert rep.simulated["margin_min"] == max(sims)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "word"),
+    [
+        ({"reference": np.r_[np.zeros(9000), math.nan]}, "reference"),
+        ({"margin": 15e-6}, "margin"),
+        ({"centre_max": (0.0,)}, "centre_max"),
+        ({"integral_corners": ()}, "integral_corners"),
+        ({"max_peak_sensitivity": 1.0}, "max_peak_sensitivity"),
+        ({"min_delay_margin": -1}, "min_delay_margin"),
+        ({"check_seeds": ()}, "check_seeds"),
+    ],
+)
+def test_design_lqr_bad_input_names_the_argument(kwargs, word):
+    args = {"reference": 1e-9 * np.arange(9000.0), "fs": FS, **kwargs}
+    with pytest.raises(ValueError, match=word):
+        ddl.design_lqr(args.pop("reference"), args.pop("fs"), **args)
+
+
+def test_design_lqr_with_an_unreachable_robustness_rule():
+    with pytest.raises(ValueError, match="no LQR candidate"):
+        ddl.design_lqr(
+            1e-9 * np.arange(9000.0),
+            FS,
+            max_peak_sensitivity=1.05,
+            centre_max=(10e-6,),
+            integral_corners=(20.0,),
+        )
