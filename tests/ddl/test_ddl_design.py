@@ -275,3 +275,42 @@ def test_design_lqr_with_an_unreachable_robustness_rule():
             centre_max=(10e-6,),
             integral_corners=(20.0,),
         )
+
+
+# ---------------------------------------------------------------------------- unstable coarse bw
+def test_an_unstable_coarse_bandwidth_is_refused_at_reset():
+    import warnings
+
+    from qpcoord.ddl.coordinator import coarse_loop_margin
+    from qpcoord.ddl.envelope import allowed_bandwidth
+
+    plant = ddl.DualStage()
+    r = ddl.kolmogorov_opd(0.05, FS, seed=1, preset="paranal_250hz")
+    # 6 Hz (issue 17's hand setting): −1.3 dB at the carriage mode → ValueError naming it
+    with pytest.raises(ValueError, match=r"coarse_bandwidth = 6\.0 Hz .*-1\.3 dB"):
+        ddl.simulate(plant, ddl.SisoCoordinator(coarse_bandwidth=6.0), r, FS)
+    # the threshold is the 0 dB bandwidth of loops.coarse_gain_margin (≈ 5.2 Hz)
+    edge = allowed_bandwidth(plant, FS, min_gain_margin=1.0)
+    assert 5.0 < edge < 5.4
+    assert (
+        coarse_loop_margin(plant, FS, 1.01 * edge)[0]
+        < 1.0
+        < coarse_loop_margin(plant, FS, 0.99 * edge)[0]
+    )
+    with pytest.raises(ValueError, match="coarse_bandwidth"):
+        ddl.SisoCoordinator(coarse_bandwidth=1.01 * edge).reset(plant, FS, 0.0, 0.0)
+    # the thesis default and a stable but small-margin 4 Hz stay silent
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for bw in (2.0, 4.0, 0.99 * edge):
+            ddl.simulate(plant, ddl.SisoCoordinator(coarse_bandwidth=bw), r, FS)
+    # it depends on the plant: with half the carriage-mode damping 4 Hz is unstable
+    import dataclasses
+
+    st = dataclasses.replace(plant.stepper, viscous_damping=0.5 * plant.stepper.viscous_damping)
+    weak = ddl.DualStage(stepper=st)
+    assert coarse_loop_margin(weak, FS, 4.0)[0] < 1.0
+    with pytest.raises(ValueError, match=r"coarse_bandwidth = 4\.0 Hz"):
+        ddl.SisoCoordinator(coarse_bandwidth=4.0).reset(weak, FS, 0.0, 0.0)
+    # Eq 6.1 read literally is kept unstable on purpose (its own test shows it): not refused
+    ddl.SisoCoordinator(literal_eq61=True).reset(plant, FS, 0.0, 0.0)
