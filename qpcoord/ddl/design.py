@@ -1,6 +1,11 @@
-"""Tune the thesis coordinator for a given sky: :func:`design_coordinator`.
+"""Tune the thesis coordinator (:func:`design_coordinator`) and the LQR (:func:`design_lqr`)
+for a given sky.
 
-Method (``docs/ch6.md``, "Designing the coordinator for a turbulence"):
+The LQR has no closed-form excursion bound here: :func:`design_lqr` simulates a grid of its
+weights under its robustness rule (its docstring). The MPC takes the margin as a hard
+constraint (``MPC(margin=...)``): there is nothing to design for it beyond passing the number.
+
+Method for the coordinator (``docs/ch6.md``, "Designing the coordinator for a turbulence"):
 
 1. **Spectrum.** The reference's one-sided PSD ``S(f)`` is given (:class:`.psd.OpdPsd` or a pair
    ``(f, S)``) or estimated from one record (:meth:`.psd.OpdPsd.from_signal`).
