@@ -207,12 +207,18 @@ def summarise(points: list, results: list) -> dict:
             ]
             rec = [f["recovery"] for _, f in pairs]
             done = [x for x in rec if x is not None]
+            # percentiles with "not recovered" as +inf (None when they fall there)
+            v = np.array([math.inf if x is None else x for x in rec])
+            q50, q95 = (float(np.quantile(v, q, method="lower")) for q in (0.5, 0.95))
+            dev = np.array([f["max_dev"] for _, f in pairs]) * 1e9
             by_fault[f"{ctl} | {fault}"] = {
                 "controller": ctl,
                 "fault": fault,
                 "runs": len(pairs),
                 "rejected_samples": int(sum(f["rejected_samples"] for _, f in pairs)),
-                "recovery_median_s": float(np.median(done)) if done else None,
+                "recovered_25ms_runs": int(np.sum(v <= 0.025)),
+                "recovery_median_s": q50 if math.isfinite(q50) else None,
+                "recovery_p95_s": q95 if math.isfinite(q95) else None,
                 "recovery_max_s": None if len(done) < len(rec) else float(max(done)),
                 "not_recovered_runs": len(rec) - len(done),
                 "added_saturated_steps": int(
@@ -221,7 +227,8 @@ def summarise(points: list, results: list) -> dict:
                 "runs_with_added_saturation": int(
                     sum(f["saturated_steps"] > c["saturated_steps"] for c, f in pairs)
                 ),
-                "max_dev_nm": float(max(f["max_dev"] for _, f in pairs) * 1e9),
+                "max_dev_median_nm": float(np.median(dev)),
+                "max_dev_nm": float(dev.max()),
                 "lost_sync_runs": int(sum(f["lost_sync"] for _, f in pairs)),
             }
     return {"by_case": by_case, "by_fault": by_fault}
@@ -290,21 +297,23 @@ def make_claims(tables, results, nseeds, duration, design_report) -> list[dict]:
         parts = []
         for fault in FAULTS[1:]:
             row = bf[f"{c} | {fault}"]
-            worst_rec = (
-                "never" if row["recovery_max_s"] is None else _ms(row["recovery_max_s"]) + " ms"
+            parts.append(
+                f"{fault} {row['recovered_25ms_runs']}/{row['runs']} within 25 ms "
+                f"(median {_ms(row['recovery_median_s'])} ms)"
             )
-            parts.append(f"{fault} {worst_rec}")
         rec.append(f"{c}: " + ", ".join(parts))
     rows.append(
         claim(
             "robustness-fault-recovery",
             "After one metrology fault the error returns to its fault-free level.",
             "Not in the thesis: issue 17's robustness study",
-            "worst recovery over plants × seeds — " + "; ".join(rec),
+            "runs recovered within 25 ms of the fault, over plants × seeds — " + "; ".join(rec),
             "not in thesis",
             "Our own measurement (protocol of docs/ch6.md, 'Measurement faults': every "
             "trailing 5 ms window within 10 % + 1.25 nm of the fault-free run's RMSE). "
-            "Reported, not a pass/fail criterion: a frozen sensor is invisible to the guard.",
+            "Reported, not a pass/fail criterion: a frozen sensor is invisible to the guard, and "
+            "the criterion also flags late, nm-level differences between two runs of a "
+            "nonlinear loop (see docs/ch6.md).",
         )
     )
     return rows
@@ -371,19 +380,25 @@ def main(argv=None) -> int:
             f"{row['saturated_steps']:6d} {row['margin_min_um']:9.2f} {row['lost_sync_runs']:9d}"
         )
     say(
-        "\nFaults, over all plants × seeds (recovery median / max, ms; 'never' = still outside "
-        "at the end; added saturated steps vs the fault-free run):"
+        "\nFaults, over all plants × seeds: rejected samples; runs recovered within 25 ms; "
+        "recovery median / 95th percentile / max, ms ('never' = still outside at the end); "
+        "added saturated steps vs the fault-free run; max |e − e_fault-free| median / max:"
     )
     say(
-        f"{'controller':21s} {'fault':13s} {'rejected':>8s} {'recovery ms':>16s} "
-        f"{'not rec.':>8s} {'+sat.':>6s} {'max dev nm':>10s} {'lost':>4s}"
+        f"{'controller':21s} {'fault':13s} {'rejected':>8s} {'<=25ms':>7s} "
+        f"{'recovery ms':>22s} {'not rec.':>8s} {'+sat.':>6s} {'max dev nm':>17s} {'lost':>4s}"
     )
     for row in tables["by_fault"].values():
-        rec = f"{_ms(row['recovery_median_s'])} / {_ms(row['recovery_max_s'])}"
+        rec = (
+            f"{_ms(row['recovery_median_s'])} / {_ms(row['recovery_p95_s'])} / "
+            f"{_ms(row['recovery_max_s'])}"
+        )
+        dev = f"{row['max_dev_median_nm']:.1f} / {row['max_dev_nm']:.1f}"
         say(
             f"{row['controller']:21s} {row['fault']:13s} {row['rejected_samples']:8d} "
-            f"{rec:>16s} {row['not_recovered_runs']:8d} {row['added_saturated_steps']:6d} "
-            f"{row['max_dev_nm']:10.1f} {row['lost_sync_runs']:4d}"
+            f"{row['recovered_25ms_runs']:4d}/{row['runs']:<3d}{rec:>22s} "
+            f"{row['not_recovered_runs']:8d} {row['added_saturated_steps']:6d} {dev:>17s} "
+            f"{row['lost_sync_runs']:4d}"
         )
     wall = time.perf_counter() - t0
     say(f"\nwall time {wall:.1f} s")
