@@ -431,14 +431,16 @@ def main(argv=None) -> int:
                 ]
                 v = [duration / 2 if x is None else x for x in v]
                 x = k + 0.25 * (j - 1) + np.linspace(-0.05, 0.05, len(v))
-                ax[1].plot(x, np.array(v) * 1e3, "o", ms=2.5, color=f"C{j}")
+                ax[1].plot(
+                    x, np.array(v) * 1e3, "o", ms=2.5, color=f"C{j}", label=c if k == 0 else None
+                )
         ax[0].axhline(SPEC_RMSE * 1e9, color="C3", ls=":", lw=1, label="spec 70 nm")
         ax[0].set_xticks(range(len(CASES)), list(CASES), rotation=30, ha="right", fontsize=7)
         ax[0].set_yscale("log")
         ax[0].set_ylabel("RMSE, fault-free (nm)")
         ax[0].legend(fontsize=7)
         ax[0].set_title(f"plant mismatch ({nseeds} seeds × {duration:g} s, {PRESET})", fontsize=9)
-        ax[1].axhline(duration / 2 * 1e3, color="k", ls=":", lw=1, label="not recovered")
+        ax[1].axhline(duration / 2 * 1e3, color="k", ls=":", lw=1, label="not recovered (end)")
         ax[1].set_xticks(range(len(FAULTS) - 1), list(FAULTS[1:]), fontsize=8)
         ax[1].set_ylabel("recovery time (ms)")
         ax[1].legend(fontsize=7)
