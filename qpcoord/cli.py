@@ -6,6 +6,7 @@
 ``qpcoord bench ik``       Panda differential IK, qpcoord vs Pink, per-step times and errors
 ``qpcoord ddl track``      DDL coordinator on Kolmogorov OPD references, metrics per seed
 ``qpcoord ddl compare``    every DDL controller on the same cases: Table 6.1 and 6.2 forms
+``qpcoord ddl design``     tune the coordinator for a recorded reference (REFERENCE.npy)
 ``qpcoord reproduce``      run the chapters' reproductions, write report.md / report.html
 """
 
@@ -100,6 +101,59 @@ def _cmd_ddl_track(args: argparse.Namespace) -> int:
             f"{time.perf_counter() - t0:6.2f}"
         )
     return 0
+
+
+def _cmd_ddl_design(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from . import ddl
+
+    r = np.load(args.reference, allow_pickle=False)
+    plant = ddl.DualStage()
+    check = ddl.check_reference(r, args.fs, plant)
+    print(f"reference: {r.size} samples at {args.fs:g} Hz; check: {check.verdict} — {check.reason}")
+    ctl, rep = ddl.design_coordinator(r, args.fs, plant)
+    print(rep.summary())
+    seeds = (2001, 2002, 2003)
+    runs = []
+    for seed in seeds:
+        fresh = rep.psd.synthesize(args.duration, args.fs, seed=seed)
+        runs.append(ddl.simulate(plant, ctl, fresh, args.fs, seed=seed))
+    ms = [run.metrics for run in runs]
+    print(
+        f"fresh seeds {seeds}, {args.duration:g} s: RMSE "
+        + ", ".join(f"{m['rmse'] * 1e9:.1f}" for m in ms)
+        + " nm; min margin "
+        + ", ".join(f"{m['fine_margin_min'] * 1e6:.2f}" for m in ms)
+        + " µm; saturated "
+        + ", ".join(str(m["saturated_steps"]) for m in ms)
+    )
+    from .studies.figures import _pyplot, save
+
+    plt = _pyplot()
+    run = ddl.simulate(plant, ctl, r, args.fs)
+    fp = plant.fine
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax[0].plot(run.t, run.y_f * 1e6, lw=0.6, label="fine stage")
+    for lim in (fp.stroke_min, fp.stroke_max):
+        ax[0].axhline(lim * 1e6, color="k", lw=1)
+    for lim in (fp.stroke_min + rep.margin, fp.stroke_max - rep.margin):
+        ax[0].axhline(lim * 1e6, color="r", ls="--", lw=0.8)
+    ax[0].set(xlabel="t (s)", ylabel="y_f (µm)", title="fine stage vs its stroke (margin dashed)")
+    f = rep.psd.f
+    ax[1].loglog(f, rep.psd.S, lw=0.8, label="reference PSD")
+    e = run.error
+    w = np.hanning(e.size)
+    pe = 2.0 * np.abs(np.fft.rfft((e - e.mean()) * w)) ** 2 / (args.fs * np.sum(w * w))
+    fe = np.fft.rfftfreq(e.size, 1.0 / args.fs)
+    ax[1].loglog(fe[1:], pe[1:], lw=0.5, label="error (this record)")
+    ax[1].set(xlabel="f (Hz)", ylabel="m²/Hz", title="error spectrum vs reference PSD")
+    ax[1].legend(fontsize=8)
+    out = save(fig, Path(args.out) / "ddl_design.png")
+    print(f"figure: {out}")
+    return 0 if rep.met else 1
 
 
 def _cmd_ddl_compare(args: argparse.Namespace) -> int:
@@ -206,6 +260,12 @@ def build_parser() -> argparse.ArgumentParser:
     dc.add_argument("--duration", type=float, default=10.0, help="tracking seconds (10)")
     dc.add_argument("--fs", type=float, default=8000.0, help="control rate, Hz (8000)")
     dc.set_defaults(func=_cmd_ddl_compare)
+    dg = dsub.add_parser("design", help="tune the coordinator for a reference (.npy, metres)")
+    dg.add_argument("reference", help="1-D .npy file of the reference, m")
+    dg.add_argument("--fs", type=float, default=8000.0, help="its sampling rate, Hz (8000)")
+    dg.add_argument("--out", default=".", help="folder of the figure (default .)")
+    dg.add_argument("--duration", type=float, default=2.0, help="fresh-seed runs, s (2)")
+    dg.set_defaults(func=_cmd_ddl_design)
     rp = sub.add_parser("reproduce", help="run the thesis reproductions, write one report")
     rp.add_argument(
         "chapters", nargs="*", help="core, 4, 5, 6, A, B, C (also ch4, appA...; default: all)"

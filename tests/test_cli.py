@@ -118,3 +118,19 @@ def test_help_lists_every_command(capsys):
     for command in ("solvers", "demo", "bench stack", "bench ik", "ddl track", "ddl compare"):
         assert f"qpcoord {command}" in out
     assert "qpcoord reproduce --quick" in out
+
+
+def test_ddl_design_prints_the_design_and_writes_the_figure(tmp_path, capsys):
+    import numpy as np
+
+    import qpcoord.ddl as ddl
+
+    ref = tmp_path / "ref.npy"
+    np.save(ref, ddl.kolmogorov_opd(1.5, 8000.0, seed=0, preset="paranal_250hz"))
+    out = tmp_path / "out"
+    rc = main(["ddl", "design", str(ref), "--fs", "8000", "--out", str(out), "--duration", "1"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "coarse bandwidth" in text and "predicted" in text and "fresh seeds" in text
+    assert (out / "ddl_design.png").stat().st_size > 0
+    assert not list(out.glob("*.tmp*"))

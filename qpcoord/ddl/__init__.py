@@ -18,6 +18,8 @@ controller passes its measurement through a :class:`MeasurementGuard` (``ctl.gua
 from . import faults, identify, references, two_ddl
 from .compare import compare, format_grid, format_table
 from .coordinator import SisoCoordinator
+from .design import DesignReport, LqrDesignReport, design_coordinator, design_lqr
+from .envelope import ReferenceCheck, check_reference
 from .fine import FineParams
 from .flatness import FlatnessBased
 from .flexure import BladeFlexure
@@ -29,6 +31,7 @@ from .mpc import MPC
 from .pi_linearised import PILinearised
 from .plant import DualStage
 from .pq import PQ
+from .psd import OpdPsd
 from .references import PRESETS, kolmogorov_opd, opd_psd, step_reference
 from .simulate import Run, simulate
 from .stepper import StepperParams
@@ -36,21 +39,28 @@ from .stepper import StepperParams
 __all__ = [
     "BladeFlexure",
     "DesignModel",
+    "DesignReport",
     "DualStage",
     "FineParams",
     "FlatnessBased",
     "LQR",
+    "LqrDesignReport",
     "MPC",
     "MeasurementGuard",
+    "OpdPsd",
     "PILinearised",
     "PQ",
     "PRESETS",
+    "ReferenceCheck",
     "Run",
     "SisoCoordinator",
     "StepperParams",
     "bandwidth_3db",
+    "check_reference",
     "coarse_frf",
     "compare",
+    "design_coordinator",
+    "design_lqr",
     "design_model",
     "faults",
     "fine_frf",

@@ -32,6 +32,11 @@ Cn², 10 m/s) and a fast layer (20 %, 40 m/s), plus telescope vibration lines at
 150 and 230 Hz with 50, 30, 20, 10 and 5 nm rms (frequencies of the kind reported for VLTI
 vibrations; amplitudes picked as AT-like levels, not fitted to any result), band-limited at
 250 Hz.
+
+``"paranal_250hz_lf10"``: ``"paranal_250hz"`` with 10× the turbulence power below ≈ 2 Hz
+(``low_freq_gain=10``, ``low_freq_corner=2``): a stronger low-frequency wander (longer
+baseline, larger outer scale or slower seeing) for designs that must keep the fine stage off
+its stops (issue 17). Any preset takes ``low_freq_gain`` / ``low_freq_corner`` as overrides.
 """
 
 from __future__ import annotations
@@ -112,6 +117,14 @@ PRESETS: dict[str, dict] = {
         "f_max": 250.0,
     },
 }
+PRESETS["paranal_250hz_lf10"] = {
+    **PRESETS["paranal_250hz"],
+    "low_freq_gain": 10.0,
+    "low_freq_corner": 2.0,
+}
+
+#: Keywords of :func:`opd_psd` every preset accepts as overrides besides its own entries.
+_EXTRA_PARAMS = ("low_freq_gain", "low_freq_corner")
 
 
 def _piston_integral(kx: np.ndarray, r0: float, L0: float, aperture: float) -> np.ndarray:
@@ -141,6 +154,8 @@ def opd_psd(
     layers=(Layer(10.0, 1.0),),
     lines=(),
     f_max: float | None = None,
+    low_freq_gain: float = 1.0,
+    low_freq_corner: float = 2.0,
 ) -> np.ndarray:
     """One-sided PSD of the differential-piston OPD at frequencies ``f`` (Hz), m²/Hz.
 
@@ -162,6 +177,12 @@ def opd_psd(
         Vibration lines added as Gaussian bumps of the given rms.
     f_max : float, optional
         Band limit, Hz: the PSD is zero above it.
+    low_freq_gain : float
+        Factor on the turbulence (layers') PSD at low frequency, > 0 (1: none): the layers'
+        sum is multiplied by ``1 + (g − 1)/(1 + (f/f_lf)⁴)`` — ``g`` well below the corner,
+        1 well above it. Vibration lines are not scaled.
+    low_freq_corner : float
+        Corner ``f_lf`` of that factor, Hz.
     """
     f = np.atleast_1d(np.asarray(f, dtype=float))
     if np.any(~np.isfinite(f)) or np.any(f <= 0):
@@ -183,6 +204,10 @@ def opd_psd(
         g = _piston_integral(grid / v, r0_i, L0, aperture) * (2.0 / v)
         smooth = np.exp(np.interp(lf, np.log(grid), np.log(np.maximum(g, 1e-300))))
         out += 4.0 * np.sin(math.pi * f * baseline / v) ** 2 * smooth
+    low_freq_gain = positive("low_freq_gain", low_freq_gain)
+    low_freq_corner = positive("low_freq_corner", low_freq_corner)
+    if low_freq_gain != 1.0:
+        out *= 1.0 + (low_freq_gain - 1.0) / (1.0 + (f / low_freq_corner) ** 4)
     for line in lines:
         if not isinstance(line, VibrationLine):
             line = VibrationLine(*line)
@@ -231,12 +256,14 @@ def kolmogorov_opd(
     seed : int
         Seed: the same seed gives the same signal.
     preset : str or None
-        Name in :data:`PRESETS` (``"paranal"`` or ``"paranal_250hz"``); ``None`` starts from
+        Name in :data:`PRESETS` (``"paranal"``, ``"paranal_250hz"``,
+        ``"paranal_250hz_lf10"``); ``None`` starts from
         the ``"paranal"`` values. Keyword ``params`` override the preset's entries.
     oversample : int
         Generate this many times the length and keep the start (≥ 1).
     **params
-        ``baseline``, ``aperture``, ``r0``, ``L0``, ``layers``, ``lines``, ``f_max`` — see
+        ``baseline``, ``aperture``, ``r0``, ``L0``, ``layers``, ``lines``, ``f_max``,
+        ``low_freq_gain``, ``low_freq_corner`` — see
         :func:`opd_psd`.
 
     Returns
@@ -250,7 +277,7 @@ def kolmogorov_opd(
         preset = "paranal"
     if preset not in PRESETS:
         raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
-    unknown = set(params) - set(PRESETS[preset])
+    unknown = set(params) - set(PRESETS[preset]) - set(_EXTRA_PARAMS)
     if unknown:
         raise ValueError(f"unknown OPD parameter(s): {sorted(unknown)}")
     cfg = {**PRESETS[preset], **params}

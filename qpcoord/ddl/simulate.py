@@ -43,8 +43,9 @@ class Run:
         See :func:`.metrics.tracking_metrics`, plus ``rejected_samples`` (int: measurements
         the controller's :class:`.guard.MeasurementGuard` rejected; 0 for a controller
         without ``guard``), ``rejected_references`` (int), ``lost_sync`` (bool),
-        ``sync_slip_steps``, ``coarse_stop_steps`` (int), ``rmse_true`` (m, error of the
-        true output), ``fine_excursion`` (max |y_f − mid-stroke|, m), ``wall_time`` (s);
+        ``sync_slip_steps``, ``coarse_stop_steps``, ``saturation_guard_steps`` (int: steps in
+        which the controller's saturation guard acted, 0 without one), ``rmse_true`` (m, error
+        of the true output), ``fine_excursion`` (max |y_f − mid-stroke|, m), ``wall_time`` (s);
         with ``simulate(..., timing=True)`` also ``step_time_median`` and ``step_time_p99``
         (s per ``controller.step`` call).
     step_times : ndarray
@@ -245,6 +246,7 @@ def simulate(
     m["lost_sync"] = bool(plant.lost_sync)
     m["sync_slip_steps"] = int(plant.sync_slip_steps)
     m["coarse_stop_steps"] = int(stops)
+    m["saturation_guard_steps"] = int(getattr(controller, "saturation_guard_steps", 0))
     true_err = r - (run.y_c + run.y_f)
     m["rmse_true"] = float(np.sqrt(np.mean(true_err * true_err)))
     m["fine_excursion"] = float(np.max(np.abs(run.y_f - fp.centre)))
