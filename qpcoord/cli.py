@@ -204,8 +204,10 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     print(
         f"{c['ok']} of {c['scripts']} scripts ran in {report.seconds:.1f} s; claims: "
         + ", ".join(
-            f"{c[s]} {s}" for s in ("reproduced", "differs", "inconclusive", "not in thesis")
+            f"{c[s]} {s}"
+            for s in ("reproduced", "differs", "inconclusive", "calibrated", "own check")
         )
+        + " (thesis claims, each ID counted once)"
     )
     for r in report.failed:
         print(f"  {r.name}: {r.status}: {r.error}", file=sys.stderr)
