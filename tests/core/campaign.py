@@ -142,7 +142,7 @@ class Verdict:
 def reference(spec: Spec):
     from oracle import lexicographic
 
-    return lexicographic(spec.levels, spec.bounds)
+    return lexicographic(spec.levels, spec.bounds, polish=True)
 
 
 def bvls_level0(spec: Spec) -> float | None:

