@@ -2,8 +2,9 @@
 
 ``make_stack(kind, seed)`` builds one stack of a degeneracy kind (:data:`KINDS`);
 ``judge(stack_spec, solver)`` solves it with qpcoord and compares every level with the
-cvxpy lexicographic reference of ``tests/oracle.py``. The normal suite runs a small sample
-(``tests/core/test_campaign.py``), the ``slow`` marker at least 1 000 stacks;
+cvxpy lexicographic reference of ``tests/oracle.py`` with ``polish=True`` (each equality
+level made exact by BVLS / a verified active set). The normal suite runs a small sample
+(``tests/core/test_campaign.py``), the ``slow`` marker 1 000 stacks of each kind;
 ``python tests/core/campaign.py N`` prints the counts per backend.
 
 A level is *wrong* when its residual is above the reference's by more than ``WRONG_TOL``
@@ -175,8 +176,9 @@ def judge(spec: Spec, ref, solver: str, damping: float = 0.0, **solve_options) -
     A stack flagged *worsened* whose level 0 is a bounded least-squares problem is
     re-judged at level 0 against scipy's BVLS (exact there): if the library's level 0 is
     within ``WORSEN_TOL`` of BVLS's, the reference's level 0 was the one off (it slid
-    along a weak singular direction, see ``test_worsened_near_parallel_stacks_are_the_
-    reference``) and the stack is not counted as worsened at level 0.
+    along a weak singular direction, see ``test_near_parallel_stacks_need_the_exact_
+    reference``) and the stack is not counted as worsened at level 0. (With the polished
+    reference, ``polish=True``, this no longer happens in the campaign; kept as a guard.)
     """
     t0 = time.perf_counter()
     try:
