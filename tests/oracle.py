@@ -171,14 +171,109 @@ def _solve(problem: cp.Problem, where: str, settings=CLARABEL, ok=(cp.OPTIMAL,))
         raise OracleError(f"{where}: Clarabel status {problem.status!r}")
 
 
+#: Polish: a kept row within this (relative) distance of a limit is taken as active
+#: (tried in turn until one verifies).
+ACTIVE_TOLS = (1e-7, 1e-5, 1e-9, 1e-3)
+#: Polish: the KKT residual (relative to ``‖Aᵀ‖·‖A x − b‖``) that certifies the point.
+KKT_TOL = 1e-9
+
+
+def _polish(A, b, E, e, C, lo, hi, x_guess):
+    """:func:`_polish_at` with each of ``ACTIVE_TOLS`` in turn (``None``: none verified)."""
+    for tol in ACTIVE_TOLS:
+        x = _polish_at(A, b, E, e, C, lo, hi, x_guess, tol)
+        if x is not None:
+            return x
+    return None
+
+
+def _bvls(A, b, lo, hi):
+    """scipy's bounded-variable least squares (an exact active-set method)."""
+    from scipy.optimize import lsq_linear
+
+    return lsq_linear(A, b, bounds=(lo, hi), method="bvls", tol=1e-15).x
+
+
+def _polish_at(A, b, E, e, C, lo, hi, x_guess, active_tol):
+    """Exact optimum of ``min ‖A x − b‖ s.t. E x = e, lo ≤ C x ≤ hi`` near ``x_guess``
+    (a conic solver's point), or ``None`` if it cannot be verified.
+
+    The rows within ``active_tol`` of a limit at ``x_guess`` are taken as active (equal to
+    that limit); the equality-constrained least-squares problem is solved by an
+    orthonormal null-space basis (SVD), choosing among its optima the one nearest
+    ``x_guess``. It is accepted only if it is primal feasible (to 1e-12 relative) and
+    the KKT conditions hold with multipliers of the right signs (an NNLS, to
+    ``KKT_TOL``): a convex problem's KKT point is its optimum.
+    """
+    cx = C @ x_guess
+    sc = np.maximum(1.0, np.abs(cx))
+    at_lo = np.isfinite(lo) & (cx - lo <= active_tol * sc)
+    at_hi = np.isfinite(hi) & (hi - cx <= active_tol * sc) & ~at_lo
+    W = at_lo | at_hi
+    K = np.vstack([E, C[W]])
+    k = np.concatenate([e, np.where(at_lo, lo, hi)[W]])
+    n = A.shape[1]
+    if K.shape[0]:
+        U, s, Vt = np.linalg.svd(K, full_matrices=True)
+        rank = int(np.count_nonzero(s > RANK_TOL * s[0])) if s.size and s[0] > 0 else 0
+        xp = Vt[:rank].T @ ((U[:, :rank].T @ k) / s[:rank])
+        if np.linalg.norm(K @ xp - k) > 1e-12 * max(1.0, np.linalg.norm(k)):
+            return None  # the guessed active rows are inconsistent
+        N = Vt[rank:].T
+    else:
+        xp, N = np.zeros(n), np.eye(n)
+    if N.shape[1] == 0:
+        x = xp
+    else:
+        M = A @ N
+        z, *_ = np.linalg.lstsq(M, b - A @ xp, rcond=None)
+        # among the optima (z + null(M)), the one nearest the guess
+        _, sm, Vm = np.linalg.svd(M, full_matrices=True)
+        rm = int(np.count_nonzero(sm > RANK_TOL * sm[0])) if sm.size and sm[0] > 0 else 0
+        Z = Vm[rm:].T
+        z = z + Z @ (Z.T @ (N.T @ (x_guess - xp) - z))
+        x = xp + N @ z
+    # primal feasibility of every kept row
+    cx = C @ x
+    tol = 1e-12 * np.maximum(1.0, np.abs(cx))
+    if np.any(cx < lo - tol) or np.any(cx > hi + tol):
+        return None
+    # dual: Aᵀr = Eᵀμ + Σ_lo λ Cᵢᵀ − Σ_hi λ Cᵢᵀ,  λ ≥ 0  (rows with lo == hi: either sign)
+    from scipy.optimize import nnls
+
+    r = A @ x - b
+    g = A.T @ r
+    eq_rows = W & (lo == hi)
+    cols = [E.T, -E.T, C[at_lo | eq_rows].T, -C[at_hi | eq_rows].T]
+    Mk = np.hstack([c for c in cols if c.shape[1]]) if any(c.shape[1] for c in cols) else None
+    scale = float(np.linalg.norm(A) * np.linalg.norm(r))
+    if scale == 0.0:
+        return x
+    res = np.linalg.norm(g) if Mk is None else nnls(Mk, g, maxiter=50 * Mk.shape[1])[1]
+    return x if res <= KKT_TOL * scale else None
+
+
 def lexicographic(
-    levels, bounds=None, constraints=None, mode: str = "pin", epi_tol: float = EPI_TOL
+    levels,
+    bounds=None,
+    constraints=None,
+    mode: str = "pin",
+    epi_tol: float = EPI_TOL,
+    polish: bool = False,
 ) -> OracleResult:
     """Reference strict-hierarchy solution of a stack (same arguments as ``qc.Stack``).
 
     Returns the minimum-norm point of the lexicographically optimal set and its residuals.
     Raises :class:`OracleError` if Clarabel does not report ``optimal`` or if the final
     point does not reproduce every level's optimum to ``SELF_CHECK`` (relative).
+
+    ``polish=True`` (``mode="pin"``) makes every level without inequality rows exact
+    where it can be verified (:func:`_polish`): Clarabel's point is only ~1e-11 off, but
+    the next levels are pinned to it and, on near-singular levels, a 1e-13 error in level
+    ``k`` buys level ``k+1`` up to ~1e-6 of its scale (measured, campaign near_parallel).
+    ``info["polished"]`` lists the levels that were made exact; if the final minimum-norm
+    step fails, the last level's point (also lexicographically optimal) is returned as
+    ``x`` and ``info["min_norm"]`` is ``False``.
     """
     if mode not in ("pin", "epigraph"):
         raise ValueError(mode)
@@ -233,6 +328,7 @@ def lexicographic(
     optima = []
     n_pinned = []
     violated_rows = []
+    polished = []
     for k, L in enumerate(Ls):
         mi = L.C.shape[0]
         v = cp.Variable(mi) if mi else None
@@ -245,9 +341,31 @@ def lexicographic(
             cons += _two_sided(L.C @ x - v, L.lo, L.hi)
         obj = cp.sum([cp.sum_squares(p) for p in parts])
         prob = cp.Problem(cp.Minimize(obj), cons)
-        _solve(prob, f"level {k}", settings, ok)
-        xk = np.array(x.value, dtype=float)
-        fk = max(float(prob.value), 0.0)
+        eligible = polish and mode == "pin" and mi == 0 and L.Ae.shape[0] > 0
+        exact = None  # a verified exact optimum found before the conic solve (BVLS)
+        if eligible:
+            C, lo, hi = np.vstack(Cin), np.concatenate(lin), np.concatenate(uin)
+            E = _orth_rows(pinned)
+            e = E @ x_pin if x_pin is not None else (E @ x0 if E.shape[0] else np.zeros(0))
+            if E.shape[0] == 0 and C.shape[0] == n and np.array_equal(C, np.eye(n)):
+                # a bounded least-squares problem: BVLS's active set, verified
+                exact = _polish(L.Ae, L.be, E, e, C, lo, hi, _bvls(L.Ae, L.be, lo, hi))
+        if exact is not None:
+            xk = exact
+            r = L.Ae @ xk - L.be
+            fk = float(r @ r)
+            polished.append(k)
+        else:
+            _solve(prob, f"level {k}", settings, ok)
+            xk = np.array(x.value, dtype=float)
+            fk = max(float(prob.value), 0.0)
+            if eligible:
+                xp = _polish(L.Ae, L.be, E, e, C, lo, hi, xk)
+                if xp is not None:
+                    r = L.Ae @ xp - L.be
+                    if float(r @ r) <= fk * (1 + 1e-6) + 1e-300:
+                        xk, fk = xp, float(r @ r)
+                        polished.append(k)
         optima.append(np.sqrt(fk))
         if mode == "epigraph":
             rk = np.sqrt(fk)
@@ -279,8 +397,16 @@ def lexicographic(
         n_pinned.append(_orth_rows(pinned).shape[0])
     # minimum-norm point of the lexicographic optimal set
     prob = cp.Problem(cp.Minimize(cp.sum_squares(x)), common(x_pin) + epi)
-    _solve(prob, "minimum-norm step", settings, ok)
-    xf = np.array(x.value, dtype=float)
+    min_norm = True
+    try:
+        _solve(prob, "minimum-norm step", settings, ok)
+        xf = np.array(x.value, dtype=float)
+    except OracleError:
+        if not (polish and x_pin is not None):
+            raise
+        # the last level's point is in the lexicographic optimal set too (not the
+        # minimum-norm one); the self-check below still applies to it
+        xf, min_norm = x_pin, False
     res = np.array([_residual(L, xf) for L in Ls])
     optima = np.array(optima)
     if mode == "pin":
@@ -289,5 +415,11 @@ def lexicographic(
             raise OracleError(
                 f"self-check: final residuals {res} do not reproduce the level optima {optima}"
             )
-    info = dict(mode=mode, pinned_rank=n_pinned, violated_rows=violated_rows)
+    info = dict(
+        mode=mode,
+        pinned_rank=n_pinned,
+        violated_rows=violated_rows,
+        polished=polished,
+        min_norm=min_norm,
+    )
     return OracleResult(x=xf, level_residuals=res, level_optima=optima, info=info)

@@ -2,8 +2,9 @@
 
 ``make_stack(kind, seed)`` builds one stack of a degeneracy kind (:data:`KINDS`);
 ``judge(stack_spec, solver)`` solves it with qpcoord and compares every level with the
-cvxpy lexicographic reference of ``tests/oracle.py``. The normal suite runs a small sample
-(``tests/core/test_campaign.py``), the ``slow`` marker at least 1 000 stacks;
+cvxpy lexicographic reference of ``tests/oracle.py`` with ``polish=True`` (each equality
+level made exact by BVLS / a verified active set). The normal suite runs a small sample
+(``tests/core/test_campaign.py``), the ``slow`` marker 1 000 stacks of each kind;
 ``python tests/core/campaign.py N`` prints the counts per backend.
 
 A level is *wrong* when its residual is above the reference's by more than ``WRONG_TOL``
@@ -142,7 +143,27 @@ class Verdict:
 def reference(spec: Spec):
     from oracle import lexicographic
 
-    return lexicographic(spec.levels, spec.bounds)
+    return lexicographic(spec.levels, spec.bounds, polish=True)
+
+
+def bvls_level0(spec: Spec) -> float | None:
+    """Exact level-0 residual by scipy's bounded least squares (BVLS, an active-set method
+    independent of the library and of the conic reference), where level 0 is a bounded
+    least-squares problem: equality tasks only. ``None`` where it does not apply."""
+    from scipy.optimize import lsq_linear
+
+    lv = spec.levels[0]
+    tasks = lv if isinstance(lv, list) else [lv]
+    if not all(isinstance(t, qc.Equality) for t in tasks):
+        return None
+    A = np.vstack([np.sqrt(t.weight)[:, None] * t.A for t in tasks])
+    b = np.concatenate([np.sqrt(t.weight) * t.b for t in tasks])
+    if spec.bounds is None:
+        x = np.linalg.lstsq(A, b, rcond=None)[0]
+    else:
+        lb, ub = spec.bounds.resolve(spec.n)
+        x = lsq_linear(A, b, bounds=(lb, ub), method="bvls", tol=1e-15).x
+    return float(np.linalg.norm(A @ x - b))
 
 
 def judge(spec: Spec, ref, solver: str, damping: float = 0.0, **solve_options) -> Verdict:
@@ -151,6 +172,13 @@ def judge(spec: Spec, ref, solver: str, damping: float = 0.0, **solve_options) -
     ``damping=0`` by default: the reference is the exact lexicographic optimum, and the
     damping of near-singular levels (condition above 1/damping) is a documented deviation
     from it (near-parallel rows reach 1e7 here).
+
+    A stack flagged *worsened* whose level 0 is a bounded least-squares problem is
+    re-judged at level 0 against scipy's BVLS (exact there): if the library's level 0 is
+    within ``WORSEN_TOL`` of BVLS's, the reference's level 0 was the one off (it slid
+    along a weak singular direction, see ``test_near_parallel_stacks_need_the_exact_
+    reference``) and the stack is not counted as worsened at level 0. (With the polished
+    reference, ``polish=True``, this no longer happens in the campaign; kept as a guard.)
     """
     t0 = time.perf_counter()
     try:
@@ -173,59 +201,75 @@ def judge(spec: Spec, ref, solver: str, damping: float = 0.0, **solve_options) -
             better = True
             break
     worse2 = (ours**2 - theirs**2) / scale**2
-    worsened = bool(
-        any(
-            worse2[k] > WORSEN_TOL and (worse2[k + 1 :] < -WORSEN_TOL).any()
-            for k in range(len(ours))
-        )
-    )
+    flagged = [
+        k
+        for k in range(len(ours))
+        if worse2[k] > WORSEN_TOL and (worse2[k + 1 :] < -WORSEN_TOL).any()
+    ]
+    if flagged == [0]:
+        exact = bvls_level0(spec)
+        if exact is not None and (ours[0] ** 2 - exact**2) / scale[0] ** 2 <= WORSEN_TOL:
+            flagged = []
+            better = True  # the reference's level 0 is above the exact optimum
     gap = float(d[wrong]) if wrong is not None else 0.0
-    return Verdict(wrong, sol.status, worsened, better, dt, gap)
+    return Verdict(wrong, sol.status, bool(flagged), better, dt, gap)
 
 
-def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0):
-    """Counts per backend: silent wrong, flagged inaccurate, errors, worsened, times."""
+def _zero():
+    return dict(
+        stacks=0, silent=0, inaccurate=0, errors=0, worsened=0, better=0, over10=0, tmax=0.0
+    )
+
+
+def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0, kinds=KINDS):
+    """Judge ``n_per_kind`` stacks of each kind (seeds from ``seed0`` on, skipping those
+    the reference cannot solve: infeasible, or its self-check failed) on every solver.
+
+    Returns ``(counts, per_kind, bad)``: ``counts[solver]`` totals (silent wrong, flagged
+    inaccurate, errors, worsened, reference beaten, solves over 10 s, times),
+    ``per_kind[solver][kind]`` the same per kind, and the silent wrong levels as
+    ``(solver, kind, seed, level, gap)``.
+    """
     from oracle import OracleError
 
-    counts = {
-        s: dict(stacks=0, silent=0, inaccurate=0, errors=0, worsened=0, better=0, over10=0, t=[])
-        for s in solvers
-    }
-    by_kind = {s: {k: 0 for k in KINDS} for s in solvers}
+    counts = {s: dict(_zero(), t=[]) for s in solvers}
+    per_kind = {s: {k: _zero() for k in kinds} for s in solvers}
     bad = []
     worsened = []  # (solver, kind, seed)
-    for kind in KINDS:
-        for seed in range(seed0, seed0 + n_per_kind):
+    skipped = {k: 0 for k in kinds}
+    for kind in kinds:
+        done = 0
+        seed = seed0
+        while done < n_per_kind and seed < seed0 + 3 * n_per_kind:
             spec = make_stack(kind, seed)
+            seed += 1
             try:
                 ref = reference(spec)
             except (OracleError, qc.InfeasibleError):
+                skipped[kind] += 1
                 continue
+            done += 1
             for s in solvers:
-                try:
-                    v = judge(spec, ref, s, damping=damping)
-                except qc.InfeasibleError:
-                    continue
-                c = counts[s]
-                c["stacks"] += 1
-                c["t"].append(v.time)
-                c["over10"] += v.time > 10.0
-                if v.status.startswith("error"):
-                    c["errors"] += 1
-                elif v.wrong_level is not None:
-                    if v.status == "optimal":
+                v = judge(spec, ref, s, damping=damping)
+                for c in (counts[s], per_kind[s][kind]):
+                    c["stacks"] += 1
+                    c["tmax"] = max(c["tmax"], v.time)
+                    c["over10"] += v.time > 10.0
+                    if v.status.startswith("error"):
+                        c["errors"] += 1
+                    elif v.wrong_level is not None and v.status == "optimal":
                         c["silent"] += 1
-                        by_kind[s][kind] += 1
-                        bad.append((s, kind, seed, v.wrong_level, v.gap))
-                    else:
+                    elif v.status != "optimal":
                         c["inaccurate"] += 1
-                elif v.status != "optimal":
-                    c["inaccurate"] += 1
-                c["worsened"] += v.worsened
+                    c["worsened"] += v.worsened
+                    c["better"] += v.better
+                counts[s]["t"].append(v.time)
+                if v.wrong_level is not None and v.status == "optimal":
+                    bad.append((s, kind, spec.seed, v.wrong_level, v.gap))
                 if v.worsened:
-                    worsened.append((s, kind, seed))
-                c["better"] += v.better
+                    worsened.append((s, kind, spec.seed))
     if log is not None:
+        print(f"reference skipped (infeasible or self-check): {skipped}", file=log)
         for s, c in counts.items():
             t = np.array(c["t"]) if c["t"] else np.zeros(1)
             print(
@@ -233,14 +277,27 @@ def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0
                 f"inaccurate {c['inaccurate']:4d} errors {c['errors']:3d} "
                 f"worsened {c['worsened']:3d} ref-beaten {c['better']:3d} "
                 f"over-10s {c['over10']} "
-                f"median {np.median(t) * 1e3:.2f} ms max {t.max() * 1e3:.1f} ms  "
-                f"by kind {by_kind[s]}",
+                f"median {np.median(t) * 1e3:.2f} ms max {t.max() * 1e3:.1f} ms",
                 file=log,
             )
-    if log is not None:
+        print(
+            "| backend | kind | stacks | silent wrong | inaccurate | errors | worsened "
+            "| ref beaten | > 10 s | max time |",
+            file=log,
+        )
+        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|", file=log)
+        for s in solvers:
+            for k, c in per_kind[s].items():
+                print(
+                    f"| {s} | {k} | {c['stacks']} | {c['silent']} | {c['inaccurate']} | "
+                    f"{c['errors']} | {c['worsened']} | {c['better']} | {c['over10']} | "
+                    f"{c['tmax'] * 1e3:.1f} ms |",
+                    file=log,
+                )
         for w in worsened:
             print("worsened", w, file=log)
-    return counts, by_kind, bad
+        log.flush()
+    return counts, per_kind, bad
 
 
 if __name__ == "__main__":
@@ -250,6 +307,8 @@ if __name__ == "__main__":
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 20
     solvers = sys.argv[2].split(",") if len(sys.argv) > 2 else qc.available_solvers()
     damping = float(sys.argv[3]) if len(sys.argv) > 3 else 0.0
+    t0 = time.perf_counter()
     _, _, bad = run(n, solvers, log=sys.stdout, damping=damping)
+    print(f"wall time {time.perf_counter() - t0:.0f} s")
     for b in bad[:40]:
         print("silent", b)

@@ -1,5 +1,5 @@
 """Seeded campaign over the degeneracy kinds of issue 22, judged against the exact
-lexicographic reference (``tests/oracle.py``): no level may come out worse than the
+lexicographic reference (``tests/oracle.py``, ``polish=True``): no level may come out worse than the
 reference by 1e-6 of its scale while the solution says ``"optimal"``."""
 
 from __future__ import annotations
@@ -13,35 +13,45 @@ EXACT = [s for s in ("daqp", "quadprog") if s in qc.available_solvers()]
 OTHERS = [s for s in ("proxqp", "piqp", "clarabel", "highs", "osqp") if s in qc.available_solvers()]
 
 
-def _check(counts, solvers):
+def _check(counts, per_kind, solvers, n_per_kind):
     for s in solvers:
         c = counts[s]
         assert c["stacks"] > 0
+        for kind, ck in per_kind[s].items():
+            assert ck["stacks"] >= n_per_kind, f"{s}/{kind}: only {ck['stacks']} stacks"
         assert c["silent"] == 0, f"{s}: {c['silent']} silent wrong levels"
         assert c["errors"] == 0, f"{s}: {c['errors']} errors"
+        assert c["worsened"] == 0, f"{s}: {c['worsened']} higher levels worsened"
+        assert c["over10"] == 0, f"{s}: {c['over10']} solves over 10 s"
 
 
 def test_campaign_fast_sample():
     """4 stacks of each kind through daqp and quadprog (a few seconds)."""
-    counts, _, bad = run(4, EXACT, seed0=1000)
-    _check(counts, EXACT)
+    counts, per_kind, _ = run(4, EXACT, seed0=1000)
+    _check(counts, per_kind, EXACT, 4)
 
 
 @pytest.mark.slow
 def test_campaign_slow_exact_backends():
-    """≥ 1 000 stacks (165 per kind, ~7 % dropped where the reference fails its
-    self-check) through daqp and quadprog: 0 silent wrong levels."""
-    counts, _, bad = run(165, EXACT)
-    assert all(counts[s]["stacks"] >= 1000 for s in EXACT)
-    _check(counts, EXACT)
+    """1 000 stacks of each kind (7 000; seeds the reference cannot solve are skipped and
+    replaced) through daqp and quadprog: 0 silent wrong levels, 0 higher levels worsened,
+    0 errors, 0 solves over 10 s (~3 min here)."""
+    counts, per_kind, _ = run(1000, EXACT)
+    _check(counts, per_kind, EXACT, 1000)
 
 
 @pytest.mark.slow
 def test_campaign_slow_other_backends():
-    """The same stacks through the other fast backends: 0 silent wrong levels (a level that
-    cannot be certified says so)."""
-    counts, _, bad = run(165, OTHERS)
-    _check(counts, OTHERS)
+    """200 stacks of each kind through the other fast backends: 0 silent wrong levels and
+    0 higher levels worsened (a level that cannot be certified says so). Their errors and
+    times are counted, not asserted (docs/stack.md: proxqp exceeds its time limit on some
+    var_scaled stacks)."""
+    counts, per_kind, _ = run(200, OTHERS)
+    for s in OTHERS:
+        for kind, ck in per_kind[s].items():
+            assert ck["stacks"] >= 200, f"{s}/{kind}: only {ck['stacks']} stacks"
+        assert counts[s]["silent"] == 0, f"{s}: {counts[s]['silent']} silent wrong levels"
+        assert counts[s]["worsened"] == 0, f"{s}: {counts[s]['worsened']} worsened"
 
 
 def test_kinds_are_all_generated():
@@ -72,30 +82,50 @@ def test_proxqp_honours_the_time_limit_on_slow_outer_iterations():
     assert time.perf_counter() - t0 < 4.0
 
 
-@pytest.mark.parametrize("seed", [10, 79, 135])
-def test_worsened_near_parallel_stacks_are_the_reference(seed):
-    """The 3 stacks the campaign flags as "higher level worsened" on every backend
-    (near_parallel 10, 79, 135: level 0 of condition 2e6–8e6 with active bounds). The
-    library's level 0 is exact: its A x equals scipy's bounded least squares (BVLS, an
-    independent method) to rounding, while the reference's differs by 2e-13–1e-11 — within
-    Clarabel's tolerance on the level-0 objective, but along the weak singular direction
-    (σ_min/σ_max ~ 1e-7) that lets the reference's x slide by up to 1.7e-6 and buy a better
-    level 1 at level 0's expense. The lexicographic order is decided at level 0: the
-    library is right, the reference is not."""
+@pytest.mark.parametrize("seed", [10, 79, 135, 538, 257, 855])
+def test_near_parallel_stacks_need_the_exact_reference(seed):
+    """Stacks the campaign flagged with the plain (conic) reference: "higher level
+    worsened" (near_parallel 10, 79, 135, 538) or a level 1–2e-6 of its scale above it
+    (257, 538, 855) on every backend alike. Level 0 there has condition 4e5–7e6: the
+    library's level 0 equals scipy's bounded least squares (BVLS, an exact method) to
+    rounding, the conic reference's misses by up to ~1e-11 along the weak singular
+    direction and pins the next levels there, buying a lower level at level 0's expense.
+    With ``polish=True`` (each level made exact: BVLS / verified active set) the reference
+    agrees with the library to ~1e-15 of each level's scale."""
     import numpy as np
-    from campaign import make_stack, reference
+    from campaign import level_scales, make_stack
+    from oracle import lexicographic
     from scipy.optimize import lsq_linear
 
     spec = make_stack("near_parallel", seed)
-    ref = reference(spec)
+    plain = lexicographic(spec.levels, spec.bounds)
+    exact = lexicographic(spec.levels, spec.bounds, polish=True)
     sol = qc.Stack(spec.levels, bounds=spec.bounds, damping=0.0).solve(solver="daqp")
     assert sol.status == "optimal"
+    scale = level_scales(spec.levels, exact.x)
+    d_plain = np.abs(sol.level_residuals - plain.level_optima) / scale
+    d_exact = np.abs(sol.level_residuals - exact.level_optima) / scale
+    assert d_plain.max() > 1e-9  # the plain reference is off
+    assert d_exact.max() < 1e-12, d_exact
     t0 = spec.levels[0]
     A = np.sqrt(t0.weight)[:, None] * t0.A
     b = np.sqrt(t0.weight) * t0.b
     bv = lsq_linear(A, b, bounds=(spec.bounds.lower, spec.bounds.upper), method="bvls", tol=1e-15)
-    scale = float(np.linalg.norm(b))
-    assert np.linalg.norm(A @ (sol.x - bv.x)) <= 1e-14 * scale
-    assert np.linalg.norm(A @ (ref.x - bv.x)) > 10.0 * np.linalg.norm(A @ (sol.x - bv.x))
-    f = lambda x: float(np.sum((A @ x - b) ** 2))  # noqa: E731
-    assert f(ref.x) > f(bv.x) and f(sol.x) <= f(bv.x) + 1e-15 * scale**2
+    assert np.linalg.norm(A @ (sol.x - bv.x)) <= 1e-13 * float(np.linalg.norm(b))
+
+
+@pytest.mark.parametrize(
+    "solver", [s for s in ("daqp", "quadprog", "proxqp") if s in EXACT + OTHERS]
+)
+def test_level_qp_the_active_set_backends_reject_falls_back_to_clarabel(solver):
+    """Campaign stack var_scaled/1043 (columns scaled 10^±3, three equality levels): the
+    level-1 QP (feasible by construction) is called inconsistent by quadprog and proxqp,
+    and daqp returns a point 1e-3 outside it; the fallback chain ended there and the solve
+    raised. clarabel (interior point, with a time limit) now ends the chain and solves it."""
+    from campaign import judge, make_stack, reference
+
+    if "clarabel" not in qc.available_solvers():
+        pytest.skip("needs clarabel")
+    spec = make_stack("var_scaled", 1043)
+    v = judge(spec, reference(spec), solver)
+    assert v.status == "optimal" and v.wrong_level is None and not v.worsened

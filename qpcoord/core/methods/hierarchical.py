@@ -119,7 +119,9 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
         U, s, Vt = svd(Em, full=True)
         rk = numerical_rank(s, Em.shape)
         zp = Vt[:rk].T @ ((U[:, :rk].T @ tv) / s[:rk])
-        if np.abs(Em @ zp - tv).max() > 1e-9 * max(1.0, float(np.abs(tv).max())):
+        if not np.isfinite(zp).all() or np.abs(Em @ zp - tv).max() > 1e-9 * max(
+            1.0, float(np.abs(tv).max())
+        ):
             return None
         N = Vt[rk:].T
     else:
@@ -130,8 +132,10 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
         U, s, Vt = svd(K, full=False)
         rk = numerical_rank(s, K.shape, nA)
         if rk:
-            u = Vt[:rk].T @ ((U[:, :rk].T @ (b - A @ zp)) / s[:rk])
-            zp = zp + N @ u
+            # the library never prints: an overflow here is caught by the check below
+            with np.errstate(all="ignore"):
+                u = Vt[:rk].T @ ((U[:, :rk].T @ (b - A @ zp)) / s[:rk])
+                zp = zp + N @ u
     xn = x + R.lift(zp)
     if not np.isfinite(xn.sum()) or not R.feasible(xn):
         return None

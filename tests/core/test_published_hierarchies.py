@@ -1,0 +1,184 @@
+"""Published hierarchical least-squares problems (LexLS, soth, hdaqp; ``tests/data/hlsp``)
+on every backend with the default options, judged against the exact lexicographic
+reference (``tests/oracle.py``) and, for the humanoid, LexLS's published solution.
+
+Every level value must match the reference to ``REL`` of its value (a floor of ``FLOOR``
+of the level's scale for levels whose optimum is 0), or the solution must say
+``"inaccurate"`` — which fails here too: these problems are expected to be certified.
+Issue 22 found: the humanoid's last level 4.9e-4 above the optimum (regularisation 1e-9)
+on every backend and 12 % above on HiGHS; soth's 30-variable stack letting level-0 joint
+limits slip by up to 9e-6 to improve level 2. Each is pinned below.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from campaign import level_scales
+from hlsp import NAMES, load
+from oracle import level_residuals, lexicographic
+from scipy.optimize import linprog, lsq_linear
+
+import qpcoord as qc
+
+#: Backends fast enough for the normal suite; osqp and scs (seconds on the humanoid) are slow.
+FAST = [s for s in ("daqp", "quadprog", "proxqp", "piqp", "clarabel", "highs")
+        if s in qc.available_solvers()]  # fmt: skip
+SLOW = [s for s in ("osqp", "scs") if s in qc.available_solvers()]
+BACKENDS = [pytest.param(s) for s in FAST] + [pytest.param(s, marks=pytest.mark.slow) for s in SLOW]
+#: Relative agreement of a level value with the reference.
+REL = 1e-6
+#: Floor (relative to the level's scale) for levels whose optimum is 0.
+FLOOR = 1e-9
+#: A higher level may not be worse than the reference by more than this of its squared scale.
+WORSEN = 1e-9
+
+_REF: dict = {}
+
+
+def _case(name: str, as_bounds: bool):
+    key = (name, as_bounds)
+    if key not in _REF:
+        P = load(name, simple_as_bounds=as_bounds)
+        _REF[key] = (P, lexicographic(P.levels, P.bounds, polish=True))
+    return _REF[key]
+
+
+def _solve(P, solver: str):
+    """Default options. scs (first-order, run to 1e-10) may hit the 10 s time limit on the
+    88-variable humanoid: that is a clear error in bounded time, reported as xfail."""
+    try:
+        return P.stack().solve(solver=solver)
+    except qc.SolverError as exc:
+        if solver == "scs" and "time limit" in str(exc):
+            pytest.xfail(f"scs: {str(exc)[:80]}")
+        raise
+
+
+CASES = [(name, False) for name in NAMES] + [("lexls_test01_humanoid", True)]
+IDS = [f"{n}{'-box' if b else ''}" for n, b in CASES]
+
+
+def _dual_gap(A, b, E, u, lo, up, x) -> tuple[float, float]:
+    """Level value at ``x`` and a lower bound on the optimum of
+    ``min ‖A x − b‖ s.t. E x = u, lo ≤ x ≤ up`` (finite box) by Lagrangian duality:
+    ``g(y, μ) = −½‖y‖² − yᵀb − μᵀu + Σ min(cᵢ loᵢ, cᵢ upᵢ)``, ``c = Aᵀy + Eᵀμ``, a lower
+    bound on ``½‖A x − b‖²`` for *any* ``(y, μ)``. ``y = A x − b``; ``μ`` maximises ``g``
+    (an LP: concave piecewise linear), so an inexact LP only loosens the bound."""
+    y = A @ x - b
+    c0 = A.T @ y
+    m, n = E.shape
+    # variables (μ, t): minimise uᵀμ − Σt  s.t.  t_i ≤ c_i lo_i,  t_i ≤ c_i up_i
+    G = np.block([[-lo[:, None] * E.T, np.eye(n)], [-up[:, None] * E.T, np.eye(n)]])
+    h = np.concatenate([lo * c0, up * c0])
+    lp = linprog(
+        np.concatenate([u, -np.ones(n)]), A_ub=G, b_ub=h, bounds=(None, None), method="highs"
+    )
+    assert lp.status == 0, lp.message
+    c = c0 + E.T @ lp.x[:m]
+    g = -0.5 * y @ y - y @ b - lp.x[:m] @ u + float(np.sum(np.minimum(c * lo, c * up)))
+    return float(np.linalg.norm(y)), float(np.sqrt(max(2.0 * g, 0.0)))
+
+
+@pytest.mark.parametrize("solver", BACKENDS)
+@pytest.mark.parametrize(("name", "as_bounds"), CASES, ids=IDS)
+def test_level_values_match_the_reference(name, as_bounds, solver):
+    P, ref = _case(name, as_bounds)
+    sol = _solve(P, solver)
+    assert sol.status == "optimal", f"{name}/{solver}: {sol.status} {sol.info.get('inaccurate')}"
+    ours, theirs = sol.level_residuals, ref.level_optima
+    scale = level_scales(P.levels, ref.x)
+    tol = np.maximum(REL * theirs, FLOOR * scale)
+    for k in range(len(ours)):
+        assert abs(ours[k] - theirs[k]) <= tol[k], (
+            f"{name}/{solver} level {k}: {ours[k]!r} vs reference {theirs[k]!r} "
+            f"({(ours[k] - theirs[k]) / max(theirs[k], 1e-300):.2e} relative)"
+        )
+    # no higher level worsened to improve a lower one
+    worse2 = (ours**2 - theirs**2) / scale**2
+    for k in range(len(ours)):
+        assert not (worse2[k] > WORSEN and (worse2[k + 1 :] < -WORSEN).any()), (name, k)
+    # hard rows never slip
+    if P.bounds is not None:
+        lb, ub = P.bounds.resolve(P.n)
+        assert np.all(sol.x >= lb) and np.all(sol.x <= ub)
+
+
+@pytest.mark.parametrize("solver", BACKENDS)
+def test_humanoid_last_level_is_exact_and_matches_lexls(solver):
+    """LexLS test_01 (88 variables, 5 levels). Issue 22: the last level came out 4.9e-4
+    relative above the optimum with the default regularisation on every backend, 12 % on
+    HiGHS. It must now match the exact reference and LexLS's published solution to 1e-6."""
+    for as_bounds in (False, True):
+        P, ref = _case("lexls_test01_humanoid", as_bounds)
+        sol = _solve(P, solver)
+        assert sol.status == "optimal"
+        published = level_residuals(P.levels, P.solution)
+        last = sol.level_residuals[-1]
+        assert last == pytest.approx(ref.level_optima[-1], rel=REL)
+        assert last == pytest.approx(published[-1], rel=REL)
+        # the levels above are met (published and reference: ~1e-13; values, not slack)
+        assert np.all(sol.level_residuals[:-1] <= 1e-9)
+
+
+@pytest.mark.parametrize("solver", BACKENDS)
+def test_soth_sot_joint_limits_never_slip(solver):
+    """soth ``sot.txt`` (30 variables, 5 levels, level 0 = joint limits as rows). Issue 22:
+    several backends let the level-0 limits slip by up to 9e-6 to improve level 2."""
+    P, _ = _case("soth_sot", False)
+    lim = P.levels[0]
+    sol = _solve(P, solver)
+    cx = lim.C @ sol.x
+    slip = np.maximum(np.maximum(lim.lower - cx, cx - lim.upper), 0.0)
+    assert slip.max() <= 1e-12, f"{solver}: joint limits slip by {slip.max():.2e}"
+
+
+def test_soth_sot_plain_reference_is_off_at_level_1():
+    """soth_sot: level 1 (3 equality rows under the joint-limit box) is a bounded least-
+    squares problem, solved exactly by scipy's BVLS. The library's ``A₁x`` equals BVLS's to
+    rounding; the plain (conic, unpolished) reference's misses it by ~2.5e-11 and its
+    level 1 is ~2e-11 above the optimum — which buys it a level 2 better than the true
+    lexicographic optimum by ~2e-5 relative. Hence the tests use ``polish=True``."""
+    P, _ = _case("soth_sot", False)
+    ref = lexicographic(P.levels, P.bounds)
+    lim, t1 = P.levels[0], P.levels[1]
+    assert np.allclose(lim.C, np.eye(P.n))
+    bv = lsq_linear(t1.A, t1.b, bounds=(lim.lower, lim.upper), method="bvls", tol=1e-15)
+    u = t1.A @ bv.x
+    sol = P.stack().solve(solver="daqp")
+    assert np.linalg.norm(t1.A @ sol.x - u) <= 1e-14
+    assert np.linalg.norm(t1.A @ ref.x - u) > 1e-12
+    r1 = np.linalg.norm(u - t1.b)
+    assert ref.level_optima[1] > r1 * (1 + 1e-10)
+
+
+@pytest.mark.parametrize("solver", BACKENDS)
+def test_soth_sot_level_2_meets_its_dual_bound(solver):
+    """Level 2 of soth_sot judged without the reference: pinned to level 1's exact values
+    (BVLS) inside the joint-limit box, the library's level-2 value is within 1e-6 relative
+    of a Lagrangian lower bound on the optimum (so it is optimal to 1e-6)."""
+    P, _ = _case("soth_sot", False)
+    lim, t1, t2 = P.levels[0], P.levels[1], P.levels[2]
+    bv = lsq_linear(t1.A, t1.b, bounds=(lim.lower, lim.upper), method="bvls", tol=1e-15)
+    sol = _solve(P, solver)
+    value, lower = _dual_gap(t2.A, t2.b, t1.A, t1.A @ bv.x, lim.lower, lim.upper, sol.x)
+    assert value == pytest.approx(sol.level_residuals[2], rel=1e-12)
+    assert lower <= value * (1 + 1e-12)
+    assert value - lower <= REL * value, f"{solver}: gap {(value - lower) / value:.2e}"
+
+
+def test_loader_maps_rows_and_simple_bounds():
+    """Rows with lower == upper are equalities, the others inequalities; the humanoid's
+    level-0 simple bounds become the box only on request, and both forms have the same
+    lexicographic optimum (the box is consistent, so level 0's optimal set is the box)."""
+    P = load("lexls_test01_humanoid")
+    Pb = load("lexls_test01_humanoid", simple_as_bounds=True)
+    assert len(P.levels) == 5 and len(Pb.levels) == 4 and Pb.bounds is not None
+    eqs = [t for t in P.levels[4:] if isinstance(t, qc.Equality)]
+    assert eqs and eqs[0].A.shape == (97, 88)
+    r, rb = _case("lexls_test01_humanoid", False)[1], _case("lexls_test01_humanoid", True)[1]
+    assert r.level_optima[-1] == pytest.approx(rb.level_optima[-1], rel=1e-9)
+    with pytest.raises(ValueError, match="simple_as_bounds"):
+        load("soth_sot", simple_as_bounds=True)
+    with pytest.raises(ValueError, match="name"):
+        load("nope")
