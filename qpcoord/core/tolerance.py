@@ -12,8 +12,13 @@ __all__ = ["widen", "within", "at_bounds"]
 
 
 def widen(lo: np.ndarray, hi: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(lo − tol·max(1,|lo|), hi + tol·max(1,|hi|))``; infinite bounds stay infinite."""
-    return lo - tol * np.maximum(1.0, np.abs(lo)), hi + tol * np.maximum(1.0, np.abs(hi))
+    """``(lo − tol·max(1,|lo|), hi + tol·max(1,|hi|))``; infinite bounds stay infinite.
+
+    A wrong-sided infinity (``lo = +inf``, written in place past the checks) gives NaN, which
+    meets no comparison, silently: the solve-time check names it (the library never prints).
+    """
+    with np.errstate(invalid="ignore"):
+        return lo - tol * np.maximum(1.0, np.abs(lo)), hi + tol * np.maximum(1.0, np.abs(hi))
 
 
 def within(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
