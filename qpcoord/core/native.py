@@ -223,7 +223,8 @@ class NativeHierarchy:
         info : dict
             ``engine``, ``active_set_iterations`` (per level), ``hard_iterations``,
             ``min_norm_iterations``, ``warm_start_hits`` (stages whose stored working set
-            was optimal), ``closed_form_levels``, ``uncertified`` (``[(level, deviation)]``
+            was optimal), ``closed_form_levels``, ``qp_calls`` (stages solved by the active
+            set rather than a closed form: the Python engine's count of QP calls), ``uncertified`` (``[(level, deviation)]``
             when a level's value at ``x`` moved from the one it was frozen with by more
             than ``KKT_TOL`` relative: the lower levels left its optimal set by rounding).
 
@@ -278,6 +279,10 @@ class NativeHierarchy:
             "min_norm_iterations": int(iters[-1]),
             "warm_start_hits": int(st[:, 1].sum()),
             "closed_form_levels": np.flatnonzero(st[1:-1, 2]).tolist(),
+            # as the Python engine's count of QP calls: the stages (hard phase, levels,
+            # minimum-norm step) that needed the active set (its iterations or a stored
+            # working set) rather than a closed form
+            "qp_calls": int(np.count_nonzero((st[:, 0] > 0) | (st[:, 1] > 0))),
             "uncertified": [(int(self.detail[6]), dev)] if dev > KKT_TOL else [],
         }
         return self.x.copy(), self.res.copy(), info

@@ -46,6 +46,8 @@ class PivotedQR {
 
   /// Factorise in place; returns the numerical rank.
   int factor(double abs_tol, double rel_tol) {
+    abs_tol_ = abs_tol;
+    rel_tol_ = rel_tol;
     MapMat A = matrix();
     const int steps = std::min(m_, nc_);
     for (int j = 0; j < nc_; ++j) perm_[j] = j;
@@ -114,16 +116,59 @@ class PivotedQR {
   /// B <- B Qf (B: p x m), through a workspace of p doubles.
   template <typename B>
   void apply_q_right(B&& b) {
+    for (int j = 0; j < rank_; ++j) reflect_right(j, b);
+  }
+  /// B <- B H_j (one reflector, e.g. the one append() added: j = rank() - 1).
+  template <typename B>
+  void reflect_right(int j, B&& b) {
     const auto A = cmatrix();
-    for (int j = 0; j < rank_; ++j) {
-      const int len = m_ - j - 1;
-      auto w = work_.head(b.rows());
-      w.noalias() = b.col(j);
-      if (len > 0) w.noalias() += b.middleCols(j + 1, len) * A.col(j).segment(j + 1, len);
-      w *= tau_(j);
-      b.col(j) -= w;
-      if (len > 0) b.middleCols(j + 1, len).noalias() -= w * A.col(j).segment(j + 1, len).transpose();
+    const int len = m_ - j - 1;
+    auto w = work_.head(b.rows());
+    w.noalias() = b.col(j);
+    if (len > 0) w.noalias() += b.middleCols(j + 1, len) * A.col(j).segment(j + 1, len);
+    w *= tau_(j);
+    b.col(j) -= w;
+    if (len > 0) b.middleCols(j + 1, len).noalias() -= w * A.col(j).segment(j + 1, len).transpose();
+  }
+  /// Append a column a (m entries) to a factorisation of full column rank: the reflectors
+  /// so far are applied to it and one more reflector (no pivoting) zeroes it below the
+  /// diagonal. False (nothing changed) if the factorisation is rank-deficient, full, or the
+  /// new column is dependent to the factorisation's tolerance: then factor() again.
+  template <typename A_>
+  bool append(const A_& a) {
+    if (rank_ != nc_ || nc_ >= max_cols_ || rank_ >= m_) return false;
+    const int j = nc_;
+    Eigen::Map<Vec> col(buf_.data() + static_cast<Eigen::Index>(j) * std::max(m_, 1), m_);
+    col = a;
+    for (int i = 0; i < rank_; ++i) reflect(i, col);
+    const double pn = col.tail(m_ - j).norm();
+    const double ref = (j == 0) ? pn : first_;
+    if (!(pn > abs_tol_) || !(pn > rel_tol_ * ref) || pn == 0.0) return false;
+    if (j == 0) first_ = pn;
+    const double x0 = col(j);
+    const double beta = (x0 >= 0.0) ? -pn : pn;
+    const double v0 = x0 - beta;
+    double tau = 0.0;
+    if (v0 != 0.0) {
+      col.segment(j + 1, m_ - j - 1) /= v0;
+      tau = (beta - x0) / beta;
     }
+    col(j) = beta;
+    tau_(j) = tau;
+    perm_[j] = j;
+    ++nc_;
+    ++rank_;
+    return true;
+  }
+
+  /// The minimum-norm v with A^T v = b for the factorised A (m x nc, b: nc entries, out: m
+  /// entries): A^T = P R^T Qf^T, so v = Qf [R11^-T (P^T b)(0:rank); 0] (b in A^T's range).
+  template <typename B, typename V>
+  void min_norm_transposed_solve(const B& b, V&& out) const {
+    out.setZero();
+    for (int i = 0; i < rank_; ++i) out(i) = b(perm_[i]);
+    solve_rt(out);
+    apply_q(out);
   }
   /// Solve R11 u = rhs(0:rank) in place (rhs: at least rank entries).
   template <typename V>
@@ -159,7 +204,7 @@ class PivotedQR {
   Vec buf_, tau_, norms_, work_;
   std::vector<int> perm_;
   int max_rows_ = 0, max_cols_ = 0, m_ = 0, nc_ = 0, rank_ = 0;
-  double first_ = 0.0;
+  double first_ = 0.0, abs_tol_ = 0.0, rel_tol_ = 0.0;
 };
 
 }  // namespace qpcoord

@@ -117,6 +117,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   }
   wqr_.reserve(max_cols, max_grows, max_qrows);
   kqr_.reserve(max_qrows, max_cols, 1);
+  cqr_.reserve(max_cols, max_cols, 1);
   fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
@@ -237,9 +238,22 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   auto rhs = tvec_.head(qr);
   rhs = -res;
   kqr_.apply_qt(rhs);
-  kqr_.solve_r(rhs);
-  // step = Qf [0; s], s(perm(i)) = rhs(i) for the first rk pivots, else 0
-  for (int i = 0; i < rk; ++i) step(rho + kqr_.perm(i)) = rhs(i);
+  // step = Qf [0; s]; K P = Qk [R11 R12; 0 0]: with full column rank s(perm(i)) = u(i),
+  // u = R11^-1 (Qk^T (-res))(0:rk); rank-deficient K: the minimum-norm s (as a complete
+  // orthogonal decomposition), u the min-norm solution of [R11 R12] u = (Qk^T (-res))(0:rk)
+  if (rk == nk) {
+    kqr_.solve_r(rhs);
+    for (int i = 0; i < rk; ++i) step(rho + kqr_.perm(i)) = rhs(i);
+  } else if (rk > 0) {
+    const auto Kf = kqr_.matrix();
+    MapMat T = cqr_.matrix(nk, rk);  // [R11 R12]^T
+    T.setZero();
+    for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
+    cqr_.factor(0.0, 0.0);
+    auto u = u_.head(nk);
+    cqr_.min_norm_transposed_solve(rhs.head(rk), u);
+    for (int i = 0; i < nk; ++i) step(rho + kqr_.perm(i)) = u(i);
+  }
   wqr_.apply_q(step);
 }
 
@@ -279,10 +293,10 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>&
     const double v = (W[i] == 1) ? -mu(j) : mu(j);
     if (v >= -tol) continue;
     if (bland) {  // degenerate stretch: the lowest index with a negative multiplier
-      jmin = i;
-      break;
+      if (jmin < 0 || i < jmin) jmin = i;
+      continue;
     }
-    if (v < mmin) {
+    if (v < mmin || (v == mmin && i < jmin)) {
       mmin = v;
       jmin = i;
     }
@@ -314,13 +328,15 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   std::fill(keep_.begin(), keep_.begin() + m, 0);
   int last_drop = -1;
   int zero_steps = 0;
+  bool current = false;  // the working set's factorisation matches W (after an append)
   for (int it = 0; it < max_iter; ++it) {
     if (out_of_time()) {
       timed_out_ = true;
       return false;
     }
     ++iters;
-    factor_working(P, W);
+    if (!current) factor_working(P, W);
+    current = false;
     ls_step(P, y, step);  // res_ = Q y - c
     const auto res = res_.head(qr);
     dres.noalias() = Q * step;
@@ -379,7 +395,17 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       ++zero_steps;
     }
     y += alpha * step;
-    if (block >= 0) W[block] = side;
+    if (block >= 0) {
+      W[block] = side;
+      // one row enters: update the working set's QR and Q Qf instead of refactorising
+      if (wqr_.append(P.G.row(block).head(k).transpose())) {
+        widx_.push_back(block);
+        wqr_.reflect_right(wqr_.rank() - 1, Qt_.topLeftCorner(qr, k));
+        current = true;
+      }
+    } else {
+      current = true;  // W unchanged
+    }
   }
   return false;
 }

@@ -162,6 +162,7 @@ class Hierarchy {
   PivotedQR wqr_;  ///< G_w^T of the working set (k x kw)
   PivotedQR kqr_;  ///< the projected objective K = Q N (qrows x (k - rank))
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
+  PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
   Mat Qt_;         ///< Q Qf
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
   Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,

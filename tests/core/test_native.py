@@ -352,3 +352,16 @@ def test_repeated_calls_reuse_the_buffers():
         s.solve(engine="native")
     assert s._native is nh
     assert [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)] == ids
+
+
+@needs_native
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_qp_calls_count_the_levels_that_needed_an_active_set(engine):
+    """Both engines report ``qp_calls``: 0 when every level's closed form meets the bounds,
+    > 0 when a bound is active (the native engine counts its active-set stages)."""
+    inside = qc.Stack([qc.Equality(np.eye(3), [0.1, 0.2, 0.3])], bounds=qc.Bounds(-1.0, 1.0))
+    assert inside.solve(engine=engine).info["qp_calls"] == 0
+    outside = qc.Stack([qc.Equality(np.eye(3), [0.1, 2.0, 0.3])], bounds=qc.Bounds(-1.0, 1.0))
+    sol = outside.solve(engine=engine)
+    assert sol.info["qp_calls"] > 0
+    np.testing.assert_allclose(sol.x, [0.1, 1.0, 0.3], atol=1e-12)
