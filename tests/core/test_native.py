@@ -98,6 +98,17 @@ def test_python_default_never_warns(missing_extension, monkeypatch):
         assert _small_stack().solve(engine="python").solver != "native"
 
 
+@needs_native
+def test_default_is_native_where_built():
+    """``engine=None`` on a hierarchical stack without ``solver=`` is the native engine."""
+    assert native.DEFAULT_ENGINE == "native"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _small_stack().solve().solver == "native"
+        assert qc.solve_stack([qc.Equality(np.eye(2), [1.0, 2.0])]).solver == "native"
+    assert _small_stack().solve(engine="python").solver != "native"
+
+
 def test_engine_argument_errors():
     s = _small_stack()
     with pytest.raises(ValueError, match="unknown engine 'fast'"):
