@@ -41,9 +41,9 @@ __all__ = [
 
 #: The engines :meth:`Stack.solve` offers.
 ENGINES = ("native", "python")
-#: What ``engine=None`` means where the native engine applies. "python" for now: the native
-#: engine is opt-in (``engine="native"``) until every test of the suite passes with it.
-DEFAULT_ENGINE = "python"
+#: What ``engine=None`` means where the native engine applies (method ``"hierarchical"``, no
+#: explicit ``solver``): the native engine where it is built, else Python with one warning.
+DEFAULT_ENGINE = "native"
 #: Name of the extension module.
 MODULE = "qpcoord._native"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
@@ -223,9 +223,11 @@ class NativeHierarchy:
         info : dict
             ``engine``, ``active_set_iterations`` (per level), ``hard_iterations``,
             ``min_norm_iterations``, ``warm_start_hits`` (stages whose stored working set
-            was optimal), ``closed_form_levels``, ``uncertified`` (``[(level, deviation)]``
-            when a level's value at ``x`` moved from the one it was frozen with by more
-            than ``KKT_TOL`` relative: the lower levels left its optimal set by rounding).
+            was optimal), ``closed_form_levels``, ``qp_calls`` (stages solved by the active
+            set rather than a closed form: the Python engine's count of QP calls),
+            ``uncertified`` (``[(level, deviation)]`` when a level's value at ``x`` moved
+            from the one it was frozen with by more than ``KKT_TOL`` relative: the lower
+            levels left its optimal set by rounding).
 
         Raises
         ------
@@ -268,16 +270,19 @@ class NativeHierarchy:
             self._solved = False  # the stored working sets may be from another problem
             self._raise(code, P)
         self._solved = True
-        st = self.stats
-        iters = st[:, 0].tolist()
+        rows = self.stats.tolist()  # (stages, 3): iterations, warm hit, closed form
         dev = float(self.detail[5])
         info = {
             "engine": "native",
-            "hard_iterations": int(iters[0]),
-            "active_set_iterations": [int(v) for v in iters[1:-1]],
-            "min_norm_iterations": int(iters[-1]),
-            "warm_start_hits": int(st[:, 1].sum()),
-            "closed_form_levels": np.flatnonzero(st[1:-1, 2]).tolist(),
+            "hard_iterations": int(rows[0][0]),
+            "active_set_iterations": [int(r[0]) for r in rows[1:-1]],
+            "min_norm_iterations": int(rows[-1][0]),
+            "warm_start_hits": int(sum(r[1] for r in rows)),
+            "closed_form_levels": [k for k, r in enumerate(rows[1:-1]) if r[2]],
+            # as the Python engine's count of QP calls: the stages (hard phase, levels,
+            # minimum-norm step) that needed the active set (its iterations or a stored
+            # working set) rather than a closed form
+            "qp_calls": sum(1 for r in rows if r[0] > 0 or r[1] > 0),
             "uncertified": [(int(self.detail[6]), dev)] if dev > KKT_TOL else [],
         }
         return self.x.copy(), self.res.copy(), info

@@ -104,16 +104,36 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   // largest stage: (z, w) with w over a level's rows, or the hard phase (slack per hard row
   // and per bound); Q holds equalities, damping rows and slack rows (or Z for the min norm)
   const int hard_cols = n + min_[0] + (has_bounds ? n : 0);
-  const int max_cols = std::max(n + max_in, hard_cols);
-  const int max_qrows = std::max({max_eq + n + max_in, n, min_[0] + (has_bounds ? n : 0)});
+  const int max_cols = std::max({n + max_in, hard_cols, 1});
+  const int max_qrows = std::max({max_eq + n + max_in, n, min_[0] + (has_bounds ? n : 0), 1});
   const int max_grows = capacity_ + (has_bounds ? n : 0) + max_in + 1;
-  P_.resize(std::max(max_qrows, 1), max_grows, std::max(max_cols, 1));
-  y_.resize(std::max(max_cols, 1));
+  P_.resize(max_qrows, max_grows, max_cols);
+  y_.setZero(max_cols);
   W_.assign(max_grows, 0);
   working_.resize(blocks + 1);
+  for (auto& w : working_) {
+    w.id.reserve(max_grows);
+    w.side.reserve(max_grows);
+  }
+  wqr_.reserve(max_cols, max_grows, max_qrows);
+  kqr_.reserve(max_qrows, max_cols, 1);
+  cqr_.reserve(max_cols, max_cols, 1);
+  fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
+  Qt_.setZero(max_qrows, max_cols);
+  const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
+  for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
+                 &tmpr_, &xc_, &xold_, &e_, &ute_})
+    v->setZero(big);
+  widx_.reserve(max_grows);
+  mov_.reserve(std::max(max_in, 1));
+  keep_.assign(max_grows, 0);
+  viol_.assign(std::max(max_in, 1), 0);
+  Ms_.resize(blocks);
+  svds_.resize(blocks);
+  Ztmp_.setZero(n, n);
 }
 
-bool Hierarchy::feasible(const Vec& x) const {
+bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) const {
   if (has_bounds_)
     for (int j = 0; j < n_; ++j)
       if (!in_box(x(j), lb_(j), ub_(j))) return false;
@@ -141,26 +161,22 @@ void Hierarchy::inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>
   }
 }
 
-void Hierarchy::add_inherited_rows(LsqProblem& P, int col0) {
-  (void)col0;
-  Vec g(r_);
+void Hierarchy::add_inherited_rows(LsqProblem& P) {
+  auto full = rowbuf_.head(P.cols);
+  full.setZero();
   for (int i = 0; i < k_; ++i) {
-    g.noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
+    full.head(r_).noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
     const double v = Cin_.row(i).dot(x_);
     const double l = std::min(lin_(i) - v, 0.0);
     const double u = std::max(uin_(i) - v, 0.0);
-    const int before = P.rows;
-    Vec full = Vec::Zero(P.cols);
-    full.head(r_) = g;
     P.add_row(full, l, u, inid_[i], Cin_.row(i).norm());
-    (void)before;
   }
 }
 
-void Hierarchy::add_bound_rows(LsqProblem& P, int col0) {
-  (void)col0;
+void Hierarchy::add_bound_rows(LsqProblem& P) {
   if (!has_bounds_) return;
-  Vec full = Vec::Zero(P.cols);
+  auto full = rowbuf_.head(P.cols);
+  full.setZero();
   for (int j = 0; j < n_; ++j) {
     full.head(r_) = Z_.row(j).head(r_).transpose();
     const double l = std::min(lb_(j) - x_(j), 0.0);
@@ -169,96 +185,118 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int col0) {
   }
 }
 
-void Hierarchy::freeze(const Mat& F, double scale) {
-  if (F.rows() == 0 || r_ == 0) return;
-  Eigen::JacobiSVD<Mat> svd(F, Eigen::ComputeFullV);
-  const int rank =
-      numerical_rank(svd.singularValues(), static_cast<int>(F.rows()), r_, scale);
+void Hierarchy::freeze(double scale) {
+  const int f = fqr_.cols();
+  if (f == 0 || r_ == 0) return;
+  // numerical rank as qpcoord.core.linalg.numerical_rank: relative to max(|F|_2, scale),
+  // the first pivot (largest row norm of F) standing for |F|_2
+  const MapMat Ft = fqr_.matrix();
+  const double first = Ft.colwise().norm().maxCoeff();
+  const double tol = std::max(f, r_) * kEps * std::max(first, scale);
+  const int rank = fqr_.factor(tol, 0.0);
   if (rank == 0) return;
-  const Mat N = svd.matrixV().rightCols(r_ - rank);
-  Mat Zn = Z_.leftCols(r_) * N;
+  auto Zr = Z_.leftCols(r_);
+  fqr_.apply_q_right(Zr);  // Z Qf: its last r - rank columns span Z null(F)
+  for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
   r_ -= rank;
-  Z_.leftCols(r_) = Zn;
 }
 
 // ---------------------------------------------------------------------------------------
-void Hierarchy::null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, Mat& N) {
+void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W) {
   const int k = P.cols;
-  int kw = 0;
+  widx_.clear();
   for (int i = 0; i < P.rows; ++i)
-    if (W[i]) ++kw;
-  if (kw == 0) {
-    N = Mat::Identity(k, k);
-    return;
-  }
-  Mat GwT(k, kw);
-  int j = 0;
-  for (int i = 0; i < P.rows; ++i)
-    if (W[i]) GwT.col(j++) = P.G.row(i).head(k).transpose();
-  Eigen::ColPivHouseholderQR<Mat> qr(GwT);
-  qr.setThreshold(std::max(k, kw) * kEps * 10.0);
-  const int rank = static_cast<int>(qr.rank());
-  const Mat Qf = qr.householderQ();
-  N = Qf.rightCols(k - rank);
+    if (W[i]) widx_.push_back(i);
+  const int kw = static_cast<int>(widx_.size());
+  MapMat GwT = wqr_.matrix(k, kw);
+  for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
+  wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
+  auto Qt = Qt_.topLeftCorner(P.qrows, k);
+  Qt = P.Q.topLeftCorner(P.qrows, k);
+  wqr_.apply_q_right(Qt);
 }
 
-/// The minimum-norm least-squares step in span(N): min ||Q (y + N s) - c||, res = Q y - c.
-/// Numerical rank as qpcoord.core.linalg.numerical_rank with the scale of Q before
-/// projection: a K = Q N whose columns are rounding noise (the working set's rows span what
+/// The minimum-residual step in null(G_w) = span(Qf(:, rank:)): min ||Q (y + N s) - c||.
+/// Numerical rank of K = Q N as qpcoord.core.linalg.numerical_rank with the scale of Q
+/// before projection: a K whose columns are rounding noise (the working set's rows span what
 /// Q can change) is rank 0, not a full-rank matrix of size 1e-16.
-static void subspace_step(const Eigen::Ref<const Mat>& Q, const Mat& N, const Vec& res, double qscale,
-                   Vec& step) {
-  const Mat K = Q * N;
-  const double kmax = K.colwise().norm().maxCoeff();  // the first pivot of a pivoted QR
-  const double tol = std::max(K.rows(), K.cols()) * kEps * std::max(kmax, qscale);
-  if (kmax > tol) {
-    Eigen::CompleteOrthogonalDecomposition<Mat> cod;
-    cod.setThreshold(tol / kmax);
-    cod.compute(K);
-    step.noalias() = N * cod.solve(-res);
-  } else {
-    step.setZero();
+void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
+                        Eigen::Ref<Vec> step) {
+  const int k = P.cols, qr = P.qrows, rho = wqr_.rank(), nk = k - rho;
+  const auto Q = P.Q.topLeftCorner(qr, k);
+  auto res = res_.head(qr);
+  res.noalias() = Q * y;
+  res -= P.c.head(qr);
+  step.setZero();
+  if (nk == 0 || qr == 0) return;
+  const auto K = Qt_.block(0, rho, qr, nk);
+  const double kmax = K.colwise().norm().maxCoeff();
+  const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
+  if (!(kmax > tol)) return;
+  kqr_.matrix(qr, nk) = K;
+  const int rk = kqr_.factor(tol, 0.0);
+  auto rhs = tvec_.head(qr);
+  rhs = -res;
+  kqr_.apply_qt(rhs);
+  // step = Qf [0; s]; K P = Qk [R11 R12; 0 0]: with full column rank s(perm(i)) = u(i),
+  // u = R11^-1 (Qk^T (-res))(0:rk); rank-deficient K: the minimum-norm s (as a complete
+  // orthogonal decomposition), u the min-norm solution of [R11 R12] u = (Qk^T (-res))(0:rk)
+  if (rk == nk) {
+    kqr_.solve_r(rhs);
+    for (int i = 0; i < rk; ++i) step(rho + kqr_.perm(i)) = rhs(i);
+  } else if (rk > 0) {
+    const auto Kf = kqr_.matrix();
+    MapMat T = cqr_.matrix(nk, rk);  // [R11 R12]^T
+    T.setZero();
+    for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
+    cqr_.factor(0.0, 0.0);
+    auto u = u_.head(nk);
+    cqr_.min_norm_transposed_solve(rhs.head(rk), u);
+    for (int i = 0; i < nk; ++i) step(rho + kqr_.perm(i)) = u(i);
   }
+  wqr_.apply_q(step);
 }
 
-bool Hierarchy::multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
-                               int* drop, const std::vector<char>* keep, bool bland) {
-  const int k = P.cols;
-  const auto Q = P.Q.topLeftCorner(P.qrows, k);
-  const Vec res = Q * y - P.c.head(P.qrows);
-  const Vec g = Q.transpose() * res;
-  std::vector<int> idx;
-  for (int i = 0; i < P.rows; ++i)
-    if (W[i]) idx.push_back(i);
-  if (idx.empty()) return true;
-  Mat A(k, static_cast<int>(idx.size()));
-  for (size_t j = 0; j < idx.size(); ++j) {
-    const double sign = (W[idx[j]] == 1) ? -1.0 : 1.0;
-    A.col(static_cast<int>(j)) = sign * P.G.row(idx[j]).head(k).transpose();
-  }
-  Eigen::CompleteOrthogonalDecomposition<Mat> cod(A);
-  cod.setThreshold(std::max(k, static_cast<int>(idx.size())) * kEps);
-  const Vec mu = cod.solve(g);
+bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
+                               const std::vector<int8_t>& W, int* drop,
+                               const std::vector<char>* keep, bool bland) {
+  const int k = P.cols, qr = P.qrows;
+  const int kw = static_cast<int>(widx_.size());
+  if (kw == 0) return true;
+  const auto Q = P.Q.topLeftCorner(qr, k);
+  auto res = dres_.head(qr);
+  res.noalias() = Q * y;
+  res -= P.c.head(qr);
+  auto g = gvec_.head(k);
+  g.noalias() = Q.transpose() * res;
+  // G_w^T u = g in least squares through the working set's QR; mu = sign * u
+  auto u = u_.head(k);
+  u = g;
+  wqr_.apply_qt(u);
+  wqr_.solve_r(u);
+  auto mu = mu_.head(kw);
+  mu.setZero();
+  for (int i = 0; i < wqr_.rank(); ++i) mu(wqr_.perm(i)) = u(i);
   // a multiplier counts as negative beyond the sign tolerance (relative to the gradient) and
   // beyond the rounding of the gradient itself (g = Q^T (Q y - c) in floating point)
-  const double qn = Q.norm();
+  const double qn = qscale_;
   const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
   const double round =
-      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c.head(P.qrows).norm());
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c.head(qr).norm());
   const double tol = kKktTol * gref + round;
   int jmin = -1;
   double mmin = kInf;
-  for (size_t j = 0; j < idx.size(); ++j) {
-    const int i = idx[j];
-    if (W[i] == 2) continue;            // equalities are never dropped
-    if (keep && (*keep)[i]) continue;   // re-blocked right after a drop: multiplier is zero
-    const double v = mu(static_cast<int>(j));
+  for (int j = 0; j < kw; ++j) {
+    const int i = widx_[j];
+    if (W[i] == 2) continue;           // equalities are never dropped
+    if (keep && (*keep)[i]) continue;  // re-blocked right after a drop: multiplier is zero
+    const double v = (W[i] == 1) ? -mu(j) : mu(j);
     if (v >= -tol) continue;
     if (bland) {  // degenerate stretch: the lowest index with a negative multiplier
-      jmin = i;
-      break;
+      if (jmin < 0 || i < jmin) jmin = i;
+      continue;
     }
-    if (v < mmin) {
+    if (v < mmin || (v == mmin && i < jmin)) {
       mmin = v;
       jmin = i;
     }
@@ -268,46 +306,50 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Vec& y, const std::vec
   return false;
 }
 
-bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, int& iters) {
+bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W,
+                           int& iters) {
   const int k = P.cols;
   const int m = P.rows;
-  const auto Q = P.Q.topLeftCorner(P.qrows, k);
-  const auto c = P.c.head(P.qrows);
+  const int qr = P.qrows;
+  const auto Q = P.Q.topLeftCorner(qr, k);
+  const auto c = P.c.head(qr);
   const double cn = c.norm();
-  const double qscale = Q.norm();
+  qscale_ = Q.norm();
   const int max_iter = kIterFactor * (m + k) + 10;
-  Mat N;
-  Vec step(k), res, dres, gy(m), gp(m);
+  auto step = step_.head(k);
+  auto dres = dres_.head(qr);
+  auto gy = gy_.head(m);
+  auto gp = gp_.head(m);
+  auto qy = e_.head(qr);
   // anti-cycling: a row dropped for a negative multiplier that blocks the very next step at
   // once had a multiplier that is zero to rounding; it is put back and kept ("keep") until
   // the point moves. After several steps of length zero in a row, Bland's rule (lowest
   // index) chooses the row to drop; ties in the ratio test go to the lowest index always.
-  std::vector<char> keep(m, 0);
+  std::fill(keep_.begin(), keep_.begin() + m, 0);
   int last_drop = -1;
   int zero_steps = 0;
+  bool current = false;  // the working set's factorisation matches W (after an append)
   for (int it = 0; it < max_iter; ++it) {
     if (out_of_time()) {
       timed_out_ = true;
       return false;
     }
     ++iters;
-    null_of_rows(P, W, N);
-    res = Q * y - c;
-    if (N.cols() > 0) {
-      subspace_step(Q, N, res, qscale, step);
-    } else {
-      step.setZero();
-    }
-    dres = Q * step;
+    if (!current) factor_working(P, W);
+    current = false;
+    ls_step(P, y, step);  // res_ = Q y - c
+    const auto res = res_.head(qr);
+    dres.noalias() = Q * step;
     const double gain = -(2.0 * res.dot(dres) + dres.squaredNorm());
     const double smax = step.cwiseAbs().maxCoeff();
     const double yscale = std::max(1.0, y.cwiseAbs().maxCoeff());
     // stationary on W: the step no longer decreases the objective measurably (relative to
     // its value, with a floor at rounding of the data's scale), or it is rounding itself
-    const double floor = 1e-28 * std::max(cn * cn, (Q * y).squaredNorm());
+    qy = res + c;
+    const double floor = 1e-28 * std::max(cn * cn, qy.squaredNorm());
     if (gain <= 1e-15 * res.squaredNorm() + floor || smax <= 1e-15 * yscale) {
       int drop = -1;
-      if (multipliers_ok(P, y, W, &drop, &keep, zero_steps > kBlandAfter)) return true;
+      if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) return true;
       W[drop] = 0;
       last_drop = drop;
       continue;
@@ -317,8 +359,8 @@ bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, 
     int block = -1;
     int8_t side = 0;
     if (m) {
-      gp.head(m).noalias() = P.G.topLeftCorner(m, k) * step;
-      gy.head(m).noalias() = P.G.topLeftCorner(m, k) * y;
+      gp.noalias() = P.G.topLeftCorner(m, k) * step;
+      gy.noalias() = P.G.topLeftCorner(m, k) * y;
       const double tiny = 1e-13 * smax;
       for (int i = 0; i < m; ++i) {
         if (W[i]) continue;
@@ -341,63 +383,73 @@ bool Hierarchy::active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, 
     const bool moved = alpha * smax > 1e-14 * yscale;
     if (!moved && block >= 0 && block == last_drop) {
       W[block] = side;  // its multiplier was zero to rounding: back, and kept
-      keep[block] = 1;
+      keep_[block] = 1;
       last_drop = -1;
       continue;
     }
     last_drop = -1;
     if (moved) {
-      std::fill(keep.begin(), keep.end(), 0);
+      std::fill(keep_.begin(), keep_.begin() + m, 0);
       zero_steps = 0;
     } else {
       ++zero_steps;
     }
     y += alpha * step;
-    if (block >= 0) W[block] = side;
+    if (block >= 0) {
+      W[block] = side;
+      // one row enters: update the working set's QR and Q Qf instead of refactorising
+      if (wqr_.append(P.G.row(block).head(k).transpose())) {
+        widx_.push_back(block);
+        wqr_.reflect_right(wqr_.rank() - 1, Qt_.topLeftCorner(qr, k));
+        current = true;
+      }
+    } else {
+      current = true;  // W unchanged
+    }
   }
   return false;
 }
 
-bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Vec& y,
+bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                                 std::vector<int8_t>& W) {
   if (ws.id.empty()) return false;
   const int k = P.cols;
   std::fill(W.begin(), W.begin() + P.rows, 0);
-  int kw = 0;
+  int found = 0;
   for (size_t j = 0; j < ws.id.size(); ++j) {
     for (int i = 0; i < P.rows; ++i) {
       if (P.id[i] == ws.id[j]) {
         W[i] = ws.side[j];
-        ++kw;
+        ++found;
         break;
       }
     }
   }
-  if (kw != static_cast<int>(ws.id.size())) return false;
-  Mat Gw(kw, k);
-  Vec t(kw);
-  int j = 0;
-  for (int i = 0; i < P.rows; ++i) {
-    if (!W[i]) continue;
-    Gw.row(j) = P.G.row(i).head(k);
+  if (found != static_cast<int>(ws.id.size())) return false;
+  qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
+  factor_working(P, W);
+  const int kw = static_cast<int>(widx_.size());
+  auto t = tvec_.head(kw);
+  for (int j = 0; j < kw; ++j) {
+    const int i = widx_[j];
     t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
     if (!std::isfinite(t(j))) return false;
-    ++j;
   }
-  const Eigen::CompleteOrthogonalDecomposition<Mat> cod(Gw);
-  Vec yp = cod.solve(t);
-  if ((Gw * yp - t).cwiseAbs().maxCoeff() > 1e-10 * std::max(1.0, t.cwiseAbs().maxCoeff()))
-    return false;
-  Mat N;
-  null_of_rows(P, W, N);
-  if (N.cols() > 0) {
-    const auto Q = P.Q.topLeftCorner(P.qrows, k);
-    const Vec res = Q * yp - P.c.head(P.qrows);
-    Vec step(k);
-    subspace_step(Q, N, res, Q.norm(), step);
-    yp += step;
-  }
-  const Vec gy = P.G.topLeftCorner(P.rows, k) * yp;
+  // the point on the working set's rows: G_w y = t, y = Qf [R11^-T (P^T t)_(1:rank); 0]
+  const int rho = wqr_.rank();
+  auto yp = xc_.head(k);
+  yp.setZero();
+  for (int i = 0; i < rho; ++i) yp(i) = t(wqr_.perm(i));
+  wqr_.solve_rt(yp);
+  wqr_.apply_q(yp);
+  const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
+  for (int j = 0; j < kw; ++j)
+    if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) return false;
+  auto step = step_.head(k);
+  ls_step(P, yp, step);
+  yp += step;
+  auto gy = gy_.head(P.rows);
+  gy.noalias() = P.G.topLeftCorner(P.rows, k) * yp;
   for (int i = 0; i < P.rows; ++i) {
     const double sl = kWarmFeasTol * std::max(1.0, finite_abs(P.lo(i)));
     const double su = kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)));
@@ -432,13 +484,19 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   if (me) {
     const auto A = Aeq.topRows(me);
     const auto b = beq.head(me);
-    Eigen::JacobiSVD<Mat> svd(A, Eigen::ComputeThinU | Eigen::ComputeFullV);
+    Mat& M = Ms_[0];
+    M = A;
+    auto& svd = svds_[0];
+    svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeFullV);
     const Vec& s = svd.singularValues();
     const int rank = numerical_rank(s, me, n_, 0.0);
-    Vec coef = svd.matrixU().leftCols(rank).transpose() * b;
+    auto coef = ute_.head(rank);
+    coef.noalias() = svd.matrixU().leftCols(rank).transpose() * b;
     coef.array() /= s.head(rank).array();
-    x_ = svd.matrixV().leftCols(rank) * coef;
-    const Vec res = A * x_ - b;
+    x_.noalias() = svd.matrixV().leftCols(rank) * coef;
+    auto res = e_.head(me);
+    res.noalias() = A * x_;
+    res -= b;
     const double scale = std::max(1.0, b.cwiseAbs().maxCoeff());
     if (res.cwiseAbs().maxCoeff() > kCheckTol * scale) {
       detail(0) = res.norm();
@@ -468,13 +526,14 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   LsqProblem& P = P_;
   P.start(k_ + nb, cols);
   for (int i = 0; i < k_ + nb; ++i) P.Q(i, r_ + i) = 1.0;
-  Vec g = Vec::Zero(cols);
-  Vec y = Vec::Zero(cols);
+  auto g = rowbuf_.head(cols);
+  auto y = y_.head(cols);
+  y.setZero();
   double worst_fixed = 0.0;
   for (int i = 0; i < k_; ++i) {
     const double v = Cin_.row(i).dot(x_);
     g.setZero();
-    g.head(r_) = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
+    g.head(r_).noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
     const double gap = std::max({lin_(i) - v, v - uin_(i), 0.0});
     if (g.head(r_).norm() <= 1e-12 * Cin_.row(i).norm()) {  // fixed by the hard equalities
       worst_fixed = std::max(
@@ -517,7 +576,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   store_working_set(P, W_, working_[0]);
   stats(0, 0) = iters;
   stats(0, 1) = hit ? 1.0 : 0.0;
-  x_ += Z_.leftCols(r_) * y.head(r_);
+  x_.noalias() += Z_.leftCols(r_) * y.head(r_);
   // the violation left, relative to each row's scale
   double worst = 0.0;
   for (int i = 0; i < k_; ++i) {
@@ -557,24 +616,29 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // ---- damped closed form of the projected equalities
   int rank = 0;
   double tau = 0.0;
-  Mat M, V;
-  Vec s, e, Ut_e;
-  Vec xc = x_;
+  Mat& M = Ms_[stage];
+  auto& svd = svds_[stage];
+  auto e = e_.head(me);
+  auto xc = xc_.head(n_);
+  xc = x_;
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
+    M.resize(me, r_);  // no-op when the size repeats (the usual case)
     M.noalias() = A * Zr;
-    e = beq.segment(e0, me) - A * x_;
-    Eigen::JacobiSVD<Mat> svd(M, Eigen::ComputeThinU | Eigen::ComputeFullV);
-    s = svd.singularValues();
+    e.noalias() = -A * x_;
+    e += beq.segment(e0, me);
+    svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeFullV);
+    const Vec& s = svd.singularValues();
     const double scale = A.norm();
     rank = numerical_rank(s, me, r_, scale);
     if (rank) {
       tau = damping_ * std::max(s(0), scale);
-      Ut_e = svd.matrixU().leftCols(rank).transpose() * e;
-      Vec gz(rank);
-      for (int i = 0; i < rank; ++i) gz(i) = (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
-      V = svd.matrixV();
-      xc.noalias() += Zr * (V.leftCols(rank) * gz.cwiseProduct(Ut_e));
+      auto ute = ute_.head(rank);
+      ute.noalias() = svd.matrixU().leftCols(rank).transpose() * e;
+      for (int i = 0; i < rank; ++i) ute(i) *= (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
+      auto dz = tmpr_.head(r_);
+      dz.noalias() = svd.matrixV().leftCols(rank) * ute;
+      xc.noalias() += Zr * dz;
     }
   }
   bool ok = feasible(xc);
@@ -585,24 +649,26 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
     if (rank) {
-      const Mat Vn = V.rightCols(r_ - rank);
-      Mat Zn = Zr * Vn;
-      r_ -= rank;
-      Z_.leftCols(r_) = Zn;
+      const int rn = r_ - rank;
+      Ztmp_.leftCols(rn).noalias() = Zr * svd.matrixV().rightCols(rn);
+      Z_.leftCols(rn) = Ztmp_.leftCols(rn);
+      r_ = rn;
     }
     stats(stage, 2) = 1.0;
     return kOk;
   }
+  const Vec& s = svd.singularValues();
   // ---- exact active-set least squares in y = (z, w)
-  std::vector<int> mov;  // level rows z can move, with a finite side
+  mov_.clear();  // level rows z can move, with a finite side
+  auto zc = zc_.head(r_);
   for (int i = 0; i < mi; ++i) {
     const int g = i0 + i;
     if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
     const double cn = C.row(g).norm();
-    const double dn = (Zr.transpose() * C.row(g).transpose()).norm();
-    if (dn > 1e-9 * cn) mov.push_back(i);
+    zc.noalias() = Zr.transpose() * C.row(g).transpose();
+    if (zc.norm() > 1e-9 * cn) mov_.push_back(i);
   }
-  const int mv = static_cast<int>(mov.size());
+  const int mv = static_cast<int>(mov_.size());
   int ndamp = 0;
   for (int i = 0; i < rank; ++i)
     if (s(i) < tau) ++ndamp;
@@ -616,20 +682,20 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   {
     int d = me;
     for (int i = 0; i < rank; ++i)
-      if (s(i) < tau) P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * V.col(i);
+      if (s(i) < tau)
+        P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i);
   }
-  Vec y = Vec::Zero(cols);
-  add_inherited_rows(P, 0);
-  add_bound_rows(P, 0);
-  Vec g = Vec::Zero(cols);
+  add_inherited_rows(P);
+  add_bound_rows(P);
+  auto y = y_.head(cols);
+  auto g = rowbuf_.head(cols);
   for (int j = 0; j < mv; ++j) {
-    const int row = i0 + mov[j];
+    const int row = i0 + mov_[j];
     const double v = C.row(row).dot(x_);
     P.Q(me + ndamp + j, r_ + j) = sw(row);
     g.setZero();
-    g.head(r_) = Zr.transpose() * C.row(row).transpose();
+    g.head(r_).noalias() = Zr.transpose() * C.row(row).transpose();
     g(r_ + j) = -1.0;
-    y(r_ + j) = (v > hi(row)) ? v - hi(row) : ((v < lo(row)) ? v - lo(row) : 0.0);
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
   }
   int iters = 0;
@@ -640,7 +706,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
     y.setZero();
     for (int j = 0; j < mv; ++j) {
-      const int row = i0 + mov[j];
+      const int row = i0 + mov_[j];
       const double v = C.row(row).dot(x_);
       y(r_ + j) = (v > hi(row)) ? v - hi(row) : ((v < lo(row)) ? v - lo(row) : 0.0);
     }
@@ -649,39 +715,41 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   store_working_set(P, W_, working_[stage]);
   stats(stage, 0) = iters;
   stats(stage, 1) = hit ? 1.0 : 0.0;
-  const Vec x_old = x_;
-  x_ += Zr * y.head(r_);
+  xold_.head(n_) = x_;
+  x_.noalias() += Zr * y.head(r_);
   snap(x_);
   // ---- classify the level's rows on the new point; freeze
-  std::vector<char> viol(mi, 0);
-  const double xscale = std::max(x_old.cwiseAbs().maxCoeff(), x_.cwiseAbs().maxCoeff());
+  std::fill(viol_.begin(), viol_.begin() + mi, 0);
+  const double xscale =
+      std::max(xold_.head(n_).cwiseAbs().maxCoeff(), x_.cwiseAbs().maxCoeff());
   int nviol = 0;
   for (int j = 0; j < mv; ++j) {
-    const int i = mov[j], row = i0 + i;
+    const int i = mov_[j], row = i0 + i;
     const double v = C.row(row).dot(x_);
     const double gap = std::max(lo(row) - v, v - hi(row));
     const double scale = std::max({finite_abs(lo(row)), finite_abs(hi(row)),
                                    C.row(row).norm() * xscale});
     if (gap > kViolationTol * scale + kAbsFloor) {
-      viol[i] = 1;
+      viol_[i] = 1;
       ++nviol;
     }
   }
-  Mat F(rank + nviol, r_);
+  // F^T = [V_rank, Z^T C_violated^T] (r x f), null(F) is what the level leaves free
+  MapMat Ft = fqr_.matrix(r_, rank + nviol);
   double fscale = 1.0;
-  for (int i = 0; i < rank; ++i) F.row(i) = V.col(i).transpose();
+  Ft.leftCols(rank) = svd.matrixV().leftCols(rank);
   {
     int f = rank;
     double fro = 0.0;
     for (int i = 0; i < mi; ++i) {
-      if (!viol[i]) continue;
-      F.row(f++) = (Zr.transpose() * C.row(i0 + i).transpose()).transpose();
+      if (!viol_[i]) continue;
+      Ft.col(f++).noalias() = Zr.transpose() * C.row(i0 + i).transpose();
       fro += C.row(i0 + i).squaredNorm();
     }
     fscale = std::max(fscale, std::sqrt(fro));
   }
-  inherit(C, lo, hi, i0, mi, &viol);
-  freeze(F, fscale);
+  inherit(C, lo, hi, i0, mi, &viol_);
+  freeze(fscale);
   return kOk;
 }
 
@@ -689,7 +757,11 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   const int stage = static_cast<int>(meq_.size());
   if (r_ == 0) return kOk;
   const auto Zr = Z_.leftCols(r_);
-  const Vec xc = x_ - Zr * (Zr.transpose() * x_);
+  auto zx = tmpr_.head(r_);
+  zx.noalias() = Zr.transpose() * x_;
+  auto xc = xc_.head(n_);
+  xc = x_;
+  xc.noalias() -= Zr * zx;
   if (feasible(xc)) {
     x_ = xc;
     snap(x_);
@@ -700,9 +772,10 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   P.start(n_, r_);
   P.Q.topLeftCorner(n_, r_) = Zr;
   P.c.head(n_) = -x_;
-  add_inherited_rows(P, 0);
-  add_bound_rows(P, 0);
-  Vec y = Vec::Zero(r_);
+  add_inherited_rows(P);
+  add_bound_rows(P);
+  auto y = y_.head(r_);
+  y.setZero();
   int iters = 0;
   const bool hit = warm && try_working_set(P, working_[stage], y, W_);
   if (!hit) {
@@ -715,7 +788,7 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   store_working_set(P, W_, working_[stage]);
   stats(stage, 0) = iters;
   stats(stage, 1) = hit ? 1.0 : 0.0;
-  x_ += Zr * y;
+  x_.noalias() += Zr * y;
   snap(x_);
   return kOk;
 }
@@ -725,8 +798,10 @@ double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
                               const CRef<Vec>& sw, const Vec& x) const {
   const int b = k + 1;
   double total = 0.0;
-  if (meq_[b]) total += (Aeq.middleRows(eq0_[b], meq_[b]) * x - beq.segment(eq0_[b], meq_[b]))
-                            .squaredNorm();
+  for (int i = eq0_[b]; i < eq0_[b] + meq_[b]; ++i) {
+    const double d = Aeq.row(i).dot(x) - beq(i);
+    total += d * d;
+  }
   for (int i = in0_[b]; i < in0_[b] + min_[b]; ++i) {
     const double v = C.row(i).dot(x);
     const double gap = sw(i) * (v - std::min(std::max(v, lo(i)), hi(i)));
@@ -791,10 +866,15 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   }
   if (meq_[0]) {
     const double scale = std::max(1.0, beq.head(meq_[0]).cwiseAbs().maxCoeff());
-    const Vec r = Aeq.topRows(meq_[0]) * x_ - beq.head(meq_[0]);
-    if (r.cwiseAbs().maxCoeff() > kCheckTol * scale) {
+    double worst = 0.0, sq = 0.0;
+    for (int i = 0; i < meq_[0]; ++i) {
+      const double d = Aeq.row(i).dot(x_) - beq(i);
+      worst = std::max(worst, std::abs(d));
+      sq += d * d;
+    }
+    if (worst > kCheckTol * scale) {
       detail(3) = 2;
-      detail(4) = r.norm();
+      detail(4) = std::sqrt(sq);
       return kCheckFailed;
     }
   }

@@ -19,12 +19,12 @@
 #include <cstdint>
 #include <vector>
 
+#include "dense.hpp"
+
 namespace qpcoord {
 
 inline constexpr int kAbiVersion = 2;
 
-using Mat = Eigen::MatrixXd;
-using Vec = Eigen::VectorXd;
 template <typename T>
 using CRef = Eigen::Ref<const T, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 template <typename T>
@@ -97,24 +97,32 @@ class Hierarchy {
             bool warm);
   int min_norm(MRef<Mat> stats, bool warm);
 
-  bool feasible(const Vec& x) const;
+  bool feasible(const Eigen::Ref<const Vec>& x) const;
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
                const std::vector<char>* skip);
-  void add_inherited_rows(LsqProblem& P, int col0);
-  void add_bound_rows(LsqProblem& P, int col0);
-  void freeze(const Mat& F, double scale);
+  void add_inherited_rows(LsqProblem& P);
+  void add_bound_rows(LsqProblem& P);
+  /// Z <- Z null(F) with F^T the r x f matrix already in fqr_ (rank relative to scale).
+  void freeze(double scale);
   void snap(Vec& x) const;
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
-  bool active_set(const LsqProblem& P, Vec& y, std::vector<int8_t>& W, int& iters);
+  bool active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W, int& iters);
   /// Try a stored working set: solve on it, check feasibility and multiplier signs.
-  bool try_working_set(const LsqProblem& P, const Working& ws, Vec& y, std::vector<int8_t>& W);
+  bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
+                       std::vector<int8_t>& W);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
-  /// Multiplier signs on W; else the row to drop in *drop (the most negative multiplier, or
-  /// with bland the lowest index); rows flagged in keep are not dropped.
-  bool multipliers_ok(const LsqProblem& P, const Vec& y, const std::vector<int8_t>& W,
-                      int* drop, const std::vector<char>* keep, bool bland);
-  void null_of_rows(const LsqProblem& P, const std::vector<int8_t>& W, Mat& N);
+  /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
+  /// Qt_ = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
+  void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
+  /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
+  void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
+  /// Multiplier signs on W (factor_working of this W first); else the row to drop in *drop
+  /// (the most negative multiplier, or with bland the lowest index); rows flagged in keep are
+  /// not dropped.
+  bool multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
+                      const std::vector<int8_t>& W, int* drop, const std::vector<char>* keep,
+                      bool bland);
 
   int n_;
   std::vector<int> meq_, min_, eq0_, in0_;
@@ -148,6 +156,22 @@ class Hierarchy {
   LsqProblem P_;
   Vec y_;
   std::vector<int8_t> W_;
+
+  // workspace, sized at construction: the per-call path does not allocate (the closed-form
+  // SVDs are one object per stage, whose sizes repeat from one call to the next)
+  PivotedQR wqr_;  ///< G_w^T of the working set (k x kw)
+  PivotedQR kqr_;  ///< the projected objective K = Q N (qrows x (k - rank))
+  PivotedQR fqr_;  ///< F^T of a freeze (r x f)
+  PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
+  Mat Qt_;         ///< Q Qf
+  double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
+  Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,
+      e_, ute_;
+  std::vector<int> widx_, mov_;
+  std::vector<char> keep_, viol_;
+  std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
+  Mat Ztmp_;
+  std::vector<Eigen::JacobiSVD<Mat>> svds_;
 };
 
 }  // namespace qpcoord

@@ -98,6 +98,17 @@ def test_python_default_never_warns(missing_extension, monkeypatch):
         assert _small_stack().solve(engine="python").solver != "native"
 
 
+@needs_native
+def test_default_is_native_where_built():
+    """``engine=None`` on a hierarchical stack without ``solver=`` is the native engine."""
+    assert native.DEFAULT_ENGINE == "native"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _small_stack().solve().solver == "native"
+        assert qc.solve_stack([qc.Equality(np.eye(2), [1.0, 2.0])]).solver == "native"
+    assert _small_stack().solve(engine="python").solver != "native"
+
+
 def test_engine_argument_errors():
     s = _small_stack()
     with pytest.raises(ValueError, match="unknown engine 'fast'"):
@@ -352,3 +363,16 @@ def test_repeated_calls_reuse_the_buffers():
         s.solve(engine="native")
     assert s._native is nh
     assert [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)] == ids
+
+
+@needs_native
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_qp_calls_count_the_levels_that_needed_an_active_set(engine):
+    """Both engines report ``qp_calls``: 0 when every level's closed form meets the bounds,
+    > 0 when a bound is active (the native engine counts its active-set stages)."""
+    inside = qc.Stack([qc.Equality(np.eye(3), [0.1, 0.2, 0.3])], bounds=qc.Bounds(-1.0, 1.0))
+    assert inside.solve(engine=engine).info["qp_calls"] == 0
+    outside = qc.Stack([qc.Equality(np.eye(3), [0.1, 2.0, 0.3])], bounds=qc.Bounds(-1.0, 1.0))
+    sol = outside.solve(engine=engine)
+    assert sol.info["qp_calls"] > 0
+    np.testing.assert_allclose(sol.x, [0.1, 1.0, 0.3], atol=1e-12)

@@ -1,0 +1,110 @@
+// Profiling / allocation driver of the native core, without Python (built only by hand or by
+// tests/core/test_native.py): reads problems written by dump_problems.py, solves every step
+// warm (as Stack.solve does), repeats, and reports the time per solve and the heap
+// allocations (a counting global operator new) made by the solves after the first pass.
+//
+//   g++ -O2 -g -std=c++17 -DNDEBUG -I<eigen3> -Isrc/native src/native/tools/driver.cpp \
+//       src/native/hierarchy.cpp -o /tmp/driver
+//   /tmp/driver FILE.bin [repeats] [cold]
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <new>
+#include <vector>
+
+#include "hierarchy.hpp"
+
+static long long g_allocs = 0;
+void* operator new(std::size_t n) {
+  ++g_allocs;
+  void* p = std::malloc(n ? n : 1);
+  if (!p) throw std::bad_alloc();
+  return p;
+}
+void* operator new[](std::size_t n) {
+  ++g_allocs;
+  void* p = std::malloc(n ? n : 1);
+  if (!p) throw std::bad_alloc();
+  return p;
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+
+using namespace qpcoord;
+using RowMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+using VecMap = Eigen::Map<const Vec>;
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: driver FILE.bin [repeats] [cold]\n");
+    return 2;
+  }
+  const int repeats = argc > 2 ? std::atoi(argv[2]) : 20;
+  const bool cold = argc > 3 && argv[3][0] == 'c';
+  std::ifstream f(argv[1], std::ios::binary);
+  auto rd_i = [&]() {
+    long long v;
+    f.read(reinterpret_cast<char*>(&v), 8);
+    return static_cast<int>(v);
+  };
+  const int n = rd_i(), blocks = rd_i();
+  const bool has_bounds = rd_i() != 0;
+  double damping;
+  f.read(reinterpret_cast<char*>(&damping), 8);
+  const int steps = rd_i();
+  std::vector<int> meq(blocks), min(blocks);
+  int me = 0, mi = 0;
+  for (auto& v : meq) me += (v = rd_i());
+  for (auto& v : min) mi += (v = rd_i());
+  const int L = blocks - 1;
+  const size_t per = size_t(me) * n + me + size_t(mi) * n + 3 * mi + 2 * n;
+  std::vector<double> data(per * steps);
+  f.read(reinterpret_cast<char*>(data.data()), data.size() * 8);
+  if (!f) {
+    std::fprintf(stderr, "short file\n");
+    return 2;
+  }
+  Hierarchy h(n, meq, min, has_bounds, damping);
+  Vec x(n), res(L), detail(8);
+  Mat stats(L + 2, 3);
+  long long allocs_after_first = 0;
+  double seconds = 0.0;
+  long long iters = 0, hits = 0, closed = 0;
+  for (int rep = 0; rep < repeats; ++rep) {
+    for (int s = 0; s < steps; ++s) {
+      const double* p = data.data() + per * s;
+      RowMap Aeq(p, me, n, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(1, n));
+      p += size_t(me) * n;
+      VecMap beq(p, me);
+      p += me;
+      RowMap C(p, mi, n, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(1, n));
+      p += size_t(mi) * n;
+      VecMap lo(p, mi), hi(p + mi, mi), sw(p + 2 * mi, mi);
+      p += 3 * mi;
+      VecMap lb(p, n), ub(p + n, n);
+      const long long a0 = g_allocs;
+      const auto t0 = std::chrono::steady_clock::now();
+      const int code = h.solve(Aeq, beq, C, lo, hi, sw, lb, ub, !cold && (rep || s), std::numeric_limits<double>::infinity(), x,
+                               res, stats, detail);
+      seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (rep > 0) allocs_after_first += g_allocs - a0;
+      if (code) {
+        std::fprintf(stderr, "step %d: status %d\n", s, code);
+        return 1;
+      }
+      iters += static_cast<long long>(stats.col(0).sum());
+      hits += static_cast<long long>(stats.col(1).sum());
+      closed += static_cast<long long>(stats.col(2).sum());
+    }
+  }
+  const double solves = double(repeats) * steps;
+  std::printf("solves %.0f  mean %.2f us  iters/solve %.2f  warm hits/solve %.2f  "
+              "closed forms/solve %.2f  allocations after the first pass %lld\n",
+              solves, 1e6 * seconds / solves, iters / solves, hits / solves, closed / solves,
+              allocs_after_first);
+  return 0;
+}
