@@ -102,17 +102,24 @@ class Case:
 
 def default_controllers() -> dict:
     """Name → factory of every DDL controller of the library, with default arguments: the
-    thesis coordinator, LQR, PQ, the prioritised-stack MPC (weighted, persistent QP), and
-    the PI-linearised and flatness-based coarse controls of Table 6.1."""
+    thesis coordinator; the thesis's current-driven LQR (no rate limit) and PQ (coarse stage
+    as main actuator), ``LQRCurrent`` and ``PQCurrent``; qpcoord's field-phase variants
+    ``LQR`` and ``PQ`` (3 mm/s rate limit, fixed amplitude); the prioritised-stack MPC
+    (weighted, persistent QP); and the PI-linearised and flatness-based coarse controls of
+    Table 6.1 (dither + friction feed-forward)."""
     from .coordinator import SisoCoordinator
     from .flatness import FlatnessBased
     from .lqr import LQR
+    from .lqr_current import LQRCurrent
     from .mpc import MPC
     from .pi_linearised import PILinearised
     from .pq import PQ
+    from .pq_current import PQCurrent
 
     return {
         "coordinator": SisoCoordinator,
+        "LQRCurrent": LQRCurrent,
+        "PQCurrent": PQCurrent,
         "LQR": LQR,
         "PQ": PQ,
         "MPC": MPC,

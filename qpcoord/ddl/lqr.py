@@ -88,6 +88,7 @@ from .guard import MeasurementGuard, guard_arg
 __all__ = [
     "DesignModel",
     "design_model",
+    "discretise_model",
     "default_weights",
     "solve_dare",
     "kalman_gain",
@@ -228,6 +229,28 @@ def design_model(
             inputs=list(INPUTS),
             outputs=["y", "y_f", "y_c"],
         )
+    return discretise_model(
+        sysc,
+        dp_fine=plant.fine,
+        fs=fs,
+        y_c=y_c,
+        current=current,
+        alpha_op=_operating_phase(plant, y_c, current),
+    )
+
+
+def discretise_model(
+    sysc, dp_fine, fs: float, y_c: float, current: float, alpha_op: float, inputs=INPUTS
+) -> DesignModel:
+    """ZOH discretisation, integral augmentation and command matrix of a continuous model.
+
+    ``sysc``: 4 states ``STATES``, 2 inputs (piezo voltage first), outputs ``(y, y_f, y_c)``;
+    ``dp_fine`` the :class:`.fine.FineParams` giving the mid-stroke operating point. Shared by
+    :func:`design_model` (field-phase input) and :func:`.lqr_current.design_model_force`
+    (carriage-force input).
+    """
+    import control
+
     sysd = control.c2d(sysc, 1.0 / fs, method="zoh")
     a = np.asarray(sysd.A, dtype=float)
     b = np.asarray(sysd.B, dtype=float)
@@ -251,7 +274,7 @@ def design_model(
     rhs = np.zeros(6)
     rhs[4] = 1.0
     sol = np.linalg.solve(m, rhs)
-    fine = plant.fine
+    fine = dp_fine
     for arr in (a, b, c, c_all, aa, ba, ca):
         arr.setflags(write=False)
     nx = sol[:4].copy()
@@ -273,9 +296,10 @@ def design_model(
         y_f_op=fine.centre,
         y_op=y_c + fine.centre,
         v_op=fine.v_centre,
-        alpha_op=_operating_phase(plant, y_c, current),
+        alpha_op=alpha_op,
         current=current,
         continuous=sysc,
+        inputs=tuple(inputs),
     )
 
 

@@ -10,15 +10,38 @@ its amplitude commands the torque::
     i_q = (F_v r + k_f ŷ_c r + T_d sin 4θ̂e) / K_m       (cancels flexure spring and detent)
     α = θ̂e + atan2(i_q, i_d),   I = √(i_q² + i_d²),     i_a = I sin α, i_b = I cos α
 
-so that the carriage obeys ``M ÿ_c + c ẏ_c = F_v`` (friction left as a disturbance), with
-``M`` the carriage-equivalent mass (491 kg: rotor inertia through the screw + flexure) and
-``c`` the viscous coefficient. ``F_v`` is a PI on ``e_c = r_c − ŷ_c`` (this module) or the
-same PI plus the flat-output feed-forward ``M r̈_c + c ṙ_c`` (:class:`.flatness.FlatnessBased`).
+so that the carriage obeys ``M ÿ_c + c ẏ_c = F_v − F_friction``, with ``M`` the
+carriage-equivalent mass (491 kg: rotor inertia through the screw + flexure) and ``c`` the
+viscous coefficient. ``F_v`` is a PI on ``e_c = r_c − ŷ_c`` (this module) or the same PI plus
+the flat-output feed-forward ``M r̈_c + c ṙ_c`` (:class:`.flatness.FlatnessBased`).
+
+**Friction** (``friction="dither"``, the default). The lead-screw friction (31 N Coulomb,
+41 N stiction on the carriage) is large against the forces a µm-scale coarse reference
+needs (``M ω² x`` ≈ 0.2 N for 10 µm at 1 Hz), and a PI designed on the friction-free model
+at 2 Hz has a stiffness of 7.7e4 N/m: it would need a 0.5 mm error to break stiction, and
+its carriage never moves on a Kolmogorov OPD (measured, issue 18: travel ratio 0.00 — the
+fine stage tracked alone and saturated on a 3× reference). So the linearising law also
+handles friction, the two classical ways (Armstrong-Hélouvry et al. 1994):
+
+* a square-wave **dither** force ``±A`` at ``fs/dither_period`` (2 kHz), ``A =
+  dither_ratio · F̂_s`` (2 × the model's stiction force, so that +20 % friction still breaks
+  away), keeps the carriage sliding (ripple ≈ 1 nm); friction then averages to the smooth
+  ``F̄(u) = F̂_c clip(u/v_d, ±1)`` of :mod:`.dither` (a viscous ``c_d = F̂_c/v_d`` ≈ 1.8e6 N·s/m
+  about rest);
+* a friction **feed-forward** ``F̄(ṙ_c)`` at the rate-limited reference's speed;
+* the **coarse PI is designed with that friction in the loop**: same rule (crossover 2 Hz,
+  zero 4× below) on ``1/(s(Ms + c + c_d))`` — phase margin 75.8°, stiffness 2.2e7 N/m
+  (22 N at 1 µm error); the coarse error is averaged over one dither period (a moving
+  average, which has a zero at the dither frequency) so that the carriage's ripple does not
+  feed back into the PI, and the pre-compensation's coarse model includes ``F̄``.
+
+``friction="none"`` is the friction-free design the audit measured (kept for comparison).
 
 Design rules (not fits):
 
-* coarse PI: crossover 2 Hz (the coordinator's coarse bandwidth) on ``1/(s(Ms + c))``, PI zero
-  a factor 4 below (0.5 Hz) — phase margin 53.3° on the nominal model;
+* coarse PI: crossover 2 Hz (the coordinator's coarse bandwidth) on ``1/(s(Ms + c'))``, PI
+  zero a factor 4 below (0.5 Hz), ``c' = c + c_d`` with the dither (``c' = c`` without:
+  phase margin 53.3° on the nominal model);
 * the coarse reference is rate-limited to ``max_speed`` (3 mm/s as the coordinator; the
   thesis: "strict rate limitations for speed have been introduced, for the controllers
   based on the decoupled SISO structure"); ``|i_q| ≤ current`` (1.5 A, the direct coil's
@@ -40,6 +63,7 @@ from scipy.linalg import expm
 
 from ._check import finite, nonnegative, positive
 from .biquad import butterworth_sections, filter_sample
+from .dither import dither_model
 from .fine import fine_zoh
 from .guard import MeasurementGuard, guard_arg
 from .pi import clamp_with_antiwindup
@@ -68,12 +92,21 @@ class PILinearised:
         Rate limit of the coarse reference, m/s.
     feedforward : bool
         Pre-compensate the predicted coarse motion into the fine voltage.
+    friction : {"dither", "none"}
+        ``"dither"``: dither + averaged-friction feed-forward + PI designed with the averaged
+        friction (module docstring); ``"none"``: friction-free design (the carriage sticks).
+    dither_ratio : float
+        Dither amplitude / the model's stiction force (> 1).
+    dither_period : int
+        Dither period, control periods (even ≥ 2).
     guard : MeasurementGuard, optional
         Measurement guard (default: a new :class:`.guard.MeasurementGuard` with the plant's
         physical bounds). A rejected measurement is replaced by the a-priori prediction
         ``2 ŷ_c(k−1) − ŷ_c(k−2) + ŷ_f(k)`` (carriage estimate extrapolated at its last
         speed, fine model advanced; the nominal coarse closed loop is a worse predictor:
-        in stiction the carriage does not follow it).
+        in stiction the carriage does not follow it). With the dither the carriage does
+        not stick, and the estimate advances by the nominal model's motion instead (the
+        last speed carries the dither's ripple).
 
     Attributes
     ----------
@@ -96,6 +129,9 @@ class PILinearised:
         d_current: float = 0.01,
         max_speed: float = 3.0e-3,
         feedforward: bool = True,
+        friction: str = "dither",
+        dither_ratio: float = 2.0,
+        dither_period: int = 4,
         guard: MeasurementGuard | None = None,
     ):
         self.fine_kp = nonnegative("fine_kp", fine_kp)
@@ -107,6 +143,16 @@ class PILinearised:
         self.d_current = nonnegative("d_current", d_current)
         self.max_speed = positive("max_speed", max_speed)
         self.feedforward = bool(feedforward)
+        if friction not in ("dither", "none"):
+            raise ValueError(f"friction must be 'dither' or 'none', got {friction!r}")
+        self.friction = friction
+        self.dither_ratio = positive("dither_ratio", dither_ratio)
+        if self.dither_ratio <= 1.0:
+            raise ValueError(f"dither_ratio must be > 1, got {dither_ratio!r}")
+        if int(dither_period) != dither_period or dither_period < 2 or int(dither_period) % 2:
+            raise ValueError(f"dither_period must be an even integer >= 2, got {dither_period!r}")
+        self.dither_period = int(dither_period)
+        self.dither = None
         self.guard = guard_arg(guard)
         self.y_c_hat = 0.0
 
@@ -156,7 +202,18 @@ class PILinearised:
         damp = st.viscous_damping
         self._mass = mass
         self._damp = damp
-        self._ckp, self._cki = self.coarse_gains(mass, damp)
+        if self.friction == "dither":
+            r_s = st.screw_radius
+            fst = st.static_torque / r_s
+            self.dither = dither_model(
+                self.dither_ratio * fst, st.coulomb_torque / r_s, fst, mass, fs, self.dither_period
+            )
+            self._ckp, self._cki = self.coarse_gains(mass, damp + self.dither.damping)
+            self._ebuf = [0.0] * self.dither_period
+            self._kd = 0
+        else:
+            self.dither = None
+            self._ckp, self._cki = self.coarse_gains(mass, damp)
         self._cint = 0.0
         self._fmax = self.current * st.torque_constant / r  # N
         self._dr = self.max_speed * h
@@ -207,10 +264,26 @@ class PILinearised:
         self._dyc = yc - self.y_c_hat
         self.y_c_hat = yc
         ec = rcl - yc
-        fv = self._ckp * ec + self._cki * self._cint + f_ff
+        dm = self.dither
         fmax = self._fmax
-        if -fmax < fv < fmax:
+        if dm is not None:
+            # average the error over one dither period (removes the carriage's ripple)
+            buf = self._ebuf
+            kd = self._kd
+            buf[kd % dm.period] = ec
+            ec = sum(buf) / dm.period
+            f_fr = dm.friction((rcl - self._rcl1) * self._fs)
+            f_ff += f_fr
+            dith = dm.amplitude if kd % dm.period < dm.period // 2 else -dm.amplitude
+            self._kd = kd + 1
+            flim = fmax - dm.amplitude
+        else:
+            dith = 0.0
+            flim = fmax
+        fv = self._ckp * ec + self._cki * self._cint + f_ff
+        if -flim < fv < flim:
             self._cint += self._h * ec
+        fv += dith
         th = self._ne * yc
         iq = (fv * self._r + self._kflex * yc * self._r + self._td * math.sin(4.0 * th)) / self._km
         cur = self.current
@@ -225,10 +298,10 @@ class PILinearised:
         pp, pv = self._pp, self._pv
         epc = rcl - pp
         fp_ = self._ckp * epc + self._cki * self._pint + f_ff
-        if fp_ > fmax:
-            fp_ = fmax
-        elif fp_ < -fmax:
-            fp_ = -fmax
+        if fp_ > flim:
+            fp_ = flim
+        elif fp_ < -flim:
+            fp_ = -flim
         else:
             self._pint += self._h * epc
         m01, m11, b0, b1 = self._pm
@@ -239,8 +312,15 @@ class PILinearised:
             u += (rc - pp) / self._kf
         ii = self._kih * e
         v, self._integ = clamp_with_antiwindup(u + ii, self._integ, ii, self._vmin, self._vmax)
-        self._pp = pp + m01 * pv + b0 * fp_
-        self._pv = m11 * pv + b1 * fp_
+        if dm is None:
+            self._pp = pp + m01 * pv + b0 * fp_
+            self._pv = m11 * pv + b1 * fp_
+        else:  # the model with the averaged friction (semi-implicit Euler, stable: h c_d/M < 1)
+            h = self._h
+            pv = pv + h * (fp_ - self._damp * pv - dm.friction(pv)) / self._mass
+            self._pv = pv
+            self._pp = pp + h * pv
+            self._dyc = h * pv  # the guard's prediction: the model's motion
         a11, a12, a21, a22, b1f, b2f = self._fz
         mf, mfd = self._mf, self._mfd
         self._mf = a11 * mf + a12 * mfd + b1f * v
