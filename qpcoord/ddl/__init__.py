@@ -26,11 +26,13 @@ from .flexure import BladeFlexure
 from .guard import MeasurementGuard
 from .identify import bandwidth_3db, coarse_frf, fine_frf, peak_frequency
 from .lqr import LQR, DesignModel, design_model
+from .lqr_current import LQRCurrent
 from .metrics import power, tracking_metrics
 from .mpc import MPC
 from .pi_linearised import PILinearised
 from .plant import DualStage
 from .pq import PQ
+from .pq_current import PQCurrent
 from .psd import OpdPsd
 from .references import PRESETS, kolmogorov_opd, opd_psd, step_reference
 from .simulate import Run, simulate
@@ -44,12 +46,14 @@ __all__ = [
     "FineParams",
     "FlatnessBased",
     "LQR",
+    "LQRCurrent",
     "LqrDesignReport",
     "MPC",
     "MeasurementGuard",
     "OpdPsd",
     "PILinearised",
     "PQ",
+    "PQCurrent",
     "PRESETS",
     "ReferenceCheck",
     "Run",
