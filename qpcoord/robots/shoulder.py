@@ -281,9 +281,7 @@ class ShoulderModel:
                         f"got {el['f_max']!r}"
                     )
                 lo.append(_array(el["origins"], (f.size, 3), f"origins of {self.names[j]!r}"))
-                li.append(
-                    _array(el["insertions"], (f.size, 3), f"insertions of {self.names[j]!r}")
-                )
+                li.append(_array(el["insertions"], (f.size, 3), f"insertions of {self.names[j]!r}"))
                 w = f / f.sum()
             lw.append(w)
             lr.append(np.full(w.size, self.wrap_radii[j]))
@@ -360,44 +358,42 @@ class ShoulderModel:
         )
 
     def _line_paths(self, q: np.ndarray) -> MusclePaths:
+        """All lines at once (vectorised over the lines; the geometry of the class
+        docstring: tangent, great-circle arc, tangent when the straight line cuts the
+        sphere)."""
         R = rotation(q)
         ins = self._li @ R.T
-        origins = self._lo
-        m = self.n_lines
-        lengths = np.empty(m)
-        dirs = np.empty((m, 3))
+        o, r = self._lo, self._lr
+        seg = o - ins
+        straight = np.linalg.norm(seg, axis=1)
+        lengths = straight.copy()
+        dirs = seg / straight[:, None]
         tang = ins.copy()
-        wrapped = np.zeros(m, dtype=bool)
-        for j in range(m):
-            o, i, r = origins[j], ins[j], self._lr[j]
-            seg = o - i
-            straight = np.linalg.norm(seg)
-            lengths[j] = straight
-            dirs[j] = seg / straight
-            if r == 0.0:
-                continue
-            a, b = np.linalg.norm(o), np.linalg.norm(i)
-            e1 = o / a
-            cos_g = float(np.clip(e1 @ i / b, -1.0, 1.0))
-            gamma = np.arccos(cos_g)
+        wrapped = np.zeros(self.n_lines, dtype=bool)
+        w = np.flatnonzero(r > 0.0)
+        if w.size:
+            o, i, r = o[w], ins[w], r[w]
+            a, b = np.linalg.norm(o, axis=1), np.linalg.norm(i, axis=1)
+            e1 = o / a[:, None]
+            proj = np.einsum("kj,kj->k", e1, i)
+            gamma = np.arccos(np.clip(proj / b, -1.0, 1.0))
             alpha, beta = np.arccos(r / a), np.arccos(r / b)
-            if gamma <= alpha + beta:
-                continue  # the straight line clears the sphere
-            perp = i - (e1 @ i) * e1
-            norm_perp = np.linalg.norm(perp)
-            if norm_perp < 1e-12 * b:  # origin, centre, insertion aligned: any plane
-                helper = np.eye(3)[np.argmin(np.abs(e1))]
-                perp = helper - (helper @ e1) * e1
-                norm_perp = np.linalg.norm(perp)
-            e2 = perp / norm_perp
-            t = r * (np.cos(alpha) * e1 + np.sin(alpha) * e2)
-            lengths[j] = (
-                np.sqrt(a * a - r * r) + r * (gamma - alpha - beta) + np.sqrt(b * b - r * r)
-            )
+            cut = gamma > alpha + beta  # otherwise the straight line clears the sphere
+            perp = i - proj[:, None] * e1
+            norm_perp = np.linalg.norm(perp, axis=1)
+            for k in np.flatnonzero(cut & (norm_perp < 1e-12 * b)):  # aligned: any plane
+                helper = np.eye(3)[np.argmin(np.abs(e1[k]))]
+                perp[k] = helper - (helper @ e1[k]) * e1[k]
+                norm_perp[k] = np.linalg.norm(perp[k])
+            e2 = perp / np.where(norm_perp > 0.0, norm_perp, 1.0)[:, None]
+            t = r[:, None] * (np.cos(alpha)[:, None] * e1 + np.sin(alpha)[:, None] * e2)
             d = o - t
-            dirs[j] = d / np.linalg.norm(d)
-            tang[j] = t
-            wrapped[j] = True
+            wl = np.sqrt(a * a - r * r) + r * (gamma - alpha - beta) + np.sqrt(b * b - r * r)
+            idx = w[cut]
+            lengths[idx] = wl[cut]
+            dirs[idx] = d[cut] / np.linalg.norm(d[cut], axis=1)[:, None]
+            tang[idx] = t[cut]
+            wrapped[idx] = True
         return MusclePaths(lengths, dirs, ins, tang, wrapped)
 
     def lengths(self, q) -> np.ndarray:
