@@ -10,20 +10,25 @@ thesis's two-step method (pseudo-inverse A.22 + null-space QP A.28). Then a weig
 hand at 90° abduction is increased until Q is beyond what the muscles can produce: the top
 level becomes best effort and the result says so (``feasible`` false, residual in N·m).
 
-Measured (full run, 601 samples, daqp; ``python examples/appA_shoulder.py``):
-max ``‖W F − Q‖/‖Q‖`` = 1.4e-15 and max bound violation 0 N over the motion; the stack's
-point vs the two-step method, max ``|ΔF|/F_max`` = 6.2e-16; median time per distribution
-3.0 ms (two-step 7.5 ms) on the shared 2-core machine (1.3 ms / 4.1 ms when quiet, see
-``docs/appA.md``); the pseudo-inverse alone (A.22) asks some muscle to push at 599 of 601
-samples. Peak ``‖Q‖`` 6.84 N·m, peak glenohumeral contact force 506 N. No muscle reaches
-F_max during the motion (peak activation 0.25, supraspinatus); deltoideus posterior, teres
-major and latissimus dorsi stay at 0. With a weight in the hand at 90° abduction (0.62 m
-from the GH centre) the largest producible load is 14.53 kg, where the three deltoid
-parts, coracobrachialis, supraspinatus and subscapularis are at F_max; at 15, 17.5 and
-20 kg the stack's top level misses Q by 1.44, 9.55 and 22.9 N·m (best effort, reported
-``feasible: false``) and the two-step method raises ``InfeasibleError``.
+Muscle lines: each muscle acts along its DAS3 elements (``--lines elements``, default;
+issue 18 finding 8) or along one lumped line (``--lines lumped``, the model before). The
+script also measures how much moment arm the lumped lines lose against the elements
+(``lumping_loss``, rule in its docstring; nine of eleven muscles lose > 20 % somewhere).
 
-Run: ``python examples/appA_shoulder.py [--quick] [--out DIR]``.
+Measured (full run, 601 samples, daqp, element lines; ``python examples/appA_shoulder.py``):
+max ``‖W F − Q‖/‖Q‖`` = 1.9e-15 and max bound violation 0 N over the motion; the stack's
+point vs the two-step method, max ``|ΔF|/F_max`` = 6.3e-16 before the active-set polish;
+the pseudo-inverse alone (A.22) asks some muscle to push at 599 of 601 samples. Peak
+``‖Q‖`` 6.84 N·m, peak glenohumeral contact force 585 N (lumped: 506 N). No muscle reaches
+F_max during the motion (peak activation 0.31, supraspinatus); deltoideus posterior, teres
+major and latissimus dorsi stay at 0. With a weight in the hand at 90° abduction (0.62 m
+from the GH centre) the largest producible load is 13.75 kg (lumped: 14.53 kg), where the
+three deltoid parts, coracobrachialis and subscapularis are at F_max; at 15, 17.5 and
+20 kg the stack's top level misses Q by 4.01, 13.4 and 27.4 N·m (best effort, reported
+``feasible: false``) and the two-step method raises ``InfeasibleError``. Times per
+distribution: see ``docs/appA.md`` (they vary ~2× with the load of the shared machine).
+
+Run: ``python examples/appA_shoulder.py [--quick] [--lines elements|lumped] [--out DIR]``.
 """
 
 from __future__ import annotations
