@@ -96,7 +96,16 @@ half of the run (ending ≤ 1e-3 rad). Measured (full run)::
     δ = 2 (4R):  10 % at T/200 and at T/400 (one start on a 36·T cycle; nine drift)
     δ = 3 (5R):   0 % at both steps
 
-Claims (``summary["claims"]``): Fig 4.7 / Remark 4.4 on the 5R (single run, as above) and the
+Fig 4.7 / Remark 4.4 is judged, in the full run, on the general 5R geometries that put the
+thesis's q0 on the Lissajous with Thm 4.2's hypothesis (:func:`geometry_search`: 6 of 100
+seeded starts) -- not on qpcoord's arm, reported beside them. :func:`found_arms_study` runs
+J⁺ (1/s feedback) from q0 on all of them, 300 periods at T/200 and T/400 (333 s); the rule,
+fixed before the first run, is in :func:`found_arm_outcome` and :func:`found_arms_status`.
+Measured: 4 arms close on a 1·T cycle at both steps, 1 shows no cycle up to 60·T, 1 loses
+the path (σ_min(J) 1.2e-4); none closes over a multiple ≥ 2: differs. Full run 826 s on
+the loaded 2-core machine (the search 160 s, the found arms 333 s).
+
+Claims (``summary["claims"]``): Fig 4.7 / Remark 4.4 (above) and the
 three clauses of Conjecture 4.1 from the multi-start study (criteria in
 :func:`conjecture_claims`): δ = 1 inconclusive (step-dependent), δ = 2 differs (a thesis
 error: 9 of 10 starts never converge), δ = 3 reproduced. ``--quick`` (3 starts, 10 periods,
