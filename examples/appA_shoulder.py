@@ -10,20 +10,25 @@ thesis's two-step method (pseudo-inverse A.22 + null-space QP A.28). Then a weig
 hand at 90° abduction is increased until Q is beyond what the muscles can produce: the top
 level becomes best effort and the result says so (``feasible`` false, residual in N·m).
 
-Measured (full run, 601 samples, daqp; ``python examples/appA_shoulder.py``):
-max ``‖W F − Q‖/‖Q‖`` = 1.4e-15 and max bound violation 0 N over the motion; the stack's
-point vs the two-step method, max ``|ΔF|/F_max`` = 6.2e-16; median time per distribution
-3.0 ms (two-step 7.5 ms) on the shared 2-core machine (1.3 ms / 4.1 ms when quiet, see
-``docs/appA.md``); the pseudo-inverse alone (A.22) asks some muscle to push at 599 of 601
-samples. Peak ``‖Q‖`` 6.84 N·m, peak glenohumeral contact force 506 N. No muscle reaches
-F_max during the motion (peak activation 0.25, supraspinatus); deltoideus posterior, teres
-major and latissimus dorsi stay at 0. With a weight in the hand at 90° abduction (0.62 m
-from the GH centre) the largest producible load is 14.53 kg, where the three deltoid
-parts, coracobrachialis, supraspinatus and subscapularis are at F_max; at 15, 17.5 and
-20 kg the stack's top level misses Q by 1.44, 9.55 and 22.9 N·m (best effort, reported
-``feasible: false``) and the two-step method raises ``InfeasibleError``.
+Muscle lines: each muscle acts along its DAS3 elements (``--lines elements``, default;
+issue 18 finding 8) or along one lumped line (``--lines lumped``, the model before). The
+script also measures how much moment arm the lumped lines lose against the elements
+(``lumping_loss``, rule in its docstring; nine of eleven muscles lose > 20 % somewhere).
 
-Run: ``python examples/appA_shoulder.py [--quick] [--out DIR]``.
+Measured (full run, 601 samples, daqp, element lines; ``python examples/appA_shoulder.py``):
+max ``‖W F − Q‖/‖Q‖`` = 1.9e-15 and max bound violation 0 N over the motion; the stack's
+point vs the two-step method, max ``|ΔF|/F_max`` = 6.3e-16 before the active-set polish;
+the pseudo-inverse alone (A.22) asks some muscle to push at 599 of 601 samples. Peak
+``‖Q‖`` 6.84 N·m, peak glenohumeral contact force 585 N (lumped: 506 N). No muscle reaches
+F_max during the motion (peak activation 0.31, supraspinatus); deltoideus posterior, teres
+major and latissimus dorsi stay at 0. With a weight in the hand at 90° abduction (0.62 m
+from the GH centre) the largest producible load is 13.75 kg (lumped: 14.53 kg), where the
+three deltoid parts, coracobrachialis and subscapularis are at F_max; at 15, 17.5 and
+20 kg the stack's top level misses Q by 4.01, 13.4 and 27.4 N·m (best effort, reported
+``feasible: false``) and the two-step method raises ``InfeasibleError``. Times per
+distribution: see ``docs/appA.md`` (they vary ~2× with the load of the shared machine).
+
+Run: ``python examples/appA_shoulder.py [--quick] [--lines elements|lumped] [--out DIR]``.
 """
 
 from __future__ import annotations
@@ -207,15 +212,74 @@ def run_load_sweep(model, masses, solver: str | None) -> dict:
 
 
 def moment_arm_table(model) -> dict:
-    straight = shoulder.build(wrap=False)
-    W, Ws = model.moment_arms(np.zeros(3)), straight.moment_arms(np.zeros(3))
+    """Moment arms at ``q = 0`` (mm) of ``model``, of the lumped and the element lines
+    (wrapped) and of straight lines (same kind of lines as ``model``)."""
+    lumped = shoulder.build(lines="lumped")
+    elements = shoulder.build(lines="elements")
+    straight = shoulder.build(wrap=False, lines=model.lines)
+    q = np.zeros(3)
+    W = {
+        "model": model.moment_arms(q),
+        "lumped": lumped.moment_arms(q),
+        "elements": elements.moment_arms(q),
+        "straight": straight.moment_arms(q),
+    }
     return {
-        name: {
-            "wrapped_mm": (1e3 * W[:, j]).round(1).tolist(),
-            "straight_mm": (1e3 * Ws[:, j]).round(1).tolist(),
-        }
+        name: {f"{k}_mm": (1e3 * v[:, j]).round(1).tolist() for k, v in W.items()}
         for j, name in enumerate(model.names)
     }
+
+
+#: Lumping-loss measurement (issue 18, finding 8), rule fixed before the measurement: the
+#: postures (a 5 × 4 × 3 grid of the model range, degrees), the smallest element moment arm
+#: counted (rows below it are not compared) and the loss beyond which a lumped line is
+#: replaced by its elements.
+LOSS_GRID_DEG = (
+    (-90.0, -60.0, -30.0, 0.0, 20.0),
+    (-40.0, 0.0, 40.0, 70.0),
+    (-60.0, 0.0, 60.0),
+)
+LOSS_MIN_ARM = 5e-3  # m
+LOSS_LIMIT = 0.2
+
+
+def lumping_loss() -> dict:
+    """Per muscle: how much moment arm the lumped line loses against its DAS3 elements
+    (force-weighted, same wraps): ``|W_lumped − W_elements| / |W_elements|`` per row of ``W``
+    whose element arm is ≥ :data:`LOSS_MIN_ARM`, at ``q = 0`` and the worst over the
+    :data:`LOSS_GRID_DEG` postures; and the mean over the grid of the relative difference
+    of the 3-vector of arms."""
+    lumped = shoulder.build(lines="lumped")
+    elements = shoulder.build(lines="elements")
+    grid = [np.radians([a, b, c]) for a in LOSS_GRID_DEG[0] for b in LOSS_GRID_DEG[1]
+            for c in LOSS_GRID_DEG[2]]  # fmt: skip
+    pairs = [(lumped.moment_arms(q), elements.moment_arms(q)) for q in grid]
+    W0l, W0e = lumped.moment_arms(np.zeros(3)), elements.moment_arms(np.zeros(3))
+
+    def rows_loss(wl, we):
+        keep = np.abs(we) >= LOSS_MIN_ARM
+        return float(np.max(np.abs(wl - we)[keep] / np.abs(we[keep]))) if keep.any() else 0.0
+
+    out = {}
+    for j, name in enumerate(lumped.names):
+        grid_loss = [rows_loss(wl[:, j], we[:, j]) for wl, we in pairs]
+        k = int(np.argmax(grid_loss))
+        out[name] = {
+            "loss_at_neutral": rows_loss(W0l[:, j], W0e[:, j]),
+            "worst_loss_on_grid": grid_loss[k],
+            "worst_posture_deg": np.degrees(grid[k]).round(1).tolist(),
+            "mean_vector_loss_on_grid": float(
+                np.mean(
+                    [
+                        np.linalg.norm(wl[:, j] - we[:, j]) / np.linalg.norm(we[:, j])
+                        for wl, we in pairs
+                    ]  # fmt: skip
+                )
+            ),
+            "elements": int(np.count_nonzero(elements.line_share[j])),
+            "exceeds_limit": bool(max(grid_loss[k], rows_loss(W0l[:, j], W0e[:, j])) > LOSS_LIMIT),
+        }
+    return out
 
 
 def forward_claim(fwd: dict) -> dict:
@@ -346,10 +410,29 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="121 samples, 5 loads (CI)")
     p.add_argument("--out", type=Path, default=Path("out/appA_shoulder"))
     p.add_argument("--solver", default=None, help="QP backend (default: qpcoord's)")
+    p.add_argument(
+        "--lines",
+        choices=("elements", "lumped"),
+        default="elements",
+        help="muscle lines: DAS3 elements (default) or one lumped line per muscle",
+    )
     args = p.parse_args(argv)
     log = TextLog()
     say = log.say
-    model = qc.robots.load("shoulder")
+    model = qc.robots.load("shoulder", lines=args.lines)
+    say(f"model: {model!r}")
+    loss = lumping_loss()
+    say(
+        f"lumped line vs DAS3 elements, moment-arm loss per row (rows with element arm "
+        f"≥ {1e3 * LOSS_MIN_ARM:g} mm): at q = 0, worst on the grid, mean vector loss"
+    )
+    for name, v in loss.items():
+        say(
+            f"  {name:>22} ({v['elements']:2d} el.) {100 * v['loss_at_neutral']:5.1f} % "
+            f"{100 * v['worst_loss_on_grid']:6.1f} % at {v['worst_posture_deg']} "
+            f"{100 * v['mean_vector_loss_on_grid']:5.1f} %"
+            + ("  > limit" if v["exceeds_limit"] else "")
+        )
     n = 121 if args.quick else 601
     masses = np.array([0.0, 5.0, 10.0, 15.0, 20.0]) if args.quick else np.arange(0.0, 20.5, 2.5)
 
@@ -467,6 +550,14 @@ def main(argv=None) -> int:
         args.out / "summary.json",
         {
             "model": "shoulder",
+            "lines": model.lines,
+            "n_lines": model.n_lines,
+            "lumping_loss": {
+                "grid_deg": LOSS_GRID_DEG,
+                "min_arm_m": LOSS_MIN_ARM,
+                "limit": LOSS_LIMIT,
+                "muscles": loss,
+            },
             "solver": args.solver or qc.default_solver(),
             "quick": bool(args.quick),
             "checks_pass": bool(ok),

@@ -96,7 +96,16 @@ half of the run (ending ≤ 1e-3 rad). Measured (full run)::
     δ = 2 (4R):  10 % at T/200 and at T/400 (one start on a 36·T cycle; nine drift)
     δ = 3 (5R):   0 % at both steps
 
-Claims (``summary["claims"]``): Fig 4.7 / Remark 4.4 on the 5R (single run, as above) and the
+Fig 4.7 / Remark 4.4 is judged, in the full run, on the general 5R geometries that put the
+thesis's q0 on the Lissajous with Thm 4.2's hypothesis (:func:`geometry_search`: 6 of 100
+seeded starts) -- not on qpcoord's arm, reported beside them. :func:`found_arms_study` runs
+J⁺ (1/s feedback) from q0 on all of them, 300 periods at T/200 and T/400 (333 s); the rule,
+fixed before the first run, is in :func:`found_arm_outcome` and :func:`found_arms_status`.
+Measured: 4 arms close on a 1·T cycle at both steps, 1 shows no cycle up to 60·T, 1 loses
+the path (σ_min(J) 1.2e-4); none closes over a multiple ≥ 2: differs. Full run 826 s on
+the loaded 2-core machine (the search 160 s, the found arms 333 s).
+
+Claims (``summary["claims"]``): Fig 4.7 / Remark 4.4 (above) and the
 three clauses of Conjecture 4.1 from the multi-start study (criteria in
 :func:`conjecture_claims`): δ = 1 inconclusive (step-dependent), δ = 2 differs (a thesis
 error: 9 of 10 starts never converge), δ = 3 reproduced. ``--quick`` (3 starts, 10 periods,
@@ -497,86 +506,180 @@ def geometry_search(starts: int) -> dict:
             np.percentile(sig, [0, 50, 90, 100]).tolist() if sig.size else []
         ),
         "best_params": (max(on, key=lambda c: c.sigma_min_thm42).params.tolist() if on else []),
+        "passing_params": [c.params.tolist() for c in ok],
+        "passing_sigma_min_thm42": [float(c.sigma_min_thm42) for c in ok],
         "runtime_s": time.perf_counter() - t0,
     }
 
 
-def claims(rows: list[dict], geometry: dict | None = None) -> list[dict]:
-    """Claim rows computed from the cases (Fig 4.7 / Remark 4.4 and Conjecture 4.1).
+#: Long J⁺ runs on the found arms (issue 18, finding 5): periods, steps per period (the two
+#: steps of the step check) and the tracking error beyond which a run has lost the path.
+FOUND_PERIODS = 300
+FOUND_STEPS = (200, 400)
+FOUND_LOST_M = 1e-2
 
-    ``geometry`` (the full run's :func:`geometry_search`): if no general 5R geometry puts the
-    thesis's q0 on the path with Thm 4.2's hypothesis, the 5R claim cannot be judged on the
-    thesis's arm, and is inconclusive rather than "differs"."""
+
+def found_arm_outcome(per: dict[int, dict], max_err_m: float) -> str:
+    """One found arm's outcome from :func:`geometric_convergence` at each step of
+    :data:`FOUND_STEPS` (rule fixed before the first run, issue 18 finding 5):
+
+    ``"path lost"`` if the tracking error exceeds :data:`FOUND_LOST_M` at either step;
+    ``"closes mT"`` (m ≥ 2, the thesis's behaviour) if the sections converge to a cycle at
+    both steps with the same multiple m ≥ 2; ``"closes 1T"`` likewise with m = 1; ``"no
+    cycle"`` if they converge at neither step; ``"step-dependent"`` otherwise.
+    """
+    if max_err_m > FOUND_LOST_M:
+        return "path lost"
+    conv = [p["converges"] for p in per.values()]
+    mult = {p["multiple"] for p in per.values() if p["converges"]}
+    if all(conv) and len(mult) == 1:
+        return "closes 1T" if mult == {1} else "closes mT"
+    if not any(conv):
+        return "no cycle"
+    return "step-dependent"
+
+
+def found_arms_study(geometry: dict, periods: int = FOUND_PERIODS) -> dict:
+    """The long J⁺ run of Fig 4.7 / Remark 4.4 (q̇ = J⁺(Ẏ + K(Y − ζ)), K = CLIK_GAIN, from the
+    thesis's q0) on every geometry that passed :func:`geometry_search`, at both steps of
+    :data:`FOUND_STEPS`, judged per arm by :func:`found_arm_outcome`."""
+    from qpcoord.robots.spatial_5r_search import pinv_sections
+
+    params = np.array(geometry["passing_params"], dtype=float).reshape(-1, 27)
+    t0 = time.perf_counter()
+    runs = {
+        s: pinv_sections(params, qc.robots.spatial_5r.Q0_THESIS, periods, s, CLIK_GAIN)
+        for s in FOUND_STEPS
+    }
+    arms = []
+    for j in range(params.shape[0]):
+        per = {
+            f"T/{s}": geometric_convergence(runs[s].sections[:, j], CONJ_MAX_MULTIPLE)
+            for s in FOUND_STEPS
+        }
+        err = max(float(runs[s].max_tracking_m[j]) for s in FOUND_STEPS)
+        last = {
+            f"T/{s}": float(wrapped_closure_errors(runs[s].sections[:, j])[-1]) for s in FOUND_STEPS
+        }
+        arms.append(
+            {
+                "arm": j,
+                "sigma_min_thm42": geometry["passing_sigma_min_thm42"][j],
+                "per_step": per,
+                "closure_last_wrapped_rad": last,
+                "max_tracking_error_m": err,
+                "min_sigma_J": min(float(runs[s].min_sigma_J[j]) for s in FOUND_STEPS),
+                "outcome": found_arm_outcome(per, err),
+            }
+        )
+    return {
+        "periods": periods,
+        "steps": list(FOUND_STEPS),
+        "arms": arms,
+        "runtime_s": time.perf_counter() - t0,
+    }
+
+
+def found_arms_status(study: dict | None) -> tuple[str, str]:
+    """``(status, text)`` of Fig 4.7 / Remark 4.4 on the found arms. Rule fixed before the
+    first run (issue 18 finding 5): reproduced if every arm whose run keeps the path
+    "closes mT" (m ≥ 2); differs if none of them closes with m ≥ 2 at either step (all
+    "no cycle" or "closes 1T"); inconclusive otherwise (the outcome depends on the arm or
+    on the step), or with fewer than two arms that keep the path, runs shorter than
+    :data:`DECIDE` periods, or without the study."""
+    if study is None:
+        return "inconclusive", ""
+    valid = [a for a in study["arms"] if a["outcome"] != "path lost"]
+    counts: dict[str, int] = {}
+    for a in study["arms"]:
+        counts[a["outcome"]] = counts.get(a["outcome"], 0) + 1
+    mults = sorted({p["multiple"] for a in valid for p in a["per_step"].values() if p["converges"]})
+    text = (
+        f"J⁺ on the {len(study['arms'])} found arms ({study['periods']} periods at "
+        + " and ".join(f"T/{s}" for s in study["steps"])
+        + "): "
+        + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
+        + (f" (multiples seen: {', '.join(f'{m}T' for m in mults)})" if mults else "")
+    )
+    if len(valid) < 2 or study["periods"] < DECIDE:
+        return "inconclusive", text
+    if all(a["outcome"] == "closes mT" for a in valid):
+        return "reproduced", text
+    high = [
+        a
+        for a in valid
+        if any(p["converges"] and p["multiple"] >= 2 for p in a["per_step"].values())
+    ]
+    if not high:
+        return "differs", text
+    return "inconclusive", text
+
+
+def claims(rows: list[dict], geometry: dict | None = None, found: dict | None = None) -> list[dict]:
+    """Claim row of Fig 4.7 / Remark 4.4.
+
+    It is judged on the *found arms* (``found``, :func:`found_arms_study`: the general 5R
+    geometries of the full run's :func:`geometry_search` that put the thesis's q0 on the
+    Lissajous with Thm 4.2's hypothesis) by :func:`found_arms_status`; qpcoord's own arm
+    (``rows``' ``spatial_5r`` case) is reported beside it. Without a passing geometry the
+    thesis's arm is unknown and the row is inconclusive; without the search (``--quick``)
+    nothing is decided."""
     by = {r["case"]: cycle_outcome(r) for r in rows}
     case = {r["case"]: r for r in rows}
-
-    def apart(name):
-        half = case[name]["dt_half_check"]
-        first = half and half["first_period_apart"]
-        return "never" if first is None else f"from period {first}"
-
-    crit = (
-        f"criterion: a cycle is a wrapped return within {TOL:g} rad at some multiple ≤ K/2 "
-        f"that repeats (detect_period or the wrapped search); 'no cycle' needs ≥ {DECIDE} "
-        "periods at both dt and dt/2; found at one step only is step-dependent"
+    half = case["spatial_5r"]["dt_half_check"]
+    first = half and half["first_period_apart"]
+    ours = by["spatial_5r"][1] + (
+        f" (dt and dt/2 sections apart by > {AGREE:g} rad "
+        + ("never" if first is None else f"from period {first}")
+        + ")"
+        if half
+        else ""
     )
-    short = "; the run is too short or has no dt/2 check (--quick): the full run decides"
-
-    def status(outcomes, want):
-        if any(o == "short" for o in outcomes):
-            return "inconclusive"
-        if any(o == "step-dependent" for o in outcomes):
-            return "inconclusive"
-        return "reproduced" if all(o == want for o in outcomes) else "differs"
-
-    rows_out = []
-    o = [by["spatial_5r"][0]]
-    st = status(o, "cycle")
-    geo = ""
-    if geometry is not None:
-        q = geometry["sigma_min_thm42_quantiles"]
-        geo = (
-            f"; thesis arm search: {geometry['starts']} seeded general 5R geometries (27 "
-            f"parameters, thesis link lengths), q0 on the Lissajous start for "
-            f"{geometry['q0_on_path']}, Thm 4.2's σ_min([J; ω₄; ω₅]) ≥ {GEOMETRY_SIGMA:g} over "
-            f"one period for {geometry['passing']} (largest "
-            f"{(q[-1] if q else float('nan')):.3f})"
+    rule = (
+        "rule fixed before the runs on the found arms: per arm, the sections of J⁺ (1/s "
+        f"feedback, {FOUND_PERIODS} periods at T/{FOUND_STEPS[0]} and T/{FOUND_STEPS[1]}) "
+        "'close mT' if the gap ‖wrap(p_k − p_(k−m))‖ converges (the Conjecture 4.1 "
+        f"criterion, m ≤ {CONJ_MAX_MULTIPLE}) at both steps with the same m ≥ 2; reproduced if "
+        "every arm that keeps the path closes mT, differs if none closes with m ≥ 2 at either "
+        "step, inconclusive if it depends on the arm or the step; cycles longer than "
+        f"{CONJ_MAX_MULTIPLE}·T cannot be seen in this run"
+    )
+    if geometry is None:
+        st, measured = "inconclusive", "qpcoord's arm: " + ours
+        note = rule + "; no geometry search in this run (--quick): the full run decides"
+    elif geometry["passing"] == 0:
+        st, measured = "inconclusive", "qpcoord's arm: " + ours
+        note = (
+            rule + "; no 5R geometry in the search has the thesis's q0 on the path with Thm "
+            "4.2's hypothesis, so the thesis's arm is unknown (issue 18 finding 5)"
         )
-        if geometry["passing"] == 0 and st == "differs":
-            st = "inconclusive"
-    rows_out.append(
+    else:
+        st, text = found_arms_status(found)
+        q = geometry["sigma_min_thm42_quantiles"]
+        measured = (
+            f"{text}; search: {geometry['starts']} seeded general 5R geometries (27 "
+            f"parameters, thesis link lengths), q0 on the Lissajous start for "
+            f"{geometry['q0_on_path']}, σ_min([J; ω₄; ω₅]) ≥ {GEOMETRY_SIGMA:g} over one "
+            f"period for {geometry['passing']} (largest {q[-1]:.3f}); qpcoord's arm: {ours}"
+        )
+        note = rule + (
+            "; the thesis gives no axes: the found arms are the candidates for its arm "
+            "(q0 on the path, Thm 4.2's hypothesis), not identified with it"
+        )
+        if st == "inconclusive":
+            note += "; the outcome depends on the arm or the step"
+    return [
         claim(
             "rem4.4-fig4.7-5r-closes",
             "Long J⁺ runs of the 5R3D on the Lissajous close, over a high multiple of T.",
             "Remark 4.4, Fig 4.7: 'the joints trajectory is finally closed but over a very "
             "high multiple of the initial period'",
-            by["spatial_5r"][1] + geo,
+            measured,
             st,
-            crit
-            + (
-                "; this 5R's axes are qpcoord's choice (the thesis gives none); its dt and "
-                f"dt/2 sections differ by > {AGREE:g} rad {apart('spatial_5r')}"
-                if o[0] == "none"
-                else ""
-            )
-            + (short if o[0] == "short" else "")
-            + ("; found at one step only" if o[0] == "step-dependent" else "")
-            + (
-                "; no 5R geometry in the search has the thesis's q0 on the path with Thm "
-                "4.2's hypothesis, so the thesis's arm is unknown and this run on ours cannot "
-                "judge the remark (inconclusive, issue 18 finding 5)"
-                if geometry is not None and geometry["passing"] == 0
-                else (
-                    "; the search found geometries on which q0 lies on the path with Thm "
-                    "4.2's hypothesis, so this verdict is on qpcoord's arm only: the remark is "
-                    "not yet run on those (issue 18 finding 5, open)"
-                    if geometry is not None
-                    else ""
-                )
-            ),
+            note,
+            cause="our model" if st == "differs" else "",
         )
-    )
-    return rows_out
+    ]
 
 
 def fmt_period(d: dict) -> str:
@@ -596,6 +699,12 @@ def main(argv=None) -> int:
         type=int,
         default=None,
         help="Conjecture 4.1 study, periods per start (default 300; quick: 10)",
+    )
+    p.add_argument(
+        "--found-periods",
+        type=int,
+        default=None,
+        help=f"J⁺ periods on the found 5R arms (default {FOUND_PERIODS}; full run only)",
     )
     args = p.parse_args(argv)
     planar = args.planar_periods or (10 if args.quick else 300)
@@ -620,6 +729,11 @@ def main(argv=None) -> int:
         conj_periods, 3 if args.quick else CONJ_STARTS, step_check=not args.quick
     )
     geometry = None if args.quick else geometry_search(GEOMETRY_STARTS)
+    found = (
+        None
+        if geometry is None or not geometry["passing"]
+        else found_arms_study(geometry, args.found_periods or FOUND_PERIODS)
+    )
     total = time.perf_counter() - t0
 
     log = TextLog()
@@ -663,7 +777,21 @@ def main(argv=None) -> int:
             f"{np.round(geometry['sigma_min_thm42_quantiles'], 4).tolist()} "
             f"({geometry['runtime_s']:.0f} s)"
         )
-    rows_claims = claims(rows, geometry) + conjecture_claims(study)
+    if found is not None:
+        say(f"Fig 4.7 on the found arms ({found['periods']} periods, {found['runtime_s']:.0f} s):")
+        for a in found["arms"]:
+            say(
+                f"  arm {a['arm']} (σ_min Thm 4.2 {a['sigma_min_thm42']:.3f}): {a['outcome']}; "
+                + ", ".join(
+                    f"{k}: "
+                    + (f"{p['multiple']}T" if p["converges"] else "no")
+                    + f" (gap {p['final_gap_rad']:.1e} rad, {p['decades_last_half']:.1f} dec)"
+                    for k, p in a["per_step"].items()
+                )
+                + f"; last closure {a['closure_last_wrapped_rad']}; max err "
+                f"{a['max_tracking_error_m']:.1e} m, σmin J {a['min_sigma_J']:.2e}"
+            )
+    rows_claims = claims(rows, geometry, found) + conjecture_claims(study)
     for c in rows_claims:
         say(f"{c['id']}: {c['measured']} -> {c['status']}")
     log.write(args.out / "summary.txt")
@@ -673,6 +801,7 @@ def main(argv=None) -> int:
             "cases": rows,
             "conjecture_4_1": study,
             "geometry_search_5r": geometry,
+            "found_arms_5r": found,
             "total_runtime_s": total,
             "claims": rows_claims,
         },

@@ -106,20 +106,26 @@ def _body_jacobian_rate(q: np.ndarray, qd: np.ndarray) -> np.ndarray:
 class MusclePaths:
     """Muscle paths at one posture (thorax frame, m).
 
+    Per muscle (:meth:`ShoulderModel.paths`) or per line of action
+    (:meth:`ShoulderModel.line_paths`). For a muscle on several lines (``lines="elements"``)
+    the per-muscle values are the lines' values weighted by their share of the muscle's
+    force (the elements' ``f_max`` fractions), so ``W = −∂ℓ/∂q`` still holds.
+
     Attributes
     ----------
-    lengths : numpy.ndarray, shape (11,)
+    lengths : numpy.ndarray, shape (n,)
         Path lengths origin → insertion, wrap arc included (m).
-    directions : numpy.ndarray, shape (11, 3)
-        Unit direction of each path's free segment at the origin, pointing to the origin:
-        the direction of the muscle's net force on the humerus.
-    insertions : numpy.ndarray, shape (11, 3)
+    directions : numpy.ndarray, shape (n, 3)
+        Per line: unit direction of the path's free segment at the origin, pointing to the
+        origin (the direction of its net force on the humerus). Per muscle on several
+        lines: the net force on the humerus per newton of muscle force (norm ≤ 1).
+    insertions : numpy.ndarray, shape (n, 3)
         Insertion points in thorax coordinates (m).
-    tangent_points : numpy.ndarray, shape (11, 3)
+    tangent_points : numpy.ndarray, shape (n, 3)
         Where the path leaves the line from the origin: the wrap's first tangent point,
         or the insertion for a straight path (m).
-    wrapped : numpy.ndarray of bool, shape (11,)
-        Whether the path wraps around its sphere at this posture.
+    wrapped : numpy.ndarray of bool, shape (n,)
+        Whether the path (any of the muscle's lines) wraps around its sphere.
     """
 
     lengths: np.ndarray
@@ -147,9 +153,20 @@ class ShoulderModel:
     pcsa : numpy.ndarray, shape (11,)
         Physiological cross-sectional areas ``F_max / σ`` (m²).
     origins : numpy.ndarray, shape (11, 3)
-        Origins in the thorax frame (m).
+        Lumped origins in the thorax frame (m): the lines of a lumped model.
     insertions : numpy.ndarray, shape (11, 3)
-        Insertions in the humerus frame (m).
+        Lumped insertions in the humerus frame (m).
+    lines : {"elements", "lumped"}
+        Whether some muscles act along several lines (their DAS3 elements) or every muscle
+        along its lumped line.
+    n_lines : int
+        Number of lines of action.
+    line_share : numpy.ndarray, shape (11, n_lines)
+        Share of each muscle's force carried by each line (rows sum to 1).
+    line_origins, line_insertions : numpy.ndarray, shape (n_lines, 3)
+        Origin (thorax frame) and insertion (humerus frame) of each line (m).
+    line_wrap_radii : numpy.ndarray, shape (n_lines,)
+        Wrap-sphere radius of each line (its muscle's), 0 = straight (m).
     wrap_radii : numpy.ndarray, shape (11,)
         Radius of each muscle's wrap sphere, centred on the GH centre; 0 = straight line (m).
     mass : float
@@ -184,6 +201,7 @@ class ShoulderModel:
         lower=None,
         upper=None,
         gravity: float = GRAVITY,
+        elements=None,
     ) -> None:
         self.names = tuple(str(n) for n in names)
         m = len(self.names)
@@ -198,9 +216,9 @@ class ShoulderModel:
         self.origins = _array(origins, (m, 3), "origins")
         self.insertions = _array(insertions, (m, 3), "insertions")
         self.wrap_radii = _array(wrap_radii, (m,), "wrap_radii")
-        for name, r, o, i in zip(
-            self.names, self.wrap_radii, self.origins, self.insertions, strict=True
-        ):
+        self._set_lines(elements)
+        for j, (o, i, r) in enumerate(zip(self._lo, self._li, self._lr, strict=True)):
+            name = self.names[self._lm[j]]
             if r < 0.0:
                 raise ValueError(f"wrap radius of {name!r} must be >= 0 m, got {float(r)!r}")
             for what, p in (("origin", o), ("insertion", i)):
@@ -240,9 +258,47 @@ class ShoulderModel:
             [self.inertia_transverse, self.inertia_longitudinal, self.inertia_transverse]
         )
 
+    def _set_lines(self, elements) -> None:
+        """Lines of action: one per muscle (its lumped line) or, for a muscle given
+        ``elements``, one per element, the muscle's force shared in proportion to the
+        elements' ``f_max`` (so its moment arm is their force-weighted mean at every q)."""
+        m = self.n_muscles
+        if elements is None:
+            elements = [None] * m
+        if len(elements) != m:
+            raise ValueError(f"elements must have one entry per muscle ({m}), got {len(elements)}")
+        lo, li, lr, lw, lm = [], [], [], [], []
+        for j, el in enumerate(elements):
+            if el is None:
+                lo.append(self.origins[j][None])
+                li.append(self.insertions[j][None])
+                w = np.ones(1)
+            else:
+                f = np.asarray(el["f_max"], dtype=float)
+                if f.ndim != 1 or f.size < 1 or not np.all(np.isfinite(f) & (f > 0)):
+                    raise ValueError(
+                        f"elements of {self.names[j]!r}: f_max must be positive forces (N), "
+                        f"got {el['f_max']!r}"
+                    )
+                lo.append(_array(el["origins"], (f.size, 3), f"origins of {self.names[j]!r}"))
+                li.append(_array(el["insertions"], (f.size, 3), f"insertions of {self.names[j]!r}"))
+                w = f / f.sum()
+            lw.append(w)
+            lr.append(np.full(w.size, self.wrap_radii[j]))
+            lm.append(np.full(w.size, j))
+        self._lo, self._li = np.vstack(lo), np.vstack(li)
+        self._lr, self._lw = np.concatenate(lr), np.concatenate(lw)
+        self._lm = np.concatenate(lm)
+        self.line_origins, self.line_insertions, self.line_wrap_radii = self._lo, self._li, self._lr
+        self.n_lines = self._lw.size
+        self.lines = "lumped" if self.n_lines == m else "elements"
+        #: (muscles × lines) sharing matrix: line forces = ``line_share.T @ F``.
+        self.line_share = np.zeros((m, self.n_lines))
+        self.line_share[self._lm, np.arange(self.n_lines)] = self._lw
+
     def __repr__(self) -> str:
         return (
-            f"ShoulderModel({self.n_muscles} muscles, arm {self.mass} kg, "
+            f"ShoulderModel({self.n_muscles} muscles on {self.n_lines} lines, arm {self.mass} kg, "
             f"com {self.com_distance} m, I_t {self.inertia_transverse:.4g} kg·m² about GH)"
         )
 
@@ -284,45 +340,60 @@ class ShoulderModel:
         q = self.check_posture(q)
         return self._paths(q)
 
+    def line_paths(self, q) -> MusclePaths:
+        """Paths of the lines of action at ``q`` (rad), one per line (``n_lines``; one per
+        muscle for a lumped model, one per DAS3 element with ``lines="elements"``)."""
+        q = self.check_posture(q)
+        return self._line_paths(q)
+
     def _paths(self, q: np.ndarray) -> MusclePaths:
+        lp = self._line_paths(q)
+        if self.lines == "lumped":
+            return lp
+        A = self.line_share
+        wrapped = np.zeros(self.n_muscles, dtype=bool)
+        np.logical_or.at(wrapped, self._lm, lp.wrapped)
+        return MusclePaths(
+            A @ lp.lengths, A @ lp.directions, A @ lp.insertions, A @ lp.tangent_points, wrapped
+        )
+
+    def _line_paths(self, q: np.ndarray) -> MusclePaths:
+        """All lines at once (vectorised over the lines; the geometry of the class
+        docstring: tangent, great-circle arc, tangent when the straight line cuts the
+        sphere)."""
         R = rotation(q)
-        ins = self.insertions @ R.T
-        origins = self.origins
-        m = self.n_muscles
-        lengths = np.empty(m)
-        dirs = np.empty((m, 3))
+        ins = self._li @ R.T
+        o, r = self._lo, self._lr
+        seg = o - ins
+        straight = np.linalg.norm(seg, axis=1)
+        lengths = straight.copy()
+        dirs = seg / straight[:, None]
         tang = ins.copy()
-        wrapped = np.zeros(m, dtype=bool)
-        for j in range(m):
-            o, i, r = origins[j], ins[j], self.wrap_radii[j]
-            seg = o - i
-            straight = np.linalg.norm(seg)
-            lengths[j] = straight
-            dirs[j] = seg / straight
-            if r == 0.0:
-                continue
-            a, b = np.linalg.norm(o), np.linalg.norm(i)
-            e1 = o / a
-            cos_g = float(np.clip(e1 @ i / b, -1.0, 1.0))
-            gamma = np.arccos(cos_g)
+        wrapped = np.zeros(self.n_lines, dtype=bool)
+        w = np.flatnonzero(r > 0.0)
+        if w.size:
+            o, i, r = o[w], ins[w], r[w]
+            a, b = np.linalg.norm(o, axis=1), np.linalg.norm(i, axis=1)
+            e1 = o / a[:, None]
+            proj = np.einsum("kj,kj->k", e1, i)
+            gamma = np.arccos(np.clip(proj / b, -1.0, 1.0))
             alpha, beta = np.arccos(r / a), np.arccos(r / b)
-            if gamma <= alpha + beta:
-                continue  # the straight line clears the sphere
-            perp = i - (e1 @ i) * e1
-            norm_perp = np.linalg.norm(perp)
-            if norm_perp < 1e-12 * b:  # origin, centre, insertion aligned: any plane
-                helper = np.eye(3)[np.argmin(np.abs(e1))]
-                perp = helper - (helper @ e1) * e1
-                norm_perp = np.linalg.norm(perp)
-            e2 = perp / norm_perp
-            t = r * (np.cos(alpha) * e1 + np.sin(alpha) * e2)
-            lengths[j] = (
-                np.sqrt(a * a - r * r) + r * (gamma - alpha - beta) + np.sqrt(b * b - r * r)
-            )
+            cut = gamma > alpha + beta  # otherwise the straight line clears the sphere
+            perp = i - proj[:, None] * e1
+            norm_perp = np.linalg.norm(perp, axis=1)
+            for k in np.flatnonzero(cut & (norm_perp < 1e-12 * b)):  # aligned: any plane
+                helper = np.eye(3)[np.argmin(np.abs(e1[k]))]
+                perp[k] = helper - (helper @ e1[k]) * e1[k]
+                norm_perp[k] = np.linalg.norm(perp[k])
+            e2 = perp / np.where(norm_perp > 0.0, norm_perp, 1.0)[:, None]
+            t = r[:, None] * (np.cos(alpha)[:, None] * e1 + np.sin(alpha)[:, None] * e2)
             d = o - t
-            dirs[j] = d / np.linalg.norm(d)
-            tang[j] = t
-            wrapped[j] = True
+            wl = np.sqrt(a * a - r * r) + r * (gamma - alpha - beta) + np.sqrt(b * b - r * r)
+            idx = w[cut]
+            lengths[idx] = wl[cut]
+            dirs[idx] = d[cut] / np.linalg.norm(d[cut], axis=1)[:, None]
+            tang[idx] = t[cut]
+            wrapped[idx] = True
         return MusclePaths(lengths, dirs, ins, tang, wrapped)
 
     def lengths(self, q) -> np.ndarray:
@@ -333,7 +404,11 @@ class ShoulderModel:
         """Eq. A.18: columns ``r_j × d_j`` about the GH centre, thorax frame (m), (3, 11);
         ``M = B F`` is the muscles' moment (N·m) for forces F (N)."""
         q = self.check_posture(q)
-        return np.cross(self.origins, self._paths(q).directions).T
+        return self._moment_matrix(q)
+
+    def _moment_matrix(self, q: np.ndarray) -> np.ndarray:
+        B = np.cross(self._lo, self._line_paths(q).directions).T
+        return B if self.lines == "lumped" else B @ self.line_share.T
 
     def moment_arms(self, q) -> np.ndarray:
         """Eq. A.19: the moment-arm matrix ``W = P B`` (m), shape (3, 11).
@@ -345,8 +420,7 @@ class ShoulderModel:
         return self._moment_arms(q)
 
     def _moment_arms(self, q: np.ndarray) -> np.ndarray:
-        B = np.cross(self.origins, self._paths(q).directions).T
-        return self._axes(q) @ B
+        return self._axes(q) @ self._moment_matrix(q)
 
     # ------------------------------------------------------------------ dynamics
     def _state(self, q, qd, qdd):
@@ -496,7 +570,15 @@ def _load_table() -> dict:
     return json.loads(description_path("shoulder_muscles.json").read_text())
 
 
-def build(arm: str = "straight", wrap: bool = True, **overrides) -> ShoulderModel:
+def _load_elements() -> dict:
+    from .files import description_path
+
+    return json.loads(description_path("shoulder_elements.json").read_text())["muscles"]
+
+
+def build(
+    arm: str = "straight", wrap: bool = True, lines: str = "elements", **overrides
+) -> ShoulderModel:
     """The appendix A model from ``robots/shoulder_muscles.json``.
 
     Parameters
@@ -507,6 +589,12 @@ def build(arm: str = "straight", wrap: bool = True, **overrides) -> ShoulderMode
     wrap : bool
         Wrap the deltoid and rotator-cuff paths around spheres (default) or use straight
         lines for every muscle (the data note's comparison case).
+    lines : {"elements", "lumped"}
+        Each muscle acts along its DAS3 elements (``robots/shoulder_elements.json``, force
+        shared by the elements' ``f_max``; default: the lumped line loses up to 40 % of
+        the elements' moment arm at neutral and more elsewhere, issue 18 finding 8) or
+        along one lumped line (``shoulder_muscles.json``, the thesis's "one resultant line
+        of action per muscle").
     **overrides
         Any :class:`ShoulderModel` keyword (``f_max``, ``stress``, ``lower``, ``upper``,
         ``mass``…) replacing the table's value.
@@ -519,6 +607,8 @@ def build(arm: str = "straight", wrap: bool = True, **overrides) -> ShoulderMode
     table = _load_table()
     if arm not in ("straight", "upper"):
         raise ValueError(f"arm must be 'straight' or 'upper', got {arm!r}")
+    if lines not in ("elements", "lumped"):
+        raise ValueError(f"lines must be 'elements' or 'lumped', got {lines!r}")
     seg = table["arm" if arm == "straight" else "upper_arm"]
     muscles = table["muscles"]
     radii = table["wrap_spheres"]
@@ -534,7 +624,17 @@ def build(arm: str = "straight", wrap: bool = True, **overrides) -> ShoulderMode
         inertia_longitudinal_com=seg["inertia_longitudinal_com"],
         stress=table["muscle_stress_N_per_m2"],
     )
-    allowed = set(kw) | {"lower", "upper", "gravity"}
+    if lines == "elements":
+        el = _load_elements()
+        kw["elements"] = [
+            {
+                "f_max": [e["f_max"] for e in el[m["name"]]],
+                "origins": [e["origin"] for e in el[m["name"]]],
+                "insertions": [e["insertion"] for e in el[m["name"]]],
+            }
+            for m in muscles
+        ]
+    allowed = set(kw) | {"lower", "upper", "gravity", "elements"}
     unknown = set(overrides) - allowed
     if unknown:
         raise ValueError(f"unknown shoulder option(s) {sorted(unknown)}; known: {sorted(allowed)}")

@@ -28,7 +28,16 @@ from scipy.optimize import least_squares
 from ..kinematics.paths import LissajousSphere
 from .spatial_5r import LENGTHS, Q0_THESIS
 
-__all__ = ["N_PARAMS", "Candidate", "forward", "thm42_hypothesis", "search"]
+__all__ = [
+    "N_PARAMS",
+    "Candidate",
+    "PinvRun",
+    "forward",
+    "forward_batch",
+    "pinv_sections",
+    "search",
+    "thm42_hypothesis",
+]
 
 N_PARAMS = 27
 OMEGA_45 = np.array([[1.0, 0.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0, 0.0]])
@@ -169,3 +178,144 @@ def search(starts: int = 200, seed: int = 0, steps: int = 200) -> list[Candidate
         s42, sj, err, clos = thm42_hypothesis(sol.x, steps=steps, path=path)
         out.append(Candidate(sol.x, gap, s42, sj, err, clos))
     return out
+
+
+def _check_batch(params, q) -> tuple[np.ndarray, np.ndarray]:
+    p = np.asarray(params, dtype=float)
+    q = np.asarray(q, dtype=float)
+    if p.ndim != 2 or p.shape[1] != N_PARAMS:
+        raise ValueError(f"params must have shape (k, {N_PARAMS}), got {p.shape}")
+    if q.shape != (p.shape[0], 5):
+        raise ValueError(f"q must have shape ({p.shape[0]}, 5), got {q.shape}")
+    return p, q
+
+
+def _unit_batch(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    st = np.sin(theta)
+    return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+def _rot_batch(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rodrigues rotations, ``axis`` (k, 3) unit, ``angle`` (k,) rad → (k, 3, 3)."""
+    k = axis.shape[0]
+    K = np.zeros((k, 3, 3))
+    K[:, 0, 1], K[:, 0, 2] = -axis[:, 2], axis[:, 1]
+    K[:, 1, 0], K[:, 1, 2] = axis[:, 2], -axis[:, 0]
+    K[:, 2, 0], K[:, 2, 1] = -axis[:, 1], axis[:, 0]
+    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+
+
+def forward_batch(params, q) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`forward` for ``k`` geometries at once.
+
+    Parameters
+    ----------
+    params : array_like, shape (k, 27)
+        Geometries (rad), as in :func:`forward`.
+    q : array_like, shape (k, 5)
+        Joint angles (rad), one row per geometry.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        Tip positions (m), shape (k, 3), and position Jacobians (m/rad), shape (k, 3, 5).
+    """
+    p, q = _check_batch(params, q)
+    k = p.shape[0]
+    links = _unit_batch(p[:, 0:12:2], p[:, 1:12:2])  # (k, 6, 3)
+    axes = _unit_batch(p[:, 12:22:2], p[:, 13:22:2])  # (k, 5, 3)
+    off = p[:, 22:27]
+    R = np.broadcast_to(np.eye(3), (k, 3, 3)).copy()
+    pos = LENGTHS[0] * links[:, 0]
+    joints, zs = [], []
+    for i in range(5):
+        zs.append(np.einsum("kij,kj->ki", R, axes[:, i]))
+        joints.append(pos)
+        R = R @ _rot_batch(axes[:, i], q[:, i] + off[:, i])
+        pos = pos + LENGTHS[i + 1] * np.einsum("kij,kj->ki", R, links[:, i + 1])
+    J = np.stack([np.cross(z, pos - o) for z, o in zip(zs, joints, strict=True)], axis=-1)
+    return pos, J
+
+
+@dataclass(frozen=True)
+class PinvRun:
+    """Poincaré sections of long ``J⁺`` runs on ``k`` geometries (:func:`pinv_sections`).
+
+    Attributes
+    ----------
+    sections : numpy.ndarray, shape (periods + 1, k, 5)
+        Joint angles (rad) at ``t = jT``.
+    max_tracking_m : numpy.ndarray, shape (k,)
+        Largest ``‖ζ(q) − Y‖`` (m) at the RK4 steps.
+    min_sigma_J : numpy.ndarray, shape (k,)
+        Smallest singular value of ``J`` (m/rad) at the RK4 steps.
+    """
+
+    sections: np.ndarray
+    max_tracking_m: np.ndarray
+    min_sigma_J: np.ndarray
+
+
+def pinv_sections(
+    params, q0=Q0_THESIS, periods: int = 100, steps: int = 200, gain: float = 1.0, path=None
+) -> PinvRun:
+    """Long runs of the pseudo-inverse scheme (Eq. 4.1 with position feedback)
+    ``q̇ = J⁺(Ẏ_ref + K (Y_ref − ζ(q)))`` from ``q0`` on ``k`` geometries at once.
+
+    The scheme and integrator of ``qc.simulate(arm, qc.schemes.PseudoInverse(arm, gain=K),
+    ...)`` -- classical RK4, ``steps`` per period of the path, ``J⁺ = Jᵀ(JJᵀ)⁻¹`` -- vectorised
+    over the geometries (the planar counterpart is ``examples/ch4_long_runs.py``'s
+    ``batch_pinv_sections``).
+
+    Parameters
+    ----------
+    params : array_like, shape (k, 27)
+        Geometries (rad).
+    q0 : array_like, shape (5,)
+        Start (rad), the same for every geometry (the thesis's by default).
+    periods, steps : int
+        Number of path periods and RK4 steps per period (≥ 1).
+    gain : float
+        ``K`` (1/s), ≥ 0.
+    path : optional
+        The task (default :class:`qpcoord.kinematics.paths.LissajousSphere`).
+
+    Returns
+    -------
+    PinvRun
+    """
+    if periods < 1 or steps < 1:
+        raise ValueError(f"periods and steps must be >= 1, got {periods!r}, {steps!r}")
+    if not np.isfinite(gain) or gain < 0:
+        raise ValueError(f"gain must be a finite number >= 0 (1/s), got {gain!r}")
+    p = np.atleast_2d(np.asarray(params, dtype=float))
+    q = np.tile(np.asarray(q0, dtype=float), (p.shape[0], 1))
+    p, q = _check_batch(p, q)
+    path = path or LissajousSphere()
+    dt = path.period / steps
+    out = np.empty((periods + 1, *q.shape))
+    out[0] = q
+    err = np.zeros(p.shape[0])
+    smin = np.full(p.shape[0], np.inf)
+
+    def f(q, t, record=False):
+        y, J = forward_batch(p, q)
+        e = path.velocity(t) + gain * (path.position(t) - y)
+        if record:
+            nonlocal err, smin
+            err = np.maximum(err, np.linalg.norm(y - path.position(t), axis=1))
+            smin = np.minimum(smin, np.linalg.svd(J, compute_uv=False)[:, -1])
+        lam = np.linalg.solve(J @ np.swapaxes(J, 1, 2), e[:, :, None])
+        return (np.swapaxes(J, 1, 2) @ lam)[:, :, 0]
+
+    for j in range(periods):
+        for i in range(steps):
+            t = (j * steps + i) * dt
+            k1 = f(q, t, record=True)
+            k2 = f(q + 0.5 * dt * k1, t + 0.5 * dt)
+            k3 = f(q + 0.5 * dt * k2, t + 0.5 * dt)
+            k4 = f(q + dt * k3, t + dt)
+            q = q + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        out[j + 1] = q
+    return PinvRun(out, err, smin)

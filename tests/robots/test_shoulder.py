@@ -127,14 +127,16 @@ def test_straight_model_moment_arms_equal_minus_length_gradient(u):
     assert np.allclose(m.moment_arms(q), _lengths_fd(m, q), atol=2e-7)
 
 
+@pytest.mark.parametrize("lines", ["elements", "lumped"])
 @settings(max_examples=40, deadline=None)
-@given(unit3)
-def test_wrap_engages_exactly_when_the_straight_line_cuts_the_sphere(model, u):
+@given(u=unit3)
+def test_wrap_engages_exactly_when_the_straight_line_cuts_the_sphere(lines, u):
+    model = shoulder.build(lines=lines)
     q = _posture(u, model)
-    p = model.paths(q)
-    straight = shoulder.build(wrap=False).paths(q)
-    for j in range(model.n_muscles):
-        o, i, r = model.origins[j], p.insertions[j], model.wrap_radii[j]
+    p = model.line_paths(q)
+    straight = shoulder.build(wrap=False, lines=lines).line_paths(q)
+    for j in range(model.n_lines):
+        o, i, r = model.line_origins[j], p.insertions[j], model.line_wrap_radii[j]
         d = i - o
         t = np.clip(-(o @ d) / (d @ d), 0.0, 1.0)
         cuts = r > 0 and np.linalg.norm(o + t * d) < r
@@ -175,8 +177,8 @@ def test_moment_arm_signs_at_neutral_match_the_data_note(model):
     teres major and latissimus adduct and extend; the wrap increases the arms of the
     muscles whose straight line crosses the head."""
     idx = {n: k for k, n in enumerate(model.names)}
-    Ws = shoulder.build(wrap=False).moment_arms(np.zeros(3)) * 1e3  # mm
-    W = model.moment_arms(np.zeros(3)) * 1e3
+    Ws = shoulder.build(wrap=False, lines="lumped").moment_arms(np.zeros(3)) * 1e3  # mm
+    W = shoulder.build(lines="lumped").moment_arms(np.zeros(3)) * 1e3
     assert Ws[2, idx["subscapularis"]] == pytest.approx(13.7, abs=0.3)
     assert Ws[2, idx["infraspinatus"]] == pytest.approx(-10.7, abs=0.3)
     assert Ws[2, idx["teres minor"]] == pytest.approx(-12.9, abs=0.3)
@@ -318,3 +320,110 @@ def test_bad_model_data_is_named():
         shoulder.build(upper=[0.5, np.pi / 2, 1.0])
     with pytest.raises(ValueError, match="mass"):
         shoulder.build(mass=-1.0)
+
+
+# ---------------------------------------------------------------- DAS3 element lines
+ELEMENTS = json.loads(qc.robots.description_path("shoulder_elements.json").read_text())["muscles"]
+
+
+def test_elements_sum_to_the_lumped_table():
+    """The element file and the lumped table are the same DAS3 data: F_max sums, and the
+    force-weighted element points are the lumped points to the table's 1 mm rounding."""
+    lumped = shoulder.build(lines="lumped")
+    assert list(ELEMENTS) == list(lumped.names)
+    for j, name in enumerate(lumped.names):
+        f = np.array([e["f_max"] for e in ELEMENTS[name]])
+        assert f.sum() == pytest.approx(lumped.f_max[j], abs=1e-9)
+        for key, ref in (("origin", lumped.origins[j]), ("insertion", lumped.insertions[j])):
+            mean = f @ np.array([e[key] for e in ELEMENTS[name]]) / f.sum()
+            assert np.abs(mean - ref).max() <= 0.5e-3 + 1e-6, (name, key)
+
+
+def _one_muscle_per_element(wrap: bool = True):
+    """A model with every DAS3 element as its own muscle, and the muscle → element shares."""
+    table = shoulder._load_table()
+    radii = table["wrap_spheres"]
+    names, f, o, i, r, owner = [], [], [], [], [], []
+    for j, m in enumerate(table["muscles"]):
+        for e in ELEMENTS[m["name"]]:
+            names.append(e["das"])
+            f.append(e["f_max"])
+            o.append(e["origin"])
+            i.append(e["insertion"])
+            r.append(radii[m["wrap"]] if (wrap and m["wrap"]) else 0.0)
+            owner.append(j)
+    seg = table["arm"]
+    model = shoulder.ShoulderModel(
+        names,
+        f,
+        o,
+        i,
+        r,
+        mass=seg["mass"],
+        com_distance=seg["com_distance"],
+        inertia_transverse_com=seg["inertia_transverse_com"],
+        inertia_longitudinal_com=seg["inertia_longitudinal_com"],
+    )
+    f, owner = np.array(f), np.array(owner)
+    share = np.zeros((11, len(f)))
+    for e, j in enumerate(owner):
+        share[j, e] = f[e] / f[owner == j].sum()
+    return model, share
+
+
+@pytest.mark.parametrize("wrap", [True, False])
+def test_element_muscle_arm_is_the_force_weighted_mean_of_its_elements(wrap):
+    """lines="elements": each muscle's moment arm is its elements' arms weighted by their
+    share of F_max, at every posture (not only at neutral, where the lumped line is fitted)."""
+    model = shoulder.build(wrap=wrap)
+    assert model.lines == "elements" and model.n_lines == 60
+    per_element, share = _one_muscle_per_element(wrap)
+    np.testing.assert_allclose(model.line_share, share, atol=1e-15)
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        q = _posture(rng.uniform(0, 1, 3), model)
+        np.testing.assert_allclose(
+            model.moment_arms(q), per_element.moment_arms(q) @ share.T, atol=1e-15
+        )
+        # the muscles' net force on the humerus is the elements' force
+        F = rng.uniform(0, 1, 11) * model.f_max
+        np.testing.assert_allclose(
+            model.paths(q).directions.T @ F,
+            per_element.paths(q).directions.T @ (share.T @ F),
+            atol=1e-12,
+        )
+
+
+def test_middle_deltoid_abducts_with_its_elements_arm_at_neutral():
+    """Issue 18 finding 8: the lumped middle deltoid has 6.9 mm of abduction arm at q = 0,
+    its seven DAS3 elements 11.4 mm force-weighted (the model now uses the elements)."""
+    j = shoulder.build().names.index("deltoideus medial")
+    assert -shoulder.build(lines="lumped").moment_arms(np.zeros(3))[0, j] == pytest.approx(
+        6.9e-3, abs=0.05e-3
+    )
+    assert -shoulder.build().moment_arms(np.zeros(3))[0, j] == pytest.approx(11.4e-3, abs=0.05e-3)
+
+
+def test_lines_option_is_checked():
+    with pytest.raises(ValueError, match="lines must be"):
+        shoulder.build(lines="tendons")
+    with pytest.raises(ValueError, match="elements must have one entry per muscle"):
+        shoulder.build(elements=[None])
+    bad = [None] * 11
+    bad[0] = {"f_max": [-1.0], "origins": [[0.0, 0.1, 0.0]], "insertions": [[0.0, -0.1, 0.0]]}
+    with pytest.raises(ValueError, match="f_max must be positive"):
+        shoulder.build(elements=bad)
+
+
+@pytest.mark.skipif(
+    not Path(__import__("os").environ.get("QPCOORD_DAS3_OSIM", "/nonexistent")).is_file(),
+    reason="set QPCOORD_DAS3_OSIM to DAS3's das4_v4.osim (AbdnBiomechEng/arm-model)",
+)
+def test_element_file_is_read_from_das3():
+    import os
+
+    from qpcoord.robots.shoulder_das3 import read_elements
+
+    assert read_elements(os.environ["QPCOORD_DAS3_OSIM"]) == ELEMENTS
+    with pytest.raises(ValueError, match="osim"):
+        read_elements("/nonexistent.osim")

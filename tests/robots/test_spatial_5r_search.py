@@ -53,3 +53,43 @@ def test_search_is_seeded_and_checks_input():
         S.search(starts=0)
     with pytest.raises(ValueError, match="params"):
         S.forward(np.zeros(3), np.zeros(5))
+
+
+def test_forward_batch_matches_forward():
+    rng = np.random.default_rng(1)
+    P = rng.uniform(0.0, 3.0, (4, S.N_PARAMS))
+    Q = rng.uniform(-3.0, 3.0, (4, 5))
+    y, J = S.forward_batch(P, Q)
+    for k in range(4):
+        y1, J1 = S.forward(P[k], Q[k])
+        np.testing.assert_allclose(y[k], y1, atol=1e-13)
+        np.testing.assert_allclose(J[k], J1, atol=1e-13)
+    with pytest.raises(ValueError, match="params"):
+        S.forward_batch(np.zeros((2, 3)), np.zeros((2, 5)))
+    with pytest.raises(ValueError, match="q must"):
+        S.forward_batch(P, np.zeros((3, 5)))
+
+
+def test_pinv_sections_is_the_simulate_pseudo_inverse_run():
+    """The batched J⁺ runner is qc.simulate with PseudoInverse (same RK4, same feedback):
+    on qpcoord's arm, two periods from the IK-corrected start agree to round-off, for each
+    copy of the arm in the batch."""
+    arm = qc.robots.load("spatial_5r")
+    path = qc.paths.LissajousSphere()
+    traj = qc.simulate(
+        arm, qc.schemes.PseudoInverse(arm, gain=1.0), path, Q_START, 2 * path.period,
+        path.period / 100,
+    )  # fmt: skip
+    run = S.pinv_sections(
+        np.stack([qpcoord_arm_params()] * 2), traj.info["q_start"], periods=2, steps=100
+    )
+    sec = qc.analysis.poincare_section(traj, path.period)
+    assert run.sections.shape == (3, 2, 5)
+    for k in range(2):
+        np.testing.assert_allclose(run.sections[:, k], sec, atol=1e-12)
+    assert run.max_tracking_m == pytest.approx([traj.max_error] * 2, rel=1e-9)
+    assert np.all(run.min_sigma_J > 0.2)
+    with pytest.raises(ValueError, match="periods"):
+        S.pinv_sections(qpcoord_arm_params(), periods=0)
+    with pytest.raises(ValueError, match="gain"):
+        S.pinv_sections(qpcoord_arm_params(), gain=-1.0)
