@@ -582,11 +582,10 @@ def main(argv=None) -> int:
         )
     pink = False
     if not args.no_pink:
-        try:
-            import pink  # noqa: F401
+        import importlib.util
 
-            pink = True
-        except ImportError:
+        pink = importlib.util.find_spec("pink") is not None
+        if not pink:
             print("Pink skipped: pin-pink not installed (the bench extra)")
     rows = []
     for name in args.scenario or SCENARIOS:
