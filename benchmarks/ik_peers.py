@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import subprocess
 import sys
@@ -229,6 +230,8 @@ class PinkLoop:
         from pink.limits import ConfigurationLimit, VelocityLimit
         from pink.tasks import ComTask, FrameTask, PostureTask
 
+        # Pink logs (root logger) every configuration 1e-6 past a limit: keep the table readable
+        logging.getLogger().setLevel(logging.ERROR)
         self.pink, self.pin = pink, pin
         robot = sc["robot"]
         model = robot.model.copy()
@@ -351,6 +354,26 @@ class PlacoLoop:
             self.proc.stdin.write("\n")
             self.proc.stdin.flush()
             self.proc.wait(timeout=10)
+
+
+def placo_alone(name: str, steps: int, speed: float, python: Path) -> dict:
+    """PlaCo's steps back to back (every step request written at once, so its process never
+    waits on the pipe between steps): its cost without the lockstep's wake-ups."""
+    loop = PlacoLoop(scenario(name, steps, speed), python)
+    try:
+        loop.proc.stdin.write("".join(json.dumps({"k": k}) + "\n" for k in range(steps)))
+        loop.proc.stdin.flush()
+        ts = np.array([json.loads(loop.proc.stdout.readline())["t"] for _ in range(steps)])
+    finally:
+        loop.close()
+    us = ts[steps // 10 :] * 1e6
+    return {
+        "scenario": name,
+        "solver": "placo, back to back",
+        "median_us": float(np.median(us)),
+        "p90_us": float(np.percentile(us, 90)),
+        "p99_us": float(np.percentile(us, 99)),
+    }
 
 
 def _hull(poly, q0: np.ndarray, robot) -> np.ndarray:
@@ -565,6 +588,9 @@ def main(argv=None) -> int:
     p.add_argument("--no-pink", action="store_true")
     p.add_argument("--make-placo-venv", action="store_true")
     p.add_argument("--profile", action="store_true")
+    p.add_argument(
+        "--placo-alone", action="store_true", help="also time PlaCo's steps back to back"
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the rows here")
     args = p.parse_args(argv)
     if args.steps is not None and args.steps < 20:
@@ -594,6 +620,8 @@ def main(argv=None) -> int:
             steps = 60
         try:
             rows += run(name, steps, args.speed, placo, pink)
+            if args.placo_alone and placo is not None:
+                rows.append(placo_alone(name, steps, args.speed, placo))
         except ValueError as exc:  # example-robot-data missing
             rows.append({"scenario": name, "note": f"{name} skipped: {exc}"})
     print(format_rows(rows))
