@@ -1,0 +1,76 @@
+"""``benchmarks/ik_peers.py --quick`` runs without PlaCo (and says so); no timed assertion.
+
+The benchmark is a script, not a module of the package: it is run as a subprocess, as a
+user runs it. The checks are on its output's content (rows, errors, limits), never on times.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "benchmarks" / "ik_peers.py"
+
+
+def _run(tmp_path: Path, *args: str) -> tuple[str, list[dict]]:
+    out = tmp_path / "rows.json"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, str(SCRIPT), "--quick", "--json", str(out), *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout, json.loads(out.read_text())
+
+
+def test_quick_without_placo(tmp_path):
+    pytest.importorskip("pinocchio")
+    stdout, rows = _run(
+        tmp_path,
+        "--placo-python",
+        str(tmp_path / "no-such-python"),
+        "--scenario",
+        "panda-position",
+        "--scenario",
+        "panda-pose",
+    )
+    assert "PlaCo skipped: no interpreter at" in stdout
+    if any("skipped" in r.get("note", "") for r in rows):  # example-robot-data missing
+        pytest.skip(rows[0]["note"])
+    solvers = {(r["scenario"], r["solver"]) for r in rows if "solver" in r}
+    for scenario in ("panda-position", "panda-pose"):
+        for s in ("qpcoord strict native", "qpcoord strict python", "qpcoord weighted"):
+            assert (scenario, s) in solvers
+    assert not any(r["solver"] == "placo" for r in rows if "solver" in r)
+    for r in rows:
+        assert r["steps"] == 60
+        # hard limits hold on every step; the deadbeat hand task tracks the circle
+        assert r["joint_limit_violation_rad"] <= 1e-9
+        assert r["speed_limit_violation_rad_s"] <= 1e-6
+        assert r["position_error_m"] < 1e-3
+        assert r["p99_us"] >= r["p90_us"] >= r["median_us"] > 0
+    strict = {r["scenario"]: r for r in rows if r["solver"] == "qpcoord strict native"}
+    python = {r["scenario"]: r for r in rows if r["solver"] == "qpcoord strict python"}
+    for scenario, r in strict.items():  # both engines solve the same strict hierarchy
+        assert r["position_error_m"] == pytest.approx(python[scenario]["position_error_m"])
+    assert "orientation_error_rad" in strict["panda-pose"]
+
+
+def test_rejects_too_few_steps(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, str(SCRIPT), "--steps", "3", "--no-placo"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode != 0
+    assert "--steps must be >= 20, got 3" in proc.stderr
