@@ -352,17 +352,47 @@ def test_level_values_are_computed_natively():
 
 @needs_native
 def test_repeated_calls_reuse_the_buffers():
-    """The per-step path writes into the buffers built at the first call: the arrays the
-    native call receives are the same objects every step (no per-call allocation on the
-    Python side beyond the returned copies)."""
+    """The per-step path writes the tasks' numbers straight into the compiled stack's stacked
+    arrays, which the native solver is bound to: the same objects every step, and every
+    level's buffers are views of them (no copy between refresh and the native call)."""
     s = _hard_random_stack(2)
     s.solve(engine="native")
-    nh = s._native
-    ids = [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)]
+    nh, P = s._native, s._compiled
+    arrays = (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, nh.x, nh.res, nh.stats, nh.detail)
+    ids = [id(a) for a in arrays]
     for _ in range(5):
         s.solve(engine="native")
     assert s._native is nh
-    assert [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)] == ids
+    assert [id(a) for a in arrays] == ids
+    for L in P.levels:
+        assert np.shares_memory(L.C, P.C) and np.shares_memory(L.lo, P.clo)
+
+
+@needs_native
+def test_engines_alternate_on_one_stack():
+    """A Python solve lets a level read its task's arrays in place; the next native solve
+    must still see every number (the stacked arrays are rewritten, the views restored),
+    with weighted rows and a bounds update in between."""
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal((3, 6))
+    pos = qc.Equality(A, rng.standard_normal(3))
+    post = qc.Equality(np.eye(6), rng.standard_normal(6), weight=np.linspace(0.5, 2.0, 6))
+    lim = qc.Inequality(rng.standard_normal((2, 6)), -0.2, 0.3)
+    box = qc.Bounds(-0.8 * np.ones(6), 0.8 * np.ones(6))
+    s = qc.Stack([pos, [post, lim]], bounds=box)
+    for step in range(6):
+        pos.update(b=np.sin(0.3 * step + np.arange(3)))
+        if step == 3:
+            box.update(lower=-0.5 * np.ones(6))
+        engine = ("python", "native")[step % 2]
+        got = s.solve(engine=engine)
+        fresh = qc.Stack([pos, [post, lim]], bounds=box).solve(engine="python")
+        np.testing.assert_allclose(
+            got.level_residuals, fresh.level_residuals, rtol=1e-9, atol=1e-12
+        )
+        assert (got.x >= -0.8 - 1e-12).all() and (got.x <= 0.8 + 1e-12).all()
+        if step >= 3:
+            assert (got.x >= -0.5 - 1e-12).all()
 
 
 @needs_native
