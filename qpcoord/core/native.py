@@ -10,7 +10,11 @@ Damping of near-singular levels follows :mod:`qpcoord.core.linalg` (``Stack(damp
 Algorithm: variable elimination. Per level, the damped closed form of the projected
 equalities is tried first; if it breaks a row, an exact primal active-set least-squares solve
 in ``(z, w)`` (``w`` the slacks of the level's inequality rows) runs from a feasible start,
-warm-started from the working set the same level ended with at the previous call. The hard
+warm-started from the working set the same level ended with at the previous call; when that
+set misses (its point breaks a row, or a multiplier has the wrong sign), the active set starts
+from it made feasible (the ratio test from the feasible cold start towards its point on the
+rows without slack, each slack its row's violation, the stored rows still tight and the
+blocking row as working set) instead of cold. The hard
 constraints get a phase-1 (least violation inside the box) that decides infeasibility.
 
 This module is the only place that imports the extension. :func:`resolve_engine` decides
@@ -206,8 +210,10 @@ class NativeHierarchy:
         info : dict
             ``engine``, ``active_set_iterations`` (per level), ``hard_iterations``,
             ``min_norm_iterations``, ``warm_start_hits`` (stages whose stored working set
-            was optimal), ``closed_form_levels``, ``qp_calls`` (stages solved by the active
-            set rather than a closed form: the Python engine's count of QP calls),
+            was optimal), ``warm_start_seeded`` (levels whose stored working set missed
+            and seeded the active set's start), ``closed_form_levels``, ``qp_calls``
+            (stages solved by the active set rather than a closed form: the Python
+            engine's count of QP calls),
             ``uncertified`` (``[(level, deviation)]`` when a level's value at ``x`` moved
             from the one it was frozen with by more than ``KKT_TOL`` relative: the lower
             levels left its optimal set by rounding).
@@ -238,6 +244,7 @@ class NativeHierarchy:
             "active_set_iterations": its[1:-1],
             "min_norm_iterations": its[-1],
             "warm_start_hits": int(sum([r[1] for r in rows])),
+            "warm_start_seeded": int(self.detail[7]),
             "closed_form_levels": [k for k, r in enumerate(rows[1:-1]) if r[2]],
             # as the Python engine's count of QP calls: the stages (hard phase, levels,
             # minimum-norm step) that needed the active set (its iterations or a stored

@@ -406,3 +406,31 @@ def test_qp_calls_count_the_levels_that_needed_an_active_set(engine):
     sol = outside.solve(engine=engine)
     assert sol.info["qp_calls"] > 0
     np.testing.assert_allclose(sol.x, [0.1, 1.0, 0.3], atol=1e-12)
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_missed_working_set_seeds_the_next_start(seed):
+    """Moving targets make stored working sets miss; the seeded start (the stored set made
+    feasible) ends on the same level values as the Python engine and as a cold start, and
+    it is used."""
+    from qpcoord.core.native import NativeHierarchy
+
+    s = _hard_random_stack(seed, n=30, levels=6)
+    P = s._compiled
+    seeded = NativeHierarchy(P, s.damping)
+    cold = NativeHierarchy(P, s.damping)
+    cold._solver.seed_on_miss = False
+    eqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    used = 0
+    for step in range(12):
+        for j, t in enumerate(eqs):
+            shift = 0.05 * np.sin(0.7 * step + j)
+            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        xs, rs, info = seeded.solve(P)
+        xc, rc, _ = cold.solve(P)
+        ref = s.solve(engine="python").level_residuals
+        np.testing.assert_allclose(rs, ref, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(rc, ref, rtol=1e-9, atol=1e-10)
+        used += info["warm_start_seeded"]
+    assert used > 0
