@@ -4,6 +4,12 @@
 and keeps one :class:`CompiledStack`. Each solve copies the tasks' current numbers into
 the preallocated buffers (no re-stacking, no re-validation of the structure), which is the
 "structure cache" of the per-step hot path.
+
+The buffers of all blocks (hard constraints first, then the levels) are views of one
+contiguous array per kind (``CompiledStack.Aeq``, ``beq``, ``C``, ``lo``, ``hi``, ``sw``,
+``lb``, ``ub``), laid out as the native engine reads them: :meth:`CompiledStack.refresh_stacked`
+writes the tasks' numbers straight into them (one loop over tasks), and the native call
+reads them without a copy.
 """
 
 from __future__ import annotations
@@ -159,6 +165,7 @@ class CompiledStack:
         self._equalities_only = not (
             self.hard.m_eq or self.hard.m_in or any(L.m_in for L in self.levels)
         )
+        self._stack_buffers()
 
     @property
     def capacity(self) -> int:
@@ -178,14 +185,101 @@ class CompiledStack:
             )
 
     def refresh(self) -> None:
-        """Re-read every task's numbers (the per-step update)."""
+        """Re-read every task's numbers (the per-step update of the Python engine: a level
+        of one unit-weight equality reads its task's arrays in place, see
+        :meth:`CompiledLevel.refresh`)."""
         for L in self.levels:
             L.refresh()
         self.hard.refresh()
+        self._aliased = True
+        self._refresh_bounds()
+
+    def _refresh_bounds(self) -> None:
         b = self.bounds
         if b is not None and b.version != self._bounds_version:
             self.lb, self.ub = b.resolve(self.n)
             self._bounds_version = b.version
+
+    def _stack_buffers(self) -> None:
+        """One contiguous array per kind; every block's buffers become views of it."""
+        blocks = [self.hard, *self.levels]
+        n = self.n
+        me = sum(B.m_eq for B in blocks)
+        mi = sum(B.m_in for B in blocks)
+        self.Aeq = np.zeros((me, n))
+        self.beq = np.zeros(me)
+        self.C = np.zeros((mi, n))
+        self.clo = np.zeros(mi)
+        self.chi = np.zeros(mi)
+        self.csw = np.ones(mi)
+        #: the box as the native engine reads it (±inf without bounds)
+        self.lbs = np.full(n, -np.inf)
+        self.ubs = np.full(n, np.inf)
+        self._eq_ops: list[tuple] = []  # (task, shape, A rows, b rows)
+        self._in_ops: list[tuple] = []  # (task, shape, C rows, lo, hi, sw)
+        i = j = 0
+        for B in blocks:
+            B.Ae = B._Ae_buf = self.Aeq[i : i + B.m_eq]
+            B.be = B._be_buf = self.beq[i : i + B.m_eq]
+            for t, shape in zip(B.eqs, B._eq_shapes, strict=True):
+                m = shape[0]
+                self._eq_ops.append((t, shape, self.Aeq[i : i + m], self.beq[i : i + m]))
+                i += m
+            B.C = self.C[j : j + B.m_in]
+            B.low = B.lo = self.clo[j : j + B.m_in]
+            B.hiw = B.hi = self.chi[j : j + B.m_in]
+            B.sw = self.csw[j : j + B.m_in]
+            for t, shape in zip(B.ineqs, B._in_shapes, strict=True):
+                m = shape[0]
+                self._in_ops.append(
+                    (
+                        t,
+                        shape,
+                        self.C[j : j + m],
+                        self.clo[j : j + m],
+                        self.chi[j : j + m],
+                        self.csw[j : j + m],
+                    )
+                )
+                j += m
+        self._aliased = False
+
+    def refresh_stacked(self) -> None:
+        """Write every task's current numbers into the stacked arrays (the native engine's
+        per-step update): one loop over the tasks, no per-level pass, no copy afterwards.
+
+        Checks that no task's matrix changed shape (``ValueError`` naming it); the numbers
+        themselves are checked by the native call (finite, no wrong-sided infinity).
+        """
+        for t, shape, A, b in self._eq_ops:
+            tA = t.A
+            if tA.shape != shape:
+                raise ValueError(f"{t.label}: A changed shape from {shape} to {tA.shape}")
+            if t.unit_weight:
+                A[...] = tA
+                b[...] = t.b
+            else:
+                sw = t.sqrt_weight
+                np.multiply(tA, sw[:, None], out=A)
+                np.multiply(t.b, sw, out=b)
+        for t, shape, C, lo, hi, sw in self._in_ops:
+            tC = t.C
+            if tC.shape != shape:
+                raise ValueError(f"{t.label}: C changed shape from {shape} to {tC.shape}")
+            C[...] = tC
+            lo[...] = t.lower
+            hi[...] = t.upper
+            sw[...] = t.sqrt_weight
+        if self._aliased:  # a Python-engine refresh pointed levels at their tasks' arrays
+            for B in (self.hard, *self.levels):
+                B.Ae, B.be = B._Ae_buf, B._be_buf
+                B.identity = False
+                B.low, B.hiw = B.lo, B.hi
+            self._aliased = False
+        self._refresh_bounds()
+        if self.lb is not None:  # every step: the box as resolved (it may view the bounds')
+            self.lbs[...] = self.lb
+            self.ubs[...] = self.ub
 
 
 def _split(tasks, where: str) -> tuple[list[Equality], list[Inequality]]:

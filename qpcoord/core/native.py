@@ -10,7 +10,11 @@ Damping of near-singular levels follows :mod:`qpcoord.core.linalg` (``Stack(damp
 Algorithm: variable elimination. Per level, the damped closed form of the projected
 equalities is tried first; if it breaks a row, an exact primal active-set least-squares solve
 in ``(z, w)`` (``w`` the slacks of the level's inequality rows) runs from a feasible start,
-warm-started from the working set the same level ended with at the previous call. The hard
+warm-started from the working set the same level ended with at the previous call; when that
+set misses (its point breaks a row, or a multiplier has the wrong sign), the active set starts
+from it made feasible (the ratio test from the feasible cold start towards its point on the
+rows without slack, each slack its row's violation, the stored rows still tight and the
+blocking row as working set) instead of cold. The hard
 constraints get a phase-1 (least violation inside the box) that decides infeasibility.
 
 This module is the only place that imports the extension. :func:`resolve_engine` decides
@@ -47,7 +51,7 @@ DEFAULT_ENGINE = "native"
 #: Name of the extension module.
 MODULE = "qpcoord._native"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
-ABI_VERSION = 2
+ABI_VERSION = 3
 
 
 class NativeUnavailableError(ImportError):
@@ -151,11 +155,13 @@ def resolve_engine(engine: str | None, method: str, solver: str | None) -> str:
 class NativeHierarchy:
     """The native solver of one compiled stack: structure and buffers built once.
 
-    Each :meth:`solve` copies the levels' current numbers into preallocated stacked arrays
-    and makes one native call, which also checks the data (finite, no wrong-sided
-    infinity), checks the returned ``x`` (bounds, hard rows: as ``Stack._check``) and
-    computes the level values; the solver keeps each level's final working set and tries it
-    first at the next call (warm start).
+    The solver is bound once to the compiled stack's stacked arrays
+    (:meth:`CompiledStack.refresh_stacked <qpcoord.core.compile.CompiledStack.refresh_stacked>`
+    writes the tasks' numbers straight into them) and to its own output arrays: each
+    :meth:`solve` is that refresh and one native call with two scalars. The call also checks
+    the data (finite, no wrong-sided infinity), checks the returned ``x`` (bounds, hard rows:
+    as ``Stack._check``) and computes the level values; the solver keeps each level's final
+    working set and tries it first at the next call (warm start).
 
     Parameters
     ----------
@@ -167,52 +173,33 @@ class NativeHierarchy:
     def __init__(self, P: CompiledStack, damping: float) -> None:
         mod = load()
         blocks = [P.hard, *P.levels]
-        meq = [B.m_eq for B in blocks]
-        mins = [B.m_in for B in blocks]
-        n = P.n
-        self.n = n
-        eq = np.cumsum([0, *meq])
-        ineq = np.cumsum([0, *mins])
-        self.Aeq = np.zeros((int(eq[-1]), n))
-        self.beq = np.zeros(int(eq[-1]))
-        self.C = np.zeros((int(ineq[-1]), n))
-        self.lo = np.zeros(int(ineq[-1]))
-        self.hi = np.zeros(int(ineq[-1]))
-        self.sw = np.ones(int(ineq[-1]))
-        self.lb = np.full(n, -np.inf)
-        self.ub = np.full(n, np.inf)
-        self.x = np.zeros(n)
+        self.n = P.n
+        self.x = np.zeros(P.n)
         self.res = np.zeros(len(P.levels))
         self.stats = np.zeros((len(P.levels) + 2, 3))
         self.detail = np.zeros(8)
-        # (source block, destination slices) pairs: the per-step copy is one loop of views
-        self._eq_copies = [
-            (B, self.Aeq[eq[j] : eq[j + 1]], self.beq[eq[j] : eq[j + 1]])
-            for j, B in enumerate(blocks)
-            if meq[j]
-        ]
-        self._in_copies = [
-            (
-                B,
-                self.C[ineq[j] : ineq[j + 1]],
-                self.lo[ineq[j] : ineq[j + 1]],
-                self.hi[ineq[j] : ineq[j + 1]],
-                self.sw[ineq[j] : ineq[j + 1]],
-            )
-            for j, B in enumerate(blocks)
-            if mins[j]
-        ]
-        self._solver = mod.Hierarchy(n, meq, mins, P.bounds is not None, float(damping))
+        self._solver = mod.Hierarchy(
+            P.n,
+            [B.m_eq for B in blocks],
+            [B.m_in for B in blocks],
+            P.bounds is not None,
+            float(damping),
+        )
+        self._solver.bind(
+            P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs,
+            self.x, self.res, self.stats, self.detail,
+        )  # fmt: skip
         self._mod = mod
         self._solved = False
 
     def solve(
         self, P: CompiledStack, warm: bool = True, time_left: float | None = None
     ) -> tuple[np.ndarray, np.ndarray, dict]:
-        """Solve with the numbers ``P`` holds (already refreshed).
+        """Solve with the tasks' current numbers (read into ``P``'s stacked arrays here).
 
-        ``warm=False`` ignores the stored working sets (a cold solve, for benchmarks);
-        ``time_left`` (s, ``None``: no limit) bounds the active-set iterations.
+        ``P`` is the compiled stack this solver was built on. ``warm=False`` ignores the
+        stored working sets (a cold solve, for benchmarks); ``time_left`` (s, ``None``: no
+        limit) bounds the active-set iterations.
 
         Returns
         -------
@@ -223,8 +210,10 @@ class NativeHierarchy:
         info : dict
             ``engine``, ``active_set_iterations`` (per level), ``hard_iterations``,
             ``min_norm_iterations``, ``warm_start_hits`` (stages whose stored working set
-            was optimal), ``closed_form_levels``, ``qp_calls`` (stages solved by the active
-            set rather than a closed form: the Python engine's count of QP calls),
+            was optimal), ``warm_start_seeded`` (levels whose stored working set missed
+            and seeded the active set's start), ``closed_form_levels``, ``qp_calls``
+            (stages solved by the active set rather than a closed form: the Python
+            engine's count of QP calls),
             ``uncertified`` (``[(level, deviation)]`` when a level's value at ``x`` moved
             from the one it was frozen with by more than ``KKT_TOL`` relative: the lower
             levels left its optimal set by rounding).
@@ -232,58 +221,36 @@ class NativeHierarchy:
         Raises
         ------
         ValueError
-            A NaN or wrong-sided infinity in a task or the bounds (naming it).
+            A task's matrix changed shape, a NaN or wrong-sided infinity in a task or the
+            bounds (naming it).
         InfeasibleError
             Inconsistent hard equalities, or hard rows and bounds with no common point.
         SolverError
             An active-set solve did not converge or ran out of time, the result is not
             finite, or it fails the check of the bounds and hard rows.
         """
-        for B, A, b in self._eq_copies:
-            A[...] = B.Ae
-            b[...] = B.be
-        for B, C, lo, hi, sw in self._in_copies:
-            C[...] = B.C
-            lo[...] = B.lo
-            hi[...] = B.hi
-            sw[...] = B.sw
-        if P.lb is not None:
-            self.lb[...] = P.lb
-            self.ub[...] = P.ub
-        code = self._solver.solve(
-            self.Aeq,
-            self.beq,
-            self.C,
-            self.lo,
-            self.hi,
-            self.sw,
-            self.lb,
-            self.ub,
-            self._solved and warm,
-            np.inf if time_left is None else time_left,
-            self.x,
-            self.res,
-            self.stats,
-            self.detail,
-        )
+        P.refresh_stacked()
+        code = self._solver.run(self._solved and warm, np.inf if time_left is None else time_left)
         if code:
             self._solved = False  # the stored working sets may be from another problem
             self._raise(code, P)
         self._solved = True
         rows = self.stats.tolist()  # (stages, 3): iterations, warm hit, closed form
-        dev = float(self.detail[5])
+        its = [int(r[0]) for r in rows]
+        dev = self.detail[5]
         info = {
             "engine": "native",
-            "hard_iterations": int(rows[0][0]),
-            "active_set_iterations": [int(r[0]) for r in rows[1:-1]],
-            "min_norm_iterations": int(rows[-1][0]),
-            "warm_start_hits": int(sum(r[1] for r in rows)),
+            "hard_iterations": its[0],
+            "active_set_iterations": its[1:-1],
+            "min_norm_iterations": its[-1],
+            "warm_start_hits": int(sum([r[1] for r in rows])),
+            "warm_start_seeded": int(self.detail[7]),
             "closed_form_levels": [k for k, r in enumerate(rows[1:-1]) if r[2]],
             # as the Python engine's count of QP calls: the stages (hard phase, levels,
             # minimum-norm step) that needed the active set (its iterations or a stored
             # working set) rather than a closed form
-            "qp_calls": sum(1 for r in rows if r[0] > 0 or r[1] > 0),
-            "uncertified": [(int(self.detail[6]), dev)] if dev > KKT_TOL else [],
+            "qp_calls": sum([1 for r in rows if r[0] or r[1]]),
+            "uncertified": [(int(self.detail[6]), float(dev))] if dev > KKT_TOL else [],
         }
         return self.x.copy(), self.res.copy(), info
 

@@ -271,9 +271,9 @@ class Stack:
     def _solve_native(self, t0: float, warm_start, strict: bool) -> Solution:
         """``method="hierarchical"`` with the native engine. The native call checks the data
         (finite), the returned ``x`` (bounds and hard rows, as :meth:`_check`) and computes
-        the level values: no per-call Python pass over the levels here."""
+        the level values: no per-call Python pass over the levels here (the wrapper writes
+        the tasks' numbers straight into the stacked arrays the native call reads)."""
         P = self._compiled
-        P.refresh()
         if warm_start is not None:
             self._warm(warm_start)  # validated; the engine warm-starts from its working sets
         if self._native is None:

@@ -1,7 +1,10 @@
 // nanobind module qpcoord._native: the strict-hierarchy solver of hierarchy.hpp.
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
 #include <nanobind/stl/vector.h>
+
+#include <array>
 
 #include "hierarchy.hpp"
 
@@ -9,6 +12,51 @@ namespace nb = nanobind;
 using qpcoord::Hierarchy;
 using qpcoord::Mat;
 using qpcoord::Vec;
+
+namespace {
+
+/// A C-contiguous float64 numpy array, kept alive by the bound solver.
+using Arr = nb::ndarray<double, nb::numpy, nb::c_contig, nb::device::cpu>;
+using CMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+using MMap = Eigen::Map<Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+using CVMap = Eigen::Map<const Vec>;
+using MVMap = Eigen::Map<Vec>;
+
+/// The solver with its input and output arrays bound once (bind()): a per-step run() passes
+/// two scalars, no array conversion (the arrays are the stacked buffers the Python side
+/// refreshes in place).
+struct Bound : Hierarchy {
+  using Hierarchy::Hierarchy;
+  std::array<Arr, 12> a;  // Aeq beq C lo hi sw lb ub x res stats detail
+  bool bound = false;
+
+  static CMap cmat(const Arr& m) {  // row-major (r, c) seen as a column-major r x c
+    const auto r = static_cast<Eigen::Index>(m.shape(0)), c = static_cast<Eigen::Index>(m.shape(1));
+    return CMap(m.data(), r, c, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(1, c));
+  }
+  static MMap mmat(Arr& m) {
+    const auto r = static_cast<Eigen::Index>(m.shape(0)), c = static_cast<Eigen::Index>(m.shape(1));
+    return MMap(m.data(), r, c, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(1, c));
+  }
+  static CVMap cvec(const Arr& v) { return CVMap(v.data(), static_cast<Eigen::Index>(v.shape(0))); }
+  static MVMap mvec(Arr& v) { return MVMap(v.data(), static_cast<Eigen::Index>(v.shape(0))); }
+
+  int run(bool warm, double time_left) {
+    if (!bound) return static_cast<int>(qpcoord::kBadInput);
+    return solve(cmat(a[0]), cvec(a[1]), cmat(a[2]), cvec(a[3]), cvec(a[4]), cvec(a[5]),
+                 cvec(a[6]), cvec(a[7]), warm, time_left, mvec(a[8]), mvec(a[9]), mmat(a[10]),
+                 mvec(a[11]));
+  }
+};
+
+bool dims_ok(const std::array<Arr, 12>& a) {
+  static constexpr int kNdim[12] = {2, 1, 2, 1, 1, 1, 1, 1, 1, 1, 2, 1};
+  for (int i = 0; i < 12; ++i)
+    if (a[i].ndim() != static_cast<size_t>(kNdim[i])) return false;
+  return true;
+}
+
+}  // namespace
 
 NB_MODULE(_native, m) {
   m.doc() = "qpcoord's native strict-hierarchy engine (C++17, Eigen); use qpcoord.core.native";
@@ -22,13 +70,13 @@ NB_MODULE(_native, m) {
   m.attr("TIME_LIMIT") = static_cast<int>(qpcoord::kTimeLimit);
   m.attr("CHECK_FAILED") = static_cast<int>(qpcoord::kCheckFailed);
 
-  nb::class_<Hierarchy>(m, "Hierarchy",
-                        "Strict-hierarchy least squares of one stack structure (sizes fixed).")
+  nb::class_<Bound>(m, "Hierarchy",
+                    "Strict-hierarchy least squares of one stack structure (sizes fixed).")
       .def(nb::init<int, std::vector<int>, std::vector<int>, bool, double>(), nb::arg("n"),
            nb::arg("meq"), nb::arg("min"), nb::arg("has_bounds"), nb::arg("damping"))
       .def(
           "solve",
-          [](Hierarchy& h, nb::DRef<const Mat> Aeq, nb::DRef<const Vec> beq,
+          [](Bound& h, nb::DRef<const Mat> Aeq, nb::DRef<const Vec> beq,
              nb::DRef<const Mat> C, nb::DRef<const Vec> lo, nb::DRef<const Vec> hi,
              nb::DRef<const Vec> sw, nb::DRef<const Vec> lb, nb::DRef<const Vec> ub, bool warm,
              double time_left, nb::DRef<Vec> x_out, nb::DRef<Vec> res_out, nb::DRef<Mat> stats,
@@ -44,6 +92,34 @@ NB_MODULE(_native, m) {
           nb::arg("sw"), nb::arg("lb"), nb::arg("ub"), nb::arg("warm"),
           nb::arg("time_left"), nb::arg("x_out"), nb::arg("res_out"), nb::arg("stats"),
           nb::arg("detail"))
+      .def(
+          "bind",
+          [](Bound& h, Arr Aeq, Arr beq, Arr C, Arr lo, Arr hi, Arr sw, Arr lb, Arr ub, Arr x_out,
+             Arr res_out, Arr stats, Arr detail) {
+            std::array<Arr, 12> a{Aeq, beq, C, lo, hi, sw, lb, ub, x_out, res_out, stats, detail};
+            if (!dims_ok(a)) throw nb::value_error("bind: wrong number of dimensions");
+            h.a = a;
+            h.bound = true;
+          },
+          nb::arg("Aeq"), nb::arg("beq"), nb::arg("C"), nb::arg("lo"), nb::arg("hi"),
+          nb::arg("sw"), nb::arg("lb"), nb::arg("ub"), nb::arg("x_out"), nb::arg("res_out"),
+          nb::arg("stats"), nb::arg("detail"),
+          "Keep these C-contiguous float64 arrays (the solve's inputs and outputs, as solve's "
+          "arguments) for run(); the outputs must be writable.")
+      .def(
+          "run",
+          [](Bound& h, bool warm, double time_left) {
+            try {
+              return h.run(warm, time_left);
+            } catch (const std::bad_alloc&) {
+              return static_cast<int>(qpcoord::kBadInput);
+            }
+          },
+          nb::arg("warm"), nb::arg("time_left"),
+          "solve() on the bound arrays (their current numbers); returns the status code.")
+      .def_rw("seed_on_miss", &Hierarchy::seed_on_miss,
+              "Seed a level's active set from its missed stored working set (True, default) "
+              "or start it cold (False; for comparisons).")
       .def_prop_ro("n", &Hierarchy::n)
       .def_prop_ro("num_levels", &Hierarchy::num_levels)
       .def_prop_ro("damping", &Hierarchy::damping);

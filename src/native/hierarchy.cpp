@@ -460,6 +460,91 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
   return true;
 }
 
+bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows,
+                                 int zcols, Eigen::Ref<Vec> y, std::vector<int8_t>& W) {
+  if (ws.id.empty()) return false;
+  const int k = P.cols, m = P.rows;
+  std::fill(W.begin(), W.begin() + m, 0);
+  int found = 0;
+  for (size_t j = 0; j < ws.id.size(); ++j) {
+    for (int i = 0; i < m; ++i) {
+      if (P.id[i] == ws.id[j]) {
+        W[i] = ws.side[j];
+        ++found;
+        break;
+      }
+    }
+  }
+  if (!found) return false;
+  qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
+  factor_working(P, W);
+  const int kw = static_cast<int>(widx_.size());
+  auto t = tvec_.head(kw);
+  for (int j = 0; j < kw; ++j) {
+    const int i = widx_[j];
+    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    if (!std::isfinite(t(j))) return false;
+  }
+  const int rho = wqr_.rank();
+  auto yp = xc_.head(k);
+  yp.setZero();
+  for (int i = 0; i < rho; ++i) yp(i) = t(wqr_.perm(i));
+  wqr_.solve_rt(yp);
+  wqr_.apply_q(yp);
+  auto step = step_.head(k);
+  ls_step(P, yp, step);
+  yp += step;
+  if (!yp.allFinite()) return false;
+  // ratio test from z = 0 towards z_p on the rows without slack (feasible at z = 0)
+  const auto zp = yp.head(zcols);
+  const double smax = zp.cwiseAbs().maxCoeff();
+  const double tiny = 1e-13 * smax;
+  double alpha = 1.0;
+  int block = -1;
+  int8_t side = 0;
+  for (int i = 0; i < hard_rows; ++i) {
+    const double gd = P.G.row(i).head(zcols).dot(zp);
+    double a = kInf;
+    int8_t sd = 0;
+    if (gd > tiny && std::isfinite(P.hi(i))) {
+      a = std::max(P.hi(i) / gd, 0.0);
+      sd = 1;
+    } else if (gd < -tiny && std::isfinite(P.lo(i))) {
+      a = std::max(P.lo(i) / gd, 0.0);
+      sd = -1;
+    }
+    if (a < alpha) {
+      alpha = a;
+      block = i;
+      side = sd;
+    }
+  }
+  // alpha = 0 (blocked at once) is the cold start's point, with the stored rows tight there
+  y.setZero();
+  y.head(zcols) = alpha * zp;
+  // each level row's slack: its violation at z (rows hard_rows.. have one slack column each)
+  for (int i = hard_rows; i < m; ++i) {
+    const int col = zcols + (i - hard_rows);
+    const double a = -P.G(i, col);  // 1 / |row| > 0
+    const double gz = P.G.row(i).head(zcols).dot(y.head(zcols));
+    y(col) = (gz > P.hi(i)) ? (gz - P.hi(i)) / a : ((gz < P.lo(i)) ? (gz - P.lo(i)) / a : 0.0);
+  }
+  // the working set: equality rows, stored rows still tight, the blocking row
+  auto gy = gy_.head(m);
+  gy.noalias() = P.G.topLeftCorner(m, k) * y;
+  for (int i = 0; i < m; ++i) {
+    if (P.lo(i) == P.hi(i)) {
+      W[i] = 2;
+      continue;
+    }
+    if (!W[i]) continue;
+    const double bound = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    if (std::abs(gy(i) - bound) > 1e-12 * std::max(1.0, std::abs(bound))) W[i] = 0;
+  }
+  if (block >= 0) W[block] = side;
+  return true;
+}
+
 void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>& W,
                                   Working& ws) {
   ws.id.clear();
@@ -700,7 +785,12 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   int iters = 0;
   const bool hit = warm && try_working_set(P, working_[stage], y, W_);
-  if (!hit) {
+  const bool seeded =
+      !hit && warm && seed_on_miss && seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);
+  if (seeded) {
+    ++seeded_;
+    if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
+  } else if (!hit) {
     std::fill(W_.begin(), W_.begin() + P.rows, 0);
     for (int i = 0; i < P.rows; ++i)
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
@@ -832,6 +922,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   stats.setZero();
   detail.setZero();
   timed_out_ = false;
+  seeded_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +
@@ -896,6 +987,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
       detail(6) = k;
     }
   }
+  detail(7) = seeded_;
   x_out = x_;
   return kOk;
 }

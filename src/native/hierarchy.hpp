@@ -23,7 +23,7 @@
 
 namespace qpcoord {
 
-inline constexpr int kAbiVersion = 2;
+inline constexpr int kAbiVersion = 3;
 
 template <typename T>
 using CRef = Eigen::Ref<const T, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
@@ -70,7 +70,8 @@ class Hierarchy {
   /// stats: (levels + 2) x 3 doubles, per stage (hard, levels..., min-norm):
   ///   active-set iterations, warm-start hit (0/1), closed form accepted (0/1).
   /// detail: 8 doubles (hard eq residual, hard violation, failing stage, check kind, check
-  /// index or residual, worst level consistency deviation (relative), its level, unused).
+  /// index or residual, worst level consistency deviation (relative), its level, levels
+  /// whose stored working set missed and seeded the active set's start).
   /// res_out: each level's value at x (norm of the weighted equality residual and
   /// inequality violation, as CompiledLevel.residual). time_left: seconds (inf: none),
   /// checked at every active-set iteration.
@@ -80,6 +81,8 @@ class Hierarchy {
             MRef<Vec> detail);
 
   int n() const { return n_; }
+  /// Seed the active set from a missed stored working set (default) or start cold (A/B).
+  bool seed_on_miss = true;
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
   double damping() const { return damping_; }
 
@@ -112,6 +115,15 @@ class Hierarchy {
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                        std::vector<int8_t>& W);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// After a miss of a level's stored working set: a feasible start near its point. The
+  /// stored set's point (its rows held, the least squares on them) gives z_p; the ratio test
+  /// from z = 0 (feasible) towards z_p on the rows without slack (the first `hard_rows` rows
+  /// of P: inherited rows and bounds) gives z = alpha z_p; each level row's slack is its
+  /// violation at z (the cheapest feasible slack); the working set is the stored rows still
+  /// tight at that point plus the blocking row (alpha = 0: the cold start's point with the
+  /// stored rows tight there). False (cold start) if none of the stored rows is in P.
+  bool seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows, int zcols,
+                        Eigen::Ref<Vec> y, std::vector<int8_t>& W);
   /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
   /// Qt_ = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
@@ -151,6 +163,7 @@ class Hierarchy {
   bool timed_out_ = false;
   std::chrono::steady_clock::time_point deadline_;
   Vec frozen_value_;  ///< each level's value when it was frozen
+  int seeded_ = 0;    ///< stages of this call started from a seeded working set (detail[7])
 
   std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
   LsqProblem P_;

@@ -352,17 +352,47 @@ def test_level_values_are_computed_natively():
 
 @needs_native
 def test_repeated_calls_reuse_the_buffers():
-    """The per-step path writes into the buffers built at the first call: the arrays the
-    native call receives are the same objects every step (no per-call allocation on the
-    Python side beyond the returned copies)."""
+    """The per-step path writes the tasks' numbers straight into the compiled stack's stacked
+    arrays, which the native solver is bound to: the same objects every step, and every
+    level's buffers are views of them (no copy between refresh and the native call)."""
     s = _hard_random_stack(2)
     s.solve(engine="native")
-    nh = s._native
-    ids = [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)]
+    nh, P = s._native, s._compiled
+    arrays = (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, nh.x, nh.res, nh.stats, nh.detail)
+    ids = [id(a) for a in arrays]
     for _ in range(5):
         s.solve(engine="native")
     assert s._native is nh
-    assert [id(a) for a in (nh.Aeq, nh.C, nh.x, nh.res, nh.stats, nh.detail)] == ids
+    assert [id(a) for a in arrays] == ids
+    for L in P.levels:
+        assert np.shares_memory(L.C, P.C) and np.shares_memory(L.lo, P.clo)
+
+
+@needs_native
+def test_engines_alternate_on_one_stack():
+    """A Python solve lets a level read its task's arrays in place; the next native solve
+    must still see every number (the stacked arrays are rewritten, the views restored),
+    with weighted rows and a bounds update in between."""
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal((3, 6))
+    pos = qc.Equality(A, rng.standard_normal(3))
+    post = qc.Equality(np.eye(6), rng.standard_normal(6), weight=np.linspace(0.5, 2.0, 6))
+    lim = qc.Inequality(rng.standard_normal((2, 6)), -0.2, 0.3)
+    box = qc.Bounds(-0.8 * np.ones(6), 0.8 * np.ones(6))
+    s = qc.Stack([pos, [post, lim]], bounds=box)
+    for step in range(6):
+        pos.update(b=np.sin(0.3 * step + np.arange(3)))
+        if step == 3:
+            box.update(lower=-0.5 * np.ones(6))
+        engine = ("python", "native")[step % 2]
+        got = s.solve(engine=engine)
+        fresh = qc.Stack([pos, [post, lim]], bounds=box).solve(engine="python")
+        np.testing.assert_allclose(
+            got.level_residuals, fresh.level_residuals, rtol=1e-9, atol=1e-12
+        )
+        assert (got.x >= -0.8 - 1e-12).all() and (got.x <= 0.8 + 1e-12).all()
+        if step >= 3:
+            assert (got.x >= -0.5 - 1e-12).all()
 
 
 @needs_native
@@ -376,3 +406,31 @@ def test_qp_calls_count_the_levels_that_needed_an_active_set(engine):
     sol = outside.solve(engine=engine)
     assert sol.info["qp_calls"] > 0
     np.testing.assert_allclose(sol.x, [0.1, 1.0, 0.3], atol=1e-12)
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_missed_working_set_seeds_the_next_start(seed):
+    """Moving targets make stored working sets miss; the seeded start (the stored set made
+    feasible) ends on the same level values as the Python engine and as a cold start, and
+    it is used."""
+    from qpcoord.core.native import NativeHierarchy
+
+    s = _hard_random_stack(seed, n=30, levels=6)
+    P = s._compiled
+    seeded = NativeHierarchy(P, s.damping)
+    cold = NativeHierarchy(P, s.damping)
+    cold._solver.seed_on_miss = False
+    eqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    used = 0
+    for step in range(12):
+        for j, t in enumerate(eqs):
+            shift = 0.05 * np.sin(0.7 * step + j)
+            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        xs, rs, info = seeded.solve(P)
+        xc, rc, _ = cold.solve(P)
+        ref = s.solve(engine="python").level_residuals
+        np.testing.assert_allclose(rs, ref, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(rc, ref, rtol=1e-9, atol=1e-10)
+        used += info["warm_start_seeded"]
+    assert used > 0

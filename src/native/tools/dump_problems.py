@@ -4,8 +4,8 @@
 
 Each file ``<name>.bin`` holds, in native-endian int64 / float64: n, blocks, has_bounds,
 damping (float64), steps, meq[blocks], min[blocks], then per step the stacked arrays Aeq, beq,
-C, lo, hi, sw, lb, ub (row-major), as :class:`qpcoord.core.native.NativeHierarchy` passes
-them. Used to profile the native core without Python (``driver.cpp``).
+C, lo, hi, sw, lb, ub (row-major): the compiled stack's stacked arrays, which the native solver
+is bound to. Used to profile the native core without Python (``driver.cpp``).
 """
 
 from __future__ import annotations
@@ -39,9 +39,8 @@ def dump(name, build, steps, out: pathlib.Path) -> None:
         f.write(np.array([B.m_in for B in blocks], dtype=np.int64).tobytes())
         for step in range(steps):
             move(step)
-            P.refresh()
-            h.solve(P)  # fills the stacked buffers
-            for a in (h.Aeq, h.beq, h.C, h.lo, h.hi, h.sw, h.lb, h.ub):
+            h.solve(P)  # fills the compiled stack's stacked arrays
+            for a in (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs):
                 f.write(np.ascontiguousarray(a, dtype=np.float64).tobytes())
 
 
