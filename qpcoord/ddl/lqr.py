@@ -824,11 +824,13 @@ class LQR:
         self.y_c_hat = y0 - yf0
         self.guard.reset(plant, fs, y0, r0)
 
-    def step(self, y: float, r: float) -> tuple[float, float, float]:
-        """One period: measured output ``y`` (m), reference ``r`` (m) → (V, A, A)."""
-        xb = self._xbar
+    def _feedback(self, y: float, r: float):
+        """Observer update and state feedback of one period (shared with the current-driven
+        variant): returns the guarded ``y, r`` (m), the corrected estimate ``x`` (4 values),
+        the voltage ``v`` (V, clipped to its range), the coarse input deviation ``u2`` (the
+        variant's unit: rad of field phase, or N) and whether ``v`` was clipped."""
         mg = self._m
-        x0, x1, x2, x3 = xb
+        x0, x1, x2, x3 = self._xbar
         y, r = self.guard.filter(y, r, self._y_op + x0 + x2)
         innov = (y - self._y_op) - (x0 + x2)
         x0 += mg[0] * innov
@@ -842,11 +844,11 @@ class LQR:
         e2 = x2 - nx[2] * rd
         e3 = x3 - nx[3] * rd
         xi = self._xi
-        kv, ka = self._kx
+        kv, k2 = self._kx
         ki = self._ki
         uv = self._nu[0] * rd - (kv[0] * e0 + kv[1] * e1 + kv[2] * e2 + kv[3] * e3 + ki[0] * xi)
-        ua = self._nu[1] * rd - (ka[0] * e0 + ka[1] * e1 + ka[2] * e2 + ka[3] * e3 + ki[1] * xi)
-        # hardware limits: voltage range, phase rate
+        u2 = self._nu[1] * rd - (k2[0] * e0 + k2[1] * e1 + k2[2] * e2 + k2[3] * e3 + ki[1] * xi)
+        # hardware limit: voltage range
         clipped = False
         v = self._v_op + uv
         if v > self._vmax:
@@ -855,6 +857,30 @@ class LQR:
         elif v < self._vmin:
             v = self._vmin
             clipped = True
+        return y, r, (x0, x1, x2, x3), v, u2, clipped
+
+    def _predict(self, y: float, r: float, x, v: float, u2: float, clipped: bool) -> None:
+        """Integrator (held while an input is clipped) and the observer's prediction with
+        the applied inputs ``v`` (V) and ``u2`` (the coarse input deviation)."""
+        if clipped:
+            self.clipped_steps += 1
+        else:
+            self._xi = self._xi + self._h * (y - r)
+        x0, x1, x2, x3 = x
+        uv = v - self._v_op
+        a = self._a
+        b = self._b
+        xb = self._xbar
+        xb[0] = a[0][0] * x0 + a[0][1] * x1 + b[0][0] * uv
+        xb[1] = a[1][0] * x0 + a[1][1] * x1 + b[1][0] * uv
+        xb[2] = a[2][2] * x2 + a[2][3] * x3 + b[2][1] * u2
+        xb[3] = a[3][2] * x2 + a[3][3] * x3 + b[3][1] * u2
+        self.y_c_hat = x2 + self.model.y_c_op
+
+    def step(self, y: float, r: float) -> tuple[float, float, float]:
+        """One period: measured output ``y`` (m), reference ``r`` (m) → (V, A, A)."""
+        y, r, x, v, ua, clipped = self._feedback(y, r)
+        # hardware limit: phase rate
         alpha = self._alpha_op + ua
         d = alpha - self._alpha
         dmax = self._dmax
@@ -865,19 +891,6 @@ class LQR:
             alpha = self._alpha - dmax
             clipped = True
         self._alpha = alpha
-        if clipped:
-            self.clipped_steps += 1
-        else:
-            self._xi = xi + self._h * (y - r)
-        # observer prediction with the applied inputs
-        uv = v - self._v_op
-        ua = alpha - self._alpha_op
-        a = self._a
-        b = self._b
-        xb[0] = a[0][0] * x0 + a[0][1] * x1 + b[0][0] * uv
-        xb[1] = a[1][0] * x0 + a[1][1] * x1 + b[1][0] * uv
-        xb[2] = a[2][2] * x2 + a[2][3] * x3 + b[2][1] * ua
-        xb[3] = a[3][2] * x2 + a[3][3] * x3 + b[3][1] * ua
-        self.y_c_hat = x2 + self.model.y_c_op
+        self._predict(y, r, x, v, alpha - self._alpha_op, clipped)
         cur = self.current
         return v, cur * math.sin(alpha), cur * math.cos(alpha)

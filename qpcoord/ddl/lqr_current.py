@@ -148,47 +148,8 @@ class LQRCurrent(LQR):
 
     def step(self, y: float, r: float) -> tuple[float, float, float]:
         """One period: measured output ``y`` (m), reference ``r`` (m) → (V, A, A)."""
-        xb = self._xbar
-        mg = self._m
-        x0, x1, x2, x3 = xb
-        y, r = self.guard.filter(y, r, self._y_op + x0 + x2)
-        innov = (y - self._y_op) - (x0 + x2)
-        x0 += mg[0] * innov
-        x1 += mg[1] * innov
-        x2 += mg[2] * innov
-        x3 += mg[3] * innov
-        rd = r - self._y_op
-        nx = self._nx
-        e0 = x0 - nx[0] * rd
-        e1 = x1 - nx[1] * rd
-        e2 = x2 - nx[2] * rd
-        e3 = x3 - nx[3] * rd
-        xi = self._xi
-        kv, kf = self._kx
-        ki = self._ki
-        uv = self._nu[0] * rd - (kv[0] * e0 + kv[1] * e1 + kv[2] * e2 + kv[3] * e3 + ki[0] * xi)
-        uf = self._nu[1] * rd - (kf[0] * e0 + kf[1] * e1 + kf[2] * e2 + kf[3] * e3 + ki[1] * xi)
-        clipped = False
-        v = self._v_op + uv
-        if v > self._vmax:
-            v = self._vmax
-            clipped = True
-        elif v < self._vmin:
-            v = self._vmin
-            clipped = True
-        yc = x2 + self.model.y_c_op
-        ia, ib, uf = self.drive.command(uf, yc)
-        clipped = clipped or self.drive.saturated
-        if clipped:
-            self.clipped_steps += 1
-        else:
-            self._xi = xi + self._h * (y - r)
-        uv = v - self._v_op
-        a = self._a
-        b = self._b
-        xb[0] = a[0][0] * x0 + a[0][1] * x1 + b[0][0] * uv
-        xb[1] = a[1][0] * x0 + a[1][1] * x1 + b[1][0] * uv
-        xb[2] = a[2][2] * x2 + a[2][3] * x3 + b[2][1] * uf
-        xb[3] = a[3][2] * x2 + a[3][3] * x3 + b[3][1] * uf
-        self.y_c_hat = yc
+        y, r, x, v, uf, clipped = self._feedback(y, r)
+        # the drive turns the force deviation into phase currents (its saturation clips)
+        ia, ib, uf = self.drive.command(uf, x[2] + self.model.y_c_op)
+        self._predict(y, r, x, v, uf, clipped or self.drive.saturated)
         return v, ia, ib
