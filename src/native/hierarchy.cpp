@@ -410,9 +410,9 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   return false;
 }
 
-bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
-                                std::vector<int8_t>& W) {
-  if (ws.id.empty()) return false;
+int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
+                                bool consistent) {
+  if (ws.id.empty()) return 0;
   const int k = P.cols;
   std::fill(W.begin(), W.begin() + P.rows, 0);
   int found = 0;
@@ -425,7 +425,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
       }
     }
   }
-  if (found != static_cast<int>(ws.id.size())) return false;
+  if (!found) return 0;
   qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
   factor_working(P, W);
   const int kw = static_cast<int>(widx_.size());
@@ -433,7 +433,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
   for (int j = 0; j < kw; ++j) {
     const int i = widx_[j];
     t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
-    if (!std::isfinite(t(j))) return false;
+    if (!std::isfinite(t(j))) return 0;
   }
   // the point on the working set's rows: G_w y = t, y = Qf [R11^-T (P^T t)_(1:rank); 0]
   const int rho = wqr_.rank();
@@ -442,12 +442,23 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
   for (int i = 0; i < rho; ++i) yp(i) = t(wqr_.perm(i));
   wqr_.solve_rt(yp);
   wqr_.apply_q(yp);
-  const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
-  for (int j = 0; j < kw; ++j)
-    if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) return false;
+  if (consistent) {
+    const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
+    for (int j = 0; j < kw; ++j)
+      if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) return 0;
+  }
   auto step = step_.head(k);
   ls_step(P, yp, step);
   yp += step;
+  return found;
+}
+
+bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
+                                std::vector<int8_t>& W) {
+  const int k = P.cols;
+  if (ws.id.empty() || stored_set_point(P, ws, W, true) != static_cast<int>(ws.id.size()))
+    return false;
+  auto yp = xc_.head(k);
   auto gy = gy_.head(P.rows);
   gy.noalias() = P.G.topLeftCorner(P.rows, k) * yp;
   for (int i = 0; i < P.rows; ++i) {
@@ -462,38 +473,9 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
 
 bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows,
                                  int zcols, Eigen::Ref<Vec> y, std::vector<int8_t>& W) {
-  if (ws.id.empty()) return false;
   const int k = P.cols, m = P.rows;
-  std::fill(W.begin(), W.begin() + m, 0);
-  int found = 0;
-  for (size_t j = 0; j < ws.id.size(); ++j) {
-    for (int i = 0; i < m; ++i) {
-      if (P.id[i] == ws.id[j]) {
-        W[i] = ws.side[j];
-        ++found;
-        break;
-      }
-    }
-  }
-  if (!found) return false;
-  qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
-  factor_working(P, W);
-  const int kw = static_cast<int>(widx_.size());
-  auto t = tvec_.head(kw);
-  for (int j = 0; j < kw; ++j) {
-    const int i = widx_[j];
-    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
-    if (!std::isfinite(t(j))) return false;
-  }
-  const int rho = wqr_.rank();
+  if (!stored_set_point(P, ws, W, false)) return false;
   auto yp = xc_.head(k);
-  yp.setZero();
-  for (int i = 0; i < rho; ++i) yp(i) = t(wqr_.perm(i));
-  wqr_.solve_rt(yp);
-  wqr_.apply_q(yp);
-  auto step = step_.head(k);
-  ls_step(P, yp, step);
-  yp += step;
   if (!yp.allFinite()) return false;
   // ratio test from z = 0 towards z_p on the rows without slack (feasible at z = 0)
   const auto zp = yp.head(zcols);

@@ -112,6 +112,11 @@ class Hierarchy {
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
   bool active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W, int& iters);
   /// Try a stored working set: solve on it, check feasibility and multiplier signs.
+  /// Map a stored working set onto P's rows (into W), factor it and write the minimum-norm
+  /// least-squares point on it into xc_; returns the number of stored rows matched (0: none,
+  /// an infinite bound, or with `consistent` a point that misses the set's rows).
+  int stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
+                       bool consistent);
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                        std::vector<int8_t>& W);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
