@@ -15,6 +15,7 @@ from .methods.hierarchical import solve_equality_chain, solve_hierarchical
 from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
 from .native import NativeHierarchy, resolve_engine
+from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .polish import KKT_TOL
 from .solution import Solution
 from .tasks import Bounds
@@ -121,6 +122,7 @@ class Stack:
         self._work = Reduced(self._compiled.n, self._compiled.capacity, fallback)
         self._chain_missed = False
         self._native: NativeHierarchy | None = None  # built at the first native solve
+        self._native_weighted: NativeWeighted | None = None  # the first native weighted solve
 
     @property
     def n(self) -> int:
@@ -204,6 +206,8 @@ class Stack:
             raise ValueError(f"strict must be True or False, got {strict!r}")
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+        if method == "weighted" and resolve_weighted_engine(engine, solver) == "native":
+            return self._solve_native_weighted(t0, warm_start)
         if resolve_engine(engine, method, solver) == "native":
             return self._solve_native(t0, warm_start, strict)
         P = self._compiled
@@ -301,13 +305,40 @@ class Stack:
             info=info,
         )
 
-    def persistent(self, weight_ratio: float | None = None, regularization: float | None = None):
+    def _solve_native_weighted(self, t0: float, warm_start) -> Solution:
+        """``method="weighted"`` with the native engine (:mod:`qpcoord.core.native_weighted`):
+        the same QP, checked in the native call (data finite; bounds and hard rows at ``x``)."""
+        P = self._compiled
+        if warm_start is not None:
+            self._warm(warm_start)  # validated; the engine warm-starts from its working set
+        if self._native_weighted is None:
+            self._native_weighted = NativeWeighted(P, self.regularization, self.weight_ratio)
+        x, residuals, info = self._native_weighted.solve(P, time_left=time_left())
+        return Solution(
+            x=x,
+            status="optimal",
+            level_residuals=residuals,
+            solver="native",
+            solve_time=time.perf_counter() - t0,
+            method="weighted",
+            info=info,
+        )
+
+    def persistent(
+        self,
+        weight_ratio: float | None = None,
+        regularization: float | None = None,
+        engine: str | None = None,
+    ):
         """A :class:`~qpcoord.core.persistent.PersistentQP` on this stack: its weighted QP on one
-        daqp workspace kept across control steps (the tasks' matrices must stay fixed; a
-        change is detected and rebuilds the workspace)."""
+        workspace kept across control steps (the native weighted QP where built, else daqp;
+        ``engine="python"``: daqp; the tasks' matrices must stay fixed; a change is detected
+        and rebuilds the workspace)."""
         from .persistent import PersistentQP
 
-        return PersistentQP(self, weight_ratio=weight_ratio, regularization=regularization)
+        return PersistentQP(
+            self, weight_ratio=weight_ratio, regularization=regularization, engine=engine
+        )
 
     def _reset(self, solver: str):
         """The workspace for a solve with QPs, after checking that no NaN or wrong-sided
