@@ -135,7 +135,10 @@ class NativeWeighted:
         return list(map(_MATRIX_VERSION, self._tasks)) != self._versions
 
     def run(
-        self, P: CompiledStack, warm: bool = True, time_left: float | None = None,
+        self,
+        P: CompiledStack,
+        warm: bool = True,
+        time_left: float | None = None,
         refactor: bool | None = None,
     ) -> int:
         """One native call on the bound arrays' current numbers (no refresh); returns 0 or

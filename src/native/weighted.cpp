@@ -302,10 +302,12 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
     auto y = y_.head(nv);
     y.setZero();
     auto J0 = J0_.topLeftCorner(nv, nv);
-    if (r) {
-      auto t = coef_.head(r);
-      t.noalias() = J0.topLeftCorner(r, r).transpose() * f;
-      y.head(r).noalias() = -(J0.topLeftCorner(r, r) * t);
+    if (r) {  // two triangular solves with L (as LAPACK's dpotrs; J0 J0^T f loses digits)
+      auto yz = y.head(r);
+      yz = -f;
+      const auto L = L_.topLeftCorner(r, r);
+      L.template triangularView<Eigen::Lower>().solveInPlace(yz);
+      L.transpose().template triangularView<Eigen::Upper>().solveInPlace(yz);
     }
     const int max_iter = 10 * (nv + rows_) + 100;
     const auto G = G_.topLeftCorner(rows_, nv);
