@@ -1,10 +1,12 @@
 // qpcoord native engine: the weighted QP (weighted.hpp) and its nanobind binding.
 #include "weighted.hpp"
 
+#ifndef QPCOORD_NO_BINDINGS  // defined by the C++-only tools (src/native/tools/)
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/vector.h>
+#endif
 
 #include <algorithm>
 #include <array>
@@ -377,6 +379,7 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
   return kWOk;
 }
 
+#ifndef QPCOORD_NO_BINDINGS
 // ---------------------------------------------------------------------------------------
 // binding: the solver with its input and output arrays bound once (bind()); run() per step
 namespace {
@@ -450,5 +453,6 @@ void bind_weighted(nanobind::module_& m) {
       .def_prop_ro("regularization", &Weighted::regularization)
       .def_prop_ro("weight_ratio", &Weighted::weight_ratio);
 }
+#endif  // QPCOORD_NO_BINDINGS
 
 }  // namespace qpcoord
