@@ -190,10 +190,10 @@ class NativeWeighted:
             of the bounds and hard rows.
         """
         P.refresh_stacked()
-        refactor = self._versions is None or self.changed()
-        self.run(P, warm, time_left, refactor=refactor)
-        if refactor:
-            self._versions = list(map(_MATRIX_VERSION, self._tasks))
+        versions = list(map(_MATRIX_VERSION, self._tasks))
+        refactor = versions != self._versions
+        self.run(P, warm, time_left, refactor=refactor)  # on an error: raises, set up again
+        self._versions = versions
         d = self.detail.tolist()
         info = {
             "engine": "native",
