@@ -177,7 +177,8 @@ class Stack:
             iteration (the same ``SolverError`` message).
         engine : {None, "native", "python"}
             ``"native"``: the compiled solver of :mod:`qpcoord.core.native` (method
-            ``"hierarchical"`` only, no ``solver``; warm-started from the previous call's
+            ``"hierarchical"``; ``"weighted"``: :mod:`qpcoord.core.native_weighted`; no
+            ``solver``; warm-started from the previous call's
             working sets). ``"python"``: the methods of :mod:`qpcoord.core.methods`. ``None``:
             :data:`qpcoord.core.native.DEFAULT_ENGINE` where the native engine applies, else
             Python (one warning per process if the default is native but not built).
