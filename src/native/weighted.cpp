@@ -54,8 +54,13 @@ bool cholesky(Eigen::Ref<Mat> L, int k, double& min_pivot) {
     s = std::sqrt(s);
     L(j, j) = s;
     min_pivot = std::min(min_pivot, s);
-    for (int i = j + 1; i < k; ++i)
-      L(i, j) = (L(i, j) - L.row(i).head(j).dot(L.row(j).head(j))) / s;
+    const int below = k - j - 1;
+    if (below > 0) {  // column j below the diagonal: one matrix-vector product
+      if (j > 0)
+        L.col(j).segment(j + 1, below).noalias() -=
+            L.block(j + 1, 0, below, j) * L.row(j).head(j).transpose();
+      L.col(j).segment(j + 1, below) /= s;
+    }
   }
   return true;
 }
