@@ -56,7 +56,13 @@ class DualActiveSet {
   }
 
   /// Forget the stored working set (the next warm solve starts cold).
-  void forget() { stored_.clear(); }
+  void forget() {
+    stored_.clear();
+    kept_ = false;
+  }
+  /// J0 or the rows changed (a new set-up): the kept factors of the stored working set are
+  /// stale; the next warm solve factors the stored set again.
+  void invalidate() { kept_ = false; }
 
   int iterations = 0;      ///< iterations of the last solve (rows added or dropped)
   bool warm_hit = false;   ///< the stored working set was optimal (no iteration)
@@ -88,7 +94,21 @@ class DualActiveSet {
     for (int c = 0; c < 2 * m; ++c) state_[c] = 0;  // 0 free, 1 active, 2 ignored
     iq_ = 0;
     bool first = true;
-    if (warm && !stored_.empty()) {
+    bool kept_ok = kept_ && warm && nv == kept_nv_;
+    for (int k = 0; kept_ok && k < static_cast<int>(stored_.size()); ++k) {
+      const int c = stored_[k], i = c >> 1;
+      if (i >= m || !std::isfinite((c & 1) ? hi(i) : lo(i))) kept_ok = false;
+    }
+    kept_ = false;
+    if (kept_ok) {
+      // the matrices are those of the last solve: J and R of its final working set are
+      // still the factors of the stored set (only b moved), no refactoring
+      iq_ = static_cast<int>(stored_.size());
+      for (int k = 0; k < iq_; ++k) {
+        act_[k] = stored_[k];
+        state_[stored_[k]] = 1;
+      }
+    } else if (warm && !stored_.empty()) {
       // y_u is in y: factor the stored rows, then the optimum on them
       J = J0.topLeftCorner(nv, nv);
       double rnorm = 1.0;
@@ -101,6 +121,8 @@ class DualActiveSet {
         act_[iq_ - 1] = c;
         state_[c] = 1;
       }
+    }
+    {
       if (iq_ > 0) {
         // v = b_A - N_A^T y_u; R^T w = v; y = y_u + J_1 w; u = R^{-1} w
         auto w = r_.head(iq_);
@@ -242,6 +264,8 @@ class DualActiveSet {
     stored_.clear();
     for (int k = 0; k < iq_; ++k) stored_.push_back(act_[k]);
     active = iq_;
+    kept_ = status == kSolved;  // J, R: the factors of the stored set (for the next call)
+    kept_nv_ = nv_;
     if (status == kSolved && iterations == 0 && warm_used) warm_hit = true;
     return status;
   }
@@ -316,6 +340,8 @@ class DualActiveSet {
 
   int nv_ = 0;
   int iq_ = 0;
+  bool kept_ = false;
+  int kept_nv_ = -1;
   Mat J_, R_;
   Vec d_, z_, r_, u_, v_;
   std::vector<int> act_;

@@ -243,6 +243,7 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
                             std::chrono::duration<double>(
                                 has_deadline ? std::max(time_left, 0.0) : 0.0));
   if (refactor || !ready_) {
+    qp_.invalidate();  // new J0 and rows: the stored set is factored again
     const int st = setup(Aeq, C, sw);
     if (st != kWOk) {
       ready_ = false;
