@@ -477,3 +477,22 @@ def test_accepted_inputs_keep_their_derived_flags():
     lo, hi = s.resolve(3)
     np.testing.assert_array_equal(lo, -np.ones(3))
     assert np.all(hi == inf)
+
+
+def test_the_arrays_behind_the_views_stay_writable_for_the_library():
+    """1-D ``A``, column ``b``, Fortran-ordered and strided input: each task array is a
+    read-only view of a C-contiguous array of the same shape (the library's ``_assign``
+    writes through it)."""
+    t = E([1.0, 2.0], np.array([[1.0]]))
+    t._assign(A=np.array([[3.0, 4.0]]), b=np.array([2.0]))
+    np.testing.assert_array_equal(t.A, [[3.0, 4.0]])
+    np.testing.assert_array_equal(t.b, [2.0])
+    f = E(np.asfortranarray(np.arange(6.0).reshape(2, 3)), np.zeros((1, 2)))
+    g = I(np.arange(12.0).reshape(3, 4)[:, ::2], lower=np.zeros((3, 1)), upper=inf)
+    for task in (t, f, g):
+        for arr in vars(task).values():
+            if isinstance(arr, np.ndarray):
+                assert arr.flags.c_contiguous and not arr.flags.writeable
+                assert arr.base.shape == arr.shape and arr.base.flags.writeable
+    g._assign(np.ones(3), np.full(3, 2.0), C=np.ones((3, 2)))
+    np.testing.assert_array_equal(g.lower, np.ones(3))
