@@ -43,6 +43,8 @@ def _label(kind: str, name: str) -> str:
 MATRIX_RANGE = (1e-150, 1e150)
 
 
+# the reductions of the validation, without ndarray.sum/max/min's Python wrappers
+_sum, _max, _min = np.add.reduce, np.maximum.reduce, np.minimum.reduce
 #: numpy dtype kinds converted to float without a check: bool, signed, unsigned, float
 _REAL_KINDS = ("b", "i", "u", "f")
 
@@ -110,11 +112,13 @@ def _matrix(value, what: str, label: str) -> np.ndarray:
             f"{label}: {what} has no rows (shape {arr.shape}); a task needs at least one row "
             "(leave an empty task out of the stack)"
         )
-    # three reductions on the hot path: the largest magnitude (NaN and ±inf fail ``<=``) and
-    # the smallest non-zero one; the messages are built only when one of them fails
+    # two or three reductions on the hot path: the largest magnitude (NaN and ±inf fail
+    # ``<=``) and the smallest (non-zero) one; the messages are built only if one fails
     lo_mag, hi_mag = MATRIX_RANGE
     mag = np.abs(arr)
-    if mag.max() <= hi_mag and mag.min(where=mag > 0, initial=np.inf) >= lo_mag:
+    if _max(mag, None) <= hi_mag and (
+        _min(mag, None) >= lo_mag or mag.min(where=mag > 0, initial=np.inf) >= lo_mag
+    ):
         return _frozen(arr)  # fresh, C-contiguous, the owner of its data
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
@@ -149,7 +153,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
             raise ValueError(
                 f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}"
             )
-        if math.isfinite(arr.sum()):
+        if math.isfinite(_sum(arr, None)):
             return _frozen(arr)  # fresh, C-contiguous, the owner of its data
     if np.any(np.isnan(arr)):
         i = int(np.flatnonzero(np.isnan(arr))[0])
@@ -178,7 +182,7 @@ def _weight(value, rows: int, label: str) -> np.ndarray:
 
 def _check_order(lower: np.ndarray, upper: np.ndarray, label: str) -> None:
     bad = lower > upper
-    if bad.any():
+    if np.count_nonzero(bad):
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{label}: lower > upper at row {i} ({lower[i]!r} > {upper[i]!r})")
 
@@ -210,9 +214,13 @@ class _Task:
         """Human-readable name used in messages."""
         return _label(self.kind, self.name)
 
-    def _set_weight(self, w: np.ndarray) -> None:
+    def _set_weight(self, w: np.ndarray, given=None) -> None:
+        """Keep the validated weights ``w`` (``given``: what the caller passed, if known)."""
         self.weight = w
-        self.unit_weight = bool(w[0] == 1.0 and (w == 1.0).all())
+        if (type(given) is float or type(given) is int) and given == 1:
+            self.unit_weight = True  # the default weight, broadcast: w is all ones
+        else:
+            self.unit_weight = bool(w[0] == 1.0 and (w == 1.0).all())
         #: ``√weight`` (cached: weights rarely change between control steps); the weight
         #: itself when every weight is 1
         self.sqrt_weight = w if self.unit_weight else _frozen(np.sqrt(w))
@@ -242,7 +250,7 @@ class Equality(_Task):
         self.A = _matrix(A, "A", label)
         self.is_identity = _is_identity(self.A)
         self.b = _vector(b, self.A.shape[0], "b", label)
-        self._set_weight(_weight(weight, self.A.shape[0], label))
+        self._set_weight(_weight(weight, self.A.shape[0], label), weight)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -331,7 +339,7 @@ class Inequality(_Task):
         self.lower = _vector(-np.inf if lower is None else lower, m, "lower", label, allow_inf=-1)
         self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
         _check_order(self.lower, self.upper, label)
-        self._set_weight(_weight(weight, m, label))
+        self._set_weight(_weight(weight, m, label), weight)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -413,7 +421,10 @@ class Bounds:
     def _set(self, lower, upper) -> None:
         n = None
         for v in (lower, upper):
-            if np.ndim(v) > 0:
+            if type(v) is np.ndarray:  # the common case, without np.ndim/np.size's wrappers
+                if v.ndim > 0:
+                    n = v.size
+            elif np.ndim(v) > 0:
                 n = int(np.size(v))
         lo, hi = self._validate(lower, upper, 1 if n is None else n)
         self._lower_in, self._upper_in, self.n = lower, upper, n
@@ -427,7 +438,7 @@ class Bounds:
         lo = _vector(lower, n, "lower", label, allow_inf=-1)
         hi = _vector(upper, n, "upper", label, allow_inf=+1)
         bad = lo > hi
-        if bad.any():
+        if np.count_nonzero(bad):
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})")
         return lo, hi
