@@ -49,6 +49,13 @@ _sum, _max, _min = np.add.reduce, np.maximum.reduce, np.minimum.reduce
 _REAL_KINDS = ("b", "i", "u", "f")
 
 
+def _full(rows: int, value: float) -> np.ndarray:
+    """``np.full(rows, value)`` without its Python wrapper."""
+    arr = np.empty(rows)
+    arr.fill(value)
+    return arr
+
+
 def _frozen(arr: np.ndarray) -> np.ndarray:
     """A read-only view of ``arr``, a fresh C-contiguous array of the caller's."""
     view = arr.view()
@@ -141,12 +148,12 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
     if type(value) is float or type(value) is int:  # a Python scalar (not a bool): broadcast
         v = float(value)
         if math.isfinite(v) or (allow_inf and v == allow_inf * math.inf):
-            return _frozen(np.full(rows, v))
-        arr = np.full(rows, v)  # NaN or a wrong-sided infinity: named below
+            return _frozen(_full(rows, v))
+        arr = _full(rows, v)  # NaN or a wrong-sided infinity: named below
     else:
         arr = _numeric(value, what, label)  # a copy, as in _matrix
         if arr.ndim == 0:
-            arr = np.full(rows, float(arr))
+            arr = _full(rows, float(arr))
         elif arr.ndim == 2 and 1 in arr.shape:
             arr.shape = (arr.size,)  # in place: arr stays the owner of its data
         if arr.ndim != 1 or arr.shape[0] != rows:
@@ -172,7 +179,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
 
 def _weight(value, rows: int, label: str) -> np.ndarray:
     if (type(value) is float or type(value) is int) and 0 < value < math.inf:
-        return _frozen(np.full(rows, float(value)))  # a valid Python scalar (the default)
+        return _frozen(_full(rows, float(value)))  # a valid Python scalar (the default)
     w = _vector(value, rows, "weight", label)
     if not w.min() > 0:
         i = int(np.flatnonzero(w <= 0)[0])

@@ -10,6 +10,7 @@ import pytest
 from qpcoord import Bounds as B
 from qpcoord import Equality as E
 from qpcoord import Inequality as I  # noqa: E741
+from qpcoord import Stack
 
 nan, inf = np.nan, np.inf
 MAG = (
@@ -496,3 +497,104 @@ def test_the_arrays_behind_the_views_stay_writable_for_the_library():
                 assert arr.base.shape == arr.shape and arr.base.flags.writeable
     g._assign(np.ones(3), np.full(3, 2.0), C=np.ones((3, 2)))
     np.testing.assert_array_equal(g.lower, np.ones(3))
+
+
+def _eye(n, name=""):
+    return E(np.eye(n), 0.0, name=name)
+
+
+def _box(n, name=""):
+    return I(np.eye(n), upper=1.0, name=name)
+
+
+_COLS = ": all tasks must act on the same variable"
+STRUCTURE_CASES = [
+    (
+        "column error before a bad task",
+        lambda: Stack([[_eye(3), "x"], _eye(4, "b")]),
+        "level 1, Equality 'b': has 4 columns but level 0, Equality (unnamed) has 3" + _COLS,
+    ),
+    (
+        "column error in constraints before a bad level task",
+        lambda: Stack([[B(0.0, 1.0)], _eye(3)], constraints=[_box(2, "c")]),
+        "level 1, Equality (unnamed): has 3 columns but constraints, Inequality 'c' has 2" + _COLS,
+    ),
+    (
+        "bad level task before bad constraint",
+        lambda: Stack([_eye(3), [_eye(3), 5]], constraints=[B()]),
+        "level 1, task 1: expected an Equality or Inequality, got int",
+    ),
+    (
+        "first bad task of a level",
+        lambda: Stack([[_eye(3), None, B()]]),
+        "level 0, task 1: expected an Equality or Inequality, got NoneType",
+    ),
+    (
+        "bounds in a level",
+        lambda: Stack([[_eye(3)], [_eye(3), B()]]),
+        "level 1, task 1: Bounds are always hard; pass them as Stack(..., bounds=...)",
+    ),
+    (
+        "bad constraint",
+        lambda: Stack([_eye(3)], constraints=[_box(3), np.eye(3)]),
+        "constraints, task 1: expected an Equality or Inequality, got ndarray",
+    ),
+    (
+        "bounds type",
+        lambda: Stack([_eye(3)], bounds=(0, 1)),
+        "bounds must be a qpcoord.Bounds, got tuple",
+    ),
+    (
+        "bounds type after task errors",
+        lambda: Stack([[_eye(3), 1]], bounds=(0, 1)),
+        "level 0, task 1: expected an Equality or Inequality, got int",
+    ),
+    (
+        "bounds length",
+        lambda: Stack([_eye(3)], bounds=B(np.zeros(2), np.ones(2), name="v")),
+        "Bounds 'v': has 2 entries but the tasks have 3 columns",
+    ),
+    ("empty", lambda: Stack([]), "empty stack: give at least one level with one task"),
+    (
+        "level not iterable",
+        lambda: Stack([3]),
+        "level 0: expected a task or a list of tasks, got int",
+    ),
+    (
+        "levels not iterable",
+        lambda: Stack(3),
+        "levels must be a list of tasks or task lists, got 3",
+    ),
+    (
+        "empty level",
+        lambda: Stack([_eye(2), []]),
+        "level 1 is empty: give it at least one task or remove it",
+    ),
+    (
+        "within level columns",
+        lambda: Stack([[_box(3, "a"), _eye(2, "b")]]),
+        "level 0, Equality 'b': has 2 columns but level 0, Inequality 'a' has 3" + _COLS,
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    "case, build, message", STRUCTURE_CASES, ids=[c[0] for c in STRUCTURE_CASES]
+)
+def test_rejected_structure_is_named_exactly(case, build, message):
+    """Which error a stack with several problems reports first (the structure pass)."""
+    with pytest.raises(ValueError) as info:
+        build()
+    assert str(info.value) == message
+
+
+def test_a_stack_of_constraints_only_and_mixed_levels_compiles():
+    s = Stack([], constraints=_eye(2))
+    assert s.n == 2 and s.num_levels == 0
+    s = Stack([[_box(3, "a"), _eye(3, "b")], _eye(3, "c")], constraints=[_box(3, "h")])
+    assert [[t.name for t in lev] for lev in s.levels] == [["b", "a"], ["c"]]
+    P = s._compiled
+    assert (P.hard.m_eq, P.hard.m_in) == (0, 3)
+    assert [(L.m_eq, L.m_in) for L in P.levels] == [(3, 3), (3, 0)]
+    assert P.Aeq.shape == (6, 3) and P.C.shape == (6, 3)
+    assert np.shares_memory(P.levels[0].C, P.C) and np.shares_memory(P.levels[1].Ae, P.Aeq)
