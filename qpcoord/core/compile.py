@@ -290,22 +290,11 @@ class CompiledStack:
             self.ubs[...] = self.ub
 
 
-def _split(tasks, where: str) -> tuple[list[Equality], list[Inequality]]:
-    eqs, ineqs = [], []
-    for j, t in enumerate(tasks):
-        if isinstance(t, Equality):
-            eqs.append(t)
-        elif isinstance(t, Inequality):
-            ineqs.append(t)
-        elif isinstance(t, Bounds):
-            raise ValueError(
-                f"{where}, task {j}: Bounds are always hard; pass them as Stack(..., bounds=...)"
-            )
-        else:
-            raise ValueError(
-                f"{where}, task {j}: expected an Equality or Inequality, got {type(t).__name__}"
-            )
-    return eqs, ineqs
+def _not_a_task(t, where: str, j: int) -> str:
+    """The message for an object that is not an Equality or Inequality in a level."""
+    if isinstance(t, Bounds):
+        return f"{where}, task {j}: Bounds are always hard; pass them as Stack(..., bounds=...)"
+    return f"{where}, task {j}: expected an Equality or Inequality, got {type(t).__name__}"
 
 
 def compile_stack(levels, bounds, constraints) -> CompiledStack:
@@ -348,14 +337,28 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
         if not tasks:
             raise ValueError(f"level {k} is empty: give it at least one task or remove it")
         norm_levels.append(tasks)
+    # one pass over the tasks (constraints first): every task must have the same number of
+    # columns (reported first, in this order), and only Equality / Inequality may be in a
+    # level or the constraints (the first other object of the levels is reported, else of
+    # the constraints)
     n = None
     first = None
+    bad_task = [None, None]  # levels, constraints
+    blocks = []
     for k, tasks in enumerate([hard_tasks, *norm_levels]):
         where = "constraints" if k == 0 else f"level {k - 1}"
-        for t in tasks:
-            if not isinstance(t, (Equality, Inequality)):
+        eqs, ineqs = [], []
+        for j, t in enumerate(tasks):
+            if isinstance(t, Equality):
+                eqs.append(t)
+                cols = t.A.shape[1]
+            elif isinstance(t, Inequality):
+                ineqs.append(t)
+                cols = t.C.shape[1]
+            else:
+                if bad_task[k == 0] is None:
+                    bad_task[k == 0] = _not_a_task(t, where, j)
                 continue
-            cols = t.shape[1]
             if n is None:
                 n, first = cols, f"{where}, {t.label}"
             elif cols != n:
@@ -363,11 +366,9 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
                     f"{where}, {t.label}: has {cols} columns but {first} has {n}: "
                     "all tasks must act on the same variable"
                 )
-    compiled_levels = []
-    for k, tasks in enumerate(norm_levels):
-        eqs, ineqs = _split(tasks, f"level {k}")
-        compiled_levels.append((eqs, ineqs))
-    heqs, hineqs = _split(hard_tasks, "constraints")
+        blocks.append((eqs, ineqs))
+    if bad_task[0] or bad_task[1]:
+        raise ValueError(bad_task[0] or bad_task[1])
     if bounds is not None and not isinstance(bounds, Bounds):
         raise ValueError(f"bounds must be a qpcoord.Bounds, got {type(bounds).__name__}")
     if n is None:
@@ -376,8 +377,8 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
         bounds.resolve(n)  # ValueError now if the length does not match
     out = CompiledStack(
         n=n,
-        levels=[CompiledLevel(e, i, n, False) for e, i in compiled_levels],
-        hard=CompiledLevel(heqs, hineqs, n, False),
+        levels=[CompiledLevel(e, i, n, False) for e, i in blocks[1:]],
+        hard=CompiledLevel(*blocks[0], n, False),
         bounds=bounds,
     )
     return out
