@@ -95,3 +95,33 @@ def test_rejects_too_few_steps(tmp_path):
     )
     assert proc.returncode != 0
     assert "--steps must be >= 20, got 3" in proc.stderr
+
+
+def test_stack_bench_one_shot_table():
+    """``stack_bench.py --one-shot-only``: the three calls per size, and the daqp floor solves
+    the weighted QP of the same numbers (its x matches qpcoord's weighted method)."""
+    pytest.importorskip("daqp")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "stack_bench.py"),
+            "--one-shot-only",
+            "--one-shot-steps",
+            "20",
+            "--sizes",
+            "7",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = proc.stdout
+    for call in ("solve_stack native", "solve_stack python", "daqp.solve floor"):
+        assert f"| 7 | {call} | 18 |" in out
+    note = next(line for line in out.splitlines() if line.startswith("<!-- n=7"))
+    dx = float(note.split("max |dx| ")[1].split(";")[0])
+    assert dx < 1e-6
+    assert "daqp exit flags [1]" in note
