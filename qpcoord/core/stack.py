@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import functools
-import math
 import time
+from functools import cached_property
+from math import isfinite
 
 import numpy as np
 
@@ -106,7 +107,7 @@ class Stack:
             ("damping", damping, True),
             ("weight_ratio", weight_ratio, False),
         ):
-            if not (type(value) is float and math.isfinite(value)) and (
+            if not (type(value) is float and isfinite(value)) and (
                 isinstance(value, bool)
                 or not isinstance(value, (int, float, np.floating, np.integer))
                 or not np.isfinite(value)
@@ -123,7 +124,7 @@ class Stack:
         self._chain_missed = False
         self._native: NativeHierarchy | None = None  # built at the first native solve
 
-    @functools.cached_property
+    @cached_property
     def _work(self) -> Reduced:
         """The Python engine's workspace, built at its first use (a native solve never
         needs it)."""
