@@ -46,6 +46,14 @@ Run::
     python benchmarks/ik_peers.py --scenario panda-position --steps 4000
     python benchmarks/ik_peers.py --make-placo-venv   # create benchmarks/.placo-venv first
     python benchmarks/ik_peers.py --profile           # cProfile of the native Panda IK step
+    python benchmarks/ik_peers.py --no-back-to-back   # the lockstep table only
+
+Two tables. **Lockstep**: the solvers stepped in turn as above (the order rotating every
+step), so load falls on all alike, but each solver's caches are cold at its step and PlaCo's
+subprocess wakes from a pipe wait at every step. **Back to back**: then each solver runs the
+whole trajectory alone, one after the other (fresh solver, same scenario, same per-step timer,
+same meters; PlaCo gets all its step requests at once). Both give median / p90 / p99 and the
+ratios to PlaCo's median and p99 in the same table.
 """
 
 from __future__ import annotations
@@ -340,6 +348,10 @@ class PlacoLoop:
     def step(self, k: int) -> float:
         self.proc.stdin.write(json.dumps({"k": k}) + "\n")
         self.proc.stdin.flush()
+        return self._answer()
+
+    def _answer(self) -> float:
+        """Read one step's answer: its time (s); ``self.q`` becomes its configuration."""
         line = self.proc.stdout.readline()
         if not line:
             err = self.proc.stderr.read().strip().splitlines()
@@ -349,6 +361,12 @@ class PlacoLoop:
         self.q = np.concatenate([q[:7], q[self.order]]) if self.free else q[self.order]
         return ans["t"]
 
+    def request_all(self, steps: int) -> None:
+        """Ask for every step at once (back to back: the subprocess never waits on the pipe
+        between steps); then each :meth:`_answer` reads the next step's result."""
+        self.proc.stdin.write("".join(json.dumps({"k": k}) + "\n" for k in range(steps)))
+        self.proc.stdin.flush()
+
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.stdin.write("\n")
@@ -356,24 +374,78 @@ class PlacoLoop:
             self.proc.wait(timeout=10)
 
 
-def placo_alone(name: str, steps: int, speed: float, python: Path) -> dict:
-    """PlaCo's steps back to back (every step request written at once, so its process never
-    waits on the pipe between steps): its cost without the lockstep's wake-ups."""
-    loop = PlacoLoop(scenario(name, steps, speed), python)
-    try:
-        loop.proc.stdin.write("".join(json.dumps({"k": k}) + "\n" for k in range(steps)))
-        loop.proc.stdin.flush()
-        ts = np.array([json.loads(loop.proc.stdout.readline())["t"] for _ in range(steps)])
-    finally:
-        loop.close()
-    us = ts[steps // 10 :] * 1e6
+def _row(name: str, loop, meter: Meter, ts: np.ndarray, mode: str) -> dict:
+    """One table row: per-step times (the first 10 % dropped: caches and warm starts settle)
+    and the solver's errors and limit violations."""
+    us = ts[len(ts) // 10 :] * 1e6
     return {
         "scenario": name,
-        "solver": "placo, back to back",
+        "solver": loop.name,
+        "mode": mode,
+        "steps": len(ts),
         "median_us": float(np.median(us)),
         "p90_us": float(np.percentile(us, 90)),
         "p99_us": float(np.percentile(us, 99)),
+        **meter.final(loop.q),
     }
+
+
+def _makers(sc: dict, placo: Path | None, pink: bool) -> list:
+    """Constructors of the scenario's solvers, in the lockstep's order (PlaCo last)."""
+    makers = [
+        lambda: QpcoordLoop(sc, "hierarchical", "native", "qpcoord strict native"),
+        lambda: QpcoordLoop(sc, "hierarchical", "python", "qpcoord strict python"),
+    ]
+    if sc["name"] != "talos":
+        makers.append(lambda: QpcoordLoop(sc, "weighted", None, "qpcoord weighted"))
+    if pink:
+        makers.append(lambda: PinkLoop(sc))
+    if placo is not None:
+        makers.append(lambda: PlacoLoop(sc, placo))
+    return makers
+
+
+def _build(make, name: str, notes: list[str]):
+    """``make()``, or ``None`` with a note if PlaCo's side does not start."""
+    try:
+        return make()
+    except (RuntimeError, OSError, json.JSONDecodeError) as exc:
+        notes.append(f"placo skipped on {name}: {exc}")
+        return None
+
+
+def run_back_to_back(
+    name: str, steps: int, speed: float, placo: Path | None, pink: bool
+) -> list[dict]:
+    """Each solver runs the whole trajectory alone, one solver after the other (same scenario,
+    same per-step timer, same meters as :func:`run`), built fresh: no other solver's steps
+    between its own. PlaCo's step requests are all written at once, so its process never
+    waits on the pipe between steps either."""
+    sc = scenario(name, steps, speed)
+    notes: list[str] = []
+    rows = []
+    for make in _makers(sc, placo, pink):
+        loop = _build(make, name, notes)
+        if loop is None:
+            continue
+        meter = Meter(sc)
+        ts = np.full(steps, np.nan)
+        placo_side = isinstance(loop, PlacoLoop)
+        try:
+            with _threads_one() or _nothing():
+                if placo_side:
+                    loop.request_all(steps)
+                for k in range(steps):
+                    q_prev = loop.q.copy()
+                    ts[k] = loop._answer() if placo_side else loop.step(k)
+                    meter(q_prev, loop.q)
+        except RuntimeError as exc:  # PlaCo's QPError, through the pipe
+            notes.append(f"{loop.name} failed on {name} (back to back) at step {k}: {exc}")
+            continue
+        finally:
+            loop.close()
+        rows.append(_row(name, loop, meter, ts, "back to back"))
+    return rows + [{"scenario": name, "note": n} for n in notes]
 
 
 def _hull(poly, q0: np.ndarray, robot) -> np.ndarray:
@@ -466,20 +538,10 @@ def make_placo_venv() -> Path:
 def run(name: str, steps: int, speed: float, placo: Path | None, pink: bool) -> list[dict]:
     """Run one scenario with every available solver in lockstep; one row per solver."""
     sc = scenario(name, steps, speed)
-    loops: list = [
-        QpcoordLoop(sc, "hierarchical", "native", "qpcoord strict native"),
-        QpcoordLoop(sc, "hierarchical", "python", "qpcoord strict python"),
-    ]
-    if name != "talos":
-        loops.append(QpcoordLoop(sc, "weighted", None, "qpcoord weighted"))
     notes: list[str] = []
-    if pink:
-        loops.append(PinkLoop(sc))
-    if placo is not None:
-        try:
-            loops.append(PlacoLoop(sc, placo))
-        except (RuntimeError, OSError, json.JSONDecodeError) as exc:
-            notes.append(f"placo skipped on {name}: {exc}")
+    loops = [
+        loop for make in _makers(sc, placo, pink) if (loop := _build(make, name, notes)) is not None
+    ]
     meters = [Meter(sc) for _ in loops]
     times = np.full((len(loops), steps), np.nan)
     failed: set[int] = set()
@@ -501,23 +563,11 @@ def run(name: str, steps: int, speed: float, placo: Path | None, pink: bool) -> 
     finally:
         for loop in loops:
             loop.close()
-    rows = []
-    skip = steps // 10  # first 10 %: caches and warm starts settle
-    for i, (loop, meter, ts) in enumerate(zip(loops, meters, times, strict=True)):
-        if i in failed:
-            continue
-        us = ts[skip:] * 1e6
-        rows.append(
-            {
-                "scenario": name,
-                "solver": loop.name,
-                "steps": steps,
-                "median_us": float(np.median(us)),
-                "p90_us": float(np.percentile(us, 90)),
-                "p99_us": float(np.percentile(us, 99)),
-                **meter.final(loop.q),
-            }
-        )
+    rows = [
+        _row(name, loop, meter, ts, "lockstep")
+        for i, (loop, meter, ts) in enumerate(zip(loops, meters, times, strict=True))
+        if i not in failed
+    ]
     for n in notes:
         rows.append({"scenario": name, "note": n})
     return rows
@@ -532,16 +582,24 @@ class _nothing:
 
 
 def format_rows(rows: list[dict]) -> str:
-    """A markdown table of :func:`run` rows (notes as lines under it)."""
+    """A markdown table of :func:`run` / :func:`run_back_to_back` rows (notes as lines under
+    it); the ratios are to PlaCo's row of the same scenario in the same rows (``–`` without
+    PlaCo)."""
     head = (
-        "| scenario | solver | median µs | p90 µs | p99 µs | hand error (m) | orient. (rad) "
-        "| joint-limit viol. (rad) | speed viol. (rad/s) | feet drift (m) | CoM beyond soles (m) |"
+        "| scenario | solver | median µs | p90 µs | p99 µs | median / PlaCo | p99 / PlaCo "
+        "| hand error (m) | orient. (rad) | joint-limit viol. (rad) | speed viol. (rad/s) "
+        "| feet drift (m) | CoM beyond soles (m) |"
     )
-    lines = [head, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [head, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     notes = []
+    placo = {r["scenario"]: r for r in rows if r.get("solver") == "placo"}
 
     def f(r, key):
         return f"{r[key]:.2e}" if key in r else "–"
+
+    def ratio(r, key):
+        ref = placo.get(r["scenario"])
+        return f"{r[key] / ref[key]:.1f}" if ref else "–"
 
     for r in rows:
         if "note" in r:
@@ -549,7 +607,8 @@ def format_rows(rows: list[dict]) -> str:
             continue
         lines.append(
             f"| {r['scenario']} | {r['solver']} | {r['median_us']:.1f} | {r['p90_us']:.1f} "
-            f"| {r['p99_us']:.1f} | {f(r, 'position_error_m')} | {f(r, 'orientation_error_rad')} "
+            f"| {r['p99_us']:.1f} | {ratio(r, 'median_us')} | {ratio(r, 'p99_us')} "
+            f"| {f(r, 'position_error_m')} | {f(r, 'orientation_error_rad')} "
             f"| {f(r, 'joint_limit_violation_rad')} | {f(r, 'speed_limit_violation_rad_s')} "
             f"| {f(r, 'feet_drift_m')} | {f(r, 'com_beyond_sole_polygon_m')} |"
         )
@@ -589,7 +648,9 @@ def main(argv=None) -> int:
     p.add_argument("--make-placo-venv", action="store_true")
     p.add_argument("--profile", action="store_true")
     p.add_argument(
-        "--placo-alone", action="store_true", help="also time PlaCo's steps back to back"
+        "--no-back-to-back",
+        action="store_true",
+        help="skip the back-to-back runs (each solver's whole trajectory alone)",
     )
     p.add_argument("--json", type=Path, default=None, help="also write the rows here")
     args = p.parse_args(argv)
@@ -600,6 +661,7 @@ def main(argv=None) -> int:
         return 0
     if args.make_placo_venv:
         print(f"PlaCo interpreter: {make_placo_venv()}")
+        return 0
     placo = None if args.no_placo else placo_python(args.placo_python)
     if placo is None and not args.no_placo:
         print(
@@ -620,11 +682,16 @@ def main(argv=None) -> int:
             steps = 60
         try:
             rows += run(name, steps, args.speed, placo, pink)
-            if args.placo_alone and placo is not None:
-                rows.append(placo_alone(name, steps, args.speed, placo))
+            if not args.no_back_to_back:
+                rows += run_back_to_back(name, steps, args.speed, placo, pink)
         except ValueError as exc:  # example-robot-data missing
             rows.append({"scenario": name, "note": f"{name} skipped: {exc}"})
-    print(format_rows(rows))
+    lockstep = [r for r in rows if r.get("mode", "lockstep") == "lockstep"]
+    print("Lockstep (one step of each solver in turn, the order rotating every step):\n")
+    print(format_rows(lockstep))
+    if not args.no_back_to_back:
+        print("\nBack to back (each solver's whole trajectory alone, one after the other):\n")
+        print(format_rows([r for r in rows if r.get("mode") == "back to back"]))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

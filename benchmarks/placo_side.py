@@ -18,8 +18,9 @@ and talks to the benchmark over its standard input/output, one JSON line per mes
    numbers first);
 4. an empty line ends it.
 
-The benchmark interleaves these steps with its in-process solvers: the pipe round trip is
-outside every timer.
+In its lockstep table the benchmark interleaves these steps with its in-process solvers; back
+to back it writes every step request at once (this side then never waits on the pipe between
+steps) and reads the answers as they come. The pipe round trip is outside every timer.
 """
 
 from __future__ import annotations

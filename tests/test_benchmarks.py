@@ -1,4 +1,5 @@
-"""``benchmarks/ik_peers.py --quick`` runs without PlaCo (and says so); no timed assertion.
+"""``benchmarks/ik_peers.py --quick`` runs without PlaCo (and says so), in lockstep and back to
+back; no timed assertion.
 
 The benchmark is a script, not a module of the package: it is run as a subprocess, as a
 user runs it. The checks are on its output's content (rows, errors, limits), never on times.
@@ -46,11 +47,13 @@ def test_quick_without_placo(tmp_path):
     assert "PlaCo skipped: no interpreter at" in stdout
     if any("skipped" in r.get("note", "") for r in rows):  # example-robot-data missing
         pytest.skip(rows[0]["note"])
-    solvers = {(r["scenario"], r["solver"]) for r in rows if "solver" in r}
+    solvers = {(r["scenario"], r["solver"], r["mode"]) for r in rows if "solver" in r}
     for scenario in ("panda-position", "panda-pose"):
         for s in ("qpcoord strict native", "qpcoord strict python", "qpcoord weighted"):
-            assert (scenario, s) in solvers
+            for mode in ("lockstep", "back to back"):
+                assert (scenario, s, mode) in solvers
     assert not any(r["solver"] == "placo" for r in rows if "solver" in r)
+    assert "Back to back (each solver's whole trajectory alone" in stdout
     for r in rows:
         assert r["steps"] == 60
         # hard limits hold on every step; the deadbeat hand task tracks the circle
@@ -58,11 +61,29 @@ def test_quick_without_placo(tmp_path):
         assert r["speed_limit_violation_rad_s"] <= 1e-6
         assert r["position_error_m"] < 1e-3
         assert r["p99_us"] >= r["p90_us"] >= r["median_us"] > 0
-    strict = {r["scenario"]: r for r in rows if r["solver"] == "qpcoord strict native"}
-    python = {r["scenario"]: r for r in rows if r["solver"] == "qpcoord strict python"}
+    lockstep = [r for r in rows if r["mode"] == "lockstep"]
+    strict = {r["scenario"]: r for r in lockstep if r["solver"] == "qpcoord strict native"}
+    python = {r["scenario"]: r for r in lockstep if r["solver"] == "qpcoord strict python"}
     for scenario, r in strict.items():  # both engines solve the same strict hierarchy
         assert r["position_error_m"] == pytest.approx(python[scenario]["position_error_m"])
     assert "orientation_error_rad" in strict["panda-pose"]
+    # a solver alone follows the same trajectory as in the lockstep (same inputs per step)
+    alone = {(r["scenario"], r["solver"]): r for r in rows if r["mode"] == "back to back"}
+    for r in lockstep:
+        twin = alone[(r["scenario"], r["solver"])]
+        assert twin["steps"] == r["steps"]
+        assert twin["position_error_m"] == pytest.approx(r["position_error_m"], rel=1e-9)
+
+
+def test_lockstep_only(tmp_path):
+    pytest.importorskip("pinocchio")
+    stdout, rows = _run(
+        tmp_path, "--no-placo", "--no-pink", "--no-back-to-back", "--scenario", "panda-position"
+    )
+    if any("skipped" in r.get("note", "") for r in rows):  # example-robot-data missing
+        pytest.skip(rows[0]["note"])
+    assert {r["mode"] for r in rows} == {"lockstep"}
+    assert "Back to back" not in stdout
 
 
 def test_rejects_too_few_steps(tmp_path):
@@ -74,3 +95,33 @@ def test_rejects_too_few_steps(tmp_path):
     )
     assert proc.returncode != 0
     assert "--steps must be >= 20, got 3" in proc.stderr
+
+
+def test_stack_bench_one_shot_table():
+    """``stack_bench.py --one-shot-only``: the three calls per size, and the daqp floor solves
+    the weighted QP of the same numbers (its x matches qpcoord's weighted method)."""
+    pytest.importorskip("daqp")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "stack_bench.py"),
+            "--one-shot-only",
+            "--one-shot-steps",
+            "20",
+            "--sizes",
+            "7",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = proc.stdout
+    for call in ("solve_stack native", "solve_stack python", "daqp.solve floor"):
+        assert f"| 7 | {call} | 18 |" in out
+    note = next(line for line in out.splitlines() if line.startswith("<!-- n=7"))
+    dx = float(note.split("max |dx| ")[1].split(";")[0])
+    assert dx < 1e-6
+    assert "daqp exit flags [1]" in note

@@ -15,7 +15,7 @@ reads them without a copy.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 
 import numpy as np
 
@@ -44,31 +44,35 @@ class CompiledLevel:
     hi: np.ndarray = field(init=False)
     sw: np.ndarray = field(init=False)
 
-    def __post_init__(self) -> None:
-        me = sum(t.A.shape[0] for t in self.eqs)
-        mi = sum(t.C.shape[0] for t in self.ineqs)
-        self.Ae = self._Ae_buf = np.zeros((me, self.n))
-        self.be = self._be_buf = np.zeros(me)
-        self.C = np.zeros((mi, self.n))
-        self.lo = np.zeros(mi)
-        self.hi = np.zeros(mi)
-        self.sw = np.ones(mi)
-        self.low = self.lo  # lo/hi widened by FEAS_TOL (the closed-form feasibility test)
-        self.hiw = self.hi
+    #: allocate the level's own buffers (``False``: :class:`CompiledStack` gives it views of
+    #: its stacked arrays right after, see :meth:`_use`)
+    buffers: InitVar[bool] = True
+
+    def __post_init__(self, buffers: bool) -> None:
         self._eq_shapes = [t.A.shape for t in self.eqs]
+        self._in_shapes = [t.C.shape for t in self.ineqs]
+        #: number of equality rows
+        self.m_eq = sum([s[0] for s in self._eq_shapes])
+        #: number of inequality rows
+        self.m_in = sum([s[0] for s in self._in_shapes])
         #: the level is exactly ``x = be`` (one unit-weight identity task, no inequalities)
         self.identity = False
-        self._in_shapes = [t.C.shape for t in self.ineqs]
+        if buffers:
+            me, mi, n = self.m_eq, self.m_in, self.n
+            self._use(
+                np.zeros((me, n)), np.zeros(me),
+                np.zeros((mi, n)), np.zeros(mi), np.zeros(mi), np.ones(mi),
+            )  # fmt: skip
 
-    @property
-    def m_eq(self) -> int:
-        """Number of equality rows."""
-        return self.Ae.shape[0]
-
-    @property
-    def m_in(self) -> int:
-        """Number of inequality rows."""
-        return self.C.shape[0]
+    def _use(self, Ae, be, C, lo, hi, sw) -> None:
+        """Make the given arrays the level's buffers (``lo``/``hi`` widened by ``FEAS_TOL``
+        for the closed-form feasibility test are ``low``/``hiw``, the same until a refresh)."""
+        self.Ae = self._Ae_buf = Ae
+        self.be = self._be_buf = be
+        self.C = C
+        self.low = self.lo = lo
+        self.hiw = self.hi = hi
+        self.sw = sw
 
     def refresh(self) -> None:
         """Copy the tasks' current numbers into the buffers (checks shapes did not change).
@@ -201,47 +205,51 @@ class CompiledStack:
             self._bounds_version = b.version
 
     def _stack_buffers(self) -> None:
-        """One contiguous array per kind; every block's buffers become views of it."""
+        """One contiguous array per kind; every block's buffers become views of it (a block
+        without rows of a kind gets the shared empty view of that kind)."""
         blocks = [self.hard, *self.levels]
         n = self.n
-        me = sum(B.m_eq for B in blocks)
-        mi = sum(B.m_in for B in blocks)
-        self.Aeq = np.zeros((me, n))
-        self.beq = np.zeros(me)
-        self.C = np.zeros((mi, n))
-        self.clo = np.zeros(mi)
-        self.chi = np.zeros(mi)
-        self.csw = np.ones(mi)
+        me = sum([B.m_eq for B in blocks])
+        mi = sum([B.m_in for B in blocks])
+        Aeq = self.Aeq = np.zeros((me, n))
+        beq = self.beq = np.zeros(me)
+        C = self.C = np.zeros((mi, n))
+        clo = self.clo = np.zeros(mi)
+        chi = self.chi = np.zeros(mi)
+        csw = self.csw = np.empty(mi)
+        csw.fill(1.0)
         #: the box as the native engine reads it (±inf without bounds)
-        self.lbs = np.full(n, -np.inf)
-        self.ubs = np.full(n, np.inf)
-        self._eq_ops: list[tuple] = []  # (task, shape, A rows, b rows)
-        self._in_ops: list[tuple] = []  # (task, shape, C rows, lo, hi, sw)
+        self.lbs = np.empty(n)
+        self.lbs.fill(-np.inf)
+        self.ubs = np.empty(n)
+        self.ubs.fill(np.inf)
+        eq_ops: list[tuple] = []  # (task, shape, A rows, b rows)
+        in_ops: list[tuple] = []  # (task, shape, C rows, lo, hi, sw)
+        no_eq = (Aeq[:0], beq[:0])
+        no_in = (C[:0], clo[:0], chi[:0], csw[:0])
         i = j = 0
         for B in blocks:
-            B.Ae = B._Ae_buf = self.Aeq[i : i + B.m_eq]
-            B.be = B._be_buf = self.beq[i : i + B.m_eq]
-            for t, shape in zip(B.eqs, B._eq_shapes, strict=True):
-                m = shape[0]
-                self._eq_ops.append((t, shape, self.Aeq[i : i + m], self.beq[i : i + m]))
-                i += m
-            B.C = self.C[j : j + B.m_in]
-            B.low = B.lo = self.clo[j : j + B.m_in]
-            B.hiw = B.hi = self.chi[j : j + B.m_in]
-            B.sw = self.csw[j : j + B.m_in]
-            for t, shape in zip(B.ineqs, B._in_shapes, strict=True):
-                m = shape[0]
-                self._in_ops.append(
-                    (
-                        t,
-                        shape,
-                        self.C[j : j + m],
-                        self.clo[j : j + m],
-                        self.chi[j : j + m],
-                        self.csw[j : j + m],
-                    )
-                )
-                j += m
+            i1, j1 = i + B.m_eq, j + B.m_in
+            eq = (Aeq[i:i1], beq[i:i1]) if i1 > i else no_eq
+            ineq = (C[j:j1], clo[j:j1], chi[j:j1], csw[j:j1]) if j1 > j else no_in
+            B._use(*eq, *ineq)
+            if len(B.eqs) == 1:  # one task: its rows are the block's
+                eq_ops.append((B.eqs[0], B._eq_shapes[0], *eq))
+            else:
+                for t, shape in zip(B.eqs, B._eq_shapes, strict=True):
+                    m = i + shape[0]
+                    eq_ops.append((t, shape, Aeq[i:m], beq[i:m]))
+                    i = m
+            if len(B.ineqs) == 1:
+                in_ops.append((B.ineqs[0], B._in_shapes[0], *ineq))
+            else:
+                for t, shape in zip(B.ineqs, B._in_shapes, strict=True):
+                    m = j + shape[0]
+                    in_ops.append((t, shape, C[j:m], clo[j:m], chi[j:m], csw[j:m]))
+                    j = m
+            i, j = i1, j1
+        self._eq_ops = eq_ops
+        self._in_ops = in_ops
         self._aliased = False
 
     def refresh_stacked(self) -> None:
@@ -282,22 +290,11 @@ class CompiledStack:
             self.ubs[...] = self.ub
 
 
-def _split(tasks, where: str) -> tuple[list[Equality], list[Inequality]]:
-    eqs, ineqs = [], []
-    for j, t in enumerate(tasks):
-        if isinstance(t, Equality):
-            eqs.append(t)
-        elif isinstance(t, Inequality):
-            ineqs.append(t)
-        elif isinstance(t, Bounds):
-            raise ValueError(
-                f"{where}, task {j}: Bounds are always hard; pass them as Stack(..., bounds=...)"
-            )
-        else:
-            raise ValueError(
-                f"{where}, task {j}: expected an Equality or Inequality, got {type(t).__name__}"
-            )
-    return eqs, ineqs
+def _not_a_task(t, where: str, j: int) -> str:
+    """The message for an object that is not an Equality or Inequality in a level."""
+    if isinstance(t, Bounds):
+        return f"{where}, task {j}: Bounds are always hard; pass them as Stack(..., bounds=...)"
+    return f"{where}, task {j}: expected an Equality or Inequality, got {type(t).__name__}"
 
 
 def compile_stack(levels, bounds, constraints) -> CompiledStack:
@@ -340,14 +337,28 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
         if not tasks:
             raise ValueError(f"level {k} is empty: give it at least one task or remove it")
         norm_levels.append(tasks)
+    # one pass over the tasks (constraints first): every task must have the same number of
+    # columns (reported first, in this order), and only Equality / Inequality may be in a
+    # level or the constraints (the first other object of the levels is reported, else of
+    # the constraints)
     n = None
     first = None
+    bad_task = [None, None]  # levels, constraints
+    blocks = []
     for k, tasks in enumerate([hard_tasks, *norm_levels]):
         where = "constraints" if k == 0 else f"level {k - 1}"
-        for t in tasks:
-            if not isinstance(t, (Equality, Inequality)):
+        eqs, ineqs = [], []
+        for j, t in enumerate(tasks):
+            if isinstance(t, Equality):
+                eqs.append(t)
+                cols = t.A.shape[1]
+            elif isinstance(t, Inequality):
+                ineqs.append(t)
+                cols = t.C.shape[1]
+            else:
+                if bad_task[k == 0] is None:
+                    bad_task[k == 0] = _not_a_task(t, where, j)
                 continue
-            cols = t.shape[1]
             if n is None:
                 n, first = cols, f"{where}, {t.label}"
             elif cols != n:
@@ -355,11 +366,9 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
                     f"{where}, {t.label}: has {cols} columns but {first} has {n}: "
                     "all tasks must act on the same variable"
                 )
-    compiled_levels = []
-    for k, tasks in enumerate(norm_levels):
-        eqs, ineqs = _split(tasks, f"level {k}")
-        compiled_levels.append((eqs, ineqs))
-    heqs, hineqs = _split(hard_tasks, "constraints")
+        blocks.append((eqs, ineqs))
+    if bad_task[0] or bad_task[1]:
+        raise ValueError(bad_task[0] or bad_task[1])
     if bounds is not None and not isinstance(bounds, Bounds):
         raise ValueError(f"bounds must be a qpcoord.Bounds, got {type(bounds).__name__}")
     if n is None:
@@ -368,8 +377,8 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
         bounds.resolve(n)  # ValueError now if the length does not match
     out = CompiledStack(
         n=n,
-        levels=[CompiledLevel(e, i, n) for e, i in compiled_levels],
-        hard=CompiledLevel(heqs, hineqs, n),
+        levels=[CompiledLevel(e, i, n, False) for e, i in blocks[1:]],
+        hard=CompiledLevel(*blocks[0], n, False),
         bounds=bounds,
     )
     return out

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import time
+from functools import cached_property
+from math import isfinite
 
 import numpy as np
 
@@ -106,7 +108,7 @@ class Stack:
             ("damping", damping, True),
             ("weight_ratio", weight_ratio, False),
         ):
-            if (
+            if not (type(value) is float and isfinite(value)) and (
                 isinstance(value, bool)
                 or not isinstance(value, (int, float, np.floating, np.integer))
                 or not np.isfinite(value)
@@ -119,10 +121,16 @@ class Stack:
         self.damping = float(damping)
         self.weight_ratio = float(weight_ratio)
         self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
-        self._work = Reduced(self._compiled.n, self._compiled.capacity, fallback)
+        self._fallback = fallback
         self._chain_missed = False
         self._native: NativeHierarchy | None = None  # built at the first native solve
         self._native_weighted: NativeWeighted | None = None  # the first native weighted solve
+
+    @cached_property
+    def _work(self) -> Reduced:
+        """The Python engine's workspace, built at its first use (a native solve never
+        needs it)."""
+        return Reduced(self._compiled.n, self._compiled.capacity, self._fallback)
 
     @property
     def n(self) -> int:

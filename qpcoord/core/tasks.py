@@ -25,6 +25,7 @@ allocating uses the private, explicit paths: ``Equality._assign``, ``Inequality.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -40,6 +41,26 @@ def _label(kind: str, name: str) -> str:
 #: matrices (``AᵀA``), so entries outside would under- or overflow (1e-320 made quadprog
 #: fail with an IndexError). Rescale the units of ``x`` or of the task instead.
 MATRIX_RANGE = (1e-150, 1e150)
+
+
+# the reductions of the validation, without ndarray.sum/max/min's Python wrappers
+_sum, _max, _min = np.add.reduce, np.maximum.reduce, np.minimum.reduce
+#: numpy dtype kinds converted to float without a check: bool, signed, unsigned, float
+_REAL_KINDS = ("b", "i", "u", "f")
+
+
+def _full(rows: int, value: float) -> np.ndarray:
+    """``np.full(rows, value)`` without its Python wrapper."""
+    arr = np.empty(rows)
+    arr.fill(value)
+    return arr
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    """A read-only view of ``arr``, a fresh C-contiguous array of the caller's."""
+    view = arr.view()
+    view.flags.writeable = False
+    return view
 
 
 def _readonly(arr: np.ndarray) -> np.ndarray:
@@ -67,6 +88,8 @@ def _w(view: np.ndarray) -> np.ndarray:
 def _numeric(value, what: str, label: str, noun: str = "numeric") -> np.ndarray:
     """``value`` as a new float array; complex input is a ``TypeError`` and non-numeric input
     a ``ValueError``, both naming ``what`` (numpy would drop an imaginary part)."""
+    if type(value) is np.ndarray and value.dtype.kind in _REAL_KINDS:
+        return np.array(value, dtype=float, order="C")  # the common case: no check, one copy
     try:
         complex_in = np.iscomplexobj(value)
     except (TypeError, ValueError):  # ragged lists: let np.array name the problem
@@ -74,17 +97,21 @@ def _numeric(value, what: str, label: str, noun: str = "numeric") -> np.ndarray:
     if complex_in:
         raise TypeError(f"{label}: {what} is complex; tasks take real numbers")
     try:
-        return np.array(value, dtype=float)  # a copy: a task never aliases the caller's array
+        # a copy: a task never aliases the caller's array
+        return np.array(value, dtype=float, order="C")
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{label}: {what} is not {noun} ({exc})") from None
 
 
 def _matrix(value, what: str, label: str) -> np.ndarray:
     arr = _numeric(value, what, label, "a numeric array")
-    if arr.ndim == 1:
-        arr = arr.reshape(1, -1)
     if arr.ndim != 2:
-        raise ValueError(f"{label}: {what} must be 2-D (rows × variables), got shape {arr.shape}")
+        if arr.ndim == 1:
+            arr.shape = (1, arr.shape[0])  # in place: arr stays the owner of its data
+        else:
+            raise ValueError(
+                f"{label}: {what} must be 2-D (rows × variables), got shape {arr.shape}"
+            )
     if arr.shape[1] == 0:
         raise ValueError(f"{label}: {what} has no columns (shape {arr.shape})")
     if arr.shape[0] == 0:
@@ -92,22 +119,25 @@ def _matrix(value, what: str, label: str) -> np.ndarray:
             f"{label}: {what} has no rows (shape {arr.shape}); a task needs at least one row "
             "(leave an empty task out of the stack)"
         )
-    # one reduction on the hot path; NaN/inf propagate into the sum
-    if not np.isfinite(arr.sum()) and not np.all(np.isfinite(arr)):
+    # two or three reductions on the hot path: the largest magnitude (NaN and ±inf fail
+    # ``<=``) and the smallest (non-zero) one; the messages are built only if one fails
+    lo_mag, hi_mag = MATRIX_RANGE
+    mag = np.abs(arr)
+    if _max(mag, None) <= hi_mag and (
+        _min(mag, None) >= lo_mag or mag.min(where=mag > 0, initial=np.inf) >= lo_mag
+    ):
+        return _frozen(arr)  # fresh, C-contiguous, the owner of its data
+    if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise ValueError(
             f"{label}: {what} contains a non-finite value {arr[tuple(bad)]!r} "
             f"at row {bad[0]}, column {bad[1]}"
         )
-    mag = np.abs(arr)
-    lo_mag, hi_mag = MATRIX_RANGE
-    if mag.max() > hi_mag or ((mag < lo_mag) & (mag > 0)).any():
-        i, j = np.argwhere((mag > hi_mag) | ((mag < lo_mag) & (mag > 0)))[0]
-        raise ValueError(
-            f"{label}: {what}[{i}, {j}] = {arr[i, j]!r} is outside the magnitudes a QP can "
-            f"square ({lo_mag:g} … {hi_mag:g}, or exactly 0): rescale the units"
-        )
-    return _readonly(arr)
+    i, j = np.argwhere((mag > hi_mag) | ((mag < lo_mag) & (mag > 0)))[0]
+    raise ValueError(
+        f"{label}: {what}[{i}, {j}] = {arr[i, j]!r} is outside the magnitudes a QP can "
+        f"square ({lo_mag:g} … {hi_mag:g}, or exactly 0): rescale the units"
+    )
 
 
 def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.ndarray:
@@ -115,16 +145,23 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
 
     ``allow_inf``: 0 forbids ±inf, +1 allows +inf only, -1 allows -inf only.
     """
-    arr = _numeric(value, what, label)  # a copy, as in _matrix
-    if arr.ndim == 0:
-        arr = np.full(rows, float(arr))
-    elif arr.ndim == 2 and 1 in arr.shape:
-        arr = arr.reshape(-1)
-    if arr.ndim != 1 or arr.shape[0] != rows:
-        raise ValueError(f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}")
-    total = arr.sum()
-    if np.isfinite(total):
-        return _readonly(arr)
+    if type(value) is float or type(value) is int:  # a Python scalar (not a bool): broadcast
+        v = float(value)
+        if math.isfinite(v) or (allow_inf and v == allow_inf * math.inf):
+            return _frozen(_full(rows, v))
+        arr = _full(rows, v)  # NaN or a wrong-sided infinity: named below
+    else:
+        arr = _numeric(value, what, label)  # a copy, as in _matrix
+        if arr.ndim == 0:
+            arr = _full(rows, float(arr))
+        elif arr.ndim == 2 and 1 in arr.shape:
+            arr.shape = (arr.size,)  # in place: arr stays the owner of its data
+        if arr.ndim != 1 or arr.shape[0] != rows:
+            raise ValueError(
+                f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}"
+            )
+        if math.isfinite(_sum(arr, None)):
+            return _frozen(arr)  # fresh, C-contiguous, the owner of its data
     if np.any(np.isnan(arr)):
         i = int(np.flatnonzero(np.isnan(arr))[0])
         raise ValueError(f"{label}: {what} contains NaN at index {i}")
@@ -137,12 +174,14 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{label}: {what} has the non-allowed value {arr[i]!r} at index {i}")
-    return _readonly(arr)
+    return _frozen(arr)
 
 
 def _weight(value, rows: int, label: str) -> np.ndarray:
+    if (type(value) is float or type(value) is int) and 0 < value < math.inf:
+        return _frozen(_full(rows, float(value)))  # a valid Python scalar (the default)
     w = _vector(value, rows, "weight", label)
-    if w.min() <= 0:
+    if not w.min() > 0:
         i = int(np.flatnonzero(w <= 0)[0])
         raise ValueError(f"{label}: weight must be > 0, got {w[i]!r} at row {i}")
     return w
@@ -150,15 +189,16 @@ def _weight(value, rows: int, label: str) -> np.ndarray:
 
 def _check_order(lower: np.ndarray, upper: np.ndarray, label: str) -> None:
     bad = lower > upper
-    if bad.any():
+    if np.count_nonzero(bad):
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{label}: lower > upper at row {i} ({lower[i]!r} > {upper[i]!r})")
 
 
 def _is_identity(A: np.ndarray) -> bool:
-    """Is ``A`` exactly the identity matrix? (Posture-like tasks; lets solvers skip an SVD.)"""
+    """Is ``A`` exactly the identity matrix? (Posture-like tasks; lets solvers skip an SVD.)
+    ``n`` non-zero entries, all of them ones on the diagonal."""
     n = A.shape[0]
-    return n == A.shape[1] and bool(np.array_equal(A, np.eye(n)))
+    return n == A.shape[1] and np.count_nonzero(A) == n and bool((A.diagonal() == 1.0).all())
 
 
 def _bad_box(lower: np.ndarray, upper: np.ndarray) -> bool:
@@ -181,11 +221,16 @@ class _Task:
         """Human-readable name used in messages."""
         return _label(self.kind, self.name)
 
-    def _set_weight(self, w: np.ndarray) -> None:
+    def _set_weight(self, w: np.ndarray, given=None) -> None:
+        """Keep the validated weights ``w`` (``given``: what the caller passed, if known)."""
         self.weight = w
-        #: ``√weight`` (cached: weights rarely change between control steps)
-        self.sqrt_weight = _readonly(np.sqrt(w))
-        self.unit_weight = bool((w == 1.0).all())
+        if (type(given) is float or type(given) is int) and given == 1:
+            self.unit_weight = True  # the default weight, broadcast: w is all ones
+        else:
+            self.unit_weight = bool(w[0] == 1.0 and (w == 1.0).all())
+        #: ``√weight`` (cached: weights rarely change between control steps); the weight
+        #: itself when every weight is 1
+        self.sqrt_weight = w if self.unit_weight else _frozen(np.sqrt(w))
 
 
 class Equality(_Task):
@@ -212,7 +257,7 @@ class Equality(_Task):
         self.A = _matrix(A, "A", label)
         self.is_identity = _is_identity(self.A)
         self.b = _vector(b, self.A.shape[0], "b", label)
-        self._set_weight(_weight(weight, self.A.shape[0], label))
+        self._set_weight(_weight(weight, self.A.shape[0], label), weight)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -301,7 +346,7 @@ class Inequality(_Task):
         self.lower = _vector(-np.inf if lower is None else lower, m, "lower", label, allow_inf=-1)
         self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
         _check_order(self.lower, self.upper, label)
-        self._set_weight(_weight(weight, m, label))
+        self._set_weight(_weight(weight, m, label), weight)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -383,7 +428,10 @@ class Bounds:
     def _set(self, lower, upper) -> None:
         n = None
         for v in (lower, upper):
-            if np.ndim(v) > 0:
+            if type(v) is np.ndarray:  # the common case, without np.ndim/np.size's wrappers
+                if v.ndim > 0:
+                    n = v.size
+            elif np.ndim(v) > 0:
                 n = int(np.size(v))
         lo, hi = self._validate(lower, upper, 1 if n is None else n)
         self._lower_in, self._upper_in, self.n = lower, upper, n
@@ -397,7 +445,7 @@ class Bounds:
         lo = _vector(lower, n, "lower", label, allow_inf=-1)
         hi = _vector(upper, n, "upper", label, allow_inf=+1)
         bad = lo > hi
-        if bad.any():
+        if np.count_nonzero(bad):
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})")
         return lo, hi
