@@ -7,8 +7,11 @@ inequality limits and the bounds move. The weighted QP of such a stack (``method
 :mod:`qpcoord.core.methods.weighted`) then has a constant Hessian and constraint matrix, so the
 backend's
 workspace -- its factorisation and its working set -- can be kept between steps: this class
-sets up one ``daqp.Model`` once and, per step, only updates the linear term and the limits and
-hot-starts from the previous working set. No Python-level QP assembly happens per step.
+sets up one workspace once and, per step, only updates the linear term and the limits and
+hot-starts from the previous working set. No Python-level QP assembly happens per step. The
+workspace is the native weighted QP (:mod:`qpcoord.core.native_weighted`: the Hessian factored
+once per set-up, a dual active set warm-started from the last working set) where the
+extension is built, else (or with ``engine="python"``) one ``daqp.Model``.
 
 The answer is the same QP as ``stack.solve(method="weighted")`` (levels weighted by
 ``weight_ratio**k``, soft inequalities with slacks, bounds and hard constraints hard) and is
@@ -40,6 +43,8 @@ from scipy.linalg import lapack
 from .backends import DEFAULT_TIME_LIMIT
 from .compile import CompiledStack
 from .elimination import CHECK_TOL
+from .errors import InfeasibleError, SolverError
+from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .solution import Solution
 from .tasks import Equality
 
@@ -96,25 +101,35 @@ class PersistentQP:
         ``update``).
     weight_ratio, regularization : float, optional
         Default: the stack's.
+    engine : {None, "native", "python"}
+        ``"native"``: the native weighted QP; ``"python"``: a daqp workspace; ``None``: native
+        where built (:func:`~qpcoord.core.native_weighted.resolve_weighted_engine`).
 
     Raises
     ------
     ValueError
         ``stack`` is not a Stack.
     ImportError
-        daqp is not installed.
+        daqp is not installed (``engine="python"``), or ``engine="native"`` and the extension
+        is not built.
 
     Notes
     -----
     Variables: ``x`` (n) and one slack per soft inequality row. Cost:
     ``Σ_k ρᵏ (‖A_k x − b_k‖² + ‖√w_k s_k‖²) + ε‖x‖²`` with ``ρ = weight_ratio``,
     ``ε = regularization · max(1, max diag)``, as
-    :func:`qpcoord.core.methods.weighted.solve_weighted`.
+    :func:`qpcoord.core.methods.weighted.solve_weighted`. The native workspace adds ``ε``
+    exactly where that function does (the Hessian singular on the hard equalities' null
+    space), so its answer is ``stack.solve(method="weighted")``'s; the daqp workspace adds it
+    where the x-space Hessian has no Cholesky factor.
     """
 
-    def __init__(self, stack: Stack, weight_ratio=None, regularization=None) -> None:
-        import daqp
-
+    def __init__(self, stack: Stack, weight_ratio=None, regularization=None, engine=None) -> None:
+        self.engine = resolve_weighted_engine(engine, None)
+        if self.engine == "python":
+            import daqp
+        else:
+            daqp = None
         # duck-typed on the compiled data, so that this module needs no import of
         # qpcoord.core.stack (which imports it: Stack.persistent)
         if not isinstance(getattr(stack, "_compiled", None), CompiledStack):
@@ -130,6 +145,7 @@ class PersistentQP:
             raise ValueError(f"regularization must be >= 0, got {self.regularization!r}")
         self._daqp = daqp
         self.model = None
+        self._nw: NativeWeighted | None = None
         self.setups = 0
         self.fallbacks = 0
         #: :meth:`solve_theta` steps answered by a cached critical region's affine law
@@ -174,10 +190,13 @@ class PersistentQP:
         # line wrote into a copy -- ``H.flat[::k][:n] += ε`` -- so ε was never added and a
         # singular H sent every step to the fallback.)
         self.regularized = False
-        if lapack.dpotrf(H[:n, :n], lower=0, clean=0)[1] != 0:
+        if self.engine == "native":
+            self.regularized = self._native_setup(P)
+        elif lapack.dpotrf(H[:n, :n], lower=0, clean=0)[1] != 0:
+            self.regularized = True
+        if self.regularized:
             i = np.arange(n)
             H[i, i] += self.regularization * max(1.0, float(H.diagonal()[:n].max()))
-            self.regularized = True
         hard = P.hard
         # rows after the simple bounds: hard equalities, hard inequalities, soft rows C x − s
         G = np.zeros((hard.m_eq + hard.m_in + mi, nv))
@@ -263,6 +282,9 @@ class PersistentQP:
         else:
             self._res_eq = None
         self._res_in = [(k, t) for k, L in enumerate(P.levels) for t in L.ineqs]
+        self.setups += 1
+        if self.engine == "native":
+            return
         model = self._daqp.Model()
         model.settings = dict(model.settings, **DAQP_SETTINGS)
         flag = model.setup(H, self._f, G, self._bu, self._bl, np.zeros(k, dtype=np.int32))
@@ -271,7 +293,63 @@ class PersistentQP:
         # a failed set-up (e.g. constraints daqp's presolve finds inconsistent) leaves no
         # workspace: every step then goes to the general path, which reports the cause
         self.model = model if flag >= 0 else None
-        self.setups += 1
+
+    def _native_setup(self, P) -> bool:
+        """The native workspace: its own stacked arrays (the constant matrices written once;
+        per step only ``beq``, the limits and the box), the write plan of a step, and one
+        solve that factors the Hessian. Returns whether ``ε`` was added (its rule)."""
+        P.refresh_stacked()
+        arrs = tuple(a.copy() for a in (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs))
+        self._nb = arrs
+        eq_plan, in_plan = [], []
+        i = j = 0
+        for B in (P.hard, *P.levels):
+            for t in B.eqs:
+                m = t.A.shape[0]
+                eq_plan.append((t, slice(i, i + m), None if t.unit_weight else t.sqrt_weight))
+                i += m
+            for t in B.ineqs:
+                m = t.C.shape[0]
+                in_plan.append((t, slice(j, j + m)))
+                j += m
+        self._nb_plan = (eq_plan, in_plan)
+        self._nb_bounds = None
+        self._nw = NativeWeighted(P, self.regularization, self.weight_ratio, arrays=arrs)
+        try:
+            self._nw.run(P, warm=False, refactor=True)
+        except (InfeasibleError, SolverError, ValueError):
+            pass  # the steps report it (they fall back to the general path)
+        return bool(self._nw.detail[6])
+
+    def _native_fill(self, P) -> None:
+        """Write the tasks' right-hand sides, limits and the box into the native arrays."""
+        beq, clo, chi, lbs, ubs = self._nb[1], self._nb[3], self._nb[4], self._nb[6], self._nb[7]
+        eq_plan, in_plan = self._nb_plan
+        for t, sl, sw in eq_plan:
+            if sw is None:
+                beq[sl] = t.b
+            else:
+                np.multiply(t.b, sw, out=beq[sl])
+        for t, sl in in_plan:
+            clo[sl] = t.lower
+            chi[sl] = t.upper
+        b = P.bounds
+        if self._bounded and b.version != self._nb_bounds:
+            lbs[...], ubs[...] = b.resolve(self._n)
+            self._nb_bounds = b.version
+
+    def _native_step(self, P) -> np.ndarray | None:
+        """One native solve on the filled arrays; the checked ``x`` (a new array) or ``None``
+        (then: fall back). Sets ``_lam`` (the active rows in daqp's order) and ``_iters``."""
+        try:
+            self._nw.run(P, warm=True, time_left=DEFAULT_TIME_LIMIT, refactor=False)
+        except (InfeasibleError, SolverError, ValueError):
+            self._lam = None
+            return None
+        self._iters = int(self._nw.detail[2])
+        act = self._nw.active
+        self._lam = act if self._bounded else act[self._n :]
+        return self._nw.x.copy()
 
     def _fill_limits(self, P) -> None:
         bu, bl = self._bu, self._bl
@@ -315,8 +393,8 @@ class PersistentQP:
             sol = Solution(
                 x=x,
                 status="optimal",
-                level_residuals=self._residuals(x),
-                solver="daqp",
+                level_residuals=self._nw.res.copy() if self._nw else self._residuals(x),
+                solver="native" if self.engine == "native" else "daqp",
                 solve_time=time.perf_counter() - t0,
                 method="weighted",
                 info={
@@ -338,7 +416,10 @@ class PersistentQP:
 
     def _fallback(self) -> Solution:
         self.fallbacks += 1
-        sol = self.stack.solve(solver="daqp", method="weighted")
+        if self.engine == "native":
+            sol = self.stack.solve(method="weighted", engine="python")
+        else:
+            sol = self.stack.solve(solver="daqp", method="weighted")
         sol.info.update(persistent=False, setups=self.setups, fallbacks=self.fallbacks)
         self.last = sol
         return sol
@@ -349,6 +430,10 @@ class PersistentQP:
         if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
             P.refresh()
             self._setup(P)
+        if self.engine == "native":
+            self._native_fill(P)
+            x = self._native_step(P)
+            return x, (0 if x is None else self._iters)
         n = self._n
         if self._eq_tasks:
             i = 0
@@ -514,6 +599,29 @@ class PersistentQP:
         )
         self._p_version = self._version
         self._p_bounds = self._bounds_version
+        if self.engine == "native":
+            self._native_parametric(P, spec)
+
+    def _native_parametric(self, P, spec: dict) -> None:
+        """The native arrays affine in θ: ``beq = q0 + Q θ``, ``lo = l0 + L θ``,
+        ``hi = h0 + U θ`` (tasks not in ``spec`` keep their current numbers)."""
+        size = self._pspec[0]
+        self._native_fill(P)
+        beq, clo, chi = self._nb[1], self._nb[3], self._nb[4]
+        q0, Q = beq.copy(), np.zeros((beq.shape[0], size))
+        l0, Lq = clo.copy(), np.zeros((clo.shape[0], size))
+        h0, Uq = chi.copy(), np.zeros((chi.shape[0], size))
+        eq_plan, in_plan = self._nb_plan
+        for t, sl, sw in eq_plan:
+            if id(t) in spec:
+                ((c, M),) = spec[id(t)][1]
+                w = np.ones(c.shape[0]) if sw is None else sw
+                q0[sl], Q[sl] = w * c, w[:, None] * M
+        for t, sl in in_plan:
+            if id(t) in spec:
+                (cl, Ml), (cu, Mu) = spec[id(t)][1]
+                l0[sl], Lq[sl], h0[sl], Uq[sl] = cl, Ml, cu, Mu
+        self._nb_param = (q0, Q, l0, Lq, h0, Uq)
 
     def _build_region(self, lam: np.ndarray):
         """The affine law and KKT test of the critical region whose active rows are
@@ -644,6 +752,24 @@ class PersistentQP:
             if (E @ theta + e0).max() <= CHECK_TOL:
                 self.region_steps += 1
                 return z0 + Z @ theta
+        if self.engine == "native":
+            q0, Q, l0, Lq, h0, Uq = self._nb_param
+            beq, clo, chi = self._nb[1], self._nb[3], self._nb[4]
+            np.dot(Q, theta, out=beq)
+            beq += q0
+            if clo.shape[0]:
+                np.dot(Lq, theta, out=clo)
+                clo += l0
+                np.dot(Uq, theta, out=chi)
+                chi += h0
+            x = self._native_step(P)
+            if x is not None:
+                self.qp_steps += 1
+                if self._fused is not None and self._pz is not None:
+                    self._learn_region(self._lam)
+                return x
+            self.write_tasks(theta)
+            return self._fallback().x
         f = self._f[: self._n]
         np.dot(self._Ft, theta, out=f)
         f += self._f0

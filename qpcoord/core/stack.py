@@ -17,6 +17,7 @@ from .methods.hierarchical import solve_equality_chain, solve_hierarchical
 from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
 from .native import NativeHierarchy, resolve_engine
+from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .polish import KKT_TOL
 from .solution import Solution
 from .tasks import Bounds
@@ -123,6 +124,7 @@ class Stack:
         self._fallback = fallback
         self._chain_missed = False
         self._native: NativeHierarchy | None = None  # built at the first native solve
+        self._native_weighted: NativeWeighted | None = None  # the first native weighted solve
 
     @cached_property
     def _work(self) -> Reduced:
@@ -183,7 +185,8 @@ class Stack:
             iteration (the same ``SolverError`` message).
         engine : {None, "native", "python"}
             ``"native"``: the compiled solver of :mod:`qpcoord.core.native` (method
-            ``"hierarchical"`` only, no ``solver``; warm-started from the previous call's
+            ``"hierarchical"``; ``"weighted"``: :mod:`qpcoord.core.native_weighted`; no
+            ``solver``; warm-started from the previous call's
             working sets). ``"python"``: the methods of :mod:`qpcoord.core.methods`. ``None``:
             :data:`qpcoord.core.native.DEFAULT_ENGINE` where the native engine applies, else
             Python (one warning per process if the default is native but not built).
@@ -212,6 +215,8 @@ class Stack:
             raise ValueError(f"strict must be True or False, got {strict!r}")
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+        if method == "weighted" and resolve_weighted_engine(engine, solver) == "native":
+            return self._solve_native_weighted(t0, warm_start)
         if resolve_engine(engine, method, solver) == "native":
             return self._solve_native(t0, warm_start, strict)
         P = self._compiled
@@ -309,13 +314,40 @@ class Stack:
             info=info,
         )
 
-    def persistent(self, weight_ratio: float | None = None, regularization: float | None = None):
+    def _solve_native_weighted(self, t0: float, warm_start) -> Solution:
+        """``method="weighted"`` with the native engine (:mod:`qpcoord.core.native_weighted`):
+        the same QP, checked in the native call (data finite; bounds and hard rows at ``x``)."""
+        P = self._compiled
+        if warm_start is not None:
+            self._warm(warm_start)  # validated; the engine warm-starts from its working set
+        if self._native_weighted is None:
+            self._native_weighted = NativeWeighted(P, self.regularization, self.weight_ratio)
+        x, residuals, info = self._native_weighted.solve(P, time_left=time_left())
+        return Solution(
+            x=x,
+            status="optimal",
+            level_residuals=residuals,
+            solver="native",
+            solve_time=time.perf_counter() - t0,
+            method="weighted",
+            info=info,
+        )
+
+    def persistent(
+        self,
+        weight_ratio: float | None = None,
+        regularization: float | None = None,
+        engine: str | None = None,
+    ):
         """A :class:`~qpcoord.core.persistent.PersistentQP` on this stack: its weighted QP on one
-        daqp workspace kept across control steps (the tasks' matrices must stay fixed; a
-        change is detected and rebuilds the workspace)."""
+        workspace kept across control steps (the native weighted QP where built, else daqp;
+        ``engine="python"``: daqp; the tasks' matrices must stay fixed; a change is detected
+        and rebuilds the workspace)."""
         from .persistent import PersistentQP
 
-        return PersistentQP(self, weight_ratio=weight_ratio, regularization=regularization)
+        return PersistentQP(
+            self, weight_ratio=weight_ratio, regularization=regularization, engine=engine
+        )
 
     def _reset(self, solver: str):
         """The workspace for a solve with QPs, after checking that no NaN or wrong-sided
