@@ -91,7 +91,8 @@ def _region(x0, X, r0, R) -> tuple:
 
 
 class PersistentQP:
-    """The weighted QP of a fixed-matrix :class:`~qpcoord.Stack` on a persistent daqp workspace.
+    """The weighted QP of a fixed-matrix :class:`~qpcoord.Stack` on a persistent workspace (native
+    or daqp).
 
     Parameters
     ----------

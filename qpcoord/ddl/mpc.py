@@ -18,7 +18,7 @@ The stack (``qc.Stack``):
 * level 2: least effort ``Δα_j = 0`` (rad) and ``Δv_j = 0`` (in units of
   :data:`V_EFFORT` = 10 V: the coarse phase costs most).
 
-``method="weighted"`` solves it as one QP on a persistent daqp workspace
+``method="weighted"`` solves it as one QP on a persistent workspace (native where built, else daqp)
 (:class:`qpcoord.core.persistent.PersistentQP`, hot-started); ``method="hierarchical"`` solves
 the strict hierarchy with :meth:`qpcoord.Stack.solve` each step (exact priorities, slower).
 If a step's QP fails (infeasible hard constraints, backend failure), the step uses the fine
@@ -178,7 +178,8 @@ class MPC:
     Parameters
     ----------
     method : {"weighted", "hierarchical"}
-        One weighted QP on a persistent daqp workspace (default), or the strict hierarchy.
+        One weighted QP on a persistent workspace (default; native where built, else
+        daqp), or the strict hierarchy.
     blocks : sequence of int
         Move-blocking lengths, control periods (default :data:`DEFAULT_BLOCKS`).
     margin : float
