@@ -7,6 +7,7 @@
 #include <array>
 
 #include "hierarchy.hpp"
+#include "ik_step.hpp"
 
 namespace nb = nanobind;
 using qpcoord::Hierarchy;
@@ -123,4 +124,6 @@ NB_MODULE(_native, m) {
       .def_prop_ro("n", &Hierarchy::n)
       .def_prop_ro("num_levels", &Hierarchy::num_levels)
       .def_prop_ro("damping", &Hierarchy::damping);
+
+  qpcoord::bind_ik_step(m);
 }
