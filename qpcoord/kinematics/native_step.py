@@ -312,4 +312,3 @@ class NativeIKStep(NativeHierarchy):
                 "native engine: time limit reached in an active set"
             )
         self._raise(code, self.P)
-

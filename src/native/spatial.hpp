@@ -48,7 +48,7 @@ inline Vec3 log3(const Mat3& R, double& theta) {
     if (tr <= 3.0 - prec)
       th = std::acos(std::min(1.0, std::max(-1.0, c)));
     else
-      th = std::sqrt(2.0 * (1.0 - c) + eps * eps);
+      th = std::sqrt(std::max(0.0, 2.0 * (1.0 - c)) + eps * eps);
     const double s2 = w.squaredNorm();
     const double k = th >= prec ? th / std::sin(th) : 1.0 + s2 / 6.0 + s2 * s2 * 3.0 / 40.0;
     theta = th;
