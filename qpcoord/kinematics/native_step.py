@@ -155,8 +155,7 @@ class NativeIKStep(NativeHierarchy):
                         self._python_tasks.append(owner)
                 else:
                     frame = -1
-                    if kind == 4 and not self.com:
-                        pin.jacobianCenterOfMass(self._model, self._data, robot.neutral(), False)
+                    if kind == 4 and not self.com:  # views: computed at each step
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     elif kind not in (4, 5):

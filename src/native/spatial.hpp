@@ -17,10 +17,14 @@ using Vec3 = Eigen::Vector3d;
 using Mat6 = Eigen::Matrix<double, 6, 6>;
 using Vec6 = Eigen::Matrix<double, 6, 1>;
 
-/// Below these angles the closed forms lose precision and their Taylor series are used
-/// (eps^(1/3) for log3 / log6, eps^(1/4) for the Jacobians, as Pinocchio).
+/// Below this trace deficit (3 - tr < eps^(1/3), as Pinocchio) log3's angle comes from
+/// sqrt(2 (1 - cos)) instead of acos.
 inline double taylor_log() { return std::cbrt(std::numeric_limits<double>::epsilon()); }
-inline double taylor_jac() { return std::sqrt(std::sqrt(std::numeric_limits<double>::epsilon())); }
+/// Below this angle (rad) the coefficients of V^-1, Jlog3 and Jlog6 come from their series
+/// (to theta^6): their closed forms cancel (1/theta^2 - ..., 1/theta^4 - ...) and lose
+/// eps / theta^4 (Pinocchio switches at eps^(1/4) = 1.2e-4 and loses ~1e-7 near 1e-3 rad in
+/// Jlog6); the series' first omitted term is below 1e-15 here.
+inline constexpr double kSeries = 0.05;
 
 /// (R - R^T) / 2 as a vector: sin(theta) u.
 inline Vec3 unskew(const Mat3& R) {
@@ -76,11 +80,11 @@ inline Vec3 log3(const Mat3& R, double& theta) {
 /// Jlog3 at r = theta u: (theta sin / (2 (1 - cos))) I + r r^T (1/theta^2 - sin / (2 theta
 /// (1 - cos))) + [r]x / 2.
 inline Mat3 jlog3(double theta, const Vec3& r) {
-  const double prec = taylor_jac();
   double alpha, diag;
-  if (theta < prec) {
-    alpha = 1.0 / 12.0 + theta * theta / 720.0;
-    diag = 0.5 * (2.0 - theta * theta / 6.0);
+  if (theta < kSeries) {
+    const double t2 = theta * theta;
+    alpha = 1.0 / 12.0 + t2 * (1.0 / 720.0 + t2 * (1.0 / 30240.0 + t2 / 1209600.0));
+    diag = 1.0 - t2 * (1.0 / 12.0 + t2 * (1.0 / 720.0 + t2 / 30240.0));
   } else {
     const double st = std::sin(theta), ct = std::cos(theta);
     const double st_1mct = st / (1.0 - ct);
@@ -97,11 +101,11 @@ inline Mat3 jlog3(double theta, const Vec3& r) {
 inline Vec6 log6(const Mat3& R, const Vec3& p) {
   double theta;
   const Vec3 w = log3(R, theta);
-  const double t2 = unskew(R).squaredNorm();
   double alpha, beta;
-  if (R.trace() >= 3.0 - taylor_log()) {
-    alpha = 1.0 - t2 / 12.0 - t2 * t2 / 720.0;
-    beta = 1.0 / 12.0 + t2 / 720.0;
+  if (theta < kSeries) {
+    const double t2 = theta * theta;
+    alpha = 1.0 - t2 * (1.0 / 12.0 + t2 * (1.0 / 720.0 + t2 / 30240.0));
+    beta = 1.0 / 12.0 + t2 * (1.0 / 720.0 + t2 * (1.0 / 30240.0 + t2 / 1209600.0));
   } else {
     const double st = std::sin(theta), ct = std::cos(theta);
     alpha = theta * st / (2.0 * (1.0 - ct));
@@ -120,9 +124,10 @@ inline Mat6 jlog6(const Mat3& R, const Vec3& p) {
   const Mat3 A = jlog3(t, w);
   const double t2 = t * t;
   double beta, beta_dot_over_theta;
-  if (t < taylor_jac()) {
-    beta = 1.0 / 12.0 + t2 / 720.0;
-    beta_dot_over_theta = 1.0 / 360.0;
+  if (t < kSeries) {
+    beta = 1.0 / 12.0 + t2 * (1.0 / 720.0 + t2 * (1.0 / 30240.0 + t2 / 1209600.0));
+    // beta'(t) / t
+    beta_dot_over_theta = 1.0 / 360.0 + t2 * (1.0 / 7560.0 + t2 * (1.0 / 201600.0));
   } else {
     const double tinv = 1.0 / t, t2inv = tinv * tinv;
     const double st = std::sin(t), ct = std::cos(t);
