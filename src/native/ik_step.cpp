@@ -331,13 +331,15 @@ class IKStep {
   }
 
   /// Write row r of kernel k: A row (pin coordinates in src, mapped here), b value.
-  void write_row(const Kernel& k, int r, const Eigen::Ref<const Eigen::RowVectorXd>& src,
+  /// (A row of a column-major matrix: an inner stride, so that no copy is made.)
+  void write_row(const Kernel& k, int r,
+                 const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& src,
                  double bval) {
     double* Aeq = out_[0].data() + static_cast<size_t>(k.row0 + r) * nv_;
     double* beq = out_[1].data() + k.row0 + r;
     const double s = k.sw[r];
     if (mapped_) {
-      row_.noalias() = (src * M_).transpose();
+      row_.noalias() = M_.transpose() * src.transpose();
     } else {
       row_ = src.transpose();
     }
@@ -359,24 +361,24 @@ class IKStep {
     switch (k.kind) {
       case kPosition: {
         const Frame& f = frames_[k.frame];
-        nb::object tgt = attr(k.task, names_[4]);
-        View y, v;
+        const View* y = &k.target;
+        View yv, v;
         nb::object ref_pair;
         bool moving = false;
-        if (view_of(tgt, y, 1) && y.rows == rows) {
-          // a fixed target: y_ref, v_ref = 0 (PositionTask.reference_at)
-        } else {
+        if (cached(k.task, names_[4], k.target, 1, rows) != 1) {
+          // a path, or no target (the run's reference): PositionTask.reference_at(t, reference)
           ref_pair = attr(k.task, names_[9])(t, reference);
           nb::tuple pair = nb::cast<nb::tuple>(ref_pair);
-          if (pair.size() != 2 || !view_of(pair[0], y, 1) || !view_of(pair[1], v, 1) ||
-              y.rows != rows || v.rows != rows)
+          if (pair.size() != 2 || !view_of(pair[0], yv, 1) || !view_of(pair[1], v, 1) ||
+              yv.rows != rows || v.rows != rows)
             return false;
+          y = &yv;
           moving = true;
         }
         frame_jacobian(f);
         for (int r = 0; r < rows; ++r) {
           const int a = k.sel[r];
-          const double e = gain * (y[r] - f.p[a]);
+          const double e = gain * ((*y)[r] - f.p[a]);
           write_row(k, r, Jt_.row(a), moving ? v[r] + e : 0.0 + e);
         }
         return true;
@@ -424,7 +426,7 @@ class IKStep {
           Jl_.col(c).tail<3>() = Rt * Jt_.col(c).tail<3>();
         }
         Jt_.setZero();
-        for (int c : f.cols) Jt_.col(c) = Jlog * Jl_.col(c);
+        for (int c : f.cols) Jt_.col(c).noalias() = Jlog * Jl_.col(c);
         Vec6 ff = Vec6::Zero();
         if (hv) {
           // Ad(E^-1) nu with E^-1 = (RE^T, -RE^T pE)
