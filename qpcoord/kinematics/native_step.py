@@ -277,20 +277,32 @@ class NativeIKStep(NativeHierarchy):
             sw[...] = task.sqrt_weight
 
     def _info(self) -> dict:
-        """The solve's statistics, as :meth:`NativeHierarchy.solve` reports them."""
-        rows = self.stats.tolist()
-        its = [int(r[0]) for r in rows]
-        dev = self.detail[5]
+        """The solve's statistics, as :meth:`NativeHierarchy.solve` reports them (one pass
+        over the stages: hard, levels, minimum-norm step)."""
+        its: list[int] = []
+        hits = calls = 0
+        closed: list[int] = []
+        last = len(self.res)
+        for k, (i, h, c) in enumerate(self.stats.tolist()):
+            its.append(int(i))
+            hits += h
+            if c and 0 < k <= last:
+                closed.append(k - 1)
+            if i or h:
+                calls += 1
+        d = self.detail.tolist()
         return {
             "engine": "native",
             "hard_iterations": its[0],
             "active_set_iterations": its[1:-1],
             "min_norm_iterations": its[-1],
-            "warm_start_hits": int(sum([r[1] for r in rows])),
-            "warm_start_seeded": int(self.detail[7]),
-            "closed_form_levels": [k for k, r in enumerate(rows[1:-1]) if r[2]],
-            "qp_calls": sum([1 for r in rows if r[0] or r[1]]),
-            "uncertified": [(int(self.detail[6]), float(dev))] if dev > KKT_TOL else [],
+            "warm_start_hits": int(hits),
+            "warm_start_seeded": int(d[7]),
+            "closed_form_levels": closed,
+            # as the Python engine's count of QP calls: the stages that needed the active
+            # set (its iterations or a stored working set) rather than a closed form
+            "qp_calls": calls,
+            "uncertified": [(int(d[6]), d[5])] if d[5] > KKT_TOL else [],
         }
 
     def _fail(self, code: int, q: Any, t: float, reference: Any) -> None:

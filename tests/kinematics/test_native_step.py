@@ -179,7 +179,7 @@ def test_set_target_and_gain_are_followed(robots):
 def test_limit_boxes_equal_the_python_refresh(robots, name):
     robot = _robot(robots, name)
     q = _start(robot).copy()
-    limited = JointLimitsIndex(robot)
+    limited = _limited_joints(robot)
     q[limited[0]] = robot.upper[limited[0]] + 0.05  # outside a limit: the boxes do not meet
     levels = lambda: [qc.PostureTask(robot, _start(robot))]  # noqa: E731
     limits = lambda: [  # noqa: E731
@@ -198,7 +198,7 @@ def test_limit_boxes_equal_the_python_refresh(robots, name):
     assert np.any(lo == hi)  # the speed limit won where the boxes did not meet
 
 
-def JointLimitsIndex(robot: qc.Robot) -> list[int]:  # noqa: N802 - reads as a constant
+def _limited_joints(robot: qc.Robot) -> list[int]:
     """q indices of the robot's limited 1-DoF joints."""
     return [
         int(j.idx_q)
@@ -337,7 +337,11 @@ def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind)
         vn, sn = ikn.step(q)
         vp, _ = ikp.step(q)
         current.refresh(q)
-        vc = current.stack.solve(engine="native").x
+        sc = current.stack.solve(engine="native")
+        vc = sc.x
+        assert sn.info.keys() == sc.info.keys()
+        if kind == "position":  # the same rows to rounding: the same solver path
+            assert sn.info == sc.info, step
         np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
         # the same rows but for Jlog6's series below 0.05 rad (Pinocchio's closed form)
         np.testing.assert_allclose(vn, vc, rtol=0, atol=1e-9, err_msg=f"step {step}")
