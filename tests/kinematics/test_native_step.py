@@ -547,3 +547,34 @@ def test_without_the_extension_the_python_path_warns_once(robots, missing_extens
         np.testing.assert_allclose(v, ref.step(q)[0], atol=1e-12)
     with pytest.raises(native.NativeUnavailableError):
         qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="native")
+
+
+@needs_native
+def test_hard_constraint_rows_are_native_and_match(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    frame = FRAMES["panda"]
+
+    def build(engine):
+        hold = FramePositionTask(robot, frame, robot.frame_pose(q, frame)[:3, 3], gain=10.0)
+        pose = OrientationTask(robot, frame, _target_pose(robot, q), gain=5.0)
+        return qc.IK(robot, [pose, qc.PostureTask(robot, q)], DT, constraints=[hold], engine=engine)
+
+    ikn, ikp = build("native"), build("python")
+    assert len(ikn._native.kernel_tasks) == 3 and not ikn._native._hybrid
+    for step in range(20):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_a_path_of_the_wrong_dimension_raises_the_tasks_message(robots):
+    robot = robots["panda"]
+    task = qc.PositionTask(robot, gain=1.0)  # no target: the run's reference is used
+    ik = qc.IK(robot, [task], DT, engine="native")
+    with pytest.raises(ValueError, match="reference path is 2-D"):
+        ik.step(_start(robot), reference=Circle())
+    with pytest.raises(ValueError, match="no target"):
+        ik.step(_start(robot))
