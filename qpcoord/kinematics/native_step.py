@@ -14,12 +14,13 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
 - :class:`~qpcoord.FramePositionTask`, :class:`~qpcoord.FrameTask` (``error="se3"``),
   :class:`~qpcoord.OrientationTask`, :class:`~qpcoord.ComTask` (targets, feed-forward,
   masks, weights),
-- :class:`~qpcoord.PostureTask` on a vector-space configuration (``nq == nv``),
+- :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
+  not in it; a continuous joint's are),
 - :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
   intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
 
 Every other task (bands, support polygons, relative frames, collision, user tasks, a
-posture on a floating base, ``FrameTask(error="split")``) and constant
+posture over a continuous joint, ``FrameTask(error="split")``) and constant
 Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
 copied into the same arrays (a hybrid step); any other limit (acceleration limits, user
 limits) makes the whole box Python-computed. The kernels also write each task's own
@@ -70,9 +71,24 @@ def native_kind(task: KinematicTask) -> int | None:
         return None  # no default frame: its _refresh raises the robot's message
     if kind == 2 and task.error != "se3":
         return None
-    if kind == 5 and not task.robot.euclidean:
+    if kind == 5 and _posture_q_index(task) is None:
         return None
     return kind
+
+
+def _posture_q_index(task: PostureTask) -> list[int] | None:
+    """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there), or
+    ``None`` if a row's joint is not a 1-DoF vector-space joint (a continuous joint)."""
+    robot = task.robot
+    if robot.euclidean:
+        return [int(j) for j in task.joints]
+    model = robot.model
+    by_v = {}
+    for joint in model.joints[1:]:
+        if joint.nq == 1 and joint.nv == 1:
+            by_v[int(joint.idx_v)] = int(joint.idx_q)
+    out = [by_v.get(int(j)) for j in task.joints]
+    return None if None in out else out
 
 
 def _selection(task: KinematicTask, kind: int) -> list[int]:
@@ -163,7 +179,8 @@ class NativeIKStep(NativeHierarchy):
                         if fid not in frames:
                             frames[fid] = self._add_frame(solver, fid)
                         frame = frames[fid]
-                    solver.add_task(kind, owner, t, frame, _selection(owner, kind), i)
+                    qidx = _posture_q_index(owner) if kind == 5 else []
+                    solver.add_task(kind, owner, t, frame, _selection(owner, kind), i, qidx)
                     self.kernel_tasks.append(owner)
                 i += m
             for t in B.ineqs:

@@ -116,6 +116,7 @@ struct Kernel {
   nb::object task, eq;
   int frame = -1;
   std::vector<int> sel;  ///< per row: the axis (0..5) or, for a posture, the joint's v index
+  std::vector<int> qidx;  ///< posture: per row, the joint's q index
   int row0 = 0;
   View target, vel, sw, A, b;
   nb::object pose_target;  ///< FrameTask: the pin.SE3 its target inverse was read from
@@ -193,8 +194,9 @@ class IKStep {
     return static_cast<int>(frames_.size()) - 1;
   }
 
+  /// qidx: for a posture, the q index of each row's joint (a 1-DoF joint: q_ref - q there).
   void add_task(int kind, nb::object task, nb::object eq, int frame, std::vector<int> sel,
-                int row0) {
+                int row0, std::vector<int> qidx) {
     if (kind < kPosition || kind > kPosture) throw nb::value_error("add_task: unknown kind");
     if ((kind != kCom && kind != kPosture) && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
@@ -206,6 +208,11 @@ class IKStep {
     for (int s : sel)
       if (s < 0 || s >= (kind == kPosture ? nv_ : 6))
         throw nb::value_error("add_task: row selection out of range");
+    if (kind == kPosture) {
+      if (qidx.size() != sel.size()) throw nb::value_error("add_task: one q index per row");
+      for (int i : qidx)
+        if (i < 0 || i >= nq_) throw nb::value_error("add_task: q index out of range");
+    }
     Kernel k;
     k.kind = kind;
     k.task = std::move(task);
@@ -213,6 +220,7 @@ class IKStep {
     k.frame = frame;
     k.sel = std::move(sel);
     k.row0 = row0;
+    k.qidx = std::move(qidx);
     kernels_.push_back(std::move(k));
   }
 
@@ -489,9 +497,9 @@ class IKStep {
         double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
         double* beq = out_[1].data() + k.row0;
         for (int r = 0; r < rows; ++r) {
-          const int j = k.sel[r];
+          const int j = k.sel[r], iq = k.qidx[r];
           const double s = k.sw[r];
-          const double bv = gain * (k.target[j] - q[j * qs]);
+          const double bv = gain * (k.target[iq] - q[iq * qs]);
           // the task's A (the selection) is constant: the stacked row is rewritten
           for (int c = 0; c < nv_; ++c) Aeq[r * nv_ + c] = 0.0;
           Aeq[r * nv_ + j] = k.A(r, j) * s;

@@ -129,8 +129,8 @@ def test_native_rows_equal_the_python_refresh(robots, name, kind):
     ikn, ikp = _pair(robot, lambda: _kind_levels(robot, kind, q))
     task = ikn._dynamic[0]
     assert native_kind(task) is not None and task in ikn._native.kernel_tasks
-    if robot.euclidean:  # a posture on a floating base keeps its Python refresh (hybrid)
-        assert ikn._dynamic[1] in ikn._native.kernel_tasks
+    assert ikn._dynamic[1] in ikn._native.kernel_tasks  # the posture too (1-DoF joints)
+    assert not ikn._native._hybrid
     for step, t in enumerate((0.0, 0.37)):
         qs = q if step == 0 else robot.integrate(q, 0.1 * np.ones(robot.nv), DT)
         ikn.step(qs, t)
@@ -428,7 +428,7 @@ def test_hybrid_step_matches_the_python_engine(robots):
 
 
 @needs_native
-def test_floating_base_posture_is_hybrid_and_matches(robots):
+def test_floating_base_whole_body_is_native_and_matches(robots):
     robot = _robot(robots, "talos")
     q = _start(robot)
     feet = ["left_sole_link", "right_sole_link"]
@@ -441,7 +441,7 @@ def test_floating_base_posture_is_hybrid_and_matches(robots):
         return [tasks, com, qc.PostureTask(robot, q)]
 
     ikn, ikp = _pair(robot, levels)
-    assert len(ikn._native.kernel_tasks) == 3 and ikn._native._python_tasks
+    assert len(ikn._native.kernel_tasks) == 4 and not ikn._native._hybrid
     for step in range(30):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)
@@ -547,6 +547,34 @@ def test_without_the_extension_the_python_path_warns_once(robots, missing_extens
         np.testing.assert_allclose(v, ref.step(q)[0], atol=1e-12)
     with pytest.raises(native.NativeUnavailableError):
         qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="native")
+
+
+@needs_native
+def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
+    model = pin.Model()
+    parent = 0
+    for i, joint in enumerate(
+        [pin.JointModelRZ(), pin.JointModelRUBZ(), pin.JointModelRY(), pin.JointModelRZ()]
+    ):
+        placement = pin.SE3(np.eye(3), np.array([0.0 if i == 0 else 0.4, 0.0, 0.0]))
+        parent = model.addJoint(parent, joint, placement, f"j{i}")
+        model.appendBodyToJoint(parent, pin.Inertia.Random(), pin.SE3.Identity())
+    model.addFrame(
+        pin.Frame("tip", parent, 0, pin.SE3(np.eye(3), np.array([0.4, 0, 0])), pin.OP_FRAME)
+    )
+    robot = qc.Robot(model, "tip")
+    q = robot.random_configuration(1)
+
+    def levels():
+        return [qc.PositionTask(robot, robot.position(q) + 0.05), qc.PostureTask(robot, q)]
+
+    ikn, ikp = _pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
+    assert ikn._native._python_tasks == [ikn._dynamic[1]]
+    for step in range(30):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
 
 
 @needs_native
