@@ -4,7 +4,12 @@ its errors."""
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -606,3 +611,70 @@ def test_a_path_of_the_wrong_dimension_raises_the_tasks_message(robots):
         ik.step(_start(robot), reference=Circle())
     with pytest.raises(ValueError, match="no target"):
         ik.step(_start(robot))
+
+
+_COUNTING_MALLOC = r"""
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <stddef.h>
+static long long calls = 0;
+static void* (*next_malloc)(size_t) = 0;
+static void* (*next_realloc)(void*, size_t) = 0;
+long long qpcoord_malloc_calls(void) { return calls; }
+void* malloc(size_t s) {
+  if (!next_malloc) next_malloc = dlsym(RTLD_NEXT, "malloc");
+  ++calls;
+  return next_malloc(s);
+}
+void* realloc(void* p, size_t s) {
+  if (!next_realloc) next_realloc = dlsym(RTLD_NEXT, "realloc");
+  ++calls;
+  return next_realloc(p, s);
+}
+"""
+
+_ALLOCATION_RUN = r"""
+import ctypes, sys
+import numpy as np, pinocchio as pin, qpcoord as qc
+sys.path.insert(0, {tests!r})
+from test_native_step import _kind_levels, _start, DT
+count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
+count.restype = ctypes.c_longlong
+robot = qc.robots.load("panda")
+for kind in ("position", "frame_position", "pose", "orientation", "com"):
+    q = _start(robot)
+    ik = qc.IK(robot, _kind_levels(robot, kind, q), DT, engine="native")
+    call = ik._native._solver.step
+    pin.computeJointJacobians(robot.model, robot.data, q)
+    pin.jacobianCenterOfMass(robot.model, robot.data, False)
+    for _ in range(20):
+        assert call(q, 0.0, None, True, 10.0) == 0
+    before = count()
+    for _ in range(500):
+        call(q, 0.0, None, True, 10.0)
+    print(kind, count() - before)
+"""
+
+
+@needs_native
+def test_the_native_call_does_not_allocate(tmp_path):
+    """The per-step native call (kernels, box, hierarchy) on the Panda makes no heap
+    allocation after its first calls: malloc is counted by a preloaded shim (glibc)."""
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None or not sys.platform.startswith("linux"):
+        pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
+    src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
+    src.write_text(_COUNTING_MALLOC)
+    subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
+    script = _ALLOCATION_RUN.format(tests=str(Path(__file__).parent), lib=str(lib))
+    proc = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    counts = dict(line.split() for line in proc.stdout.splitlines())
+    assert len(counts) == 5
+    assert all(int(c) == 0 for c in counts.values()), counts
