@@ -11,7 +11,7 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
 
 - :class:`~qpcoord.PositionTask` on a robot with a default frame (fixed target, path or the
   run's reference; a path is evaluated by the task's ``reference_at``),
-- :class:`~qpcoord.FramePositionTask`, :class:`~qpcoord.FrameTask` (``error="se3"``),
+- :class:`~qpcoord.FramePositionTask`, :class:`~qpcoord.FrameTask` (both errors),
   :class:`~qpcoord.OrientationTask`, :class:`~qpcoord.ComTask` (targets, feed-forward,
   masks, weights),
 - :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
@@ -20,7 +20,7 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
 
 Every other task (bands, support polygons, relative frames, collision, user tasks, a
-posture over a continuous joint, ``FrameTask(error="split")``) and constant
+posture over a continuous joint) and constant
 Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
 copied into the same arrays (a hybrid step); any other limit (acceleration limits, user
 limits) makes the whole box Python-computed. The kernels also write each task's own
@@ -48,7 +48,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["NativeIKStep", "KERNELS", "native_kind"]
 
-#: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class.
+#: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class (6:
+#: ``FrameTask(error="split")``).
 KERNELS = {
     PositionTask: 0,
     FramePositionTask: 1,
@@ -69,8 +70,8 @@ def native_kind(task: KinematicTask) -> int | None:
         return None
     if kind == 0 and task.robot.frame_id is None:
         return None  # no default frame: its _refresh raises the robot's message
-    if kind == 2 and task.error != "se3":
-        return None
+    if kind == 2 and task.error == "split":
+        return 6
     if kind == 5 and _posture_q_index(task) is None:
         return None
     return kind

@@ -100,7 +100,15 @@ int cached(nb::handle owner, nb::handle name, View& v, size_t ndim, int64_t rows
   return 1;
 }
 
-enum Kind : int { kPosition = 0, kFramePosition, kPose, kOrientation, kCom, kPosture };
+enum Kind : int {
+  kPosition = 0,
+  kFramePosition,
+  kPose,
+  kOrientation,
+  kCom,
+  kPosture,
+  kPoseSplit,  ///< FrameTask(error="split")
+};
 
 struct Frame {
   View Rj, pj;  ///< rotation and translation of the parent joint (views of data.oMi[j])
@@ -197,7 +205,7 @@ class IKStep {
   /// qidx: for a posture, the q index of each row's joint (a 1-DoF joint: q_ref - q there).
   void add_task(int kind, nb::object task, nb::object eq, int frame, std::vector<int> sel,
                 int row0, std::vector<int> qidx) {
-    if (kind < kPosition || kind > kPosture) throw nb::value_error("add_task: unknown kind");
+    if (kind < kPosition || kind > kPoseSplit) throw nb::value_error("add_task: unknown kind");
     if ((kind != kCom && kind != kPosture) && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
     if (kind == kCom && !com_.p) throw nb::value_error("add_task: set_com first");
@@ -405,7 +413,8 @@ class IKStep {
         }
         return true;
       }
-      case kPose: {
+      case kPose:
+      case kPoseSplit: {
         const Frame& f = frames_[k.frame];
         nb::object inv = attr(k.task, names_[6]);
         if (inv.is_none()) return false;
@@ -423,10 +432,8 @@ class IKStep {
         if (hv < 0) return false;
         const Mat3 RE = k.Rinv * f.R;
         const Vec3 pE = k.Rinv * f.p + k.pinv;
-        const Vec6 e = spatial::log6(RE, pE);
-        const Mat6 Jlog = spatial::jlog6(RE, pE);
         frame_jacobian(f);
-        // LOCAL Jacobian: R^T of both parts, then Jlog6 times it
+        // LOCAL Jacobian: R^T of both parts
         Jl_.setZero();
         const Mat3 Rt = f.R.transpose();
         for (int c : f.cols) {
@@ -434,17 +441,36 @@ class IKStep {
           Jl_.col(c).tail<3>() = Rt * Jt_.col(c).tail<3>();
         }
         Jt_.setZero();
-        for (int c : f.cols) Jt_.col(c).noalias() = Jlog * Jl_.col(c);
-        Vec6 ff = Vec6::Zero();
-        if (hv) {
-          // Ad(E^-1) nu with E^-1 = (RE^T, -RE^T pE)
-          const Mat3 Ri = RE.transpose();
-          const Vec3 pi = -(Ri * pE);
-          const Vec3 u(k.vel[0], k.vel[1], k.vel[2]), w(k.vel[3], k.vel[4], k.vel[5]);
-          Vec6 tw;
-          tw.tail<3>() = Ri * w;
-          tw.head<3>() = Ri * u + pi.cross(tw.tail<3>());
-          ff = Jlog * tw;
+        Vec6 e, ff = Vec6::Zero();
+        if (k.kind == kPose) {  // e = log6(E), J = Jlog6(E) J_local
+          e = spatial::log6(RE, pE);
+          const Mat6 Jlog = spatial::jlog6(RE, pE);
+          for (int c : f.cols) Jt_.col(c).noalias() = Jlog * Jl_.col(c);
+          if (hv) {
+            // Ad(E^-1) nu with E^-1 = (RE^T, -RE^T pE)
+            const Mat3 Ri = RE.transpose();
+            const Vec3 pi = -(Ri * pE);
+            const Vec3 u(k.vel[0], k.vel[1], k.vel[2]), w(k.vel[3], k.vel[4], k.vel[5]);
+            Vec6 tw;
+            tw.tail<3>() = Ri * w;
+            tw.head<3>() = Ri * u + pi.cross(tw.tail<3>());
+            ff = Jlog * tw;
+          }
+        } else {  // "split": e = (E.translation, log3(E.rotation)), J = (R_E J_lin; Jlog3 J_ang)
+          double theta;
+          const Vec3 lw = spatial::log3(RE, theta);
+          const Mat3 Jlog = spatial::jlog3(theta, lw);
+          e.head<3>() = pE;
+          e.tail<3>() = lw;
+          for (int c : f.cols) {
+            Jt_.col(c).head<3>() = RE * Jl_.col(c).head<3>();
+            Jt_.col(c).tail<3>() = Jlog * Jl_.col(c).tail<3>();
+          }
+          if (hv) {
+            const Vec3 u(k.vel[0], k.vel[1], k.vel[2]), w(k.vel[3], k.vel[4], k.vel[5]);
+            ff.head<3>() = w.cross(pE) + u;
+            ff.tail<3>() = Jlog * (RE.transpose() * w);
+          }
         }
         for (int r = 0; r < rows; ++r) {
           const int a = k.sel[r];

@@ -92,6 +92,9 @@ def _kind_levels(robot: qc.Robot, kind: str, q: np.ndarray) -> list:
             robot, frame, gain=2.0, position_weight=2.0, orientation_weight=0.5, mask="x y rz ry"
         )
         task.set_target(_target_pose(robot, q), velocity=[0.1, 0.0, -0.1, 0.2, 0.1, -0.3])
+    elif kind == "pose_split":
+        task = FrameTask(robot, frame, gain=2.5, mask="x z rx ry", error="split", name="split")
+        task.set_target(_target_pose(robot, q), velocity=[0.1, 0.2, -0.1, 0.3, -0.1, 0.2])
     elif kind == "pose_plain":
         task = FrameTask(robot, frame, _target_pose(robot, q), gain=4.0)
     elif kind == "orientation":
@@ -107,7 +110,7 @@ def _kind_levels(robot: qc.Robot, kind: str, q: np.ndarray) -> list:
     return [task, posture]
 
 
-KINDS = ["position", "position_path", "frame_position", "pose", "orientation", "com"]
+KINDS = ["position", "position_path", "frame_position", "pose", "pose_split", "orientation", "com"]
 
 
 def _pair(robot, factory, **options):
@@ -226,7 +229,9 @@ def _error_and_jacobian(ik: qc.IK, q: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 @needs_native
 @pytest.mark.parametrize("name", ["panda", "planar_3r", "talos"])
-@pytest.mark.parametrize("kind", ["position", "frame_position", "pose", "orientation", "com"])
+@pytest.mark.parametrize(
+    "kind", ["position", "frame_position", "pose", "pose_split", "orientation", "com"]
+)
 def test_native_jacobians_match_finite_differences(robots, name, kind):
     robot = _robot(robots, name)
     if kind == "com" and robot.mass <= 0:
@@ -238,6 +243,7 @@ def test_native_jacobians_match_finite_differences(robots, name, kind):
         "position": lambda: qc.PositionTask(_ee(robot), target=_ee(robot).position(q), gain=1.0),
         "frame_position": lambda: FramePositionTask(robot, frame, T[:3, 3], gain=1.0),
         "pose": lambda: FrameTask(robot, frame, T, gain=1.0),
+        "pose_split": lambda: FrameTask(robot, frame, T, gain=1.0, error="split"),
         "orientation": lambda: OrientationTask(robot, frame, T, gain=1.0),
         "com": lambda: ComTask(robot, robot.com(q) + 0.01, gain=1.0),
     }[kind]()
@@ -424,7 +430,7 @@ def test_hybrid_step_matches_the_python_engine(robots):
     ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
     hybrid = ikn._native
     assert hybrid._python_tasks and hybrid._python_limits
-    assert [type(t) for t in hybrid.kernel_tasks] == [qc.PostureTask]
+    assert [type(t) for t in hybrid.kernel_tasks] == [FrameTask, qc.PostureTask]
     for step in range(60):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)
