@@ -191,6 +191,20 @@ class IK:
 
             self._native = NativeIKStep(self)
 
+    def __getstate__(self) -> dict:
+        """Pickling (e.g. a sweep's worker): the native step holds views of the robot's
+        Pinocchio data and is rebuilt on unpickling (its warm start is lost)."""
+        state = self.__dict__.copy()
+        state["_native"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        if self.engine == "native":
+            from .native_step import NativeIKStep
+
+            self._native = NativeIKStep(self)
+
     def _collect(self, level, where: str) -> list:
         items = level if isinstance(level, (list, tuple)) else [level]
         out = []

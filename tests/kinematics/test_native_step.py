@@ -684,3 +684,17 @@ def test_the_native_call_does_not_allocate(tmp_path):
     counts = dict(line.split() for line in proc.stdout.splitlines())
     assert len(counts) == 5
     assert all(int(c) == 0 for c in counts.values()), counts
+
+
+@needs_native
+def test_an_ik_with_the_native_step_pickles(robots):
+    import pickle
+
+    robot = robots["panda"]
+    q = _start(robot)
+    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", q), DT, engine="native")
+    v, _ = ik.step(q)
+    copy = pickle.loads(pickle.dumps(ik))
+    assert copy.engine == "native" and copy._native is not None
+    np.testing.assert_allclose(copy.step(q)[0], v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ik.step(q)[0], v, rtol=0, atol=1e-12)  # the original still runs
