@@ -246,6 +246,10 @@ class NativeIKStep(NativeHierarchy):
         if type(q) is not np.ndarray or q.dtype != _F64 or q.shape != self._qshape or self._hybrid:
             q = robot.check_configuration(q)
         t = float(t)
+        if self._hybrid:  # first: a Python task may evaluate the robot elsewhere (its data)
+            self._python_rows(q, t, reference)
+        if self._python_limits:
+            self.ik._refresh_limits(q)
         if self._M is None:
             pin.computeJointJacobians(self._model, self._data, q)
         else:
@@ -253,10 +257,6 @@ class NativeIKStep(NativeHierarchy):
         if self.com:
             pin.jacobianCenterOfMass(self._model, self._data, False)
         robot._state = 0  # the robot's cached kinematics no longer match its data
-        if self._hybrid:
-            self._python_rows(q, t, reference)
-        if self._python_limits:
-            self.ik._refresh_limits(q)
         code = self._solver.step(q, t, reference, self._solved, DEFAULT_TIME_LIMIT)
         if code:
             self._solved = False

@@ -402,6 +402,42 @@ class Height(qc.KinematicTask):
         return self.robot.frame_jacobian(q, self.frame)[2:3]
 
 
+class HeightFD(Height):
+    """The same with a finite-difference Jacobian: it leaves the robot's Pinocchio data at
+    another configuration than the step's."""
+
+    def compute_jacobian(self, q):
+        h = 1e-6
+        J = np.empty((1, self.robot.nv))
+        for i in range(self.robot.nv):
+            d = np.zeros(self.robot.nv)
+            d[i] = h
+            up = self.compute_error(self.robot.integrate(q, d, 1.0))
+            down = self.compute_error(self.robot.integrate(q, -d, 1.0))
+            J[0, i] = (up - down)[0] / (2 * h)
+        return J
+
+
+@needs_native
+def test_a_python_task_moving_the_robot_data_does_not_disturb_the_kernels(robots):
+    robot = robots["panda"]
+    frame = FRAMES["panda"]
+    q = robot.random_configuration(2)
+    T = _target_pose(robot, q)
+
+    def levels():
+        return [HeightFD(robot, frame, 0.5), FrameTask(robot, frame, T, gain=3.0)]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    current = qc.IK(robot, levels(), DT, engine="python")  # Python tasks + native solve
+    for step in range(20):
+        vn, _ = ikn.step(q)
+        current.refresh(q)
+        vc = current.stack.solve(engine="native").x
+        np.testing.assert_allclose(vn, vc, rtol=0, atol=1e-8, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
 @needs_native
 def test_hybrid_step_matches_the_python_engine(robots):
     robot = robots["panda"]
