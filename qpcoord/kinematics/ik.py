@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.linalg import filtered_svd
+from ..core.native import resolve_engine
 from ..core.stack import METHODS, Solution, Stack
 from ..core.tasks import Bounds, Equality, Inequality
 from .robot import Robot
@@ -100,6 +101,14 @@ class IK:
     fallback : bool
         Passed to :class:`~qpcoord.Stack`: solve a level QP the backend failed on with
         another backend (reported in ``Solution.info["fallbacks"]``).
+    engine : {None, "native", "python"}
+        ``"native"``: the native IK step (:mod:`qpcoord.kinematics.native_step`): task rows,
+        limit box and strict hierarchy in one compiled call per step (tasks without a
+        native kernel keep their Python refresh). ``"python"``: the tasks' Python refresh
+        and the Python engine of :meth:`Stack.solve <qpcoord.Stack.solve>`. ``None``
+        (default): as :meth:`Stack.solve`'s rule -- native where it is built and
+        applies (``method="hierarchical"``, no ``solver``), else Python (one warning per
+        process if it is not built).
 
     Attributes
     ----------
@@ -121,6 +130,7 @@ class IK:
         regularization: float = 1e-9,
         weight_ratio: float = 1e-3,
         fallback: bool = True,
+        engine: str | None = None,
     ) -> None:
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
@@ -172,6 +182,28 @@ class IK:
             fallback=fallback,
         )
         self.last: Solution | None = None
+        #: ``"native"`` (the native IK step) or ``"python"``: the engine this IK uses
+        self.engine = resolve_engine(engine, method, solver)
+        self._engine_arg = engine
+        self._native = None
+        if self.engine == "native":
+            from .native_step import NativeIKStep  # the extension is loaded and built
+
+            self._native = NativeIKStep(self)
+
+    def __getstate__(self) -> dict:
+        """Pickling (e.g. a sweep's worker): the native step holds views of the robot's
+        Pinocchio data and is rebuilt on unpickling (its warm start is lost)."""
+        state = self.__dict__.copy()
+        state["_native"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        if self.engine == "native":
+            from .native_step import NativeIKStep
+
+            self._native = NativeIKStep(self)
 
     def _collect(self, level, where: str) -> list:
         items = level if isinstance(level, (list, tuple)) else [level]
@@ -213,6 +245,10 @@ class IK:
         is kept: the speed limit, and the position limit, win."""
         for task in self._dynamic:
             task._refresh(q, t, self.dt, reference)
+        self._refresh_limits(q)
+
+    def _refresh_limits(self, q: np.ndarray) -> None:
+        """The limits' boxes intersected into the stack's bounds (see :meth:`refresh`)."""
         if self.limits:
             # written straight into the stack's Bounds (the writable arrays behind its
             # read-only lower/upper), then marked changed
@@ -259,13 +295,19 @@ class IK:
             The stack's solution (``info["level_ranks"]`` shows a rank loss near a
             singularity).
         """
-        q = self.robot.check_configuration(q)
-        self.refresh(q, t, reference)
-        sol = self.stack.solve(
-            solver=self.solver,
-            method=self.method,
-            warm_start=self.last if warm_start is None else warm_start,
-        )
+        if self._native is not None:
+            if warm_start is not None:
+                self.stack._warm(warm_start)  # validated; the engine keeps its working sets
+            sol = self._native.step(q, t, reference)
+        else:
+            q = self.robot.check_configuration(q)
+            self.refresh(q, t, reference)
+            sol = self.stack.solve(
+                solver=self.solver,
+                method=self.method,
+                warm_start=self.last if warm_start is None else warm_start,
+                engine=self._engine_arg,
+            )
         self.last = sol
         v = sol.x
         self.v_prev[...] = v

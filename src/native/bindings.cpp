@@ -8,6 +8,7 @@
 
 #include "hierarchy.hpp"
 #include "weighted.hpp"
+#include "ik_step.hpp"
 
 namespace nb = nanobind;
 using qpcoord::Hierarchy;
@@ -125,4 +126,5 @@ NB_MODULE(_native, m) {
       .def_prop_ro("num_levels", &Hierarchy::num_levels)
       .def_prop_ro("damping", &Hierarchy::damping);
   qpcoord::bind_weighted(m);
+  qpcoord::bind_ik_step(m);
 }

@@ -1,0 +1,343 @@
+"""The native IK step: one call into ``qpcoord._native`` per control step.
+
+:class:`NativeIKStep` compiles an :class:`~qpcoord.IK` once: which kernel writes which rows
+of the compiled stack's stacked arrays (the native solver's inputs), the frames the kernels
+read (views of the robot's ``pinocchio.Data``, bound once), and the limit boxes. A step is
+then Pinocchio's ``computeJointJacobians`` (and ``jacobianCenterOfMass`` with a CoM task) and
+one native call that checks ``q``, computes each task's error and Jacobian, the intersected
+limit box, and solves the strict hierarchy.
+
+Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
+
+- :class:`~qpcoord.PositionTask` on a robot with a default frame (fixed target, path or the
+  run's reference; a path is evaluated by the task's ``reference_at``),
+- :class:`~qpcoord.FramePositionTask`, :class:`~qpcoord.FrameTask` (both errors),
+  :class:`~qpcoord.OrientationTask`, :class:`~qpcoord.ComTask` (targets, feed-forward,
+  masks, weights),
+- :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
+  not in it; a continuous joint's are),
+- :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
+  intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
+
+Every other task (bands, support polygons, relative frames, collision, user tasks, a
+posture over a continuous joint) and constant
+Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
+copied into the same arrays (a hybrid step); any other limit (acceleration limits, user
+limits) makes the whole box Python-computed. The kernels also write each task's own
+``task.task`` arrays (``A``, ``b``), as its ``_refresh`` would.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..core.backends import DEFAULT_TIME_LIMIT
+from ..core.errors import SolverError
+from ..core.native import NativeHierarchy, load
+from ..core.polish import KKT_TOL
+from ..core.solution import Solution
+from .frame_tasks import ComTask, FramePositionTask, FrameTask, OrientationTask
+from .tasks import JointLimits, KinematicTask, PositionTask, PostureTask, VelocityLimits
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .ik import IK
+
+__all__ = ["NativeIKStep", "KERNELS", "native_kind"]
+
+#: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class (6:
+#: ``FrameTask(error="split")``).
+KERNELS = {
+    PositionTask: 0,
+    FramePositionTask: 1,
+    FrameTask: 2,
+    OrientationTask: 3,
+    ComTask: 4,
+    PostureTask: 5,
+}
+
+_F64 = np.dtype(np.float64)
+
+
+def native_kind(task: KinematicTask) -> int | None:
+    """The native kernel of ``task`` (a code of :data:`KERNELS`), or ``None`` if its rows are
+    built by its Python ``_refresh`` (exact classes only: a subclass may change them)."""
+    kind = KERNELS.get(type(task))
+    if kind is None or task.kind != "equality":
+        return None
+    if kind == 0 and task.robot.frame_id is None:
+        return None  # no default frame: its _refresh raises the robot's message
+    if kind == 2 and task.error == "split":
+        return 6
+    if kind == 5 and _posture_q_index(task) is None:
+        return None
+    return kind
+
+
+def _posture_q_index(task: PostureTask) -> list[int] | None:
+    """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there), or
+    ``None`` if a row's joint is not a 1-DoF vector-space joint (a continuous joint)."""
+    robot = task.robot
+    if robot.euclidean:
+        return [int(j) for j in task.joints]
+    model = robot.model
+    by_v = {}
+    for joint in model.joints[1:]:
+        if joint.nq == 1 and joint.nv == 1:
+            by_v[int(joint.idx_v)] = int(joint.idx_q)
+    out = [by_v.get(int(j)) for j in task.joints]
+    return None if None in out else out
+
+
+def _selection(task: KinematicTask, kind: int) -> list[int]:
+    """Per row of the task: the axis of its full error (or the joint of a posture)."""
+    if kind == 0:
+        return [int(r) for r in task.robot.rows]
+    if kind == 5:
+        return [int(j) for j in task.joints]
+    return [int(r) for r in task._sel]
+
+
+class NativeIKStep(NativeHierarchy):
+    """The compiled native step of one :class:`~qpcoord.IK` (built by the IK).
+
+    It is a :class:`~qpcoord.core.native.NativeHierarchy` whose solver also writes the task
+    rows (its status codes and messages are the same), bound to the IK's compiled stack.
+
+    Parameters
+    ----------
+    ik : IK
+        An IK with ``method="hierarchical"`` and no explicit ``solver``.
+    """
+
+    def __init__(self, ik: IK) -> None:  # noqa: D107 - no NativeHierarchy.__init__: own solver
+        mod = load()
+        robot = ik.robot
+        P = ik.stack._compiled
+        self.ik = ik
+        self.robot = robot
+        self.P = P
+        self.n = P.n
+        self._mod = mod
+        self._solved = False
+        self.x = np.zeros(P.n)
+        self.res = np.zeros(len(P.levels))
+        self.stats = np.zeros((len(P.levels) + 2, 3))
+        self.detail = np.zeros(8)
+        self._model, self._data = robot.model, robot.data
+        self._qshape = (robot.nq,)
+        self._M = robot.coordinate_map
+        blocks = [P.hard, *P.levels]
+        unit = [v for start, stop, _, _ in robot._unit_blocks for v in (start, stop - start)]
+        solver = mod.IKStep(
+            robot.nq,
+            robot.nv,
+            [B.m_eq for B in blocks],
+            [B.m_in for B in blocks],
+            P.bounds is not None,
+            float(ik.stack.damping),
+            float(ik.dt),
+            unit,
+        )
+        if P.bounds is not None:
+            box_lo, box_hi = ik.bounds._writable()
+        else:
+            box_lo, box_hi = np.full(P.n, -np.inf), np.full(P.n, np.inf)
+        solver.bind(
+            P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs, box_lo, box_hi,
+            self.x, self.res, self.stats, self.detail,
+        )  # fmt: skip
+        solver.set_jacobian(self._data.J)
+        if self._M is not None:
+            solver.set_coordinate_map(np.ascontiguousarray(self._M, dtype=float))
+        owners = {id(t.task): t for t in ik._dynamic}
+        self.kernel_tasks: list[KinematicTask] = []
+        self._python_tasks: list[KinematicTask] = []
+        self._eq_ops: list[tuple] = []  # (task, A rows, b rows): copied every step
+        self._in_ops: list[tuple] = []  # (task, C rows, lo, hi, sw)
+        self.com = False
+        frames: dict[int, int] = {}
+        i = j = 0
+        for B in blocks:
+            for t in B.eqs:
+                m = t.A.shape[0]
+                owner = owners.get(id(t))
+                kind = None if owner is None else native_kind(owner)
+                if kind is None:
+                    self._eq_ops.append((t, P.Aeq[i : i + m], P.beq[i : i + m]))
+                    if owner is not None and owner not in self._python_tasks:
+                        self._python_tasks.append(owner)
+                else:
+                    frame = -1
+                    if kind == 4 and not self.com:  # views: computed at each step
+                        solver.set_com(self._data.com[0], self._data.Jcom)
+                        self.com = True
+                    elif kind not in (4, 5):
+                        fid = owner.robot.frame_id if kind == 0 else owner.frame_id
+                        if fid not in frames:
+                            frames[fid] = self._add_frame(solver, fid)
+                        frame = frames[fid]
+                    qidx = _posture_q_index(owner) if kind == 5 else []
+                    solver.add_task(kind, owner, t, frame, _selection(owner, kind), i, qidx)
+                    self.kernel_tasks.append(owner)
+                i += m
+            for t in B.ineqs:
+                m = t.C.shape[0]
+                rows = slice(j, j + m)
+                self._in_ops.append((t, P.C[rows], P.clo[rows], P.chi[rows], P.csw[rows]))
+                owner = owners.get(id(t))
+                if owner is not None and owner not in self._python_tasks:
+                    self._python_tasks.append(owner)
+                j += m
+        # limits: natively when all are JointLimits / VelocityLimits, else Python's box
+        self._python_limits = False
+        if ik.limits:
+            if all(type(lim) in (JointLimits, VelocityLimits) for lim in ik.limits):
+                for lim in ik.limits:
+                    self._add_limit(solver, lim)
+                solver.limits_mode = 1
+            else:
+                self._python_limits = True
+                solver.limits_mode = 2
+        self._hybrid = bool(self._python_tasks or self._eq_ops or self._in_ops)
+        self._solver = solver
+
+    def _add_frame(self, solver: Any, fid: int) -> int:
+        model, data = self._model, self._data
+        frame = model.frames[fid]
+        joint = int(frame.parentJoint)
+        cols = [
+            c
+            for s in model.supports[joint]
+            if s > 0
+            for c in range(model.joints[s].idx_v, model.joints[s].idx_v + model.joints[s].nv)
+        ]
+        oMi = data.oMi[joint]
+        placement = frame.placement
+        return solver.add_frame(
+            oMi.rotation,
+            oMi.translation,
+            np.array(placement.rotation, dtype=float),
+            np.array(placement.translation, dtype=float),
+            cols,
+        )
+
+    def _add_limit(self, solver: Any, lim: Any) -> None:
+        if type(lim) is VelocityLimits:
+            solver.add_velocity_limits(lim, lim.limit)
+        elif lim._q_index is None:
+            solver.add_joint_limits(lim, lim.lower, lim.upper, [], [])
+        else:
+            solver.add_joint_limits(
+                lim, lim._lower_q, lim._upper_q, lim._q_index.tolist(), lim._v_index.tolist()
+            )
+
+    # ------------------------------------------------------------------ per step
+    def step(self, q: Any, t: float, reference: Any) -> Solution:
+        """One step at configuration ``q`` (nq,) and time ``t`` (s): the IK's solution.
+
+        Raises as :meth:`IK.step <qpcoord.IK.step>` does (``ValueError`` naming ``q`` for a
+        bad configuration, the tasks' own messages, the solver's errors)."""
+        t0 = time.perf_counter()
+        robot = self.robot
+        if type(q) is not np.ndarray or q.dtype != _F64 or q.shape != self._qshape or self._hybrid:
+            q = robot.check_configuration(q)
+        t = float(t)
+        if self._hybrid:  # first: a Python task may evaluate the robot elsewhere (its data)
+            self._python_rows(q, t, reference)
+        if self._python_limits:
+            self.ik._refresh_limits(q)
+        if self._M is None:
+            pin.computeJointJacobians(self._model, self._data, q)
+        else:
+            pin.computeJointJacobians(self._model, self._data, self._M @ q)
+        if self.com:
+            pin.jacobianCenterOfMass(self._model, self._data, False)
+        robot._state = 0  # the robot's cached kinematics no longer match its data
+        code = self._solver.step(q, t, reference, self._solved, DEFAULT_TIME_LIMIT)
+        if code:
+            self._solved = False
+            self._fail(code, q, t, reference)
+        self._solved = True
+        info = self._info()
+        status = "optimal"
+        bad = info["uncertified"]
+        if bad:
+            status = "inaccurate"
+            k, dev = bad[0]
+            info["inaccurate"] = {"level": k, "kkt_residual": dev}
+        return Solution(
+            x=self.x.copy(),
+            status=status,
+            level_residuals=self.res.copy(),
+            solver="native",
+            solve_time=time.perf_counter() - t0,
+            method="hierarchical",
+            info=info,
+        )
+
+    def _python_rows(self, q: np.ndarray, t: float, reference: Any) -> None:
+        """The hybrid part: the Python tasks' ``_refresh`` and every non-native row copied
+        into the stacked arrays (as ``CompiledStack.refresh_stacked``)."""
+        dt = self.ik.dt
+        for task in self._python_tasks:
+            task._refresh(q, t, dt, reference)
+        for task, A, b in self._eq_ops:
+            np.multiply(task.A, task.sqrt_weight[:, None], out=A)
+            np.multiply(task.b, task.sqrt_weight, out=b)
+        for task, C, lo, hi, sw in self._in_ops:
+            C[...] = task.C
+            lo[...] = task.lower
+            hi[...] = task.upper
+            sw[...] = task.sqrt_weight
+
+    def _info(self) -> dict:
+        """The solve's statistics, as :meth:`NativeHierarchy.solve` reports them (one pass
+        over the stages: hard, levels, minimum-norm step)."""
+        its: list[int] = []
+        hits = calls = 0
+        closed: list[int] = []
+        last = len(self.res)
+        for k, (i, h, c) in enumerate(self.stats.tolist()):
+            its.append(int(i))
+            hits += h
+            if c and 0 < k <= last:
+                closed.append(k - 1)
+            if i or h:
+                calls += 1
+        d = self.detail.tolist()
+        return {
+            "engine": "native",
+            "hard_iterations": its[0],
+            "active_set_iterations": its[1:-1],
+            "min_norm_iterations": its[-1],
+            "warm_start_hits": int(hits),
+            "warm_start_seeded": int(d[7]),
+            "closed_form_levels": closed,
+            # as the Python engine's count of QP calls: the stages that needed the active
+            # set (its iterations or a stored working set) rather than a closed form
+            "qp_calls": calls,
+            "uncertified": [(int(d[6]), d[5])] if d[5] > KKT_TOL else [],
+        }
+
+    def _fail(self, code: int, q: Any, t: float, reference: Any) -> None:
+        mod = self._mod
+        if code == mod.IK_BAD_Q:
+            self.robot.check_configuration(q)  # names q
+            raise ValueError(f"q: the native IK step rejected the configuration {q!r}")
+        if code >= mod.IK_TASK_DATA:
+            task = self.kernel_tasks[code - mod.IK_TASK_DATA]
+            task._refresh(q, t, self.ik.dt, reference)  # raises the task's own message
+            raise ValueError(
+                f"{task.task.label}: its data cannot be read by the native IK step (a target "
+                "or weight of an unexpected type); use IK(..., engine='python')"
+            )
+        if code == mod.TIME_LIMIT:
+            raise SolverError(
+                f"time limit of {DEFAULT_TIME_LIMIT:g} s reached before the solve ended: "
+                "native engine: time limit reached in an active set"
+            )
+        self._raise(code, self.P)

@@ -1,0 +1,640 @@
+// qpcoord native engine: one differential-IK step in one call (see ik_step.hpp).
+//
+// The task kernels mirror the Python tasks' _refresh (qpcoord/kinematics/tasks.py,
+// frame_tasks.py) term by term: the same error, Jacobian, gain, feed-forward and weights.
+// Targets and gains are read from the task objects at every step (an attribute read, the
+// array re-mapped only when the task holds a new object), so set_target(...) and a changed
+// gain are followed as by the Python path. Nothing in step() allocates on the C++ side
+// (buffers sized at compile time); the Python objects it reads are the tasks' own.
+#include "ik_step.hpp"
+
+#include <nanobind/eigen/dense.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/vector.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "hierarchy.hpp"
+#include "spatial.hpp"
+
+namespace nb = nanobind;
+
+namespace qpcoord {
+namespace {
+
+using spatial::Mat3;
+using spatial::Mat6;
+using spatial::Vec3;
+using spatial::Vec6;
+
+using CArr = nb::ndarray<const double, nb::device::cpu>;
+using OutArr = nb::ndarray<double, nb::numpy, nb::c_contig, nb::device::cpu>;
+using CMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+using MMap = Eigen::Map<Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+/// step() codes beyond the Hierarchy's: a bad q (Python re-checks it to name it), or a task
+/// whose data the kernel cannot use (Python runs its _refresh, which raises its message).
+constexpr int kBadQ = 100;
+constexpr int kTaskData = 200;
+
+/// A float64 array seen through its strides (any order), kept alive by `keep`.
+struct View {
+  nb::object keep;
+  const double* p = nullptr;
+  int64_t rows = 0, cols = 1, s0 = 1, s1 = 1;
+  double operator[](int64_t i) const { return p[i * s0]; }
+  double operator()(int64_t i, int64_t j) const { return p[i * s0 + j * s1]; }
+  double* w() const { return const_cast<double*>(p); }  // the memory behind a read-only view
+};
+
+/// Map `h` (a float64 numpy array of `ndim` dimensions) into v; false if it is not one.
+bool view_of(nb::handle h, View& v, size_t ndim) {
+  CArr a;
+  if (!nb::try_cast(h, a, false) || a.ndim() != ndim) return false;
+  v.keep = nb::borrow(h);
+  v.p = a.data();
+  v.rows = static_cast<int64_t>(a.shape(0));
+  v.s0 = a.stride(0);
+  if (ndim == 2) {
+    v.cols = static_cast<int64_t>(a.shape(1));
+    v.s1 = a.stride(1);
+  } else {
+    v.cols = 1;
+    v.s1 = 1;
+  }
+  return true;
+}
+
+/// Attribute `name` of `owner` (a new reference).
+nb::object attr(nb::handle owner, nb::handle name) {
+  PyObject* o = PyObject_GetAttr(owner.ptr(), name.ptr());
+  if (!o) throw nb::python_error();
+  return nb::steal(o);
+}
+
+double float_attr(nb::handle owner, nb::handle name) {
+  nb::object o = attr(owner, name);
+  const double v = PyFloat_AsDouble(o.ptr());
+  if (v == -1.0 && PyErr_Occurred()) throw nb::python_error();
+  return v;
+}
+
+/// Re-map v from owner.name when the attribute holds another object than last time.
+/// Returns 1 mapped, 0 None, -1 something else.
+int cached(nb::handle owner, nb::handle name, View& v, size_t ndim, int64_t rows) {
+  nb::object o = attr(owner, name);
+  if (o.ptr() == v.keep.ptr() && v.p) return 1;
+  if (o.is_none()) {
+    v.keep = o;
+    v.p = nullptr;
+    return 0;
+  }
+  if (!view_of(o, v, ndim) || v.rows != rows) {
+    v.keep = nb::object();
+    v.p = nullptr;
+    return -1;
+  }
+  return 1;
+}
+
+enum Kind : int {
+  kPosition = 0,
+  kFramePosition,
+  kPose,
+  kOrientation,
+  kCom,
+  kPosture,
+  kPoseSplit,  ///< FrameTask(error="split")
+};
+
+struct Frame {
+  View Rj, pj;  ///< rotation and translation of the parent joint (views of data.oMi[j])
+  Mat3 Rp;      ///< placement of the frame in its joint
+  Vec3 pp;
+  std::vector<int> cols;  ///< velocity indices of the joints supporting it
+  Mat3 R;                 ///< this step's placement in the world
+  Vec3 p;
+};
+
+struct Kernel {
+  int kind = 0;
+  nb::object task, eq;
+  int frame = -1;
+  std::vector<int> sel;  ///< per row: the axis (0..5) or, for a posture, the joint's v index
+  std::vector<int> qidx;  ///< posture: per row, the joint's q index
+  int row0 = 0;
+  View target, vel, sw, A, b;
+  nb::object pose_target;  ///< FrameTask: the pin.SE3 its target inverse was read from
+  Mat3 Rinv = Mat3::Identity();
+  Vec3 pinv = Vec3::Zero();
+};
+
+struct Limit {
+  nb::object lim;
+  bool velocity = false;  ///< VelocityLimits (else JointLimits)
+  View lower, upper;      ///< JointLimits: q layout (all of q, or the indexed entries)
+  std::vector<int> qi, vi;
+  bool indexed = false;
+};
+
+class IKStep {
+ public:
+  IKStep(int nq, int nv, std::vector<int> meq, std::vector<int> min, bool has_bounds,
+         double damping, double dt, std::vector<int> unit_blocks)
+      : nq_(nq), nv_(nv), dt_(dt), unit_(std::move(unit_blocks)),
+        h_(nv, std::move(meq), std::move(min), has_bounds, damping) {
+    Jt_.resize(6, nv);
+    Jl_.resize(6, nv);
+    row_.resize(nv);
+    lo_.resize(nv);
+    hi_.resize(nv);
+    hi2_.resize(nv);
+    for (const char* s : {"gain", "sqrt_weight", "A", "b", "target", "target_velocity",
+                          "_target_inv", "_target_t", "q_ref", "reference_at", "rotation",
+                          "translation"})
+      names_.push_back(nb::str(s));
+  }
+
+  void bind(OutArr Aeq, OutArr beq, OutArr C, OutArr clo, OutArr chi, OutArr csw, OutArr lbs,
+            OutArr ubs, OutArr box_lo, OutArr box_hi, OutArr x, OutArr res, OutArr stats,
+            OutArr detail) {
+    out_ = {Aeq, beq, C, clo, chi, csw, lbs, ubs, box_lo, box_hi, x, res, stats, detail};
+    static constexpr size_t kNdim[14] = {2, 1, 2, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2, 1};
+    for (size_t i = 0; i < out_.size(); ++i)
+      if (out_[i].ndim() != kNdim[i]) throw nb::value_error("bind: wrong number of dimensions");
+    if (Aeq.shape(1) != static_cast<size_t>(nv_) || lbs.shape(0) != static_cast<size_t>(nv_))
+      throw nb::value_error("bind: arrays of another size than nv");
+    bound_ = true;
+  }
+
+  void set_jacobian(nb::handle J) {
+    if (!view_of(J, J_, 2) || J_.rows != 6 || J_.cols != nv_)
+      throw nb::value_error("set_jacobian: expected data.J, a (6, nv) float64 array");
+  }
+
+  void set_com(nb::handle com, nb::handle Jcom) {
+    if (!view_of(com, com_, 1) || com_.rows != 3 || !view_of(Jcom, Jcom_, 2) ||
+        Jcom_.rows != 3 || Jcom_.cols != nv_)
+      throw nb::value_error("set_com: expected data.com[0] (3,) and data.Jcom (3, nv)");
+  }
+
+  void set_coordinate_map(nb::DRef<const Mat> M) {
+    if (M.rows() != nv_ || M.cols() != nv_) throw nb::value_error("coordinate map: (nv, nv)");
+    M_ = M;
+    mapped_ = true;
+  }
+
+  int add_frame(nb::handle R, nb::handle p, const Mat3& Rp, const Vec3& pp,
+                std::vector<int> cols) {
+    Frame f;
+    if (!view_of(R, f.Rj, 2) || f.Rj.rows != 3 || f.Rj.cols != 3 || !view_of(p, f.pj, 1) ||
+        f.pj.rows != 3)
+      throw nb::value_error("add_frame: expected oMi[j].rotation (3, 3), .translation (3,)");
+    for (int c : cols)
+      if (c < 0 || c >= nv_) throw nb::value_error("add_frame: column out of range");
+    f.Rp = Rp;
+    f.pp = pp;
+    f.cols = std::move(cols);
+    frames_.push_back(std::move(f));
+    return static_cast<int>(frames_.size()) - 1;
+  }
+
+  /// qidx: for a posture, the q index of each row's joint (a 1-DoF joint: q_ref - q there).
+  void add_task(int kind, nb::object task, nb::object eq, int frame, std::vector<int> sel,
+                int row0, std::vector<int> qidx) {
+    if (kind < kPosition || kind > kPoseSplit) throw nb::value_error("add_task: unknown kind");
+    if ((kind != kCom && kind != kPosture) && (frame < 0 || frame >= (int)frames_.size()))
+      throw nb::value_error("add_task: unknown frame slot");
+    if (kind == kCom && !com_.p) throw nb::value_error("add_task: set_com first");
+    if (!bound_) throw nb::value_error("add_task: bind first");
+    const int rows = static_cast<int>(sel.size());
+    if (row0 < 0 || row0 + rows > static_cast<int>(out_[0].shape(0)))
+      throw nb::value_error("add_task: rows out of range");
+    for (int s : sel)
+      if (s < 0 || s >= (kind == kPosture ? nv_ : 6))
+        throw nb::value_error("add_task: row selection out of range");
+    if (kind == kPosture) {
+      if (qidx.size() != sel.size()) throw nb::value_error("add_task: one q index per row");
+      for (int i : qidx)
+        if (i < 0 || i >= nq_) throw nb::value_error("add_task: q index out of range");
+    }
+    Kernel k;
+    k.kind = kind;
+    k.task = std::move(task);
+    k.eq = std::move(eq);
+    k.frame = frame;
+    k.sel = std::move(sel);
+    k.row0 = row0;
+    k.qidx = std::move(qidx);
+    kernels_.push_back(std::move(k));
+  }
+
+  void add_joint_limits(nb::object lim, nb::handle lower, nb::handle upper, std::vector<int> qi,
+                        std::vector<int> vi) {
+    Limit L;
+    L.lim = std::move(lim);
+    L.indexed = !qi.empty() || !vi.empty();
+    if (!view_of(lower, L.lower, 1) || !view_of(upper, L.upper, 1))
+      throw nb::value_error("add_joint_limits: lower/upper must be float64 vectors");
+    const int64_t n = L.indexed ? static_cast<int64_t>(qi.size()) : nv_;
+    if (L.lower.rows != n || L.upper.rows != n || qi.size() != vi.size())
+      throw nb::value_error("add_joint_limits: sizes do not match");
+    for (size_t i = 0; i < qi.size(); ++i)
+      if (qi[i] < 0 || qi[i] >= nq_ || vi[i] < 0 || vi[i] >= nv_)
+        throw nb::value_error("add_joint_limits: index out of range");
+    L.qi = std::move(qi);
+    L.vi = std::move(vi);
+    limits_.push_back(std::move(L));
+  }
+
+  void add_velocity_limits(nb::object lim, nb::handle limit) {
+    Limit L;
+    L.lim = std::move(lim);
+    L.velocity = true;
+    if (!view_of(limit, L.upper, 1) || L.upper.rows != nv_)
+      throw nb::value_error("add_velocity_limits: limit must be nv float64 values");
+    limits_.push_back(std::move(L));
+  }
+
+  /// Limits: 0 none, 1 native (the added ones), 2 the box already in box_lo / box_hi.
+  int limits_mode = 0;
+  /// The kernel that returned kTaskData (its index), or -1.
+  int failed = -1;
+
+  int step(nb::ndarray<const double, nb::ndim<1>, nb::device::cpu> q, double t,
+           nb::handle reference, bool warm, double time_left) {
+    failed = -1;
+    if (!bound_ || !J_.p) return kBadInput;
+    if (static_cast<int64_t>(q.shape(0)) != nq_) return kBadQ;
+    const int64_t qs = q.stride(0);
+    const double* qp = q.data();
+    double sum = 0.0;
+    for (int i = 0; i < nq_; ++i) sum += qp[i * qs];
+    if (!std::isfinite(sum)) return kBadQ;
+    for (size_t u = 0; u + 1 < unit_.size(); u += 2) {
+      double s2 = 0.0;
+      for (int i = unit_[u]; i < unit_[u] + unit_[u + 1]; ++i) s2 += qp[i * qs] * qp[i * qs];
+      if (std::abs(std::sqrt(s2) - 1.0) > 1e-6) return kBadQ;
+    }
+    for (Frame& f : frames_) {
+      Mat3 Rj;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) Rj(i, j) = f.Rj(i, j);
+      const Vec3 pj(f.pj[0], f.pj[1], f.pj[2]);
+      f.R.noalias() = Rj * f.Rp;
+      f.p.noalias() = Rj * f.pp;
+      f.p += pj;
+    }
+    for (size_t i = 0; i < kernels_.size(); ++i) {
+      if (!run_kernel(kernels_[i], qp, qs, t, reference)) {
+        failed = static_cast<int>(i);
+        return kTaskData + static_cast<int>(i);
+      }
+    }
+    double* lbs = out_[6].data();
+    double* ubs = out_[7].data();
+    double* blo = out_[8].data();
+    double* bhi = out_[9].data();
+    if (limits_mode == 1) {
+      box(qp, qs);
+      for (int i = 0; i < nv_; ++i) {
+        blo[i] = lbs[i] = lo_[i];
+        bhi[i] = ubs[i] = hi_[i];
+      }
+    } else if (limits_mode == 2) {
+      for (int i = 0; i < nv_; ++i) {
+        lbs[i] = blo[i];
+        ubs[i] = bhi[i];
+      }
+    }
+    return h_.solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]), cvec(out_[4]),
+                    cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm, time_left, mvec(out_[10]),
+                    mvec(out_[11]), mmat(out_[12]), mvec(out_[13]));
+  }
+
+  /// The rows a kernel writes (for tests): its index in the order added.
+  int num_tasks() const { return static_cast<int>(kernels_.size()); }
+
+ private:
+  static CMap cmat(const OutArr& m) {
+    const auto r = static_cast<Eigen::Index>(m.shape(0)), c = static_cast<Eigen::Index>(m.shape(1));
+    return CMap(m.data(), r, c, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(1, c));
+  }
+  static MMap mmat(OutArr& m) {
+    const auto r = static_cast<Eigen::Index>(m.shape(0)), c = static_cast<Eigen::Index>(m.shape(1));
+    return MMap(m.data(), r, c, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(1, c));
+  }
+  static Eigen::Map<const Vec> cvec(const OutArr& v) {
+    return Eigen::Map<const Vec>(v.data(), static_cast<Eigen::Index>(v.shape(0)));
+  }
+  static Eigen::Map<Vec> mvec(OutArr& v) {
+    return Eigen::Map<Vec>(v.data(), static_cast<Eigen::Index>(v.shape(0)));
+  }
+
+  /// World-aligned linear (rows 0-2) and angular (rows 3-5) Jacobian of frame f at its origin
+  /// into Jt_ (zero outside its columns): data.J's columns moved from the world origin to p.
+  void frame_jacobian(const Frame& f) {
+    Jt_.setZero();
+    for (int c : f.cols) {
+      const Vec3 w(J_(3, c), J_(4, c), J_(5, c));
+      const Vec3 v(J_(0, c), J_(1, c), J_(2, c));
+      Jt_.col(c).head<3>() = v + w.cross(f.p);
+      Jt_.col(c).tail<3>() = w;
+    }
+  }
+
+  /// Write row r of kernel k: A row (pin coordinates in src, mapped here), b value.
+  /// (A row of a column-major matrix: an inner stride, so that no copy is made.)
+  void write_row(const Kernel& k, int r,
+                 const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& src,
+                 double bval) {
+    double* Aeq = out_[0].data() + static_cast<size_t>(k.row0 + r) * nv_;
+    double* beq = out_[1].data() + k.row0 + r;
+    const double s = k.sw[r];
+    if (mapped_) {
+      row_.noalias() = M_.transpose() * src.transpose();
+    } else {
+      row_ = src.transpose();
+    }
+    double* Ap = k.A.w();
+    for (int c = 0; c < nv_; ++c) {
+      Ap[r * k.A.s0 + c * k.A.s1] = row_[c];
+      Aeq[c] = row_[c] * s;
+    }
+    k.b.w()[r * k.b.s0] = bval;
+    *beq = bval * s;
+  }
+
+  bool run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::handle reference) {
+    const double gain = float_attr(k.task, names_[0]);
+    const int rows = static_cast<int>(k.sel.size());
+    if (cached(k.eq, names_[1], k.sw, 1, rows) != 1) return false;
+    if (cached(k.eq, names_[2], k.A, 2, rows) != 1 || k.A.cols != nv_) return false;
+    if (cached(k.eq, names_[3], k.b, 1, rows) != 1) return false;
+    switch (k.kind) {
+      case kPosition: {
+        const Frame& f = frames_[k.frame];
+        const View* y = &k.target;
+        View yv, v;
+        nb::object ref_pair;
+        bool moving = false;
+        if (cached(k.task, names_[4], k.target, 1, rows) != 1) {
+          // a path, or no target (the run's reference): PositionTask.reference_at(t, reference)
+          ref_pair = attr(k.task, names_[9])(t, reference);
+          nb::tuple pair = nb::cast<nb::tuple>(ref_pair);
+          if (pair.size() != 2 || !view_of(pair[0], yv, 1) || !view_of(pair[1], v, 1) ||
+              yv.rows != rows || v.rows != rows)
+            return false;
+          y = &yv;
+          moving = true;
+        }
+        frame_jacobian(f);
+        for (int r = 0; r < rows; ++r) {
+          const int a = k.sel[r];
+          const double e = gain * ((*y)[r] - f.p[a]);
+          write_row(k, r, Jt_.row(a), moving ? v[r] + e : 0.0 + e);
+        }
+        return true;
+      }
+      case kFramePosition: {
+        const Frame& f = frames_[k.frame];
+        if (cached(k.task, names_[4], k.target, 1, 3) != 1) return false;
+        const int hv = cached(k.task, names_[5], k.vel, 1, 3);
+        if (hv < 0) return false;
+        frame_jacobian(f);
+        for (int r = 0; r < rows; ++r) {
+          const int a = k.sel[r];
+          double bv = -gain * (f.p[a] - k.target[a]);
+          if (hv) bv += k.vel[a];
+          write_row(k, r, Jt_.row(a), bv);
+        }
+        return true;
+      }
+      case kPose:
+      case kPoseSplit: {
+        const Frame& f = frames_[k.frame];
+        nb::object inv = attr(k.task, names_[6]);
+        if (inv.is_none()) return false;
+        if (inv.ptr() != k.pose_target.ptr()) {
+          View R, p;
+          if (!view_of(attr(inv, names_[10]), R, 2) || !view_of(attr(inv, names_[11]), p, 1))
+            return false;
+          for (int i = 0; i < 3; ++i) {
+            k.pinv[i] = p[i];
+            for (int j = 0; j < 3; ++j) k.Rinv(i, j) = R(i, j);
+          }
+          k.pose_target = inv;
+        }
+        const int hv = cached(k.task, names_[5], k.vel, 1, 6);
+        if (hv < 0) return false;
+        const Mat3 RE = k.Rinv * f.R;
+        const Vec3 pE = k.Rinv * f.p + k.pinv;
+        frame_jacobian(f);
+        // LOCAL Jacobian: R^T of both parts
+        Jl_.setZero();
+        const Mat3 Rt = f.R.transpose();
+        for (int c : f.cols) {
+          Jl_.col(c).head<3>() = Rt * Jt_.col(c).head<3>();
+          Jl_.col(c).tail<3>() = Rt * Jt_.col(c).tail<3>();
+        }
+        Jt_.setZero();
+        Vec6 e, ff = Vec6::Zero();
+        if (k.kind == kPose) {  // e = log6(E), J = Jlog6(E) J_local
+          e = spatial::log6(RE, pE);
+          const Mat6 Jlog = spatial::jlog6(RE, pE);
+          for (int c : f.cols) Jt_.col(c).noalias() = Jlog * Jl_.col(c);
+          if (hv) {
+            // Ad(E^-1) nu with E^-1 = (RE^T, -RE^T pE)
+            const Mat3 Ri = RE.transpose();
+            const Vec3 pi = -(Ri * pE);
+            const Vec3 u(k.vel[0], k.vel[1], k.vel[2]), w(k.vel[3], k.vel[4], k.vel[5]);
+            Vec6 tw;
+            tw.tail<3>() = Ri * w;
+            tw.head<3>() = Ri * u + pi.cross(tw.tail<3>());
+            ff = Jlog * tw;
+          }
+        } else {  // "split": e = (E.translation, log3(E.rotation)), J = (R_E J_lin; Jlog3 J_ang)
+          double theta;
+          const Vec3 lw = spatial::log3(RE, theta);
+          const Mat3 Jlog = spatial::jlog3(theta, lw);
+          e.head<3>() = pE;
+          e.tail<3>() = lw;
+          for (int c : f.cols) {
+            Jt_.col(c).head<3>() = RE * Jl_.col(c).head<3>();
+            Jt_.col(c).tail<3>() = Jlog * Jl_.col(c).tail<3>();
+          }
+          if (hv) {
+            const Vec3 u(k.vel[0], k.vel[1], k.vel[2]), w(k.vel[3], k.vel[4], k.vel[5]);
+            ff.head<3>() = w.cross(pE) + u;
+            ff.tail<3>() = Jlog * (RE.transpose() * w);
+          }
+        }
+        for (int r = 0; r < rows; ++r) {
+          const int a = k.sel[r];
+          double bv = -gain * e[a];
+          if (hv) bv += ff[a];
+          write_row(k, r, Jt_.row(a), bv);
+        }
+        return true;
+      }
+      case kOrientation: {
+        const Frame& f = frames_[k.frame];
+        if (cached(k.task, names_[7], k.target, 2, 3) != 1 || k.target.cols != 3) return false;
+        const int hv = cached(k.task, names_[5], k.vel, 1, 3);
+        if (hv < 0) return false;
+        Mat3 Rt;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) Rt(i, j) = k.target(i, j);
+        const Mat3 E = Rt * f.R;
+        double theta;
+        const Vec3 e = spatial::log3(E, theta);
+        const Mat3 Jlog = spatial::jlog3(theta, e);
+        const Mat3 JR = Jlog * f.R.transpose();
+        Jt_.setZero();
+        for (int c : f.cols) Jt_.col(c).head<3>() = JR * Vec3(J_(3, c), J_(4, c), J_(5, c));
+        Vec3 ff = Vec3::Zero();
+        if (hv) ff = Jlog * (E.transpose() * Vec3(k.vel[0], k.vel[1], k.vel[2]));
+        for (int r = 0; r < rows; ++r) {
+          const int a = k.sel[r];
+          double bv = -gain * e[a];
+          if (hv) bv += ff[a];
+          write_row(k, r, Jt_.row(a), bv);
+        }
+        return true;
+      }
+      case kCom: {
+        if (cached(k.task, names_[4], k.target, 1, 3) != 1) return false;
+        const int hv = cached(k.task, names_[5], k.vel, 1, 3);
+        if (hv < 0) return false;
+        for (int r = 0; r < rows; ++r) {
+          const int a = k.sel[r];
+          for (int c = 0; c < nv_; ++c) Jt_(0, c) = Jcom_(a, c);
+          double bv = -gain * (com_[a] - k.target[a]);
+          if (hv) bv += k.vel[a];
+          write_row(k, r, Jt_.row(0), bv);
+        }
+        return true;
+      }
+      case kPosture: {
+        if (cached(k.task, names_[8], k.target, 1, nq_) != 1) return false;
+        double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
+        double* beq = out_[1].data() + k.row0;
+        for (int r = 0; r < rows; ++r) {
+          const int j = k.sel[r], iq = k.qidx[r];
+          const double s = k.sw[r];
+          const double bv = gain * (k.target[iq] - q[iq * qs]);
+          // the task's A (the selection) is constant: the stacked row is rewritten
+          for (int c = 0; c < nv_; ++c) Aeq[r * nv_ + c] = 0.0;
+          Aeq[r * nv_ + j] = k.A(r, j) * s;
+          k.b.w()[r * k.b.s0] = bv;
+          beq[r] = bv * s;
+        }
+        return true;
+      }
+    }
+    return false;
+  }
+
+  /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
+  void box(const double* q, int64_t qs) {
+    bool first = true;
+    for (const Limit& L : limits_) {
+      for (int i = 0; i < nv_; ++i) {
+        row_[i] = -kInf;
+        hi2_[i] = kInf;
+      }
+      if (L.velocity) {
+        for (int i = 0; i < nv_; ++i) {
+          row_[i] = -L.upper[i];
+          hi2_[i] = L.upper[i];
+        }
+      } else {
+        const double k = float_attr(L.lim, names_[0]) / dt_;
+        if (L.indexed) {
+          for (size_t i = 0; i < L.qi.size(); ++i) {
+            const double qq = q[L.qi[i] * qs];
+            row_[L.vi[i]] = k * (L.lower[i] - qq);
+            hi2_[L.vi[i]] = k * (L.upper[i] - qq);
+          }
+        } else {
+          for (int i = 0; i < nv_; ++i) {
+            row_[i] = k * (L.lower[i] - q[i * qs]);
+            hi2_[i] = k * (L.upper[i] - q[i * qs]);
+          }
+        }
+      }
+      for (int i = 0; i < nv_; ++i) {
+        if (first) {
+          lo_[i] = row_[i];
+          hi_[i] = hi2_[i];
+        } else {
+          lo_[i] = std::max(lo_[i], row_[i]);
+          hi_[i] = std::min(hi_[i], hi2_[i]);
+        }
+      }
+      first = false;
+    }
+    // boxes that do not meet: the end nearer to 0 wins
+    for (int i = 0; i < nv_; ++i)
+      if (lo_[i] > hi_[i]) lo_[i] = hi_[i] = std::abs(lo_[i]) < std::abs(hi_[i]) ? lo_[i] : hi_[i];
+  }
+
+  int nq_, nv_;
+  double dt_;
+  std::vector<int> unit_;  ///< (start, size) of each unit-norm block of q
+  Hierarchy h_;
+  std::vector<OutArr> out_;
+  bool bound_ = false;
+  View J_, com_, Jcom_;
+  Mat M_;
+  bool mapped_ = false;
+  std::vector<Frame> frames_;
+  std::vector<Kernel> kernels_;
+  std::vector<Limit> limits_;
+  std::vector<nb::str> names_;
+  Mat Jt_, Jl_;
+  Vec row_, lo_, hi_, hi2_;
+};
+
+}  // namespace
+
+void bind_ik_step(nb::module_& m) {
+  nb::class_<IKStep>(m, "IKStep",
+                     "One differential-IK step in one call: task rows, limit box and strict "
+                     "hierarchy (qpcoord.kinematics.native_step builds it).")
+      .def(nb::init<int, int, std::vector<int>, std::vector<int>, bool, double, double,
+                    std::vector<int>>(),
+           nb::arg("nq"), nb::arg("nv"), nb::arg("meq"), nb::arg("min"), nb::arg("has_bounds"),
+           nb::arg("damping"), nb::arg("dt"), nb::arg("unit_blocks"))
+      .def("bind", &IKStep::bind)
+      .def("set_jacobian", &IKStep::set_jacobian)
+      .def("set_com", &IKStep::set_com)
+      .def("set_coordinate_map", &IKStep::set_coordinate_map)
+      .def("add_frame", &IKStep::add_frame)
+      .def("add_task", &IKStep::add_task)
+      .def("add_joint_limits", &IKStep::add_joint_limits)
+      .def("add_velocity_limits", &IKStep::add_velocity_limits)
+      .def("step", &IKStep::step, nb::arg("q"), nb::arg("t"), nb::arg("reference").none(),
+           nb::arg("warm"), nb::arg("time_left"))
+      .def_rw("limits_mode", &IKStep::limits_mode)
+      .def_ro("failed", &IKStep::failed)
+      .def_prop_ro("num_tasks", &IKStep::num_tasks);
+  m.attr("IK_BAD_Q") = kBadQ;
+  m.attr("IK_TASK_DATA") = kTaskData;
+  m.def("spatial_log3", [](const Mat3& R) {
+    double th;
+    return Vec3(spatial::log3(R, th));
+  });
+  m.def("spatial_jlog3", [](const Mat3& R) {
+    double th;
+    const Vec3 r = spatial::log3(R, th);
+    return Mat3(spatial::jlog3(th, r));
+  });
+  m.def("spatial_log6", [](const Mat3& R, const Vec3& p) { return Vec6(spatial::log6(R, p)); });
+  m.def("spatial_jlog6", [](const Mat3& R, const Vec3& p) { return Mat6(spatial::jlog6(R, p)); });
+}
+
+}  // namespace qpcoord

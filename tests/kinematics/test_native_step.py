@@ -1,0 +1,736 @@
+"""The native IK step (:mod:`qpcoord.kinematics.native_step`) against the Python tasks and
+engines: the rows it writes, its Jacobians, its closed-loop velocities, the hybrid step and
+its errors."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import qpcoord as qc
+from qpcoord.core import native
+from qpcoord.kinematics.frame_tasks import (
+    ComTask,
+    FramePositionTask,
+    FrameTask,
+    OrientationTask,
+    RelativeFrameTask,
+)
+from qpcoord.kinematics.native_step import native_kind
+from qpcoord.kinematics.paths import Circle, HorizontalCircle
+from qpcoord.kinematics.tasks import AccelerationLimits, PositionBand
+
+needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
+
+DT = 0.01
+#: the controlled frame and the default-frame robot of each test robot
+FRAMES = {"panda": "panda_hand_tcp", "planar_3r": "tip", "talos": "gripper_right_base_link"}
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, qc.Robot]:
+    out = {"panda": qc.robots.load("panda"), "planar_3r": qc.robots.load("planar_3r")}
+    try:
+        out["talos"] = qc.robots.load("talos")
+    except ValueError:  # example-robot-data missing
+        pass
+    return out
+
+
+def _robot(robots, name: str) -> qc.Robot:
+    if name not in robots:
+        pytest.skip(f"{name} not available")
+    return robots[name]
+
+
+def _start(robot: qc.Robot) -> np.ndarray:
+    if robot.name == "talos":
+        return robot.reference_configuration("half_sitting")
+    return robot.random_configuration(3)
+
+
+def _ee(robot: qc.Robot) -> qc.Robot:
+    """A robot whose default frame is the controlled frame (shares the model)."""
+    frame = FRAMES[robot.name]
+    return robot if robot.frame == frame else robot.with_frame(frame)
+
+
+def _target_pose(robot: qc.Robot, q: np.ndarray) -> np.ndarray:
+    frame = FRAMES[robot.name]
+    T = robot.frame_pose(q, frame).copy()
+    T[:3, :3] = T[:3, :3] @ pin.exp3(np.array([0.2, -0.3, 0.4]))
+    T[:3, 3] += [0.05, -0.04, 0.03]
+    return T
+
+
+def _kind_levels(robot: qc.Robot, kind: str, q: np.ndarray) -> list:
+    """A fresh stack of one task kind (with masks, weights, feed-forward) and a posture."""
+    frame = FRAMES[robot.name]
+    ee = _ee(robot)
+    if kind == "position":
+        task = qc.PositionTask(ee, target=ee.position(q) + 0.05, gain=7.0, weight=2.0)
+    elif kind == "position_path":
+        path = (
+            Circle(radius=0.2)
+            if ee.m == 2
+            else HorizontalCircle(ee.position(q) + [0.0, 0.0, 0.02], 0.1, 2.0)
+        )
+        task = qc.PositionTask(ee, target=path, gain=5.0)
+    elif kind == "frame_position":
+        task = FramePositionTask(robot, frame, gain=3.0, mask="x z", weight=2.0)
+        task.set_target(robot.frame_pose(q, frame)[:3, 3] + 0.03, velocity=[0.1, -0.2, 0.3])
+    elif kind == "pose":
+        task = FrameTask(
+            robot, frame, gain=2.0, position_weight=2.0, orientation_weight=0.5, mask="x y rz ry"
+        )
+        task.set_target(_target_pose(robot, q), velocity=[0.1, 0.0, -0.1, 0.2, 0.1, -0.3])
+    elif kind == "pose_split":
+        task = FrameTask(robot, frame, gain=2.5, mask="x z rx ry", error="split", name="split")
+        task.set_target(_target_pose(robot, q), velocity=[0.1, 0.2, -0.1, 0.3, -0.1, 0.2])
+    elif kind == "pose_plain":
+        task = FrameTask(robot, frame, _target_pose(robot, q), gain=4.0)
+    elif kind == "orientation":
+        task = OrientationTask(robot, frame, gain=1.5, mask="rx rz", weight=3.0)
+        task.set_target(_target_pose(robot, q), velocity=[0.3, -0.2, 0.1])
+    elif kind == "com":
+        task = ComTask(robot, gain=2.0, mask="xy", weight=4.0)
+        task.set_target(robot.com(q) + [0.01, -0.02, 0.0], velocity=[0.05, 0.0, 0.1])
+    else:
+        raise AssertionError(kind)
+    w = np.linspace(0.5, 2.0, qc.PostureTask(robot, q).task.shape[0])
+    posture = qc.PostureTask(robot, robot.random_configuration(9), gain=1.5, weight=w)
+    return [task, posture]
+
+
+KINDS = ["position", "position_path", "frame_position", "pose", "pose_split", "orientation", "com"]
+
+
+def _pair(robot, factory, **options):
+    """A native-step IK and a Python-engine IK of two copies of one stack."""
+    return (
+        qc.IK(robot, factory(), DT, engine="native", **options),
+        qc.IK(robot, factory(), DT, engine="python", **options),
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# the rows: native kernels against the tasks' Python _refresh
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "planar_3r", "talos"])
+@pytest.mark.parametrize("kind", KINDS)
+def test_native_rows_equal_the_python_refresh(robots, name, kind):
+    robot = _robot(robots, name)
+    if kind == "com" and robot.mass <= 0:
+        pytest.skip("massless model")
+    q = _start(robot)
+    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, kind, q))
+    task = ikn._dynamic[0]
+    assert native_kind(task) is not None and task in ikn._native.kernel_tasks
+    assert ikn._dynamic[1] in ikn._native.kernel_tasks  # the posture too (1-DoF joints)
+    assert not ikn._native._hybrid
+    for step, t in enumerate((0.0, 0.37)):
+        qs = q if step == 0 else robot.integrate(q, 0.1 * np.ones(robot.nv), DT)
+        ikn.step(qs, t)
+        ikp.refresh(qs, t)
+        Pn, Pp = ikn.stack._compiled, ikp.stack._compiled
+        Pp.refresh_stacked()
+        scale = max(1.0, float(np.abs(Pp.Aeq).max()), float(np.abs(Pp.beq).max()))
+        np.testing.assert_allclose(Pn.Aeq, Pp.Aeq, rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(Pn.beq, Pp.beq, rtol=0, atol=1e-12 * scale)
+        np.testing.assert_array_equal(Pn.lbs, Pp.lbs)
+        np.testing.assert_array_equal(Pn.ubs, Pp.ubs)
+        for tn, tp in zip(ikn._dynamic, ikp._dynamic, strict=True):  # the tasks' own rows
+            np.testing.assert_allclose(tn.task.A, tp.task.A, rtol=0, atol=1e-12 * scale)
+            np.testing.assert_allclose(tn.task.b, tp.task.b, rtol=0, atol=1e-12 * scale)
+
+
+@needs_native
+def test_position_task_follows_the_run_reference(robots):
+    robot = robots["planar_3r"]
+    q = np.array([0.2, 0.9, -0.4])
+    ikn, ikp = _pair(robot, lambda: [qc.PositionTask(robot, gain=2.0)], limits=None)
+    for t in (0.0, 0.4, 1.1):
+        vn, _ = ikn.step(q, t, reference=Circle(radius=0.3))
+        vp, _ = ikp.step(q, t, reference=Circle(radius=0.3))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ikn._dynamic[0].task.b, ikp._dynamic[0].task.b, atol=1e-13)
+
+
+@needs_native
+def test_set_target_and_gain_are_followed(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, "pose_plain", q))
+    for ik in (ikn, ikp):
+        ik._dynamic[0].set_target(_target_pose(robot, robot.random_configuration(11)))
+        ik._dynamic[0].gain = 9.0
+        ik._dynamic[1].set_target(robot.random_configuration(12))
+    vn, _ = ikn.step(q)
+    vp, _ = ikp.step(q)
+    np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ikn._dynamic[0].task.b, ikp._dynamic[0].task.b, atol=1e-12)
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_limit_boxes_equal_the_python_refresh(robots, name):
+    robot = _robot(robots, name)
+    q = _start(robot).copy()
+    limited = _limited_joints(robot)
+    q[limited[0]] = robot.upper[limited[0]] + 0.05  # outside a limit: the boxes do not meet
+    levels = lambda: [qc.PostureTask(robot, _start(robot))]  # noqa: E731
+    limits = lambda: [  # noqa: E731
+        qc.JointLimits(robot, gain=0.5),
+        qc.VelocityLimits(robot, 0.3 * np.minimum(robot.velocity_limit, 2.0)),
+    ]
+    ikn = qc.IK(robot, levels(), DT, limits=limits(), engine="native")
+    ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
+    ikn.step(q)
+    ikp.refresh(q)
+    Pn = ikn.stack._compiled
+    lo, hi = ikp.bounds.lower, ikp.bounds.upper
+    np.testing.assert_array_equal(Pn.lbs, lo)
+    np.testing.assert_array_equal(Pn.ubs, hi)
+    np.testing.assert_array_equal(ikn.bounds.lower, lo)
+    assert np.any(lo == hi)  # the speed limit won where the boxes did not meet
+
+
+def _limited_joints(robot: qc.Robot) -> list[int]:
+    """q indices of the robot's limited 1-DoF joints."""
+    return [
+        int(j.idx_q)
+        for j in robot.model.joints[1:]
+        if j.nq == 1 and np.isfinite(robot.upper[j.idx_q]) and robot.upper[j.idx_q] < 1e300
+    ]
+
+
+# ---------------------------------------------------------------------------------------
+# Jacobians: finite differences of the errors the native kernels compute
+# ---------------------------------------------------------------------------------------
+
+
+def _error_and_jacobian(ik: qc.IK, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(e, J)`` of the IK's first task from a native step (gain 1, no feed-forward)."""
+    ik.step(q)
+    task = ik._dynamic[0].task
+    return -np.array(task.b), np.array(task.A)
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "planar_3r", "talos"])
+@pytest.mark.parametrize(
+    "kind", ["position", "frame_position", "pose", "pose_split", "orientation", "com"]
+)
+def test_native_jacobians_match_finite_differences(robots, name, kind):
+    robot = _robot(robots, name)
+    if kind == "com" and robot.mass <= 0:
+        pytest.skip("massless model")
+    frame = FRAMES[robot.name]
+    q = _start(robot)
+    T = _target_pose(robot, q)
+    task = {
+        "position": lambda: qc.PositionTask(_ee(robot), target=_ee(robot).position(q), gain=1.0),
+        "frame_position": lambda: FramePositionTask(robot, frame, T[:3, 3], gain=1.0),
+        "pose": lambda: FrameTask(robot, frame, T, gain=1.0),
+        "pose_split": lambda: FrameTask(robot, frame, T, gain=1.0, error="split"),
+        "orientation": lambda: OrientationTask(robot, frame, T, gain=1.0),
+        "com": lambda: ComTask(robot, robot.com(q) + 0.01, gain=1.0),
+    }[kind]()
+    ik = qc.IK(robot, [task], DT, limits=None, engine="native")
+    _, J = _error_and_jacobian(ik, q)
+    rng = np.random.default_rng(4)
+    h = 1e-6
+    for _ in range(3):
+        d = rng.normal(size=robot.nv)
+        ep, _ = _error_and_jacobian(ik, robot.integrate(q, d, h))
+        em, _ = _error_and_jacobian(ik, robot.integrate(q, d, -h))
+        fd = (ep - em) / (2 * h)
+        np.testing.assert_allclose(J @ d, fd, rtol=0, atol=1e-6 * max(1.0, np.abs(fd).max()))
+
+
+def _rotations(
+    rng: np.random.Generator, kind: str, count: int, pi_gap: tuple[float, float] = (-6, -2)
+) -> list[np.ndarray]:
+    out = []
+    for _ in range(count):
+        u = rng.normal(size=3)
+        u /= np.linalg.norm(u)
+        if kind == "random":
+            out.append(pin.exp3(rng.uniform(0.0, 3.0) * u))
+        elif kind == "small":
+            out.append(pin.exp3(10 ** rng.uniform(-9, -2) * u))
+        else:  # near pi
+            out.append(pin.exp3((np.pi - 10 ** rng.uniform(*pi_gap)) * u))
+    return out
+
+
+@needs_native
+@pytest.mark.parametrize(("kind", "tol"), [("random", 1e-11), ("small", 1e-11), ("pi", 1e-9)])
+def test_spatial_logs_match_pinocchio(kind, tol):
+    """The kernels against Pinocchio. Pinocchio renormalises R first: the acos near pi and
+    the closed forms amplify that rounding to ~1e-12 (near pi ~1e-10). Below 0.05 rad the
+    kernels' Jacobians use the series where Pinocchio's closed forms cancel (pin 4.1's Jlog6
+    is off by 1e-5 at 1.5e-4 rad, by 3e-8 at 1e-3 rad; the finite-difference test below
+    shows the kernels' are right): the Jacobians are compared where both use the series
+    (below Pinocchio's switch, eps^(1/4) = 1.2e-4 rad) or both the closed form."""
+    mod = native.load()
+    rng = np.random.default_rng(5)
+    for R in _rotations(rng, kind, 200):
+        p = rng.normal(size=3)
+        M = pin.SE3(R, p)
+        np.testing.assert_allclose(mod.spatial_log3(R), pin.log3(R), rtol=0, atol=tol)
+        np.testing.assert_allclose(mod.spatial_log6(R, p), pin.log6(M).vector, rtol=0, atol=tol)
+        theta = np.linalg.norm(pin.log3(R))
+        if 1e-4 < theta < 0.05:
+            continue
+        np.testing.assert_allclose(mod.spatial_jlog3(R), pin.Jlog3(R), rtol=0, atol=tol)
+        np.testing.assert_allclose(mod.spatial_jlog6(R, p), pin.Jlog6(M), rtol=0, atol=tol)
+
+
+@needs_native
+@pytest.mark.parametrize(("kind", "tol"), [("random", 1e-8), ("small", 1e-8), ("pi", 1e-6)])
+def test_spatial_log_jacobians_match_finite_differences(kind, tol):
+    """``d log3(R exp(ε ω))/dε = Jlog3 ω`` and ``d log6(M exp6(ε ν))/dε = Jlog6 ν``.
+
+    Near pi the log is ill-conditioned (rounding / (pi − θ)): checked from 1e-2 away."""
+    mod = native.load()
+    rng = np.random.default_rng(6)
+    h = 1e-5
+    for R in _rotations(rng, kind, 30, pi_gap=(-2, -1)):
+        w = rng.normal(size=3)
+        fd = (mod.spatial_log3(R @ pin.exp3(h * w)) - mod.spatial_log3(R @ pin.exp3(-h * w))) / (
+            2 * h
+        )
+        np.testing.assert_allclose(mod.spatial_jlog3(R) @ w, fd, rtol=0, atol=tol)
+        p, nu = rng.normal(size=3), rng.normal(size=6)
+        M = pin.SE3(R, p)
+        Mp, Mm = M * pin.exp6(h * nu), M * pin.exp6(-h * nu)
+        fd6 = (
+            mod.spatial_log6(Mp.rotation, Mp.translation)
+            - mod.spatial_log6(Mm.rotation, Mm.translation)
+        ) / (2 * h)
+        np.testing.assert_allclose(mod.spatial_jlog6(R, p) @ nu, fd6, rtol=0, atol=tol)
+
+
+# ---------------------------------------------------------------------------------------
+# closed loop: the same velocities as the Python paths
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+@pytest.mark.parametrize("kind", ["position", "pose_plain", "orientation"])
+def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind):
+    robot = robots["panda"]
+    q = 0.5 * (robot.lower + robot.upper)
+    q[3] = robot.lower[3] + 0.02  # near a limit
+    far = robot.random_configuration(21)
+
+    def levels():
+        lv = _kind_levels(robot, kind, far)
+        lv[0].gain = 20.0  # fast: the speed and position limits bind
+        return lv
+
+    ikn, ikp = _pair(robot, levels)
+    current = qc.IK(robot, levels(), DT, engine="python")  # Python tasks + native solve
+    binding = 0
+    for step in range(200):
+        vn, sn = ikn.step(q)
+        vp, _ = ikp.step(q)
+        current.refresh(q)
+        sc = current.stack.solve(engine="native")
+        vc = sc.x
+        assert sn.info.keys() == sc.info.keys()
+        if kind == "position":  # the same rows to rounding: the same solver path
+            assert sn.info == sc.info, step
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        # the same rows but for Jlog6's series below 0.05 rad (Pinocchio's closed form)
+        np.testing.assert_allclose(vn, vc, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        lo, hi = ikn.bounds.lower, ikn.bounds.upper
+        binding += bool(np.any(np.minimum(vn - lo, hi - vn) < 1e-9))
+        assert sn.solver == "native" and sn.status == "optimal"
+        q = robot.integrate(q, vn, DT)
+    assert 10 <= binding, binding
+
+
+@needs_native
+def test_closed_loop_on_the_planar_arm(robots):
+    robot = robots["planar_3r"]
+    q = np.array([0.3, 0.8, 1.1])
+    ikn, ikp = _pair(
+        robot,
+        lambda: [
+            qc.PositionTask(robot, target=Circle(radius=0.4), gain=10.0),
+            qc.PostureTask(robot, [0.0, 0.5, 1.0]),
+        ],
+        limits=[qc.VelocityLimits(robot, 1.5)],
+    )
+    for step in range(200):
+        t = step * DT
+        vn, _ = ikn.step(q, t)
+        vp, _ = ikp.step(q, t)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+# ---------------------------------------------------------------------------------------
+# hybrid steps: tasks without a kernel keep their Python refresh
+# ---------------------------------------------------------------------------------------
+
+
+class Height(qc.KinematicTask):
+    """A user task (compute_error / compute_jacobian): keep the hand's height."""
+
+    def __init__(self, robot, frame, z):
+        super().__init__(robot, 1, gain=5.0, name="height")
+        self.frame, self.z = frame, z
+
+    def compute_error(self, q):
+        return self.robot.frame_pose(q, self.frame)[2:3, 3] - self.z
+
+    def compute_jacobian(self, q):
+        return self.robot.frame_jacobian(q, self.frame)[2:3]
+
+
+class HeightFD(Height):
+    """The same with a finite-difference Jacobian: it leaves the robot's Pinocchio data at
+    another configuration than the step's."""
+
+    def compute_jacobian(self, q):
+        h = 1e-6
+        J = np.empty((1, self.robot.nv))
+        for i in range(self.robot.nv):
+            d = np.zeros(self.robot.nv)
+            d[i] = h
+            up = self.compute_error(self.robot.integrate(q, d, 1.0))
+            down = self.compute_error(self.robot.integrate(q, -d, 1.0))
+            J[0, i] = (up - down)[0] / (2 * h)
+        return J
+
+
+@needs_native
+def test_a_python_task_moving_the_robot_data_does_not_disturb_the_kernels(robots):
+    robot = robots["panda"]
+    frame = FRAMES["panda"]
+    q = robot.random_configuration(2)
+    T = _target_pose(robot, q)
+
+    def levels():
+        return [HeightFD(robot, frame, 0.5), FrameTask(robot, frame, T, gain=3.0)]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    current = qc.IK(robot, levels(), DT, engine="python")  # Python tasks + native solve
+    for step in range(20):
+        vn, _ = ikn.step(q)
+        current.refresh(q)
+        vc = current.stack.solve(engine="native").x
+        np.testing.assert_allclose(vn, vc, rtol=0, atol=1e-8, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_hybrid_step_matches_the_python_engine(robots):
+    robot = robots["panda"]
+    frame = FRAMES["panda"]
+    q = robot.random_configuration(2)
+    T = _target_pose(robot, q)
+
+    def levels():
+        return [
+            [
+                PositionBand(robot, lower=[-np.inf, -np.inf, 0.3], gain=5.0),
+                Height(robot, frame, 0.5),
+            ],
+            [FrameTask(robot, frame, T, gain=3.0, error="split", mask="z rx ry")],
+            [RelativeFrameTask(robot, frame, "panda_link4", pin.SE3.Identity(), gain=0.0)],
+            [qc.Equality(np.eye(robot.nv)[:2], [0.1, -0.1], name="constant")],
+            qc.PostureTask(robot, robot.random_configuration(4)),
+        ]
+
+    limits = lambda: [  # noqa: E731
+        qc.JointLimits(robot),
+        qc.VelocityLimits(robot),
+        AccelerationLimits(robot, 30.0),
+    ]
+    ikn = qc.IK(robot, levels(), DT, limits=limits(), engine="native")
+    ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
+    hybrid = ikn._native
+    assert hybrid._python_tasks and hybrid._python_limits
+    assert [type(t) for t in hybrid.kernel_tasks] == [FrameTask, qc.PostureTask]
+    for step in range(60):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_floating_base_whole_body_is_native_and_matches(robots):
+    robot = _robot(robots, "talos")
+    q = _start(robot)
+    feet = ["left_sole_link", "right_sole_link"]
+
+    def levels():
+        tasks = [FrameTask(robot, s, gain=1.0 / DT) for s in feet]
+        for t in tasks:
+            t.set_target_from_configuration(q)
+        com = ComTask(robot, robot.com(q) + [0.02, 0.0, -0.01], gain=5.0)
+        return [tasks, com, qc.PostureTask(robot, q)]
+
+    ikn, ikp = _pair(robot, levels)
+    assert len(ikn._native.kernel_tasks) == 4 and not ikn._native._hybrid
+    for step in range(30):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+# ---------------------------------------------------------------------------------------
+# errors, engine choice, warm start
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+def test_bad_configurations_are_named(robots):
+    robot = robots["panda"]
+    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", _start(robot)), DT, engine="native")
+    q = _start(robot)
+    bad = q.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match=r"q\[3\] is nan"):
+        ik.step(bad)
+    with pytest.raises(ValueError, match="q must have 7 entries"):
+        ik.step(q[:5])
+    with pytest.raises(ValueError, match="q must be numeric"):
+        ik.step(["a"] * 7)
+    v, _ = ik.step(list(q))  # converted
+    np.testing.assert_allclose(v, ik.step(q)[0], atol=1e-12)
+
+
+@needs_native
+def test_non_unit_quaternion_is_named(robots):
+    robot = _robot(robots, "talos")
+    q = _start(robot).copy()
+    ik = qc.IK(robot, [ComTask(robot, robot.com(q), gain=1.0)], DT, engine="native")
+    q[3:7] *= 1.01
+    with pytest.raises(ValueError, match=r"q\[3:7\] is the quaternion"):
+        ik.step(q)
+
+
+@needs_native
+def test_missing_target_raises_the_tasks_message(robots):
+    robot = robots["panda"]
+    ik = qc.IK(robot, [FrameTask(robot, FRAMES["panda"])], DT, engine="native")
+    with pytest.raises(ValueError, match="no target"):
+        ik.step(_start(robot))
+
+
+@needs_native
+def test_engine_choice(robots):
+    robot = robots["panda"]
+    levels = lambda: [qc.PostureTask(robot, _start(robot))]  # noqa: E731
+    assert qc.IK(robot, levels(), DT).engine == "native"  # the default where built
+    assert qc.IK(robot, levels(), DT, engine="python").engine == "python"
+    assert qc.IK(robot, levels(), DT, method="weighted").engine == "python"
+    with pytest.raises(ValueError, match="method='weighted' is not supported by the native"):
+        qc.IK(robot, levels(), DT, method="weighted", engine="native")
+    with pytest.raises(ValueError, match="solver='quadprog' is not supported"):
+        qc.IK(robot, levels(), DT, solver="quadprog", engine="native")
+    with pytest.raises(ValueError, match="unknown engine"):
+        qc.IK(robot, levels(), DT, engine="fast")
+
+
+@needs_native
+def test_warm_start_reset_and_v_prev(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    ik = qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="native")
+    v1, s1 = ik.step(q)
+    np.testing.assert_array_equal(ik.v_prev, v1)
+    assert ik.last is s1
+    v2, _ = ik.step(q, warm_start=s1)
+    np.testing.assert_allclose(v1, v2, atol=1e-12)
+    with pytest.raises(ValueError, match="warm_start"):
+        ik.step(q, warm_start=np.ones(3))
+    ik.reset()
+    assert ik.last is None and not ik.v_prev.any()
+    np.testing.assert_allclose(ik.step(q)[0], v1, atol=1e-12)
+
+
+@pytest.fixture
+def missing_extension(monkeypatch):
+    """Simulate an install without a C++ compiler: the extension cannot be imported."""
+
+    def fail():
+        raise ImportError("No module named 'qpcoord._native'")
+
+    monkeypatch.setattr(native, "_import", fail)
+    monkeypatch.setattr(native, "_module", None)
+    monkeypatch.setattr(native, "_warned", False)
+
+
+def test_without_the_extension_the_python_path_warns_once(robots, missing_extension):
+    robot = robots["panda"]
+    q = _start(robot)
+    with pytest.warns(RuntimeWarning, match="native engine is not built") as rec:
+        ik = qc.IK(robot, _kind_levels(robot, "position", q), DT)
+        v, sol = ik.step(q)
+    assert len(rec) == 1
+    assert ik.engine == "python" and sol.solver != "native"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ref = qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="python")
+        np.testing.assert_allclose(v, ref.step(q)[0], atol=1e-12)
+    with pytest.raises(native.NativeUnavailableError):
+        qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="native")
+
+
+@needs_native
+def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
+    model = pin.Model()
+    parent = 0
+    for i, joint in enumerate(
+        [pin.JointModelRZ(), pin.JointModelRUBZ(), pin.JointModelRY(), pin.JointModelRZ()]
+    ):
+        placement = pin.SE3(np.eye(3), np.array([0.0 if i == 0 else 0.4, 0.0, 0.0]))
+        parent = model.addJoint(parent, joint, placement, f"j{i}")
+        model.appendBodyToJoint(parent, pin.Inertia.Random(), pin.SE3.Identity())
+    model.addFrame(
+        pin.Frame("tip", parent, 0, pin.SE3(np.eye(3), np.array([0.4, 0, 0])), pin.OP_FRAME)
+    )
+    robot = qc.Robot(model, "tip")
+    q = robot.random_configuration(1)
+
+    def levels():
+        return [qc.PositionTask(robot, robot.position(q) + 0.05), qc.PostureTask(robot, q)]
+
+    ikn, ikp = _pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
+    assert ikn._native._python_tasks == [ikn._dynamic[1]]
+    for step in range(30):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_hard_constraint_rows_are_native_and_match(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    frame = FRAMES["panda"]
+
+    def build(engine):
+        hold = FramePositionTask(robot, frame, robot.frame_pose(q, frame)[:3, 3], gain=10.0)
+        pose = OrientationTask(robot, frame, _target_pose(robot, q), gain=5.0)
+        return qc.IK(robot, [pose, qc.PostureTask(robot, q)], DT, constraints=[hold], engine=engine)
+
+    ikn, ikp = build("native"), build("python")
+    assert len(ikn._native.kernel_tasks) == 3 and not ikn._native._hybrid
+    for step in range(20):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_a_path_of_the_wrong_dimension_raises_the_tasks_message(robots):
+    robot = robots["panda"]
+    task = qc.PositionTask(robot, gain=1.0)  # no target: the run's reference is used
+    ik = qc.IK(robot, [task], DT, engine="native")
+    with pytest.raises(ValueError, match="reference path is 2-D"):
+        ik.step(_start(robot), reference=Circle())
+    with pytest.raises(ValueError, match="no target"):
+        ik.step(_start(robot))
+
+
+_COUNTING_MALLOC = r"""
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <stddef.h>
+static long long calls = 0;
+static void* (*next_malloc)(size_t) = 0;
+static void* (*next_realloc)(void*, size_t) = 0;
+long long qpcoord_malloc_calls(void) { return calls; }
+void* malloc(size_t s) {
+  if (!next_malloc) next_malloc = dlsym(RTLD_NEXT, "malloc");
+  ++calls;
+  return next_malloc(s);
+}
+void* realloc(void* p, size_t s) {
+  if (!next_realloc) next_realloc = dlsym(RTLD_NEXT, "realloc");
+  ++calls;
+  return next_realloc(p, s);
+}
+"""
+
+_ALLOCATION_RUN = r"""
+import ctypes, sys
+import numpy as np, pinocchio as pin, qpcoord as qc
+sys.path.insert(0, {tests!r})
+from test_native_step import _kind_levels, _start, DT
+count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
+count.restype = ctypes.c_longlong
+robot = qc.robots.load("panda")
+for kind in ("position", "frame_position", "pose", "orientation", "com"):
+    q = _start(robot)
+    ik = qc.IK(robot, _kind_levels(robot, kind, q), DT, engine="native")
+    call = ik._native._solver.step
+    pin.computeJointJacobians(robot.model, robot.data, q)
+    pin.jacobianCenterOfMass(robot.model, robot.data, False)
+    for _ in range(20):
+        assert call(q, 0.0, None, True, 10.0) == 0
+    before = count()
+    for _ in range(500):
+        call(q, 0.0, None, True, 10.0)
+    print(kind, count() - before)
+"""
+
+
+@needs_native
+def test_the_native_call_does_not_allocate(tmp_path):
+    """The per-step native call (kernels, box, hierarchy) on the Panda makes no heap
+    allocation after its first calls: malloc is counted by a preloaded shim (glibc)."""
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None or not sys.platform.startswith("linux"):
+        pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
+    src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
+    src.write_text(_COUNTING_MALLOC)
+    subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
+    script = _ALLOCATION_RUN.format(tests=str(Path(__file__).parent), lib=str(lib))
+    proc = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    counts = dict(line.split() for line in proc.stdout.splitlines())
+    assert len(counts) == 5
+    assert all(int(c) == 0 for c in counts.values()), counts
+
+
+@needs_native
+def test_an_ik_with_the_native_step_pickles(robots):
+    import pickle
+
+    robot = robots["panda"]
+    q = _start(robot)
+    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", q), DT, engine="native")
+    v, _ = ik.step(q)
+    copy = pickle.loads(pickle.dumps(ik))
+    assert copy.engine == "native" and copy._native is not None
+    np.testing.assert_allclose(copy.step(q)[0], v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ik.step(q)[0], v, rtol=0, atol=1e-12)  # the original still runs
