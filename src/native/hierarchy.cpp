@@ -352,6 +352,16 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) return true;
       W[drop] = 0;
       last_drop = drop;
+      // the row leaves: downdate the working set's QR and Q Qf instead of refactorising
+      if (downdate) {
+        const auto pos = std::find(widx_.begin(), widx_.end(), drop);
+        if (pos != widx_.end() &&
+            wqr_.remove(static_cast<int>(pos - widx_.begin()), Qt_.topLeftCorner(qr, k))) {
+          widx_.erase(pos);
+          current = true;
+          ++downdates_;
+        }
+      }
       continue;
     }
     // ratio test on the rows outside the working set (ties: the lowest index)
@@ -400,7 +410,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       // one row enters: update the working set's QR and Q Qf instead of refactorising
       if (wqr_.append(P.G.row(block).head(k).transpose())) {
         widx_.push_back(block);
-        wqr_.reflect_right(wqr_.rank() - 1, Qt_.topLeftCorner(qr, k));
+        wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
         current = true;
       }
     } else {
@@ -850,7 +860,14 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   y.setZero();
   int iters = 0;
   const bool hit = warm && try_working_set(P, working_[stage], y, W_);
-  if (!hit) {
+  // on a miss: the stored set made feasible (every row is without slack here; y = 0 is
+  // feasible: x meets the inherited rows and the bounds)
+  const bool seeded =
+      !hit && warm && seed_on_miss && seed_working_set(P, working_[stage], P.rows, r_, y, W_);
+  if (seeded) {
+    ++seeded_;
+    if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
+  } else if (!hit) {
     std::fill(W_.begin(), W_.begin() + P.rows, 0);
     for (int i = 0; i < P.rows; ++i)
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
@@ -905,6 +922,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   detail.setZero();
   timed_out_ = false;
   seeded_ = 0;
+  downdates_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +

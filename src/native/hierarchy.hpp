@@ -81,8 +81,13 @@ class Hierarchy {
             MRef<Vec> detail);
 
   int n() const { return n_; }
-  /// Seed the active set from a missed stored working set (default) or start cold (A/B).
+  /// Rows that left a working set through a downdate of its QR during the last call.
+  int downdates() const { return downdates_; }
+  /// Seed the active set (levels, minimum-norm step) from a missed stored working set
+  /// (default) or start cold (A/B).
   bool seed_on_miss = true;
+  /// Downdate the working set's QR when a row leaves (default) or refactorise (A/B).
+  bool downdate = true;
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
   double damping() const { return damping_; }
 
@@ -169,6 +174,7 @@ class Hierarchy {
   std::chrono::steady_clock::time_point deadline_;
   Vec frozen_value_;  ///< each level's value when it was frozen
   int seeded_ = 0;    ///< stages of this call started from a seeded working set (detail[7])
+  int downdates_ = 0;  ///< rows that left a working set by a QR downdate in this call
 
   std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
   LsqProblem P_;
@@ -177,7 +183,7 @@ class Hierarchy {
 
   // workspace, sized at construction: the per-call path does not allocate (the closed-form
   // SVDs are one object per stage, whose sizes repeat from one call to the next)
-  PivotedQR wqr_;  ///< G_w^T of the working set (k x kw)
+  WorkingQR wqr_;  ///< G_w^T of the working set (k x kw), updated as rows enter and leave
   PivotedQR kqr_;  ///< the projected objective K = Q N (qrows x (k - rank))
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)

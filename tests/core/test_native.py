@@ -434,3 +434,72 @@ def test_a_missed_working_set_seeds_the_next_start(seed):
         np.testing.assert_allclose(rc, ref, rtol=1e-9, atol=1e-10)
         used += info["warm_start_seeded"]
     assert used > 0
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_downdated_working_sets_give_the_cold_answer(seed):
+    """Moving bounds make rows leave the working sets during warm solves; the QR of the
+    working set is then downdated (Givens) instead of refactorised. Every step's answer
+    equals the refactorising solver's, a cold solve's and the Python engine's (level values
+    to 1e-9 relative, x to 1e-9), and downdates did happen."""
+    from qpcoord.core.native import NativeHierarchy
+
+    s = _hard_random_stack(seed, n=30, levels=6)
+    P = s._compiled
+    down = NativeHierarchy(P, s.damping)
+    refac = NativeHierarchy(P, s.damping)
+    refac._solver.downdate = False
+    cold = NativeHierarchy(P, s.damping)
+    ineqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    used = 0
+    for step in range(12):
+        for j, t in enumerate(ineqs):
+            shift = 0.05 * np.sin(0.7 * step + j)
+            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        xd, rd, _ = down.solve(P)
+        used += down._solver.downdates
+        xr, rr, _ = refac.solve(P)
+        assert refac._solver.downdates == 0
+        xc, rc, _ = cold.solve(P, warm=False)
+        ref = s.solve(engine="python")
+        for r in (rd, rr, rc):
+            np.testing.assert_allclose(r, ref.level_residuals, rtol=1e-9, atol=1e-10)
+        scale = max(1.0, float(np.max(np.abs(xc))))
+        assert np.max(np.abs(xd - xr)) <= 1e-9 * scale
+        assert np.max(np.abs(xd - xc)) <= 1e-9 * scale
+        assert np.max(np.abs(xd - ref.x)) <= X_TOL * scale
+    assert used > 0
+
+
+@needs_native
+def test_a_missed_minimum_norm_set_seeds_its_start():
+    """One level of inequality rows leaves freedom: the minimum-norm step runs an active set
+    on the inherited rows and the box. As the rows move its stored working set misses; the
+    seeded start ends on the cold start's x and the Python engine's, and it is used."""
+    from qpcoord.core.native import NativeHierarchy
+
+    rng = np.random.default_rng(0)
+    n = 8
+    C = rng.standard_normal((6, n))
+    C /= np.linalg.norm(C, axis=1)[:, None]
+    lo0 = rng.uniform(0.2, 0.8, 6)
+    t = qc.Inequality(C, lo0.copy(), np.full(6, np.inf))
+    s = qc.Stack([t], bounds=qc.Bounds(-np.ones(n), np.ones(n)))
+    P = s._compiled
+    seeded = NativeHierarchy(P, s.damping)
+    cold = NativeHierarchy(P, s.damping)
+    cold._solver.seed_on_miss = False
+    used = 0
+    for step in range(20):
+        t.update(lower=lo0 + 0.3 * np.sin(0.9 * step + np.arange(6)))
+        xs, rs, info = seeded.solve(P)
+        xc, rc, cinfo = cold.solve(P)
+        assert cinfo["warm_start_seeded"] == 0
+        sp = s.solve(engine="python")
+        np.testing.assert_allclose(rs, sp.level_residuals, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(xs, xc, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(xs, sp.x, rtol=0, atol=X_TOL)
+        if info["active_set_iterations"] == [0] and info["min_norm_iterations"]:
+            used += info["warm_start_seeded"]  # the level hit: the seed was the min-norm step's
+    assert used > 0
