@@ -704,7 +704,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     M.noalias() = A * Zr;
     e.noalias() = -A * x_;
     e += beq.segment(e0, me);
-    svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeFullV);
+    // thin V: its first rank columns are all a level uses (the damped step, the damping
+    // rows, the freeze); the null space of M comes from the freeze of V_rank
+    svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeThinV);
     const Vec& s = svd.singularValues();
     const double scale = A.norm();
     rank = numerical_rank(s, me, r_, scale);
@@ -725,11 +727,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     x_ = xc;
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
-    if (rank) {
-      const int rn = r_ - rank;
-      Ztmp_.leftCols(rn).noalias() = Zr * svd.matrixV().rightCols(rn);
-      Z_.leftCols(rn) = Ztmp_.leftCols(rn);
-      r_ = rn;
+    if (rank) {  // Z <- Z null(V_rank^T) (the QR of V_rank: orthonormal, rank `rank`)
+      fqr_.matrix(r_, rank) = svd.matrixV().leftCols(rank);
+      freeze(1.0);
     }
     stats(stage, 2) = 1.0;
     return kOk;
