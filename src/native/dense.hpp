@@ -199,6 +199,13 @@ class PivotedQR {
     A.topLeftCorner(rank_, rank_).template triangularView<Eigen::Upper>().solveInPlace(
         rhs.head(rank_));
   }
+  /// Solve R11 X = B(0:rank, :) in place (B: at least rank rows).
+  template <typename B>
+  void solve_r_matrix(B&& b) const {
+    const auto A = cmatrix();
+    A.topLeftCorner(rank_, rank_).template triangularView<Eigen::Upper>().solveInPlace(
+        b.topRows(rank_));
+  }
   /// Solve R11^T u = rhs(0:rank) in place.
   template <typename V>
   void solve_rt(V&& rhs) const {

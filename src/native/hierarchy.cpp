@@ -20,6 +20,7 @@ constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every
 constexpr int kIterFactor = 6;
 constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
 constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
+constexpr double kQrMargin = 4.0;       // QR closed form: sigma_min bound over the SVD's floor
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
@@ -131,6 +132,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Ms_.resize(blocks);
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
+  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), 1);
+  rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
 
 bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) const {
@@ -679,6 +682,52 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   return kOk;
 }
 
+bool Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
+                               Eigen::Ref<Vec> dz) {
+  const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
+  const bool wide = me <= r;
+  const int p = wide ? me : r;
+  if (wide)
+    mqr_.matrix(r, me) = M.transpose();
+  else
+    mqr_.matrix(me, r) = M;
+  if (mqr_.factor(0.0, 0.0) < p) return false;
+  // sigma_min(M) = sigma_min(R) >= 1 / |R^-1|_F: well above the floor (damping threshold,
+  // rank tolerance), every singular value passes it and the SVD's closed form is the
+  // plain minimum-norm least-squares solution
+  auto Ri = rinv_.topLeftCorner(p, p);
+  Ri.setIdentity();
+  mqr_.solve_r_matrix(Ri);
+  const double inv = Ri.norm();
+  if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return false;
+  if (wide) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
+    mqr_.min_norm_transposed_solve(e, dz);
+  } else {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
+    auto u = ute_.head(me);
+    u = e;
+    mqr_.apply_qt(u);
+    mqr_.solve_r(u);
+    for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = u(i);
+  }
+  return true;
+}
+
+void Hierarchy::row_space_basis(const Eigen::JacobiSVD<Mat>& svd, bool by_qr, int me, int rank,
+                                Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out) {
+  if (!by_qr) {
+    out = svd.matrixV().leftCols(rank);
+  } else if (me < static_cast<int>(out.rows())) {  // wide: Qf's first me columns
+    out.setZero();
+    for (int i = 0; i < rank; ++i) {
+      out(i, i) = 1.0;
+      auto col = out.col(i);
+      mqr_.apply_q(col);
+    }
+  } else {  // M has full column rank: the whole space
+    out.setIdentity();
+  }
+}
+
 int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                      const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
                      MRef<Mat> stats, bool warm) {
@@ -698,26 +747,37 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   auto e = e_.head(me);
   auto xc = xc_.head(n_);
   xc = x_;
+  bool by_qr = false;  // closed form from a QR of M (no damping can apply), no SVD
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
     M.resize(me, r_);  // no-op when the size repeats (the usual case)
     M.noalias() = A * Zr;
     e.noalias() = -A * x_;
     e += beq.segment(e0, me);
-    // thin V: its first rank columns are all a level uses (the damped step, the damping
-    // rows, the freeze); the null space of M comes from the freeze of V_rank
-    svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeThinV);
-    const Vec& s = svd.singularValues();
     const double scale = A.norm();
-    rank = numerical_rank(s, me, r_, scale);
-    if (rank) {
-      tau = damping_ * std::max(s(0), scale);
-      auto ute = ute_.head(rank);
-      ute.noalias() = svd.matrixU().leftCols(rank).transpose() * e;
-      for (int i = 0; i < rank; ++i) ute(i) *= (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
-      auto dz = tmpr_.head(r_);
-      dz.noalias() = svd.matrixV().leftCols(rank) * ute;
+    // |M|_2 <= |M|_F <= |A|_F (Z orthonormal): the damping threshold and the rank tolerance
+    // of the SVD, max(s_0, scale) = scale, are known before any factorisation
+    tau = damping_ * scale;
+    auto dz = tmpr_.head(r_);
+    by_qr = qr_closed_form(M, e, std::max(tau, std::max(me, r_) * kEps * scale), dz);
+    if (by_qr) {
+      rank = std::min(me, r_);
       xc.noalias() += Zr * dz;
+    } else {
+      // thin V: its first rank columns are all a level uses (the damped step, the damping
+      // rows, the freeze); the null space of M comes from the freeze of V_rank
+      svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeThinV);
+      const Vec& s = svd.singularValues();
+      rank = numerical_rank(s, me, r_, scale);
+      if (rank) {
+        tau = damping_ * std::max(s(0), scale);
+        auto ute = ute_.head(rank);
+        ute.noalias() = svd.matrixU().leftCols(rank).transpose() * e;
+        for (int i = 0; i < rank; ++i)
+          ute(i) *= (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
+        dz.noalias() = svd.matrixV().leftCols(rank) * ute;
+        xc.noalias() += Zr * dz;
+      }
     }
   }
   bool ok = feasible(xc);
@@ -728,13 +788,12 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
     if (rank) {  // Z <- Z null(V_rank^T) (the QR of V_rank: orthonormal, rank `rank`)
-      fqr_.matrix(r_, rank) = svd.matrixV().leftCols(rank);
+      row_space_basis(svd, by_qr, me, rank, fqr_.matrix(r_, rank));
       freeze(1.0);
     }
     stats(stage, 2) = 1.0;
     return kOk;
   }
-  const Vec& s = svd.singularValues();
   // ---- exact active-set least squares in y = (z, w)
   mov_.clear();  // level rows z can move, with a finite side
   auto zc = zc_.head(r_);
@@ -747,8 +806,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   const int mv = static_cast<int>(mov_.size());
   int ndamp = 0;
-  for (int i = 0; i < rank; ++i)
-    if (s(i) < tau) ++ndamp;
+  const Vec& s = svd.singularValues();  // used only off the QR path
+  if (!by_qr)
+    for (int i = 0; i < rank; ++i)
+      if (s(i) < tau) ++ndamp;
   const int cols = r_ + mv;
   LsqProblem& P = P_;
   P.start(me + ndamp + mv, cols);
@@ -758,7 +819,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   {
     int d = me;
-    for (int i = 0; i < rank; ++i)
+    for (int i = 0; i < rank && ndamp; ++i)
       if (s(i) < tau)
         P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i);
   }
@@ -819,7 +880,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // F^T = [V_rank, Z^T C_violated^T] (r x f), null(F) is what the level leaves free
   MapMat Ft = fqr_.matrix(r_, rank + nviol);
   double fscale = 1.0;
-  Ft.leftCols(rank) = svd.matrixV().leftCols(rank);
+  row_space_basis(svd, by_qr, me, rank, Ft.leftCols(rank));
   {
     int f = rank;
     double fro = 0.0;

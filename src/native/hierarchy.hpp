@@ -105,6 +105,16 @@ class Hierarchy {
             bool warm);
   int min_norm(MRef<Mat> stats, bool warm);
 
+  /// The closed form of a level's projected equalities M dz = e by a QR of M, when M has
+  /// full rank and its smallest singular value is certainly above `floor` (the damping
+  /// threshold and the rank tolerance: then the SVD's damped closed form is this plain
+  /// minimum-norm least-squares solution). False: use the SVD.
+  bool qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
+                      Eigen::Ref<Vec> dz);
+  /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
+  /// the QR of qr_closed_form.
+  void row_space_basis(const Eigen::JacobiSVD<Mat>& svd, bool by_qr, int me, int rank,
+                       Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out);
   bool feasible(const Eigen::Ref<const Vec>& x) const;
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
                const std::vector<char>* skip);
@@ -195,6 +205,8 @@ class Hierarchy {
   std::vector<char> keep_, viol_;
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ztmp_;
+  PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
+  Mat rinv_;       ///< R^-1 of mqr_ (a bound on M's smallest singular value)
   std::vector<Eigen::JacobiSVD<Mat>> svds_;
 };
 
