@@ -424,7 +424,8 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
 }
 
 int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
-                                bool consistent) {
+                                bool* consistent) {
+  *consistent = false;
   if (ws.id.empty()) return 0;
   const int k = P.cols;
   std::fill(W.begin(), W.begin() + P.rows, 0);
@@ -455,10 +456,11 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   for (int i = 0; i < rho; ++i) yp(i) = t(wqr_.perm(i));
   wqr_.solve_rt(yp);
   wqr_.apply_q(yp);
-  if (consistent) {
+  {
     const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
-    for (int j = 0; j < kw; ++j)
-      if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) return 0;
+    *consistent = true;
+    for (int j = 0; j < kw && *consistent; ++j)
+      if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) *consistent = false;
   }
   auto step = step_.head(k);
   ls_step(P, yp, step);
@@ -467,10 +469,13 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
 }
 
 bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
-                                std::vector<int8_t>& W) {
+                                std::vector<int8_t>& W, int* found) {
   const int k = P.cols;
-  if (ws.id.empty() || stored_set_point(P, ws, W, true) != static_cast<int>(ws.id.size()))
-    return false;
+  *found = 0;
+  if (ws.id.empty()) return false;
+  bool consistent = false;
+  *found = stored_set_point(P, ws, W, &consistent);
+  if (*found != static_cast<int>(ws.id.size()) || !consistent) return false;
   auto yp = xc_.head(k);
   auto gy = gy_.head(P.rows);
   gy.noalias() = P.G.topLeftCorner(P.rows, k) * yp;
@@ -487,7 +492,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
 bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows,
                                  int zcols, Eigen::Ref<Vec> y, std::vector<int8_t>& W) {
   const int k = P.cols, m = P.rows;
-  if (!stored_set_point(P, ws, W, false)) return false;
+  (void)ws;  // its point is in xc_ already (try_working_set's stored_set_point)
   auto yp = xc_.head(k);
   if (!yp.allFinite()) return false;
   // ratio test from z = 0 towards z_p on the rows without slack (feasible at z = 0)
@@ -643,7 +648,8 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
     return kInfeasibleHard;
   }
   int iters = 0;
-  const bool hit = warm && try_working_set(P, working_[0], y, W_);
+  int found = 0;
+  const bool hit = warm && try_working_set(P, working_[0], y, W_, &found);
   if (!hit) {
     std::fill(W_.begin(), W_.begin() + P.rows, 0);
     for (int i = 0; i < P.rows; ++i)
@@ -837,9 +843,11 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
   }
   int iters = 0;
-  const bool hit = warm && try_working_set(P, working_[stage], y, W_);
+  int found = 0;
+  const bool hit = warm && try_working_set(P, working_[stage], y, W_, &found);
   const bool seeded =
-      !hit && warm && seed_on_miss && seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);
+      !hit && warm && seed_on_miss && found > 0 &&
+      seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);
   if (seeded) {
     ++seeded_;
     if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
@@ -920,11 +928,13 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   auto y = y_.head(r_);
   y.setZero();
   int iters = 0;
-  const bool hit = warm && try_working_set(P, working_[stage], y, W_);
+  int found = 0;
+  const bool hit = warm && try_working_set(P, working_[stage], y, W_, &found);
   // on a miss: the stored set made feasible (every row is without slack here; y = 0 is
   // feasible: x meets the inherited rows and the bounds)
   const bool seeded =
-      !hit && warm && seed_on_miss && seed_working_set(P, working_[stage], P.rows, r_, y, W_);
+      !hit && warm && seed_on_miss && found > 0 &&
+      seed_working_set(P, working_[stage], P.rows, r_, y, W_);
   if (seeded) {
     ++seeded_;
     if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;

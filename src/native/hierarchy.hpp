@@ -126,14 +126,15 @@ class Hierarchy {
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
   bool active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W, int& iters);
-  /// Try a stored working set: solve on it, check feasibility and multiplier signs.
   /// Map a stored working set onto P's rows (into W), factor it and write the minimum-norm
   /// least-squares point on it into xc_; returns the number of stored rows matched (0: none,
-  /// an infinite bound, or with `consistent` a point that misses the set's rows).
+  /// or an infinite bound); *consistent: the point meets the set's rows.
   int stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
-                       bool consistent);
+                       bool* consistent);
+  /// Try a stored working set: solve on it, check feasibility and multiplier signs. *found:
+  /// the stored rows matched (its point stays in xc_ for seed_working_set on a miss).
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
-                       std::vector<int8_t>& W);
+                       std::vector<int8_t>& W, int* found);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
   /// After a miss of a level's stored working set: a feasible start near its point. The
   /// stored set's point (its rows held, the least squares on them) gives z_p; the ratio test
@@ -141,7 +142,8 @@ class Hierarchy {
   /// of P: inherited rows and bounds) gives z = alpha z_p; each level row's slack is its
   /// violation at z (the cheapest feasible slack); the working set is the stored rows still
   /// tight at that point plus the blocking row (alpha = 0: the cold start's point with the
-  /// stored rows tight there). False (cold start) if none of the stored rows is in P.
+  /// stored rows tight there). Call after a try_working_set of ws that matched rows (its
+  /// point and W's mapping are reused, not recomputed).
   bool seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows, int zcols,
                         Eigen::Ref<Vec> y, std::vector<int8_t>& W);
   /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
