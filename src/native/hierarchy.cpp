@@ -132,7 +132,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Ms_.resize(blocks);
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
-  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), 1);
+  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max(n, 1));
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
 
@@ -793,7 +793,14 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     x_ = xc;
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
-    if (rank) {  // Z <- Z null(V_rank^T) (the QR of V_rank: orthonormal, rank `rank`)
+    if (by_qr && me >= r_) {  // M has full column rank: no freedom left
+      r_ = 0;
+    } else if (by_qr) {  // wide, full row rank: null(M) = span(Qf(:, me:)) of M^T's QR
+      auto Zr2 = Z_.leftCols(r_);
+      mqr_.apply_q_right(Zr2);
+      for (int i = 0; i < r_ - me; ++i) Z_.col(i) = Z_.col(me + i);
+      r_ -= me;
+    } else if (rank) {  // Z <- Z null(V_rank^T) (the QR of V_rank: orthonormal, rank `rank`)
       row_space_basis(svd, by_qr, me, rank, fqr_.matrix(r_, rank));
       freeze(1.0);
     }
