@@ -14,8 +14,11 @@ warm-started from the working set the same level ended with at the previous call
 set misses (its point breaks a row, or a multiplier has the wrong sign), the active set starts
 from it made feasible (the ratio test from the feasible cold start towards its point on the
 rows without slack, each slack its row's violation, the stored rows still tight and the
-blocking row as working set) instead of cold. The hard
-constraints get a phase-1 (least violation inside the box) that decides infeasibility.
+blocking row as working set) instead of cold; so do the minimum-norm step and the hard
+constraints' phase-1 (least violation inside the box), which decides infeasibility. The QR of
+the working set is updated as rows enter (a reflector) and leave (Givens downdate); a level's
+closed form uses a QR of its projected equalities when no singular value can be damped, the
+SVD otherwise.
 
 This module is the only place that imports the extension. :func:`resolve_engine` decides
 which engine a :meth:`Stack.solve <qpcoord.Stack.solve>` call uses.
@@ -214,8 +217,9 @@ class NativeHierarchy:
         info : dict
             ``engine``, ``active_set_iterations`` (per level), ``hard_iterations``,
             ``min_norm_iterations``, ``warm_start_hits`` (stages whose stored working set
-            was optimal), ``warm_start_seeded`` (levels whose stored working set missed
-            and seeded the active set's start), ``closed_form_levels``, ``qp_calls``
+            was optimal), ``warm_start_seeded`` (stages — hard phase, levels, minimum-
+            norm step — whose stored working set missed and seeded the active set's start),
+            ``closed_form_levels``, ``qp_calls``
             (stages solved by the active set rather than a closed form: the Python
             engine's count of QP calls),
             ``uncertified`` (``[(level, deviation)]`` when a level's value at ``x`` moved

@@ -118,7 +118,7 @@ NB_MODULE(_native, m) {
           nb::arg("warm"), nb::arg("time_left"),
           "solve() on the bound arrays (their current numbers); returns the status code.")
       .def_rw("seed_on_miss", &Hierarchy::seed_on_miss,
-              "Seed a level's (or the minimum-norm step's) active set from its missed stored "
+              "Seed a stage's active set (hard phase, level, minimum-norm step) from its missed stored "
               "working set (True, default) "
               "or start it cold (False; for comparisons).")
       .def_rw("downdate", &Hierarchy::downdate,

@@ -524,7 +524,15 @@ bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int har
   y.head(zcols) = alpha * zp;
   // each level row's slack: its violation at z (rows hard_rows.. have one slack column each)
   for (int i = hard_rows; i < m; ++i) {
-    const int col = zcols + (i - hard_rows);
+    // its slack column: the next one (levels: one per row, in order), else the one nonzero
+    // of the row past zcols (the hard phase skips the rows the equalities fix)
+    int col = zcols + (i - hard_rows);
+    if (col >= k || P.G(i, col) == 0.0) {
+      col = -1;
+      for (int c = zcols; c < k && col < 0; ++c)
+        if (P.G(i, c) != 0.0) col = c;
+      if (col < 0) continue;
+    }
     const double a = -P.G(i, col);  // 1 / |row| > 0
     const double gz = P.G.row(i).head(zcols).dot(y.head(zcols));
     y(col) = (gz > P.hi(i)) ? (gz - P.hi(i)) / a : ((gz < P.lo(i)) ? (gz - P.lo(i)) / a : 0.0);
@@ -650,10 +658,17 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   int iters = 0;
   int found = 0;
   const bool hit = warm && try_working_set(P, working_[0], y, W_, &found);
+  // on a miss: the stored set made feasible (every row has its slack: z = the set's point,
+  // each slack the row's violation there)
+  const bool seeded = !hit && warm && seed_on_miss && found > 0 &&
+                      seed_working_set(P, working_[0], 0, r_, y, W_);
+  if (seeded) ++seeded_;
   if (!hit) {
-    std::fill(W_.begin(), W_.begin() + P.rows, 0);
-    for (int i = 0; i < P.rows; ++i)
-      if (P.lo(i) == P.hi(i)) W_[i] = 2;
+    if (!seeded) {
+      std::fill(W_.begin(), W_.begin() + P.rows, 0);
+      for (int i = 0; i < P.rows; ++i)
+        if (P.lo(i) == P.hi(i)) W_[i] = 2;
+    }
     if (!active_set(P, y, W_, iters)) {
       detail(2) = 0;
       return timed_out_ ? kTimeLimit : kNotConverged;

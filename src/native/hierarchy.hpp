@@ -83,8 +83,8 @@ class Hierarchy {
   int n() const { return n_; }
   /// Rows that left a working set through a downdate of its QR during the last call.
   int downdates() const { return downdates_; }
-  /// Seed the active set (levels, minimum-norm step) from a missed stored working set
-  /// (default) or start cold (A/B).
+  /// Seed the active set (hard phase, levels, minimum-norm step) from a missed stored
+  /// working set (default) or start cold (A/B).
   bool seed_on_miss = true;
   /// Downdate the working set's QR when a row leaves (default) or refactorise (A/B).
   bool downdate = true;

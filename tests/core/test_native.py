@@ -526,3 +526,40 @@ def test_closed_forms_by_qr_and_by_svd_agree_with_python(cond):
     for box in (10.0, 0.3):
         st = qc.Stack([wide, tall], bounds=qc.Bounds(-box, box))
         _same(st.solve(engine="python"), st.solve(engine="native"))
+
+
+@needs_native
+def test_a_missed_hard_phase_set_seeds_its_start():
+    """Hard inequality rows that x = 0 breaks: the least-violation phase runs at every call.
+    As the rows move its stored working set misses; the seeded start (the set's point, each
+    slack the row's violation there) ends on the cold start's x and the Python engine's,
+    with fewer hard-phase iterations in total."""
+    from qpcoord.core.native import NativeHierarchy
+
+    rng = np.random.default_rng(1)
+    n = 8
+    xs = rng.uniform(-0.5, 0.5, n)
+    C = rng.standard_normal((5, n))
+    C /= np.linalg.norm(C, axis=1)[:, None]
+    C *= np.sign(C @ xs)[:, None]
+    hard = qc.Inequality(C, C @ xs - 0.05, np.full(5, np.inf))
+    lev = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))
+    s = qc.Stack([lev], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+    P = s._compiled
+    seeded = NativeHierarchy(P, s.damping)
+    cold = NativeHierarchy(P, s.damping)
+    cold._solver.seed_on_miss = False
+    its_seeded = its_cold = 0
+    for step in range(20):
+        xt = np.clip(xs + 0.4 * np.sin(0.7 * step + np.arange(n)), -0.9, 0.9)
+        hard.update(lower=C @ xt - 0.05)  # xt stays feasible
+        xs_, rs, info = seeded.solve(P)
+        xc, rc, cinfo = cold.solve(P)
+        sp = s.solve(engine="python")
+        np.testing.assert_allclose(rs, sp.level_residuals, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(xs_, xc, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(xs_, sp.x, rtol=0, atol=X_TOL)
+        assert np.all(C @ xs_ >= C @ xt - 0.05 - 1e-9)
+        its_seeded += info["hard_iterations"]
+        its_cold += cinfo["hard_iterations"]
+    assert its_seeded < its_cold
