@@ -1,4 +1,4 @@
-"""Strict hierarchies: Python engine vs native engine (cold, warm) vs DAQP's hierarchical mode.
+"""Strict hierarchies: Python vs native engine (cold, warm, bare) vs DAQP's hierarchical mode.
 
 Scenarios (seeded):
 
@@ -7,24 +7,39 @@ Scenarios (seeded):
   penalty is the same lexicographic problem as qpcoord's. Per step the targets move a little.
 * ``panda9``: the Panda's size, 9 variables: a 3-row position task above a 9-row posture task,
   box on the velocities (random well-conditioned 3 × 9 Jacobian, moving target).
+* ``chain30``: issue 24's "30 variables, 5 levels": joint-velocity box, then 3 / 3 / 6 / 6
+  equality rows with a serial chain's structure (the rows of a point on link ``L`` depend on
+  joints ``0..L`` only: tip, mid-chain, then two 6-row levels), unit rows, moving targets; the
+  box binds.
+* ``talos``: the Talos whole-body IK stack of ``ik_peers.py`` (38 velocity variables: both
+  soles, the CoM in the shrunk support polygon — inequalities —, right hand on a min-jerk path,
+  posture; the robot's position and speed limits as the box), stepped by its own native
+  solution. Rows are not unit-norm: DAQP's soft penalty is another problem there, so DAQP is
+  not run on it. Needs example-robot-data (skipped with a note if missing).
 
 Per step (interleaved, one BLAS thread): ``Stack.solve(engine="python")``, the native engine
-cold (stored working sets ignored) and warm (``Stack.solve(engine="native")``), and
-``daqp.solve(..., break_points=...)`` with ``H = I`` (minimum-norm completion; a positive-
-definite H avoids its −8 "unsupported" flag). Each engine's level values are checked against
-the Python engine's (``max |Δr| / max(1, r)``). Then the one-shot cost: ``qc.solve_stack`` of
-a 7-variable, 3-level stack (each engine) vs one direct ``daqp.solve`` of the weighted QP, with
-the ratio of medians to that direct call (the issue's goal: within 4×).
+cold (stored working sets ignored), "native warm" (``Stack.solve(engine="native")``), "native
+bare" (the native call alone, ``Hierarchy.run``, on a second solver warm from its own previous
+step, the stacked arrays already refreshed) and ``daqp.solve(..., break_points=...)`` with
+``H = I`` (minimum-norm completion; a positive-definite H avoids its −8 "unsupported" flag).
+Each engine's level values are checked against the Python engine's (``max |Δr| / max(1, r)``).
+Then the one-shot cost: ``qc.solve_stack`` of a 7-variable, 3-level stack (each engine) vs one
+direct ``daqp.solve`` of the weighted QP, with the ratio of medians to that direct call (the
+issue's goal: within 4×).
 
-    python benchmarks/hierarchy_bench.py            # ~1–2 min
+    python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds
+    python benchmarks/hierarchy_bench.py --scenario panda9 --scenario random50 --steps 300
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import platform
+import sys
 import time
+from pathlib import Path
 
 import daqp
 import numpy as np
@@ -70,6 +85,72 @@ def panda9(rng, n=9):
     return [pos, posture], bounds, move
 
 
+def _chain_rows(rng, m: int, upto: int, n: int) -> np.ndarray:
+    """``m`` unit rows of a point on link ``upto`` of an ``n``-joint chain: joints after it
+    do not move the point (zero columns)."""
+    J = np.zeros((m, n))
+    J[:, :upto] = rng.standard_normal((m, upto))
+    return _unit_rows(J)
+
+
+def chain30(rng, n=30):
+    """Bounds, then 3 / 3 / 6 / 6 equality rows with a chain's structure, moving targets."""
+    sizes_upto = ((3, n), (3, n // 2 + 5), (6, n // 2), (6, n))
+    tasks = [
+        qc.Equality(_chain_rows(rng, m, upto, n), rng.uniform(-0.5, 0.5, m))
+        for m, upto in sizes_upto
+    ]
+    base = [t.b.copy() for t in tasks]
+    bounds = qc.Bounds(-0.5 * np.ones(n), 0.5 * np.ones(n))
+
+    def move(step):
+        for t, b0 in zip(tasks, base, strict=True):
+            t.update(b=b0 + 0.2 * np.sin(0.05 * step + np.arange(b0.shape[0])))
+
+    return tasks, bounds, move
+
+
+def talos(rng):
+    """The Talos IK stack of ``ik_peers.py``, stepped by its native solution: a dict with the
+    stack and ``move(step, x)`` (integrate the last solution, new hand target, refresh)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import ik_peers
+
+    sc = ik_peers.scenario("talos", 10_000, 0.0)
+    loop = ik_peers.QpcoordLoop(sc, "hierarchical", "native", "qpcoord strict native")
+    ik, robot = loop.ik, loop.robot
+    state = {"q": loop.q}
+
+    def move(step, x=None):
+        if x is not None:
+            state["q"] = robot.integrate(state["q"], x, ik_peers.DT)
+        loop.hand.set_target(sc["targets"][step % len(sc["targets"])])
+        ik.refresh(robot.check_configuration(state["q"]))
+
+    return {"stack": ik.stack, "move": move, "daqp": None}
+
+
+SCENARIOS = {
+    "random50": ("random50 (n=50, 10×20 rows)", random50),
+    "panda9": ("panda9", panda9),
+    "chain30": ("chain30 (n=30, box + 3/3/6/6 eq rows)", chain30),
+    "talos": ("talos IK (n=38, 4 levels)", talos),
+}
+
+
+def _scenario(build, rng) -> dict:
+    """A builder's scenario as a dict: stack, move(step, x), DAQP's data (or None)."""
+    out = build(rng)
+    if isinstance(out, dict):
+        return out
+    levels, bounds, move = out
+    return {
+        "stack": qc.Stack(levels, bounds=bounds),
+        "move": lambda step, x=None: move(step),
+        "daqp": (levels, bounds),
+    }
+
+
 def daqp_problem(levels, bounds, n):
     """DAQP's hierarchical form: bounds hard (first n simple bounds), one block per level."""
     A, bu, bl, breaks = [], [bounds.upper * np.ones(n)], [bounds.lower * np.ones(n)], [n]
@@ -103,42 +184,55 @@ def _levels_residuals(stack: qc.Stack, x: np.ndarray) -> np.ndarray:
 
 def run(name, build, steps, seed=0):
     rng = np.random.default_rng(seed)
-    levels, bounds, move = build(rng)
-    stack = qc.Stack(levels, bounds=bounds)
+    sc = _scenario(build, rng)
+    stack, move, dq = sc["stack"], sc["move"], sc["daqp"]
     n = stack.n
-    cold = NativeHierarchy(stack._compiled, stack.damping)
-    times = {k: [] for k in ("python", "native cold", "native warm", "daqp hierarchical")}
+    P = stack._compiled
+    cold = NativeHierarchy(P, stack.damping)
+    bare = NativeHierarchy(P, stack.damping)
+    run_bare = bare._solver.run
+    keys = ["python", "native cold", "native warm", "native bare"]
+    if dq is not None:
+        keys.append("daqp hierarchical")
+    times = {k: [] for k in keys}
     worst = dict.fromkeys(times, 0.0)
     flags = set()
+    x_prev = None
     for step in range(steps):
-        move(step)
+        move(step, x_prev)
         t = time.perf_counter()
         sp = stack.solve(engine="python")
         times["python"].append(time.perf_counter() - t)
         ref = sp.level_residuals
         t = time.perf_counter()
-        P = stack._compiled
         P.refresh()
         xc, _, _ = cold.solve(P, warm=False)
         times["native cold"].append(time.perf_counter() - t)
         t = time.perf_counter()
         sw = stack.solve(engine="native")
         times["native warm"].append(time.perf_counter() - t)
+        P.refresh_stacked()
         t = time.perf_counter()
-        A, bu, bl, sense, breaks = daqp_problem(levels, bounds, n)
-        xd, _f, flag, _info = daqp.solve(
-            np.eye(n), np.zeros(n), A, bu, bl, sense, break_points=breaks
-        )
-        times["daqp hierarchical"].append(time.perf_counter() - t)
-        flags.add(int(flag))
-        for key, x in (
-            ("python", sp.x),
-            ("native cold", xc),
-            ("native warm", sw.x),
-            ("daqp hierarchical", np.asarray(xd)),
-        ):
+        code = run_bare(bool(step), math.inf)
+        times["native bare"].append(time.perf_counter() - t)
+        if code:
+            raise RuntimeError(f"{name}: native bare call, status {code}")
+        got = [("python", sp.x), ("native cold", xc), ("native warm", sw.x)]
+        got.append(("native bare", bare.x.copy()))
+        if dq is not None:
+            levels, bounds = dq
+            t = time.perf_counter()
+            A, bu, bl, sense, breaks = daqp_problem(levels, bounds, n)
+            xd, _f, flag, _info = daqp.solve(
+                np.eye(n), np.zeros(n), A, bu, bl, sense, break_points=breaks
+            )
+            times["daqp hierarchical"].append(time.perf_counter() - t)
+            flags.add(int(flag))
+            got.append(("daqp hierarchical", np.asarray(xd)))
+        for key, x in got:
             r = _levels_residuals(stack, x)
             worst[key] = max(worst[key], float(np.max(np.abs(r - ref) / np.maximum(1.0, ref))))
+        x_prev = sw.x
     rows = []
     for key, ts in times.items():
         us = np.array(ts[2:]) * 1e6
@@ -175,18 +269,37 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="few steps (smoke run)")
     ap.add_argument("--steps", type=int, default=None)
+    ap.add_argument(
+        "--scenario",
+        action="append",
+        choices=sorted(SCENARIOS),
+        help="run only these scenarios (repeatable; default: all)",
+    )
+    ap.add_argument("--no-one-shot", action="store_true", help="skip the one-shot table")
     args = ap.parse_args(argv)
     steps = args.steps or (20 if args.quick else 300)
+    if steps < 5:
+        ap.error(f"--steps must be at least 5, got {steps}")
+    chosen = args.scenario or list(SCENARIOS)
     print(f"# hierarchy_bench: {steps} steps per scenario, interleaved, 1 BLAS thread")
     print(f"# {platform.python_version()}, numpy {np.__version__}, {platform.machine()}")
     with threadpool_limits(1):
         print("\n| scenario | engine | median µs | p90 µs | p99 µs | max level diff vs python |")
         print("|---|---|---|---|---|---|")
-        for name, build in (("random50 (n=50, 10×20 rows)", random50), ("panda9", panda9)):
-            rows, flags = run(name, build, steps if "random" not in name else max(steps // 3, 5))
+        for key in chosen:
+            name, build = SCENARIOS[key]
+            k = steps if key not in ("random50", "talos") else max(steps // 3, 5)
+            try:
+                rows, flags = run(name, build, k)
+            except FileNotFoundError as exc:  # example-robot-data missing
+                print(f"<!-- {name}: skipped ({exc}) -->")
+                continue
             for r in rows:
                 print(f"| {r[0]} | {r[1]} | {r[2]:.1f} | {r[3]:.1f} | {r[4]:.1f} | {r[5]:.1e} |")
-            print(f"<!-- {name}: daqp exit flags {sorted(flags)} -->")
+            if flags:
+                print(f"<!-- {name}: daqp exit flags {sorted(flags)} -->")
+        if args.no_one_shot:
+            return 0
         print(
             "\n| one-shot, 7 variables, 3 levels | median µs | p90 µs | p99 µs "
             "| median / one direct daqp.solve |"

@@ -14,8 +14,11 @@ warm-started from the working set the same level ended with at the previous call
 set misses (its point breaks a row, or a multiplier has the wrong sign), the active set starts
 from it made feasible (the ratio test from the feasible cold start towards its point on the
 rows without slack, each slack its row's violation, the stored rows still tight and the
-blocking row as working set) instead of cold. The hard
-constraints get a phase-1 (least violation inside the box) that decides infeasibility.
+blocking row as working set) instead of cold; so do the minimum-norm step and the hard
+constraints' phase-1 (least violation inside the box), which decides infeasibility. The QR of
+the working set is updated as rows enter (a reflector) and leave (Givens downdate); a level's
+closed form uses a QR of its projected equalities when no singular value can be damped, the
+SVD otherwise.
 
 This module is the only place that imports the extension. :func:`resolve_engine` decides
 which engine a :meth:`Stack.solve <qpcoord.Stack.solve>` call uses.
@@ -52,6 +55,8 @@ DEFAULT_ENGINE = "native"
 MODULE = "qpcoord._native"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
 ABI_VERSION = 3
+
+_INF = float("inf")
 
 
 class NativeUnavailableError(ImportError):
@@ -132,7 +137,7 @@ def resolve_engine(engine: str | None, method: str, solver: str | None) -> str:
                 "was installed); using the Python engine. Reinstall with a compiler to build "
                 f"it, or pass engine='python' to silence this ({_load_error})",
                 RuntimeWarning,
-                stacklevel=4,
+                stacklevel=3,  # the caller of Stack.solve
             )
         return "python"
     if engine not in ENGINES:
@@ -189,6 +194,8 @@ class NativeHierarchy:
             P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs,
             self.x, self.res, self.stats, self.detail,
         )  # fmt: skip
+        self._run = self._solver.run
+        self._levels = len(P.levels)
         self._mod = mod
         self._solved = False
 
@@ -210,8 +217,9 @@ class NativeHierarchy:
         info : dict
             ``engine``, ``active_set_iterations`` (per level), ``hard_iterations``,
             ``min_norm_iterations``, ``warm_start_hits`` (stages whose stored working set
-            was optimal), ``warm_start_seeded`` (levels whose stored working set missed
-            and seeded the active set's start), ``closed_form_levels``, ``qp_calls``
+            was optimal), ``warm_start_seeded`` (stages — hard phase, levels, minimum-
+            norm step — whose stored working set missed and seeded the active set's start),
+            ``closed_form_levels``, ``qp_calls``
             (stages solved by the active set rather than a closed form: the Python
             engine's count of QP calls),
             ``uncertified`` (``[(level, deviation)]`` when a level's value at ``x`` moved
@@ -230,29 +238,46 @@ class NativeHierarchy:
             finite, or it fails the check of the bounds and hard rows.
         """
         P.refresh_stacked()
-        code = self._solver.run(self._solved and warm, np.inf if time_left is None else time_left)
+        code = self._run(self._solved and warm, _INF if time_left is None else time_left)
         if code:
             self._solved = False  # the stored working sets may be from another problem
             self._raise(code, P)
         self._solved = True
-        rows = self.stats.tolist()  # (stages, 3): iterations, warm hit, closed form
-        its = [int(r[0]) for r in rows]
-        dev = self.detail[5]
-        info = {
+        return self.x.copy(), self.res.copy(), self._info()
+
+    def _info(self) -> dict:
+        """The info dict of the last call, from ``stats`` (per stage: iterations, warm hit,
+        closed form) and ``detail``: one pass over the stages' rows as Python floats."""
+        its = []
+        hits = qp_calls = 0
+        closed = []
+        k = -1  # stage index - 1: the levels are 0..L-1
+        last = self._levels
+        for it, hit, cf in self.stats.tolist():
+            its.append(int(it))
+            if hit:
+                hits += 1
+            # as the Python engine's count of QP calls: the stages (hard phase, levels,
+            # minimum-norm step) that needed the active set (its iterations or a stored
+            # working set) rather than a closed form
+            if it or hit:
+                qp_calls += 1
+            if cf and 0 <= k < last:
+                closed.append(k)
+            k += 1
+        d = self.detail.tolist()
+        dev = d[5]
+        return {
             "engine": "native",
             "hard_iterations": its[0],
             "active_set_iterations": its[1:-1],
             "min_norm_iterations": its[-1],
-            "warm_start_hits": int(sum([r[1] for r in rows])),
-            "warm_start_seeded": int(self.detail[7]),
-            "closed_form_levels": [k for k, r in enumerate(rows[1:-1]) if r[2]],
-            # as the Python engine's count of QP calls: the stages (hard phase, levels,
-            # minimum-norm step) that needed the active set (its iterations or a stored
-            # working set) rather than a closed form
-            "qp_calls": sum([1 for r in rows if r[0] or r[1]]),
-            "uncertified": [(int(self.detail[6]), float(dev))] if dev > KKT_TOL else [],
+            "warm_start_hits": hits,
+            "warm_start_seeded": int(d[7]),
+            "closed_form_levels": closed,
+            "qp_calls": qp_calls,
+            "uncertified": [(int(d[6]), dev)] if dev > KKT_TOL else [],
         }
-        return self.x.copy(), self.res.copy(), info
 
     def _raise(self, code: int, P: CompiledStack) -> None:
         mod = self._mod

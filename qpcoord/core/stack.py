@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import functools
 import time
 from functools import cached_property
 from math import isfinite
 
 import numpy as np
 
-from .backends import check_solver, check_time_limit, deadline, time_left
+from .backends import DEFAULT_TIME_LIMIT, check_solver, check_time_limit, deadline, time_left
 from .compile import compile_stack
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
 from .errors import SolverError
@@ -29,26 +28,12 @@ __all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
 METHODS = ("hierarchical", "nullspace", "weighted")
 
 
-def _time_limited(solve):
-    """Run ``solve`` under ``time_limit`` (s; keyword): every QP it starts gets the time left
-    (:class:`qpcoord.core.backends.deadline`); a backend failure once it has passed is a
-    :class:`SolverError` that says so."""
-
-    @functools.wraps(solve)
-    def wrapper(self, *args, time_limit=None, **kwargs):
-        limit = check_time_limit(time_limit)
-        with deadline(limit) as budget:
-            try:
-                return solve(self, *args, **kwargs)
-            except SolverError as exc:
-                if budget.expired() or "time limit" in str(exc):
-                    raise SolverError(
-                        f"time limit of {limit:g} s reached before the solve ended "
-                        f"(time_limit=...; math.inf lifts it): {exc}"
-                    ) from exc
-                raise
-
-    return wrapper
+def _limit_error(limit: float, exc: SolverError) -> SolverError:
+    """The error of a solve whose backend failed once its time limit of ``limit`` s passed."""
+    return SolverError(
+        f"time limit of {limit:g} s reached before the solve ended "
+        f"(time_limit=...; math.inf lifts it): {exc}"
+    )
 
 
 class Stack:
@@ -147,7 +132,6 @@ class Stack:
         """The tasks of each level (equalities first, then inequalities)."""
         return [L.eqs + L.ineqs for L in self._compiled.levels]
 
-    @_time_limited
     def solve(
         self,
         solver: str | None = None,
@@ -211,14 +195,27 @@ class Stack:
             certified.
         """
         t0 = time.perf_counter()
-        if not isinstance(strict, bool):
+        limit = DEFAULT_TIME_LIMIT if time_limit is None else check_time_limit(time_limit)
+        if strict is not True and strict is not False:
             raise ValueError(f"strict must be True or False, got {strict!r}")
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
         if method == "weighted" and resolve_weighted_engine(engine, solver) == "native":
             return self._solve_native_weighted(t0, warm_start)
         if resolve_engine(engine, method, solver) == "native":
-            return self._solve_native(t0, warm_start, strict)
+            return self._solve_native(t0, warm_start, strict, limit)
+        # every QP the Python engine starts gets the time left (backends.deadline); a backend
+        # failure once it has passed is a SolverError that says so
+        with deadline(limit) as budget:
+            try:
+                return self._solve_python(t0, solver, method, warm_start, strict)
+            except SolverError as exc:
+                if budget.expired() or "time limit" in str(exc):
+                    raise _limit_error(limit, exc) from exc
+                raise
+
+    def _solve_python(self, t0: float, solver, method: str, warm_start, strict: bool) -> Solution:
+        """:meth:`solve` with the Python engine (under the solve's deadline)."""
         P = self._compiled
         P.refresh()
         x_warm = self._warm(warm_start)
@@ -281,17 +278,31 @@ class Stack:
             info=info,
         )
 
-    def _solve_native(self, t0: float, warm_start, strict: bool) -> Solution:
+    def _solve_native(self, t0: float, warm_start, strict: bool, limit: float) -> Solution:
         """``method="hierarchical"`` with the native engine. The native call checks the data
         (finite), the returned ``x`` (bounds and hard rows, as :meth:`_check`) and computes
         the level values: no per-call Python pass over the levels here (the wrapper writes
-        the tasks' numbers straight into the stacked arrays the native call reads)."""
+        the tasks' numbers straight into the stacked arrays the native call reads). The time
+        limit goes to the native call as seconds (the earlier of ``limit`` and an enclosing
+        solve's deadline); no deadline object is built (the native engine starts no QP)."""
         P = self._compiled
         if warm_start is not None:
             self._warm(warm_start)  # validated; the engine warm-starts from its working sets
-        if self._native is None:
-            self._native = NativeHierarchy(P, self.damping)
-        x, residuals, info = self._native.solve(P, time_left=time_left())
+        native = self._native
+        if native is None:
+            native = self._native = NativeHierarchy(P, self.damping)
+        left = time_left()  # an enclosing solve's deadline (None: none)
+        if left is not None and left < limit:
+            limit_now = left
+        else:
+            limit_now = limit
+        t1 = time.perf_counter()
+        try:
+            x, residuals, info = native.solve(P, time_left=limit_now)
+        except SolverError as exc:
+            if "time limit" in str(exc) or time.perf_counter() - t1 >= limit_now:
+                raise _limit_error(limit, exc) from exc
+            raise
         status = "optimal"
         bad = info["uncertified"]
         if bad:

@@ -120,8 +120,14 @@ NB_MODULE(_native, m) {
           nb::arg("warm"), nb::arg("time_left"),
           "solve() on the bound arrays (their current numbers); returns the status code.")
       .def_rw("seed_on_miss", &Hierarchy::seed_on_miss,
-              "Seed a level's active set from its missed stored working set (True, default) "
+              "Seed a stage's active set (hard phase, level, minimum-norm step) from its missed stored "
+              "working set (True, default) "
               "or start it cold (False; for comparisons).")
+      .def_rw("downdate", &Hierarchy::downdate,
+              "Downdate the working set's QR when a row leaves (True, default) or "
+              "refactorise it (False; for comparisons).")
+      .def_prop_ro("downdates", &Hierarchy::downdates,
+                   "Rows that left a working set through a QR downdate in the last call.")
       .def_prop_ro("n", &Hierarchy::n)
       .def_prop_ro("num_levels", &Hierarchy::num_levels)
       .def_prop_ro("damping", &Hierarchy::damping);

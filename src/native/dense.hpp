@@ -14,6 +14,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 namespace qpcoord {
@@ -32,6 +33,7 @@ class PivotedQR {
     buf_.setZero(static_cast<Eigen::Index>(max_rows_) * max_cols_);
     tau_.setZero(max_cols_);
     norms_.setZero(max_cols_);
+    orig_.setZero(max_cols_);
     perm_.assign(max_cols_, 0);
     work_.setZero(std::max({max_rows_, max_cols_, max_right_rows, 1}));
   }
@@ -50,28 +52,34 @@ class PivotedQR {
     rel_tol_ = rel_tol;
     MapMat A = matrix();
     const int steps = std::min(m_, nc_);
-    for (int j = 0; j < nc_; ++j) perm_[j] = j;
+    for (int j = 0; j < nc_; ++j) {
+      perm_[j] = j;
+      norms_(j) = A.col(j).norm();  // partial norms, downdated as rows are eliminated
+      orig_(j) = norms_(j);
+    }
     rank_ = 0;
     first_ = 0.0;
+    const double tol3z = std::sqrt(std::numeric_limits<double>::epsilon());
     for (int j = 0; j < steps; ++j) {
-      // pivot: the remaining column of largest norm (recomputed: exact, no downdating)
+      // pivot: the remaining column of largest (downdated) norm, as LAPACK's dlaqp2
       int p = j;
       double best = -1.0;
       for (int c = j; c < nc_; ++c) {
-        const double v = A.col(c).segment(j, m_ - j).squaredNorm();
-        norms_(c) = v;
-        if (v > best) {
-          best = v;
+        if (norms_(c) > best) {
+          best = norms_(c);
           p = c;
         }
       }
-      const double pn = std::sqrt(std::max(best, 0.0));
-      if (j == 0) first_ = pn;
-      if (!(pn > abs_tol) || !(pn > rel_tol * first_) || pn == 0.0) break;
       if (p != j) {
         A.col(j).swap(A.col(p));
         std::swap(perm_[j], perm_[p]);
+        std::swap(norms_(j), norms_(p));
+        std::swap(orig_(j), orig_(p));
       }
+      // the rank decision on the pivot's exact norm
+      const double pn = A.col(j).segment(j, m_ - j).norm();
+      if (j == 0) first_ = pn;
+      if (!(pn > abs_tol) || !(pn > rel_tol * first_) || pn == 0.0) break;
       // Householder reflector of A(j:m, j)
       const double x0 = A(j, j);
       const double beta = (x0 >= 0.0) ? -pn : pn;
@@ -90,6 +98,18 @@ class PivotedQR {
         const double tw = tau * w;
         ac(0) -= tw;
         ac.tail(m_ - j - 1) -= tw * A.col(j).segment(j + 1, m_ - j - 1);
+        // downdate the partial norm by the eliminated entry; recompute on cancellation
+        if (norms_(c) != 0.0) {
+          double t = std::abs(ac(0)) / norms_(c);
+          t = std::max(0.0, (1.0 + t) * (1.0 - t));
+          const double r = norms_(c) / orig_(c);
+          if (t * r * r <= tol3z) {
+            norms_(c) = ac.tail(m_ - j - 1).norm();
+            orig_(c) = norms_(c);
+          } else {
+            norms_(c) *= std::sqrt(t);
+          }
+        }
       }
       ++rank_;
     }
@@ -100,6 +120,8 @@ class PivotedQR {
   int rows() const { return m_; }
   int cols() const { return nc_; }
   double first_pivot() const { return first_; }
+  /// tau of reflector j (H_j = I - tau_j v_j v_j^T).
+  double tau(int j) const { return tau_(j); }
   /// Column i of R (pivoted order) comes from column perm(i) of A.
   int perm(int i) const { return perm_[i]; }
 
@@ -177,6 +199,13 @@ class PivotedQR {
     A.topLeftCorner(rank_, rank_).template triangularView<Eigen::Upper>().solveInPlace(
         rhs.head(rank_));
   }
+  /// Solve R11 X = B(0:rank, :) in place (B: at least rank rows).
+  template <typename B>
+  void solve_r_matrix(B&& b) const {
+    const auto A = cmatrix();
+    A.topLeftCorner(rank_, rank_).template triangularView<Eigen::Upper>().solveInPlace(
+        b.topRows(rank_));
+  }
   /// Solve R11^T u = rhs(0:rank) in place.
   template <typename V>
   void solve_rt(V&& rhs) const {
@@ -201,9 +230,265 @@ class PivotedQR {
     if (len > 0) v.segment(j + 1, len) -= tw * A.col(j).segment(j + 1, len);
   }
 
-  Vec buf_, tau_, norms_, work_;
+  Vec buf_, tau_, norms_, orig_, work_;
   std::vector<int> perm_;
   int max_rows_ = 0, max_cols_ = 0, m_ = 0, nc_ = 0, rank_ = 0;
+  double first_ = 0.0, abs_tol_ = 0.0, rel_tol_ = 0.0;
+};
+
+/// The QR of the active set's working-set matrix G_w^T (k x kw) kept up to date as rows
+/// enter (one Householder reflector appended) and leave (the column deleted from R and the
+/// Hessenberg part restored by Givens rotations: a downdate, no refactorisation).
+///
+///   A P = Qf [R; 0],  Qf^T = S_m ... S_1,
+/// with S_t the transforms in the order they were made: the reflectors of the pivoted
+/// factorisation, then one reflector per appended column and a Givens rotation per row of R
+/// restored after a deletion. R (rank x nc, upper triangular, full column rank after an
+/// update) lives in its own buffer; the transform list has a fixed capacity (an update that
+/// would overflow it returns false: the caller refactorises). No heap use after reserve().
+class WorkingQR {
+ public:
+  void reserve(int max_rows, int max_cols, int max_right_rows) {
+    max_rows_ = std::max(max_rows, 1);
+    max_cols_ = std::max(max_cols, 1);
+    base_.reserve(max_rows_, max_cols_, max_right_rows);
+    // R: at most rank <= max_rows rows
+    R_.setZero(static_cast<Eigen::Index>(max_rows_) * max_cols_);
+    max_h_ = 2 * max_rows_ + 8;
+    H_.setZero(static_cast<Eigen::Index>(max_rows_) * max_h_);
+    htau_.setZero(max_h_);
+    hpos_.assign(max_h_, 0);
+    max_g_ = 8 * max_rows_ + 16;
+    gc_.setZero(max_g_);
+    gs_.setZero(max_g_);
+    gi_.assign(max_g_, 0);
+    seq_.reserve(max_h_ + max_g_);
+    perm_.assign(max_cols_, 0);
+    work_.setZero(std::max({max_rows_, max_cols_, max_right_rows, 1}));
+  }
+
+  /// The k x kw matrix to fill before factor().
+  MapMat matrix(int k, int kw) { return base_.matrix(k, kw); }
+
+  /// Pivoted Householder QR of matrix() (see PivotedQR::factor); returns the rank.
+  int factor(double abs_tol, double rel_tol) {
+    rank_ = base_.factor(abs_tol, rel_tol);
+    m_ = base_.rows();
+    nc_ = base_.cols();
+    abs_tol_ = abs_tol;
+    rel_tol_ = rel_tol;
+    first_ = base_.first_pivot();
+    const MapMat A = base_.matrix();
+    // R: the first rank rows of the factorised matrix (upper triangle)
+    for (int j = 0; j < nc_; ++j) {
+      auto rc = rcol(j);
+      const int top = std::min(j + 1, rank_);
+      rc.head(top) = A.col(j).head(top);
+      if (top < rank_) rc.segment(top, rank_ - top).setZero();
+      perm_[j] = base_.perm(j);
+    }
+    // the reflectors, as full-length vectors (v(pos) = 1, zeros above)
+    seq_.clear();
+    nh_ = ng_ = 0;
+    for (int j = 0; j < rank_; ++j) {
+      auto v = hcol(nh_);
+      v.head(j).setZero();
+      v(j) = 1.0;
+      v.segment(j + 1, m_ - j - 1) = A.col(j).segment(j + 1, m_ - j - 1);
+      htau_(nh_) = base_.tau(j);
+      hpos_[nh_] = j;
+      seq_.push_back(nh_++);
+    }
+    return rank_;
+  }
+
+  int rank() const { return rank_; }
+  int rows() const { return m_; }
+  int cols() const { return nc_; }
+  /// Column i of R comes from column perm(i) of A.
+  int perm(int i) const { return perm_[i]; }
+
+  /// v <- Qf^T v (v: m).
+  template <typename V>
+  void apply_qt(V&& v) const {
+    for (const int t : seq_) {
+      if (t >= 0)
+        reflect(t, v);
+      else
+        rotate(-t - 1, v, false);
+    }
+  }
+  /// v <- Qf v (v: m).
+  template <typename V>
+  void apply_q(V&& v) const {
+    for (auto it = seq_.rbegin(); it != seq_.rend(); ++it) {
+      if (*it >= 0)
+        reflect(*it, v);
+      else
+        rotate(-*it - 1, v, true);
+    }
+  }
+  /// B <- B Qf (B: p x m).
+  template <typename B>
+  void apply_q_right(B&& b) {
+    for (const int t : seq_) right(t, b);
+  }
+  /// B <- B S_last^T (the transform the last append made).
+  template <typename B>
+  void apply_last_right(B&& b) {
+    right(seq_.back(), b);
+  }
+
+  /// Append a column a (m entries) to a factorisation of full column rank: false (nothing
+  /// changed) if it is rank-deficient, full, a is dependent to the factorisation's
+  /// tolerance, or the transform list is full: then factor() again.
+  template <typename A_>
+  bool append(const A_& a) {
+    if (rank_ != nc_ || nc_ >= max_cols_ || rank_ >= m_ || nh_ >= max_h_) return false;
+    const int j = nc_;
+    auto col = work_.head(m_);
+    col = a;
+    apply_qt(col);
+    const double pn = col.tail(m_ - j).norm();
+    const double ref = (j == 0) ? pn : first_;
+    if (!(pn > abs_tol_) || !(pn > rel_tol_ * ref) || pn == 0.0) return false;
+    if (j == 0) first_ = pn;
+    const double x0 = col(j);
+    const double beta = (x0 >= 0.0) ? -pn : pn;
+    const double v0 = x0 - beta;
+    auto v = hcol(nh_);
+    v.head(j).setZero();
+    v(j) = 1.0;
+    double tau = 0.0;
+    if (v0 != 0.0) {
+      v.segment(j + 1, m_ - j - 1) = col.segment(j + 1, m_ - j - 1) / v0;
+      tau = (beta - x0) / beta;
+    } else {
+      v.segment(j + 1, m_ - j - 1).setZero();
+    }
+    auto rc = rcol(j);
+    rc.head(j) = col.head(j);
+    rc(j) = beta;
+    htau_(nh_) = tau;
+    hpos_[nh_] = j;
+    seq_.push_back(nh_++);
+    perm_[j] = j;
+    ++nc_;
+    ++rank_;
+    return true;
+  }
+
+  /// Delete column jcol of A (full column rank): its column of R goes, the Givens rotations
+  /// that restore the triangle are recorded and applied to the columns of B (B <- B G^T,
+  /// p x m: the objective in the QR's basis); columns of A after jcol shift left. False
+  /// (nothing changed) when rank-deficient or the transform list is full: factor() again.
+  template <typename B>
+  bool remove(int jcol, B&& b) {
+    if (rank_ != nc_ || jcol < 0 || jcol >= nc_) return false;
+    int i0 = -1;
+    for (int i = 0; i < nc_; ++i)
+      if (perm_[i] == jcol) i0 = i;
+    if (i0 < 0 || ng_ + (nc_ - 1 - i0) > max_g_) return false;
+    // shift R's columns i0+1.. left (upper Hessenberg from column i0 on)
+    for (int j = i0; j + 1 < nc_; ++j) {
+      rcol(j).head(j + 2) = rcol(j + 1).head(j + 2);
+      perm_[j] = perm_[j + 1];
+    }
+    --nc_;
+    for (int j = 0; j < nc_; ++j)
+      if (perm_[j] > jcol) --perm_[j];
+    // Givens on rows (i, i+1) zero the subdiagonal R(i+1, i), i = i0 .. nc-1
+    for (int i = i0; i < nc_; ++i) {
+      const double a = R_(idx(i, i)), bb = R_(idx(i + 1, i));
+      const double r = std::hypot(a, bb);
+      double c = 1.0, s = 0.0;
+      if (r != 0.0) {
+        c = a / r;
+        s = bb / r;
+      }
+      for (int j = i; j < nc_; ++j) {
+        const double ri = R_(idx(i, j)), rn = R_(idx(i + 1, j));
+        R_(idx(i, j)) = c * ri + s * rn;
+        R_(idx(i + 1, j)) = -s * ri + c * rn;
+      }
+      R_(idx(i + 1, i)) = 0.0;
+      gc_(ng_) = c;
+      gs_(ng_) = s;
+      gi_[ng_] = i;
+      seq_.push_back(-(ng_++) - 1);
+      right(seq_.back(), b);
+    }
+    rank_ = nc_;
+    return true;
+  }
+
+  /// Solve R11 u = rhs(0:rank) in place.
+  template <typename V>
+  void solve_r(V&& rhs) const {
+    rmat().topLeftCorner(rank_, rank_).template triangularView<Eigen::Upper>().solveInPlace(
+        rhs.head(rank_));
+  }
+  /// Solve R11^T u = rhs(0:rank) in place.
+  template <typename V>
+  void solve_rt(V&& rhs) const {
+    rmat().topLeftCorner(rank_, rank_).transpose().template triangularView<Eigen::Lower>()
+        .solveInPlace(rhs.head(rank_));
+  }
+
+ private:
+  Eigen::Index idx(int i, int j) const { return static_cast<Eigen::Index>(j) * max_rows_ + i; }
+  Eigen::Map<Vec> rcol(int j) { return Eigen::Map<Vec>(R_.data() + idx(0, j), max_rows_); }
+  Eigen::Map<const Mat, 0, Eigen::OuterStride<>> rmat() const {
+    return Eigen::Map<const Mat, 0, Eigen::OuterStride<>>(R_.data(), max_rows_, max_cols_,
+                                                          Eigen::OuterStride<>(max_rows_));
+  }
+  Eigen::Map<Vec> hcol(int t) {
+    return Eigen::Map<Vec>(H_.data() + static_cast<Eigen::Index>(t) * max_rows_, m_);
+  }
+  Eigen::Map<const Vec> hcol(int t) const {
+    return Eigen::Map<const Vec>(H_.data() + static_cast<Eigen::Index>(t) * max_rows_, m_);
+  }
+  template <typename V>
+  void reflect(int t, V& v) const {
+    const int p = hpos_[t], len = m_ - p;
+    const auto h = hcol(t).segment(p, len);
+    const double tw = htau_(t) * h.dot(v.segment(p, len));
+    v.segment(p, len) -= tw * h;
+  }
+  template <typename V>
+  void rotate(int g, V& v, bool transpose) const {
+    const int i = gi_[g];
+    const double c = gc_(g), s = transpose ? -gs_(g) : gs_(g);
+    const double a = v(i), b = v(i + 1);
+    v(i) = c * a + s * b;
+    v(i + 1) = -s * a + c * b;
+  }
+  /// B <- B S_t^T: a reflector (symmetric) or the transpose of a rotation.
+  template <typename B>
+  void right(int t, B& b) {
+    if (t >= 0) {
+      const int p = hpos_[t], len = m_ - p;
+      const auto h = hcol(t).segment(p, len);
+      auto w = work_.head(b.rows());
+      w.noalias() = b.middleCols(p, len) * h;
+      w *= htau_(t);
+      b.middleCols(p, len).noalias() -= w * h.transpose();
+    } else {
+      const int g = -t - 1, i = gi_[g];
+      const double c = gc_(g), s = gs_(g);
+      for (Eigen::Index r = 0; r < b.rows(); ++r) {
+        const double x = b(r, i), y = b(r, i + 1);
+        b(r, i) = c * x + s * y;
+        b(r, i + 1) = -s * x + c * y;
+      }
+    }
+  }
+
+  PivotedQR base_;
+  Vec R_, H_, htau_, gc_, gs_, work_;
+  std::vector<int> hpos_, gi_, perm_, seq_;
+  int max_rows_ = 0, max_cols_ = 0, max_h_ = 0, max_g_ = 0, nh_ = 0, ng_ = 0;
+  int m_ = 0, nc_ = 0, rank_ = 0;
   double first_ = 0.0, abs_tol_ = 0.0, rel_tol_ = 0.0;
 };
 

@@ -20,6 +20,7 @@ constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every
 constexpr int kIterFactor = 6;
 constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
 constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
+constexpr double kQrMargin = 4.0;       // QR closed form: sigma_min bound over the SVD's floor
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
@@ -131,6 +132,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Ms_.resize(blocks);
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
+  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max(n, 1));
+  rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
 
 bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) const {
@@ -352,6 +355,16 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) return true;
       W[drop] = 0;
       last_drop = drop;
+      // the row leaves: downdate the working set's QR and Q Qf instead of refactorising
+      if (downdate) {
+        const auto pos = std::find(widx_.begin(), widx_.end(), drop);
+        if (pos != widx_.end() &&
+            wqr_.remove(static_cast<int>(pos - widx_.begin()), Qt_.topLeftCorner(qr, k))) {
+          widx_.erase(pos);
+          current = true;
+          ++downdates_;
+        }
+      }
       continue;
     }
     // ratio test on the rows outside the working set (ties: the lowest index)
@@ -400,7 +413,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       // one row enters: update the working set's QR and Q Qf instead of refactorising
       if (wqr_.append(P.G.row(block).head(k).transpose())) {
         widx_.push_back(block);
-        wqr_.reflect_right(wqr_.rank() - 1, Qt_.topLeftCorner(qr, k));
+        wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
         current = true;
       }
     } else {
@@ -411,7 +424,8 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
 }
 
 int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
-                                bool consistent) {
+                                bool* consistent) {
+  *consistent = false;
   if (ws.id.empty()) return 0;
   const int k = P.cols;
   std::fill(W.begin(), W.begin() + P.rows, 0);
@@ -442,10 +456,11 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   for (int i = 0; i < rho; ++i) yp(i) = t(wqr_.perm(i));
   wqr_.solve_rt(yp);
   wqr_.apply_q(yp);
-  if (consistent) {
+  {
     const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
-    for (int j = 0; j < kw; ++j)
-      if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) return 0;
+    *consistent = true;
+    for (int j = 0; j < kw && *consistent; ++j)
+      if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) *consistent = false;
   }
   auto step = step_.head(k);
   ls_step(P, yp, step);
@@ -454,10 +469,13 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
 }
 
 bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
-                                std::vector<int8_t>& W) {
+                                std::vector<int8_t>& W, int* found) {
   const int k = P.cols;
-  if (ws.id.empty() || stored_set_point(P, ws, W, true) != static_cast<int>(ws.id.size()))
-    return false;
+  *found = 0;
+  if (ws.id.empty()) return false;
+  bool consistent = false;
+  *found = stored_set_point(P, ws, W, &consistent);
+  if (*found != static_cast<int>(ws.id.size()) || !consistent) return false;
   auto yp = xc_.head(k);
   auto gy = gy_.head(P.rows);
   gy.noalias() = P.G.topLeftCorner(P.rows, k) * yp;
@@ -474,7 +492,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
 bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows,
                                  int zcols, Eigen::Ref<Vec> y, std::vector<int8_t>& W) {
   const int k = P.cols, m = P.rows;
-  if (!stored_set_point(P, ws, W, false)) return false;
+  (void)ws;  // its point is in xc_ already (try_working_set's stored_set_point)
   auto yp = xc_.head(k);
   if (!yp.allFinite()) return false;
   // ratio test from z = 0 towards z_p on the rows without slack (feasible at z = 0)
@@ -506,7 +524,15 @@ bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int har
   y.head(zcols) = alpha * zp;
   // each level row's slack: its violation at z (rows hard_rows.. have one slack column each)
   for (int i = hard_rows; i < m; ++i) {
-    const int col = zcols + (i - hard_rows);
+    // its slack column: the next one (levels: one per row, in order), else the one nonzero
+    // of the row past zcols (the hard phase skips the rows the equalities fix)
+    int col = zcols + (i - hard_rows);
+    if (col >= k || P.G(i, col) == 0.0) {
+      col = -1;
+      for (int c = zcols; c < k && col < 0; ++c)
+        if (P.G(i, c) != 0.0) col = c;
+      if (col < 0) continue;
+    }
     const double a = -P.G(i, col);  // 1 / |row| > 0
     const double gz = P.G.row(i).head(zcols).dot(y.head(zcols));
     y(col) = (gz > P.hi(i)) ? (gz - P.hi(i)) / a : ((gz < P.lo(i)) ? (gz - P.lo(i)) / a : 0.0);
@@ -630,11 +656,19 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
     return kInfeasibleHard;
   }
   int iters = 0;
-  const bool hit = warm && try_working_set(P, working_[0], y, W_);
+  int found = 0;
+  const bool hit = warm && try_working_set(P, working_[0], y, W_, &found);
+  // on a miss: the stored set made feasible (every row has its slack: z = the set's point,
+  // each slack the row's violation there)
+  const bool seeded = !hit && warm && seed_on_miss && found > 0 &&
+                      seed_working_set(P, working_[0], 0, r_, y, W_);
+  if (seeded) ++seeded_;
   if (!hit) {
-    std::fill(W_.begin(), W_.begin() + P.rows, 0);
-    for (int i = 0; i < P.rows; ++i)
-      if (P.lo(i) == P.hi(i)) W_[i] = 2;
+    if (!seeded) {
+      std::fill(W_.begin(), W_.begin() + P.rows, 0);
+      for (int i = 0; i < P.rows; ++i)
+        if (P.lo(i) == P.hi(i)) W_[i] = 2;
+    }
     if (!active_set(P, y, W_, iters)) {
       detail(2) = 0;
       return timed_out_ ? kTimeLimit : kNotConverged;
@@ -669,6 +703,52 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   return kOk;
 }
 
+bool Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
+                               Eigen::Ref<Vec> dz) {
+  const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
+  const bool wide = me <= r;
+  const int p = wide ? me : r;
+  if (wide)
+    mqr_.matrix(r, me) = M.transpose();
+  else
+    mqr_.matrix(me, r) = M;
+  if (mqr_.factor(0.0, 0.0) < p) return false;
+  // sigma_min(M) = sigma_min(R) >= 1 / |R^-1|_F: well above the floor (damping threshold,
+  // rank tolerance), every singular value passes it and the SVD's closed form is the
+  // plain minimum-norm least-squares solution
+  auto Ri = rinv_.topLeftCorner(p, p);
+  Ri.setIdentity();
+  mqr_.solve_r_matrix(Ri);
+  const double inv = Ri.norm();
+  if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return false;
+  if (wide) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
+    mqr_.min_norm_transposed_solve(e, dz);
+  } else {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
+    auto u = ute_.head(me);
+    u = e;
+    mqr_.apply_qt(u);
+    mqr_.solve_r(u);
+    for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = u(i);
+  }
+  return true;
+}
+
+void Hierarchy::row_space_basis(const Eigen::JacobiSVD<Mat>& svd, bool by_qr, int me, int rank,
+                                Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out) {
+  if (!by_qr) {
+    out = svd.matrixV().leftCols(rank);
+  } else if (me < static_cast<int>(out.rows())) {  // wide: Qf's first me columns
+    out.setZero();
+    for (int i = 0; i < rank; ++i) {
+      out(i, i) = 1.0;
+      auto col = out.col(i);
+      mqr_.apply_q(col);
+    }
+  } else {  // M has full column rank: the whole space
+    out.setIdentity();
+  }
+}
+
 int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                      const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
                      MRef<Mat> stats, bool warm) {
@@ -688,24 +768,37 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   auto e = e_.head(me);
   auto xc = xc_.head(n_);
   xc = x_;
+  bool by_qr = false;  // closed form from a QR of M (no damping can apply), no SVD
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
     M.resize(me, r_);  // no-op when the size repeats (the usual case)
     M.noalias() = A * Zr;
     e.noalias() = -A * x_;
     e += beq.segment(e0, me);
-    svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeFullV);
-    const Vec& s = svd.singularValues();
     const double scale = A.norm();
-    rank = numerical_rank(s, me, r_, scale);
-    if (rank) {
-      tau = damping_ * std::max(s(0), scale);
-      auto ute = ute_.head(rank);
-      ute.noalias() = svd.matrixU().leftCols(rank).transpose() * e;
-      for (int i = 0; i < rank; ++i) ute(i) *= (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
-      auto dz = tmpr_.head(r_);
-      dz.noalias() = svd.matrixV().leftCols(rank) * ute;
+    // |M|_2 <= |M|_F <= |A|_F (Z orthonormal): the damping threshold and the rank tolerance
+    // of the SVD, max(s_0, scale) = scale, are known before any factorisation
+    tau = damping_ * scale;
+    auto dz = tmpr_.head(r_);
+    by_qr = qr_closed_form(M, e, std::max(tau, std::max(me, r_) * kEps * scale), dz);
+    if (by_qr) {
+      rank = std::min(me, r_);
       xc.noalias() += Zr * dz;
+    } else {
+      // thin V: its first rank columns are all a level uses (the damped step, the damping
+      // rows, the freeze); the null space of M comes from the freeze of V_rank
+      svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeThinV);
+      const Vec& s = svd.singularValues();
+      rank = numerical_rank(s, me, r_, scale);
+      if (rank) {
+        tau = damping_ * std::max(s(0), scale);
+        auto ute = ute_.head(rank);
+        ute.noalias() = svd.matrixU().leftCols(rank).transpose() * e;
+        for (int i = 0; i < rank; ++i)
+          ute(i) *= (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
+        dz.noalias() = svd.matrixV().leftCols(rank) * ute;
+        xc.noalias() += Zr * dz;
+      }
     }
   }
   bool ok = feasible(xc);
@@ -715,16 +808,20 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     x_ = xc;
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
-    if (rank) {
-      const int rn = r_ - rank;
-      Ztmp_.leftCols(rn).noalias() = Zr * svd.matrixV().rightCols(rn);
-      Z_.leftCols(rn) = Ztmp_.leftCols(rn);
-      r_ = rn;
+    if (by_qr && me >= r_) {  // M has full column rank: no freedom left
+      r_ = 0;
+    } else if (by_qr) {  // wide, full row rank: null(M) = span(Qf(:, me:)) of M^T's QR
+      auto Zr2 = Z_.leftCols(r_);
+      mqr_.apply_q_right(Zr2);
+      for (int i = 0; i < r_ - me; ++i) Z_.col(i) = Z_.col(me + i);
+      r_ -= me;
+    } else if (rank) {  // Z <- Z null(V_rank^T) (the QR of V_rank: orthonormal, rank `rank`)
+      row_space_basis(svd, by_qr, me, rank, fqr_.matrix(r_, rank));
+      freeze(1.0);
     }
     stats(stage, 2) = 1.0;
     return kOk;
   }
-  const Vec& s = svd.singularValues();
   // ---- exact active-set least squares in y = (z, w)
   mov_.clear();  // level rows z can move, with a finite side
   auto zc = zc_.head(r_);
@@ -737,8 +834,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   const int mv = static_cast<int>(mov_.size());
   int ndamp = 0;
-  for (int i = 0; i < rank; ++i)
-    if (s(i) < tau) ++ndamp;
+  const Vec& s = svd.singularValues();  // used only off the QR path
+  if (!by_qr)
+    for (int i = 0; i < rank; ++i)
+      if (s(i) < tau) ++ndamp;
   const int cols = r_ + mv;
   LsqProblem& P = P_;
   P.start(me + ndamp + mv, cols);
@@ -748,7 +847,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   {
     int d = me;
-    for (int i = 0; i < rank; ++i)
+    for (int i = 0; i < rank && ndamp; ++i)
       if (s(i) < tau)
         P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i);
   }
@@ -766,9 +865,11 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
   }
   int iters = 0;
-  const bool hit = warm && try_working_set(P, working_[stage], y, W_);
+  int found = 0;
+  const bool hit = warm && try_working_set(P, working_[stage], y, W_, &found);
   const bool seeded =
-      !hit && warm && seed_on_miss && seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);
+      !hit && warm && seed_on_miss && found > 0 &&
+      seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);
   if (seeded) {
     ++seeded_;
     if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
@@ -809,7 +910,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // F^T = [V_rank, Z^T C_violated^T] (r x f), null(F) is what the level leaves free
   MapMat Ft = fqr_.matrix(r_, rank + nviol);
   double fscale = 1.0;
-  Ft.leftCols(rank) = svd.matrixV().leftCols(rank);
+  row_space_basis(svd, by_qr, me, rank, Ft.leftCols(rank));
   {
     int f = rank;
     double fro = 0.0;
@@ -849,8 +950,17 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   auto y = y_.head(r_);
   y.setZero();
   int iters = 0;
-  const bool hit = warm && try_working_set(P, working_[stage], y, W_);
-  if (!hit) {
+  int found = 0;
+  const bool hit = warm && try_working_set(P, working_[stage], y, W_, &found);
+  // on a miss: the stored set made feasible (every row is without slack here; y = 0 is
+  // feasible: x meets the inherited rows and the bounds)
+  const bool seeded =
+      !hit && warm && seed_on_miss && found > 0 &&
+      seed_working_set(P, working_[stage], P.rows, r_, y, W_);
+  if (seeded) {
+    ++seeded_;
+    if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
+  } else if (!hit) {
     std::fill(W_.begin(), W_.begin() + P.rows, 0);
     for (int i = 0; i < P.rows; ++i)
       if (P.lo(i) == P.hi(i)) W_[i] = 2;
@@ -905,6 +1015,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   detail.setZero();
   timed_out_ = false;
   seeded_ = 0;
+  downdates_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +

@@ -81,8 +81,13 @@ class Hierarchy {
             MRef<Vec> detail);
 
   int n() const { return n_; }
-  /// Seed the active set from a missed stored working set (default) or start cold (A/B).
+  /// Rows that left a working set through a downdate of its QR during the last call.
+  int downdates() const { return downdates_; }
+  /// Seed the active set (hard phase, levels, minimum-norm step) from a missed stored
+  /// working set (default) or start cold (A/B).
   bool seed_on_miss = true;
+  /// Downdate the working set's QR when a row leaves (default) or refactorise (A/B).
+  bool downdate = true;
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
   double damping() const { return damping_; }
 
@@ -100,6 +105,16 @@ class Hierarchy {
             bool warm);
   int min_norm(MRef<Mat> stats, bool warm);
 
+  /// The closed form of a level's projected equalities M dz = e by a QR of M, when M has
+  /// full rank and its smallest singular value is certainly above `floor` (the damping
+  /// threshold and the rank tolerance: then the SVD's damped closed form is this plain
+  /// minimum-norm least-squares solution). False: use the SVD.
+  bool qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
+                      Eigen::Ref<Vec> dz);
+  /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
+  /// the QR of qr_closed_form.
+  void row_space_basis(const Eigen::JacobiSVD<Mat>& svd, bool by_qr, int me, int rank,
+                       Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out);
   bool feasible(const Eigen::Ref<const Vec>& x) const;
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
                const std::vector<char>* skip);
@@ -111,14 +126,15 @@ class Hierarchy {
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
   bool active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W, int& iters);
-  /// Try a stored working set: solve on it, check feasibility and multiplier signs.
   /// Map a stored working set onto P's rows (into W), factor it and write the minimum-norm
   /// least-squares point on it into xc_; returns the number of stored rows matched (0: none,
-  /// an infinite bound, or with `consistent` a point that misses the set's rows).
+  /// or an infinite bound); *consistent: the point meets the set's rows.
   int stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
-                       bool consistent);
+                       bool* consistent);
+  /// Try a stored working set: solve on it, check feasibility and multiplier signs. *found:
+  /// the stored rows matched (its point stays in xc_ for seed_working_set on a miss).
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
-                       std::vector<int8_t>& W);
+                       std::vector<int8_t>& W, int* found);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
   /// After a miss of a level's stored working set: a feasible start near its point. The
   /// stored set's point (its rows held, the least squares on them) gives z_p; the ratio test
@@ -126,7 +142,8 @@ class Hierarchy {
   /// of P: inherited rows and bounds) gives z = alpha z_p; each level row's slack is its
   /// violation at z (the cheapest feasible slack); the working set is the stored rows still
   /// tight at that point plus the blocking row (alpha = 0: the cold start's point with the
-  /// stored rows tight there). False (cold start) if none of the stored rows is in P.
+  /// stored rows tight there). Call after a try_working_set of ws that matched rows (its
+  /// point and W's mapping are reused, not recomputed).
   bool seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows, int zcols,
                         Eigen::Ref<Vec> y, std::vector<int8_t>& W);
   /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
@@ -169,6 +186,7 @@ class Hierarchy {
   std::chrono::steady_clock::time_point deadline_;
   Vec frozen_value_;  ///< each level's value when it was frozen
   int seeded_ = 0;    ///< stages of this call started from a seeded working set (detail[7])
+  int downdates_ = 0;  ///< rows that left a working set by a QR downdate in this call
 
   std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
   LsqProblem P_;
@@ -177,7 +195,7 @@ class Hierarchy {
 
   // workspace, sized at construction: the per-call path does not allocate (the closed-form
   // SVDs are one object per stage, whose sizes repeat from one call to the next)
-  PivotedQR wqr_;  ///< G_w^T of the working set (k x kw)
+  WorkingQR wqr_;  ///< G_w^T of the working set (k x kw), updated as rows enter and leave
   PivotedQR kqr_;  ///< the projected objective K = Q N (qrows x (k - rank))
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
@@ -189,6 +207,8 @@ class Hierarchy {
   std::vector<char> keep_, viol_;
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ztmp_;
+  PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
+  Mat rinv_;       ///< R^-1 of mqr_ (a bound on M's smallest singular value)
   std::vector<Eigen::JacobiSVD<Mat>> svds_;
 };
 

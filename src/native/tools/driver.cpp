@@ -5,7 +5,11 @@
 //
 //   g++ -O2 -g -std=c++17 -DNDEBUG -I<eigen3> -Isrc/native src/native/tools/driver.cpp \
 //       src/native/hierarchy.cpp -o /tmp/driver
-//   /tmp/driver FILE.bin [repeats] [cold]
+//   /tmp/driver FILE.bin [repeats] [cold|warm] [XOUT.bin]
+//
+// Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
+// (float64, n per solve, in order) to compare two builds.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -46,6 +50,7 @@ int main(int argc, char** argv) {
   const int repeats = argc > 2 ? std::atoi(argv[2]) : 20;
   const bool cold = argc > 3 && argv[3][0] == 'c';
   std::ifstream f(argv[1], std::ios::binary);
+  std::FILE* xout = argc > 4 ? std::fopen(argv[4], "wb") : nullptr;
   auto rd_i = [&]() {
     long long v;
     f.read(reinterpret_cast<char*>(&v), 8);
@@ -73,6 +78,8 @@ int main(int argc, char** argv) {
   Mat stats(L + 2, 3);
   long long allocs_after_first = 0;
   double seconds = 0.0;
+  std::vector<double> each;
+  each.reserve(size_t(repeats) * steps);
   long long iters = 0, hits = 0, closed = 0;
   for (int rep = 0; rep < repeats; ++rep) {
     for (int s = 0; s < steps; ++s) {
@@ -90,7 +97,10 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       const int code = h.solve(Aeq, beq, C, lo, hi, sw, lb, ub, !cold && (rep || s), std::numeric_limits<double>::infinity(), x,
                                res, stats, detail);
-      seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      seconds += dt;
+      each.push_back(dt);
+      if (xout) std::fwrite(x.data(), sizeof(double), size_t(n), xout);
       if (rep > 0) allocs_after_first += g_allocs - a0;
       if (code) {
         std::fprintf(stderr, "step %d: status %d\n", s, code);
@@ -101,7 +111,11 @@ int main(int argc, char** argv) {
       closed += static_cast<long long>(stats.col(2).sum());
     }
   }
+  if (xout) std::fclose(xout);
   const double solves = double(repeats) * steps;
+  std::sort(each.begin(), each.end());
+  auto pct = [&](double q) { return 1e6 * each[size_t(q * double(each.size() - 1))]; };
+  std::printf("median %.2f us  p90 %.2f us  p99 %.2f us  ", pct(0.5), pct(0.9), pct(0.99));
   std::printf("solves %.0f  mean %.2f us  iters/solve %.2f  warm hits/solve %.2f  "
               "closed forms/solve %.2f  allocations after the first pass %lld\n",
               solves, 1e6 * seconds / solves, iters / solves, hits / solves, closed / solves,

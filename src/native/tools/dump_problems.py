@@ -1,4 +1,4 @@
-"""Dump the benchmark's stacks (panda9, random50: several moving steps) for the C++ driver.
+"""Dump the benchmark's stacks (panda9, random50, chain30, talos) for the C++ driver.
 
     python src/native/tools/dump_problems.py OUT_DIR [--steps N]
 
@@ -19,14 +19,13 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[3] / "benchmarks"))
 import hierarchy_bench as hb  # noqa: E402
 
-import qpcoord as qc  # noqa: E402
 from qpcoord.core.native import NativeHierarchy  # noqa: E402
 
 
 def dump(name, build, steps, out: pathlib.Path) -> None:
     rng = np.random.default_rng(0)
-    levels, bounds, move = build(rng)
-    stack = qc.Stack(levels, bounds=bounds)
+    sc = hb._scenario(build, rng)
+    stack, move = sc["stack"], sc["move"]
     P = stack._compiled
     h = NativeHierarchy(P, stack.damping)
     blocks = [P.hard, *P.levels]
@@ -37,9 +36,10 @@ def dump(name, build, steps, out: pathlib.Path) -> None:
         f.write(np.array([steps], dtype=np.int64).tobytes())
         f.write(np.array([B.m_eq for B in blocks], dtype=np.int64).tobytes())
         f.write(np.array([B.m_in for B in blocks], dtype=np.int64).tobytes())
+        x = None
         for step in range(steps):
-            move(step)
-            h.solve(P)  # fills the compiled stack's stacked arrays
+            move(step, x)
+            x, _, _ = h.solve(P)  # fills the compiled stack's stacked arrays
             for a in (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs):
                 f.write(np.ascontiguousarray(a, dtype=np.float64).tobytes())
 
@@ -51,8 +51,8 @@ def main() -> int:
     a = ap.parse_args()
     out = pathlib.Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    dump("panda9", hb.panda9, a.steps, out)
-    dump("random50", hb.random50, a.steps, out)
+    for name, (_label, build) in hb.SCENARIOS.items():
+        dump(name, build, a.steps, out)
     return 0
 
 
