@@ -36,6 +36,22 @@ def _limit_error(limit: float, exc: SolverError) -> SolverError:
     )
 
 
+def _call_native(native, P, limit: float):
+    """``native.solve(P, time_left=...)`` (a :class:`~qpcoord.core.native.NativeHierarchy` or
+    :class:`~qpcoord.core.native_weighted.NativeWeighted`) with the solve's time limit
+    ``limit`` (s) or, if earlier, an enclosing solve's deadline; a native error raised once
+    that time has passed is the time-limit error. Returns ``(x, level values, info)``."""
+    left = time_left()  # an enclosing solve's deadline (None: none)
+    limit_now = left if left is not None and left < limit else limit
+    t1 = time.perf_counter()
+    try:
+        return native.solve(P, time_left=limit_now)
+    except SolverError as exc:
+        if "time limit" in str(exc) or time.perf_counter() - t1 >= limit_now:
+            raise _limit_error(limit, exc) from exc
+        raise
+
+
 class Stack:
     """A prioritised stack of tasks, solved once per control step.
 
@@ -201,7 +217,7 @@ class Stack:
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
         if method == "weighted" and resolve_weighted_engine(engine, solver) == "native":
-            return self._solve_native_weighted(t0, warm_start)
+            return self._solve_native_weighted(t0, warm_start, limit)
         if resolve_engine(engine, method, solver) == "native":
             return self._solve_native(t0, warm_start, strict, limit)
         # every QP the Python engine starts gets the time left (backends.deadline); a backend
@@ -291,18 +307,7 @@ class Stack:
         native = self._native
         if native is None:
             native = self._native = NativeHierarchy(P, self.damping)
-        left = time_left()  # an enclosing solve's deadline (None: none)
-        if left is not None and left < limit:
-            limit_now = left
-        else:
-            limit_now = limit
-        t1 = time.perf_counter()
-        try:
-            x, residuals, info = native.solve(P, time_left=limit_now)
-        except SolverError as exc:
-            if "time limit" in str(exc) or time.perf_counter() - t1 >= limit_now:
-                raise _limit_error(limit, exc) from exc
-            raise
+        x, residuals, info = _call_native(native, P, limit)
         status = "optimal"
         bad = info["uncertified"]
         if bad:
@@ -325,7 +330,7 @@ class Stack:
             info=info,
         )
 
-    def _solve_native_weighted(self, t0: float, warm_start) -> Solution:
+    def _solve_native_weighted(self, t0: float, warm_start, limit: float) -> Solution:
         """``method="weighted"`` with the native engine (:mod:`qpcoord.core.native_weighted`):
         the same QP, checked in the native call (data finite; bounds and hard rows at ``x``)."""
         P = self._compiled
@@ -333,7 +338,7 @@ class Stack:
             self._warm(warm_start)  # validated; the engine warm-starts from its working set
         if self._native_weighted is None:
             self._native_weighted = NativeWeighted(P, self.regularization, self.weight_ratio)
-        x, residuals, info = self._native_weighted.solve(P, time_left=time_left())
+        x, residuals, info = _call_native(self._native_weighted, P, limit)
         return Solution(
             x=x,
             status="optimal",
