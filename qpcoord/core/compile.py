@@ -14,12 +14,12 @@ reads them without a copy.
 
 from __future__ import annotations
 
-import math
 from dataclasses import InitVar, dataclass, field
 
 import numpy as np
 
 from .elimination import FEAS_TOL
+from .linalg import all_finite
 from .tasks import Bounds, Equality, Inequality, _bad_box, find_bad_value
 from .tolerance import widen
 
@@ -125,9 +125,9 @@ class CompiledLevel:
         infinity (a solve-time check: tasks validate what they are given, this catches
         what reached their arrays another way). Three reductions per kind of row."""
         bad = False
-        if self.m_eq and not math.isfinite(float(self.Ae.sum()) + float(self.be.sum())):
+        if self.m_eq and not (all_finite(self.Ae) and all_finite(self.be)):
             bad = True
-        if self.m_in and (not math.isfinite(float(self.C.sum())) or _bad_box(self.lo, self.hi)):
+        if self.m_in and (not all_finite(self.C) or _bad_box(self.lo, self.hi)):
             bad = True
         if bad:
             for t in (*self.eqs, *self.ineqs):

@@ -17,7 +17,7 @@ import numpy as np
 
 from .backends import OK, as_rows, available_solvers, solve_dense_qp, time_left
 from .errors import InfeasibleError, SolverError
-from .linalg import null_space, numerical_rank, svd
+from .linalg import all_finite, null_space, numerical_rank, svd
 from .polish import polish
 from .tolerance import widen, within
 
@@ -48,7 +48,7 @@ FALLBACKS = ("quadprog", "daqp", "proxqp", "clarabel")
 def _miss(G, lo, hi, lb, ub, y) -> float:
     """Largest relative violation ``(row − bound)/max(1, |bound|)`` of a QP point
     (``inf`` for a non-finite point; infinite bounds never count)."""
-    if not np.isfinite(y.sum()):
+    if not all_finite(y):
         return np.inf
     worst = 0.0
     pairs = [(G @ y, lo, hi)] if G.shape[0] else []
@@ -366,7 +366,7 @@ class Reduced:
             if y is not None:
                 return y
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
-        if not np.isfinite(res.y.sum()):
+        if not all_finite(res.y):
             raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite solution")
         miss = _miss(G, lo, hi, lb, ub, res.y)
         if miss > CHECK_TOL:
@@ -520,7 +520,7 @@ class Reduced:
     def _hard_ok(self, xn: np.ndarray) -> bool:
         """Does ``xn`` meet the bounds and hard rows to :data:`CHECK_TOL`?"""
         return bool(
-            np.isfinite(xn.sum())
+            all_finite(xn)
             and (self.lb is None or within(xn, self.lb, self.ub, CHECK_TOL))
             and within(self.Cin @ xn, self.lin, self.uin, CHECK_TOL)
         )

@@ -26,7 +26,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lapack
 
-__all__ = ["svd", "filtered_svd", "filtered_gains", "null_space", "numerical_rank"]
+__all__ = [
+    "svd",
+    "filtered_svd",
+    "filtered_gains",
+    "null_space",
+    "numerical_rank",
+    "all_finite",
+]
 
 _EPS = np.finfo(float).eps
 _dgesvd = lapack.dgesvd
@@ -114,3 +121,14 @@ def null_space(F: np.ndarray, scale: float = 0.0) -> np.ndarray:
         return np.eye(r)
     _, s, Vt = svd(F, full=True)
     return Vt[numerical_rank(s, F.shape, scale) :].T
+
+
+def all_finite(a: np.ndarray) -> bool:
+    """``True`` if every entry of ``a`` is finite (neither NaN nor ±inf).
+
+    One ``isfinite`` and one reduction: as cheap as the ``math.isfinite(a.sum())`` idiom on
+    control-step sizes, but exact and silent — a sum overflows to ``inf`` (and numpy prints a
+    ``RuntimeWarning``) on large *finite* entries such as ``1e308``, or makes NaN of ``+inf``
+    and ``-inf``.
+    """
+    return bool(np.isfinite(a).all())

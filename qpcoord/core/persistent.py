@@ -44,6 +44,7 @@ from .backends import DEFAULT_TIME_LIMIT
 from .compile import CompiledStack
 from .elimination import CHECK_TOL
 from .errors import InfeasibleError, SolverError
+from .linalg import all_finite
 from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .solution import Solution
 from .tasks import Equality
@@ -845,7 +846,7 @@ class PersistentQP:
         if self._G_check is not None:  # NaN or inf in x fails both tests of _inside
             sl = self._check_rows
             return _inside(self._G_check @ x, self._bl[sl], self._bu[sl])
-        if not np.isfinite(x.sum()):
+        if not all_finite(x):
             return False
         n = self._n
         if self._bounded and not _inside(x, self._bl[:n], self._bu[:n]):

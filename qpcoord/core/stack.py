@@ -12,6 +12,7 @@ from .backends import DEFAULT_TIME_LIMIT, check_solver, check_time_limit, deadli
 from .compile import compile_stack
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
 from .errors import SolverError
+from .linalg import all_finite
 from .methods.hierarchical import solve_equality_chain, solve_hierarchical
 from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
@@ -268,7 +269,7 @@ class Stack:
             x = R.x
         if R is not None or method != "hierarchical" or not P.equalities_only:
             self._check(x, R, used)
-        elif not np.isfinite(x.sum()):  # bounds met to FEAS_TOL already; no hard rows
+        elif not all_finite(x):  # bounds met to FEAS_TOL already; no hard rows
             P.check_finite()  # names a NaN/inf that reached the tasks' arrays
             raise SolverError("the closed-form solution is not finite")
         residuals = np.array([L.residual(x) for L in P.levels])
@@ -394,7 +395,7 @@ class Stack:
     def _check(self, x: np.ndarray, R, solver: str) -> None:
         """Never return an unchecked x: finite, bounds, hard rows, inherited rows."""
         P = self._compiled
-        if not np.isfinite(x.sum()):
+        if not all_finite(x):
             P.check_finite()  # names a NaN/inf that reached the tasks' arrays
             raise SolverError(f"backend {solver!r} produced a non-finite solution")
         if R is not None and R.verified and not P.hard.m_eq:

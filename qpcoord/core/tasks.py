@@ -30,6 +30,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .linalg import all_finite
+
 __all__ = ["Equality", "Inequality", "Bounds", "Task"]
 
 
@@ -44,7 +46,7 @@ MATRIX_RANGE = (1e-150, 1e150)
 
 
 # the reductions of the validation, without ndarray.sum/max/min's Python wrappers
-_sum, _max, _min = np.add.reduce, np.maximum.reduce, np.minimum.reduce
+_max, _min = np.maximum.reduce, np.minimum.reduce
 #: numpy dtype kinds converted to float without a check: bool, signed, unsigned, float
 _REAL_KINDS = ("b", "i", "u", "f")
 
@@ -160,7 +162,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
             raise ValueError(
                 f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}"
             )
-        if math.isfinite(_sum(arr, None)):
+        if all_finite(arr):
             return _frozen(arr)  # fresh, C-contiguous, the owner of its data
     if np.any(np.isnan(arr)):
         i = int(np.flatnonzero(np.isnan(arr))[0])
@@ -299,13 +301,13 @@ class Equality(_Task):
         Only finiteness is checked (one reduction); shapes are the caller's contract.
         """
         if A is not None:
-            if not np.isfinite(A.sum()):
+            if not all_finite(A):
                 raise ValueError(f"{self.label}: A contains a non-finite value")
             _w(self.A)[...] = A
             self.is_identity = False
             self.matrix_version += 1
         if b is not None:
-            if not np.isfinite(b.sum()):
+            if not all_finite(b):
                 raise ValueError(f"{self.label}: b contains a non-finite value")
             _w(self.b)[...] = b
         return self
@@ -389,7 +391,7 @@ class Inequality(_Task):
             _check_order(lower, upper, self.label)
             raise ValueError(f"{self.label}: bounds contain NaN or ±inf on the wrong side")
         if C is not None:
-            if not np.isfinite(C.sum()):
+            if not all_finite(C):
                 raise ValueError(f"{self.label}: C contains a non-finite value")
             _w(self.C)[...] = C
             self.matrix_version += 1

@@ -4,9 +4,12 @@ argument, at construction and at ``update``)."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
+import qpcoord as qc
 from qpcoord import Bounds as B
 from qpcoord import Equality as E
 from qpcoord import Inequality as I  # noqa: E741
@@ -598,3 +601,35 @@ def test_a_stack_of_constraints_only_and_mixed_levels_compiles():
     assert [(L.m_eq, L.m_in) for L in P.levels] == [(3, 3), (3, 0)]
     assert P.Aeq.shape == (6, 3) and P.C.shape == (6, 3)
     assert np.shares_memory(P.levels[0].C, P.C) and np.shares_memory(P.levels[1].Ae, P.Aeq)
+
+
+# ---------------------------------------------------------------------------------------
+# finiteness checks are exact and silent: large finite numbers are not "non-finite"
+
+
+@pytest.mark.parametrize(
+    "a, expected",
+    [
+        (np.full(3, 1e308), True),  # a sum would overflow to inf
+        (np.array([np.inf, -np.inf]), False),  # a sum would be NaN
+        (np.array([1.0, np.nan]), False),
+        (np.zeros((0, 3)), True),
+        (np.eye(3), True),
+    ],
+)
+def test_all_finite_is_exact(a, expected):
+    from qpcoord.core.linalg import all_finite
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert all_finite(a) is expected
+
+
+def test_large_finite_targets_are_accepted_without_a_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        t = qc.Equality(np.eye(3), [1e308, -1e308, 1e308], name="big")
+        t._assign(b=np.array([1e308, 1e308, -1e308]))  # the trusted per-step path too
+        i = qc.Inequality(np.eye(2), [-1e308, -1e308], [1e308, 1e308])
+        i.update(lower=[-1e308, 0.0], upper=[1e308, 1e308])
+    assert t.b[0] == 1e308
