@@ -348,6 +348,37 @@ class IKStep {
     return code;
   }
 
+  /// The solve's statistics as a dict (NativeIKStep._info's keys and values, built here:
+  /// one pass over the stages hard, levels, minimum-norm step of the bound stats / detail).
+  nb::dict info(double kkt_tol) const {
+    const OutArr& st = out_[12];
+    const double* d = out_[13].data();
+    const int stages = static_cast<int>(st.shape(0)), last = stages - 2;
+    const double* s = st.data();
+    nb::list levels, closed, uncertified;
+    double hits = 0.0;
+    long calls = 0;
+    for (int k = 0; k < stages; ++k) {
+      const double it = s[3 * k], h = s[3 * k + 1], c = s[3 * k + 2];
+      if (k > 0 && k < stages - 1) levels.append(static_cast<long>(it));
+      hits += h;
+      if (c != 0.0 && k > 0 && k <= last) closed.append(k - 1);
+      if (it != 0.0 || h != 0.0) ++calls;
+    }
+    if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
+    nb::dict out;
+    out["engine"] = "native";
+    out["hard_iterations"] = static_cast<long>(s[0]);
+    out["active_set_iterations"] = levels;
+    out["min_norm_iterations"] = static_cast<long>(s[3 * (stages - 1)]);
+    out["warm_start_hits"] = static_cast<long>(hits);
+    out["warm_start_seeded"] = static_cast<long>(d[7]);
+    out["closed_form_levels"] = closed;
+    out["qp_calls"] = calls;
+    out["uncertified"] = uncertified;
+    return out;
+  }
+
   /// The rows a kernel writes (for tests): its index in the order added.
   int num_tasks() const { return static_cast<int>(kernels_.size()); }
 
@@ -656,6 +687,7 @@ void bind_ik_step(nb::module_& m) {
       .def("set_integrator", &IKStep::set_integrator, nb::arg("plan"), nb::arg("q_next"))
       .def("step", &IKStep::step, nb::arg("q"), nb::arg("t"), nb::arg("reference").none(),
            nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false)
+      .def("info", &IKStep::info, nb::arg("kkt_tol"))
       .def_rw("limits_mode", &IKStep::limits_mode)
       .def_ro("failed", &IKStep::failed)
       .def_prop_ro("num_tasks", &IKStep::num_tasks);
