@@ -129,3 +129,27 @@ def test_step_integrate_falls_back_to_robot_integrate(robots):
     np.testing.assert_array_equal(qn, robot.integrate(q, v, ik.dt))
     with pytest.raises(ValueError, match="q must have 7 entries"):
         ik.step_integrate(q[:3])
+
+
+def test_robot_integrate_fast_path_keeps_its_checks(robots):
+    """A fixed-base arm's float64 arrays take the short path of Robot.integrate: the same
+    result as q + v dt, and every bad input still gets the full checks' message."""
+    robot = robots["panda"]
+    q = robot.random_configuration(4)
+    v = np.linspace(-1.0, 1.0, robot.nv)
+    np.testing.assert_array_equal(robot.integrate(q, v, 1e-3), q + v * 1e-3)
+    np.testing.assert_array_equal(robot.integrate(list(q), list(v), 1), q + v)
+    bad_v = v.copy()
+    bad_v[1] = np.nan
+    with pytest.raises(ValueError, match=r"^v\[1\] is nan: velocities must be finite$"):
+        robot.integrate(q, bad_v, 1e-3)
+    bad_q = q.copy()
+    bad_q[2] = -np.inf
+    with pytest.raises(ValueError, match=r"^q\[2\] is -inf: configurations must be finite$"):
+        robot.integrate(bad_q, v, 1e-3)
+    with pytest.raises(ValueError, match="dt must be finite"):
+        robot.integrate(q, v, np.inf)
+    with pytest.raises(ValueError, match="v must have nv = 7 entries"):
+        robot.integrate(q, v[:3], 1e-3)
+    huge = np.full(robot.nv, 1e308)  # sums overflow: the full path, which accepts it
+    np.testing.assert_array_equal(robot.integrate(q, huge, 1.0), q + huge)
