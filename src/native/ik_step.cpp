@@ -155,7 +155,7 @@ class IKStep {
     hi2_.resize(nv);
     for (const char* s : {"gain", "sqrt_weight", "A", "b", "target", "target_velocity",
                           "_target_inv", "_target_t", "q_ref", "reference_at", "rotation",
-                          "translation"})
+                          "translation", "matrix_version"})
       names_.push_back(nb::str(s));
   }
 
@@ -319,6 +319,8 @@ class IKStep {
         failed = static_cast<int>(i);
         return kTaskData + static_cast<int>(i);
       }
+      // a new A, as the task's _assign(A, b) counts it (a posture writes only b)
+      if (kernels_[i].kind != kPosture) bump_matrix_version(kernels_[i].eq);
     }
     double* lbs = out_[6].data();
     double* ubs = out_[7].data();
@@ -412,6 +414,16 @@ class IKStep {
 
   /// Write row r of kernel k: A row (pin coordinates in src, mapped here), b value.
   /// (A row of a column-major matrix: an inner stride, so that no copy is made.)
+  /// eq.matrix_version += 1 (what a persistent solver watches to refactorise).
+  void bump_matrix_version(nb::handle eq) {
+    nb::object v = attr(eq, names_[12]);
+    PyObject* next = PyNumber_Add(v.ptr(), one_.ptr());
+    if (!next) throw nb::python_error();
+    const int rc = PyObject_SetAttr(eq.ptr(), names_[12].ptr(), next);
+    Py_DECREF(next);
+    if (rc != 0) throw nb::python_error();
+  }
+
   void write_row(const Kernel& k, int r,
                  const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& src,
                  double bval) {
@@ -662,6 +674,7 @@ class IKStep {
   std::vector<Kernel> kernels_;
   std::vector<Limit> limits_;
   std::vector<nb::str> names_;
+  nb::int_ one_ = nb::int_(1);
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
 };

@@ -131,6 +131,7 @@ def test_step_integrate_falls_back_to_robot_integrate(robots):
         ik.step_integrate(q[:3])
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 def test_robot_integrate_fast_path_keeps_its_checks(robots):
     """A fixed-base arm's float64 arrays take the short path of Robot.integrate: the same
     result as q + v dt, and every bad input still gets the full checks' message."""
@@ -153,3 +154,28 @@ def test_robot_integrate_fast_path_keeps_its_checks(robots):
         robot.integrate(q, v[:3], 1e-3)
     huge = np.full(robot.nv, 1e308)  # sums overflow: the full path, which accepts it
     np.testing.assert_array_equal(robot.integrate(q, huge, 1.0), q + huge)
+
+
+@needs_native
+def test_kernels_count_matrix_changes_for_a_persistent_solver(robots):
+    """The kernels bump ``task.task.matrix_version`` as ``_assign(A, b)`` does (a posture
+    writes only ``b``), so a PersistentQP on ``ik.stack`` sees the new ``A``."""
+    from qpcoord.core.persistent import PersistentQP
+
+    robot = robots["panda"]
+    q = robot.random_configuration(5)
+    ik = _ik(robot, q, "native")
+    hand, posture = ik._dynamic
+    ik.step(q)
+    before = (hand.task.matrix_version, posture.task.matrix_version)
+    ik.step(q)
+    assert hand.task.matrix_version == before[0] + 1
+    assert posture.task.matrix_version == before[1]
+    qp = PersistentQP(ik.stack)
+    assert qp.solve().info["setups"] == 1
+    for k in range(5):
+        q = robot.integrate(q, ik.step(q)[0], 0.05)  # new rows, written natively
+        sol = qp.solve()
+        assert sol.info["persistent"] and sol.info["setups"] == k + 2  # it saw A change
+        expected = ik.stack.solve(method="weighted").x
+        np.testing.assert_allclose(sol.x, expected, rtol=0, atol=1e-9, err_msg=str(k))
