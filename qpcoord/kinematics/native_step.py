@@ -24,7 +24,9 @@ posture over a continuous joint) and constant
 Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
 copied into the same arrays (a hybrid step); any other limit (acceleration limits, user
 limits) makes the whole box Python-computed. The kernels also write each task's own
-``task.task`` arrays (``A``, ``b``), as its ``_refresh`` would.
+``task.task`` arrays (``A``, ``b``) and count a new ``A`` in its ``matrix_version``, as its
+``_refresh`` would. With ``integrate=True`` (:meth:`IK.step_integrate
+<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
 """
 
 from __future__ import annotations
