@@ -10,12 +10,15 @@ Paths, stepped in lockstep (one step of each in turn, the order rotating every s
 from the same start with its own IK and tasks:
 
 - ``native step``: ``IK(engine="native")`` (default): Pinocchio's ``computeJointJacobians``
-  and one native call (task rows, limit box, strict hierarchy);
+  and one native call (task rows, limit box, strict hierarchy), then ``robot.integrate``;
+- ``native step_integrate``: the same IK's ``step_integrate``: ``q_next`` written by the
+  native call (no ``robot.integrate``);
 - ``python tasks + native solve``: the path before the native step: ``IK.refresh`` (the
   tasks' Python ``_refresh``, the limit boxes) then ``Stack.solve(engine="native")``;
 - ``python engine``: ``IK(engine="python")`` (Python refresh, Python strict hierarchy, daqp).
 
-A timed step is what a control loop does: ``set_target`` + the step + ``robot.integrate``.
+A timed step is what a control loop does: ``set_target`` + the step + ``robot.integrate``
+(``set_target`` + ``step_integrate`` for that path).
 One BLAS thread. Printed per run: median / p90 / p99 (µs), and the largest velocity
 difference to the native step over the run (the three paths see the same configurations:
 each steps from the native step's ``q``).
@@ -46,7 +49,7 @@ PANDA_Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
 RADIUS, PERIOD = 0.1, 2.0  # m, s
 SPEED = 0.8  # rad/s
 FRAME = "panda_hand_tcp"
-PATHS = ("native step", "python tasks + native solve", "python engine")
+PATHS = ("native step", "native step_integrate", "python tasks + native solve", "python engine")
 
 
 class Loop:
@@ -70,6 +73,7 @@ class Loop:
             engine = "python"  # the IK refreshes in Python; its stack is solved natively
         self.ik = qc.IK(robot, [self.hand, posture], DT, limits=limits, engine=engine)
         self.native_solve = path == "python tasks + native solve"
+        self.fused = path == "native step_integrate"
 
     def _target(self, k: int):
         p = self.circle.position((k + 1) * DT)
@@ -91,6 +95,9 @@ class Loop:
             sol = ik.stack.solve(warm_start=ik.last, engine="native")
             ik.last = sol
             v = sol.x
+        elif self.fused:
+            _, v, _ = ik.step_integrate(q)
+            return time.perf_counter() - t0, v
         else:
             v, _ = ik.step(q)
         robot.integrate(q, v, DT)

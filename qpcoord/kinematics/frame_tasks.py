@@ -63,6 +63,7 @@ from __future__ import annotations
 import re
 from abc import abstractmethod
 from collections.abc import Sequence
+from math import isfinite
 from typing import Any
 
 import numpy as np
@@ -90,6 +91,7 @@ __all__ = [
 #: the last row's deviation from ``[0, 0, 0, 1]`` (dimensionless).
 RIGID_TOLERANCE = 1e-6
 
+_F64 = np.dtype(np.float64)
 _POSE_AXES = ("x", "y", "z", "rx", "ry", "rz")
 _POSITION_AXES = ("x", "y", "z")
 _ROTATION_AXES = ("rx", "ry", "rz")
@@ -124,6 +126,9 @@ def _gain(value: Any, what: str = "gain") -> float:
 
 
 def _vector(value: Any, size: int, what: str, unit: str) -> np.ndarray:
+    if type(value) is np.ndarray and value.shape == (size,) and value.dtype == _F64:
+        if isfinite(sum(value.tolist())):  # else (NaN, inf or an overflow): the checks below
+            return value.copy()
     try:
         arr = np.array(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -150,8 +155,44 @@ def _rotation(R: np.ndarray, what: str) -> None:
         )
 
 
+def _rigid_fast(value: Any) -> pin.SE3 | None:
+    """:func:`_as_se3` of a float64 4×4 array in a few scalar operations, or ``None`` when
+    the checks do not all pass (or ``value`` is of another kind): then :func:`_as_se3`'s full
+    path runs and raises its message. The same tests (finite, last row, ``max |RᵀR − I|``,
+    ``det R``) against :data:`RIGID_TOLERANCE`."""
+    if type(value) is not np.ndarray or value.shape != (4, 4) or value.dtype != _F64:
+        return None
+    (a, b, c, x), (d, e, f, y), (g, h, i, z), (l0, l1, l2, l3) = value.tolist()
+    if not isfinite(a + b + c + x + d + e + f + y + g + h + i + z + l0 + l1 + l2 + l3):
+        return None
+    if max(abs(l0), abs(l1), abs(l2), abs(l3 - 1.0)) > RIGID_TOLERANCE:
+        return None
+    if not _is_rotation(a, b, c, d, e, f, g, h, i):
+        return None
+    return pin.SE3(value)
+
+
+def _is_rotation(a: float, b: float, c: float, d: float, e: float, f: float, g: float,
+                 h: float, i: float) -> bool:  # fmt: skip
+    """The checks of :func:`_rotation` on the 9 entries of ``R`` (row-major), as scalars."""
+    tol = RIGID_TOLERANCE
+    gram = max(
+        abs(a * a + d * d + g * g - 1.0),
+        abs(b * b + e * e + h * h - 1.0),
+        abs(c * c + f * f + i * i - 1.0),
+        abs(a * b + d * e + g * h),
+        abs(a * c + d * f + g * i),
+        abs(b * c + e * f + h * i),
+    )
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return gram <= tol and abs(det - 1.0) <= tol
+
+
 def _as_se3(value: Any, what: str = "target") -> pin.SE3:
     """A validated rigid transform from a 4×4 array or a ``pin.SE3``."""
+    fast = _rigid_fast(value)
+    if fast is not None:
+        return fast
     if isinstance(value, pin.SE3):
         T = np.array(value.homogeneous, dtype=float)
     else:
@@ -176,6 +217,11 @@ def _as_se3(value: Any, what: str = "target") -> pin.SE3:
 
 def _as_rotation(value: Any, what: str = "target") -> np.ndarray:
     """A validated 3×3 rotation from a 3×3 array, a 4×4 transform or a ``pin.SE3``."""
+    if type(value) is np.ndarray and value.shape == (3, 3) and value.dtype == _F64:
+        rows = value.tolist()
+        flat = [*rows[0], *rows[1], *rows[2]]
+        if isfinite(sum(flat)) and _is_rotation(*flat):
+            return value.copy()
     if isinstance(value, pin.SE3) or np.shape(value) == (4, 4):
         return np.array(_as_se3(value, what).rotation, dtype=float)
     try:

@@ -315,6 +315,42 @@ class IK:
             lim.record(v)
         return v, sol
 
+    def step_integrate(
+        self, q, t: float = 0.0, reference=None, warm_start=None
+    ) -> tuple[np.ndarray, np.ndarray, Solution]:
+        """One control step and the configuration it leads to: ``(q_next, v, solution)``.
+
+        The same step as :meth:`step` (same arguments, same ``v`` and ``solution``) followed
+        by ``q_next = robot.integrate(q, v, dt)`` with this IK's ``dt`` (s). On the native
+        engine the integration is done inside the native call, on the configuration
+        manifold as ``pinocchio.integrate`` (revolute, prismatic, helical and translation
+        joints ``q + v dt``; continuous joints on their circle; spherical and free-flyer
+        joints through the SO(3) / SE(3) exponential, quaternions renormalised); a model
+        with another joint type (planar, composite, mimic) falls back to
+        :meth:`~qpcoord.Robot.integrate`, as does the Python engine.
+
+        Returns
+        -------
+        q_next : numpy.ndarray, shape (nq,)
+            Configuration after ``dt`` (a new array).
+        v : numpy.ndarray, shape (nv,)
+            Velocity (rad/s, m/s), as :meth:`step`.
+        solution : Solution
+        """
+        native = self._native
+        if native is not None and native.integrates:
+            if warm_start is not None:
+                self.stack._warm(warm_start)
+            sol = native.step(q, t, reference, True)
+            self.last = sol
+            v = sol.x
+            self.v_prev[...] = v
+            for lim in self._recorders:
+                lim.record(v)
+            return native.q_next.copy(), v, sol
+        v, sol = self.step(q, t, reference, warm_start)
+        return self.robot.integrate(q, v, self.dt), v, sol
+
     def reset(self, v_prev=None) -> None:
         """Forget the previous step: ``v_prev`` (and that of the acceleration limits) back to
         zero, or to the given velocity (nv,); no warm start for the next solve."""

@@ -24,7 +24,9 @@ posture over a continuous joint) and constant
 Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
 copied into the same arrays (a hybrid step); any other limit (acceleration limits, user
 limits) makes the whole box Python-computed. The kernels also write each task's own
-``task.task`` arrays (``A``, ``b``), as its ``_refresh`` would.
+``task.task`` arrays (``A``, ``b``) and count a new ``A`` in its ``matrix_version``, as its
+``_refresh`` would. With ``integrate=True`` (:meth:`IK.step_integrate
+<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ from .tasks import JointLimits, KinematicTask, PositionTask, PostureTask, Veloci
 if TYPE_CHECKING:  # pragma: no cover
     from .ik import IK
 
-__all__ = ["NativeIKStep", "KERNELS", "native_kind"]
+__all__ = ["NativeIKStep", "KERNELS", "native_kind", "integration_plan"]
 
 #: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class (6:
 #: ``FrameTask(error="split")``).
@@ -90,6 +92,50 @@ def _posture_q_index(task: PostureTask) -> list[int] | None:
             by_v[int(joint.idx_v)] = int(joint.idx_q)
     out = [by_v.get(int(j)) for j in task.joints]
     return None if None in out else out
+
+
+#: Joints whose configuration is a vector space (``q + v dt``), by Pinocchio short name.
+_VECTOR_JOINTS = frozenset(
+    f"JointModel{name}"
+    for name in (
+        "RX", "RY", "RZ", "PX", "PY", "PZ", "HX", "HY", "HZ", "RevoluteUnaligned",
+        "PrismaticUnaligned", "HelicalUnaligned", "Translation",
+    )
+)  # fmt: skip
+#: Segment kinds of the native integrator (``src/native/integrate.hpp``) by joint short name.
+_MANIFOLD_JOINTS = {
+    "JointModelRUBX": 1,
+    "JointModelRUBY": 1,
+    "JointModelRUBZ": 1,
+    "JointModelRevoluteUnboundedUnaligned": 1,
+    "JointModelSpherical": 2,
+    "JointModelFreeFlyer": 3,
+}
+
+
+def integration_plan(robot: Any) -> list[int] | None:
+    """The native integrator's plan for ``robot`` (``(kind, idx_q, idx_v, size)`` per segment,
+    adjacent vector-space joints merged), or ``None`` if a joint is of another type (planar,
+    composite, mimic, ...): then ``q_next`` comes from :meth:`~qpcoord.Robot.integrate`.
+
+    A robot with a vector-space configuration (``robot.euclidean``, a coordinate map
+    included) is one segment ``q + v dt`` in its own coordinates, as ``Robot.integrate``."""
+    if robot.euclidean:
+        return [0, 0, 0, robot.nq]
+    plan: list[int] = []
+    for joint in robot.model.joints[1:]:
+        name = joint.shortname()
+        iq, iv = int(joint.idx_q), int(joint.idx_v)
+        if name in _VECTOR_JOINTS:
+            if plan and plan[-4] == 0 and plan[-3] + plan[-1] == iq and plan[-2] + plan[-1] == iv:
+                plan[-1] += int(joint.nq)
+            else:
+                plan += [0, iq, iv, int(joint.nq)]
+        elif name in _MANIFOLD_JOINTS:
+            plan += [_MANIFOLD_JOINTS[name], iq, iv, 1]
+        else:
+            return None
+    return plan
 
 
 def _selection(task: KinematicTask, kind: int) -> list[int]:
@@ -203,6 +249,13 @@ class NativeIKStep(NativeHierarchy):
                 self._python_limits = True
                 solver.limits_mode = 2
         self._hybrid = bool(self._python_tasks or self._eq_ops or self._in_ops)
+        #: q_next of the last ``step(..., integrate=True)`` (nq,), overwritten by the next one
+        self.q_next = np.zeros(robot.nq)
+        plan = integration_plan(robot)
+        #: whether the native call integrates (every joint of a supported type)
+        self.integrates = plan is not None
+        if plan is not None:
+            solver.set_integrator(plan, self.q_next)
         self._solver = solver
 
     def _add_frame(self, solver: Any, fid: int) -> int:
@@ -236,8 +289,11 @@ class NativeIKStep(NativeHierarchy):
             )
 
     # ------------------------------------------------------------------ per step
-    def step(self, q: Any, t: float, reference: Any) -> Solution:
+    def step(self, q: Any, t: float, reference: Any, integrate: bool = False) -> Solution:
         """One step at configuration ``q`` (nq,) and time ``t`` (s): the IK's solution.
+
+        With ``integrate`` (and :attr:`integrates`) the native call also writes
+        ``q_next = integrate(q, v dt)`` into :attr:`q_next` (overwritten by the next step).
 
         Raises as :meth:`IK.step <qpcoord.IK.step>` does (``ValueError`` naming ``q`` for a
         bad configuration, the tasks' own messages, the solver's errors)."""
@@ -257,12 +313,12 @@ class NativeIKStep(NativeHierarchy):
         if self.com:
             pin.jacobianCenterOfMass(self._model, self._data, False)
         robot._state = 0  # the robot's cached kinematics no longer match its data
-        code = self._solver.step(q, t, reference, self._solved, DEFAULT_TIME_LIMIT)
+        code = self._solver.step(q, t, reference, self._solved, DEFAULT_TIME_LIMIT, integrate)
         if code:
             self._solved = False
             self._fail(code, q, t, reference)
         self._solved = True
-        info = self._info()
+        info = self._solver.info(KKT_TOL)  # the dict of _info, built in C++
         status = "optimal"
         bad = info["uncertified"]
         if bad:
@@ -296,7 +352,8 @@ class NativeIKStep(NativeHierarchy):
 
     def _info(self) -> dict:
         """The solve's statistics, as :meth:`NativeHierarchy.solve` reports them (one pass
-        over the stages: hard, levels, minimum-norm step)."""
+        over the stages: hard, levels, minimum-norm step). The step uses the same dict built
+        by the native ``IKStep.info`` (tested equal); this is its Python reference."""
         its: list[int] = []
         hits = calls = 0
         closed: list[int] = []

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Sequence
+from math import isfinite
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,8 @@ UNIT_NORM_TOLERANCE = 1e-6
 
 #: Joint types whose configuration holds a unit-norm block: (offset in the joint's q, size,
 #: what it is).
+_F64 = np.dtype(np.float64)
+
 _UNIT_BLOCKS = {
     "JointModelFreeFlyer": (3, 4, "quaternion"),
     "JointModelSpherical": (0, 4, "quaternion"),
@@ -580,7 +583,7 @@ class Robot:
                 f"{what} must have {self.nq} entries for robot {self.name!r} (nq = {self.nq}, "
                 f"nv = {self.nv}), got shape {np.shape(q)}"
             )
-        if not np.isfinite(arr.sum()):
+        if not np.isfinite(arr.sum()) and not np.isfinite(arr).all():  # (a sum may overflow)
             i = int(np.flatnonzero(~np.isfinite(arr))[0])
             raise ValueError(f"{what}[{i}] is {float(arr[i])}: configurations must be finite")
         if self._unit_blocks:
@@ -605,7 +608,7 @@ class Robot:
                 f"{what} must have nv = {self.nv} entries for robot {self.name!r}, "
                 f"got shape {np.shape(v)}"
             )
-        if not np.isfinite(arr.sum()):
+        if not np.isfinite(arr.sum()) and not np.isfinite(arr).all():  # (a sum may overflow)
             i = int(np.flatnonzero(~np.isfinite(arr))[0])
             raise ValueError(f"{what}[{i}] is {float(arr[i])}: velocities must be finite")
         return arr
@@ -651,6 +654,19 @@ class Robot:
             Bad ``q`` (see :meth:`check_configuration`), ``v`` of the wrong size or not
             finite, ``dt`` not a finite number.
         """
+        if (
+            self.euclidean
+            and type(q) is np.ndarray
+            and type(v) is np.ndarray
+            and q.dtype == _F64
+            and v.dtype == _F64
+            and q.shape == (self.nq,)
+            and v.shape == (self.nv,)
+            and type(dt) is float
+            # all finite (an overflowing sum or a non-finite entry: the full checks below)
+            and isfinite(sum(q.tolist()) + sum(v.tolist()) + dt)
+        ):
+            return q + v * dt
         q = self.check_configuration(q)
         v = self._check_velocity(v)
         try:

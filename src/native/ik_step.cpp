@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "hierarchy.hpp"
+#include "integrate.hpp"
 #include "spatial.hpp"
 
 namespace nb = nanobind;
@@ -154,7 +155,7 @@ class IKStep {
     hi2_.resize(nv);
     for (const char* s : {"gain", "sqrt_weight", "A", "b", "target", "target_velocity",
                           "_target_inv", "_target_t", "q_ref", "reference_at", "rotation",
-                          "translation"})
+                          "translation", "matrix_version"})
       names_.push_back(nb::str(s));
   }
 
@@ -264,8 +265,33 @@ class IKStep {
   /// The kernel that returned kTaskData (its index), or -1.
   int failed = -1;
 
+  /// The plan of integrate::run (kind, idx_q, idx_v, size per segment, covering q) and the
+  /// (nq,) array step(..., integrate=True) writes q_next = integrate(q, x dt) into.
+  void set_integrator(std::vector<int> plan, OutArr q_next) {
+    if (plan.size() % 4 != 0) throw nb::value_error("set_integrator: 4 ints per segment");
+    if (q_next.ndim() != 1 || q_next.shape(0) != static_cast<size_t>(nq_))
+      throw nb::value_error("set_integrator: q_next must be (nq,)");
+    static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
+    int covered = 0;
+    for (size_t s = 0; s < plan.size(); s += 4) {
+      const int kind = plan[s], iq = plan[s + 1], iv = plan[s + 2], n = plan[s + 3];
+      if (kind < integrate::kVector || kind > integrate::kFreeFlyer)
+        throw nb::value_error("set_integrator: unknown segment kind");
+      const int nq = kind == integrate::kVector ? n : kNq[kind];
+      const int nv = kind == integrate::kVector ? n : kNv[kind];
+      if ((kind != integrate::kVector && n != 1) || n < 1 || iq < 0 || iv < 0 ||
+          iq + nq > nq_ || iv + nv > nv_)
+        throw nb::value_error("set_integrator: segment out of range");
+      covered += nq;
+    }
+    if (covered != nq_) throw nb::value_error("set_integrator: the plan does not cover q");
+    plan_ = std::move(plan);
+    q_next_ = q_next;
+    integrator_ = true;
+  }
+
   int step(nb::ndarray<const double, nb::ndim<1>, nb::device::cpu> q, double t,
-           nb::handle reference, bool warm, double time_left) {
+           nb::handle reference, bool warm, double time_left, bool integrate = false) {
     failed = -1;
     if (!bound_ || !J_.p) return kBadInput;
     if (static_cast<int64_t>(q.shape(0)) != nq_) return kBadQ;
@@ -293,6 +319,8 @@ class IKStep {
         failed = static_cast<int>(i);
         return kTaskData + static_cast<int>(i);
       }
+      // a new A, as the task's _assign(A, b) counts it (a posture writes only b)
+      if (kernels_[i].kind != kPosture) bump_matrix_version(kernels_[i].eq);
     }
     double* lbs = out_[6].data();
     double* ubs = out_[7].data();
@@ -310,9 +338,47 @@ class IKStep {
         ubs[i] = bhi[i];
       }
     }
-    return h_.solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]), cvec(out_[4]),
-                    cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm, time_left, mvec(out_[10]),
-                    mvec(out_[11]), mmat(out_[12]), mvec(out_[13]));
+    const int code =
+        h_.solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]), cvec(out_[4]),
+                 cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm, time_left, mvec(out_[10]),
+                 mvec(out_[11]), mmat(out_[12]), mvec(out_[13]));
+    if (integrate && code == 0) {
+      if (!integrator_) return kBadInput;
+      integrate::run(plan_.data(), static_cast<int>(plan_.size() / 4), qp, qs, out_[10].data(),
+                     dt_, q_next_.data());
+    }
+    return code;
+  }
+
+  /// The solve's statistics as a dict (NativeIKStep._info's keys and values, built here:
+  /// one pass over the stages hard, levels, minimum-norm step of the bound stats / detail).
+  nb::dict info(double kkt_tol) const {
+    const OutArr& st = out_[12];
+    const double* d = out_[13].data();
+    const int stages = static_cast<int>(st.shape(0)), last = stages - 2;
+    const double* s = st.data();
+    nb::list levels, closed, uncertified;
+    double hits = 0.0;
+    long calls = 0;
+    for (int k = 0; k < stages; ++k) {
+      const double it = s[3 * k], h = s[3 * k + 1], c = s[3 * k + 2];
+      if (k > 0 && k < stages - 1) levels.append(static_cast<long>(it));
+      hits += h;
+      if (c != 0.0 && k > 0 && k <= last) closed.append(k - 1);
+      if (it != 0.0 || h != 0.0) ++calls;
+    }
+    if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
+    nb::dict out;
+    out["engine"] = "native";
+    out["hard_iterations"] = static_cast<long>(s[0]);
+    out["active_set_iterations"] = levels;
+    out["min_norm_iterations"] = static_cast<long>(s[3 * (stages - 1)]);
+    out["warm_start_hits"] = static_cast<long>(hits);
+    out["warm_start_seeded"] = static_cast<long>(d[7]);
+    out["closed_form_levels"] = closed;
+    out["qp_calls"] = calls;
+    out["uncertified"] = uncertified;
+    return out;
   }
 
   /// The rows a kernel writes (for tests): its index in the order added.
@@ -348,6 +414,16 @@ class IKStep {
 
   /// Write row r of kernel k: A row (pin coordinates in src, mapped here), b value.
   /// (A row of a column-major matrix: an inner stride, so that no copy is made.)
+  /// eq.matrix_version += 1 (what a persistent solver watches to refactorise).
+  void bump_matrix_version(nb::handle eq) {
+    nb::object v = attr(eq, names_[12]);
+    PyObject* next = PyNumber_Add(v.ptr(), one_.ptr());
+    if (!next) throw nb::python_error();
+    const int rc = PyObject_SetAttr(eq.ptr(), names_[12].ptr(), next);
+    Py_DECREF(next);
+    if (rc != 0) throw nb::python_error();
+  }
+
   void write_row(const Kernel& k, int r,
                  const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& src,
                  double bval) {
@@ -585,6 +661,9 @@ class IKStep {
   int nq_, nv_;
   double dt_;
   std::vector<int> unit_;  ///< (start, size) of each unit-norm block of q
+  std::vector<int> plan_;  ///< integrate::run's segments
+  OutArr q_next_;
+  bool integrator_ = false;
   Hierarchy h_;
   std::vector<OutArr> out_;
   bool bound_ = false;
@@ -595,6 +674,7 @@ class IKStep {
   std::vector<Kernel> kernels_;
   std::vector<Limit> limits_;
   std::vector<nb::str> names_;
+  nb::int_ one_ = nb::int_(1);
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
 };
@@ -617,13 +697,36 @@ void bind_ik_step(nb::module_& m) {
       .def("add_task", &IKStep::add_task)
       .def("add_joint_limits", &IKStep::add_joint_limits)
       .def("add_velocity_limits", &IKStep::add_velocity_limits)
+      .def("set_integrator", &IKStep::set_integrator, nb::arg("plan"), nb::arg("q_next"))
       .def("step", &IKStep::step, nb::arg("q"), nb::arg("t"), nb::arg("reference").none(),
-           nb::arg("warm"), nb::arg("time_left"))
+           nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false)
+      .def("info", &IKStep::info, nb::arg("kkt_tol"))
       .def_rw("limits_mode", &IKStep::limits_mode)
       .def_ro("failed", &IKStep::failed)
       .def_prop_ro("num_tasks", &IKStep::num_tasks);
   m.attr("IK_BAD_Q") = kBadQ;
   m.attr("IK_TASK_DATA") = kTaskData;
+  m.def(
+      "integrate_configuration",
+      [](std::vector<int> plan, nb::ndarray<const double, nb::ndim<1>, nb::device::cpu> q,
+         nb::DRef<const Vec> v, double dt, OutArr out) {
+        if (plan.size() % 4 != 0 || out.ndim() != 1 || out.shape(0) != q.shape(0))
+          throw nb::value_error("integrate_configuration: bad plan or sizes");
+        for (size_t s = 0; s < plan.size(); s += 4) {
+          static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
+          const int kind = plan[s];
+          if (kind < 0 || kind > 3) throw nb::value_error("integrate_configuration: bad kind");
+          const int nq = kind == 0 ? plan[s + 3] : kNq[kind], nv = kind == 0 ? plan[s + 3] : kNv[kind];
+          if (plan[s + 1] < 0 || plan[s + 2] < 0 || plan[s + 1] + nq > (int)q.shape(0) ||
+              plan[s + 2] + nv > v.size())
+            throw nb::value_error("integrate_configuration: segment out of range");
+        }
+        integrate::run(plan.data(), static_cast<int>(plan.size() / 4), q.data(), q.stride(0),
+                       v.data(), dt, out.data());
+      },
+      nb::arg("plan"), nb::arg("q"), nb::arg("v"), nb::arg("dt"), nb::arg("out"),
+      "out = integrate(q, v dt) over a plan of qpcoord.kinematics.native_step.integration_plan "
+      "(for tests).");
   m.def("spatial_log3", [](const Mat3& R) {
     double th;
     return Vec3(spatial::log3(R, th));

@@ -716,3 +716,69 @@ def test_the_robot_tasks_page_snippets_run():
     feet, polygon, q = ns["feet"], ns["polygon"], ns["q"]
     assert max(np.abs(f.compute_error(q)).max() for f in feet) <= 1e-5
     assert polygon.compute_error(q)[: polygon.edges].max() + 0.02 <= 1e-6
+
+
+def _exact_cases():
+    R = pin.exp3(np.array([0.1, 0.2, 0.3]))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, [0.3, 0.1, 0.5]
+    skewed, reflection, last_row = T.copy(), T.copy(), T.copy()
+    skewed[0, 1] += 1e-3
+    reflection[:3, 0] *= -1
+    last_row[3, 0] = 0.1
+    skewed3 = R.copy()
+    skewed3[2, 2] += 2e-6
+    inf = T.copy()
+    inf[0, 0] = np.inf
+    rigid = "(must be 1: a reflection is not a rigid transform)"
+    return [
+        (FrameTask, skewed, "target: rotation part is not orthonormal (max |RᵀR − I| = "
+         "0.000936 > 1e-06); not a rigid transform"),
+        (FrameTask, reflection, f"target: rotation part has det = -1 {rigid}"),
+        (FrameTask, last_row, "target: last row must be [0, 0, 0, 1], got [0.1, 0.0, 0.0, 1.0]"),
+        (FrameTask, inf, f"target contains NaN or inf: {inf.tolist()}"),
+        (FrameTask, R, "target must be a 4×4 homogeneous matrix or a pinocchio.SE3, got "
+         "shape (3, 3)"),
+        (OrientationTask, skewed3, "target: rotation part is not orthonormal (max |RᵀR − I| = "
+         "3.9e-06 > 1e-06); not a rigid transform"),
+        (OrientationTask, -R, f"target: rotation part has det = -1 {rigid}"),
+        (FramePositionTask, np.array([0.1, np.nan, 0.2]), "target must be finite (m), got "
+         "[0.1 nan 0.2]"),
+        (FramePositionTask, np.array([0.1, np.inf, 0.2]), "target must be finite (m), got "
+         "[0.1 inf 0.2]"),
+        (FramePositionTask, np.zeros(4), "target must be 3 numbers (m), got shape (4,)"),
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize(("cls", "target", "message"), _exact_cases())
+def test_bad_targets_exact_messages(robots, cls, target, message):
+    """The messages of the set_target fast paths' fallbacks (float64 arrays, the common case)."""
+    robot = robots["panda"]
+    with pytest.raises(ValueError) as info:
+        cls(robot, "panda_hand_tcp", target)
+    assert str(info.value) == message
+
+
+def test_set_target_keeps_a_copy_and_accepts_the_tolerance(robots):
+    robot = robots["panda"]
+    R = pin.exp3(np.array([0.1, 0.2, 0.3]))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, [0.3, 0.1, 0.5]
+    task = FrameTask(robot, "panda_hand_tcp", T)
+    position = FramePositionTask(robot, "panda_hand_tcp", T[:3, 3].copy())
+    orientation = OrientationTask(robot, "panda_hand_tcp", R.copy())
+    np.testing.assert_array_equal(task.target.homogeneous, T)
+    np.testing.assert_allclose(task._target_inv.homogeneous, np.linalg.inv(T), atol=1e-15)
+    p, R2 = position.target, orientation.target
+    T[0, 3] = R[0, 0] = 9.0  # the caller's arrays change: the targets do not
+    assert task.target.translation[0] == 0.3 and p[0] == 0.3 and R2[0, 0] != 9.0
+    near = np.eye(4)
+    near[0, 0] = 1.0 + 0.4e-6  # |RᵀR − I| = 0.8e-6 < RIGID_TOLERANCE: accepted as given
+    task.set_target(near)
+    assert task.target.rotation[0, 0] == near[0, 0]
+    near[0, 0] = 1.0 + 3e-6
+    with pytest.raises(ValueError, match="orthonormal"):
+        task.set_target(near)
+    huge = np.array([1e308, 1e308, 0.0])  # the fast path's sum overflows: the full checks
+    position.set_target(huge)
+    np.testing.assert_array_equal(position.target, huge)

@@ -351,6 +351,7 @@ def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind)
         sc = current.stack.solve(engine="native")
         vc = sc.x
         assert sn.info.keys() == sc.info.keys()
+        assert sn.info == ikn._native._info(), step  # the C++ dict = its Python reference
         if kind == "position":  # the same rows to rounding: the same solver path
             assert sn.info == sc.info, step
         np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
@@ -689,18 +690,19 @@ for kind in ("position", "frame_position", "pose", "orientation", "com"):
     call = ik._native._solver.step
     pin.computeJointJacobians(robot.model, robot.data, q)
     pin.jacobianCenterOfMass(robot.model, robot.data, False)
+    assert ik._native.integrates  # the native call also writes q_next (integrate=True)
     for _ in range(20):
-        assert call(q, 0.0, None, True, 10.0) == 0
+        assert call(q, 0.0, None, True, 10.0, True) == 0
     before = count()
     for _ in range(500):
-        call(q, 0.0, None, True, 10.0)
+        call(q, 0.0, None, True, 10.0, True)
     print(kind, count() - before)
 """
 
 
 @needs_native
 def test_the_native_call_does_not_allocate(tmp_path):
-    """The per-step native call (kernels, box, hierarchy) on the Panda makes no heap
+    """The per-step native call (kernels, box, hierarchy, q_next) on the Panda makes no heap
     allocation after its first calls: malloc is counted by a preloaded shim (glibc)."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None or not sys.platform.startswith("linux"):
