@@ -15,9 +15,12 @@ Scenarios (same targets, same start, same hard limits for every solver, 1 kHz):
 Solvers, stepped in lockstep (one step of each in turn, the order rotating every step):
 
 - ``qpcoord strict native``: :class:`qpcoord.IK`, ``method="hierarchical"``, default
-  engine (the compiled strict hierarchy);
-- ``qpcoord strict python``: the same IK stack solved with ``engine="python"`` (daqp);
-- ``qpcoord weighted``: the same stack as one weighted QP (``weight_ratio`` 1e-3, daqp);
+  engine: one native call per step (task rows, limit box, strict hierarchy and the
+  integration of ``q``: ``IK.step_integrate``);
+- ``qpcoord strict python``: the same IK with ``engine="python"`` (Python task refresh, the
+  Python engine on daqp, ``robot.integrate``);
+- ``qpcoord weighted native``: the same stack as one weighted QP (``weight_ratio`` 1e-3), its
+  default engine (Python task refresh, the native weighted QP, ``robot.integrate``);
 - ``pink``: ``pink.solve_ik`` with ``solver="daqp"`` (the same backend), then
   ``Configuration.integrate_inplace``;
 - ``placo``: PlaCo 0.10 ``KinematicsSolver`` (its own QP, C++), run by
@@ -25,7 +28,8 @@ Solvers, stepped in lockstep (one step of each in turn, the order rotating every
   subprocess step per lockstep slot, timed by the subprocess's own clock.
 
 A timed step is what a control loop does: set the target, kinematics, task updates, the
-QP(s) and the integration (qpcoord: ``set_target`` + ``IK.step`` + ``robot.integrate``).
+QP(s) and the integration (qpcoord: ``set_target`` + ``IK.step_integrate``, or ``IK.step`` +
+``robot.integrate``).
 BLAS is limited to one thread. Errors and limit violations are measured in this process with
 qpcoord's Pinocchio model on every solver's configurations.
 
@@ -185,9 +189,13 @@ class QpcoordLoop:
             posture = qc.PostureTask(robot, self.q, gain=gain)
             levels = [self.hand, posture]
             limits = [qc.JointLimits(robot, gain=0.5), qc.VelocityLimits(robot, sc["speed"])]
-        solver = None if engine == "native" else "daqp"
-        self.ik = qc.IK(robot, levels, DT, limits=limits, method=method, solver=solver)
-        self.step_fn = self._step_native if engine == "native" else self._step_python
+        solver = "daqp" if engine == "python" else None
+        self.ik = qc.IK(
+            robot, levels, DT, limits=limits, method=method, solver=solver, engine=engine
+        )
+        # the strict native IK integrates q in its one native call (IK.step_integrate)
+        native_step = engine == "native" and method == "hierarchical"
+        self.step_fn = self._step_native if native_step else self._step_python
 
     def _pose(self, k: int) -> np.ndarray:
         T = np.eye(4)
@@ -201,22 +209,14 @@ class QpcoordLoop:
     def _step_native(self, k: int) -> float:
         t0 = time.perf_counter()
         self._set_target(k)
-        v, _ = self.ik.step(self.q)
-        self.q = self.robot.integrate(self.q, v, DT)
+        self.q, _, _ = self.ik.step_integrate(self.q)
         return time.perf_counter() - t0
 
     def _step_python(self, k: int) -> float:
-        # IK.step with the engine chosen (IK has no engine argument): the same calls
-        ik = self.ik
         t0 = time.perf_counter()
         self._set_target(k)
-        q = ik.robot.check_configuration(self.q)
-        ik.refresh(q)
-        sol = ik.stack.solve(
-            solver=ik.solver, method=ik.method, warm_start=ik.last, engine="python"
-        )
-        ik.last = sol
-        self.q = self.robot.integrate(self.q, sol.x, DT)
+        v, _ = self.ik.step(self.q)
+        self.q = self.robot.integrate(self.q, v, DT)
         return time.perf_counter() - t0
 
     def step(self, k: int) -> float:
@@ -397,7 +397,7 @@ def _makers(sc: dict, placo: Path | None, pink: bool) -> list:
         lambda: QpcoordLoop(sc, "hierarchical", "python", "qpcoord strict python"),
     ]
     if sc["name"] != "talos":
-        makers.append(lambda: QpcoordLoop(sc, "weighted", None, "qpcoord weighted"))
+        makers.append(lambda: QpcoordLoop(sc, "weighted", None, "qpcoord weighted native"))
     if pink:
         makers.append(lambda: PinkLoop(sc))
     if placo is not None:

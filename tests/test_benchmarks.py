@@ -49,7 +49,7 @@ def test_quick_without_placo(tmp_path):
         pytest.skip(rows[0]["note"])
     solvers = {(r["scenario"], r["solver"], r["mode"]) for r in rows if "solver" in r}
     for scenario in ("panda-position", "panda-pose"):
-        for s in ("qpcoord strict native", "qpcoord strict python", "qpcoord weighted"):
+        for s in ("qpcoord strict native", "qpcoord strict python", "qpcoord weighted native"):
             for mode in ("lockstep", "back to back"):
                 assert (scenario, s, mode) in solvers
     assert not any(r["solver"] == "placo" for r in rows if "solver" in r)
