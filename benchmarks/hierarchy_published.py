@@ -165,9 +165,9 @@ def resolve(levels: list, bounds, n: int, steps: int, moved: bool) -> tuple[dict
     worst = dict.fromkeys(RESOLVE_KEYS, 0.0)
     flags: set = set()
 
-    def timed(key, fn):
+    def timed(key, fn, *args, **kw):
         t = time.perf_counter()
-        out = fn()
+        out = fn(*args, **kw)
         times[key].append(time.perf_counter() - t)
         return out
 
@@ -175,18 +175,18 @@ def resolve(levels: list, bounds, n: int, steps: int, moved: bool) -> tuple[dict
         if moved:
             move(step)
             _, bu, bl, sense, _ = daqp_problem(levels, box, n)
-        sp = timed("python", lambda: stack.solve(engine="python"))
-        sw = timed("native warm", lambda: stack.solve(engine="native"))
+        sp = timed("python", stack.solve, engine="python")
+        sw = timed("native warm", stack.solve, engine="native")
         P.refresh()
-        xc = timed("native cold", lambda: cold.solve(P, warm=False)[0])
+        xc = timed("native cold", cold.solve, P, warm=False)[0]
         P.refresh_stacked()
-        code = timed("native bare", lambda: run_bare(bool(step), math.inf))
+        code = timed("native bare", run_bare, step > 0, math.inf)
         if code:
             raise RuntimeError(f"native bare call, status {code}")
         xd, _, flag, _ = timed(
-            "daqp.solve", lambda: daqp.solve(H, f, A, bu, bl, sense, break_points=breaks)
+            "daqp.solve", daqp.solve, H, f, A, bu, bl, sense, break_points=breaks
         )
-        xm, _, flag_m, _ = timed("daqp Model warm", lambda: _update_solve(model, bu, bl))
+        xm, _, flag_m, _ = timed("daqp Model warm", _update_solve, model, bu, bl)
         flags.update((int(flag), int(flag_m)))
         ref = sp.level_residuals
         for key, x in (
