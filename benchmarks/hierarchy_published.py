@@ -13,6 +13,22 @@ BLAS is limited to one thread (threadpoolctl)::
     python benchmarks/hierarchy_published.py --problem lexls_test01_humanoid
 
 Backends that fail (e.g. the 10 s time limit) show the error's first words instead.
+
+``--resolve``: the issue-24 re-solve table instead — per problem, per step, interleaved:
+the Python engine (default backend), the native engine warm (``Stack.solve``), cold
+(stored working sets ignored) and bare (the native call alone on the refreshed buffers, warm
+from its own last step), DAQP's hierarchical mode from Python (``daqp.solve`` with ``H = I``,
+the bounds hard, one soft block per level; its arrays built outside the timer) and a
+``daqp.Model`` kept across steps (``update`` of the right-hand sides + ``solve``: DAQP's warm
+path). Two kinds of step: ``same`` (the unchanged stack solved again) and ``moved`` (every
+right-hand side shifted by ``1e-3 sin(...)`` times its row's norm). Each solver's level values
+are checked against the Python engine's at every step (``max |Δr| / max(1, r)``). DAQP
+normalises each soft row, so on the published rows (norms 0.02–431 on the humanoid) it solves
+another problem; the ``(unit rows)`` copies divide each row and its bounds by the row's norm,
+where every solver solves the same problem::
+
+    python benchmarks/hierarchy_published.py --resolve                 # ~1 min
+    python benchmarks/hierarchy_published.py --resolve --steps 300 --problem soth_sot
 """
 
 from __future__ import annotations
@@ -24,15 +40,23 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:0] = [os.path.join(HERE, "..", "tests"), os.path.join(HERE, "..", "tests", "core")]
+sys.path[:0] = [HERE, os.path.join(HERE, "..", "tests"), os.path.join(HERE, "..", "tests", "core")]
 
+import math  # noqa: E402
+
+import daqp  # noqa: E402
 import numpy as np  # noqa: E402
 from campaign import level_scales  # noqa: E402
+from hierarchy_bench import daqp_problem  # noqa: E402
 from hlsp import NAMES, load  # noqa: E402
 from oracle import lexicographic  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
+from qpcoord.core.native import NativeHierarchy  # noqa: E402
+
+#: The re-solve table's default problems: the two large ones of issue 24, the rest are tiny.
+RESOLVE_DEFAULT = ("lexls_test01_humanoid", "soth_sot", "hdaqp_basic", "soth_plus")
 
 
 def cases(problems):
@@ -61,12 +85,163 @@ def measure(P, ref, solver: str, repeats: int) -> dict:
     return dict(median=statistics.median(times), status=sol.status, gap=gap)
 
 
+def _tasks(level) -> list:
+    return level if isinstance(level, list) else [level]
+
+
+def unit_rows(levels: list) -> list:
+    """The same levels with each row and its bounds divided by the row's norm (new tasks):
+    the problem DAQP's row-normalised soft penalty solves."""
+    out = []
+    for level in levels:
+        tasks = []
+        for t in _tasks(level):
+            if isinstance(t, qc.Equality):
+                s = np.linalg.norm(t.A, axis=1)
+                tasks.append(qc.Equality(t.A / s[:, None], t.b / s))
+            else:
+                s = np.linalg.norm(t.C, axis=1)
+                tasks.append(qc.Inequality(t.C / s[:, None], t.lower / s, t.upper / s))
+        out.append(tasks if len(tasks) > 1 else tasks[0])
+    return out
+
+
+def _mover(levels: list):
+    """``move(step)``: every right-hand side at its start plus ``1e-3 sin(0.1 step + i)``
+    times its row's norm (inequalities: both sides shifted alike)."""
+    start = []
+    for level in levels:
+        for t in _tasks(level):
+            if isinstance(t, qc.Equality):
+                start.append((t, t.b.copy(), None, np.linalg.norm(t.A, axis=1)))
+            else:
+                start.append((t, t.lower.copy(), t.upper.copy(), np.linalg.norm(t.C, axis=1)))
+
+    def move(step: int) -> None:
+        for t, lo, hi, norm in start:
+            d = 1e-3 * norm * np.sin(0.1 * step + np.arange(norm.shape[0]))
+            if hi is None:
+                t.update(b=lo + d)
+            else:
+                t.update(lower=lo + d, upper=hi + d)
+
+    return move
+
+
+RESOLVE_KEYS = (
+    "python",
+    "native warm",
+    "native cold",
+    "native bare",
+    "daqp.solve",
+    "daqp Model warm",  # update + solve
+)
+
+
+def _update_solve(model, bu, bl):
+    """DAQP's warm path: new right-hand sides (its solve of an un-updated model returns
+    the −8 flag), then the solve from the last working set."""
+    if model.update(bupper=bu, blower=bl) < 0:
+        raise RuntimeError("daqp.Model.update failed")
+    return model.solve()
+
+
+def resolve(levels: list, bounds, n: int, steps: int, moved: bool) -> tuple[dict, dict, set]:
+    """Per-step times (s) and worst level gap to the Python engine of every solver of
+    :data:`RESOLVE_KEYS`, interleaved; and DAQP's exit flags."""
+    stack = qc.Stack(levels, bounds=bounds)
+    P = stack._compiled
+    cold = NativeHierarchy(P, stack.damping)
+    bare = NativeHierarchy(P, stack.damping)
+    run_bare = bare._solver.run
+    box = bounds if bounds is not None else qc.Bounds(np.full(n, -1e30), np.full(n, 1e30))
+    H, f = np.eye(n), np.zeros(n)
+    A, bu, bl, sense, breaks = daqp_problem(levels, box, n)
+    model = daqp.Model()
+    if model.setup(H, f, A, bu, bl, sense, break_points=breaks)[0] < 0:
+        raise RuntimeError("daqp.Model.setup failed")
+    move = _mover(levels)
+    times = {k: [] for k in RESOLVE_KEYS}
+    worst = dict.fromkeys(RESOLVE_KEYS, 0.0)
+    flags: set = set()
+
+    def timed(key, fn, *args, **kw):
+        t = time.perf_counter()
+        out = fn(*args, **kw)
+        times[key].append(time.perf_counter() - t)
+        return out
+
+    for step in range(steps):
+        if moved:
+            move(step)
+            _, bu, bl, sense, _ = daqp_problem(levels, box, n)
+        sp = timed("python", stack.solve, engine="python")
+        sw = timed("native warm", stack.solve, engine="native")
+        P.refresh()
+        xc = timed("native cold", cold.solve, P, warm=False)[0]
+        P.refresh_stacked()
+        code = timed("native bare", run_bare, step > 0, math.inf)
+        if code:
+            raise RuntimeError(f"native bare call, status {code}")
+        xd, _, flag, _ = timed(
+            "daqp.solve", daqp.solve, H, f, A, bu, bl, sense, break_points=breaks
+        )
+        xm, _, flag_m, _ = timed("daqp Model warm", _update_solve, model, bu, bl)
+        flags.update((int(flag), int(flag_m)))
+        ref = sp.level_residuals
+        for key, x in (
+            ("python", sp.x),
+            ("native warm", sw.x),
+            ("native cold", xc),
+            ("native bare", bare.x),
+            ("daqp.solve", np.asarray(xd)),
+            ("daqp Model warm", np.asarray(xm)),
+        ):
+            r = np.array([L.residual(x) for L in P.levels])
+            worst[key] = max(worst[key], float(np.max(np.abs(r - ref) / np.maximum(1.0, ref))))
+    return times, worst, flags
+
+
+def resolve_table(problems, steps: int) -> None:
+    """Print the re-solve table (see the module's docstring)."""
+    print(f"{steps} steps per problem and kind (first 2 dropped), interleaved, BLAS 1 thread")
+    print("| problem | n | step | solver | median µs | p90 µs | p99 µs | max level gap vs python |")
+    print("|---|---:|---|---|---:|---:|---:|---:|")
+    for name in problems:
+        variants = [(name, load(name))]
+        if name == "lexls_test01_humanoid":
+            variants.append((name + " (box)", load(name, simple_as_bounds=True)))
+        for label, P in variants:
+            for unit in (False, True):
+                levels = unit_rows(P.levels) if unit else P.levels
+                lab = label + (" (unit rows)" if unit else "")
+                for moved in (False, True):
+                    kind = "moved" if moved else "same"
+                    times, worst, flags = resolve(levels, P.bounds, P.n, steps, moved)
+                    for key in RESOLVE_KEYS:
+                        us = np.percentile(np.array(times[key][2:]) * 1e6, [50, 90, 99])
+                        print(
+                            f"| {lab} | {P.n} | {kind} | {key} | {us[0]:.1f} | {us[1]:.1f} "
+                            f"| {us[2]:.1f} | {worst[key]:.1e} |"
+                        )
+                    print(f"<!-- {lab} {kind}: daqp exit flags {sorted(flags)} -->")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--solver", action="append", help="backend (repeatable; default: all)")
     ap.add_argument("--problem", action="append", choices=NAMES, help="problem (repeatable)")
     ap.add_argument("--repeats", type=int, default=20, help="timed re-solves (default 20)")
+    ap.add_argument("--resolve", action="store_true", help="the re-solve table (issue 24)")
+    ap.add_argument("--steps", type=int, default=100, help="--resolve: steps (default 100)")
     args = ap.parse_args(argv)
+    if args.resolve:
+        if args.steps < 5:
+            ap.error(f"--steps must be at least 5, got {args.steps}")
+        print(f"python {sys.version.split()[0]}, numpy {np.__version__}, daqp 0.11 (H = I)")
+        with threadpool_limits(limits=1):
+            resolve_table(args.problem or RESOLVE_DEFAULT, args.steps)
+        return 0
     solvers = args.solver or qc.available_solvers()
     problems = args.problem or NAMES
     print(f"python {sys.version.split()[0]}, numpy {np.__version__}, qpcoord {qc.__version__}")

@@ -609,6 +609,13 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
     ++k_;
   }
   if (feasible(x_)) return kOk;
+  if (me == 0 && k_ == 0 && has_bounds_) {
+    // only the box: its point nearest x = 0 is feasible (a performance shortcut: phase 1
+    // would find a zero-violation point by an active set over all n bounds; the levels and
+    // the minimum-norm step do not depend on which feasible start they get)
+    snap(x_);
+    if (feasible(x_)) return kOk;
+  }
   if (r_ == 0) {
     detail(1) = kInf;
     return kInfeasibleHard;

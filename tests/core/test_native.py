@@ -257,6 +257,31 @@ def test_hard_equalities_fix_x_outside_the_box(engine):
 
 
 @needs_native
+@pytest.mark.parametrize("seed", range(4))
+def test_a_box_away_from_zero_starts_at_its_nearest_point(seed):
+    """Bounds only (no hard rows), x = 0 outside the box: the hard phase starts the levels
+    from the box's point nearest 0 (no active set: ``hard_iterations == 0``); the answer is
+    the Python engine's, cold and warm, as the targets move."""
+    rng = np.random.default_rng(seed)
+    n = 8
+    lb = rng.uniform(0.2, 1.0, n) * rng.choice([-1.0, 1.0], n)
+    lb[0] = 2.0  # 0 is outside the box
+    ub = np.where(lb > 0, lb + rng.uniform(0.0, 1.0, n), lb * 0.3)  # ub < 0 where lb < 0
+    ub[1] = lb[1]  # a fixed variable
+    eq = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))
+    ineq = qc.Inequality(rng.standard_normal((4, n)), -np.ones(4), np.ones(4))
+    post = qc.Equality(np.eye(n), np.zeros(n))
+    s = qc.Stack([eq, ineq, post], bounds=qc.Bounds(lb, ub))
+    for step in range(4):
+        eq.update(b=eq.b + 0.3 * np.sin(step + np.arange(3)))
+        sp = s.solve(engine="python")
+        sn = s.solve(engine="native")
+        _same(sp, sn)
+        assert sn.info["hard_iterations"] == 0
+        assert np.all(sn.x >= lb) and np.all(sn.x <= ub)
+
+
+@needs_native
 def test_warm_start_gives_the_cold_answer():
     """A moving target over 30 steps: each warm re-solve equals a fresh (cold) stack's."""
     spec = build("mixed_levels", 1)

@@ -1,6 +1,8 @@
-"""Dump the benchmark's stacks (panda9, random50, chain30, talos) for the C++ driver.
+"""Dump the benchmarks' stacks for the C++ driver: hierarchy_bench's scenarios (panda9,
+random50, chain30, talos) and the published problems of hierarchy_published's re-solve table
+(the LexLS humanoid, its box form, soth_sot; each moved as that table's ``moved`` steps).
 
-    python src/native/tools/dump_problems.py OUT_DIR [--steps N]
+    python src/native/tools/dump_problems.py OUT_DIR [--steps N] [--only NAME ...]
 
 Each file ``<name>.bin`` holds, in native-endian int64 / float64: n, blocks, has_bounds,
 damping (float64), steps, meq[blocks], min[blocks], then per step the stacked arrays Aeq, beq,
@@ -16,16 +18,39 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[3] / "benchmarks"))
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+sys.path[:0] = [str(ROOT / "benchmarks"), str(ROOT / "tests"), str(ROOT / "tests" / "core")]
 import hierarchy_bench as hb  # noqa: E402
+import hierarchy_published as hp  # noqa: E402
+from hlsp import load  # noqa: E402
 
+import qpcoord as qc  # noqa: E402
 from qpcoord.core.native import NativeHierarchy  # noqa: E402
+
+#: Published problems dumped beside hierarchy_bench's scenarios: (file stem, box form).
+PUBLISHED = {
+    "humanoid": ("lexls_test01_humanoid", False),
+    "humanoid_box": ("lexls_test01_humanoid", True),
+    "soth_sot": ("soth_sot", False),
+}
+
+
+def published(name: str) -> tuple[qc.Stack, object]:
+    """(stack, move(step, x)) of a published problem of :data:`PUBLISHED`."""
+    stem, box = PUBLISHED[name]
+    prob = load(stem, simple_as_bounds=box)
+    mover = hp._mover(prob.levels)
+    return qc.Stack(prob.levels, bounds=prob.bounds), lambda step, x=None: mover(step)
 
 
 def dump(name, build, steps, out: pathlib.Path) -> None:
-    rng = np.random.default_rng(0)
-    sc = hb._scenario(build, rng)
-    stack, move = sc["stack"], sc["move"]
+    """Dump a hierarchy_bench-style builder's scenario (``build(rng)``, seed 0)."""
+    sc = hb._scenario(build, np.random.default_rng(0))
+    dump_stack(name, sc["stack"], sc["move"], steps, out)
+
+
+def dump_stack(name, stack, move, steps, out: pathlib.Path) -> None:
+    """Dump ``steps`` steps of ``stack``, moved by ``move(step, x)`` before each."""
     P = stack._compiled
     h = NativeHierarchy(P, stack.damping)
     blocks = [P.hard, *P.levels]
@@ -48,11 +73,16 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
     ap.add_argument("--steps", type=int, default=50)
+    names = [*hb.SCENARIOS, *PUBLISHED]
+    ap.add_argument("--only", action="append", choices=names, help="these problems only")
     a = ap.parse_args()
     out = pathlib.Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    for name, (_label, build) in hb.SCENARIOS.items():
-        dump(name, build, a.steps, out)
+    for name in a.only or names:
+        if name in PUBLISHED:
+            dump_stack(name, *published(name), a.steps, out)
+        else:
+            dump(name, hb.SCENARIOS[name][1], a.steps, out)
     return 0
 
 
