@@ -165,17 +165,26 @@ class _Certifier:
     left them by its tolerance), then the exact active-set continuation from the best one,
     then each fallback backend's QP point (with the continuation). Returns the first
     certified point, else the best feasible one with ``ok = False``.
+
+    On a damped level a certified point is continued exactly too: a damped direction's
+    curvature is only ``τ²`` (1e-14 of the level's largest at the default damping), so a
+    point certified to ``KKT_TOL`` can lie anywhere in the box along it, and the freeze
+    would pass that arbitrary point on to every lower level (issue 24: a level below got
+    1.42 instead of the exact 3.89). The continuation reaches the damped problem's exact
+    optimum, unique in the frozen directions; it is kept if certified and no worse.
     """
 
     def __init__(self, R, r, rank, M, e, s, tau, Vt, mv, Dm, dlo, dhi, wdiag):
         self.R, self.r, self.mv = R, r, mv
         kdim = r + mv
         blocks, rhs = [], []
+        self.damped = False
         if rank:
             blocks.append(np.hstack((M, np.zeros((M.shape[0], mv)))) if mv else M)
             rhs.append(e)
             damped = s[:rank] < tau
             if damped.any():
+                self.damped = True
                 gain = np.sqrt(tau * tau - s[:rank][damped] ** 2)
                 Dr = gain[:, None] * Vt[:rank][damped]
                 blocks.append(np.hstack((Dr, np.zeros((Dr.shape[0], mv)))) if mv else Dr)
@@ -211,12 +220,26 @@ class _Certifier:
         st, infeas = kkt_residual(self.Q, self.c, self.G, self.lo, self.hi, y, self.prep)
         return st <= KKT_TOL and infeas <= KKT_FEAS_TOL, st
 
+    def _exact(self, y, kkt):
+        """The exact continuation of a certified point ``y`` (a damped level): kept if it
+        is certified and its objective is no worse (to rounding), else ``y``."""
+        yc, _conv = active_set_ls(self.Q, self.c, self.G, self.lo, self.hi, y, prepared=self.prep)
+        yc = self._feasible_point(yc[: self.r])
+        ok, kc = self._check(yc)
+        self.R.continued += 1
+        o, oc = self._obj(y), self._obj(yc)
+        if ok and oc <= o + 4.0 * np.finfo(float).eps * (o + float(self.c @ self.c)):
+            return yc, kc
+        return y, kkt
+
     def run(self, candidates, H, f, Dy, where):
         best, best_obj, best_kkt = None, np.inf, np.inf
         for z in candidates:
             y = self._feasible_point(z)
             ok, kkt = self._check(y)
             if ok:
+                if self.damped:
+                    y, kkt = self._exact(y, kkt)
                 return y[: self.r], True, kkt
             o = self._obj(y)
             if o < best_obj:
