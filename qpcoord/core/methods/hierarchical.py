@@ -220,17 +220,55 @@ class _Certifier:
         st, infeas = kkt_residual(self.Q, self.c, self.G, self.lo, self.hi, y, self.prep)
         return st <= KKT_TOL and infeas <= KKT_FEAS_TOL, st
 
-    def _exact(self, y, kkt):
-        """The exact continuation of a certified point ``y`` (a damped level): kept if it
-        is certified and its objective is no worse (to rounding), else ``y``."""
-        yc, _conv = active_set_ls(self.Q, self.c, self.G, self.lo, self.hi, y, prepared=self.prep)
-        yc = self._feasible_point(yc[: self.r])
+    def _working_set_solve(self, y):
+        """``y`` moved to the exact minimiser of the level on the rows active at ``y``
+        (as equalities): the minimum-norm least-squares step in their null space, in the
+        equilibrated variables. :func:`active_set_ls` stops where a step gains less than
+        1e-15 of the objective; along a damped direction (curvature ``τ²``) such a step
+        can still move the point by ~1e-9, which the level's freeze would pass on."""
+        prep = self.prep
+        S = prep.col_scale(self.Q)
+        u = y / S
+        Gs = prep.Gn * S
+        N = None
+        if prep.Gn.shape[0]:
+            gy = prep.Gn @ y
+            tol = KKT_FEAS_TOL * np.maximum(prep.bscale, float(np.abs(y).max()))
+            W = (gy - prep.lo <= tol) | (prep.hi - gy <= tol)
+            if W.any():
+                _U, sw, Vw = svd(Gs[W], full=True)
+                N = Vw[numerical_rank(sw, Gs[W].shape) :].T
+        Qs = self.Q * S
+        K = Qs if N is None else Qs @ N
+        if K.shape[1] == 0:
+            return y
+        Uk, sk, Vk = svd(K, full=False)
+        rk = numerical_rank(sk, K.shape)
+        if not rk:
+            return y
+        du = Vk[:rk].T @ ((Uk[:, :rk].T @ (self.c - Qs @ u)) / sk[:rk])
+        return (u + (du if N is None else N @ du)) * S
+
+    def _no_worse(self, y, kkt, cand):
+        """``cand`` (made feasible) if it is certified and its objective is no worse than
+        ``y``'s (to rounding), else ``y``; with the kept point's KKT residual."""
+        yc = self._feasible_point(cand[: self.r])
         ok, kc = self._check(yc)
-        self.R.continued += 1
         o, oc = self._obj(y), self._obj(yc)
         if ok and oc <= o + 4.0 * np.finfo(float).eps * (o + float(self.c @ self.c)):
             return yc, kc
         return y, kkt
+
+    def _exact(self, y, kkt):
+        """A certified point ``y`` of a damped level made exact: the active-set
+        continuation with the multiplier signs to rounding, then the working-set solve,
+        each kept only if certified and no worse."""
+        ya, _conv = active_set_ls(
+            self.Q, self.c, self.G, self.lo, self.hi, y, prepared=self.prep, exact_signs=True
+        )
+        self.R.continued += 1
+        y, kkt = self._no_worse(y, kkt, ya)
+        return self._no_worse(y, kkt, self._working_set_solve(y))
 
     def run(self, candidates, H, f, Dy, where):
         best, best_obj, best_kkt = None, np.inf, np.inf
@@ -256,6 +294,8 @@ class _Certifier:
             ok, kkt = self._check(y)
             self.R.continued += 1
             if ok:
+                if self.damped:
+                    y, kkt = self._exact(y, kkt)
                 return y[: self.r], True, kkt
             o = self._obj(y)
             if o < best_obj:
