@@ -46,6 +46,11 @@ VIOLATION_TOL = 1e-6
 ACTIVE_TOL = (1e-7, 1e-5)
 #: Relative objective increase the refinement may cost over the QP's own point.
 REFINE_SLACK = 1e-7
+#: A level whose projected equality rows have a singular value under this fraction of the
+#: largest (curvature under 1e-6 of the largest), or a damped one, is finished exactly after
+#: its certificate (:class:`_Certifier`): along such a direction a point certified to
+#: ``KKT_TOL`` can be far from the optimum, and the freeze passes it on.
+ILL_CONDITIONED = 1e-3
 _ABS_FLOOR = 1e-14
 
 
@@ -166,25 +171,26 @@ class _Certifier:
     then each fallback backend's QP point (with the continuation). Returns the first
     certified point, else the best feasible one with ``ok = False``.
 
-    On a damped level a certified point is continued exactly too: a damped direction's
-    curvature is only ``τ²`` (1e-14 of the level's largest at the default damping), so a
-    point certified to ``KKT_TOL`` can lie anywhere in the box along it, and the freeze
-    would pass that arbitrary point on to every lower level (issue 24: a level below got
-    1.42 instead of the exact 3.89). The continuation reaches the damped problem's exact
-    optimum, unique in the frozen directions; it is kept if certified and no worse.
+    On a damped or ill-conditioned level (:data:`ILL_CONDITIONED`) a certified point is
+    finished exactly too (:meth:`_exact`): a damped direction's curvature is only ``τ²``
+    (1e-14 of the level's largest at the default damping), a near-singular one's ``s²``, so
+    a point certified to ``KKT_TOL`` can lie far along it (anywhere in the box, damped), and
+    the freeze would pass that point on to every lower level (issue 24: a level below got
+    1.42 instead of the exact 3.89). The exact point, unique in the frozen directions, is
+    kept if certified and no worse.
     """
 
     def __init__(self, R, r, rank, M, e, s, tau, Vt, mv, Dm, dlo, dhi, wdiag):
         self.R, self.r, self.mv = R, r, mv
         kdim = r + mv
         blocks, rhs = [], []
-        self.damped = False
+        self.exact = False  # finish certified points exactly (ILL_CONDITIONED)
         if rank:
             blocks.append(np.hstack((M, np.zeros((M.shape[0], mv)))) if mv else M)
             rhs.append(e)
+            self.exact = bool(s[rank - 1] < max(tau, ILL_CONDITIONED * s[0]))
             damped = s[:rank] < tau
             if damped.any():
-                self.damped = True
                 gain = np.sqrt(tau * tau - s[:rank][damped] ** 2)
                 Dr = gain[:, None] * Vt[:rank][damped]
                 blocks.append(np.hstack((Dr, np.zeros((Dr.shape[0], mv)))) if mv else Dr)
@@ -260,7 +266,7 @@ class _Certifier:
         return y, kkt
 
     def _exact(self, y, kkt):
-        """A certified point ``y`` of a damped level made exact: the active-set
+        """A certified point ``y`` of an ill-conditioned level made exact: the active-set
         continuation with the multiplier signs to rounding, then the working-set solve,
         each kept only if certified and no worse."""
         ya, _conv = active_set_ls(
@@ -276,7 +282,7 @@ class _Certifier:
             y = self._feasible_point(z)
             ok, kkt = self._check(y)
             if ok:
-                if self.damped:
+                if self.exact:
                     y, kkt = self._exact(y, kkt)
                 return y[: self.r], True, kkt
             o = self._obj(y)
@@ -294,7 +300,7 @@ class _Certifier:
             ok, kkt = self._check(y)
             self.R.continued += 1
             if ok:
-                if self.damped:
+                if self.exact:
                     y, kkt = self._exact(y, kkt)
                 return y[: self.r], True, kkt
             o = self._obj(y)
