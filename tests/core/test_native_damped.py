@@ -173,56 +173,33 @@ def test_exact_reference_is_damped_where_it_should_be():
 # ---------------------------------------------------------------------------------------
 
 
-def _signed_permutation(rng, n: int) -> np.ndarray:
-    return np.eye(n)[rng.permutation(n)] * rng.choice([-1.0, 1.0], n)
-
-
-def _exact_basis(rng, n: int) -> np.ndarray:
-    """An orthogonal matrix exact in binary: signed permutations around ``I − J/2`` on four
-    of the coordinates (entries 0, ±½, ±1)."""
-    B = np.eye(n)
-    if n >= 4:
-        B[:4, :4] = V
-    return _signed_permutation(rng, n) @ B @ _signed_permutation(rng, n)
-
-
 @st.composite
 def damped_stacks(draw):
     """Random stacks (n ≤ 6, 2–3 levels, the box always on: a damped direction's
-    unconstrained gain is up to 1/τ) with one deliberately near-singular level, in one of
-    two well-posed forms:
+    unconstrained gain is up to 1/τ) with one deliberately near-singular level anywhere in
+    the stack (projected on the freedom the levels above leave): ``U diag(σ) Vᵀ`` with
+    random orthogonal factors, damping 1e-3 or 1e-2 (a control loop near a singularity) with
+    the smallest ``σ`` down to 1e-6 of the largest (damped, 1e-4 of the threshold), or the
+    default 1e-7 with ``σ`` down to 1e-3 (undamped, ill-conditioned).
 
-    - ``"exact"``: level 0 is ``D·Vᵀ`` with orthogonal rows, ``V`` exact in binary (see
-      :func:`_exact_basis`) and singular values ``2⁻ᵏ`` from 1 down to 2⁻⁴⁷ (≈ 7e-15, above
-      the rank tolerance), default damping: the data carry their singular values exactly,
-      so the damped optimum is defined to rounding however small ``s`` is;
-    - ``"random"``: any level, ``U diag(σ) Vᵀ`` with random orthogonal factors, smallest
-      ``σ`` from 10× the threshold down to 1e-6 of the largest, damping 1e-7…1e-2 (a control
-      loop near a singularity): a rounding of the data moves ``σ`` by ~ε·σ₀, under 1e-9·σ
-      at these ratios.
-
-    Below 1e-7 of σ₀ with rounded data no engine can be compared to 1e-9: ε·σ₀ is then more
-    than 1e-9 of ``σ``, and the damped optimum moves with it (docs/solvers.md)."""
+    Where the level's effective condition number ``s₀/max(s, τ)`` is larger, a damped or
+    near-singular direction's optimum is not defined to 1e-9 in floating point (rounding of
+    the data or of any backward-stable factorisation moves it by ~``ε·κ²`` of the
+    residual): no two implementations can be compared there at this tolerance
+    (docs/solvers.md, "Damped levels"); the exact sweep above covers the default damping."""
     seed = draw(st.integers(0, 2**32 - 1))
     rng = np.random.default_rng(seed)
-    kind = draw(st.sampled_from(["exact", "random"]))
     n = draw(st.integers(2, 6))
     nlev = draw(st.integers(2, 3))
-    if kind == "exact":
-        which, damping = 0, DAMPING
-        me = draw(st.integers(2, n))
-        sv = 2.0 ** -np.array([0] + [draw(st.integers(1, 47)) for _ in range(me - 1)])
-        sv *= 2.0 ** draw(st.integers(-2, 2))
-        Ab = (sv[:, None] * _exact_basis(rng, n)[:me]) if me else None
-    else:
-        which = draw(st.integers(0, nlev - 1))
-        damping = draw(st.sampled_from([1e-7, 1e-4, 1e-3, 1e-2]))
-        me = draw(st.integers(2, n))
-        ratio = max(damping * 10.0 ** draw(st.floats(-3.0, 1.0)), 1e-6)
-        U = np.linalg.qr(rng.standard_normal((me, me)))[0]
-        Vq = np.linalg.qr(rng.standard_normal((n, me)))[0]
-        sv = np.geomspace(1.0, ratio, me) * rng.uniform(0.5, 3.0)
-        Ab = (U * sv) @ Vq.T
+    which = draw(st.integers(0, nlev - 1))
+    damping = draw(st.sampled_from([1e-7, 1e-3, 1e-2]))
+    lowest = -6.0 if damping >= 1e-3 else -3.0
+    ratio = 10.0 ** draw(st.floats(lowest, -1.0))
+    me = draw(st.integers(2, n))
+    U = np.linalg.qr(rng.standard_normal((me, me)))[0]
+    Vq = np.linalg.qr(rng.standard_normal((n, me)))[0]
+    sv = np.geomspace(1.0, ratio, me) * rng.uniform(0.5, 3.0)
+    Ab = (U * sv) @ Vq.T
     levels = []
     for k in range(nlev):
         A = Ab if k == which else rng.standard_normal((draw(st.integers(1, 3)), n))
@@ -234,7 +211,7 @@ def damped_stacks(draw):
         levels.append(tasks)
     bounds = qc.Bounds(-rng.uniform(0.6, 2.0, n), rng.uniform(0.6, 2.0, n))
     constraints = None
-    if kind == "random" and n > 2 and draw(st.booleans()):
+    if n > 2 and draw(st.booleans()):
         x0 = rng.uniform(-0.5, 0.5, n)
         A = rng.standard_normal((1, n))
         constraints = [qc.Equality(A, A @ x0)]
