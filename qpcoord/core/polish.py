@@ -40,6 +40,7 @@ POLISH_FEAS_TOL = 1e-10
 PROX = 1e-6
 #: Refinement steps of the fallback.
 PROX_STEPS = 2
+_EPS = float(np.finfo(float).eps)
 
 
 def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray, obj_slack: float = 0.0) -> np.ndarray:
@@ -329,7 +330,9 @@ def pull_back(G, lo, hi, y, y_safe=None, norms=None):
     return base + max(t, 0.0) * (y - base)
 
 
-def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None, prepared=None):
+def active_set_ls(
+    Q, c, G, lo, hi, y0, max_iter: int | None = None, prepared=None, exact_signs: bool = False
+):
     """Solve ``min ½‖Q y − c‖², lo ≤ G y ≤ hi`` exactly from a feasible ``y0``.
 
     A primal active-set method (Nocedal & Wright, Alg. 16.3) on the least-squares form:
@@ -337,6 +340,12 @@ def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None, prepared=Non
     least squares (an SVD, no Hessian is formed: a semidefinite ``QᵀQ`` is fine), steps
     as far as the inactive rows allow, adds the blocking row, or, when the point is
     stationary on its working set, drops the row whose multiplier has the wrong sign.
+    A multiplier counts as negative below ``−KKT_TOL·‖g‖∞``; with ``exact_signs`` below the
+    rounding of the gradient only (``16·ε·k·‖Q‖·(‖Q‖·‖y‖∞ + ‖c‖)``, in the equilibrated
+    variables), and a working set counts as solved when the step is at rounding, not when
+    it gains under 1e-15 of the objective: for a damped level, whose damped directions
+    have curvature ``τ²`` and gradients far under ``KKT_TOL``, so that a multiplier of
+    1e-10, or a step gaining 1e-19, still moves the optimum along them by ~1.
     Returns ``(y, converged)``; ``y`` is feasible whenever ``y0`` is.
     """
     k = y0.shape[0]
@@ -379,7 +388,13 @@ def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None, prepared=Non
         # stationary on W when the step no longer decreases the objective measurably
         dres = Qs @ step
         gain = -(2.0 * float(res @ dres) + float(dres @ dres))
-        if gain <= 1e-15 * max(float(res @ res), 1e-30 * cn * cn) or not np.any(step):
+        if exact_signs:  # on a damped direction a step gaining 1e-19 can still move y
+            stationary = gain <= 0.0 or float(np.abs(step).max()) <= 8.0 * _EPS * max(
+                1.0, float(np.abs(u).max())
+            )
+        else:
+            stationary = gain <= 1e-15 * max(float(res @ res), 1e-30 * cn * cn)
+        if stationary or not np.any(step):
             g = Qs.T @ res
             if not W.any():
                 return u * S, True
@@ -389,7 +404,12 @@ def active_set_ls(Q, c, G, lo, hi, y0, max_iter: int | None = None, prepared=Non
             mu[eq[idx]] = np.inf  # equalities are never dropped
             j = int(np.argmin(mu))
             gref = max(float(np.abs(g).max()), 1e-300)
-            if mu[j] >= -KKT_TOL * gref:
+            if exact_signs:
+                qn = float(np.linalg.norm(Qs))
+                thr = 16.0 * _EPS * k * qn * (qn * float(np.abs(u).max()) + cn)
+            else:
+                thr = KKT_TOL * gref
+            if mu[j] >= -thr:
                 return u * S, True
             W_lo[idx[j]] = W_hi[idx[j]] = False
             continue

@@ -21,6 +21,9 @@ constexpr int kIterFactor = 6;
 constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
 constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
 constexpr double kQrMargin = 4.0;       // QR closed form: sigma_min bound over the SVD's floor
+// a level with a singular value under this fraction of the largest (or a damped one) is
+// finished with exact_ (as qpcoord.core.methods.hierarchical.ILL_CONDITIONED)
+constexpr double kIllConditioned = 1e-3;
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
@@ -286,7 +289,7 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>&
   const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
   const double round =
       kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c.head(qr).norm());
-  const double tol = kKktTol * gref + round;
+  const double tol = (exact_ ? 0.0 : kKktTol * gref) + round;
   int jmin = -1;
   double mmin = kInf;
   for (int j = 0; j < kw; ++j) {
@@ -350,7 +353,12 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     // its value, with a floor at rounding of the data's scale), or it is rounding itself
     qy = res + c;
     const double floor = 1e-28 * std::max(cn * cn, qy.squaredNorm());
-    if (gain <= 1e-15 * res.squaredNorm() + floor || smax <= 1e-15 * yscale) {
+    // (exact_: a step is taken unless it is rounding: on a direction of curvature tau^2 a
+    // step gaining 1e-19 of the objective can still move y by ~1)
+    const bool stationary = exact_ ? (gain <= floor || smax <= 8.0 * kEps * yscale)
+                                   : (gain <= 1e-15 * res.squaredNorm() + floor ||
+                                      smax <= 1e-15 * yscale);
+    if (stationary) {
       int drop = -1;
       if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) return true;
       W[drop] = 0;
@@ -420,7 +428,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       current = true;  // W unchanged
     }
   }
-  return false;
+  return exact_;  // the exact finish at its cap: y is feasible and no worse than its start
 }
 
 int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
@@ -728,6 +736,7 @@ bool Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, dou
   mqr_.solve_r_matrix(Ri);
   const double inv = Ri.norm();
   if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return false;
+  qr_smin_ = 1.0 / inv;
   if (wide) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
     mqr_.min_norm_transposed_solve(e, dz);
   } else {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
@@ -776,6 +785,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   auto xc = xc_.head(n_);
   xc = x_;
   bool by_qr = false;  // closed form from a QR of M (no damping can apply), no SVD
+  double M_scale = 0.0;  // |A|_F of the level's equalities (>= s_0 of M)
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
     M.resize(me, r_);  // no-op when the size repeats (the usual case)
@@ -783,6 +793,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     e.noalias() = -A * x_;
     e += beq.segment(e0, me);
     const double scale = A.norm();
+    M_scale = scale;
     // |M|_2 <= |M|_F <= |A|_F (Z orthonormal): the damping threshold and the rank tolerance
     // of the SVD, max(s_0, scale) = scale, are known before any factorisation
     tau = damping_ * scale;
@@ -891,6 +902,16 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       y(r_ + j) = (v > hi(row)) ? v - hi(row) : ((v < lo(row)) ? v - lo(row) : 0.0);
     }
     if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
+  }
+  // an ill-conditioned or damped level: finished to rounding (a point optimal to kKktTol can
+  // be far from the optimum along a direction of curvature s^2 or tau^2, and is frozen)
+  if (me && rank &&
+      (by_qr ? qr_smin_ < kIllConditioned * M_scale
+             : s(rank - 1) < std::max(tau, kIllConditioned * s(0)))) {
+    exact_ = true;
+    const bool done = active_set(P, y, W_, iters);
+    exact_ = false;
+    if (!done) return timed_out_ ? kTimeLimit : kNotConverged;
   }
   store_working_set(P, W_, working_[stage]);
   stats(stage, 0) = iters;

@@ -201,6 +201,10 @@ class Hierarchy {
   PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
   Mat Qt_;         ///< Q Qf
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
+  /// active_set decides stationarity and multiplier signs to rounding, not to kKktTol and a
+  /// 1e-15 objective gain (the finish of an ill-conditioned or damped level, issue 24)
+  bool exact_ = false;
+  double qr_smin_ = 0.0;  ///< lower bound 1/|R^-1|_F of sigma_min(M) from the last QR closed form
   Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,
       e_, ute_;
   std::vector<int> widx_, mov_;

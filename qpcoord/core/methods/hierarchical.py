@@ -46,6 +46,11 @@ VIOLATION_TOL = 1e-6
 ACTIVE_TOL = (1e-7, 1e-5)
 #: Relative objective increase the refinement may cost over the QP's own point.
 REFINE_SLACK = 1e-7
+#: A level whose projected equality rows have a singular value under this fraction of the
+#: largest (curvature under 1e-6 of the largest), or a damped one, is finished exactly after
+#: its certificate (:class:`_Certifier`): along such a direction a point certified to
+#: ``KKT_TOL`` can be far from the optimum, and the freeze passes it on.
+ILL_CONDITIONED = 1e-3
 _ABS_FLOOR = 1e-14
 
 
@@ -165,15 +170,25 @@ class _Certifier:
     left them by its tolerance), then the exact active-set continuation from the best one,
     then each fallback backend's QP point (with the continuation). Returns the first
     certified point, else the best feasible one with ``ok = False``.
+
+    On a damped or ill-conditioned level (:data:`ILL_CONDITIONED`) a certified point is
+    finished exactly too (:meth:`_exact`): a damped direction's curvature is only ``τ²``
+    (1e-14 of the level's largest at the default damping), a near-singular one's ``s²``, so
+    a point certified to ``KKT_TOL`` can lie far along it (anywhere in the box, damped), and
+    the freeze would pass that point on to every lower level (issue 24: a level below got
+    1.42 instead of the exact 3.89). The exact point, unique in the frozen directions, is
+    kept if certified and no worse.
     """
 
     def __init__(self, R, r, rank, M, e, s, tau, Vt, mv, Dm, dlo, dhi, wdiag):
         self.R, self.r, self.mv = R, r, mv
         kdim = r + mv
         blocks, rhs = [], []
+        self.exact = False  # finish certified points exactly (ILL_CONDITIONED)
         if rank:
             blocks.append(np.hstack((M, np.zeros((M.shape[0], mv)))) if mv else M)
             rhs.append(e)
+            self.exact = bool(s[rank - 1] < max(tau, ILL_CONDITIONED * s[0]))
             damped = s[:rank] < tau
             if damped.any():
                 gain = np.sqrt(tau * tau - s[:rank][damped] ** 2)
@@ -211,12 +226,64 @@ class _Certifier:
         st, infeas = kkt_residual(self.Q, self.c, self.G, self.lo, self.hi, y, self.prep)
         return st <= KKT_TOL and infeas <= KKT_FEAS_TOL, st
 
+    def _working_set_solve(self, y):
+        """``y`` moved to the exact minimiser of the level on the rows active at ``y``
+        (as equalities): the minimum-norm least-squares step in their null space, in the
+        equilibrated variables. :func:`active_set_ls` stops where a step gains less than
+        1e-15 of the objective; along a damped direction (curvature ``τ²``) such a step
+        can still move the point by ~1e-9, which the level's freeze would pass on."""
+        prep = self.prep
+        S = prep.col_scale(self.Q)
+        u = y / S
+        Gs = prep.Gn * S
+        N = None
+        if prep.Gn.shape[0]:
+            gy = prep.Gn @ y
+            tol = KKT_FEAS_TOL * np.maximum(prep.bscale, float(np.abs(y).max()))
+            W = (gy - prep.lo <= tol) | (prep.hi - gy <= tol)
+            if W.any():
+                _U, sw, Vw = svd(Gs[W], full=True)
+                N = Vw[numerical_rank(sw, Gs[W].shape) :].T
+        Qs = self.Q * S
+        K = Qs if N is None else Qs @ N
+        if K.shape[1] == 0:
+            return y
+        Uk, sk, Vk = svd(K, full=False)
+        rk = numerical_rank(sk, K.shape)
+        if not rk:
+            return y
+        du = Vk[:rk].T @ ((Uk[:, :rk].T @ (self.c - Qs @ u)) / sk[:rk])
+        return (u + (du if N is None else N @ du)) * S
+
+    def _no_worse(self, y, kkt, cand):
+        """``cand`` (made feasible) if it is certified and its objective is no worse than
+        ``y``'s (to rounding), else ``y``; with the kept point's KKT residual."""
+        yc = self._feasible_point(cand[: self.r])
+        ok, kc = self._check(yc)
+        o, oc = self._obj(y), self._obj(yc)
+        if ok and oc <= o + 4.0 * np.finfo(float).eps * (o + float(self.c @ self.c)):
+            return yc, kc
+        return y, kkt
+
+    def _exact(self, y, kkt):
+        """A certified point ``y`` of an ill-conditioned level made exact: the active-set
+        continuation with the multiplier signs to rounding, then the working-set solve,
+        each kept only if certified and no worse."""
+        ya, _conv = active_set_ls(
+            self.Q, self.c, self.G, self.lo, self.hi, y, prepared=self.prep, exact_signs=True
+        )
+        self.R.continued += 1
+        y, kkt = self._no_worse(y, kkt, ya)
+        return self._no_worse(y, kkt, self._working_set_solve(y))
+
     def run(self, candidates, H, f, Dy, where):
         best, best_obj, best_kkt = None, np.inf, np.inf
         for z in candidates:
             y = self._feasible_point(z)
             ok, kkt = self._check(y)
             if ok:
+                if self.exact:
+                    y, kkt = self._exact(y, kkt)
                 return y[: self.r], True, kkt
             o = self._obj(y)
             if o < best_obj:
@@ -233,6 +300,8 @@ class _Certifier:
             ok, kkt = self._check(y)
             self.R.continued += 1
             if ok:
+                if self.exact:
+                    y, kkt = self._exact(y, kkt)
                 return y[: self.r], True, kkt
             o = self._obj(y)
             if o < best_obj:
