@@ -95,6 +95,9 @@ class Hierarchy {
   struct Working {  ///< a stage's final working set: (row id, side)
     std::vector<int> id;
     std::vector<int8_t> side;
+    /// a set was stored (it may hold no one-sided row: the stage's optimum has only its
+    /// equality rows active, and is still a warm start)
+    bool stored = false;
   };
 
   int hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
