@@ -754,7 +754,7 @@ bool Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, dou
   return true;
 }
 
-void Hierarchy::row_space_basis(const Eigen::JacobiSVD<Mat>& svd, bool by_qr, int me, int rank,
+void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int me, int rank,
                                 Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out) {
   if (!by_qr) {
     out = svd.matrixV().leftCols(rank);
