@@ -434,20 +434,24 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
 int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
                                 bool* consistent) {
   *consistent = false;
-  if (ws.id.empty()) return 0;
+  if (!ws.stored) return 0;
   const int k = P.cols;
-  std::fill(W.begin(), W.begin() + P.rows, 0);
+  // the equality rows (lo = hi: hard or inherited rows fixed at their value) are in every
+  // working set, as in the cold start: store_working_set keeps the one-sided rows only, and
+  // a point on the stored rows alone is free to leave an equality row (issue 24: the
+  // humanoid's box form missed on every call, its point off two inherited rows lo = hi = 0)
+  for (int i = 0; i < P.rows; ++i) W[i] = (P.lo(i) == P.hi(i)) ? 2 : 0;
   int found = 0;
   for (size_t j = 0; j < ws.id.size(); ++j) {
     for (int i = 0; i < P.rows; ++i) {
       if (P.id[i] == ws.id[j]) {
-        W[i] = ws.side[j];
+        if (W[i] != 2) W[i] = ws.side[j];
         ++found;
         break;
       }
     }
   }
-  if (!found) return 0;
+  if (!found && !ws.id.empty()) return 0;
   qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
   factor_working(P, W);
   const int kw = static_cast<int>(widx_.size());
@@ -480,7 +484,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
                                 std::vector<int8_t>& W, int* found) {
   const int k = P.cols;
   *found = 0;
-  if (ws.id.empty()) return false;
+  if (!ws.stored) return false;
   bool consistent = false;
   *found = stored_set_point(P, ws, W, &consistent);
   if (*found != static_cast<int>(ws.id.size()) || !consistent) return false;
@@ -565,6 +569,7 @@ void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>
                                   Working& ws) {
   ws.id.clear();
   ws.side.clear();
+  ws.stored = true;
   for (int i = 0; i < P.rows; ++i) {
     if (W[i] == 1 || W[i] == -1) {
       ws.id.push_back(P.id[i]);
@@ -749,7 +754,7 @@ bool Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, dou
   return true;
 }
 
-void Hierarchy::row_space_basis(const Eigen::JacobiSVD<Mat>& svd, bool by_qr, int me, int rank,
+void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int me, int rank,
                                 Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out) {
   if (!by_qr) {
     out = svd.matrixV().leftCols(rank);

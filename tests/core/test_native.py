@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hlsp import load
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from test_hygiene import _force_write
@@ -308,6 +309,34 @@ def test_repeated_solve_is_a_warm_hit():
     assert first.info["warm_start_hits"] == 0
     assert second.info["warm_start_hits"] >= 1
     np.testing.assert_allclose(second.x, first.x, atol=1e-12)
+
+
+@needs_native
+@pytest.mark.parametrize("box", [True, False], ids=["box", "published"])
+def test_unchanged_humanoid_is_a_warm_hit(box):
+    """The LexLS humanoid solved again unchanged: every stage the active set solves is a
+    warm hit (its stored working set kept the equality rows lo = hi of the stage, which the
+    stored set does not list: issue 24, the box form missed at two levels on every call),
+    and x is the cold solve's and the Python engine's."""
+    P = load("lexls_test01_humanoid", simple_as_bounds=box)
+    s = qc.Stack(P.levels, bounds=P.bounds)
+    cold = s.solve(engine="native")
+    warm = s.solve(engine="native")
+    info = warm.info
+    assert cold.info["warm_start_hits"] == 0 and cold.info["qp_calls"] > 0
+    assert info["warm_start_hits"] == info["qp_calls"] == cold.info["qp_calls"]
+    assert info["warm_start_seeded"] == 0
+    assert info["hard_iterations"] == 0 and info["min_norm_iterations"] == 0
+    # the one level left with iterations is the exact finish of an ill-conditioned level
+    # (run after a hit too): a refinement step, not a search
+    assert sum(info["active_set_iterations"]) <= 2
+    np.testing.assert_allclose(warm.x, cold.x, rtol=0, atol=1e-9)
+    sp = s.solve(engine="python")
+    scale = max(1.0, float(np.max(np.abs(sp.x))))
+    np.testing.assert_allclose(warm.x, sp.x, rtol=0, atol=1e-9 * scale)
+    ref = np.asarray(sp.level_residuals)
+    gap = np.abs(np.asarray(warm.level_residuals) - ref) / np.maximum(1.0, ref)
+    assert gap.max() <= 1e-9
 
 
 @needs_native

@@ -81,6 +81,8 @@ int main(int argc, char** argv) {
   std::vector<double> each;
   each.reserve(size_t(repeats) * steps);
   long long iters = 0, hits = 0, closed = 0;
+  Mat per_stage = Mat::Zero(L + 2, 3);  // summed stats: iterations, warm hits, closed forms
+  long long seeded = 0;
   for (int rep = 0; rep < repeats; ++rep) {
     for (int s = 0; s < steps; ++s) {
       const double* p = data.data() + per * s;
@@ -109,6 +111,8 @@ int main(int argc, char** argv) {
       iters += static_cast<long long>(stats.col(0).sum());
       hits += static_cast<long long>(stats.col(1).sum());
       closed += static_cast<long long>(stats.col(2).sum());
+      per_stage += stats;
+      seeded += static_cast<long long>(detail(7));
     }
   }
   if (xout) std::fclose(xout);
@@ -120,5 +124,11 @@ int main(int argc, char** argv) {
               "closed forms/solve %.2f  allocations after the first pass %lld\n",
               solves, 1e6 * seconds / solves, iters / solves, hits / solves, closed / solves,
               allocs_after_first);
+  // per stage (hard, levels..., min-norm): iterations, warm hits, closed forms per solve
+  std::printf("per stage (iters/hits/closed per solve):");
+  for (int b = 0; b < L + 2; ++b)
+    std::printf(" [%d] %.2f/%.2f/%.2f", b, per_stage(b, 0) / solves, per_stage(b, 1) / solves,
+                per_stage(b, 2) / solves);
+  std::printf("  seeded stages/solve %.2f\n", double(seeded) / solves);
   return 0;
 }
