@@ -224,7 +224,10 @@ def damped_stack(spec: dict) -> qc.Stack:
         bounds=spec["bounds"],
         constraints=spec["constraints"],
         damping=spec["damping"],
-        fallback=False,
+        # the library's default: a level QP daqp wrongly calls infeasible (found by
+        # hypothesis at damping 1e-7: exit flag -1 on a feasible 4-variable box) is solved
+        # again by quadprog, as a user's stack would be
+        fallback=True,
     )
 
 
@@ -237,3 +240,35 @@ def test_native_matches_python_on_damped_stacks(spec):
     s = damped_stack(spec)
     _same(sp, s.solve(engine="native"))
     _same(sp, s.solve(engine="native"))  # warm: the stored working sets
+
+
+def test_a_level_daqp_calls_infeasible_is_solved_by_the_fallback():
+    """Found by hypothesis (damping 1e-7): daqp returns exit flag -1 on level 1's feasible
+    QP; the default fallback (quadprog) solves it, to the native engine's level values."""
+    A0 = np.array(
+        [
+            [0.14450968487773966, 0.24757747598922894, -0.13793399152329971, 0.12295159680470974],
+            [0.46617590030163136, 0.7978490560603728, -0.6864061585123568, 0.05284463983042435],
+        ]
+    )
+    b0 = np.array([-0.7007605390805356, 1.6197998895058245])
+    A1 = np.array(
+        [[-2.487321277182908, 1.2339249518481232, 1.0556713265200932, -0.15653043176104384]]
+    )
+    b1 = np.array([2.4401298478016247])
+    lo = np.array(
+        [-1.7442385425292648, -1.2878505519706294, -1.4846369782887914, -0.8826567754411319]
+    )
+    hi = np.array([1.6730558378487648, 1.635580963379816, 1.2119801580864173, 1.2743858766837395])
+
+    def stack():
+        return qc.Stack(
+            [[qc.Equality(A0, b0)], [qc.Equality(A1, b1)]], bounds=qc.Bounds(lo, hi), damping=1e-7
+        )
+
+    sp = stack().solve(engine="python")
+    assert sp.status == "optimal"
+    if not sp.info["fallbacks"]:
+        pytest.skip("this daqp build solves the level (no fallback needed)")
+    sn = stack().solve(engine="native")
+    np.testing.assert_allclose(sp.level_residuals, sn.level_residuals, rtol=1e-9, atol=1e-12)
