@@ -29,6 +29,7 @@ from __future__ import annotations
 import importlib
 import warnings
 from types import ModuleType
+from typing import NoReturn
 
 import numpy as np
 
@@ -44,6 +45,7 @@ __all__ = [
     "load",
     "resolve_engine",
     "NativeHierarchy",
+    "raise_status",
 ]
 
 #: The engines :meth:`Stack.solve` offers.
@@ -280,50 +282,79 @@ class NativeHierarchy:
         }
 
     def _raise(self, code: int, P: CompiledStack) -> None:
-        mod = self._mod
-        d = self.detail
-        if code == mod.BAD_INPUT:
-            P.check_finite()  # names the NaN/inf (task or bounds) that reached the arrays
-            raise ValueError(f"native engine rejected the data (status {code})")
-        if code == mod.INFEASIBLE_EQ:
-            names = ", ".join(t.label for t in P.hard.eqs)
-            raise InfeasibleError(
-                f"hard equality constraints are inconsistent ({names}): "
-                f"least-squares residual {d[0]:.3g}"
-            )
-        if code == mod.INFEASIBLE_HARD and np.isinf(d[1]):
-            raise InfeasibleError(
-                "constraints: the hard equalities fix x completely and it violates the bounds "
-                "or hard inequalities"
-            )
-        if code == mod.INFEASIBLE_HARD:
-            raise InfeasibleError(
-                "constraints: bounds and hard constraints are inconsistent (native engine's "
-                f"least-violation phase: no point within {d[1]:.3g} of them, relative)"
-            )
-        k = int(d[2])
+        k = int(self.detail[2])
         where = (
             "the hard constraints"
             if k == 0
             else ("the minimum-norm step" if k == len(P.levels) + 1 else f"level {k - 1}")
         )
-        if code == mod.NOT_CONVERGED:
-            raise SolverError(f"native engine: the active set of {where} did not converge")
-        if code == mod.TIME_LIMIT:
-            raise SolverError(f"native engine: time limit reached in the active set of {where}")
-        if code == mod.NON_FINITE:
-            raise SolverError("native engine produced a non-finite solution")
-        if code == mod.CHECK_FAILED:  # the messages of Stack._check
-            if d[3] == 1:
-                i = int(d[4])
-                raise SolverError(
-                    f"backend 'native' returned x[{i}] = {self.x[i]!r} outside the bounds "
-                    f"[{P.lb[i]!r}, {P.ub[i]!r}]"
-                )
-            if d[3] == 2:
-                raise SolverError(
-                    "backend 'native' returned a point violating the hard equalities "
-                    f"(residual {d[4]:.3g})"
-                )
-            raise SolverError("backend 'native' returned a point violating the hard inequalities")
-        raise SolverError(f"native engine: unknown status {code}")
+        raise_status(
+            code,
+            self._mod,
+            self.detail,
+            self.x,
+            P,
+            hard_phase="least-violation phase: no point within {:.3g} of them, relative",
+            stage=f" of {where}",
+        )
+
+
+def raise_status(
+    code: int,
+    mod: ModuleType,
+    d: np.ndarray,
+    x: np.ndarray,
+    P: CompiledStack,
+    hard_phase: str,
+    stage: str = "",
+    prefix: str = "",
+) -> NoReturn:
+    """Raise the exception of a native engine's non-zero status ``code`` with the Python
+    engine's messages (shared by the strict hierarchy and the weighted QP).
+
+    ``d`` is the engine's ``detail`` array (0: residual of the hard equalities, 1: relative
+    violation of the hard part, 3/4: which check failed and where), ``x`` its output array.
+    ``hard_phase`` describes the engine's infeasibility detection (a format string for
+    ``d[1]``); ``stage`` (e.g. ``" of level 2"``) and ``prefix`` (e.g. ``"weighted QP: "``)
+    complete the iteration- and time-limit messages.
+    """
+    if code == mod.BAD_INPUT:
+        P.check_finite()  # names the NaN/inf (task or bounds) that reached the arrays
+        raise ValueError(f"native engine rejected the data (status {code})")
+    if code == mod.INFEASIBLE_EQ:
+        names = ", ".join(t.label for t in P.hard.eqs)
+        raise InfeasibleError(
+            f"hard equality constraints are inconsistent ({names}): "
+            f"least-squares residual {d[0]:.3g}"
+        )
+    if code == mod.INFEASIBLE_HARD and np.isinf(d[1]):
+        raise InfeasibleError(
+            "constraints: the hard equalities fix x completely and it violates the bounds "
+            "or hard inequalities"
+        )
+    if code == mod.INFEASIBLE_HARD:
+        raise InfeasibleError(
+            "constraints: bounds and hard constraints are inconsistent (native engine's "
+            + hard_phase.format(d[1])
+            + ")"
+        )
+    if code == mod.NOT_CONVERGED:
+        raise SolverError(f"{prefix}native engine: the active set{stage} did not converge")
+    if code == mod.TIME_LIMIT:
+        raise SolverError(f"{prefix}native engine: time limit reached in the active set{stage}")
+    if code == mod.NON_FINITE:
+        raise SolverError("native engine produced a non-finite solution")
+    if code == mod.CHECK_FAILED:  # the messages of Stack._check
+        if d[3] == 1:
+            i = int(d[4])
+            raise SolverError(
+                f"backend 'native' returned x[{i}] = {x[i]!r} outside the bounds "
+                f"[{P.lb[i]!r}, {P.ub[i]!r}]"
+            )
+        if d[3] == 2:
+            raise SolverError(
+                "backend 'native' returned a point violating the hard equalities "
+                f"(residual {d[4]:.3g})"
+            )
+        raise SolverError("backend 'native' returned a point violating the hard inequalities")
+    raise SolverError(f"native engine: unknown status {code}")

@@ -24,7 +24,6 @@ import numpy as np
 
 from . import native
 from .compile import CompiledStack
-from .errors import InfeasibleError, SolverError
 
 __all__ = ["available", "resolve_weighted_engine", "NativeWeighted"]
 
@@ -211,44 +210,12 @@ class NativeWeighted:
         self._solver.forget()
 
     def _raise(self, code: int, P: CompiledStack) -> None:
-        mod = self._mod
-        d = self.detail
-        if code == mod.BAD_INPUT:
-            P.check_finite()  # names the NaN/inf (task or bounds) that reached the arrays
-            raise ValueError(f"native engine rejected the data (status {code})")
-        if code == mod.INFEASIBLE_EQ:
-            names = ", ".join(t.label for t in P.hard.eqs)
-            raise InfeasibleError(
-                f"hard equality constraints are inconsistent ({names}): "
-                f"least-squares residual {d[0]:.3g}"
-            )
-        if code == mod.INFEASIBLE_HARD and np.isinf(d[1]):
-            raise InfeasibleError(
-                "constraints: the hard equalities fix x completely and it violates the bounds "
-                "or hard inequalities"
-            )
-        if code == mod.INFEASIBLE_HARD:
-            raise InfeasibleError(
-                "constraints: bounds and hard constraints are inconsistent (native engine's "
-                f"dual active set: a hard row stays {d[1]:.3g} away, relative)"
-            )
-        if code == mod.NOT_CONVERGED:
-            raise SolverError("weighted QP: native engine: the active set did not converge")
-        if code == mod.TIME_LIMIT:
-            raise SolverError("weighted QP: native engine: time limit reached in the active set")
-        if code == mod.NON_FINITE:
-            raise SolverError("native engine produced a non-finite solution")
-        if code == mod.CHECK_FAILED:  # the messages of Stack._check
-            if d[3] == 1:
-                i = int(d[4])
-                raise SolverError(
-                    f"backend 'native' returned x[{i}] = {self.x[i]!r} outside the bounds "
-                    f"[{P.lb[i]!r}, {P.ub[i]!r}]"
-                )
-            if d[3] == 2:
-                raise SolverError(
-                    "backend 'native' returned a point violating the hard equalities "
-                    f"(residual {d[4]:.3g})"
-                )
-            raise SolverError("backend 'native' returned a point violating the hard inequalities")
-        raise SolverError(f"native engine: unknown status {code}")
+        native.raise_status(
+            code,
+            self._mod,
+            self.detail,
+            self.x,
+            P,
+            hard_phase="dual active set: a hard row stays {:.3g} away, relative",
+            prefix="weighted QP: ",
+        )
