@@ -1,6 +1,8 @@
 // qpcoord native engine: dense exact strict-hierarchy least squares (implementation).
 #include "hierarchy.hpp"
 
+#include "checks.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -12,7 +14,6 @@ constexpr double kEps = std::numeric_limits<double>::epsilon();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kFeasTol = 1e-9;       // FEAS_TOL: closed-form feasibility test, relative
 constexpr double kInfeasTol = 1e-9;     // INFEAS_TOL: hard part violation, relative
-constexpr double kCheckTol = 1e-6;      // CHECK_TOL: hard equality consistency, relative
 constexpr double kKktTol = 1e-9;        // multiplier sign tolerance, relative to |g|
 constexpr double kViolationTol = 1e-6;  // VIOLATION_TOL: a row counts as violated
 constexpr double kAbsFloor = 1e-14;
@@ -27,24 +28,11 @@ constexpr double kIllConditioned = 1e-3;
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
-inline double widen_lo_by(double lo, double tol) { return lo - tol * std::max(1.0, std::abs(lo)); }
-inline double widen_hi_by(double hi, double tol) { return hi + tol * std::max(1.0, std::abs(hi)); }
 inline bool in_box(double v, double lo, double hi) {
   return v >= widen_lo(lo) && v <= widen_hi(hi);
 }
 inline double finite_abs(double v) { return std::isfinite(v) ? std::abs(v) : 0.0; }
 
-/// Numerical rank of sorted singular values (as qpcoord.core.linalg.numerical_rank).
-int numerical_rank(const Vec& s, int rows, int cols, double scale) {
-  if (s.size() == 0) return 0;
-  const double ref = std::max(s(0), scale);
-  if (ref == 0.0) return 0;
-  const double tol = std::max(rows, cols) * kEps * ref;
-  int rank = 0;
-  for (Eigen::Index i = 0; i < s.size(); ++i)
-    if (s(i) > tol) ++rank;
-  return rank;
-}
 
 }  // namespace
 
@@ -1012,17 +1000,7 @@ double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
                               const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi,
                               const CRef<Vec>& sw, const Vec& x) const {
   const int b = k + 1;
-  double total = 0.0;
-  for (int i = eq0_[b]; i < eq0_[b] + meq_[b]; ++i) {
-    const double d = Aeq.row(i).dot(x) - beq(i);
-    total += d * d;
-  }
-  for (int i = in0_[b]; i < in0_[b] + min_[b]; ++i) {
-    const double v = C.row(i).dot(x);
-    const double gap = sw(i) * (v - std::min(std::max(v, lo(i)), hi(i)));
-    total += gap * gap;
-  }
-  return std::sqrt(total);
+  return qpcoord::level_value(Aeq, beq, eq0_[b], meq_[b], C, lo, hi, sw, in0_[b], min_[b], x);
 }
 
 int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
@@ -1073,35 +1051,13 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   }
   if (!x_.allFinite()) return kNonFinite;
   // the check of every returned x (as Stack._check): bounds, hard equalities, hard rows
-  for (int j = 0; has_bounds_ && j < n_; ++j) {
-    if (!(x_(j) >= widen_lo_by(lb_(j), kCheckTol) && x_(j) <= widen_hi_by(ub_(j), kCheckTol))) {
-      detail(3) = 1;
-      detail(4) = j;
-      x_out = x_;
-      return kCheckFailed;
-    }
-  }
-  if (meq_[0]) {
-    const double scale = std::max(1.0, beq.head(meq_[0]).cwiseAbs().maxCoeff());
-    double worst = 0.0, sq = 0.0;
-    for (int i = 0; i < meq_[0]; ++i) {
-      const double d = Aeq.row(i).dot(x_) - beq(i);
-      worst = std::max(worst, std::abs(d));
-      sq += d * d;
-    }
-    if (worst > kCheckTol * scale) {
-      detail(3) = 2;
-      detail(4) = std::sqrt(sq);
-      return kCheckFailed;
-    }
-  }
-  for (int i = 0; i < min_[0]; ++i) {
-    const double v = C.row(i).dot(x_);
-    if (!(v >= widen_lo_by(lo(i), kCheckTol) && v <= widen_hi_by(hi(i), kCheckTol))) {
-      detail(3) = 3;
-      detail(4) = i;
-      return kCheckFailed;
-    }
+  double where = 0.0;
+  if (const int failed = check_point(x_, has_bounds_, lb_, ub_, Aeq, beq, meq_[0], C, lo, hi,
+                                     min_[0], where)) {
+    detail(3) = failed;
+    detail(4) = where;
+    if (failed == 1) x_out = x_;  // the message shows the offending entry
+    return kCheckFailed;
   }
   // each level keeps the value it was frozen with (lower levels move in its optimal set
   // only): the worst deviation, relative, is reported (Python: status "inaccurate")

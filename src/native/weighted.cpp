@@ -1,6 +1,8 @@
 // qpcoord native engine: the weighted QP (weighted.hpp) and its nanobind binding.
 #include "weighted.hpp"
 
+#include "checks.hpp"
+
 #ifndef QPCOORD_NO_BINDINGS  // defined by the C++-only tools (src/native/tools/)
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
@@ -20,29 +22,13 @@ namespace {
 using Mat = Eigen::MatrixXd;
 using Vec = Eigen::VectorXd;
 
-constexpr double kEps = std::numeric_limits<double>::epsilon();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kFeasTol = 1e-9;   // FEAS_TOL: the unconstrained optimum's acceptance, relative
 constexpr double kQpTol = 1e-12;    // a row counts as violated in the active set, relative
-constexpr double kCheckTol = 1e-6;  // CHECK_TOL: the final check, relative
 constexpr double kSingular = 1e-14;  // methods/weighted.py _SINGULAR
 
 inline double scale_of(double b) { return std::isfinite(b) ? std::max(1.0, std::abs(b)) : 1.0; }
-inline bool within(double v, double lo, double hi, double tol) {
-  return v >= lo - tol * scale_of(lo) && v <= hi + tol * scale_of(hi);
-}
 
-/// Numerical rank of sorted singular values (as qpcoord.core.linalg.numerical_rank).
-int numerical_rank(const Vec& s, int rows, int cols) {
-  if (s.size() == 0) return 0;
-  const double ref = s(0);
-  if (ref == 0.0) return 0;
-  const double tol = std::max(rows, cols) * kEps * ref;
-  int rank = 0;
-  for (Eigen::Index i = 0; i < s.size(); ++i)
-    if (s(i) > tol) ++rank;
-  return rank;
-}
 
 /// In-place lower Cholesky of the leading k x k block of L (H = L L^T, LAPACK's pivots);
 /// false if a pivot is not positive. min_pivot: the smallest diagonal entry of L.
@@ -202,17 +188,7 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
 double Weighted::level_value(int k, const MatC& Aeq, const VecC& beq, const MatC& C,
                              const VecC& lo, const VecC& hi, const VecC& sw) const {
   const int b = k + 1;
-  double total = 0.0;
-  for (int i = eq0_[b]; i < eq0_[b] + meq_[b]; ++i) {
-    const double d = Aeq.row(i).dot(x_) - beq(i);
-    total += d * d;
-  }
-  for (int i = in0_[b]; i < in0_[b] + min_[b]; ++i) {
-    const double v = C.row(i).dot(x_);
-    const double gap = sw(i) * (v - std::min(std::max(v, lo(i)), hi(i)));
-    total += gap * gap;
-  }
-  return std::sqrt(total);
+  return qpcoord::level_value(Aeq, beq, eq0_[b], meq_[b], C, lo, hi, sw, in0_[b], min_[b], x_);
 }
 
 int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC& lo,
@@ -351,34 +327,13 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
   if (!x_.allFinite()) return kWNonFinite;
   // snapped into the bounds (the QP meets them to rounding), then the check of Stack._check
   if (has_bounds_) x_ = x_.cwiseMax(lb).cwiseMin(ub);
-  for (int j = 0; has_bounds_ && j < n_; ++j) {
-    if (!within(x_(j), lb(j), ub(j), kCheckTol)) {
-      detail(3) = 1;
-      detail(4) = j;
-      x_out = x_;
-      return kWCheckFailed;
-    }
-  }
-  if (me_h) {
-    const double scale = std::max(1.0, beq.head(me_h).cwiseAbs().maxCoeff());
-    double worst = 0.0, sq = 0.0;
-    for (int i = 0; i < me_h; ++i) {
-      const double d = Aeq.row(i).dot(x_) - beq(i);
-      worst = std::max(worst, std::abs(d));
-      sq += d * d;
-    }
-    if (worst > kCheckTol * scale) {
-      detail(3) = 2;
-      detail(4) = std::sqrt(sq);
-      return kWCheckFailed;
-    }
-  }
-  for (int i = 0; i < mi_h; ++i) {
-    if (!within(C.row(i).dot(x_), lo(i), hi(i), kCheckTol)) {
-      detail(3) = 3;
-      detail(4) = i;
-      return kWCheckFailed;
-    }
+  double where = 0.0;
+  if (const int failed =
+          check_point(x_, has_bounds_, lb, ub, Aeq, beq, me_h, C, lo, hi, mi_h, where)) {
+    detail(3) = failed;
+    detail(4) = where;
+    if (failed == 1) x_out = x_;  // the message shows the offending entry
+    return kWCheckFailed;
   }
   for (int k = 0; k < Lv; ++k) res_out(k) = level_value(k, Aeq, beq, C, lo, hi, sw);
   x_out = x_;
