@@ -171,6 +171,7 @@ class NativeIKStep(NativeHierarchy):
         self._solved = False
         self.x = np.zeros(P.n)
         self.res = np.zeros(len(P.levels))
+        self._levels = len(P.levels)  # NativeHierarchy._info: the Python reference of info
         self.stats = np.zeros((len(P.levels) + 2, 3))
         self.detail = np.zeros(8)
         self._model, self._data = robot.model, robot.data
@@ -349,36 +350,6 @@ class NativeIKStep(NativeHierarchy):
             lo[...] = task.lower
             hi[...] = task.upper
             sw[...] = task.sqrt_weight
-
-    def _info(self) -> dict:
-        """The solve's statistics, as :meth:`NativeHierarchy.solve` reports them (one pass
-        over the stages: hard, levels, minimum-norm step). The step uses the same dict built
-        by the native ``IKStep.info`` (tested equal); this is its Python reference."""
-        its: list[int] = []
-        hits = calls = 0
-        closed: list[int] = []
-        last = len(self.res)
-        for k, (i, h, c) in enumerate(self.stats.tolist()):
-            its.append(int(i))
-            hits += h
-            if c and 0 < k <= last:
-                closed.append(k - 1)
-            if i or h:
-                calls += 1
-        d = self.detail.tolist()
-        return {
-            "engine": "native",
-            "hard_iterations": its[0],
-            "active_set_iterations": its[1:-1],
-            "min_norm_iterations": its[-1],
-            "warm_start_hits": int(hits),
-            "warm_start_seeded": int(d[7]),
-            "closed_form_levels": closed,
-            # as the Python engine's count of QP calls: the stages that needed the active
-            # set (its iterations or a stored working set) rather than a closed form
-            "qp_calls": calls,
-            "uncertified": [(int(d[6]), d[5])] if d[5] > KKT_TOL else [],
-        }
 
     def _fail(self, code: int, q: Any, t: float, reference: Any) -> None:
         mod = self._mod

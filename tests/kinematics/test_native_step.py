@@ -351,7 +351,7 @@ def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind)
         sc = current.stack.solve(engine="native")
         vc = sc.x
         assert sn.info.keys() == sc.info.keys()
-        assert sn.info == ikn._native._info(), step  # the C++ dict = its Python reference
+        assert sn.info == ikn._native._info(), step  # the C++ dict = NativeHierarchy._info's
         if kind == "position":  # the same rows to rounding: the same solver path
             assert sn.info == sc.info, step
         np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
