@@ -18,23 +18,7 @@
 
 #include "weighted.hpp"
 
-static long long g_allocs = 0;
-void* operator new(std::size_t n) {
-  ++g_allocs;
-  void* p = std::malloc(n ? n : 1);
-  if (!p) throw std::bad_alloc();
-  return p;
-}
-void* operator new[](std::size_t n) {
-  ++g_allocs;
-  void* p = std::malloc(n ? n : 1);
-  if (!p) throw std::bad_alloc();
-  return p;
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+#include "tools/count_allocations.hpp"
 
 using Mat = Eigen::MatrixXd;
 using Vec = Eigen::VectorXd;
