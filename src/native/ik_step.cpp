@@ -424,6 +424,19 @@ class IKStep {
     if (rc != 0) throw nb::python_error();
   }
 
+  /// The kernel's selected rows a = k.sel[r] of Jt_ with right-hand sides
+  /// -gain * e[a] (+ ff[a] with a feed-forward velocity), written by write_row.
+  template <class VE, class VF>
+  void write_error_rows(const Kernel& k, int rows, double gain, const VE& e, bool has_ff,
+                        const VF& ff) {
+    for (int r = 0; r < rows; ++r) {
+      const int a = k.sel[r];
+      double bv = -gain * e[a];
+      if (has_ff) bv += ff[a];
+      write_row(k, r, Jt_.row(a), bv);
+    }
+  }
+
   void write_row(const Kernel& k, int r,
                  const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& src,
                  double bval) {
@@ -548,12 +561,7 @@ class IKStep {
             ff.tail<3>() = Jlog * (RE.transpose() * w);
           }
         }
-        for (int r = 0; r < rows; ++r) {
-          const int a = k.sel[r];
-          double bv = -gain * e[a];
-          if (hv) bv += ff[a];
-          write_row(k, r, Jt_.row(a), bv);
-        }
+        write_error_rows(k, rows, gain, e, hv != 0, ff);
         return true;
       }
       case kOrientation: {
@@ -573,12 +581,7 @@ class IKStep {
         for (int c : f.cols) Jt_.col(c).head<3>() = JR * Vec3(J_(3, c), J_(4, c), J_(5, c));
         Vec3 ff = Vec3::Zero();
         if (hv) ff = Jlog * (E.transpose() * Vec3(k.vel[0], k.vel[1], k.vel[2]));
-        for (int r = 0; r < rows; ++r) {
-          const int a = k.sel[r];
-          double bv = -gain * e[a];
-          if (hv) bv += ff[a];
-          write_row(k, r, Jt_.row(a), bv);
-        }
+        write_error_rows(k, rows, gain, e, hv != 0, ff);
         return true;
       }
       case kCom: {
