@@ -31,3 +31,17 @@ def solver(request) -> str:
 def rng() -> np.random.Generator:
     """A fresh, seeded generator (same numbers in every test and on every run)."""
     return np.random.default_rng(20240611)
+
+
+@pytest.fixture
+def missing_extension(monkeypatch):
+    """Simulate an install without a C++ compiler: the native extension cannot be imported
+    (``qpcoord.core.native`` falls back to the Python engine with one warning)."""
+    from qpcoord.core import native
+
+    def fail():
+        raise ImportError("No module named 'qpcoord._native'")
+
+    monkeypatch.setattr(native, "_import", fail)
+    monkeypatch.setattr(native, "_module", None)
+    monkeypatch.setattr(native, "_warned", False)

@@ -59,18 +59,6 @@ def _same(sp: qc.Solution, sn: qc.Solution) -> None:
 # ---------------------------------------------------------------------------------------
 
 
-@pytest.fixture
-def missing_extension(monkeypatch):
-    """Simulate an install without a C++ compiler: the extension cannot be imported."""
-
-    def fail():
-        raise ImportError("No module named 'qpcoord._native'")
-
-    monkeypatch.setattr(native, "_import", fail)
-    monkeypatch.setattr(native, "_module", None)
-    monkeypatch.setattr(native, "_warned", False)
-
-
 def _small_stack() -> qc.Stack:
     return qc.Stack([qc.Equality(np.eye(3), [1.0, 2.0, 3.0])], bounds=qc.Bounds(-1.0, 1.0))
 

@@ -164,7 +164,7 @@ def test_weighted_default_is_native_where_built():
         s.solve(method="weighted", engine="fast")
 
 
-def test_weighted_falls_back_to_python_without_the_extension(tn_missing):
+def test_weighted_falls_back_to_python_without_the_extension(missing_extension):
     s = tn._small_stack()
     with pytest.warns(RuntimeWarning, match="native engine is not built"):
         sol = s.solve(method="weighted")
@@ -172,16 +172,6 @@ def test_weighted_falls_back_to_python_without_the_extension(tn_missing):
     with pytest.raises(native.NativeUnavailableError):
         s.solve(method="weighted", engine="native")
     assert PersistentQP(s).engine == "python"
-
-
-@pytest.fixture
-def tn_missing(monkeypatch):
-    def fail():
-        raise ImportError("No module named 'qpcoord._native'")
-
-    monkeypatch.setattr(native, "_import", fail)
-    monkeypatch.setattr(native, "_module", None)
-    monkeypatch.setattr(native, "_warned", False)
 
 
 # ---------------------------------------------------------------------------------------

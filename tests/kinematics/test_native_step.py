@@ -569,18 +569,6 @@ def test_warm_start_reset_and_v_prev(robots):
     np.testing.assert_allclose(ik.step(q)[0], v1, atol=1e-12)
 
 
-@pytest.fixture
-def missing_extension(monkeypatch):
-    """Simulate an install without a C++ compiler: the extension cannot be imported."""
-
-    def fail():
-        raise ImportError("No module named 'qpcoord._native'")
-
-    monkeypatch.setattr(native, "_import", fail)
-    monkeypatch.setattr(native, "_module", None)
-    monkeypatch.setattr(native, "_warned", False)
-
-
 def test_without_the_extension_the_python_path_warns_once(robots, missing_extension):
     robot = robots["panda"]
     q = _start(robot)
