@@ -42,7 +42,14 @@ from ..core.errors import SolverError
 from ..core.native import NativeHierarchy, load
 from ..core.polish import KKT_TOL
 from ..core.solution import Solution
-from .frame_tasks import ComTask, FramePositionTask, FrameTask, OrientationTask
+from .frame_tasks import (
+    ComBand,
+    ComTask,
+    FramePositionTask,
+    FrameTask,
+    OrientationTask,
+    SupportPolygon,
+)
 from .tasks import JointLimits, KinematicTask, PositionTask, PostureTask, VelocityLimits
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -51,7 +58,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["NativeIKStep", "KERNELS", "native_kind", "integration_plan"]
 
 #: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class (6:
-#: ``FrameTask(error="split")``).
+#: ``FrameTask(error="split")``; 7 and 8 are inequalities: ``src/native/support_kernels.hpp``).
 KERNELS = {
     PositionTask: 0,
     FramePositionTask: 1,
@@ -59,7 +66,11 @@ KERNELS = {
     OrientationTask: 3,
     ComTask: 4,
     PostureTask: 5,
+    ComBand: 7,
+    SupportPolygon: 8,
 }
+#: The band kernels (Inequality rows).
+_BANDS = (7, 8)
 
 _F64 = np.dtype(np.float64)
 
@@ -68,6 +79,8 @@ def native_kind(task: KinematicTask) -> int | None:
     """The native kernel of ``task`` (a code of :data:`KERNELS`), or ``None`` if its rows are
     built by its Python ``_refresh`` (exact classes only: a subclass may change them)."""
     kind = KERNELS.get(type(task))
+    if kind in _BANDS:
+        return kind
     if kind is None or task.kind != "equality":
         return None
     if kind == 0 and task.robot.frame_id is None:
@@ -144,6 +157,8 @@ def _selection(task: KinematicTask, kind: int) -> list[int]:
         return [int(r) for r in task.robot.rows]
     if kind == 5:
         return [int(j) for j in task.joints]
+    if kind in _BANDS:
+        return list(range(task.task.C.shape[0]))
     return [int(r) for r in task._sel]
 
 
@@ -233,9 +248,24 @@ class NativeIKStep(NativeHierarchy):
                 i += m
             for t in B.ineqs:
                 m = t.C.shape[0]
+                owner = owners.get(id(t))
+                kind = None if owner is None else native_kind(owner)
+                if kind in _BANDS:  # ComBand, SupportPolygon: C, clo, chi, csw natively
+                    if not self.com:
+                        solver.set_com(self._data.com[0], self._data.Jcom)
+                        self.com = True
+                    slots = []
+                    if kind == 8:
+                        for fid in owner.frame_ids:
+                            if fid not in frames:
+                                frames[fid] = self._add_frame(solver, fid)
+                            slots.append(frames[fid])
+                    solver.add_task(kind, owner, t, -1, _selection(owner, kind), j, slots)
+                    self.kernel_tasks.append(owner)
+                    j += m
+                    continue
                 rows = slice(j, j + m)
                 self._in_ops.append((t, P.C[rows], P.clo[rows], P.chi[rows], P.csw[rows]))
-                owner = owners.get(id(t))
                 if owner is not None and owner not in self._python_tasks:
                     self._python_tasks.append(owner)
                 j += m
