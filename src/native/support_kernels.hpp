@@ -16,7 +16,6 @@
 #pragma once
 
 #include <Eigen/Dense>
-#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -84,10 +83,15 @@ inline void contact_point(const M3& R, const V3& p, double ox, double oy, double
 /// order, lo, up: workspaces of n ints; hull: 2n ints.
 inline int convex_hull(const double* x, const double* y, int n, int* order, int* lo, int* up,
                        int* hull) {
-  for (int i = 0; i < n; ++i) order[i] = i;
-  std::stable_sort(order, order + n, [x, y](int a, int b) {
-    return x[a] < x[b] || (x[a] == x[b] && y[a] < y[b]);
-  });
+  // stable insertion sort on (x, y) (std::stable_sort would allocate its buffer; n is small)
+  for (int i = 0; i < n; ++i) {
+    int j = i;
+    while (j > 0 && (x[i] < x[order[j - 1]] || (x[i] == x[order[j - 1]] && y[i] < y[order[j - 1]]))) {
+      order[j] = order[j - 1];
+      --j;
+    }
+    order[j] = i;
+  }
   auto chain = [x, y](const int* idx, int m, int step, int* out) {
     int len = 0;
     for (int t = 0; t < m; ++t) {
