@@ -16,17 +16,21 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   masks, weights),
 - :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
   not in it; a continuous joint's are),
+- :class:`~qpcoord.ComBand` and :class:`~qpcoord.SupportPolygon` (inequality rows ``C``,
+  ``lower``, ``upper``; ``src/native/support_kernels.hpp``: the polygon's hull as
+  ``frame_tasks._hull``, its ``edges`` set; faces, margin, gain and contact points read every
+  step; collinear contacts or a non-finite row make Python raise the task's message),
 - :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
   intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
 
-Every other task (bands, support polygons, relative frames, collision, user tasks, a
-posture over a continuous joint) and constant
-Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
-copied into the same arrays (a hybrid step); any other limit (acceleration limits, user
-limits) makes the whole box Python-computed. The kernels also write each task's own
-``task.task`` arrays (``A``, ``b``) and count a new ``A`` in its ``matrix_version``, as its
-``_refresh`` would. With ``integrate=True`` (:meth:`IK.step_integrate
-<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
+Every other task (other bands, relative frames, collision, user tasks, a posture over a
+continuous joint) and constant Equality/Inequality rows keep their Python ``_refresh``, run
+before the native call and copied into the same arrays (a hybrid step); any other limit
+(acceleration limits, user limits) makes the whole box Python-computed. The kernels also
+write each task's own ``task.task`` arrays (``A``, ``b``; ``C``, ``lower``, ``upper``) and
+count a new ``A`` (``C``) in its ``matrix_version``, as its ``_refresh`` would. With
+``integrate=True`` (:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call
+writes ``q_next`` (:func:`integration_plan`).
 """
 
 from __future__ import annotations
