@@ -227,7 +227,8 @@ class IKStep {
     if (band) {  // sel: the rows 0..rows-1; qidx: a SupportPolygon's frame slots
       if (kind == kComBand && rows != 3) throw nb::value_error("add_task: a ComBand has 3 rows");
       for (int f : qidx)
-        if (f < 0 || f >= (int)frames_.size()) throw nb::value_error("add_task: unknown frame slot");
+        if (f < 0 || f >= (int)frames_.size())
+          throw nb::value_error("add_task: unknown frame slot");
       if (kind == kSupportPolygon && (qidx.empty() || rows % (int)qidx.size() != 0))
         throw nb::value_error("add_task: rows must be frames x contact points");
       if (band_names_.empty())

@@ -86,8 +86,10 @@ inline int convex_hull(const double* x, const double* y, int n, int* order, int*
   // stable insertion sort on (x, y) (std::stable_sort would allocate its buffer; n is small)
   for (int i = 0; i < n; ++i) {
     int j = i;
-    while (j > 0 && (x[i] < x[order[j - 1]] || (x[i] == x[order[j - 1]] && y[i] < y[order[j - 1]]))) {
-      order[j] = order[j - 1];
+    while (j > 0) {
+      const int o = order[j - 1];
+      if (!(x[i] < x[o] || (x[i] == x[o] && y[i] < y[o]))) break;
+      order[j] = o;
       --j;
     }
     order[j] = i;

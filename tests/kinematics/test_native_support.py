@@ -291,6 +291,30 @@ def test_planar_closed_loop_matches_the_python_engine(planar):
     assert binding > 5
 
 
+@needs_native
+def test_hard_band_and_polygon_rows_are_native_and_match(planar):
+    """The bands as hard constraints (the stack's hard inequality rows)."""
+    q = _planar_q(planar, moved=False)
+
+    def build(engine):
+        poly = SupportPolygon(planar, ["c1", "c2", "c3", "c4"], margin=0.05, gain=20.0)
+        c = planar.com(q)
+        band = ComBand(planar, c - [0.02, 1.0, 1.0], c + [1.0, 0.01, 1.0], gain=20.0)
+        tip = planar.frame_pose(q, "tip")[:3, 3] + [-1.0, 0.5, 0.0]
+        task = qc.FramePositionTask(planar, "tip", tip, gain=20.0)
+        ik = qc.IK(planar, [task], 0.01, limits=None, constraints=[poly, band], engine=engine)
+        return ik, poly
+
+    (ikn, poly), (ikp, polyp) = build("native"), build("python")
+    assert not ikn._native._hybrid and poly in ikn._native.kernel_tasks
+    for step in range(40):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(poly.task.C, polyp.task.C, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = planar.integrate(q, vn, 0.01)
+
+
 # ---------------------------------------------------------------------------------------
 # errors
 # ---------------------------------------------------------------------------------------
