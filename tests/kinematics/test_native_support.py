@@ -315,6 +315,33 @@ def test_hard_band_and_polygon_rows_are_native_and_match(planar):
         q = planar.integrate(q, vn, 0.01)
 
 
+@needs_native
+def test_a_python_band_beside_the_native_ones_is_hybrid_and_matches(planar):
+    """A PositionBand (Python refresh) in the same level as the native band kernels: the
+    rows of both kinds land in their own places of the stacked arrays."""
+    q = _planar_q(planar, moved=False)
+
+    def build(engine):
+        c = planar.com(q)
+        band = ComBand(planar, c - [0.02, 1.0, 1.0], c + [1.0, 0.01, 1.0], gain=20.0)
+        tip = planar.position(q)
+        wall = qc.PositionBand(planar, lower=[tip[0] - 0.05, -np.inf, -np.inf], gain=10.0)
+        poly = SupportPolygon(planar, ["c1", "c2", "c3", "c4"], margin=0.05, gain=20.0)
+        task = qc.PositionTask(planar, tip + [-1.0, 0.5, 0.0], gain=20.0)
+        return qc.IK(planar, [[band, wall, poly], task], 0.01, limits=None, engine=engine)
+
+    ikn, ikp = build("native"), build("python")
+    assert ikn._native._hybrid and len(ikn._native.kernel_tasks) == 3  # the position task too
+    for step in range(40):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        Pn, Pp = ikn.stack._compiled, ikp.stack._compiled
+        Pp.refresh_stacked()
+        np.testing.assert_allclose(Pn.C, Pp.C, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        q = planar.integrate(q, vn, 0.01)
+
+
 # ---------------------------------------------------------------------------------------
 # errors
 # ---------------------------------------------------------------------------------------
