@@ -124,6 +124,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max(n, 1));
+  tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
 
@@ -711,50 +712,96 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   return kOk;
 }
 
-bool Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
-                               Eigen::Ref<Vec> dz) {
+int Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double tol,
+                              double floor, Eigen::Ref<Vec> dz) {
   const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
   const bool wide = me <= r;
-  const int p = wide ? me : r;
+  qr_wide_ = wide;
+  const int p = wide ? me : r;  // columns of the factorised matrix
+  const int m = wide ? r : me;  // its rows
   if (wide)
     mqr_.matrix(r, me) = M.transpose();
   else
     mqr_.matrix(me, r) = M;
-  if (mqr_.factor(0.0, 0.0) < p) return false;
-  // sigma_min(M) = sigma_min(R) >= 1 / |R^-1|_F: well above the floor (damping threshold,
-  // rank tolerance), every singular value passes it and the SVD's closed form is the
-  // plain minimum-norm least-squares solution
-  auto Ri = rinv_.topLeftCorner(p, p);
+  // pivoted QR stopping at the first pivot column of norm <= tol: the numerical rank
+  const int rank = mqr_.factor(rank_revealing_qr ? tol : 0.0, 0.0);
+  if (rank == 0 || (rank < p && !rank_revealing_qr)) return -1;
+  const auto Af = mqr_.matrix();
+  // the dropped block R22 (the trailing matrix, every reflector applied): its norm bounds
+  // the singular values past the rank, which the SVD's rank rule must drop as well
+  if (rank < p && !(Af.bottomRightCorner(m - rank, p - rank).norm() < tol)) return -1;
+  // sigma_rank(M) >= sigma_min(R11) >= 1 / |R11^-1|_F: well above the floor (damping
+  // threshold, rank tolerance), every singular value up to the rank passes it and the SVD's
+  // closed form is the plain minimum-norm least-squares solution
+  auto Ri = rinv_.topLeftCorner(rank, rank);
   Ri.setIdentity();
   mqr_.solve_r_matrix(Ri);
   const double inv = Ri.norm();
-  if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return false;
-  qr_smin_ = 1.0 / inv;
-  if (wide) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
+  if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return -1;
+  if (wide && rank == me) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
     mqr_.min_norm_transposed_solve(e, dz);
-  } else {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
+  } else if (!wide && rank == r) {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
     auto u = ute_.head(me);
     u = e;
     mqr_.apply_qt(u);
     mqr_.solve_r(u);
     for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = u(i);
+  } else if (!wide) {
+    // M P = Qf [R11 R12; 0 0] (R22 dropped): dz = P w, w the minimum-norm solution of
+    // [R11 R12] w = (Qf^T e)(0:rank), through the QR of T = [R11 R12]^T (r x rank)
+    auto u = ute_.head(me);
+    u = e;
+    mqr_.apply_qt(u);
+    MapMat T = tqr_.matrix(r, rank);
+    T.setZero();
+    for (int j = 0; j < rank; ++j) T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
+    if (tqr_.factor(0.0, 0.0) < rank) return -1;
+    auto w = u_.head(r);
+    tqr_.min_norm_transposed_solve(u.head(rank), w);
+    for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = w(i);
+  } else {
+    // M^T P = Qf [R11 R12; 0 0]: M = P L Qf1^T with L = [R11^T; R12^T] (me x rank, full
+    // column rank); dz = Qf [v; 0], v the least-squares solution of L v = P^T e (QR of L)
+    MapMat L = tqr_.matrix(me, rank);
+    L.setZero();
+    for (int j = 0; j < rank; ++j) L.col(j).tail(me - j) = Af.row(j).segment(j, me - j).transpose();
+    if (tqr_.factor(0.0, 0.0) < rank) return -1;
+    auto u = ute_.head(me);
+    for (int i = 0; i < me; ++i) u(i) = e(mqr_.perm(i));
+    tqr_.apply_qt(u);
+    tqr_.solve_r(u);
+    dz.setZero();
+    for (int i = 0; i < rank; ++i) dz(tqr_.perm(i)) = u(i);
+    mqr_.apply_q(dz);
   }
-  return true;
+  qr_smin_ = 1.0 / inv;
+  qr_rank_ = rank;
+  ++qr_closed_forms_;
+  return rank;
 }
 
-void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int me, int rank,
+void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
                                 Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out) {
+  const int r = static_cast<int>(out.rows());
   if (!by_qr) {
     out = svd.matrixV().leftCols(rank);
-  } else if (me < static_cast<int>(out.rows())) {  // wide: Qf's first me columns
+  } else if (qr_wide_) {  // M^T P = Qf R: Qf's first rank columns
     out.setZero();
     for (int i = 0; i < rank; ++i) {
       out(i, i) = 1.0;
       auto col = out.col(i);
       mqr_.apply_q(col);
     }
-  } else {  // M has full column rank: the whole space
+  } else if (rank == r) {  // M has full column rank: the whole space
     out.setIdentity();
+  } else {  // rows of [R11 R12] P^T: P times the first rank columns of T's Q factor
+    auto q = u_.head(r);
+    for (int j = 0; j < rank; ++j) {
+      q.setZero();
+      q(j) = 1.0;
+      tqr_.apply_q(q);
+      for (int i = 0; i < r; ++i) out(mqr_.perm(i), j) = q(i);
+    }
   }
 }
 
@@ -791,9 +838,11 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     // of the SVD, max(s_0, scale) = scale, are known before any factorisation
     tau = damping_ * scale;
     auto dz = tmpr_.head(r_);
-    by_qr = qr_closed_form(M, e, std::max(tau, std::max(me, r_) * kEps * scale), dz);
+    const double rank_tol = std::max(me, r_) * kEps * scale;
+    const int qr_rank = qr_closed_form(M, e, rank_tol, std::max(tau, rank_tol), dz);
+    by_qr = qr_rank > 0;
     if (by_qr) {
-      rank = std::min(me, r_);
+      rank = qr_rank;
       xc.noalias() += Zr * dz;
     } else {
       // thin V: its first rank columns are all a level uses (the damped step, the damping
@@ -819,15 +868,15 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     x_ = xc;
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
-    if (by_qr && me >= r_) {  // M has full column rank: no freedom left
+    if (by_qr && !qr_wide_ && rank == r_) {  // M has full column rank: no freedom left
       r_ = 0;
-    } else if (by_qr) {  // wide, full row rank: null(M) = span(Qf(:, me:)) of M^T's QR
+    } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
       auto Zr2 = Z_.leftCols(r_);
       mqr_.apply_q_right(Zr2);
-      for (int i = 0; i < r_ - me; ++i) Z_.col(i) = Z_.col(me + i);
-      r_ -= me;
-    } else if (rank) {  // Z <- Z null(V_rank^T) (the QR of V_rank: orthonormal, rank `rank`)
-      row_space_basis(svd, by_qr, me, rank, fqr_.matrix(r_, rank));
+      for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
+      r_ -= rank;
+    } else if (rank) {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
+      row_space_basis(svd, by_qr, rank, fqr_.matrix(r_, rank));
       freeze(1.0);
     }
     stats(stage, 2) = 1.0;
@@ -931,7 +980,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // F^T = [V_rank, Z^T C_violated^T] (r x f), null(F) is what the level leaves free
   MapMat Ft = fqr_.matrix(r_, rank + nviol);
   double fscale = 1.0;
-  row_space_basis(svd, by_qr, me, rank, Ft.leftCols(rank));
+  row_space_basis(svd, by_qr, rank, Ft.leftCols(rank));
   {
     int f = rank;
     double fro = 0.0;
@@ -1027,6 +1076,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;
+  qr_closed_forms_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +

@@ -95,6 +95,11 @@ class Hierarchy {
   bool seed_on_miss = true;
   /// Downdate the working set's QR when a row leaves (default) or refactorise (A/B).
   bool downdate = true;
+  /// Closed form of a rank-deficient level by the pivoted QR of its M when the QR shows a
+  /// clear gap (default), else the SVD (A/B: false takes the SVD for every rank-deficient M).
+  bool rank_revealing_qr = true;
+  /// Levels whose closed form came from the QR of M (no SVD) in the last call.
+  int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
   double damping() const { return damping_; }
 
@@ -115,15 +120,19 @@ class Hierarchy {
             bool warm);
   int min_norm(MRef<Mat> stats, bool warm);
 
-  /// The closed form of a level's projected equalities M dz = e by a QR of M, when M has
-  /// full rank and its smallest singular value is certainly above `floor` (the damping
-  /// threshold and the rank tolerance: then the SVD's damped closed form is this plain
-  /// minimum-norm least-squares solution). False: use the SVD.
-  bool qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
-                      Eigen::Ref<Vec> dz);
+  /// The closed form of a level's projected equalities M dz = e by a pivoted QR of M (tall)
+  /// or M^T (wide), when the QR reveals M's numerical rank with a clear gap: the trailing
+  /// block R22 below the rank tolerance `tol` (so sigma_{rank+1}(M) <= |R22|_F < tol) and
+  /// 1/|R11^-1|_F <= sigma_rank(M) above kQrMargin x `floor` (the damping threshold and the
+  /// rank tolerance). Then the SVD's numerical rank is this rank, no singular value is
+  /// damped, and the SVD's truncated closed form is the minimum-norm least-squares solution
+  /// of the complete orthogonal decomposition (R22 dropped), computed here. Returns the rank
+  /// (qr_rank_), or -1: use the SVD.
+  int qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double tol, double floor,
+                     Eigen::Ref<Vec> dz);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
-  /// the QR of qr_closed_form.
-  void row_space_basis(const Svd& svd, bool by_qr, int me, int rank,
+  /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in tqr_).
+  void row_space_basis(const Svd& svd, bool by_qr, int rank,
                        Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out);
   bool feasible(const Eigen::Ref<const Vec>& x) const;
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
@@ -222,6 +231,12 @@ class Hierarchy {
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ztmp_;
   PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
+  /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
+  /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
+  PivotedQR tqr_;
+  int qr_rank_ = 0;         ///< M's rank from the last qr_closed_form
+  bool qr_wide_ = false;    ///< the last qr_closed_form factorised M^T (me <= r)
+  int qr_closed_forms_ = 0;  ///< closed forms by QR in this call
   Mat rinv_;       ///< R^-1 of mqr_ (a bound on M's smallest singular value)
   std::vector<Svd> svds_;
 };
