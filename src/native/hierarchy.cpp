@@ -50,6 +50,7 @@ void LsqProblem::start(int qrows_, int cols_) {
   qrows = qrows_;
   cols = cols_;
   rows = 0;
+  dropped2 = 0.0;
   Q.topLeftCorner(qrows, cols).setZero();
   c.head(qrows).setZero();
 }
@@ -88,6 +89,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   frozen_value_.setZero(std::max(blocks - 1, 1));
   Z_.resize(n, n);
   Cin_.resize(std::max(capacity_, 1), n);
+  CinZ_.resize(std::max(capacity_, 1), std::max(n, 1));
+  cinx_.resize(std::max(capacity_, 1));
   lin_.resize(std::max(capacity_, 1));
   uin_.resize(std::max(capacity_, 1));
   inid_.assign(std::max(capacity_, 1), -1);
@@ -110,6 +113,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   wqr_.reserve(max_cols, max_grows, max_qrows);
   kqr_.reserve(max_qrows, max_cols, 1);
   cqr_.reserve(max_cols, max_cols, 1);
+  kqr_t_.reserve(max_cols, max_qrows, 1);
   fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
@@ -157,13 +161,18 @@ void Hierarchy::inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>
 }
 
 void Hierarchy::add_inherited_rows(LsqProblem& P) {
+  if (k_ == 0) return;
   auto full = rowbuf_.head(P.cols);
   full.setZero();
+  // every inherited row projected at once (one matrix product, not k_ vector products)
+  auto CZ = CinZ_.topLeftCorner(k_, r_);
+  CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
+  auto cx = cinx_.head(k_);
+  cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
-    full.head(r_).noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
-    const double v = Cin_.row(i).dot(x_);
-    const double l = std::min(lin_(i) - v, 0.0);
-    const double u = std::max(uin_(i) - v, 0.0);
+    full.head(r_) = CZ.row(i).transpose();
+    const double l = std::min(lin_(i) - cx(i), 0.0);
+    const double u = std::max(uin_(i) - cx(i), 0.0);
     P.add_row(full, l, u, inid_[i], Cin_.row(i).norm());
   }
 }
@@ -228,10 +237,23 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   const double kmax = K.colwise().norm().maxCoeff();
   const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
   if (!(kmax > tol)) return;
-  kqr_.matrix(qr, nk) = K;
-  const int rk = kqr_.factor(tol, 0.0);
   auto rhs = tvec_.head(qr);
   rhs = -res;
+  // a wide K (more free directions than objective rows) of full row rank: K s = -res is
+  // consistent and its minimum-norm solution comes from one QR of K^T (nk x qr), without
+  // the QR of K and the second one of [R11 R12]^T below
+  if (nk > qr && wide_ls) {
+    kqr_t_.matrix(nk, qr) = K.transpose();
+    if (kqr_t_.factor(tol, 0.0) == qr) {
+      auto s = u_.head(nk);
+      kqr_t_.min_norm_transposed_solve(rhs, s);
+      step.segment(rho, nk) = s;
+      wqr_.apply_q(step);
+      return;
+    }
+  }
+  kqr_.matrix(qr, nk) = K;
+  const int rk = kqr_.factor(tol, 0.0);
   kqr_.apply_qt(rhs);
   // step = Qf [0; s]; K P = Qk [R11 R12; 0 0]: with full column rank s(perm(i)) = u(i),
   // u = R11^-1 (Qk^T (-res))(0:rk); rank-deficient K: the minimum-norm s (as a complete
@@ -277,7 +299,7 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>&
   const double qn = qscale_;
   const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
   const double round =
-      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c.head(qr).norm());
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
   const double tol = (exact_ ? 0.0 : kKktTol * gref) + round;
   int jmin = -1;
   double mmin = kInf;
@@ -308,7 +330,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   const int qr = P.qrows;
   const auto Q = P.Q.topLeftCorner(qr, k);
   const auto c = P.c.head(qr);
-  const double cn = c.norm();
+  const double cn = P.c_norm();
   qscale_ = Q.norm();
   const int max_iter = kIterFactor * (m + k) + 10;
   auto step = step_.head(k);
@@ -345,7 +367,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     // (exact_: a step is taken unless it is rounding: on a direction of curvature tau^2 a
     // step gaining 1e-19 of the objective can still move y by ~1)
     const bool stationary = exact_ ? (gain <= floor || smax <= 8.0 * kEps * yscale)
-                                   : (gain <= 1e-15 * res.squaredNorm() + floor ||
+                                   : (gain <= 1e-15 * (res.squaredNorm() + P.dropped2) + floor ||
                                       smax <= 1e-15 * yscale);
     if (stationary) {
       int drop = -1;
@@ -723,19 +745,34 @@ int Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, doub
     mqr_.matrix(r, me) = M.transpose();
   else
     mqr_.matrix(me, r) = M;
-  // pivoted QR stopping at the first pivot column of norm <= tol: the numerical rank
-  const int rank = mqr_.factor(rank_revealing_qr ? tol : 0.0, 0.0);
-  if (rank == 0 || (rank < p && !rank_revealing_qr)) return -1;
+  // pivoted QR, every step (the full R: a tall level's compressed objective); the rank is
+  // the first pivot of norm <= tol (|R(j, j)| is that pivot column's norm), as a
+  // factorisation stopping there would give
+  const int steps = mqr_.factor(0.0, 0.0);
   const auto Af = mqr_.matrix();
-  // the dropped block R22 (the trailing matrix, every reflector applied): its norm bounds
-  // the singular values past the rank, which the SVD's rank rule must drop as well
-  if (rank < p && !(Af.bottomRightCorner(m - rank, p - rank).norm() < tol)) return -1;
+  int rank = steps;
+  if (rank_revealing_qr) {
+    rank = 0;
+    while (rank < steps && std::abs(Af(rank, rank)) > tol) ++rank;
+  }
+  if (rank == 0 || (rank < p && !rank_revealing_qr)) return -1;
+  // the dropped block R22 (upper triangle of the trailing block; columns past `steps` were
+  // not reduced): its norm bounds the singular values past the rank, which the SVD's rank
+  // rule must drop as well
+  if (rank < p) {
+    double r22 = 0.0;
+    for (int j = rank; j < p; ++j) {
+      const int top = (j < steps) ? j + 1 : m;
+      r22 += Af.col(j).segment(rank, top - rank).squaredNorm();
+    }
+    if (!(std::sqrt(r22) < tol)) return -1;
+  }
   // sigma_rank(M) >= sigma_min(R11) >= 1 / |R11^-1|_F: well above the floor (damping
   // threshold, rank tolerance), every singular value up to the rank passes it and the SVD's
   // closed form is the plain minimum-norm least-squares solution
   auto Ri = rinv_.topLeftCorner(rank, rank);
   Ri.setIdentity();
-  mqr_.solve_r_matrix(Ri);
+  Af.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solveInPlace(Ri);
   const double inv = Ri.norm();
   if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return -1;
   if (wide && rank == me) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
@@ -900,13 +937,26 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       if (s(i) < tau) ++ndamp;
   const int cols = r_ + mv;
   LsqProblem& P = P_;
-  P.start(me + ndamp + mv, cols);
-  if (me) {
+  // a tall level factorised by the QR (M P = Qm [R; 0]): its objective rows compressed to
+  // R P^T and (Qm^T e)(0:r), exactly (an orthogonal transform; the rest of Qm^T e is
+  // constant in y, kept in dropped2)
+  const int qme =
+      (by_qr && !qr_wide_ && compress_objective && mqr_.rank() == r_) ? r_ : me;
+  P.start(qme + ndamp + mv, cols);
+  if (qme < me) {
+    const auto Af = mqr_.matrix();
+    for (int j = 0; j < r_; ++j) P.Q.col(mqr_.perm(j)).head(j + 1) = Af.col(j).head(j + 1);
+    auto u = ute_.head(me);
+    u = e;
+    mqr_.apply_qt(u);
+    P.c.head(r_) = u.head(r_);
+    P.dropped2 = u.tail(me - r_).squaredNorm();
+  } else if (me) {
     P.Q.topLeftCorner(me, r_) = M;
     P.c.head(me) = e;
   }
   {
-    int d = me;
+    int d = qme;
     for (int i = 0; i < rank && ndamp; ++i)
       if (s(i) < tau)
         P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i);
@@ -918,7 +968,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   for (int j = 0; j < mv; ++j) {
     const int row = i0 + mov_[j];
     const double v = C.row(row).dot(x_);
-    P.Q(me + ndamp + j, r_ + j) = sw(row);
+    P.Q(qme + ndamp + j, r_ + j) = sw(row);
     g.setZero();
     g.head(r_).noalias() = Zr.transpose() * C.row(row).transpose();
     g(r_ + j) = -1.0;

@@ -61,6 +61,12 @@ struct LsqProblem {
   int rows = 0;         ///< rows of G in use
   int cols = 0;
   int qrows = 0;
+  /// |r0|^2 of objective rows dropped by an orthogonal compression (constant in y: a tall
+  /// level's M and e replaced by R and (Qm^T e)(0:r) of M's QR): the tolerances that are
+  /// relative to the objective's value or |c| count it, so they do not change
+  double dropped2 = 0.0;
+  /// |c| of the uncompressed objective
+  double c_norm() const { return std::sqrt(c.head(qrows).squaredNorm() + dropped2); }
   void resize(int max_qrows, int max_grows, int max_cols);
   void start(int qrows_, int cols_);
   /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind.
@@ -98,6 +104,12 @@ class Hierarchy {
   /// Closed form of a rank-deficient level by the pivoted QR of its M when the QR shows a
   /// clear gap (default), else the SVD (A/B: false takes the SVD for every rank-deficient M).
   bool rank_revealing_qr = true;
+  /// Least squares of a tall level whose closed form came from the QR of M on the compressed
+  /// objective R (r rows instead of M's me; default) or on M itself (A/B).
+  bool compress_objective = true;
+  /// A wide projected objective K of full row rank: its minimum-norm step from one QR of
+  /// K^T (default) or from the QR of K and of [R11 R12]^T (A/B).
+  bool wide_ls = true;
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
   int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
@@ -188,6 +200,8 @@ class Hierarchy {
   Mat Z_;  ///< n x r orthonormal basis of the remaining freedom
   int r_ = 0;
   Mat Cin_;  ///< inherited rows (capacity x n)
+  Mat CinZ_;  ///< workspace: the inherited rows projected, Cin Z (capacity x n)
+  Vec cinx_;  ///< workspace: Cin x
   Vec lin_, uin_;
   std::vector<int> inid_;
   int k_ = 0;
@@ -218,6 +232,7 @@ class Hierarchy {
   PivotedQR kqr_;  ///< the projected objective K = Q N (qrows x (k - rank))
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
+  PivotedQR kqr_t_;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
   Mat Qt_;         ///< Q Qf
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
   /// active_set decides stationarity and multiplier signs to rounding, not to kKktTol and a
