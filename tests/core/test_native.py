@@ -634,6 +634,51 @@ def test_rank_deficient_closed_form_by_qr_equals_the_svd(seed, box):
 
 
 @needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compressed_and_wide_least_squares_equal_the_plain_ones(seed):
+    """Conflicting inequality levels on few equality rows (a wide projected objective: its
+    step from one QR of K^T) and a last level of many rank-deficient equality rows beside
+    inequality rows (a tall level factorised by the QR: its least squares on the compressed
+    objective R), warm over moving bounds and targets: every step equals the solver with
+    both off (``compress_objective``, ``wide_ls``) and the Python engine (level values 1e-9
+    relative, x to 1e-7)."""
+    from qpcoord.core.native import NativeHierarchy
+
+    rng = np.random.default_rng(seed)
+    n = 40
+    st = _hard_random_stack(seed, n=n, levels=1)
+    C = rng.standard_normal((10, n))
+    tall = qc.Equality(
+        rng.standard_normal((40, 12)) @ rng.standard_normal((12, n)), rng.standard_normal(40)
+    )
+    last = qc.Inequality(C, rng.uniform(0.5, 1.0, 10), np.full(10, np.inf))
+    st = qc.Stack([*st.levels, [tall, last]], bounds=qc.Bounds(-np.ones(n), np.ones(n)))
+    P = st._compiled
+    new = NativeHierarchy(P, st.damping)
+    plain = NativeHierarchy(P, st.damping)
+    plain._solver.compress_objective = False
+    plain._solver.wide_ls = False
+    ineqs = [t for lev in st.levels for t in lev if isinstance(t, qc.Inequality)]
+    b0 = tall.b.copy()
+    for step in range(8):
+        for j, t in enumerate(ineqs):
+            shift = 0.05 * np.sin(0.7 * step + j)
+            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        tall.update(b=b0 + 0.1 * np.sin(0.5 * step + np.arange(40)))
+        xn, rn, info = new.solve(P)
+        assert new._solver.qr_closed_forms == 2  # the wide first and the tall last level
+        # the last level's least squares ran (later steps: warm trials on the same problem)
+        assert step > 0 or info["active_set_iterations"][-1] > 0
+        xp, rp, _ = plain.solve(P)
+        sp = st.solve(engine="python")
+        for r in (rn, rp):
+            np.testing.assert_allclose(r, sp.level_residuals, rtol=1e-9, atol=1e-10)
+        scale = max(1.0, float(np.max(np.abs(sp.x))))
+        assert np.max(np.abs(xn - xp)) <= 1e-9 * scale
+        assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale
+
+
+@needs_native
 def test_a_missed_hard_phase_set_seeds_its_start():
     """Hard inequality rows that x = 0 breaks: the least-violation phase runs at every call.
     As the rows move its stored working set misses; the seeded start (the set's point, each
