@@ -6,7 +6,8 @@
 //   levels above; then the minimum-norm x over the last optimal set.
 //
 // Algorithm: variable elimination. x = xbar + Z z with Z an orthonormal basis of the freedom
-// left. Per level: the damped closed form of the projected equalities (SVD, min-norm); if it
+// left. Per level: the damped closed form of the projected equalities (min-norm: a pivoted QR
+// when it reveals the rank with a clear gap and no damping applies, else the SVD); if it
 // meets the level's inequalities, the inherited rows and the bounds it is the optimum.
 // Otherwise an exact primal active-set least-squares solve in y = (z, w), w the slacks of the
 // level's inequality rows, from a feasible start (z = 0, w = the rows' current violation),
