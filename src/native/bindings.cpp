@@ -128,6 +128,18 @@ NB_MODULE(_native, m) {
               "refactorise it (False; for comparisons).")
       .def_prop_ro("downdates", &Hierarchy::downdates,
                    "Rows that left a working set through a QR downdate in the last call.")
+      .def_rw("rank_revealing_qr", &Hierarchy::rank_revealing_qr,
+              "Closed form of a rank-deficient level from the pivoted QR of its projected "
+              "equalities when the QR shows a clear rank gap (True, default), else the SVD "
+              "(False: the SVD for every rank-deficient level; for comparisons).")
+      .def_rw("compress_objective", &Hierarchy::compress_objective,
+              "Least squares of a tall level whose closed form came from a QR on the compressed "
+              "objective R (True, default) or on its projected equalities (False; comparisons).")
+      .def_rw("wide_ls", &Hierarchy::wide_ls,
+              "Least-squares step of a wide projected objective of full row rank from one QR "
+              "of its transpose (True, default) or two QRs (False; for comparisons).")
+      .def_prop_ro("qr_closed_forms", &Hierarchy::qr_closed_forms,
+                   "Levels whose closed form came from a QR (no SVD) in the last call.")
       .def_prop_ro("n", &Hierarchy::n)
       .def_prop_ro("num_levels", &Hierarchy::num_levels)
       .def_prop_ro("damping", &Hierarchy::damping);

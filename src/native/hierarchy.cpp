@@ -50,6 +50,7 @@ void LsqProblem::start(int qrows_, int cols_) {
   qrows = qrows_;
   cols = cols_;
   rows = 0;
+  dropped2 = 0.0;
   Q.topLeftCorner(qrows, cols).setZero();
   c.head(qrows).setZero();
 }
@@ -88,6 +89,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   frozen_value_.setZero(std::max(blocks - 1, 1));
   Z_.resize(n, n);
   Cin_.resize(std::max(capacity_, 1), n);
+  CinZ_.resize(std::max(capacity_, 1), std::max(n, 1));
+  cinx_.resize(std::max(capacity_, 1));
   lin_.resize(std::max(capacity_, 1));
   uin_.resize(std::max(capacity_, 1));
   inid_.assign(std::max(capacity_, 1), -1);
@@ -110,6 +113,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   wqr_.reserve(max_cols, max_grows, max_qrows);
   kqr_.reserve(max_qrows, max_cols, 1);
   cqr_.reserve(max_cols, max_cols, 1);
+  kqr_t_.reserve(max_cols, max_qrows, 1);
   fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
@@ -124,6 +128,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max(n, 1));
+  tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
 
@@ -156,13 +161,18 @@ void Hierarchy::inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>
 }
 
 void Hierarchy::add_inherited_rows(LsqProblem& P) {
+  if (k_ == 0) return;
   auto full = rowbuf_.head(P.cols);
   full.setZero();
+  // every inherited row projected at once (one matrix product, not k_ vector products)
+  auto CZ = CinZ_.topLeftCorner(k_, r_);
+  CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
+  auto cx = cinx_.head(k_);
+  cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
-    full.head(r_).noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
-    const double v = Cin_.row(i).dot(x_);
-    const double l = std::min(lin_(i) - v, 0.0);
-    const double u = std::max(uin_(i) - v, 0.0);
+    full.head(r_) = CZ.row(i).transpose();
+    const double l = std::min(lin_(i) - cx(i), 0.0);
+    const double u = std::max(uin_(i) - cx(i), 0.0);
     P.add_row(full, l, u, inid_[i], Cin_.row(i).norm());
   }
 }
@@ -227,10 +237,23 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   const double kmax = K.colwise().norm().maxCoeff();
   const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
   if (!(kmax > tol)) return;
-  kqr_.matrix(qr, nk) = K;
-  const int rk = kqr_.factor(tol, 0.0);
   auto rhs = tvec_.head(qr);
   rhs = -res;
+  // a wide K (more free directions than objective rows) of full row rank: K s = -res is
+  // consistent and its minimum-norm solution comes from one QR of K^T (nk x qr), without
+  // the QR of K and the second one of [R11 R12]^T below
+  if (nk > qr && wide_ls) {
+    kqr_t_.matrix(nk, qr) = K.transpose();
+    if (kqr_t_.factor(tol, 0.0) == qr) {
+      auto s = u_.head(nk);
+      kqr_t_.min_norm_transposed_solve(rhs, s);
+      step.segment(rho, nk) = s;
+      wqr_.apply_q(step);
+      return;
+    }
+  }
+  kqr_.matrix(qr, nk) = K;
+  const int rk = kqr_.factor(tol, 0.0);
   kqr_.apply_qt(rhs);
   // step = Qf [0; s]; K P = Qk [R11 R12; 0 0]: with full column rank s(perm(i)) = u(i),
   // u = R11^-1 (Qk^T (-res))(0:rk); rank-deficient K: the minimum-norm s (as a complete
@@ -276,7 +299,7 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>&
   const double qn = qscale_;
   const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
   const double round =
-      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c.head(qr).norm());
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
   const double tol = (exact_ ? 0.0 : kKktTol * gref) + round;
   int jmin = -1;
   double mmin = kInf;
@@ -307,7 +330,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   const int qr = P.qrows;
   const auto Q = P.Q.topLeftCorner(qr, k);
   const auto c = P.c.head(qr);
-  const double cn = c.norm();
+  const double cn = P.c_norm();
   qscale_ = Q.norm();
   const int max_iter = kIterFactor * (m + k) + 10;
   auto step = step_.head(k);
@@ -344,7 +367,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     // (exact_: a step is taken unless it is rounding: on a direction of curvature tau^2 a
     // step gaining 1e-19 of the objective can still move y by ~1)
     const bool stationary = exact_ ? (gain <= floor || smax <= 8.0 * kEps * yscale)
-                                   : (gain <= 1e-15 * res.squaredNorm() + floor ||
+                                   : (gain <= 1e-15 * (res.squaredNorm() + P.dropped2) + floor ||
                                       smax <= 1e-15 * yscale);
     if (stationary) {
       int drop = -1;
@@ -711,50 +734,111 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   return kOk;
 }
 
-bool Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
-                               Eigen::Ref<Vec> dz) {
+int Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double tol,
+                              double floor, Eigen::Ref<Vec> dz) {
   const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
   const bool wide = me <= r;
-  const int p = wide ? me : r;
+  qr_wide_ = wide;
+  const int p = wide ? me : r;  // columns of the factorised matrix
+  const int m = wide ? r : me;  // its rows
   if (wide)
     mqr_.matrix(r, me) = M.transpose();
   else
     mqr_.matrix(me, r) = M;
-  if (mqr_.factor(0.0, 0.0) < p) return false;
-  // sigma_min(M) = sigma_min(R) >= 1 / |R^-1|_F: well above the floor (damping threshold,
-  // rank tolerance), every singular value passes it and the SVD's closed form is the
-  // plain minimum-norm least-squares solution
-  auto Ri = rinv_.topLeftCorner(p, p);
+  // pivoted QR, every step (the full R: a tall level's compressed objective); the rank is
+  // the first pivot of norm <= tol (|R(j, j)| is that pivot column's norm), as a
+  // factorisation stopping there would give
+  const int steps = mqr_.factor(0.0, 0.0);
+  const auto Af = mqr_.matrix();
+  int rank = steps;
+  if (rank_revealing_qr) {
+    rank = 0;
+    while (rank < steps && std::abs(Af(rank, rank)) > tol) ++rank;
+  }
+  if (rank == 0 || (rank < p && !rank_revealing_qr)) return -1;
+  // the dropped block R22 (upper triangle of the trailing block; columns past `steps` were
+  // not reduced): its norm bounds the singular values past the rank, which the SVD's rank
+  // rule must drop as well
+  if (rank < p) {
+    double r22 = 0.0;
+    for (int j = rank; j < p; ++j) {
+      const int top = (j < steps) ? j + 1 : m;
+      r22 += Af.col(j).segment(rank, top - rank).squaredNorm();
+    }
+    if (!(std::sqrt(r22) < tol)) return -1;
+  }
+  // sigma_rank(M) >= sigma_min(R11) >= 1 / |R11^-1|_F: well above the floor (damping
+  // threshold, rank tolerance), every singular value up to the rank passes it and the SVD's
+  // closed form is the plain minimum-norm least-squares solution
+  auto Ri = rinv_.topLeftCorner(rank, rank);
   Ri.setIdentity();
-  mqr_.solve_r_matrix(Ri);
+  Af.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solveInPlace(Ri);
   const double inv = Ri.norm();
-  if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return false;
-  qr_smin_ = 1.0 / inv;
-  if (wide) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
+  if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return -1;
+  if (wide && rank == me) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
     mqr_.min_norm_transposed_solve(e, dz);
-  } else {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
+  } else if (!wide && rank == r) {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
     auto u = ute_.head(me);
     u = e;
     mqr_.apply_qt(u);
     mqr_.solve_r(u);
     for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = u(i);
+  } else if (!wide) {
+    // M P = Qf [R11 R12; 0 0] (R22 dropped): dz = P w, w the minimum-norm solution of
+    // [R11 R12] w = (Qf^T e)(0:rank), through the QR of T = [R11 R12]^T (r x rank)
+    auto u = ute_.head(me);
+    u = e;
+    mqr_.apply_qt(u);
+    MapMat T = tqr_.matrix(r, rank);
+    T.setZero();
+    for (int j = 0; j < rank; ++j) T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
+    if (tqr_.factor(0.0, 0.0) < rank) return -1;
+    auto w = u_.head(r);
+    tqr_.min_norm_transposed_solve(u.head(rank), w);
+    for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = w(i);
+  } else {
+    // M^T P = Qf [R11 R12; 0 0]: M = P L Qf1^T with L = [R11^T; R12^T] (me x rank, full
+    // column rank); dz = Qf [v; 0], v the least-squares solution of L v = P^T e (QR of L)
+    MapMat L = tqr_.matrix(me, rank);
+    L.setZero();
+    for (int j = 0; j < rank; ++j) L.col(j).tail(me - j) = Af.row(j).segment(j, me - j).transpose();
+    if (tqr_.factor(0.0, 0.0) < rank) return -1;
+    auto u = ute_.head(me);
+    for (int i = 0; i < me; ++i) u(i) = e(mqr_.perm(i));
+    tqr_.apply_qt(u);
+    tqr_.solve_r(u);
+    dz.setZero();
+    for (int i = 0; i < rank; ++i) dz(tqr_.perm(i)) = u(i);
+    mqr_.apply_q(dz);
   }
-  return true;
+  qr_smin_ = 1.0 / inv;
+  qr_rank_ = rank;
+  ++qr_closed_forms_;
+  return rank;
 }
 
-void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int me, int rank,
+void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
                                 Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out) {
+  const int r = static_cast<int>(out.rows());
   if (!by_qr) {
     out = svd.matrixV().leftCols(rank);
-  } else if (me < static_cast<int>(out.rows())) {  // wide: Qf's first me columns
+  } else if (qr_wide_) {  // M^T P = Qf R: Qf's first rank columns
     out.setZero();
     for (int i = 0; i < rank; ++i) {
       out(i, i) = 1.0;
       auto col = out.col(i);
       mqr_.apply_q(col);
     }
-  } else {  // M has full column rank: the whole space
+  } else if (rank == r) {  // M has full column rank: the whole space
     out.setIdentity();
+  } else {  // rows of [R11 R12] P^T: P times the first rank columns of T's Q factor
+    auto q = u_.head(r);
+    for (int j = 0; j < rank; ++j) {
+      q.setZero();
+      q(j) = 1.0;
+      tqr_.apply_q(q);
+      for (int i = 0; i < r; ++i) out(mqr_.perm(i), j) = q(i);
+    }
   }
 }
 
@@ -791,9 +875,11 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     // of the SVD, max(s_0, scale) = scale, are known before any factorisation
     tau = damping_ * scale;
     auto dz = tmpr_.head(r_);
-    by_qr = qr_closed_form(M, e, std::max(tau, std::max(me, r_) * kEps * scale), dz);
+    const double rank_tol = std::max(me, r_) * kEps * scale;
+    const int qr_rank = qr_closed_form(M, e, rank_tol, std::max(tau, rank_tol), dz);
+    by_qr = qr_rank > 0;
     if (by_qr) {
-      rank = std::min(me, r_);
+      rank = qr_rank;
       xc.noalias() += Zr * dz;
     } else {
       // thin V: its first rank columns are all a level uses (the damped step, the damping
@@ -819,15 +905,15 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     x_ = xc;
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
-    if (by_qr && me >= r_) {  // M has full column rank: no freedom left
+    if (by_qr && !qr_wide_ && rank == r_) {  // M has full column rank: no freedom left
       r_ = 0;
-    } else if (by_qr) {  // wide, full row rank: null(M) = span(Qf(:, me:)) of M^T's QR
+    } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
       auto Zr2 = Z_.leftCols(r_);
       mqr_.apply_q_right(Zr2);
-      for (int i = 0; i < r_ - me; ++i) Z_.col(i) = Z_.col(me + i);
-      r_ -= me;
-    } else if (rank) {  // Z <- Z null(V_rank^T) (the QR of V_rank: orthonormal, rank `rank`)
-      row_space_basis(svd, by_qr, me, rank, fqr_.matrix(r_, rank));
+      for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
+      r_ -= rank;
+    } else if (rank) {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
+      row_space_basis(svd, by_qr, rank, fqr_.matrix(r_, rank));
       freeze(1.0);
     }
     stats(stage, 2) = 1.0;
@@ -851,13 +937,26 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       if (s(i) < tau) ++ndamp;
   const int cols = r_ + mv;
   LsqProblem& P = P_;
-  P.start(me + ndamp + mv, cols);
-  if (me) {
+  // a tall level factorised by the QR (M P = Qm [R; 0]): its objective rows compressed to
+  // R P^T and (Qm^T e)(0:r), exactly (an orthogonal transform; the rest of Qm^T e is
+  // constant in y, kept in dropped2)
+  const int qme =
+      (by_qr && !qr_wide_ && compress_objective && mqr_.rank() == r_) ? r_ : me;
+  P.start(qme + ndamp + mv, cols);
+  if (qme < me) {
+    const auto Af = mqr_.matrix();
+    for (int j = 0; j < r_; ++j) P.Q.col(mqr_.perm(j)).head(j + 1) = Af.col(j).head(j + 1);
+    auto u = ute_.head(me);
+    u = e;
+    mqr_.apply_qt(u);
+    P.c.head(r_) = u.head(r_);
+    P.dropped2 = u.tail(me - r_).squaredNorm();
+  } else if (me) {
     P.Q.topLeftCorner(me, r_) = M;
     P.c.head(me) = e;
   }
   {
-    int d = me;
+    int d = qme;
     for (int i = 0; i < rank && ndamp; ++i)
       if (s(i) < tau)
         P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i);
@@ -869,7 +968,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   for (int j = 0; j < mv; ++j) {
     const int row = i0 + mov_[j];
     const double v = C.row(row).dot(x_);
-    P.Q(me + ndamp + j, r_ + j) = sw(row);
+    P.Q(qme + ndamp + j, r_ + j) = sw(row);
     g.setZero();
     g.head(r_).noalias() = Zr.transpose() * C.row(row).transpose();
     g(r_ + j) = -1.0;
@@ -931,7 +1030,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // F^T = [V_rank, Z^T C_violated^T] (r x f), null(F) is what the level leaves free
   MapMat Ft = fqr_.matrix(r_, rank + nviol);
   double fscale = 1.0;
-  row_space_basis(svd, by_qr, me, rank, Ft.leftCols(rank));
+  row_space_basis(svd, by_qr, rank, Ft.leftCols(rank));
   {
     int f = rank;
     double fro = 0.0;
@@ -1027,6 +1126,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;
+  qr_closed_forms_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +

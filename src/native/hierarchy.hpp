@@ -6,7 +6,8 @@
 //   levels above; then the minimum-norm x over the last optimal set.
 //
 // Algorithm: variable elimination. x = xbar + Z z with Z an orthonormal basis of the freedom
-// left. Per level: the damped closed form of the projected equalities (SVD, min-norm); if it
+// left. Per level: the damped closed form of the projected equalities (min-norm: a pivoted QR
+// when it reveals the rank with a clear gap and no damping applies, else the SVD); if it
 // meets the level's inequalities, the inherited rows and the bounds it is the optimum.
 // Otherwise an exact primal active-set least-squares solve in y = (z, w), w the slacks of the
 // level's inequality rows, from a feasible start (z = 0, w = the rows' current violation),
@@ -61,6 +62,12 @@ struct LsqProblem {
   int rows = 0;         ///< rows of G in use
   int cols = 0;
   int qrows = 0;
+  /// |r0|^2 of objective rows dropped by an orthogonal compression (constant in y: a tall
+  /// level's M and e replaced by R and (Qm^T e)(0:r) of M's QR): the tolerances that are
+  /// relative to the objective's value or |c| count it, so they do not change
+  double dropped2 = 0.0;
+  /// |c| of the uncompressed objective
+  double c_norm() const { return std::sqrt(c.head(qrows).squaredNorm() + dropped2); }
   void resize(int max_qrows, int max_grows, int max_cols);
   void start(int qrows_, int cols_);
   /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind.
@@ -95,6 +102,17 @@ class Hierarchy {
   bool seed_on_miss = true;
   /// Downdate the working set's QR when a row leaves (default) or refactorise (A/B).
   bool downdate = true;
+  /// Closed form of a rank-deficient level by the pivoted QR of its M when the QR shows a
+  /// clear gap (default), else the SVD (A/B: false takes the SVD for every rank-deficient M).
+  bool rank_revealing_qr = true;
+  /// Least squares of a tall level whose closed form came from the QR of M on the compressed
+  /// objective R (r rows instead of M's me; default) or on M itself (A/B).
+  bool compress_objective = true;
+  /// A wide projected objective K of full row rank: its minimum-norm step from one QR of
+  /// K^T (default) or from the QR of K and of [R11 R12]^T (A/B).
+  bool wide_ls = true;
+  /// Levels whose closed form came from the QR of M (no SVD) in the last call.
+  int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
   double damping() const { return damping_; }
 
@@ -115,15 +133,19 @@ class Hierarchy {
             bool warm);
   int min_norm(MRef<Mat> stats, bool warm);
 
-  /// The closed form of a level's projected equalities M dz = e by a QR of M, when M has
-  /// full rank and its smallest singular value is certainly above `floor` (the damping
-  /// threshold and the rank tolerance: then the SVD's damped closed form is this plain
-  /// minimum-norm least-squares solution). False: use the SVD.
-  bool qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double floor,
-                      Eigen::Ref<Vec> dz);
+  /// The closed form of a level's projected equalities M dz = e by a pivoted QR of M (tall)
+  /// or M^T (wide), when the QR reveals M's numerical rank with a clear gap: the trailing
+  /// block R22 below the rank tolerance `tol` (so sigma_{rank+1}(M) <= |R22|_F < tol) and
+  /// 1/|R11^-1|_F <= sigma_rank(M) above kQrMargin x `floor` (the damping threshold and the
+  /// rank tolerance). Then the SVD's numerical rank is this rank, no singular value is
+  /// damped, and the SVD's truncated closed form is the minimum-norm least-squares solution
+  /// of the complete orthogonal decomposition (R22 dropped), computed here. Returns the rank
+  /// (qr_rank_), or -1: use the SVD.
+  int qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double tol, double floor,
+                     Eigen::Ref<Vec> dz);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
-  /// the QR of qr_closed_form.
-  void row_space_basis(const Svd& svd, bool by_qr, int me, int rank,
+  /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in tqr_).
+  void row_space_basis(const Svd& svd, bool by_qr, int rank,
                        Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out);
   bool feasible(const Eigen::Ref<const Vec>& x) const;
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
@@ -179,6 +201,8 @@ class Hierarchy {
   Mat Z_;  ///< n x r orthonormal basis of the remaining freedom
   int r_ = 0;
   Mat Cin_;  ///< inherited rows (capacity x n)
+  Mat CinZ_;  ///< workspace: the inherited rows projected, Cin Z (capacity x n)
+  Vec cinx_;  ///< workspace: Cin x
   Vec lin_, uin_;
   std::vector<int> inid_;
   int k_ = 0;
@@ -209,6 +233,7 @@ class Hierarchy {
   PivotedQR kqr_;  ///< the projected objective K = Q N (qrows x (k - rank))
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
+  PivotedQR kqr_t_;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
   Mat Qt_;         ///< Q Qf
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
   /// active_set decides stationarity and multiplier signs to rounding, not to kKktTol and a
@@ -222,6 +247,12 @@ class Hierarchy {
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ztmp_;
   PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
+  /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
+  /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
+  PivotedQR tqr_;
+  int qr_rank_ = 0;         ///< M's rank from the last qr_closed_form
+  bool qr_wide_ = false;    ///< the last qr_closed_form factorised M^T (me <= r)
+  int qr_closed_forms_ = 0;  ///< closed forms by QR in this call
   Mat rinv_;       ///< R^-1 of mqr_ (a bound on M's smallest singular value)
   std::vector<Svd> svds_;
 };

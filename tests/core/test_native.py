@@ -577,6 +577,107 @@ def test_closed_forms_by_qr_and_by_svd_agree_with_python(cond):
         _same(st.solve(engine="python"), st.solve(engine="native"))
 
 
+def _rank_deficient_stack(rng, box: float) -> tuple[qc.Stack, list[qc.Equality]]:
+    """Levels whose projected equalities are exactly rank-deficient: a tall level (9 rows of
+    rank 3 on 8 variables), a wide one (3 rows of rank 2: one row a combination of the
+    others), a conflicting inequality level, a tall level of rank 2 again; the box on top."""
+    n = 8
+    tall = qc.Equality(
+        rng.standard_normal((9, 3)) @ rng.standard_normal((3, n)), rng.standard_normal(9)
+    )
+    W = rng.standard_normal((2, n))
+    wide = qc.Equality(np.vstack([W, W[0] - 2.0 * W[1]]), rng.standard_normal(3))
+    C = rng.standard_normal((4, n))
+    ineq = qc.Inequality(C, rng.uniform(0.5, 1.0, 4), np.full(4, np.inf))
+    low = qc.Equality(
+        rng.standard_normal((6, 2)) @ rng.standard_normal((2, n)), rng.standard_normal(6)
+    )
+    st = qc.Stack([tall, wide, ineq, low], bounds=qc.Bounds(-box, box))
+    return st, [tall, wide, low]
+
+
+@needs_native
+@pytest.mark.parametrize("box", [10.0, 0.4], ids=["box-inactive", "box-active"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_rank_deficient_closed_form_by_qr_equals_the_svd(seed, box):
+    """A rank-deficient level's closed form comes from the rank-revealing QR of its projected
+    equalities (no SVD) when the QR shows a clear gap: tall and wide levels, accepted closed
+    forms and closed forms followed by an active set (the freeze from the QR's row space),
+    warm over moving right-hand sides. Every step equals the SVD path
+    (``rank_revealing_qr = False``) and the Python engine (level values 1e-9 relative, x
+    to 1e-7), and the QR path was taken where the SVD path was not."""
+    from qpcoord.core.native import NativeHierarchy
+
+    rng = np.random.default_rng(seed)
+    st, eqs = _rank_deficient_stack(rng, box)
+    P = st._compiled
+    by_qr = NativeHierarchy(P, st.damping)
+    by_svd = NativeHierarchy(P, st.damping)
+    by_svd._solver.rank_revealing_qr = False
+    targets = [t.b.copy() for t in eqs]
+    qr_forms = svd_forms = 0
+    for step in range(6):
+        for j, (t, b0) in enumerate(zip(eqs, targets, strict=True)):
+            t.update(b=b0 + 0.2 * np.sin(0.8 * step + j + np.arange(b0.size)))
+        xq, rq, _ = by_qr.solve(P)
+        qr_forms += by_qr._solver.qr_closed_forms
+        xs, rs, _ = by_svd.solve(P)
+        svd_forms += by_svd._solver.qr_closed_forms
+        sp = st.solve(engine="python")
+        for r in (rq, rs):
+            np.testing.assert_allclose(r, sp.level_residuals, rtol=1e-9, atol=1e-10)
+        scale = max(1.0, float(np.max(np.abs(sp.x))))
+        assert np.max(np.abs(xq - xs)) <= 1e-9 * scale
+        assert np.max(np.abs(xq - sp.x)) <= X_TOL * scale
+    # the tall and the wide level at every step (the last level may have no freedom left)
+    assert qr_forms >= svd_forms + 6 * 2
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compressed_and_wide_least_squares_equal_the_plain_ones(seed):
+    """Conflicting inequality levels on few equality rows (a wide projected objective: its
+    step from one QR of K^T) and a last level of many rank-deficient equality rows beside
+    inequality rows (a tall level factorised by the QR: its least squares on the compressed
+    objective R), warm over moving bounds and targets: every step equals the solver with
+    both off (``compress_objective``, ``wide_ls``) and the Python engine (level values 1e-9
+    relative, x to 1e-7)."""
+    from qpcoord.core.native import NativeHierarchy
+
+    rng = np.random.default_rng(seed)
+    n = 40
+    st = _hard_random_stack(seed, n=n, levels=1)
+    C = rng.standard_normal((10, n))
+    tall = qc.Equality(
+        rng.standard_normal((40, 12)) @ rng.standard_normal((12, n)), rng.standard_normal(40)
+    )
+    last = qc.Inequality(C, rng.uniform(0.5, 1.0, 10), np.full(10, np.inf))
+    st = qc.Stack([*st.levels, [tall, last]], bounds=qc.Bounds(-np.ones(n), np.ones(n)))
+    P = st._compiled
+    new = NativeHierarchy(P, st.damping)
+    plain = NativeHierarchy(P, st.damping)
+    plain._solver.compress_objective = False
+    plain._solver.wide_ls = False
+    ineqs = [t for lev in st.levels for t in lev if isinstance(t, qc.Inequality)]
+    b0 = tall.b.copy()
+    for step in range(8):
+        for j, t in enumerate(ineqs):
+            shift = 0.05 * np.sin(0.7 * step + j)
+            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        tall.update(b=b0 + 0.1 * np.sin(0.5 * step + np.arange(40)))
+        xn, rn, info = new.solve(P)
+        assert new._solver.qr_closed_forms == 2  # the wide first and the tall last level
+        # the last level's least squares ran (later steps: warm trials on the same problem)
+        assert step > 0 or info["active_set_iterations"][-1] > 0
+        xp, rp, _ = plain.solve(P)
+        sp = st.solve(engine="python")
+        for r in (rn, rp):
+            np.testing.assert_allclose(r, sp.level_residuals, rtol=1e-9, atol=1e-10)
+        scale = max(1.0, float(np.max(np.abs(sp.x))))
+        assert np.max(np.abs(xn - xp)) <= 1e-9 * scale
+        assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale
+
+
 @needs_native
 def test_a_missed_hard_phase_set_seeds_its_start():
     """Hard inequality rows that x = 0 breaks: the least-violation phase runs at every call.

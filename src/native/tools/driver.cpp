@@ -66,7 +66,9 @@ int main(int argc, char** argv) {
   each.reserve(size_t(repeats) * steps);
   long long iters = 0, hits = 0, closed = 0;
   Mat per_stage = Mat::Zero(L + 2, 3);  // summed stats: iterations, warm hits, closed forms
-  long long seeded = 0;
+  long long seeded = 0, qr_forms = 0;
+  // QPCOORD_DRIVER_STEPS=1: print each solve's time, iterations and QR closed forms (stderr)
+  const bool each_step = std::getenv("QPCOORD_DRIVER_STEPS") != nullptr;
   for (int rep = 0; rep < repeats; ++rep) {
     for (int s = 0; s < steps; ++s) {
       const double* p = data.data() + per * s;
@@ -97,6 +99,10 @@ int main(int argc, char** argv) {
       closed += static_cast<long long>(stats.col(2).sum());
       per_stage += stats;
       seeded += static_cast<long long>(detail(7));
+      qr_forms += h.qr_closed_forms();
+      if (each_step)
+        std::fprintf(stderr, "pass %d step %d: %.1f us, iterations %.0f, QR closed forms %d\n",
+                     rep, s, 1e6 * dt, stats.col(0).sum(), h.qr_closed_forms());
     }
   }
   if (xout) std::fclose(xout);
@@ -113,6 +119,7 @@ int main(int argc, char** argv) {
   for (int b = 0; b < L + 2; ++b)
     std::printf(" [%d] %.2f/%.2f/%.2f", b, per_stage(b, 0) / solves, per_stage(b, 1) / solves,
                 per_stage(b, 2) / solves);
-  std::printf("  seeded stages/solve %.2f\n", double(seeded) / solves);
+  std::printf("  seeded stages/solve %.2f  QR closed forms/solve %.2f\n", double(seeded) / solves,
+              double(qr_forms) / solves);
   return 0;
 }
