@@ -16,9 +16,12 @@
 #include <limits>
 #include <vector>
 
+#include <memory>
+
 #include "hierarchy.hpp"
 #include "integrate.hpp"
 #include "spatial.hpp"
+#include "weighted.hpp"
 
 namespace nb = nanobind;
 
@@ -145,8 +148,8 @@ class IKStep {
  public:
   IKStep(int nq, int nv, std::vector<int> meq, std::vector<int> min, bool has_bounds,
          double damping, double dt, std::vector<int> unit_blocks)
-      : nq_(nq), nv_(nv), dt_(dt), unit_(std::move(unit_blocks)),
-        h_(nv, std::move(meq), std::move(min), has_bounds, damping) {
+      : nq_(nq), nv_(nv), dt_(dt), unit_(std::move(unit_blocks)), meq_(meq), min_(min),
+        has_bounds_(has_bounds), h_(nv, std::move(meq), std::move(min), has_bounds, damping) {
     Jt_.resize(6, nv);
     Jl_.resize(6, nv);
     row_.resize(nv);
@@ -264,6 +267,8 @@ class IKStep {
   int limits_mode = 0;
   /// The kernel that returned kTaskData (its index), or -1.
   int failed = -1;
+  /// The weighted QP's last step rebuilt its factor (set by step()).
+  bool refactored = false;
 
   /// The plan of integrate::run (kind, idx_q, idx_v, size per segment, covering q) and the
   /// (nq,) array step(..., integrate=True) writes q_next = integrate(q, x dt) into.
@@ -290,8 +295,29 @@ class IKStep {
     integrator_ = true;
   }
 
+  /// Solve the weighted QP (weighted.hpp, method="weighted") instead of the strict hierarchy:
+  /// regularization and weight_ratio as NativeWeighted's, active the (n + hard rows + soft
+  /// inequality rows,) output of Weighted::solve. The hierarchy's stats stay untouched.
+  void set_weighted(double regularization, double weight_ratio, OutArr active) {
+    if (!bound_) throw nb::value_error("set_weighted: bind first");
+    if (active.ndim() != 1) throw nb::value_error("set_weighted: active must be a vector");
+    w_ = std::make_unique<Weighted>(nv_, meq_, min_, has_bounds_, regularization, weight_ratio);
+    const int blocks = static_cast<int>(meq_.size());
+    int rows = nv_ + (blocks ? meq_[0] + min_[0] : 0);
+    for (int b = 1; b < blocks; ++b) rows += min_[b];
+    if (active.shape(0) != static_cast<size_t>(rows))
+      throw nb::value_error("set_weighted: active has the wrong size");
+    active_ = active;
+  }
+
+  /// Is the weighted QP the step's solver (set_weighted)?
+  bool weighted() const { return static_cast<bool>(w_); }
+
+  /// refactor: for the weighted QP, a matrix the kernels do not write changed (the Python
+  /// side's matrix_version check); a kernel that writes a task's A always refactors.
   int step(nb::ndarray<const double, nb::ndim<1>, nb::device::cpu> q, double t,
-           nb::handle reference, bool warm, double time_left, bool integrate = false) {
+           nb::handle reference, bool warm, double time_left, bool integrate = false,
+           bool refactor = true) {
     failed = -1;
     if (!bound_ || !J_.p) return kBadInput;
     if (static_cast<int64_t>(q.shape(0)) != nq_) return kBadQ;
@@ -338,10 +364,21 @@ class IKStep {
         ubs[i] = bhi[i];
       }
     }
-    const int code =
-        h_.solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]), cvec(out_[4]),
-                 cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm, time_left, mvec(out_[10]),
-                 mvec(out_[11]), mmat(out_[12]), mvec(out_[13]));
+    int code;
+    if (w_) {
+      bool re = refactor;
+      for (const Kernel& k : kernels_) re = re || k.kind != kPosture;
+      code = w_->solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]),
+                       cvec(out_[4]), cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm,
+                       time_left, re, mvec(out_[10]), mvec(out_[11]), mvec(out_[13]),
+                       mvec(active_));
+      refactored = re;
+    } else {
+      code = h_.solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]),
+                      cvec(out_[4]), cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm,
+                      time_left, mvec(out_[10]), mvec(out_[11]), mmat(out_[12]),
+                      mvec(out_[13]));
+    }
     if (integrate && code == 0) {
       if (!integrator_) return kBadInput;
       integrate::run(plan_.data(), static_cast<int>(plan_.size() / 4), qp, qs, out_[10].data(),
@@ -664,10 +701,14 @@ class IKStep {
   int nq_, nv_;
   double dt_;
   std::vector<int> unit_;  ///< (start, size) of each unit-norm block of q
+  std::vector<int> meq_, min_;  ///< rows per block (hard, then the levels)
+  bool has_bounds_;
   std::vector<int> plan_;  ///< integrate::run's segments
   OutArr q_next_;
   bool integrator_ = false;
   Hierarchy h_;
+  std::unique_ptr<Weighted> w_;  ///< set_weighted: the weighted QP solves instead of h_
+  OutArr active_;
   std::vector<OutArr> out_;
   bool bound_ = false;
   View J_, com_, Jcom_;
@@ -701,11 +742,16 @@ void bind_ik_step(nb::module_& m) {
       .def("add_joint_limits", &IKStep::add_joint_limits)
       .def("add_velocity_limits", &IKStep::add_velocity_limits)
       .def("set_integrator", &IKStep::set_integrator, nb::arg("plan"), nb::arg("q_next"))
+      .def("set_weighted", &IKStep::set_weighted, nb::arg("regularization"),
+           nb::arg("weight_ratio"), nb::arg("active"))
       .def("step", &IKStep::step, nb::arg("q"), nb::arg("t"), nb::arg("reference").none(),
-           nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false)
+           nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false,
+           nb::arg("refactor") = true)
       .def("info", &IKStep::info, nb::arg("kkt_tol"))
       .def_rw("limits_mode", &IKStep::limits_mode)
       .def_ro("failed", &IKStep::failed)
+      .def_ro("refactored", &IKStep::refactored)
+      .def_prop_ro("weighted", &IKStep::weighted)
       .def_prop_ro("num_tasks", &IKStep::num_tasks);
   m.attr("IK_BAD_Q") = kBadQ;
   m.attr("IK_TASK_DATA") = kTaskData;
