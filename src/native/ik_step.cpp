@@ -158,7 +158,7 @@ class IKStep {
     hi2_.resize(nv);
     for (const char* s : {"gain", "sqrt_weight", "A", "b", "target", "target_velocity",
                           "_target_inv", "_target_t", "q_ref", "reference_at", "rotation",
-                          "translation", "matrix_version"})
+                          "translation", "matrix_version", "homogeneous"})
       names_.push_back(nb::str(s));
   }
 
@@ -544,13 +544,12 @@ class IKStep {
         const Frame& f = frames_[k.frame];
         nb::object inv = attr(k.task, names_[6]);
         if (inv.is_none()) return false;
-        if (inv.ptr() != k.pose_target.ptr()) {
-          View R, p;
-          if (!view_of(attr(inv, names_[10]), R, 2) || !view_of(attr(inv, names_[11]), p, 1))
-            return false;
+        if (inv.ptr() != k.pose_target.ptr()) {  // a new target: one read of its 4x4
+          View H;
+          if (!view_of(attr(inv, names_[13]), H, 2) || H.rows != 4 || H.cols != 4) return false;
           for (int i = 0; i < 3; ++i) {
-            k.pinv[i] = p[i];
-            for (int j = 0; j < 3; ++j) k.Rinv(i, j) = R(i, j);
+            k.pinv[i] = H(i, 3);
+            for (int j = 0; j < 3; ++j) k.Rinv(i, j) = H(i, j);
           }
           k.pose_target = inv;
         }
