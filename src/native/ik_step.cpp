@@ -784,6 +784,15 @@ void bind_ik_step(nb::module_& m) {
     const Vec3 r = spatial::log3(R, th);
     return Mat3(spatial::jlog3(th, r));
   });
+  m.def(
+      "spatial_rigid_ok",
+      [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> T, double tol) {
+        if (T.shape(0) != 4 || T.shape(1) != 4) return false;
+        return spatial::rigid_ok(T.data(), T.stride(0), T.stride(1), tol);
+      },
+      nb::arg("T"), nb::arg("tol"),
+      "The rigid-transform checks of FrameTask.set_target's fast path on a float64 4x4 "
+      "(qpcoord.kinematics.frame_tasks._rigid_fast).");
   m.def("spatial_log6", [](const Mat3& R, const Vec3& p) { return Vec6(spatial::log6(R, p)); });
   m.def("spatial_jlog6", [](const Mat3& R, const Vec3& p) { return Mat6(spatial::jlog6(R, p)); });
 }

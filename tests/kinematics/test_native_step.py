@@ -276,6 +276,49 @@ def _rotations(
 
 
 @needs_native
+def test_native_rigid_check_is_the_python_check():
+    """``spatial_rigid_ok`` (FrameTask.set_target's fast path) decides as the scalar Python
+    checks on transforms at and around the tolerance (rotation, last row, NaN/inf, overflow,
+    Fortran order and strided views)."""
+    from qpcoord.kinematics import frame_tasks as ft
+
+    mod = native.load()
+    assert ft._native_rigid() is mod.spatial_rigid_ok
+    rng = np.random.default_rng(8)
+    tol = ft.RIGID_TOLERANCE
+    cases = []
+    for k in range(3000):
+        T = np.eye(4)
+        T[:3, :3] = pin.exp3(rng.normal(size=3) * 2)
+        T[:3, 3] = rng.normal(size=3)
+        where = k % 6
+        eps = tol * rng.choice([0.3, 0.9, 0.999, 1.001, 1.1, 3.0])
+        if where == 1:
+            T[rng.integers(3), rng.integers(3)] += eps * rng.choice([-1, 1])
+        elif where == 2:
+            T[3, rng.integers(4)] += eps * rng.choice([-1, 1])
+        elif where == 3:
+            T[:3, :3] *= 1 + eps / 2  # the gram's diagonal moves by ~eps
+        elif where == 4:
+            T[:3, 0] *= -1  # a reflection
+        elif where == 5:
+            T[rng.integers(4), rng.integers(4)] = rng.choice([np.nan, np.inf, 1e308])
+        cases.append(T)
+    cases.append(np.asfortranarray(cases[0]))
+    big = np.zeros((8, 8))
+    big[::2, ::2] = cases[1]
+    cases.append(big[::2, ::2])  # a strided view
+    decided = set()
+    for T in cases:
+        with np.errstate(over="ignore", invalid="ignore"):
+            expected = ft._rigid_ok(T)
+        assert mod.spatial_rigid_ok(T, tol) == expected, T
+        decided.add(expected)
+    assert decided == {True, False}
+    assert not mod.spatial_rigid_ok(np.eye(3), tol)
+
+
+@needs_native
 @pytest.mark.parametrize(("kind", "tol"), [("random", 1e-11), ("small", 1e-11), ("pi", 1e-9)])
 def test_spatial_logs_match_pinocchio(kind, tol):
     """The kernels against Pinocchio. Pinocchio renormalises R first: the acos near pi and
