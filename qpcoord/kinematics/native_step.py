@@ -347,15 +347,12 @@ class NativeIKStep(NativeHierarchy):
             status = "inaccurate"
             k, dev = bad[0]
             info["inaccurate"] = {"level": k, "kkt_residual": dev}
+        # positional (x, status, level_residuals, solver, solve_time, method, info): 0.2 µs
+        # less than by keyword
         return Solution(
-            x=self.x.copy(),
-            status=status,
-            level_residuals=self.res.copy(),
-            solver="native",
-            solve_time=time.perf_counter() - t0,
-            method="hierarchical",
-            info=info,
-        )
+            self.x.copy(), status, self.res.copy(), "native", time.perf_counter() - t0,
+            "hierarchical", info,
+        )  # fmt: skip
 
     def _step_weighted(
         self, q: np.ndarray, t: float, reference: Any, integrate: bool, t0: float
@@ -386,14 +383,9 @@ class NativeIKStep(NativeHierarchy):
             "refactored": self._solver.refactored,
         }
         return Solution(
-            x=self.x.copy(),
-            status="optimal",
-            level_residuals=self.res.copy(),
-            solver="native",
-            solve_time=time.perf_counter() - t0,
-            method="weighted",
-            info=info,
-        )
+            self.x.copy(), "optimal", self.res.copy(), "native", time.perf_counter() - t0,
+            "weighted", info,
+        )  # fmt: skip
 
     def _python_rows(self, q: np.ndarray, t: float, reference: Any) -> None:
         """The hybrid part: the Python tasks' ``_refresh`` and every non-native row copied
