@@ -12,11 +12,11 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/vector.h>
 
+#include <array>
 #include <cmath>
 #include <limits>
-#include <vector>
-
 #include <memory>
+#include <vector>
 
 #include "hierarchy.hpp"
 #include "integrate.hpp"
@@ -405,16 +405,17 @@ class IKStep {
       if (it != 0.0 || h != 0.0) ++calls;
     }
     if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
-    nb::dict out;
-    out["engine"] = "native";
-    out["hard_iterations"] = static_cast<long>(s[0]);
-    out["active_set_iterations"] = levels;
-    out["min_norm_iterations"] = static_cast<long>(s[3 * (stages - 1)]);
-    out["warm_start_hits"] = static_cast<long>(hits);
-    out["warm_start_seeded"] = static_cast<long>(d[7]);
-    out["closed_form_levels"] = closed;
-    out["qp_calls"] = calls;
-    out["uncertified"] = uncertified;
+    nb::dict out;  // keys made once (info_keys_): no str built and hashed per call
+    const nb::str* key = info_keys_.data();
+    out[key[0]] = key[9];  // "native"
+    out[key[1]] = static_cast<long>(s[0]);
+    out[key[2]] = levels;
+    out[key[3]] = static_cast<long>(s[3 * (stages - 1)]);
+    out[key[4]] = static_cast<long>(hits);
+    out[key[5]] = static_cast<long>(d[7]);
+    out[key[6]] = closed;
+    out[key[7]] = calls;
+    out[key[8]] = uncertified;
     return out;
   }
 
@@ -717,6 +718,12 @@ class IKStep {
   std::vector<Kernel> kernels_;
   std::vector<Limit> limits_;
   std::vector<nb::str> names_;
+  /// info()'s keys in its order, then the value "native"
+  std::array<nb::str, 10> info_keys_{
+      nb::str("engine"), nb::str("hard_iterations"), nb::str("active_set_iterations"),
+      nb::str("min_norm_iterations"), nb::str("warm_start_hits"), nb::str("warm_start_seeded"),
+      nb::str("closed_form_levels"), nb::str("qp_calls"), nb::str("uncertified"),
+      nb::str("native")};
   nb::int_ one_ = nb::int_(1);
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
