@@ -912,14 +912,16 @@ def test_the_native_call_does_not_allocate(tmp_path):
 
 
 @needs_native
-def test_an_ik_with_the_native_step_pickles(robots):
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+def test_an_ik_with_the_native_step_pickles(robots, method):
     import pickle
 
     robot = robots["panda"]
     q = _start(robot)
-    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", q), DT, engine="native")
+    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", q), DT, method=method, engine="native")
     v, _ = ik.step(q)
     copy = pickle.loads(pickle.dumps(ik))
     assert copy.engine == "native" and copy._native is not None
+    assert copy._native.weighted == (method == "weighted")
     np.testing.assert_allclose(copy.step(q)[0], v, rtol=0, atol=1e-12)
     np.testing.assert_allclose(ik.step(q)[0], v, rtol=0, atol=1e-12)  # the original still runs
