@@ -1049,7 +1049,11 @@ class SupportPolygon(_BandTask):
         k = len(self.contact_points)
         for f, fid in enumerate(self.frame_ids):
             oMf = pin.updateFramePlacement(robot.model, robot.data, fid)
-            offsets = self.contact_points @ oMf.rotation.T  # world-axes offsets (k, 3)
+            # world-axes offsets R o (k, 3), summed term by term ((o_x R₀ + o_y R₁) + o_z R₂):
+            # a matmul's order of summation depends on the BLAS; this one is reproducible, so
+            # the native kernel (src/native/support_kernels.hpp) finds the same hull vertices
+            R, o = oMf.rotation, self.contact_points
+            offsets = (o[:, 0:1] * R[:, 0] + o[:, 1:2] * R[:, 1]) + o[:, 2:3] * R[:, 2]
             P[f * k : (f + 1) * k] = oMf.translation + offsets
             if jacobians:
                 J = _jacobian(robot, fid, pin.LOCAL_WORLD_ALIGNED)

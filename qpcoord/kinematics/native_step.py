@@ -18,17 +18,21 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   masks, weights),
 - :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
   not in it; a continuous joint's are),
+- :class:`~qpcoord.ComBand` and :class:`~qpcoord.SupportPolygon` (inequality rows ``C``,
+  ``lower``, ``upper``; ``src/native/support_kernels.hpp``: the polygon's hull as
+  ``frame_tasks._hull``, its ``edges`` set; faces, margin, gain and contact points read every
+  step; collinear contacts or a non-finite row make Python raise the task's message),
 - :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
   intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
 
-Every other task (bands, support polygons, relative frames, collision, user tasks, a
-posture over a continuous joint) and constant
-Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
-copied into the same arrays (a hybrid step); any other limit (acceleration limits, user
-limits) makes the whole box Python-computed. The kernels also write each task's own
-``task.task`` arrays (``A``, ``b``) and count a new ``A`` in its ``matrix_version``, as its
-``_refresh`` would. With ``integrate=True`` (:meth:`IK.step_integrate
-<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
+Every other task (other bands, relative frames, collision, user tasks, a posture over a
+continuous joint) and constant Equality/Inequality rows keep their Python ``_refresh``, run
+before the native call and copied into the same arrays (a hybrid step); any other limit
+(acceleration limits, user limits) makes the whole box Python-computed. The kernels also
+write each task's own ``task.task`` arrays (``A``, ``b``; ``C``, ``lower``, ``upper``) and
+count a new ``A`` (``C``) in its ``matrix_version``, as its ``_refresh`` would. With
+``integrate=True`` (:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call
+writes ``q_next`` (:func:`integration_plan`).
 """
 
 from __future__ import annotations
@@ -44,7 +48,14 @@ from ..core.errors import SolverError
 from ..core.native import NativeHierarchy, load, raise_status
 from ..core.polish import KKT_TOL
 from ..core.solution import Solution
-from .frame_tasks import ComTask, FramePositionTask, FrameTask, OrientationTask
+from .frame_tasks import (
+    ComBand,
+    ComTask,
+    FramePositionTask,
+    FrameTask,
+    OrientationTask,
+    SupportPolygon,
+)
 from .tasks import JointLimits, KinematicTask, PositionTask, PostureTask, VelocityLimits
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -53,7 +64,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["NativeIKStep", "KERNELS", "native_kind", "integration_plan"]
 
 #: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class (6:
-#: ``FrameTask(error="split")``).
+#: ``FrameTask(error="split")``; 7 and 8 are inequalities: ``src/native/support_kernels.hpp``).
 KERNELS = {
     PositionTask: 0,
     FramePositionTask: 1,
@@ -61,7 +72,11 @@ KERNELS = {
     OrientationTask: 3,
     ComTask: 4,
     PostureTask: 5,
+    ComBand: 7,
+    SupportPolygon: 8,
 }
+#: The band kernels (Inequality rows).
+_BANDS = (7, 8)
 
 _F64 = np.dtype(np.float64)
 
@@ -70,6 +85,8 @@ def native_kind(task: KinematicTask) -> int | None:
     """The native kernel of ``task`` (a code of :data:`KERNELS`), or ``None`` if its rows are
     built by its Python ``_refresh`` (exact classes only: a subclass may change them)."""
     kind = KERNELS.get(type(task))
+    if kind in _BANDS:
+        return kind
     if kind is None or task.kind != "equality":
         return None
     if kind == 0 and task.robot.frame_id is None:
@@ -146,6 +163,8 @@ def _selection(task: KinematicTask, kind: int) -> list[int]:
         return [int(r) for r in task.robot.rows]
     if kind == 5:
         return [int(j) for j in task.joints]
+    if kind in _BANDS:
+        return list(range(task.task.C.shape[0]))
     return [int(r) for r in task._sel]
 
 
@@ -238,9 +257,24 @@ class NativeIKStep(NativeHierarchy):
                 i += m
             for t in B.ineqs:
                 m = t.C.shape[0]
+                owner = owners.get(id(t))
+                kind = None if owner is None else native_kind(owner)
+                if kind in _BANDS:  # ComBand, SupportPolygon: C, clo, chi, csw natively
+                    if not self.com:
+                        solver.set_com(self._data.com[0], self._data.Jcom)
+                        self.com = True
+                    slots = []
+                    if kind == 8:
+                        for fid in owner.frame_ids:
+                            if fid not in frames:
+                                frames[fid] = self._add_frame(solver, fid)
+                            slots.append(frames[fid])
+                    solver.add_task(kind, owner, t, -1, _selection(owner, kind), j, slots)
+                    self.kernel_tasks.append(owner)
+                    j += m
+                    continue
                 rows = slice(j, j + m)
                 self._in_ops.append((t, P.C[rows], P.clo[rows], P.chi[rows], P.csw[rows]))
-                owner = owners.get(id(t))
                 if owner is not None and owner not in self._python_tasks:
                     self._python_tasks.append(owner)
                 j += m

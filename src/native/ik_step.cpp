@@ -21,6 +21,7 @@
 #include "hierarchy.hpp"
 #include "integrate.hpp"
 #include "spatial.hpp"
+#include "support_kernels.hpp"
 #include "weighted.hpp"
 
 namespace nb = nanobind;
@@ -112,6 +113,8 @@ enum Kind : int {
   kCom,
   kPosture,
   kPoseSplit,  ///< FrameTask(error="split")
+  kComBand,         ///< ComBand (an inequality: support_kernels.hpp)
+  kSupportPolygon,  ///< SupportPolygon (an inequality: support_kernels.hpp)
 };
 
 struct Frame {
@@ -134,6 +137,7 @@ struct Kernel {
   nb::object pose_target;  ///< FrameTask: the pin.SE3 its target inverse was read from
   Mat3 Rinv = Mat3::Identity();
   Vec3 pinv = Vec3::Zero();
+  int band = -1;  ///< a band kind: its index in IKStep::bands_
 };
 
 struct Limit {
@@ -209,17 +213,34 @@ class IKStep {
   /// qidx: for a posture, the q index of each row's joint (a 1-DoF joint: q_ref - q there).
   void add_task(int kind, nb::object task, nb::object eq, int frame, std::vector<int> sel,
                 int row0, std::vector<int> qidx) {
-    if (kind < kPosition || kind > kPoseSplit) throw nb::value_error("add_task: unknown kind");
-    if ((kind != kCom && kind != kPosture) && (frame < 0 || frame >= (int)frames_.size()))
+    if (kind < kPosition || kind > kSupportPolygon)
+      throw nb::value_error("add_task: unknown kind");
+    const bool band = kind == kComBand || kind == kSupportPolygon;
+    if ((kind != kCom && kind != kPosture && !band) &&
+        (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
-    if (kind == kCom && !com_.p) throw nb::value_error("add_task: set_com first");
+    if ((kind == kCom || band) && !com_.p) throw nb::value_error("add_task: set_com first");
     if (!bound_) throw nb::value_error("add_task: bind first");
     const int rows = static_cast<int>(sel.size());
-    if (row0 < 0 || row0 + rows > static_cast<int>(out_[0].shape(0)))
+    if (row0 < 0 || row0 + rows > static_cast<int>(out_[band ? 2 : 0].shape(0)))
       throw nb::value_error("add_task: rows out of range");
     for (int s : sel)
-      if (s < 0 || s >= (kind == kPosture ? nv_ : 6))
+      if (s < 0 || s >= (kind == kPosture ? nv_ : band ? rows : 6))
         throw nb::value_error("add_task: row selection out of range");
+    if (band) {  // sel: the rows 0..rows-1; qidx: a SupportPolygon's frame slots
+      if (kind == kComBand && rows != 3) throw nb::value_error("add_task: a ComBand has 3 rows");
+      for (int f : qidx)
+        if (f < 0 || f >= (int)frames_.size())
+          throw nb::value_error("add_task: unknown frame slot");
+      if (kind == kSupportPolygon && (qidx.empty() || rows % (int)qidx.size() != 0))
+        throw nb::value_error("add_task: rows must be frames x contact points");
+      if (band_names_.empty())
+        for (const char* s : {"C", "lower", "upper", "contact_points", "margin", "edges"})
+          band_names_.push_back(nb::str(s));
+      bands_.emplace_back();
+      bands_.back().frames = qidx;
+      if (kind == kSupportPolygon) bands_.back().size(rows, nv_);
+    }
     if (kind == kPosture) {
       if (qidx.size() != sel.size()) throw nb::value_error("add_task: one q index per row");
       for (int i : qidx)
@@ -233,6 +254,7 @@ class IKStep {
     k.sel = std::move(sel);
     k.row0 = row0;
     k.qidx = std::move(qidx);
+    if (band) k.band = static_cast<int>(bands_.size()) - 1;
     kernels_.push_back(std::move(k));
   }
 
@@ -498,6 +520,7 @@ class IKStep {
   bool run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::handle reference) {
     const double gain = float_attr(k.task, names_[0]);
     const int rows = static_cast<int>(k.sel.size());
+    if (k.band >= 0) return run_band(k, bands_[k.band], gain, rows);
     if (cached(k.eq, names_[1], k.sw, 1, rows) != 1) return false;
     if (cached(k.eq, names_[2], k.A, 2, rows) != 1 || k.A.cols != nv_) return false;
     if (cached(k.eq, names_[3], k.b, 1, rows) != 1) return false;
@@ -654,6 +677,77 @@ class IKStep {
     return false;
   }
 
+  /// A ComBand / SupportPolygon kernel (support_kernels.hpp): its Inequality's C, lower,
+  /// upper and the stacked rows C, clo, chi, csw from row k.row0 (C unweighted, as stacked).
+  bool run_band(const Kernel& k, support::Band<View>& b, double gain, int rows) {
+    const nb::str &kC = band_names_[0], &kLower = band_names_[1], &kUpper = band_names_[2],
+                  &kPoints = band_names_[3], &kMargin = band_names_[4];
+    if (cached(k.eq, names_[1], b.sw, 1, rows) != 1) return false;
+    if (cached(k.eq, kC, b.C, 2, rows) != 1 || b.C.cols != nv_) return false;
+    if (cached(k.eq, kLower, b.lower, 1, rows) != 1) return false;
+    if (cached(k.eq, kUpper, b.upper, 1, rows) != 1) return false;
+    const double c[3] = {com_[0], com_[1], com_[2]};  // data.com[0]
+    double* C = out_[2].data() + static_cast<size_t>(k.row0) * nv_;
+    double* lo = out_[3].data() + k.row0;
+    double* hi = out_[4].data() + k.row0;
+    double* sw = out_[5].data() + k.row0;
+    auto put = [&](int r, const auto& src, double l, double u) {
+      if (std::isnan(l) || std::isnan(u) || l == kInf || u == -kInf || l > u) return false;
+      if (mapped_) {
+        row_.noalias() = M_.transpose() * src.transpose();
+      } else {
+        row_ = src.transpose();
+      }
+      if (!row_.allFinite()) return false;
+      double* Cp = b.C.w();
+      for (int j = 0; j < nv_; ++j) {
+        Cp[r * b.C.s0 + j * b.C.s1] = row_[j];
+        C[static_cast<size_t>(r) * nv_ + j] = row_[j];
+      }
+      b.lower.w()[r * b.lower.s0] = lo[r] = l;
+      b.upper.w()[r * b.upper.s0] = hi[r] = u;
+      sw[r] = b.sw[r];
+      return true;
+    };
+    if (k.kind == kComBand) {
+      if (cached(k.task, kLower, b.lo, 1, 3) != 1 || cached(k.task, kUpper, b.hi, 1, 3) != 1)
+        return false;
+      for (int a = 0; a < 3; ++a) {
+        for (int j = 0; j < nv_; ++j) Jt_(0, j) = Jcom_(a, j);
+        // c is finite: +-inf - c stays +-inf
+        if (!put(a, Jt_.row(0), gain * (b.lo[a] - c[a]), gain * (b.hi[a] - c[a]))) return false;
+      }
+      return true;
+    }
+    const double margin = float_attr(k.task, kMargin);
+    const int nf = static_cast<int>(b.frames.size()), np = rows / nf;
+    if (cached(k.task, kPoints, b.points, 2, np) != 1 || b.points.cols != 3) return false;
+    for (int f = 0; f < nf; ++f) {
+      const Frame& fr = frames_[b.frames[f]];
+      frame_jacobian(fr);
+      for (int i = 0; i < np; ++i) {
+        const int r = f * np + i;
+        support::contact_point(fr.R, fr.p, b.points(i, 0), b.points(i, 1), b.points(i, 2), Jt_,
+                               b.x[r], b.y[r], b.Jx.row(r), b.Jy.row(r));
+      }
+    }
+    for (int j = 0; j < nv_; ++j) {
+      Jt_(0, j) = Jcom_(0, j);
+      Jt_(1, j) = Jcom_(1, j);
+    }
+    if (support::polygon_rows(b, c[0], c[1], Jt_.row(0), Jt_.row(1), gain, margin) < 3)
+      return false;  // collinear contacts: the task's _refresh raises its message
+    for (int r = 0; r < rows; ++r)
+      if (!put(r, b.J.row(r), -kInf, b.ub[r])) return false;
+    // task.edges = h, as _evaluate sets it (a small int: a cached object, no allocation)
+    PyObject* h = PyLong_FromLong(b.edges);
+    if (!h) throw nb::python_error();
+    const int rc = PyObject_SetAttr(k.task.ptr(), band_names_[5].ptr(), h);
+    Py_DECREF(h);
+    if (rc != 0) throw nb::python_error();
+    return true;
+  }
+
   /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
   void box(const double* q, int64_t qs) {
     bool first = true;
@@ -717,6 +811,8 @@ class IKStep {
   std::vector<Frame> frames_;
   std::vector<Kernel> kernels_;
   std::vector<Limit> limits_;
+  std::vector<support::Band<View>> bands_;  ///< ComBand / SupportPolygon data (support_kernels.hpp)
+  std::vector<nb::str> band_names_;         ///< their attribute names (set by the first one)
   std::vector<nb::str> names_;
   /// info()'s keys in its order, then the value "native"
   std::array<nb::str, 10> info_keys_{
