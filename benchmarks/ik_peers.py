@@ -20,7 +20,8 @@ Solvers, stepped in lockstep (one step of each in turn, the order rotating every
 - ``qpcoord strict python``: the same IK with ``engine="python"`` (Python task refresh, the
   Python engine on daqp, ``robot.integrate``);
 - ``qpcoord weighted native``: the same stack as one weighted QP (``weight_ratio`` 1e-3), its
-  default engine (Python task refresh, the native weighted QP, ``robot.integrate``);
+  default engine: one native call per step as the strict one (task rows, limit box, the native
+  weighted QP and the integration of ``q``: ``IK.step_integrate``);
 - ``pink``: ``pink.solve_ik`` with ``solver="daqp"`` (the same backend), then
   ``Configuration.integrate_inplace``;
 - ``placo``: PlaCo 0.10 ``KinematicsSolver`` (its own QP, C++), run by
@@ -29,7 +30,8 @@ Solvers, stepped in lockstep (one step of each in turn, the order rotating every
 
 A timed step is what a control loop does: set the target, kinematics, task updates, the
 QP(s) and the integration (qpcoord: ``set_target`` + ``IK.step_integrate``, or ``IK.step`` +
-``robot.integrate``).
+``robot.integrate``). A pose target is one 4×4 array whose translation is rewritten in place
+at every step, by both qpcoord's loop and PlaCo's side.
 BLAS is limited to one thread. Errors and limit violations are measured in this process with
 qpcoord's Pinocchio model on every solver's configurations.
 
@@ -162,6 +164,9 @@ class QpcoordLoop:
         self.robot, self.q = robot, sc["q0"].copy()
         self.engine, self.targets = engine, sc["targets"]
         self.rotation = sc["rotation"]
+        self._T = np.eye(4)
+        if self.rotation is not None:
+            self._T[:3, :3] = self.rotation
         gain = ALPHA / DT
         if sc["name"] == "talos":
             feet = [qc.FrameTask(robot, s, gain=1.0 / DT) for s in TALOS_SOLES]
@@ -193,13 +198,15 @@ class QpcoordLoop:
         self.ik = qc.IK(
             robot, levels, DT, limits=limits, method=method, solver=solver, engine=engine
         )
-        # the strict native IK integrates q in its one native call (IK.step_integrate)
-        native_step = engine == "native" and method == "hierarchical"
+        # the native IK step (strict or weighted) integrates q in its one native call
+        # (IK.step_integrate)
+        native_step = self.ik._native is not None and self.ik._native.integrates
         self.step_fn = self._step_native if native_step else self._step_python
 
     def _pose(self, k: int) -> np.ndarray:
-        T = np.eye(4)
-        T[:3, :3] = self.rotation
+        """The hand's target pose at step ``k``: one 4×4 array rewritten in place (as PlaCo's
+        side does; ``FrameTask.set_target`` copies it)."""
+        T = self._T
         T[:3, 3] = self.targets[k]
         return T
 

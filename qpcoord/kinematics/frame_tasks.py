@@ -159,17 +159,39 @@ def _rigid_fast(value: Any) -> pin.SE3 | None:
     """:func:`_as_se3` of a float64 4×4 array in a few scalar operations, or ``None`` when
     the checks do not all pass (or ``value`` is of another kind): then :func:`_as_se3`'s full
     path runs and raises its message. The same tests (finite, last row, ``max |RᵀR − I|``,
-    ``det R``) against :data:`RIGID_TOLERANCE`."""
+    ``det R``) against :data:`RIGID_TOLERANCE`, by the native extension where it is built
+    (``spatial_rigid_ok``: the same scalar expressions, 0.3 µs instead of ≈ 3 µs), else by
+    :func:`_rigid_ok`."""
     if type(value) is not np.ndarray or value.shape != (4, 4) or value.dtype != _F64:
         return None
-    (a, b, c, x), (d, e, f, y), (g, h, i, z), (l0, l1, l2, l3) = value.tolist()
-    if not isfinite(a + b + c + x + d + e + f + y + g + h + i + z + l0 + l1 + l2 + l3):
-        return None
-    if max(abs(l0), abs(l1), abs(l2), abs(l3 - 1.0)) > RIGID_TOLERANCE:
-        return None
-    if not _is_rotation(a, b, c, d, e, f, g, h, i):
+    check = _NATIVE_RIGID[0] if _NATIVE_RIGID else _native_rigid()
+    if not (_rigid_ok(value) if check is None else check(value, RIGID_TOLERANCE)):
         return None
     return pin.SE3(value)
+
+
+#: ``[qpcoord._native.spatial_rigid_ok or None]`` once looked up (:func:`_native_rigid`)
+_NATIVE_RIGID: list = []
+
+
+def _native_rigid() -> Any:
+    """The extension's rigid-transform check, or ``None`` if it is not built (looked up
+    once)."""
+    from ..core import native
+
+    fn = getattr(native.load(), "spatial_rigid_ok", None) if native.available() else None
+    _NATIVE_RIGID.append(fn)
+    return fn
+
+
+def _rigid_ok(value: np.ndarray) -> bool:
+    """The checks of :func:`_rigid_fast` on a float64 4×4 array, in Python scalars."""
+    (a, b, c, x), (d, e, f, y), (g, h, i, z), (l0, l1, l2, l3) = value.tolist()
+    if not isfinite(a + b + c + x + d + e + f + y + g + h + i + z + l0 + l1 + l2 + l3):
+        return False
+    if max(abs(l0), abs(l1), abs(l2), abs(l3 - 1.0)) > RIGID_TOLERANCE:
+        return False
+    return _is_rotation(a, b, c, d, e, f, g, h, i)
 
 
 def _is_rotation(a: float, b: float, c: float, d: float, e: float, f: float, g: float,

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..core.linalg import filtered_svd
 from ..core.native import resolve_engine
+from ..core.native_weighted import resolve_weighted_engine
 from ..core.stack import METHODS, Solution, Stack
 from ..core.tasks import Bounds, Equality, Inequality
 from .robot import Robot
@@ -103,12 +104,13 @@ class IK:
         another backend (reported in ``Solution.info["fallbacks"]``).
     engine : {None, "native", "python"}
         ``"native"``: the native IK step (:mod:`qpcoord.kinematics.native_step`): task rows,
-        limit box and strict hierarchy in one compiled call per step (tasks without a
-        native kernel keep their Python refresh). ``"python"``: the tasks' Python refresh
-        and the Python engine of :meth:`Stack.solve <qpcoord.Stack.solve>`. ``None``
-        (default): as :meth:`Stack.solve`'s rule -- native where it is built and
-        applies (``method="hierarchical"``, no ``solver``), else Python (one warning per
-        process if it is not built).
+        limit box and strict hierarchy (``method="weighted"``: the native weighted QP) in
+        one compiled call per step (tasks without a native kernel keep their Python
+        refresh). ``"python"``: the tasks' Python refresh and the Python engine of
+        :meth:`Stack.solve <qpcoord.Stack.solve>`. ``None`` (default): as
+        :meth:`Stack.solve`'s rule -- native where it is built and applies
+        (``method="hierarchical"`` or ``"weighted"``, no ``solver``), else Python (one
+        warning per process if it is not built).
 
     Attributes
     ----------
@@ -183,7 +185,10 @@ class IK:
         )
         self.last: Solution | None = None
         #: ``"native"`` (the native IK step) or ``"python"``: the engine this IK uses
-        self.engine = resolve_engine(engine, method, solver)
+        if method == "weighted":
+            self.engine = resolve_weighted_engine(engine, solver)
+        else:
+            self.engine = resolve_engine(engine, method, solver)
         self._engine_arg = engine
         self._native = None
         if self.engine == "native":

@@ -12,14 +12,17 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/vector.h>
 
+#include <array>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "hierarchy.hpp"
 #include "integrate.hpp"
 #include "spatial.hpp"
 #include "support_kernels.hpp"
+#include "weighted.hpp"
 
 namespace nb = nanobind;
 
@@ -149,8 +152,8 @@ class IKStep {
  public:
   IKStep(int nq, int nv, std::vector<int> meq, std::vector<int> min, bool has_bounds,
          double damping, double dt, std::vector<int> unit_blocks)
-      : nq_(nq), nv_(nv), dt_(dt), unit_(std::move(unit_blocks)),
-        h_(nv, std::move(meq), std::move(min), has_bounds, damping) {
+      : nq_(nq), nv_(nv), dt_(dt), unit_(std::move(unit_blocks)), meq_(meq), min_(min),
+        has_bounds_(has_bounds), h_(nv, std::move(meq), std::move(min), has_bounds, damping) {
     Jt_.resize(6, nv);
     Jl_.resize(6, nv);
     row_.resize(nv);
@@ -159,7 +162,7 @@ class IKStep {
     hi2_.resize(nv);
     for (const char* s : {"gain", "sqrt_weight", "A", "b", "target", "target_velocity",
                           "_target_inv", "_target_t", "q_ref", "reference_at", "rotation",
-                          "translation", "matrix_version"})
+                          "translation", "matrix_version", "homogeneous"})
       names_.push_back(nb::str(s));
   }
 
@@ -286,6 +289,8 @@ class IKStep {
   int limits_mode = 0;
   /// The kernel that returned kTaskData (its index), or -1.
   int failed = -1;
+  /// The weighted QP's last step rebuilt its factor (set by step()).
+  bool refactored = false;
 
   /// The plan of integrate::run (kind, idx_q, idx_v, size per segment, covering q) and the
   /// (nq,) array step(..., integrate=True) writes q_next = integrate(q, x dt) into.
@@ -312,8 +317,29 @@ class IKStep {
     integrator_ = true;
   }
 
+  /// Solve the weighted QP (weighted.hpp, method="weighted") instead of the strict hierarchy:
+  /// regularization and weight_ratio as NativeWeighted's, active the (n + hard rows + soft
+  /// inequality rows,) output of Weighted::solve. The hierarchy's stats stay untouched.
+  void set_weighted(double regularization, double weight_ratio, OutArr active) {
+    if (!bound_) throw nb::value_error("set_weighted: bind first");
+    if (active.ndim() != 1) throw nb::value_error("set_weighted: active must be a vector");
+    w_ = std::make_unique<Weighted>(nv_, meq_, min_, has_bounds_, regularization, weight_ratio);
+    const int blocks = static_cast<int>(meq_.size());
+    int rows = nv_ + (blocks ? meq_[0] + min_[0] : 0);
+    for (int b = 1; b < blocks; ++b) rows += min_[b];
+    if (active.shape(0) != static_cast<size_t>(rows))
+      throw nb::value_error("set_weighted: active has the wrong size");
+    active_ = active;
+  }
+
+  /// Is the weighted QP the step's solver (set_weighted)?
+  bool weighted() const { return static_cast<bool>(w_); }
+
+  /// refactor: for the weighted QP, a matrix the kernels do not write changed (the Python
+  /// side's matrix_version check); a kernel that writes a task's A always refactors.
   int step(nb::ndarray<const double, nb::ndim<1>, nb::device::cpu> q, double t,
-           nb::handle reference, bool warm, double time_left, bool integrate = false) {
+           nb::handle reference, bool warm, double time_left, bool integrate = false,
+           bool refactor = true) {
     failed = -1;
     if (!bound_ || !J_.p) return kBadInput;
     if (static_cast<int64_t>(q.shape(0)) != nq_) return kBadQ;
@@ -360,10 +386,21 @@ class IKStep {
         ubs[i] = bhi[i];
       }
     }
-    const int code =
-        h_.solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]), cvec(out_[4]),
-                 cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm, time_left, mvec(out_[10]),
-                 mvec(out_[11]), mmat(out_[12]), mvec(out_[13]));
+    int code;
+    if (w_) {
+      bool re = refactor;
+      for (const Kernel& k : kernels_) re = re || k.kind != kPosture;
+      code = w_->solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]),
+                       cvec(out_[4]), cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm,
+                       time_left, re, mvec(out_[10]), mvec(out_[11]), mvec(out_[13]),
+                       mvec(active_));
+      refactored = re;
+    } else {
+      code = h_.solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]),
+                      cvec(out_[4]), cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm,
+                      time_left, mvec(out_[10]), mvec(out_[11]), mmat(out_[12]),
+                      mvec(out_[13]));
+    }
     if (integrate && code == 0) {
       if (!integrator_) return kBadInput;
       integrate::run(plan_.data(), static_cast<int>(plan_.size() / 4), qp, qs, out_[10].data(),
@@ -390,16 +427,17 @@ class IKStep {
       if (it != 0.0 || h != 0.0) ++calls;
     }
     if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
-    nb::dict out;
-    out["engine"] = "native";
-    out["hard_iterations"] = static_cast<long>(s[0]);
-    out["active_set_iterations"] = levels;
-    out["min_norm_iterations"] = static_cast<long>(s[3 * (stages - 1)]);
-    out["warm_start_hits"] = static_cast<long>(hits);
-    out["warm_start_seeded"] = static_cast<long>(d[7]);
-    out["closed_form_levels"] = closed;
-    out["qp_calls"] = calls;
-    out["uncertified"] = uncertified;
+    nb::dict out;  // keys made once (info_keys_): no str built and hashed per call
+    const nb::str* key = info_keys_.data();
+    out[key[0]] = key[9];  // "native"
+    out[key[1]] = static_cast<long>(s[0]);
+    out[key[2]] = levels;
+    out[key[3]] = static_cast<long>(s[3 * (stages - 1)]);
+    out[key[4]] = static_cast<long>(hits);
+    out[key[5]] = static_cast<long>(d[7]);
+    out[key[6]] = closed;
+    out[key[7]] = calls;
+    out[key[8]] = uncertified;
     return out;
   }
 
@@ -530,13 +568,12 @@ class IKStep {
         const Frame& f = frames_[k.frame];
         nb::object inv = attr(k.task, names_[6]);
         if (inv.is_none()) return false;
-        if (inv.ptr() != k.pose_target.ptr()) {
-          View R, p;
-          if (!view_of(attr(inv, names_[10]), R, 2) || !view_of(attr(inv, names_[11]), p, 1))
-            return false;
+        if (inv.ptr() != k.pose_target.ptr()) {  // a new target: one read of its 4x4
+          View H;
+          if (!view_of(attr(inv, names_[13]), H, 2) || H.rows != 4 || H.cols != 4) return false;
           for (int i = 0; i < 3; ++i) {
-            k.pinv[i] = p[i];
-            for (int j = 0; j < 3; ++j) k.Rinv(i, j) = R(i, j);
+            k.pinv[i] = H(i, 3);
+            for (int j = 0; j < 3; ++j) k.Rinv(i, j) = H(i, j);
           }
           k.pose_target = inv;
         }
@@ -758,10 +795,14 @@ class IKStep {
   int nq_, nv_;
   double dt_;
   std::vector<int> unit_;  ///< (start, size) of each unit-norm block of q
+  std::vector<int> meq_, min_;  ///< rows per block (hard, then the levels)
+  bool has_bounds_;
   std::vector<int> plan_;  ///< integrate::run's segments
   OutArr q_next_;
   bool integrator_ = false;
   Hierarchy h_;
+  std::unique_ptr<Weighted> w_;  ///< set_weighted: the weighted QP solves instead of h_
+  OutArr active_;
   std::vector<OutArr> out_;
   bool bound_ = false;
   View J_, com_, Jcom_;
@@ -773,6 +814,12 @@ class IKStep {
   std::vector<support::Band<View>> bands_;  ///< ComBand / SupportPolygon data (support_kernels.hpp)
   std::vector<nb::str> band_names_;         ///< their attribute names (set by the first one)
   std::vector<nb::str> names_;
+  /// info()'s keys in its order, then the value "native"
+  std::array<nb::str, 10> info_keys_{
+      nb::str("engine"), nb::str("hard_iterations"), nb::str("active_set_iterations"),
+      nb::str("min_norm_iterations"), nb::str("warm_start_hits"), nb::str("warm_start_seeded"),
+      nb::str("closed_form_levels"), nb::str("qp_calls"), nb::str("uncertified"),
+      nb::str("native")};
   nb::int_ one_ = nb::int_(1);
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
@@ -797,11 +844,16 @@ void bind_ik_step(nb::module_& m) {
       .def("add_joint_limits", &IKStep::add_joint_limits)
       .def("add_velocity_limits", &IKStep::add_velocity_limits)
       .def("set_integrator", &IKStep::set_integrator, nb::arg("plan"), nb::arg("q_next"))
+      .def("set_weighted", &IKStep::set_weighted, nb::arg("regularization"),
+           nb::arg("weight_ratio"), nb::arg("active"))
       .def("step", &IKStep::step, nb::arg("q"), nb::arg("t"), nb::arg("reference").none(),
-           nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false)
+           nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false,
+           nb::arg("refactor") = true)
       .def("info", &IKStep::info, nb::arg("kkt_tol"))
       .def_rw("limits_mode", &IKStep::limits_mode)
       .def_ro("failed", &IKStep::failed)
+      .def_ro("refactored", &IKStep::refactored)
+      .def_prop_ro("weighted", &IKStep::weighted)
       .def_prop_ro("num_tasks", &IKStep::num_tasks);
   m.attr("IK_BAD_Q") = kBadQ;
   m.attr("IK_TASK_DATA") = kTaskData;
@@ -835,6 +887,15 @@ void bind_ik_step(nb::module_& m) {
     const Vec3 r = spatial::log3(R, th);
     return Mat3(spatial::jlog3(th, r));
   });
+  m.def(
+      "spatial_rigid_ok",
+      [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> T, double tol) {
+        if (T.shape(0) != 4 || T.shape(1) != 4) return false;
+        return spatial::rigid_ok(T.data(), T.stride(0), T.stride(1), tol);
+      },
+      nb::arg("T"), nb::arg("tol"),
+      "The rigid-transform checks of FrameTask.set_target's fast path on a float64 4x4 "
+      "(qpcoord.kinematics.frame_tasks._rigid_fast).");
   m.def("spatial_log6", [](const Mat3& R, const Vec3& p) { return Vec6(spatial::log6(R, p)); });
   m.def("spatial_jlog6", [](const Mat3& R, const Vec3& p) { return Mat6(spatial::jlog6(R, p)); });
 }

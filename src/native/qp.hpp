@@ -137,10 +137,13 @@ class DualActiveSet {
         auto u = u_.head(iq_);
         u = w;
         Rk.template triangularView<Eigen::Upper>().solveInPlace(u);
-        const double umax = std::max(1.0, u.cwiseAbs().maxCoeff());
+        // a negative multiplier beyond rounding (relative to the largest one: with levels
+        // weighted down to rho^k, the multipliers of a low level's rows are tiny, and an
+        // absolute threshold would keep a row that the optimum releases)
+        const double umax = u.cwiseAbs().maxCoeff();
         bool ok = y.allFinite() && u.allFinite();
         for (int k = 0; ok && k < iq_; ++k) {
-          if (u(k) < -1e-9 * umax) ok = false;
+          if (u(k) < -1e-12 * umax) ok = false;
           else if (u(k) < 0.0) u(k) = 0.0;
         }
         if (ok) {

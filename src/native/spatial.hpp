@@ -6,7 +6,9 @@
 #pragma once
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 namespace qpcoord {
@@ -146,6 +148,29 @@ inline Mat6 jlog6(const Mat3& R, const Vec3& p) {
   J.bottomLeftCorner<3, 3>().setZero();
   J.bottomRightCorner<3, 3>() = A;
   return J;
+}
+
+/// The checks of qpcoord.kinematics.frame_tasks' rigid-transform fast path on a 4x4 whose
+/// entry (i, j) is p[i s0 + j s1], term by term as its scalar Python (same sums, same order):
+/// the 16 entries' sum finite, the last row (0, 0, 0, 1) within tol, max |R^T R - I| <= tol
+/// and |det R - 1| <= tol.
+inline bool rigid_ok(const double* p, std::int64_t s0, std::int64_t s1, double tol) {
+  auto at = [&](int i, int j) { return p[i * s0 + j * s1]; };
+  double sum = 0.0;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) sum += at(i, j);
+  if (!std::isfinite(sum)) return false;
+  const double last = std::max(std::max(std::abs(at(3, 0)), std::abs(at(3, 1))),
+                               std::max(std::abs(at(3, 2)), std::abs(at(3, 3) - 1.0)));
+  if (last > tol) return false;
+  const double a = at(0, 0), b = at(0, 1), c = at(0, 2), d = at(1, 0), e = at(1, 1),
+               f = at(1, 2), g = at(2, 0), h = at(2, 1), i = at(2, 2);
+  const double gram = std::max({std::abs(a * a + d * d + g * g - 1.0),
+                                std::abs(b * b + e * e + h * h - 1.0),
+                                std::abs(c * c + f * f + i * i - 1.0), std::abs(a * b + d * e + g * h),
+                                std::abs(a * c + d * f + g * i), std::abs(b * c + e * f + h * i)});
+  const double det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
+  return gram <= tol && std::abs(det - 1.0) <= tol;
 }
 
 }  // namespace spatial

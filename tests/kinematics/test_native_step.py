@@ -276,6 +276,49 @@ def _rotations(
 
 
 @needs_native
+def test_native_rigid_check_is_the_python_check():
+    """``spatial_rigid_ok`` (FrameTask.set_target's fast path) decides as the scalar Python
+    checks on transforms at and around the tolerance (rotation, last row, NaN/inf, overflow,
+    Fortran order and strided views)."""
+    from qpcoord.kinematics import frame_tasks as ft
+
+    mod = native.load()
+    assert ft._native_rigid() is mod.spatial_rigid_ok
+    rng = np.random.default_rng(8)
+    tol = ft.RIGID_TOLERANCE
+    cases = []
+    for k in range(3000):
+        T = np.eye(4)
+        T[:3, :3] = pin.exp3(rng.normal(size=3) * 2)
+        T[:3, 3] = rng.normal(size=3)
+        where = k % 6
+        eps = tol * rng.choice([0.3, 0.9, 0.999, 1.001, 1.1, 3.0])
+        if where == 1:
+            T[rng.integers(3), rng.integers(3)] += eps * rng.choice([-1, 1])
+        elif where == 2:
+            T[3, rng.integers(4)] += eps * rng.choice([-1, 1])
+        elif where == 3:
+            T[:3, :3] *= 1 + eps / 2  # the gram's diagonal moves by ~eps
+        elif where == 4:
+            T[:3, 0] *= -1  # a reflection
+        elif where == 5:
+            T[rng.integers(4), rng.integers(4)] = rng.choice([np.nan, np.inf, 1e308])
+        cases.append(T)
+    cases.append(np.asfortranarray(cases[0]))
+    big = np.zeros((8, 8))
+    big[::2, ::2] = cases[1]
+    cases.append(big[::2, ::2])  # a strided view
+    decided = set()
+    for T in cases:
+        with np.errstate(over="ignore", invalid="ignore"):
+            expected = ft._rigid_ok(T)
+        assert mod.spatial_rigid_ok(T, tol) == expected, T
+        decided.add(expected)
+    assert decided == {True, False}
+    assert not mod.spatial_rigid_ok(np.eye(3), tol)
+
+
+@needs_native
 @pytest.mark.parametrize(("kind", "tol"), [("random", 1e-11), ("small", 1e-11), ("pi", 1e-9)])
 def test_spatial_logs_match_pinocchio(kind, tol):
     """The kernels against Pinocchio. Pinocchio renormalises R first: the acos near pi and
@@ -498,6 +541,155 @@ def test_floating_base_whole_body_is_native_and_matches(robots):
 
 
 # ---------------------------------------------------------------------------------------
+# method="weighted": the same kernels, then the native weighted QP, in one call
+# ---------------------------------------------------------------------------------------
+
+_WEIGHTED_INFO = ("engine", "iterations", "warm_start_hit", "regularized", "active_rows",
+                  "qp_calls", "refactored")  # fmt: skip
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "planar_3r", "talos"])
+@pytest.mark.parametrize("kind", KINDS)
+def test_weighted_step_matches_the_python_weighted_path(robots, name, kind):
+    """One native call (kernels + weighted QP) against the previous path, Python refresh +
+    native weighted QP (x to 1e-9, the same info dict), and the Python engine (daqp, to its
+    accuracy), on a closed loop with binding limits on the Panda."""
+    robot = _robot(robots, name)
+    if kind == "com" and robot.mass <= 0:
+        pytest.skip("massless model")
+    q = _start(robot)
+    if name == "panda":
+        q = 0.5 * (robot.lower + robot.upper)
+        q[3] = robot.lower[3] + 0.02  # near a limit
+
+    def levels():
+        lv = _kind_levels(robot, kind, q)
+        if name == "panda":
+            lv[0].gain = 20.0  # fast: the speed and position limits bind
+        return lv
+
+    ikn, ikp = _pair(robot, levels, method="weighted")
+    assert ikn._native.weighted and not ikn._native._hybrid
+    current = qc.IK(robot, levels(), DT, method="weighted", engine="python")
+    binding = 0
+    for step in range(60):
+        t = step * DT
+        vn, sn = ikn.step(q, t)
+        vp, sp = ikp.step(q, t)
+        current.refresh(q, t)
+        sc = current.stack.solve(method="weighted", engine="native")
+        assert sn.method == sp.method == "weighted" and sn.solver == "native"
+        assert tuple(sn.info) == _WEIGHTED_INFO and sn.info["refactored"]
+        assert sn.info == sc.info, step
+        # the same QP as the native weighted QP on the Python rows (to rounding: Talos'
+        # floating base, held by ε = 1e-9 only, amplifies rounding ~1e9 times); daqp's
+        # answer (the Python engine) to its own accuracy
+        tol = 1e-6 if name == "talos" else 1e-9
+        np.testing.assert_allclose(vn, sc.x, rtol=0, atol=tol, err_msg=f"step {step}")
+        np.testing.assert_allclose(
+            sn.level_residuals, sc.level_residuals, rtol=1e-9, atol=1e-10, err_msg=str(step)
+        )
+        if name != "talos":  # Talos' floating base is held by ε = 1e-9 only: ill-conditioned
+            np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-6, err_msg=f"step {step}")
+        np.testing.assert_allclose(
+            sn.level_residuals, sp.level_residuals, rtol=1e-6, atol=1e-9, err_msg=str(step)
+        )
+        if ikn.limits:
+            lo, hi = ikn.bounds.lower, ikn.bounds.upper
+            binding += bool(np.any(np.minimum(vn - lo, hi - vn) < 1e-9))
+        q = robot.integrate(q, vn, DT)
+    if name == "panda":
+        assert binding >= 5, binding
+
+
+@needs_native
+def test_weighted_step_integrates_and_refactors_only_on_a_change(robots):
+    """A stack whose rows no kernel rewrites (a posture: its A is constant) refactors the
+    weighted QP only when a task's matrix or weight changed (``matrix_version``), as
+    ``NativeWeighted``; ``step_integrate`` writes ``q_next`` in the same call."""
+    robot = robots["panda"]
+    q = _start(robot)
+
+    def levels():
+        return [qc.PostureTask(robot, robot.random_configuration(9), gain=2.0)]
+
+    ikn, ikp = _pair(robot, levels, method="weighted")
+    refactored = []
+    for step in range(6):
+        if step == 3:
+            for ik in (ikn, ikp):
+                ik._dynamic[0].task.update(weight=np.linspace(1.0, 3.0, robot.nv))
+        q_next, vn, sn = ikn.step_integrate(q)
+        vp, _ = ikp.step(q)
+        refactored.append(sn.info["refactored"])
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        np.testing.assert_allclose(q_next, robot.integrate(q, vn, DT), rtol=0, atol=1e-14)
+        q = q_next
+    assert refactored == [True, False, False, True, False, False]
+
+
+@needs_native
+def test_weighted_hybrid_step_matches_the_python_engine(robots):
+    robot = robots["panda"]
+    frame = FRAMES["panda"]
+    q = robot.random_configuration(2)
+    T = _target_pose(robot, q)
+
+    def levels():
+        return [
+            [PositionBand(robot, lower=[-np.inf, -np.inf, 0.3], gain=5.0)],
+            [Height(robot, frame, 0.5), FrameTask(robot, frame, T, gain=3.0, mask="z rx ry")],
+            [qc.Equality(np.eye(robot.nv)[:2], [0.1, -0.1], name="constant")],
+            qc.PostureTask(robot, robot.random_configuration(4)),
+        ]
+
+    limits = lambda: [qc.JointLimits(robot), AccelerationLimits(robot, 30.0)]  # noqa: E731
+    ikn = qc.IK(robot, levels(), DT, limits=limits(), method="weighted")
+    ikp = qc.IK(robot, levels(), DT, limits=limits(), method="weighted", engine="python")
+    ikc = qc.IK(robot, levels(), DT, limits=limits(), method="weighted", engine="python")
+    assert ikn._native.weighted and ikn._native._python_tasks and ikn._native._python_limits
+    for step in range(40):
+        vn, sn = ikn.step(q)
+        vp, sp = ikp.step(q)
+        ikc.refresh(q)
+        sc = ikc.stack.solve(method="weighted", engine="native")  # Python rows, native QP
+        for ik in (ikp, ikc):  # the acceleration limit's previous velocity: the native step's
+            ik.reset(vn)
+        assert sn.info == sc.info, step
+        np.testing.assert_allclose(vn, sc.x, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        # the warm start gives the cold solve's optimum (step 16 once kept a bound whose
+        # multiplier, ~1e-9 at the level weighted 1e-9, was negative)
+        cold, _, _ = ikc.stack._native_weighted.solve(ikc.stack._compiled, warm=False)
+        np.testing.assert_allclose(vn, cold, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        # daqp on four levels 1e-3 apart (the last weighted 1e-9): x to its accuracy only
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-2, err_msg=f"step {step}")
+        np.testing.assert_allclose(
+            sn.level_residuals, sp.level_residuals, rtol=1e-5, atol=1e-9, err_msg=str(step)
+        )
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_weighted_step_errors_are_those_of_the_stack(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    bad = [qc.Equality(np.ones((2, robot.nv)), [0.0, 1.0], name="clash")]
+    msg = "hard equality constraints are inconsistent"
+    for engine in ("native", None):
+        ik = qc.IK(robot, [qc.PostureTask(robot, q)], DT, constraints=bad, method="weighted",
+                   engine=engine)  # fmt: skip
+        assert ik._native is not None
+        with pytest.raises(qc.InfeasibleError, match=msg):
+            ik.step(q)
+    ik = qc.IK(robot, [FrameTask(robot, FRAMES["panda"])], DT, method="weighted")
+    with pytest.raises(ValueError, match="no target"):
+        ik.step(q)
+    with pytest.raises(ValueError, match=r"q"):
+        ik.step(q[:3])
+
+
+# ---------------------------------------------------------------------------------------
 # errors, engine choice, warm start
 # ---------------------------------------------------------------------------------------
 
@@ -543,9 +735,13 @@ def test_engine_choice(robots):
     levels = lambda: [qc.PostureTask(robot, _start(robot))]  # noqa: E731
     assert qc.IK(robot, levels(), DT).engine == "native"  # the default where built
     assert qc.IK(robot, levels(), DT, engine="python").engine == "python"
-    assert qc.IK(robot, levels(), DT, method="weighted").engine == "python"
-    with pytest.raises(ValueError, match="method='weighted' is not supported by the native"):
-        qc.IK(robot, levels(), DT, method="weighted", engine="native")
+    weighted = qc.IK(robot, levels(), DT, method="weighted")
+    assert weighted.engine == "native" and weighted._native.weighted  # one native call
+    assert qc.IK(robot, levels(), DT, method="weighted", engine="python")._native is None
+    with pytest.raises(ValueError, match="method='nullspace' is not supported by the native"):
+        qc.IK(robot, levels(), DT, method="nullspace", limits=None, engine="native")
+    with pytest.raises(ValueError, match="solver='quadprog' is not supported"):
+        qc.IK(robot, levels(), DT, method="weighted", solver="quadprog", engine="native")
     with pytest.raises(ValueError, match="solver='quadprog' is not supported"):
         qc.IK(robot, levels(), DT, solver="quadprog", engine="native")
     with pytest.raises(ValueError, match="unknown engine"):
@@ -672,9 +868,11 @@ from test_native_step import _kind_levels, _start, DT
 count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
 count.restype = ctypes.c_longlong
 robot = qc.robots.load("panda")
-for kind in ("position", "frame_position", "pose", "orientation", "com"):
+for kind, method in [(k, m) for m in ("hierarchical", "weighted")
+                     for k in ("position", "frame_position", "pose", "orientation", "com")]:
     q = _start(robot)
-    ik = qc.IK(robot, _kind_levels(robot, kind, q), DT, engine="native")
+    ik = qc.IK(robot, _kind_levels(robot, kind, q), DT, method=method, engine="native")
+    assert ik._native.weighted == (method == "weighted")
     call = ik._native._solver.step
     pin.computeJointJacobians(robot.model, robot.data, q)
     pin.jacobianCenterOfMass(robot.model, robot.data, False)
@@ -684,14 +882,15 @@ for kind in ("position", "frame_position", "pose", "orientation", "com"):
     before = count()
     for _ in range(500):
         call(q, 0.0, None, True, 10.0, True)
-    print(kind, count() - before)
+    print(kind + "-" + method, count() - before)
 """
 
 
 @needs_native
 def test_the_native_call_does_not_allocate(tmp_path):
-    """The per-step native call (kernels, box, hierarchy, q_next) on the Panda makes no heap
-    allocation after its first calls: malloc is counted by a preloaded shim (glibc)."""
+    """The per-step native call (kernels, box, hierarchy or weighted QP, q_next) on the Panda
+    makes no heap allocation after its first calls: malloc is counted by a preloaded shim
+    (glibc)."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None or not sys.platform.startswith("linux"):
         pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
@@ -708,19 +907,21 @@ def test_the_native_call_does_not_allocate(tmp_path):
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     counts = dict(line.split() for line in proc.stdout.splitlines())
-    assert len(counts) == 5
+    assert len(counts) == 10
     assert all(int(c) == 0 for c in counts.values()), counts
 
 
 @needs_native
-def test_an_ik_with_the_native_step_pickles(robots):
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+def test_an_ik_with_the_native_step_pickles(robots, method):
     import pickle
 
     robot = robots["panda"]
     q = _start(robot)
-    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", q), DT, engine="native")
+    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", q), DT, method=method, engine="native")
     v, _ = ik.step(q)
     copy = pickle.loads(pickle.dumps(ik))
     assert copy.engine == "native" and copy._native is not None
+    assert copy._native.weighted == (method == "weighted")
     np.testing.assert_allclose(copy.step(q)[0], v, rtol=0, atol=1e-12)
     np.testing.assert_allclose(ik.step(q)[0], v, rtol=0, atol=1e-12)  # the original still runs
