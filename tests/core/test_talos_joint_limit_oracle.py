@@ -203,3 +203,24 @@ def test_native_engine_seeded_from_the_previous_step_matches_the_exact_solution(
     sol = stack.solve(engine="native")
     assert sol.info["warm_start_seeded"] >= 1  # the path under test
     np.testing.assert_allclose(sol.x, exact, rtol=0, atol=X_TOL)
+
+
+def test_python_active_set_finishes_a_step_hidden_by_a_large_residual(data, exact):
+    """:func:`~qpcoord.core.polish.active_set_ls` from the native engine's point of step
+    80 (stored as it came out): its step on the working set gains 1.8e-14 of an objective of
+    72.3, under the 1e-15 relative gain test that called it stationary (as the native active
+    set does), but it is 4.5e-8 long; the Python active set takes it."""
+    from qpcoord.core.polish import active_set_ls
+
+    a = _arrays(data, "step")
+    n = a["A3"].shape[1]
+    G = np.vstack((a["A0"], a["A2"], a["C1"], np.eye(n)))
+    lo = np.concatenate((a["b0"], a["b2"], a["lo1"], a["lb"]))
+    hi = np.concatenate((a["b0"], a["b2"], a["hi1"], a["ub"]))
+    y0 = data["x_native_seeded"]
+    assert np.abs(y0 - exact).max() > 4e-8  # the point as found
+    y, converged = active_set_ls(a["A3"], a["b3"], G, lo, hi, y0)
+    assert converged
+    # y0 leaves polygon row 2 by 4.4e-12 (kept, as the engines keep a row they inherit):
+    # the optimum of that working set is 7.2e-12 from the exact one
+    np.testing.assert_allclose(y, exact, rtol=0, atol=1e-10)
