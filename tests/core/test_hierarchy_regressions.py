@@ -140,3 +140,47 @@ def test_exactly_met_level_over_a_nearly_singular_hessian_is_refined(solver):
     tol = 1e-6 if solver == "osqp" else 1e-12
     assert sol.level_residuals[0] < tol * np.linalg.norm(Q)
     assert np.all(sol.x >= 0) and np.all(sol.x <= fmax)
+
+
+def _stack_from_npz(path: Path, fallback: bool = True) -> qc.Stack:
+    """A stack stored level by level as ``L{k}_{j}_eq_{A,b,w}`` / ``L{k}_{j}_in_{C,lo,hi,w}``."""
+    with np.load(path) as f:
+        d = {k: f[k] for k in f.files}
+    levels: dict[int, dict[int, qc.Equality | qc.Inequality]] = {}
+    for key in d:
+        k, j, kind, _ = key.split("_")
+        k, j = int(k[1:]), int(j)
+        if j in levels.setdefault(k, {}):
+            continue
+        p = f"L{k}_{j}_{kind}_"
+        if kind == "eq":
+            task = qc.Equality(d[p + "A"], d[p + "b"], weight=d[p + "w"])
+        else:
+            task = qc.Inequality(d[p + "C"], d[p + "lo"], d[p + "hi"], weight=d[p + "w"])
+        levels[k][j] = task
+    return qc.Stack(
+        [[levels[k][j] for j in sorted(levels[k])] for k in sorted(levels)], fallback=fallback
+    )
+
+
+_DAQP_ONLY = Path(__file__).resolve().parents[1] / "data" / "python_engine_level_qp_infeasible.npz"
+
+
+def test_level_qp_with_a_regularisation_only_z_block_is_solved_with_fallbacks():
+    """The stack below, with the default fallback chain: a fallback backend solves level 3."""
+    sol = _stack_from_npz(_DAQP_ONLY).solve(engine="python")
+    assert sol.status == "optimal" and sol.info["fallbacks"]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=qc.SolverError,
+    reason="Python engine, daqp alone (fallback=False): level 3 (one inequality row, no "
+    "equality rows) is a QP whose z-block is only the 1e-9 regularisation, in a wedge of "
+    "inherited rows opened by 1e-12; daqp calls it infeasible (also opened 100x) although "
+    "z = 0 with its slack is feasible by construction. The native engine solves it. Found by "
+    "hypothesis (test_native_matches_python_on_random_stacks, which uses fallback=False).",
+)
+def test_level_qp_with_a_regularisation_only_z_block_is_solved_by_daqp_alone():
+    sol = _stack_from_npz(_DAQP_ONLY, fallback=False).solve(engine="python")
+    assert sol.status == "optimal"
