@@ -74,6 +74,23 @@ def resolve_weighted_engine(engine: str | None, solver: str | None) -> str:
     return engine
 
 
+def weighted_info(detail: np.ndarray, refactored: bool) -> dict:
+    """The ``Solution.info`` of a native weighted call from its ``detail`` array: ``engine``,
+    ``iterations``, ``warm_start_hit``, ``regularized``, ``active_rows``, ``qp_calls``, and
+    ``refactored`` (whether the Hessian was factored again in that call). Shared by
+    :class:`NativeWeighted` and the weighted native IK step."""
+    d = detail.tolist()
+    return {
+        "engine": "native",
+        "iterations": int(d[2]),
+        "warm_start_hit": bool(d[5]),
+        "regularized": bool(d[6]),
+        "active_rows": int(d[7]),
+        "qp_calls": 1 if d[2] or d[5] else 0,
+        "refactored": refactored,
+    }
+
+
 class NativeWeighted:
     """The native weighted QP of one compiled stack: structure and buffers built once.
 
@@ -193,17 +210,7 @@ class NativeWeighted:
         refactor = versions != self._versions
         self.run(P, warm, time_left, refactor=refactor)  # on an error: raises, set up again
         self._versions = versions
-        d = self.detail.tolist()
-        info = {
-            "engine": "native",
-            "iterations": int(d[2]),
-            "warm_start_hit": bool(d[5]),
-            "regularized": bool(d[6]),
-            "active_rows": int(d[7]),
-            "qp_calls": 1 if d[2] or d[5] else 0,
-            "refactored": refactor,
-        }
-        return self.x.copy(), self.res.copy(), info
+        return self.x.copy(), self.res.copy(), weighted_info(self.detail, refactor)
 
     def forget(self) -> None:
         """Drop the stored working set (the next solve starts cold)."""

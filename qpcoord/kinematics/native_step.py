@@ -46,6 +46,7 @@ import pinocchio as pin
 from ..core.backends import DEFAULT_TIME_LIMIT
 from ..core.errors import SolverError
 from ..core.native import NativeHierarchy, load, raise_status
+from ..core.native_weighted import weighted_info
 from ..core.polish import KKT_TOL
 from ..core.solution import Solution
 from .frame_tasks import (
@@ -406,16 +407,7 @@ class NativeIKStep(NativeHierarchy):
             self._versions = None  # the next step sets up again
             self._fail(code, q, t, reference)
         self._solved = True
-        d = self.detail.tolist()
-        info = {
-            "engine": "native",
-            "iterations": int(d[2]),
-            "warm_start_hit": bool(d[5]),
-            "regularized": bool(d[6]),
-            "active_rows": int(d[7]),
-            "qp_calls": 1 if d[2] or d[5] else 0,
-            "refactored": self._solver.refactored,
-        }
+        info = weighted_info(self.detail, self._solver.refactored)
         return Solution(
             self.x.copy(), "optimal", self.res.copy(), "native", time.perf_counter() - t0,
             "weighted", info,

@@ -860,6 +860,28 @@ void* realloc(void* p, size_t s) {
 }
 """
 
+
+def run_counting_malloc(tmp_path: Path, script: str) -> str:
+    """Run ``script`` (a template with ``{tests}``: this folder, ``{lib}``: the shim, whose
+    ``qpcoord_malloc_calls()`` counts malloc/realloc calls) in a fresh Python with the
+    counting shim preloaded; its stdout. Skips without a C compiler or glibc."""
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None or not sys.platform.startswith("linux"):
+        pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
+    src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
+    src.write_text(_COUNTING_MALLOC)
+    subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
+    proc = subprocess.run(
+        [sys.executable, "-c", script.format(tests=str(Path(__file__).parent), lib=str(lib))],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout
+
+
 _ALLOCATION_RUN = r"""
 import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
@@ -891,22 +913,8 @@ def test_the_native_call_does_not_allocate(tmp_path):
     """The per-step native call (kernels, box, hierarchy or weighted QP, q_next) on the Panda
     makes no heap allocation after its first calls: malloc is counted by a preloaded shim
     (glibc)."""
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None or not sys.platform.startswith("linux"):
-        pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
-    src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
-    src.write_text(_COUNTING_MALLOC)
-    subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
-    script = _ALLOCATION_RUN.format(tests=str(Path(__file__).parent), lib=str(lib))
-    proc = subprocess.run(
-        [sys.executable, "-c", script],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    counts = dict(line.split() for line in proc.stdout.splitlines())
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN)
+    counts = dict(line.split() for line in out.splitlines())
     assert len(counts) == 10
     assert all(int(c) == 0 for c in counts.values()), counts
 

@@ -4,16 +4,10 @@ closed loops, errors and allocations."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_native_step import _COUNTING_MALLOC, needs_native
+from test_native_step import needs_native, run_counting_malloc
 
 import qpcoord as qc
 from qpcoord.kinematics.frame_tasks import ComBand, SupportPolygon
@@ -424,19 +418,5 @@ def test_the_native_band_kernels_do_not_allocate(tmp_path, talos):
     """The native call with both band kernels (and the robot's limit box) makes no heap
     allocation on Talos. (The call of the whole Talos stack, with its equality levels, made one
     malloc per call outside these kernels when this was written: not tested here.)"""
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None or not sys.platform.startswith("linux"):
-        pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
-    src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
-    src.write_text(_COUNTING_MALLOC)
-    subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
-    script = _ALLOCATION_RUN.format(tests=str(Path(__file__).parent), lib=str(lib))
-    proc = subprocess.run(
-        [sys.executable, "-c", script],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert int(proc.stdout.split()[-1]) == 0, proc.stdout
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN)
+    assert int(out.split()[-1]) == 0, out
