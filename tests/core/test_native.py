@@ -767,7 +767,6 @@ def _conflict_scenario(rng) -> dict:
     return {"stack": s, "move": move, "daqp": None}
 
 
-
 def _small_damped_scenario(rng) -> dict:
     """Small levels (n = 10 < 16 columns: the size below which Eigen 3.4's BDCSVD built a
     local JacobiSVD per call) with near-singular equality rows under a large damping, so the
@@ -792,6 +791,7 @@ def _small_damped_scenario(rng) -> dict:
         ineq.update(lower=lo + shift, upper=lo + shift + 0.6)
 
     return {"stack": s, "move": move, "daqp": None}
+
 
 @needs_native
 @pytest.mark.skipif(shutil.which("g++") is None, reason="no C++ compiler (g++)")
