@@ -125,8 +125,10 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   keep_.assign(max_grows, 0);
   viol_.assign(std::max(max_in, 1), 0);
   Ms_.resize(blocks);
+  for (int b = 0; b < blocks; ++b) Ms_[b].setZero(meq_[b], n);  // M = A Z in its left r columns
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
+  Ab_.setZero(std::max(max_eq, 1), n);
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max(n, 1));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
@@ -734,7 +736,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   return kOk;
 }
 
-int Hierarchy::qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double tol,
+int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol,
                               double floor, Eigen::Ref<Vec> dz) {
   const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
   const bool wide = me <= r;
@@ -821,7 +823,8 @@ void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
                                 Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out) {
   const int r = static_cast<int>(out.rows());
   if (!by_qr) {
-    out = svd.matrixV().leftCols(rank);
+    if (rank == 0) return;  // no equality rows (no SVD computed): nothing to fill
+    out = svd.matrixV().topLeftCorner(r, rank);  // [M 0]'s padding rows below r are zero
   } else if (qr_wide_) {  // M^T P = Qf R: Qf's first rank columns
     out.setZero();
     for (int i = 0; i < rank; ++i) {
@@ -856,7 +859,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // ---- damped closed form of the projected equalities
   int rank = 0;
   double tau = 0.0;
-  Mat& M = Ms_[stage];
+  // M = A Z in the left r columns of the stage's me x n buffer: no reallocation when r
+  // changes from call to call (e.g. as a level's active inequality rows change)
+  auto M = Ms_[stage].leftCols(r_);
   auto& svd = svds_[stage];
   auto e = e_.head(me);
   auto xc = xc_.head(n_);
@@ -865,8 +870,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   double M_scale = 0.0;  // |A|_F of the level's equalities (>= s_0 of M)
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
-    M.resize(me, r_);  // no-op when the size repeats (the usual case)
-    M.noalias() = A * Zr;
+    auto Ab = Ab_.topRows(me);
+    Ab = A;  // contiguous: the product below makes no temporary
+    M.noalias() = Ab * Zr;
     e.noalias() = -A * x_;
     e += beq.segment(e0, me);
     const double scale = A.norm();
@@ -884,7 +890,11 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     } else {
       // thin V: its first rank columns are all a level uses (the damped step, the damping
       // rows, the freeze); the null space of M comes from the freeze of V_rank
-      svd.compute(M, Eigen::ComputeThinU | Eigen::ComputeThinV);
+      // the SVD of [M 0] (me x n, zero columns padded to the stage's fixed width): the same
+      // singular values and U; V's first rank columns are M's, padded with zero rows. A fixed
+      // size keeps JacobiSVD's workspace (no allocation when r changes)
+      Ms_[stage].rightCols(n_ - r_).setZero();
+      svd.compute(Ms_[stage], Eigen::ComputeThinU | Eigen::ComputeThinV);
       const Vec& s = svd.singularValues();
       rank = numerical_rank(s, me, r_, scale);
       if (rank) {
@@ -893,7 +903,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
         ute.noalias() = svd.matrixU().leftCols(rank).transpose() * e;
         for (int i = 0; i < rank; ++i)
           ute(i) *= (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
-        dz.noalias() = svd.matrixV().leftCols(rank) * ute;
+        dz.noalias() = svd.matrixV().topLeftCorner(r_, rank) * ute;
         xc.noalias() += Zr * dz;
       }
     }
@@ -931,7 +941,8 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   const int mv = static_cast<int>(mov_.size());
   int ndamp = 0;
-  const Vec& s = svd.singularValues();  // used only off the QR path
+  static const Vec kNoSvd;  // empty: no equality rows, or the QR path (no SVD this call)
+  const Vec& s = (me && !by_qr) ? svd.singularValues() : kNoSvd;
   if (!by_qr)
     for (int i = 0; i < rank; ++i)
       if (s(i) < tau) ++ndamp;
@@ -959,7 +970,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     int d = qme;
     for (int i = 0; i < rank && ndamp; ++i)
       if (s(i) < tau)
-        P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i);
+        P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i).head(r_);
   }
   add_inherited_rows(P);
   add_bound_rows(P);

@@ -26,12 +26,13 @@ namespace qpcoord {
 
 inline constexpr int kAbiVersion = 3;
 
-/// The SVD of the closed forms: Eigen's divide-and-conquer SVD (bidiagonalisation, then
-/// divide and conquer; one-sided Jacobi below 16 columns, Eigen's switch size). On the
-/// humanoid's 97 x 60 projected matrix it takes about half the time of JacobiSVD's
-/// two-sided sweeps; its workspace is sized on the first call of a size (no allocation
-/// after, as the driver's count shows).
-using Svd = Eigen::BDCSVD<Mat>;
+/// The SVD of the closed forms (used when the QR closed form does not apply: damping active
+/// or a rank the QR cannot settle): Eigen's one-sided Jacobi SVD with its QR preconditioner,
+/// kept per stage. Not BDCSVD: Eigen 3.4's BDCSVD::compute allocates on every call (a local
+/// JacobiSVD below 16 columns, a scaled copy and a bidiagonalisation above: 4-80 heap
+/// allocations per call, counted by tools/count_allocations.hpp), whereas JacobiSVD::compute
+/// reuses its members when the size repeats (no allocation after the first call of a size).
+using Svd = Eigen::JacobiSVD<Mat>;
 
 template <typename T>
 using CRef = Eigen::Ref<const T, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
@@ -141,7 +142,7 @@ class Hierarchy {
   /// damped, and the SVD's truncated closed form is the minimum-norm least-squares solution
   /// of the complete orthogonal decomposition (R22 dropped), computed here. Returns the rank
   /// (qr_rank_), or -1: use the SVD.
-  int qr_closed_form(const Mat& M, const Eigen::Ref<const Vec>& e, double tol, double floor,
+  int qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol, double floor,
                      Eigen::Ref<Vec> dz);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
   /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in tqr_).
@@ -245,6 +246,8 @@ class Hierarchy {
   std::vector<int> widx_, mov_;
   std::vector<char> keep_, viol_;
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
+  Mat Ab_;  ///< a level's equality rows, copied contiguous (max_eq x n): Eigen's GEMM copies a
+            ///< strided (row-major input) left factor into a heap temporary otherwise
   Mat Ztmp_;
   PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
   /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm

@@ -767,13 +767,41 @@ def _conflict_scenario(rng) -> dict:
     return {"stack": s, "move": move, "daqp": None}
 
 
+def _small_damped_scenario(rng) -> dict:
+    """Small levels (n = 10 < 16 columns: the size below which Eigen 3.4's BDCSVD built a
+    local JacobiSVD per call) with near-singular equality rows under a large damping, so the
+    closed form goes by the SVD, not the QR; a moving inequality level before them changes
+    the free dimension r from call to call (the projected matrices change width)."""
+    n = 10
+    A1 = rng.standard_normal((3, n))
+    A1[2] = A1[0] + 1e-4 * rng.standard_normal(n)  # a singular value below the damping
+    A2 = rng.standard_normal((4, n))
+    A2[3] = A2[1] - 1e-4 * rng.standard_normal(n)
+    C0 = rng.standard_normal((4, n))
+    eq1 = qc.Equality(A1, rng.standard_normal(3))
+    ineq = qc.Inequality(C0, -0.3 * np.ones(4), 0.3 * np.ones(4))
+    eq2 = qc.Equality(A2, rng.standard_normal(4))
+    s = qc.Stack([[ineq], [eq1], [eq2]], bounds=qc.Bounds(-2.0, 2.0), damping=1e-2)
+    b1, b2, lo = eq1.b.copy(), eq2.b.copy(), ineq.lower.copy()
+
+    def move(step, x=None):
+        eq1.update(b=b1 + 0.5 * np.sin(0.9 * step))
+        eq2.update(b=b2 * (1.0 + 0.4 * np.cos(0.6 * step)))
+        shift = 0.25 * np.sin(1.3 * step + np.arange(4))  # rows enter and leave the active set
+        ineq.update(lower=lo + shift, upper=lo + shift + 0.6)
+
+    return {"stack": s, "move": move, "daqp": None}
+
+
 @needs_native
 @pytest.mark.skipif(shutil.which("g++") is None, reason="no C++ compiler (g++)")
 def test_the_native_call_allocates_nothing_after_the_first(tmp_path):
-    """The C++ driver (src/native/tools/driver.cpp: a counting global operator new) replays
-    moving stacks that exercise every stage — the hard phase, levels with misses, seeded
-    starts, QR appends and downdates, the minimum-norm step — warm and cold: no heap
-    allocation in any call after the first pass, and every call succeeds."""
+    """The C++ driver (src/native/tools/driver.cpp; tools/count_allocations.hpp counts malloc,
+    calloc, realloc and the aligned forms, where Eigen's storage allocates) replays moving
+    stacks that exercise every stage — the hard phase, levels with misses, seeded starts, QR
+    appends and downdates, the minimum-norm step, damped closed forms by the SVD on small
+    levels whose width changes — warm and cold: no heap allocation in any call after the
+    first pass, and every call succeeds."""
     eigen = _eigen_include()
     if eigen is None:
         if os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":  # CI: the test extra has them
@@ -784,7 +812,12 @@ def test_the_native_call_allocates_nothing_after_the_first(tmp_path):
     spec = importlib.util.spec_from_file_location("dump_problems", tools / "dump_problems.py")
     dp = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(dp)
-    for name, make in (("hard", _hard_row_scenario), ("conflict", _conflict_scenario)):
+    scenarios = {
+        "hard": _hard_row_scenario,
+        "conflict": _conflict_scenario,
+        "small_damped": _small_damped_scenario,
+    }
+    for name, make in scenarios.items():
         dp.dump(name, make, 12, tmp_path)
     exe = tmp_path / "driver"
     subprocess.run(
@@ -793,7 +826,7 @@ def test_the_native_call_allocates_nothing_after_the_first(tmp_path):
          "-o", str(exe)],
         check=True, capture_output=True, timeout=300,
     )  # fmt: skip
-    for name in ("hard", "conflict"):
+    for name in scenarios:
         for mode in ("warm", "cold"):
             out = subprocess.run(
                 [str(exe), str(tmp_path / f"{name}.bin"), "3", mode],

@@ -1,7 +1,8 @@
 // Profiling / allocation driver of the native core, without Python (built only by hand or by
 // tests/core/test_native.py): reads problems written by dump_problems.py, solves every step
 // warm (as Stack.solve does), repeats, and reports the time per solve and the heap
-// allocations (a counting global operator new) made by the solves after the first pass.
+// allocations (a counting malloc: tools/count_allocations.hpp) made by the solves after the
+// first pass.
 //
 //   g++ -O2 -g -std=c++17 -DNDEBUG -I<eigen3> -Isrc/native src/native/tools/driver.cpp \
 //       src/native/hierarchy.cpp -o /tmp/driver
@@ -20,6 +21,7 @@
 
 #include "hierarchy.hpp"
 
+#define QPCOORD_COUNT_MALLOC  // count malloc (Eigen allocates there), not only operator new
 #include "tools/count_allocations.hpp"
 
 using namespace qpcoord;
