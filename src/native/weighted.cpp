@@ -99,6 +99,7 @@ Weighted::Weighted(int n, std::vector<int> meq, std::vector<int> min, bool has_b
   for (Vec* v : {&glo_, &ghi_, &tlo_, &thi_, &flo_, &fhi_}) v->setZero(std::max(rows_, 1));
   cx_.setZero(std::max(c, 1));
   qp_.reserve(std::max(nv, 1), std::max(rows_, 1));
+  if (me_h) rows_buf_.setZero(std::max({mes_, ms_, min_[0], 1}), n_);
 }
 
 int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
@@ -124,9 +125,11 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
   if (mes_) {
     const auto As = Aeq.middleRows(me_h, mes_);
     auto M = M_.topLeftCorner(mes_, r);
-    if (me_h)
-      M.noalias() = As * Z_.leftCols(r);
-    else
+    if (me_h) {
+      auto Ab = rows_buf_.topRows(mes_);
+      Ab = As;
+      M.noalias() = Ab * Z_.leftCols(r);
+    } else
       M = As;
     for (int j = 0; j < n_; ++j) {
       double d = 0.0;
@@ -168,16 +171,20 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
   auto G = G_.topLeftCorner(rows_, nv);
   G.setZero();
   if (ms_) {
-    if (me_h)
-      G.topLeftCorner(ms_, r).noalias() = C.middleRows(in_soft, ms_) * Z_.leftCols(r);
-    else
+    if (me_h) {
+      auto Cb = rows_buf_.topRows(ms_);
+      Cb = C.middleRows(in_soft, ms_);
+      G.topLeftCorner(ms_, r).noalias() = Cb * Z_.leftCols(r);
+    } else
       G.topLeftCorner(ms_, r) = C.middleRows(in_soft, ms_);
     for (int s = 0; s < ms_; ++s) G(s, r + s) = -1.0;
   }
   if (mi_h) {
-    if (me_h)
-      G.block(ms_, 0, mi_h, r).noalias() = C.topRows(mi_h) * Z_.leftCols(r);
-    else
+    if (me_h) {
+      auto Cb = rows_buf_.topRows(mi_h);
+      Cb = C.topRows(mi_h);
+      G.block(ms_, 0, mi_h, r).noalias() = Cb * Z_.leftCols(r);
+    } else
       G.block(ms_, 0, mi_h, r) = C.topRows(mi_h);
   }
   if (has_bounds_) G.block(ms_ + mi_h, 0, n_, r) = Z_.leftCols(r);

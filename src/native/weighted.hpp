@@ -94,6 +94,10 @@ class Weighted {
   Eigen::MatrixXd Ah_;   ///< the hard equalities (SVD input)
   Eigen::MatrixXd Z_;    ///< n x r
   Eigen::MatrixXd M_;    ///< soft equality rows times Z (mes x r)
+  /// contiguous copies of the rows multiplied by Z (the soft equalities, then the soft and
+  /// hard inequalities): a product with a strided (row-major) view of the caller's arrays
+  /// made a heap temporary on every refactor
+  Eigen::MatrixXd rows_buf_;
   Eigen::VectorXd beta_eq_, beta_in_;  ///< rho^k of each soft equality / inequality row
   Eigen::MatrixXd H_, L_, J0_, G_;
   Eigen::VectorXd xbar_, x_, f_, y_, e_, coef_, glo_, ghi_, tlo_, thi_, flo_, fhi_, cx_;

@@ -1,9 +1,9 @@
 // Allocation and timing driver of the native weighted QP (src/native/weighted.*), without
 // Python: a random stack (hard equalities and inequalities, bounds, levels of equalities and
 // soft inequalities), 2 000 steps with moving right-hand sides; counts the heap allocations
-// (a counting global operator new) of the solves after the first, with the factor kept
-// (refactor = false, PersistentQP's step) and rebuilt every call (refactor = true, a
-// changed matrix).
+// (malloc and operator new: tools/count_allocations.hpp) of the solves after the first,
+// with the factor kept (refactor = false, PersistentQP's step) and rebuilt every call
+// (refactor = true, a changed matrix).
 //
 //   g++ -O2 -std=c++17 -DNDEBUG -DQPCOORD_NO_BINDINGS -I<eigen3> -Isrc/native \
 //       src/native/tools/weighted_driver.cpp src/native/weighted.cpp -o /tmp/wdriver
@@ -18,6 +18,7 @@
 
 #include "weighted.hpp"
 
+#define QPCOORD_COUNT_MALLOC  // count malloc (Eigen allocates there), not only operator new
 #include "tools/count_allocations.hpp"
 
 using Mat = Eigen::MatrixXd;
