@@ -747,8 +747,8 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   return kOk;
 }
 
-int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol,
-                              double floor, Eigen::Ref<Vec> dz) {
+int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e,
+                              double tol, double floor, Eigen::Ref<Vec> dz) {
   const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
   const bool wide = me <= r;
   qr_wide_ = wide;
@@ -825,7 +825,6 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
     mqr_.apply_q(dz);
   }
   qr_smin_ = 1.0 / inv;
-  qr_rank_ = rank;
   ++qr_closed_forms_;
   return rank;
 }

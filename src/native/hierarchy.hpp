@@ -141,9 +141,9 @@ class Hierarchy {
   /// rank tolerance). Then the SVD's numerical rank is this rank, no singular value is
   /// damped, and the SVD's truncated closed form is the minimum-norm least-squares solution
   /// of the complete orthogonal decomposition (R22 dropped), computed here. Returns the rank
-  /// (qr_rank_), or -1: use the SVD.
-  int qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol, double floor,
-                     Eigen::Ref<Vec> dz);
+  /// or -1: use the SVD.
+  int qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol,
+                     double floor, Eigen::Ref<Vec> dz);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
   /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in tqr_).
   void row_space_basis(const Svd& svd, bool by_qr, int rank,
@@ -253,7 +253,6 @@ class Hierarchy {
   /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
   /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
   PivotedQR tqr_;
-  int qr_rank_ = 0;         ///< M's rank from the last qr_closed_form
   bool qr_wide_ = false;    ///< the last qr_closed_form factorised M^T (me <= r)
   int qr_closed_forms_ = 0;  ///< closed forms by QR in this call
   Mat rinv_;       ///< R^-1 of mqr_ (a bound on M's smallest singular value)

@@ -255,6 +255,7 @@ class IKStep {
     k.row0 = row0;
     k.qidx = std::move(qidx);
     if (band) k.band = static_cast<int>(bands_.size()) - 1;
+    if (kind != kPosture) writes_a_ = true;  // its rows' matrix changes with q
     kernels_.push_back(std::move(k));
   }
 
@@ -388,8 +389,7 @@ class IKStep {
     }
     int code;
     if (w_) {
-      bool re = refactor;
-      for (const Kernel& k : kernels_) re = re || k.kind != kPosture;
+      const bool re = refactor || writes_a_;
       code = w_->solve(cmat(out_[0]), cvec(out_[1]), cmat(out_[2]), cvec(out_[3]),
                        cvec(out_[4]), cvec(out_[5]), cvec(out_[6]), cvec(out_[7]), warm,
                        time_left, re, mvec(out_[10]), mvec(out_[11]), mvec(out_[13]),
@@ -802,6 +802,9 @@ class IKStep {
   bool integrator_ = false;
   Hierarchy h_;
   std::unique_ptr<Weighted> w_;  ///< set_weighted: the weighted QP solves instead of h_
+  /// a kernel rewrites its task's matrix at every step (all but a posture's): the weighted
+  /// QP refactors at every step
+  bool writes_a_ = false;
   OutArr active_;
   std::vector<OutArr> out_;
   bool bound_ = false;
@@ -811,8 +814,9 @@ class IKStep {
   std::vector<Frame> frames_;
   std::vector<Kernel> kernels_;
   std::vector<Limit> limits_;
-  std::vector<support::Band<View>> bands_;  ///< ComBand / SupportPolygon data (support_kernels.hpp)
-  std::vector<nb::str> band_names_;         ///< their attribute names (set by the first one)
+  /// ComBand / SupportPolygon data (support_kernels.hpp)
+  std::vector<support::Band<View>> bands_;
+  std::vector<nb::str> band_names_;  ///< their attribute names (set by the first one)
   std::vector<nb::str> names_;
   /// info()'s keys in its order, then the value "native"
   std::array<nb::str, 10> info_keys_{

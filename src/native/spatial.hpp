@@ -167,8 +167,9 @@ inline bool rigid_ok(const double* p, std::int64_t s0, std::int64_t s1, double t
                f = at(1, 2), g = at(2, 0), h = at(2, 1), i = at(2, 2);
   const double gram = std::max({std::abs(a * a + d * d + g * g - 1.0),
                                 std::abs(b * b + e * e + h * h - 1.0),
-                                std::abs(c * c + f * f + i * i - 1.0), std::abs(a * b + d * e + g * h),
-                                std::abs(a * c + d * f + g * i), std::abs(b * c + e * f + h * i)});
+                                std::abs(c * c + f * f + i * i - 1.0),
+                                std::abs(a * b + d * e + g * h), std::abs(a * c + d * f + g * i),
+                                std::abs(b * c + e * f + h * i)});
   const double det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
   return gram <= tol && std::abs(det - 1.0) <= tol;
 }

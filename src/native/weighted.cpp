@@ -118,6 +118,13 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
   }
   const int r = r_;
   const int nv = r + ms_;
+  // out = rows Z(:, 0:r) through a contiguous copy of rows: Eigen's product of a strided
+  // (row-major) view makes a heap temporary on every call
+  auto times_z = [&](const auto& rows, auto&& out) {
+    auto buf = rows_buf_.topRows(rows.rows());
+    buf = rows;
+    out.noalias() = buf * Z_.leftCols(r);
+  };
   // H = sum_k rho^k (A_k Z)^T (A_k Z); hdiag: the x-space Hessian's largest diagonal entry
   double hdiag = 0.0;
   auto H = H_.topLeftCorner(r, r);
@@ -125,11 +132,9 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
   if (mes_) {
     const auto As = Aeq.middleRows(me_h, mes_);
     auto M = M_.topLeftCorner(mes_, r);
-    if (me_h) {
-      auto Ab = rows_buf_.topRows(mes_);
-      Ab = As;
-      M.noalias() = Ab * Z_.leftCols(r);
-    } else
+    if (me_h)
+      times_z(As, M);
+    else
       M = As;
     for (int j = 0; j < n_; ++j) {
       double d = 0.0;
@@ -171,20 +176,16 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
   auto G = G_.topLeftCorner(rows_, nv);
   G.setZero();
   if (ms_) {
-    if (me_h) {
-      auto Cb = rows_buf_.topRows(ms_);
-      Cb = C.middleRows(in_soft, ms_);
-      G.topLeftCorner(ms_, r).noalias() = Cb * Z_.leftCols(r);
-    } else
+    if (me_h)
+      times_z(C.middleRows(in_soft, ms_), G.topLeftCorner(ms_, r));
+    else
       G.topLeftCorner(ms_, r) = C.middleRows(in_soft, ms_);
     for (int s = 0; s < ms_; ++s) G(s, r + s) = -1.0;
   }
   if (mi_h) {
-    if (me_h) {
-      auto Cb = rows_buf_.topRows(mi_h);
-      Cb = C.topRows(mi_h);
-      G.block(ms_, 0, mi_h, r).noalias() = Cb * Z_.leftCols(r);
-    } else
+    if (me_h)
+      times_z(C.topRows(mi_h), G.block(ms_, 0, mi_h, r));
+    else
       G.block(ms_, 0, mi_h, r) = C.topRows(mi_h);
   }
   if (has_bounds_) G.block(ms_ + mi_h, 0, n_, r) = Z_.leftCols(r);
