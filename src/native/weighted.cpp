@@ -51,6 +51,25 @@ bool cholesky(Eigen::Ref<Mat> L, int k, double& min_pivot) {
   return true;
 }
 
+/// Householder QR of W (m x k, m >= k) in place: R on and above the diagonal (R_jj = beta_j),
+/// the vectors below it, their coefficients in tau (no allocation: work holds k entries).
+/// Returns the smallest |R_jj|. The R of W, not the Cholesky of W^T W: a rank-deficient W
+/// gives a diagonal entry at rounding of |W|, not of |W|^2.
+double householder_qr(Eigen::Ref<Mat> W, Eigen::Ref<Vec> tau, Eigen::Ref<Vec> work) {
+  const int m = static_cast<int>(W.rows()), k = static_cast<int>(W.cols());
+  double dmin = kInf;
+  for (int j = 0; j < k; ++j) {
+    double beta = 0.0;
+    W.col(j).tail(m - j).makeHouseholderInPlace(tau(j), beta);
+    W(j, j) = beta;
+    dmin = std::min(dmin, std::abs(beta));
+    if (j + 1 < k)
+      W.bottomRightCorner(m - j, k - j - 1)
+          .applyHouseholderOnTheLeft(W.col(j).tail(m - j - 1), tau(j), work.data());
+  }
+  return dmin;
+}
+
 }  // namespace
 
 Weighted::Weighted(int n, std::vector<int> meq, std::vector<int> min, bool has_bounds,
@@ -100,6 +119,10 @@ Weighted::Weighted(int n, std::vector<int> meq, std::vector<int> min, bool has_b
   cx_.setZero(std::max(c, 1));
   qp_.reserve(std::max(nv, 1), std::max(rows_, 1));
   if (me_h) rows_buf_.setZero(std::max({mes_, ms_, min_[0], 1}), n_);
+  Wq_.setZero(mes_ + std::max(n_, 1), n_);
+  hh_.setZero(std::max(n_, 1));
+  tau_.setZero(std::max(n_, 1));
+  rhs_.setZero(mes_ + std::max(n_, 1));
 }
 
 int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
@@ -145,21 +168,34 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
     for (int i = 0; i < mes_; ++i) M.row(i) *= std::sqrt(beta_eq_(i));
     H.template selfadjointView<Eigen::Lower>().rankUpdate(M.transpose());
     H.template triangularView<Eigen::StrictlyUpper>() = H.transpose();
+    if (mes_ >= r && r) Wq_.topLeftCorner(mes_, r) = M;  // W = diag(sqrt(beta)) M
     for (int i = 0; i < mes_; ++i) M.row(i) /= std::sqrt(beta_eq_(i));
   }
-  // the Python rule: singular when Cholesky fails or a pivot^2 <= 1e-14 max diag
+  // the Python rule (_SINGULAR): fewer weighted rows than r, the R of W's QR with a
+  // diagonal entry^2 <= 1e-14 max diag H, or no Cholesky factor
   regularized_ = false;
   auto L = L_.topLeftCorner(r, r);
   double min_pivot = 0.0;
   L = H;
   bool ok = r == 0 || cholesky(L, r, min_pivot);
   const double hmax = r ? std::max(H.diagonal().maxCoeff(), 1e-300) : 1.0;
-  if (r && (!ok || min_pivot * min_pivot <= kSingular * hmax)) {
+  bool singular = r && (!ok || mes_ < r);
+  if (r && !singular) {
+    const double d = householder_qr(Wq_.topLeftCorner(mes_, r), tau_.head(r), hh_.head(r));
+    singular = !(d * d > kSingular * hmax);  // NaN counts as singular
+  }
+  if (singular) {
     eps_ = reg_ * std::max(1.0, hdiag);
     H.diagonal().array() += eps_;
     regularized_ = true;
     L = H;
     ok = cholesky(L, r, min_pivot);
+    // [W; sqrt(eps) I] factored for the unconstrained optimum (least squares, see Wq_)
+    auto Wa = Wq_.topLeftCorner(mes_ + r, r);
+    Wa.setZero();
+    for (int i = 0; i < mes_; ++i) Wa.row(i) = std::sqrt(beta_eq_(i)) * M_.row(i).head(r);
+    Wa.bottomRows(r).diagonal().setConstant(std::sqrt(eps_));
+    householder_qr(Wa, tau_.head(r), hh_.head(r));
   }
   if (!ok) return kWNotConverged;
   // J0 = blockdiag(L^{-T}, 1 / (sqrt(rho^k) sw))
@@ -294,7 +330,22 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
     auto y = y_.head(nv);
     y.setZero();
     auto J0 = J0_.topLeftCorner(nv, nv);
-    if (r) {  // two triangular solves with L (as LAPACK's dpotrs; J0 J0^T f loses digits)
+    if (r && regularized_) {
+      // least squares on [W; sqrt(eps) I] z = [sqrt(beta) e; -sqrt(eps) Z^T xbar]
+      auto rhs = rhs_.head(mes_ + r);
+      if (mes_) rhs.head(mes_) = e_.head(mes_).cwiseQuotient(beta_eq_.head(mes_).cwiseSqrt());
+      if (me_h)
+        rhs.tail(r).noalias() = -std::sqrt(eps_) * (Z_.leftCols(r).transpose() * xbar_);
+      else
+        rhs.tail(r).setZero();
+      const auto Wa = Wq_.topLeftCorner(mes_ + r, r);
+      for (int j = 0; j < r; ++j)
+        rhs.tail(mes_ + r - j)
+            .applyHouseholderOnTheLeft(Wa.col(j).tail(mes_ + r - j - 1), tau_(j), hh_.data());
+      auto yz = y.head(r);
+      yz = rhs.head(r);
+      Wa.topRows(r).template triangularView<Eigen::Upper>().solveInPlace(yz);
+    } else if (r) {  // two triangular solves with L (as LAPACK's dpotrs; J0 J0^T f loses digits)
       auto yz = y.head(r);
       yz = -f;
       const auto L = L_.topLeftCorner(r, r);

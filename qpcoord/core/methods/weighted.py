@@ -17,10 +17,26 @@ from ..elimination import Reduced
 
 __all__ = ["solve_weighted"]
 
-#: ``H`` counts as singular when a Cholesky pivot² is under this fraction of its largest
-#: diagonal entry: rounding-level pivots (~1e-16) of a rank-deficient ``H`` pass LAPACK's
-#: test and then fail quadprog's; a level weighted ``weight_ratio**4 = 1e-12`` stays above.
+#: ``H = WᵀW`` (``W``: the levels' equality rows in ``z``, row ``i`` of level ``k`` scaled by
+#: ``√(weight_ratioᵏ)``) counts as singular when a diagonal entry² of the triangular factor
+#: ``R`` of a Householder QR of ``W`` (``RᵀR = H``: the same numbers as ``H``'s Cholesky pivots)
+#: is at most this fraction of ``H``'s largest diagonal entry, i.e. ``|Rₖₖ| ≤ 1e-7·max‖W col‖``
+#: (units of ``W``: residual per unit ``z``); or when ``W`` has fewer rows than ``z`` has
+#: entries; or when ``H``'s Cholesky fails. ``R`` is computed from ``W`` itself, not from
+#: ``H``: a rank-deficient ``W`` gives ``|Rₖₖ|`` at rounding, ~1e-16·‖W‖, 9 decades under the
+#: threshold, where the Cholesky pivots of the formed ``H`` carry its rounding ~√ε·‖W‖ = 1.5e-8
+#: ·‖W‖ (a factor ~7 under it: 1–6 of 50 exactly singular ``H`` passed as regular, issue 24).
+#: A level weighted ``weight_ratio**4 = 1e-12`` (unit rows: ``|Rₖₖ|² ≈ 1e-12``) is regular.
 _SINGULAR = 1e-14
+
+
+def _singular(W: np.ndarray, r: int, hmax: float) -> bool:
+    """The rank decision of :data:`_SINGULAR` on the stacked weighted rows ``W`` (m × r)."""
+    if W.shape[0] < r:
+        return True
+    qr = lapack.dgeqrf(W)[0]
+    d = np.abs(qr.diagonal()[:r])
+    return bool(not np.all(np.isfinite(d)) or float(d.min()) ** 2 <= _SINGULAR * hmax)
 
 
 def solve_weighted(
@@ -38,17 +54,20 @@ def solve_weighted(
     r = R.r
     x = R.x
     if r == 0:
-        return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
+        return _stats(R, False)
     H = np.zeros((r, r))
     f = np.zeros(r)
     soft = []
     beta = 1.0
     hdiag = 0.0  # largest diagonal entry of the x-space Hessian Σ βₖ Aₖᵀ Aₖ
     dx = None
+    W, c = [], []  # the weighted rows √βₖ Mₖ (H = WᵀW) and their targets √βₖ eₖ
     for L in P.levels:
         if L.m_eq:
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
+            W.append(np.sqrt(beta) * M)
+            c.append(np.sqrt(beta) * e)
             H += beta * (M.T @ M)
             f -= beta * (M.T @ e)
             d = beta * np.einsum("ij,ij->j", L.Ae, L.Ae)
@@ -62,15 +81,25 @@ def solve_weighted(
     # x-space Hessian and centred on x = 0 (not on the hard phase's point, in the reduced
     # coordinates, where 1e-9·max diag pulled a last level weighted 1e-6 by ~1 %: 2e-3 in x)
     cho, info = lapack.dpotrf(H, lower=0, clean=1)
-    if info != 0 or float(cho.diagonal().min()) ** 2 <= _SINGULAR * max(
-        float(H.diagonal().max()), 1e-300
-    ):
+    hmax = max(float(H.diagonal().max()), 1e-300)
+    regularized = info != 0 or _singular(np.vstack(W) if W else np.zeros((0, r)), r, hmax)
+    if regularized:
         eps = regularization * max(1.0, hdiag)
+        zc = R.project(x)
         H.flat[:: r + 1] += eps
-        f += eps * R.project(x)
-        cho, info = lapack.dpotrf(H, lower=0, clean=1)
-    # unconstrained optimum first: if it violates nothing it is the QP's optimum
-    if info == 0:
+        f += eps * zc
+        # unconstrained optimum: least squares on [W; √ε I] z = [c; −√ε Zᵀx̄], not H⁻¹f
+        # (forming H and f costs ~ε_machine‖W‖²/ε along H's null space: 2e-7 in z)
+        se = np.sqrt(eps)
+        Wa = np.vstack((*W, se * np.eye(r)))
+        ca = np.concatenate((*c, -se * zc))
+        qr, tau, _work, info = lapack.dgeqrf(Wa)
+        if info == 0:
+            qtc, _work, info = lapack.dormqr("L", "T", qr, tau, ca, max(1, 2 * r))
+        if info == 0:
+            z, info = lapack.dtrtrs(qr[:r, :r], qtc[:r], lower=0)
+    else:
+        # unconstrained optimum first: if it violates nothing it is the QP's optimum
         z, info = lapack.dpotrs(cho, -f, lower=0)
     if info == 0:
         xc = x + R.lift(z)
@@ -78,7 +107,7 @@ def solve_weighted(
             (L.C @ xc <= L.hiw).all() and (L.C @ xc >= L.low).all() for L, _ in soft
         ):
             R.move_to(xc, verified=True)
-            return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
+            return _stats(R, regularized)
     mi = sum(L.m_in for L, _ in soft)
     if mi:
         C = np.vstack([L.C for L, _ in soft])
@@ -99,4 +128,14 @@ def solve_weighted(
         y0[:r] = R.project(x_warm - x)
     y = R.solve_qp(Hy, fy, D, dlo, dhi, y0, where="weighted QP")
     R.move_to(x + R.lift(y[:r]), verified=False)
-    return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
+    return _stats(R, regularized)
+
+
+def _stats(R: Reduced, regularized: bool) -> dict:
+    """Solve statistics; ``regularized``: was ``ε‖x‖²`` added (:data:`_SINGULAR`)?"""
+    return {
+        "qp_calls": R.qp_calls,
+        "retries": R.retries,
+        "fallbacks": R.fallbacks,
+        "regularized": regularized,
+    }
