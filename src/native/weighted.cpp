@@ -30,27 +30,6 @@ constexpr double kSingular = 1e-14;  // methods/weighted.py _SINGULAR
 inline double scale_of(double b) { return std::isfinite(b) ? std::max(1.0, std::abs(b)) : 1.0; }
 
 
-/// In-place lower Cholesky of the leading k x k block of L (H = L L^T, LAPACK's pivots);
-/// false if a pivot is not positive. min_pivot: the smallest diagonal entry of L.
-bool cholesky(Eigen::Ref<Mat> L, int k, double& min_pivot) {
-  min_pivot = kInf;
-  for (int j = 0; j < k; ++j) {
-    double s = L(j, j) - L.row(j).head(j).squaredNorm();
-    if (!(s > 0.0)) return false;
-    s = std::sqrt(s);
-    L(j, j) = s;
-    min_pivot = std::min(min_pivot, s);
-    const int below = k - j - 1;
-    if (below > 0) {  // column j below the diagonal: one matrix-vector product
-      if (j > 0)
-        L.col(j).segment(j + 1, below).noalias() -=
-            L.block(j + 1, 0, below, j) * L.row(j).head(j).transpose();
-      L.col(j).segment(j + 1, below) /= s;
-    }
-  }
-  return true;
-}
-
 /// Householder QR of W (m x k, m >= k) in place: R on and above the diagonal (R_jj = beta_j),
 /// the vectors below it, their coefficients in tau (no allocation: work holds k entries).
 /// Returns the smallest |R_jj|. The R of W, not the Cholesky of W^T W: a rank-deficient W
@@ -105,7 +84,6 @@ Weighted::Weighted(int n, std::vector<int> meq, std::vector<int> min, bool has_b
     for (int i = 0; i < min_[b]; ++i) beta_in_(in0_[b] - min_[0] + i) = beta;
     beta *= rho_;
   }
-  H_.setZero(n_, n_);
   L_.setZero(n_, n_);
   J0_.setZero(std::max(nv, 1), std::max(nv, 1));
   G_.setZero(std::max(rows_, 1), std::max(nv, 1));
@@ -148,10 +126,10 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
     buf = rows;
     out.noalias() = buf * Z_.leftCols(r);
   };
-  // H = sum_k rho^k (A_k Z)^T (A_k Z); hdiag: the x-space Hessian's largest diagonal entry
+  // H = sum_k rho^k (A_k Z)^T (A_k Z) = W^T W is never formed: its factor L = R^T comes from
+  // a Householder QR of W = diag(sqrt(rho^k)) M (H's Cholesky factor up to the signs of its
+  // columns, without squaring W); hdiag: the x-space Hessian's largest diagonal entry
   double hdiag = 0.0;
-  auto H = H_.topLeftCorner(r, r);
-  H.setZero();
   if (mes_) {
     const auto As = Aeq.middleRows(me_h, mes_);
     auto M = M_.topLeftCorner(mes_, r);
@@ -164,40 +142,34 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
       for (int i = 0; i < mes_; ++i) d += beta_eq_(i) * As(i, j) * As(i, j);
       hdiag = std::max(hdiag, d);
     }
-    // H = M^T diag(beta) M (rows scaled by sqrt(beta) into a temporary: L_ as scratch)
-    for (int i = 0; i < mes_; ++i) M.row(i) *= std::sqrt(beta_eq_(i));
-    H.template selfadjointView<Eigen::Lower>().rankUpdate(M.transpose());
-    H.template triangularView<Eigen::StrictlyUpper>() = H.transpose();
-    if (mes_ >= r && r) Wq_.topLeftCorner(mes_, r) = M;  // W = diag(sqrt(beta)) M
-    for (int i = 0; i < mes_; ++i) M.row(i) /= std::sqrt(beta_eq_(i));
   }
-  // the Python rule (_SINGULAR): fewer weighted rows than r, the R of W's QR with a
-  // diagonal entry^2 <= 1e-14 max diag H, or no Cholesky factor
+  // the Python rule (_SINGULAR): fewer weighted rows than r, or a diagonal entry^2 of the R
+  // of W's QR at most 1e-14 of max diag H (the largest squared column norm of W)
   regularized_ = false;
   auto L = L_.topLeftCorner(r, r);
-  double min_pivot = 0.0;
-  L = H;
-  bool ok = r == 0 || cholesky(L, r, min_pivot);
-  const double hmax = r ? std::max(H.diagonal().maxCoeff(), 1e-300) : 1.0;
-  bool singular = r && (!ok || mes_ < r);
+  bool singular = r && mes_ < r;
   if (r && !singular) {
-    const double d = householder_qr(Wq_.topLeftCorner(mes_, r), tau_.head(r), hh_.head(r));
+    auto W = Wq_.topLeftCorner(mes_, r);
+    for (int i = 0; i < mes_; ++i) W.row(i) = std::sqrt(beta_eq_(i)) * M_.row(i).head(r);
+    double hmax = 1e-300;
+    for (int j = 0; j < r; ++j) hmax = std::max(hmax, W.col(j).squaredNorm());
+    const double d = householder_qr(W, tau_.head(r), hh_.head(r));
     singular = !(d * d > kSingular * hmax);  // NaN counts as singular
+    if (!singular) L.template triangularView<Eigen::Lower>() = W.topRows(r).transpose();
   }
   if (singular) {
+    // [W; sqrt(eps) I] factored: L for H + eps I, and the unconstrained optimum as its
+    // least-squares solution (see Wq_)
     eps_ = reg_ * std::max(1.0, hdiag);
-    H.diagonal().array() += eps_;
     regularized_ = true;
-    L = H;
-    ok = cholesky(L, r, min_pivot);
-    // [W; sqrt(eps) I] factored for the unconstrained optimum (least squares, see Wq_)
     auto Wa = Wq_.topLeftCorner(mes_ + r, r);
     Wa.setZero();
     for (int i = 0; i < mes_; ++i) Wa.row(i) = std::sqrt(beta_eq_(i)) * M_.row(i).head(r);
     Wa.bottomRows(r).diagonal().setConstant(std::sqrt(eps_));
     householder_qr(Wa, tau_.head(r), hh_.head(r));
+    L.template triangularView<Eigen::Lower>() = Wa.topRows(r).transpose();
   }
-  if (!ok) return kWNotConverged;
+  if (r && !(L.diagonal().cwiseAbs().minCoeff() > 0.0)) return kWNotConverged;
   // J0 = blockdiag(L^{-T}, 1 / (sqrt(rho^k) sw))
   auto J0 = J0_.topLeftCorner(nv, nv);
   J0.setZero();
@@ -345,7 +317,7 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
       auto yz = y.head(r);
       yz = rhs.head(r);
       Wa.topRows(r).template triangularView<Eigen::Upper>().solveInPlace(yz);
-    } else if (r) {  // two triangular solves with L (as LAPACK's dpotrs; J0 J0^T f loses digits)
+    } else if (r) {  // two triangular solves with L = R^T (J0 J0^T f loses digits)
       auto yz = y.head(r);
       yz = -f;
       const auto L = L_.topLeftCorner(r, r);

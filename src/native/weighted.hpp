@@ -11,8 +11,8 @@
 // by sqrt(rho^k)), so that the optimum is unique and both engines agree. The rule is
 // methods/weighted.py's _SINGULAR: W has fewer rows than z has entries, or a diagonal entry^2
 // of the R of a Householder QR of W (not the Cholesky of the formed H, whose pivots carry
-// rounding ~sqrt(eps_machine) |W|) is at most 1e-14 of H's largest diagonal entry, or H's
-// Cholesky fails.
+// rounding ~sqrt(eps_machine) |W|) is at most 1e-14 of H's largest diagonal entry. H is never
+// formed: L = R^T is its factor (of H + eps I: the R of [W; sqrt(eps) I]).
 //
 // The QP in y = (z, w) is solved by the dual active set of qp.hpp, whose factor J0 = L^{-T}
 // and constraint rows are built once per set-up: a call with refactor = false (the matrices
@@ -109,7 +109,7 @@ class Weighted {
   Eigen::MatrixXd Wq_;
   Eigen::VectorXd hh_, tau_, rhs_;  ///< Householder workspace (n), coefficients (n), rhs
   Eigen::VectorXd beta_eq_, beta_in_;  ///< rho^k of each soft equality / inequality row
-  Eigen::MatrixXd H_, L_, J0_, G_;
+  Eigen::MatrixXd L_, J0_, G_;  ///< L = R^T of W's QR (H = L L^T), J0 = L^{-T}, rows
   Eigen::VectorXd xbar_, x_, f_, y_, e_, coef_, glo_, ghi_, tlo_, thi_, flo_, fhi_, cx_;
   qp::DualActiveSet qp_;
 };

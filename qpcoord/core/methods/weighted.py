@@ -20,23 +20,29 @@ __all__ = ["solve_weighted"]
 #: ``H = WᵀW`` (``W``: the levels' equality rows in ``z``, row ``i`` of level ``k`` scaled by
 #: ``√(weight_ratioᵏ)``) counts as singular when a diagonal entry² of the triangular factor
 #: ``R`` of a Householder QR of ``W`` (``RᵀR = H``: the same numbers as ``H``'s Cholesky pivots)
-#: is at most this fraction of ``H``'s largest diagonal entry, i.e. ``|Rₖₖ| ≤ 1e-7·max‖W col‖``
-#: (units of ``W``: residual per unit ``z``); or when ``W`` has fewer rows than ``z`` has
-#: entries; or when ``H``'s Cholesky fails. ``R`` is computed from ``W`` itself, not from
+#: is at most this fraction of ``H``'s largest diagonal entry (``W``'s largest squared column
+#: norm), i.e. ``|Rₖₖ| ≤ 1e-7·max‖W col‖`` (units of ``W``: residual per unit ``z``); or when
+#: ``W`` has fewer rows than ``z`` has entries. ``R`` is computed from ``W`` itself, not from
 #: ``H``: a rank-deficient ``W`` gives ``|Rₖₖ|`` at rounding, ~1e-16·‖W‖, 9 decades under the
 #: threshold, where the Cholesky pivots of the formed ``H`` carry its rounding ~√ε·‖W‖ = 1.5e-8
-#: ·‖W‖ (a factor ~7 under it: 1–6 of 50 exactly singular ``H`` passed as regular, issue 24).
+#: ·‖W‖ (a factor ~7 under it: 1–5 of 50 exactly singular ``H`` passed as regular, issue 24).
 #: A level weighted ``weight_ratio**4 = 1e-12`` (unit rows: ``|Rₖₖ|² ≈ 1e-12``) is regular.
+#: The native engine (``src/native/weighted.cpp``) applies the same rule to its own QR.
 _SINGULAR = 1e-14
 
 
-def _singular(W: np.ndarray, r: int, hmax: float) -> bool:
-    """The rank decision of :data:`_SINGULAR` on the stacked weighted rows ``W`` (m × r)."""
+def _factor(W: np.ndarray, r: int) -> np.ndarray | None:
+    """``R`` (r × r, upper, ``RᵀR = WᵀW``) of the stacked weighted rows ``W`` (m × r), or
+    ``None`` when ``WᵀW`` counts as singular (:data:`_SINGULAR`)."""
     if W.shape[0] < r:
-        return True
+        return None
+    hmax = max(float(np.einsum("ij,ij->j", W, W).max()), 1e-300)
     qr = lapack.dgeqrf(W)[0]
-    d = np.abs(qr.diagonal()[:r])
-    return bool(not np.all(np.isfinite(d)) or float(d.min()) ** 2 <= _SINGULAR * hmax)
+    Rf = np.triu(qr[:r, :r])
+    d = np.abs(Rf.diagonal())
+    if not np.all(np.isfinite(d)) or float(d.min()) ** 2 <= _SINGULAR * hmax:
+        return None
+    return Rf
 
 
 def solve_weighted(
@@ -80,9 +86,9 @@ def solve_weighted(
     # ε‖x‖² only where the levels leave H singular, as PersistentQP: with ε scaled by the
     # x-space Hessian and centred on x = 0 (not on the hard phase's point, in the reduced
     # coordinates, where 1e-9·max diag pulled a last level weighted 1e-6 by ~1 %: 2e-3 in x)
-    cho, info = lapack.dpotrf(H, lower=0, clean=1)
-    hmax = max(float(H.diagonal().max()), 1e-300)
-    regularized = info != 0 or _singular(np.vstack(W) if W else np.zeros((0, r)), r, hmax)
+    # H = WᵀW is factored as the R of W's QR (no squaring), and the decision made on it
+    cho = _factor(np.vstack(W) if W else np.zeros((0, r)), r)
+    regularized = cho is None
     if regularized:
         eps = regularization * max(1.0, hdiag)
         zc = R.project(x)
@@ -100,7 +106,7 @@ def solve_weighted(
             z, info = lapack.dtrtrs(qr[:r, :r], qtc[:r], lower=0)
     else:
         # unconstrained optimum first: if it violates nothing it is the QP's optimum
-        z, info = lapack.dpotrs(cho, -f, lower=0)
+        z, info = lapack.dpotrs(cho, -f, lower=0)  # RᵀR z = −f
     if info == 0:
         xc = x + R.lift(z)
         if R.feasible(xc) and all(
