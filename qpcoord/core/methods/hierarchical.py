@@ -31,10 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..backends import time_left
 from ..compile import CompiledStack
 from ..elimination import Reduced
-from ..errors import SolverError
 from ..linalg import filtered_svd, numerical_rank, svd
 from ..polish import KKT_FEAS_TOL, KKT_TOL, active_set_ls, kkt_residual, prepare, pull_back
 from ..tolerance import at_bounds
@@ -504,21 +502,7 @@ def solve_hierarchical(
             y0 = np.zeros(kdim)
             y0[:r] = R.project(x_warm - x)
         where = f"level {k}"
-        try:
-            y = R.solve_qp(H, f, Dy, dlo, dhi, y0, where=where)
-        except SolverError as exc:
-            tl = time_left()
-            if "time limit" in str(exc) or (tl is not None and tl <= 0.0):
-                raise
-            # The level QP is feasible by construction (z = 0 with its slacks meets every
-            # row): a backend's "infeasible" is wrong (daqp at a degenerate vertex over the
-            # regularisation-only block, see _DAQP_SETTINGS). Start the certifier's exact
-            # continuation from z = 0; a point it cannot certify raises below as before.
-            y = np.zeros(kdim)
-            R.fallbacks.append(f"{where}: exact continuation from z = 0 ({exc})")
-            failed = exc
-        else:
-            failed = None
+        y = R.solve_qp(H, f, Dy, dlo, dhi, y0, where=where)
         z = y[:r]
         xn = x + R.lift(z)
         F = [Vt[:rank]] if rank else []
@@ -571,8 +555,6 @@ def solve_hierarchical(
             (L.sw[idx] * dm) if mv else None,
         )
         z, ok, kkt = cert.run([zp, z] if zp is not None else [z], H, f, Dy, where)
-        if failed is not None and not ok:
-            raise failed
         R.certificates.append(kkt)
         if not ok:
             R.uncertified.append((k, kkt))
