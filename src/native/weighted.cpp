@@ -89,7 +89,6 @@ Weighted::Weighted(int n, std::vector<int> meq, std::vector<int> min, bool has_b
   G_.setZero(std::max(rows_, 1), std::max(nv, 1));
   xbar_.setZero(n_);
   x_.setZero(n_);
-  f_.setZero(n_);
   y_.setZero(std::max(nv, 1));
   e_.setZero(std::max(e, 1));
   coef_.setZero(std::max(n_, 1));
@@ -287,42 +286,38 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
     }
     x_ = xbar_;
   } else {
-    // the linear term: f = -sum_k rho^k M_k^T (be_k - A_k xbar) [+ eps Z^T xbar]
-    auto f = f_.head(r);
-    f.setZero();
+    // the soft equalities' targets e = be - A xbar (the linear term f = -M^T diag(beta) e
+    // [+ eps Z^T xbar] is never formed: see below)
     if (mes_) {
       auto e = e_.head(mes_);
       e = beq.segment(me_h, mes_);
       if (me_h) e.noalias() -= Aeq.middleRows(me_h, mes_) * xbar_;
-      e.array() *= beta_eq_.head(mes_).array();
-      f.noalias() -= M_.topLeftCorner(mes_, r).transpose() * e;
     }
-    if (regularized_ && me_h) f.noalias() += eps_ * (Z_.leftCols(r).transpose() * xbar_);
-    // the unconstrained optimum y_u = -J0 J0^T f (slacks 0)
+    // the unconstrained optimum y_u (slacks 0)
     auto y = y_.head(nv);
     y.setZero();
     auto J0 = J0_.topLeftCorner(nv, nv);
-    if (r && regularized_) {
-      // least squares on [W; sqrt(eps) I] z = [sqrt(beta) e; -sqrt(eps) Z^T xbar]
-      auto rhs = rhs_.head(mes_ + r);
-      if (mes_) rhs.head(mes_) = e_.head(mes_).cwiseQuotient(beta_eq_.head(mes_).cwiseSqrt());
-      if (me_h)
-        rhs.tail(r).noalias() = -std::sqrt(eps_) * (Z_.leftCols(r).transpose() * xbar_);
-      else
-        rhs.tail(r).setZero();
-      const auto Wa = Wq_.topLeftCorner(mes_ + r, r);
+    if (r) {
+      // the unconstrained optimum as the least-squares solution of W z = sqrt(beta) e (with
+      // eps: [W; sqrt(eps) I] z = [sqrt(beta) e; -sqrt(eps) Z^T xbar]) from W's QR, not
+      // H^{-1} f: forming f and H costs ~eps_machine cond(H) in z, the QR eps_machine
+      // cond(W) = eps_machine sqrt(cond(H)) (Talos weighted IK: cond(H) ~ 1e12)
+      const int ma = mes_ + (regularized_ ? r : 0);
+      auto rhs = rhs_.head(ma);
+      if (mes_) rhs.head(mes_) = e_.head(mes_).cwiseProduct(beta_eq_.head(mes_).cwiseSqrt());
+      if (regularized_) {
+        if (me_h)
+          rhs.tail(r).noalias() = -std::sqrt(eps_) * (Z_.leftCols(r).transpose() * xbar_);
+        else
+          rhs.tail(r).setZero();
+      }
+      const auto Wa = Wq_.topLeftCorner(ma, r);
       for (int j = 0; j < r; ++j)
-        rhs.tail(mes_ + r - j)
-            .applyHouseholderOnTheLeft(Wa.col(j).tail(mes_ + r - j - 1), tau_(j), hh_.data());
+        rhs.tail(ma - j).applyHouseholderOnTheLeft(Wa.col(j).tail(ma - j - 1), tau_(j),
+                                                   hh_.data());
       auto yz = y.head(r);
       yz = rhs.head(r);
       Wa.topRows(r).template triangularView<Eigen::Upper>().solveInPlace(yz);
-    } else if (r) {  // two triangular solves with L = R^T (J0 J0^T f loses digits)
-      auto yz = y.head(r);
-      yz = -f;
-      const auto L = L_.topLeftCorner(r, r);
-      L.template triangularView<Eigen::Lower>().solveInPlace(yz);
-      L.transpose().template triangularView<Eigen::Upper>().solveInPlace(yz);
     }
     const int max_iter = 10 * (nv + rows_) + 100;
     const auto G = G_.topLeftCorner(rows_, nv);

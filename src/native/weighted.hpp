@@ -110,7 +110,7 @@ class Weighted {
   Eigen::VectorXd hh_, tau_, rhs_;  ///< Householder workspace (n), coefficients (n), rhs
   Eigen::VectorXd beta_eq_, beta_in_;  ///< rho^k of each soft equality / inequality row
   Eigen::MatrixXd L_, J0_, G_;  ///< L = R^T of W's QR (H = L L^T), J0 = L^{-T}, rows
-  Eigen::VectorXd xbar_, x_, f_, y_, e_, coef_, glo_, ghi_, tlo_, thi_, flo_, fhi_, cx_;
+  Eigen::VectorXd xbar_, x_, y_, e_, coef_, glo_, ghi_, tlo_, thi_, flo_, fhi_, cx_;
   qp::DualActiveSet qp_;
 };
 

@@ -31,18 +31,33 @@ __all__ = ["solve_weighted"]
 _SINGULAR = 1e-14
 
 
-def _factor(W: np.ndarray, r: int) -> np.ndarray | None:
-    """``R`` (r × r, upper, ``RᵀR = WᵀW``) of the stacked weighted rows ``W`` (m × r), or
-    ``None`` when ``WᵀW`` counts as singular (:data:`_SINGULAR`)."""
+def _qr(W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """LAPACK's Householder QR of ``W`` (``dgeqrf``: ``R`` on and above the diagonal)."""
+    qr, tau, _work, info = lapack.dgeqrf(W)
+    if info != 0:
+        raise ValueError(f"dgeqrf: illegal argument {-info}")
+    return qr, tau
+
+
+def _lstsq(qr: np.ndarray, tau: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, int]:
+    """The least-squares solution ``R⁻¹ (Qᵀ rhs)[:r]`` from :func:`_qr`'s factors."""
+    r = qr.shape[1]
+    qtc, _work, info = lapack.dormqr("L", "T", qr, tau, rhs, max(1, 2 * r))
+    if info != 0:
+        return rhs[:r], info
+    z, info = lapack.dtrtrs(qr[:r, :r], qtc[:r], lower=0)
+    return z, info
+
+
+def _singular(W: np.ndarray, r: int) -> tuple[bool, tuple | None]:
+    """The decision of :data:`_SINGULAR` on the stacked weighted rows ``W`` (m × r), with
+    :func:`_qr`'s factors of ``W`` (``None`` when it has fewer rows than columns)."""
     if W.shape[0] < r:
-        return None
+        return True, None
     hmax = max(float(np.einsum("ij,ij->j", W, W).max()), 1e-300)
-    qr = lapack.dgeqrf(W)[0]
-    Rf = np.triu(qr[:r, :r])
-    d = np.abs(Rf.diagonal())
-    if not np.all(np.isfinite(d)) or float(d.min()) ** 2 <= _SINGULAR * hmax:
-        return None
-    return Rf
+    qr, tau = _qr(W)
+    d = np.abs(qr.diagonal()[:r])
+    return bool(not np.all(np.isfinite(d)) or float(d.min()) ** 2 <= _SINGULAR * hmax), (qr, tau)
 
 
 def solve_weighted(
@@ -86,27 +101,23 @@ def solve_weighted(
     # ε‖x‖² only where the levels leave H singular, as PersistentQP: with ε scaled by the
     # x-space Hessian and centred on x = 0 (not on the hard phase's point, in the reduced
     # coordinates, where 1e-9·max diag pulled a last level weighted 1e-6 by ~1 %: 2e-3 in x)
-    # H = WᵀW is factored as the R of W's QR (no squaring), and the decision made on it
-    cho = _factor(np.vstack(W) if W else np.zeros((0, r)), r)
-    regularized = cho is None
+    # the decision on the R of W's QR (no squaring); the unconstrained optimum is the
+    # least-squares solution of W z = c from that QR (with ε: of [W; √ε I] z = [c; −√ε Zᵀx̄]),
+    # not H⁻¹f: forming H and f costs ~ε_machine·cond(H) in z, the QR ε_machine·cond(W) =
+    # ε_machine·√cond(H) (the Talos weighted IK: cond(H) ~ 1e12), and with ε along H's null
+    # space ε_machine‖W‖²/ε (2e-7)
+    Wm = np.vstack(W) if W else np.zeros((0, r))
+    cm = np.concatenate(c) if c else np.zeros(0)
+    regularized, fac = _singular(Wm, r)
     if regularized:
         eps = regularization * max(1.0, hdiag)
         zc = R.project(x)
         H.flat[:: r + 1] += eps
         f += eps * zc
-        # unconstrained optimum: least squares on [W; √ε I] z = [c; −√ε Zᵀx̄], not H⁻¹f
-        # (forming H and f costs ~ε_machine‖W‖²/ε along H's null space: 2e-7 in z)
         se = np.sqrt(eps)
-        Wa = np.vstack((*W, se * np.eye(r)))
-        ca = np.concatenate((*c, -se * zc))
-        qr, tau, _work, info = lapack.dgeqrf(Wa)
-        if info == 0:
-            qtc, _work, info = lapack.dormqr("L", "T", qr, tau, ca, max(1, 2 * r))
-        if info == 0:
-            z, info = lapack.dtrtrs(qr[:r, :r], qtc[:r], lower=0)
-    else:
-        # unconstrained optimum first: if it violates nothing it is the QP's optimum
-        z, info = lapack.dpotrs(cho, -f, lower=0)  # RᵀR z = −f
+        fac = _qr(np.vstack((Wm, se * np.eye(r))))
+        cm = np.concatenate((cm, -se * zc))
+    z, info = _lstsq(*fac, cm)
     if info == 0:
         xc = x + R.lift(z)
         if R.feasible(xc) and all(
