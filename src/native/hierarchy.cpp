@@ -51,6 +51,7 @@ void LsqProblem::start(int qrows_, int cols_) {
   cols = cols_;
   rows = 0;
   dropped2 = 0.0;
+  zcols = slacks = slack_q0 = slack_g0 = 0;
   Q.topLeftCorner(qrows, cols).setZero();
   c.head(qrows).setZero();
 }
@@ -114,6 +115,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   kqr_.reserve(max_qrows, max_cols, 1);
   cqr_.reserve(max_cols, max_cols, 1);
   kqr_t_.reserve(max_cols, max_qrows, 1);
+  sqr_.reserve(max_cols, max_grows + max_qrows, 1);
+  sact_.assign(std::max(max_in, 1), -1);
   fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
@@ -235,6 +238,13 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   res -= P.c.head(qr);
   step.setZero();
   if (nk == 0 || qr == 0) return;
+  if (slack_ls && P.slacks > 0) {
+    if (slack_step(P, step)) {
+      ++slack_steps_;
+      return;
+    }
+    step.setZero();
+  }
   const auto K = Qt_.block(0, rho, qr, nk);
   const double kmax = K.colwise().norm().maxCoeff();
   const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
@@ -274,6 +284,58 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
     for (int i = 0; i < nk; ++i) step(rho + kqr_.perm(i)) = u(i);
   }
   wqr_.apply_q(step);
+}
+
+/// min |s| s.t. G_w s = 0, Q s = -res in y = (z, w). A slack j whose row is outside the
+/// working set appears in its objective row alone (Q(q0 + j, zc + j) = sw_j): s_j = -res_j /
+/// sw_j, and the rest, (z, the working rows' slacks), is the minimum-norm solution of
+///   [G_w(:, z) G_w(:, wA); Q(0:q0, z) 0; 0 diag(sw_A)] s = [0; -res(0:q0); -res_A]
+/// from one pivoted QR of its transpose ((zc + na) x (kw + q0 + na)). With full row rank the
+/// system is consistent: the projected least squares of ls_step has residual zero and this
+/// same minimum-norm step (the forced slacks add the same |s_I|^2 to every solution).
+bool Hierarchy::slack_step(const LsqProblem& P, Eigen::Ref<Vec> step) {
+  const int zc = P.zcols, ns = P.slacks, q0 = P.slack_q0, g0 = P.slack_g0;
+  const int kw = static_cast<int>(widx_.size());
+  if (wqr_.rank() < kw) return false;  // dependent working rows: the general path
+  std::fill(sact_.begin(), sact_.begin() + ns, -1);
+  int na = 0;
+  for (const int i : widx_)
+    if (i >= g0 && i < g0 + ns) sact_[i - g0] = zc + na++;
+  const int nc = zc + na, mr = kw + q0 + na;
+  if (mr > nc) return false;  // more conditions than unknowns: no exact step in general
+  const auto res = res_.head(P.qrows);
+  const double stol = std::max(P.qrows, P.cols) * kEps * std::max(qscale_, 1e-300);
+  MapMat T = sqr_.matrix(nc, mr);
+  T.setZero();
+  for (int c = 0; c < kw; ++c) {
+    const int i = widx_[c];
+    T.col(c).head(zc) = P.G.row(i).head(zc).transpose();
+    if (i >= g0) T(sact_[i - g0], c) = P.G(i, zc + i - g0);
+  }
+  for (int r = 0; r < q0; ++r) T.col(kw + r).head(zc) = P.Q.row(r).head(zc).transpose();
+  auto b = tvec_.head(mr);
+  b.head(kw).setZero();
+  b.segment(kw, q0) = -res.head(q0);
+  for (int j = 0; j < ns; ++j) {
+    const double sw = P.Q(q0 + j, zc + j);
+    if (sact_[j] < 0) {  // free slack: its own objective row
+      if (!(std::abs(sw) > stol)) return false;  // (near) zero weight: K is rank-deficient
+      step(zc + j) = -res(q0 + j) / sw;
+    } else {
+      const int c = kw + q0 + sact_[j] - zc;
+      T(sact_[j], c) = sw;
+      b(c) = -res(q0 + j);
+    }
+  }
+  const double tmax = T.colwise().norm().maxCoeff();
+  const double tol = std::max(nc, mr) * kEps * std::max(tmax, qscale_);
+  if (sqr_.factor(tol, 0.0) < mr) return false;
+  auto v = u_.head(nc);
+  sqr_.min_norm_transposed_solve(b, v);
+  step.head(zc) = v.head(zc);
+  for (int j = 0; j < ns; ++j)
+    if (sact_[j] >= 0) step(zc + j) = v(sact_[j]);
+  return true;
 }
 
 bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
@@ -986,6 +1048,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   add_bound_rows(P);
   auto y = y_.head(cols);
   auto g = rowbuf_.head(cols);
+  const int slack_g0 = P.rows;
   for (int j = 0; j < mv; ++j) {
     const int row = i0 + mov_[j];
     const double v = C.row(row).dot(x_);
@@ -994,6 +1057,12 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     g.head(r_).noalias() = Zr.transpose() * C.row(row).transpose();
     g(r_ + j) = -1.0;
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
+  }
+  if (P.rows == slack_g0 + mv && P.qrows == qme + ndamp + mv) {  // every level row kept
+    P.zcols = r_;
+    P.slacks = mv;
+    P.slack_q0 = qme + ndamp;
+    P.slack_g0 = slack_g0;
   }
   int iters = 0;
   int found = 0;
@@ -1147,6 +1216,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;
+  slack_steps_ = 0;
   qr_closed_forms_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
