@@ -116,7 +116,6 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   cqr_.reserve(max_cols, max_cols, 1);
   kqr_t_.reserve(max_cols, max_qrows, 1);
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
-  sact_.assign(std::max(max_in, 1), -1);
   fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
@@ -220,9 +219,16 @@ void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W
   MapMat GwT = wqr_.matrix(k, kw);
   for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
   wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
-  auto Qt = Qt_.topLeftCorner(P.qrows, k);
-  Qt = P.Q.topLeftCorner(P.qrows, k);
-  wqr_.apply_q_right(Qt);
+  // with the slack step the projected objective is rarely needed: formed on first use
+  qt_stale_ = true;
+  if (!(slack_ls && P.slacks > 0)) form_qt(P);
+}
+
+void Hierarchy::form_qt(const LsqProblem& P) {
+  auto Qt = Qt_.topLeftCorner(P.qrows, P.cols);
+  Qt = P.Q.topLeftCorner(P.qrows, P.cols);
+  wqr_.apply_q_right(Qt);  // every transform of the working set's QR so far, in order
+  qt_stale_ = false;
 }
 
 /// The minimum-residual step in null(G_w) = span(Qf(:, rank:)): min ||Q (y + N s) - c||.
@@ -245,6 +251,7 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
     }
     step.setZero();
   }
+  if (qt_stale_) form_qt(P);
   const auto K = Qt_.block(0, rho, qr, nk);
   const double kmax = K.colwise().norm().maxCoeff();
   const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
@@ -286,55 +293,43 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   wqr_.apply_q(step);
 }
 
-/// min |s| s.t. G_w s = 0, Q s = -res in y = (z, w). A slack j whose row is outside the
-/// working set appears in its objective row alone (Q(q0 + j, zc + j) = sw_j): s_j = -res_j /
-/// sw_j, and the rest, (z, the working rows' slacks), is the minimum-norm solution of
-///   [G_w(:, z) G_w(:, wA); Q(0:q0, z) 0; 0 diag(sw_A)] s = [0; -res(0:q0); -res_A]
-/// from one pivoted QR of its transpose ((zc + na) x (kw + q0 + na)). With full row rank the
-/// system is consistent: the projected least squares of ls_step has residual zero and this
-/// same minimum-norm step (the forced slacks add the same |s_I|^2 to every solution).
+/// min |s| s.t. G_w s = 0, Q s = -res in y = (z, w). Every slack j appears in one objective
+/// row alone (Q(q0 + j, zc + j) = sw_j != 0): the solutions all share s_j = -res_j / sw_j,
+/// and their z part solves (in minimum norm: the slacks' part is fixed)
+///   [G_w(:, z); Q(0:q0, z)] s_z = [-G_w(:, w) s_w; -res(0:q0)]
+/// by one pivoted QR of its transpose (zc x (kw + q0)). With full row rank the system is
+/// consistent: the projected least squares of ls_step has residual zero and this same
+/// minimum-norm step.
 bool Hierarchy::slack_step(const LsqProblem& P, Eigen::Ref<Vec> step) {
   const int zc = P.zcols, ns = P.slacks, q0 = P.slack_q0, g0 = P.slack_g0;
-  const int kw = static_cast<int>(widx_.size());
+  const int kw = static_cast<int>(widx_.size()), mr = kw + q0;
   if (wqr_.rank() < kw) return false;  // dependent working rows: the general path
-  std::fill(sact_.begin(), sact_.begin() + ns, -1);
-  int na = 0;
-  for (const int i : widx_)
-    if (i >= g0 && i < g0 + ns) sact_[i - g0] = zc + na++;
-  const int nc = zc + na, mr = kw + q0 + na;
-  if (mr > nc) return false;  // more conditions than unknowns: no exact step in general
+  if (mr > zc) return false;  // more conditions than unknowns: no exact step in general
   const auto res = res_.head(P.qrows);
   const double stol = std::max(P.qrows, P.cols) * kEps * std::max(qscale_, 1e-300);
-  MapMat T = sqr_.matrix(nc, mr);
-  T.setZero();
-  for (int c = 0; c < kw; ++c) {
-    const int i = widx_[c];
-    T.col(c).head(zc) = P.G.row(i).head(zc).transpose();
-    if (i >= g0) T(sact_[i - g0], c) = P.G(i, zc + i - g0);
-  }
-  for (int r = 0; r < q0; ++r) T.col(kw + r).head(zc) = P.Q.row(r).head(zc).transpose();
-  auto b = tvec_.head(mr);
-  b.head(kw).setZero();
-  b.segment(kw, q0) = -res.head(q0);
   for (int j = 0; j < ns; ++j) {
     const double sw = P.Q(q0 + j, zc + j);
-    if (sact_[j] < 0) {  // free slack: its own objective row
-      if (!(std::abs(sw) > stol)) return false;  // (near) zero weight: K is rank-deficient
-      step(zc + j) = -res(q0 + j) / sw;
-    } else {
-      const int c = kw + q0 + sact_[j] - zc;
-      T(sact_[j], c) = sw;
-      b(c) = -res(q0 + j);
-    }
+    if (!(std::abs(sw) > stol)) return false;  // (near) zero weight: K is rank-deficient
+    step(zc + j) = -res(q0 + j) / sw;
   }
-  const double tmax = T.colwise().norm().maxCoeff();
-  const double tol = std::max(nc, mr) * kEps * std::max(tmax, qscale_);
-  if (sqr_.factor(tol, 0.0) < mr) return false;
-  auto v = u_.head(nc);
-  sqr_.min_norm_transposed_solve(b, v);
-  step.head(zc) = v.head(zc);
-  for (int j = 0; j < ns; ++j)
-    if (sact_[j] >= 0) step(zc + j) = v(sact_[j]);
+  MapMat T = sqr_.matrix(zc, mr);
+  auto b = tvec_.head(mr);
+  for (int c = 0; c < kw; ++c) {
+    const int i = widx_[c];
+    T.col(c) = P.G.row(i).head(zc).transpose();
+    b(c) = (i >= g0) ? -P.G(i, zc + i - g0) * step(zc + i - g0) : 0.0;
+  }
+  for (int r = 0; r < q0; ++r) T.col(kw + r) = P.Q.row(r).head(zc).transpose();
+  b.tail(q0) = -res.head(q0);
+  const double tmax = mr ? T.colwise().norm().maxCoeff() : 0.0;
+  const double tol = std::max(zc, mr) * kEps * std::max(tmax, qscale_);
+  if (mr && sqr_.factor(tol, 0.0) < mr) return false;
+  auto v = u_.head(zc);
+  if (mr)
+    sqr_.min_norm_transposed_solve(b, v);
+  else
+    v.setZero();
+  step.head(zc) = v;
   return true;
 }
 
@@ -452,7 +447,8 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       if (downdate) {
         const auto pos = std::find(widx_.begin(), widx_.end(), drop);
         if (pos != widx_.end() &&
-            wqr_.remove(static_cast<int>(pos - widx_.begin()), Qt_.topLeftCorner(qr, k))) {
+            wqr_.remove(static_cast<int>(pos - widx_.begin()),
+                        Qt_.topLeftCorner(qt_stale_ ? 0 : qr, k))) {
           widx_.erase(pos);
           current = true;
           ++downdates_;
@@ -507,7 +503,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       // one row enters: update the working set's QR and Q Qf instead of refactorising
       if (wqr_.append(P.G.row(block).head(k).transpose())) {
         widx_.push_back(block);
-        wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
+        if (!qt_stale_) wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
         current = true;
       }
     } else {
