@@ -212,6 +212,7 @@ void Hierarchy::freeze(double scale) {
 // ---------------------------------------------------------------------------------------
 void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W) {
   const int k = P.cols;
+  finish_ready_ = false;
   widx_.clear();
   for (int i = 0; i < P.rows; ++i)
     if (W[i]) widx_.push_back(i);
@@ -405,6 +406,9 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   int last_drop = -1;
   int zero_steps = 0;
   bool current = false;  // the working set's factorisation matches W (after an append)
+  // the exact finish right after an optimal end: its first step is that end's last one
+  bool reuse = exact_ && finish_ready_ && reuse_finish;
+  finish_ready_ = false;
   // the current working set's sub-threshold step was taken (see `stationary` below)
   bool finished = false;
   for (int it = 0; it < max_iter; ++it) {
@@ -413,9 +417,13 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       return false;
     }
     ++iters;
-    if (!current) factor_working(P, W);
+    if (reuse) {  // wqr_, widx_, res_ and step_ are those of this W and y
+      reuse = false;
+    } else {
+      if (!current) factor_working(P, W);
+      ls_step(P, y, step);  // res_ = Q y - c
+    }
     current = false;
-    ls_step(P, y, step);  // res_ = Q y - c
     const auto res = res_.head(qr);
     dres.noalias() = Q * step;
     const double gain = -(2.0 * res.dot(dres) + dres.squaredNorm());
@@ -439,7 +447,10 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     }
     if (stationary) {
       int drop = -1;
-      if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) return true;
+      if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) {
+        finish_ready_ = true;
+        return true;
+      }
       W[drop] = 0;
       last_drop = drop;
       finished = false;

@@ -125,6 +125,10 @@ class Hierarchy {
   /// rows) when that has full row rank (default), or from the projected objective K = Q N
   /// on all of y (A/B).
   bool slack_ls = true;
+  /// The exact finish of an ill-conditioned level, called right after the active set ended
+  /// optimal on the same problem, starts from that end's factorisation and last step
+  /// (default) or factorises and steps again (A/B: the same numbers, recomputed).
+  bool reuse_finish = true;
   /// Least-squares steps taken by slack_ls in the last call.
   int slack_steps() const { return slack_steps_; }
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
@@ -263,6 +267,9 @@ class Hierarchy {
   /// Qt_ not formed for the working set's QR (factor_working of a level with slacks and
   /// slack_ls: ls_step forms it when its general path needs it; updates skip it till then)
   bool qt_stale_ = true;
+  /// active_set returned optimal and nothing has factorised since: wqr_, widx_, Qt_, res_
+  /// and step_ are those of its final W and y (the exact finish's first iteration)
+  bool finish_ready_ = false;
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
   /// active_set decides stationarity and multiplier signs to rounding, not to kKktTol and a
   /// 1e-15 objective gain (the finish of an ill-conditioned or damped level, issue 24)

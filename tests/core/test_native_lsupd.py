@@ -169,3 +169,52 @@ def test_the_slack_step_allocates_nothing(tmp_path):
             )  # fmt: skip
             assert out.returncode == 0, (name, mode, out.stderr)
             assert "allocations after the first pass 0" in out.stdout, (name, mode, out.stdout)
+
+
+@needs_native
+@pytest.mark.parametrize("case", ["humanoid", "ill_conditioned"])
+def test_exact_finish_from_the_optimal_end_is_the_same(case):
+    """An ill-conditioned level is finished to rounding (a second active set right after the
+    first ended optimal): started from that end's factorisation and last step
+    (``reuse_finish``, default) it gives the very numbers of the recomputed start, bit for
+    bit, and the Python engine's level values. Cases: the moving humanoid (its level 4:
+    sigma_min / |A| ~ 5e-5) and a random ill-conditioned equality level under conflicting
+    inequality rows."""
+    from qpcoord.core.native import NativeHierarchy
+
+    if case == "humanoid":
+        sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+        try:
+            import hierarchy_published as hp
+        finally:
+            sys.path.pop(0)
+        prob = load("lexls_test01_humanoid")
+        st = qc.Stack(prob.levels, bounds=prob.bounds)
+        mover = hp._mover(prob.levels)
+    else:
+        rng = np.random.default_rng(5)
+        n = 20
+        U, _ = np.linalg.qr(rng.standard_normal((30, n)))
+        V, _ = np.linalg.qr(rng.standard_normal((n, n)))
+        A = U @ np.diag(np.logspace(0, -5, n)) @ V.T  # sigma_min / sigma_max = 1e-5
+        C = rng.standard_normal((12, n))
+        C /= np.linalg.norm(C, axis=1)[:, None]
+        ineq = qc.Inequality(C, rng.uniform(0.2, 0.6, 12), np.full(12, np.inf))
+        eq = qc.Equality(A, rng.standard_normal(30))
+        st = qc.Stack([ineq, eq], bounds=qc.Bounds(-np.ones(n), np.ones(n)))
+        lo0 = ineq.lower.copy()
+
+        def mover(step: int) -> None:
+            ineq.update(lower=lo0 + 0.1 * np.sin(0.6 * step + np.arange(12)))
+
+    P = st._compiled
+    new = NativeHierarchy(P, st.damping)
+    plain = NativeHierarchy(P, st.damping)
+    plain._solver.reuse_finish = False
+    for step in range(5):
+        mover(step)
+        xn, rn, _ = new.solve(P)
+        xp, rp, _ = plain.solve(P)
+        assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
+        ref = st.solve(engine="python").level_residuals
+        assert np.all(np.abs(rn - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (rn, ref)
