@@ -222,6 +222,31 @@ void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W
   wqr_.apply_q_right(Qt);
 }
 
+void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) {
+  if (!trial_qt_tail) {
+    factor_working(P, W);
+    return;
+  }
+  const int k = P.cols;
+  widx_.clear();
+  for (int i = 0; i < P.rows; ++i)
+    if (W[i]) widx_.push_back(i);
+  const int kw = static_cast<int>(widx_.size());
+  MapMat GwT = wqr_.matrix(k, kw);
+  for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
+  wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
+  // (Q Qf)(i, :) = (Qf^T Q(i, :)^T)^T, row by row; only its columns rank.. (null(G_w)) are
+  // kept: the least-squares step reads no other (none at a vertex of the working set)
+  const int rho = wqr_.rank(), nk = k - rho;
+  if (nk == 0) return;
+  auto v = rowbuf_.head(k);
+  for (int i = 0; i < P.qrows; ++i) {
+    v = P.Q.row(i).head(k).transpose();
+    wqr_.apply_qt(v);
+    Qt_.row(i).segment(rho, nk) = v.tail(nk).transpose();
+  }
+}
+
 /// The minimum-residual step in null(G_w) = span(Qf(:, rank:)): min ||Q (y + N s) - c||.
 /// Numerical rank of K = Q N as qpcoord.core.linalg.numerical_rank with the scale of Q
 /// before projection: a K whose columns are rounding noise (the working set's rows span what
@@ -477,7 +502,7 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   }
   if (!found && !ws.id.empty()) return 0;
   qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
-  factor_working(P, W);
+  factor_trial(P, W);
   const int kw = static_cast<int>(widx_.size());
   auto t = tvec_.head(kw);
   for (int j = 0; j < kw; ++j) {

@@ -112,6 +112,9 @@ class Hierarchy {
   /// A wide projected objective K of full row rank: its minimum-norm step from one QR of
   /// K^T (default) or from the QR of K and of [R11 R12]^T (A/B).
   bool wide_ls = true;
+  /// A warm trial computes of Q Qf only the columns its least-squares step reads (default)
+  /// or all of them, as the active set (A/B).
+  bool trial_qt_tail = true;
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
   int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
@@ -182,6 +185,10 @@ class Hierarchy {
   /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
   /// Qt_ = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
+  /// factor_working for a warm trial (trial_qt_tail): the same QR of G_w^T, but of Q Qf only
+  /// the columns rank.. that ls_step reads (none when G_w pins y); the active set's updates
+  /// need all of Q Qf and start from factor_working
+  void factor_trial(const LsqProblem& P, const std::vector<int8_t>& W);
   /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
   void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
   /// Multiplier signs on W (factor_working of this W first); else the row to drop in *drop
