@@ -103,6 +103,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   const int max_qrows = std::max({max_eq + n + max_in, n, min_[0] + (has_bounds ? n : 0), 1});
   const int max_grows = capacity_ + (has_bounds ? n : 0) + max_in + 1;
   P_.resize(max_qrows, max_grows, max_cols);
+  Pr_.resize(max_qrows, max_grows, std::max(n, 1));
   y_.setZero(max_cols);
   W_.assign(max_grows, 0);
   working_.resize(blocks + 1);
@@ -485,21 +486,7 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   *consistent = false;
   if (!ws.stored) return 0;
   const int k = P.cols;
-  // the equality rows (lo = hi: hard or inherited rows fixed at their value) are in every
-  // working set, as in the cold start: store_working_set keeps the one-sided rows only, and
-  // a point on the stored rows alone is free to leave an equality row (issue 24: the
-  // humanoid's box form missed on every call, its point off two inherited rows lo = hi = 0)
-  for (int i = 0; i < P.rows; ++i) W[i] = (P.lo(i) == P.hi(i)) ? 2 : 0;
-  int found = 0;
-  for (size_t j = 0; j < ws.id.size(); ++j) {
-    for (int i = 0; i < P.rows; ++i) {
-      if (P.id[i] == ws.id[j]) {
-        if (W[i] != 2) W[i] = ws.side[j];
-        ++found;
-        break;
-      }
-    }
-  }
+  const int found = map_working_set(P, ws, W);
   if (!found && !ws.id.empty()) return 0;
   qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
   factor_trial(P, W);
@@ -529,13 +516,161 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   return found;
 }
 
+int Hierarchy::map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W) {
+  // the equality rows (lo = hi: hard or inherited rows fixed at their value) are in every
+  // working set, as in the cold start: store_working_set keeps the one-sided rows only, and
+  // a point on the stored rows alone is free to leave an equality row (issue 24: the
+  // humanoid's box form missed on every call, its point off two inherited rows lo = hi = 0)
+  for (int i = 0; i < P.rows; ++i) W[i] = (P.lo(i) == P.hi(i)) ? 2 : 0;
+  int found = 0;
+  for (size_t j = 0; j < ws.id.size(); ++j) {
+    for (int i = 0; i < P.rows; ++i) {
+      if (P.id[i] == ws.id[j]) {
+        if (W[i] != 2) W[i] = ws.side[j];
+        ++found;
+        break;
+      }
+    }
+  }
+  return found;
+}
+
+int Hierarchy::reduced_set_point(const LsqProblem& P, int mv, const Working& ws,
+                                 std::vector<int8_t>& W, bool* consistent) {
+  *consistent = false;
+  if (!ws.stored) return 0;
+  const int k = P.cols, hard = P.rows - mv, zc = k - mv;
+  const int found = map_working_set(P, ws, W);
+  if (!found && !ws.id.empty()) return 0;
+  // slack rows: row hard + j has its slack in column zc + j (G(i, zc + j) = -s_i < 0) and
+  // the objective row q0 + j = sw_j there; the rows above q0 have no slack entries
+  const int q0 = P.qrows - mv;
+  int ns = 0;
+  for (int j = 0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double t = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    // a working row without weight leaves its slack free in the objective: its point is the
+    // minimum norm over (z, w), which the reduced problem does not see (the full trial)
+    if (!std::isfinite(t) || !(P.Q(q0 + j, zc + j) > 0.0)) return -1;
+    ++ns;
+  }
+  LsqProblem& R = Pr_;
+  R.start(q0 + ns, zc);
+  R.Q.topLeftCorner(q0, zc) = P.Q.topLeftCorner(q0, zc);
+  R.c.head(q0) = P.c.head(q0);
+  // a working slack row at its bound t: w_j = (g_z z - t) / s, its objective term
+  // (sw_j w_j)^2 = ((sw_j / s) (g_z z - t))^2: a row of the objective in z
+  for (int j = 0, d = q0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double t = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    const double f = P.Q(q0 + j, zc + j) / -P.G(i, zc + j);
+    R.Q.row(d).head(zc) = f * P.G.row(i).head(zc);
+    R.c(d++) = f * t;
+  }
+  // the rows without slack, where working (the others are not read)
+  R.rows = hard;
+  for (int i = 0; i < hard; ++i) {
+    if (!W[i]) continue;
+    R.G.row(i).head(zc) = P.G.row(i).head(zc);
+    R.lo(i) = P.lo(i);
+    R.hi(i) = P.hi(i);
+  }
+  qscale_ = R.Q.topLeftCorner(R.qrows, zc).norm();
+  factor_trial(R, W);
+  const int kw = static_cast<int>(widx_.size());
+  auto t = tvec_.head(kw);
+  for (int j = 0; j < kw; ++j) {
+    const int i = widx_[j];
+    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    if (!std::isfinite(t(j))) return 0;
+  }
+  // z on the working rows without slack (minimum norm), then the least squares in their
+  // null space, as stored_set_point on the full problem
+  const int rho = wqr_.rank();
+  auto yp = xc_.head(k);
+  yp.setZero();
+  auto zp = yp.head(zc);
+  for (int i = 0; i < rho; ++i) zp(i) = t(wqr_.perm(i));
+  wqr_.solve_rt(zp);
+  wqr_.apply_q(zp);
+  *consistent = true;
+  if (kw) {
+    const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
+    for (int j = 0; j < kw && *consistent; ++j)
+      if (std::abs(P.G.row(widx_[j]).head(zc).dot(zp) - t(j)) > 1e-10 * tmax) *consistent = false;
+  }
+  auto step = step_.head(zc);
+  ls_step(R, zp, step);
+  zp += step;
+  // the slacks: a working row's from its bound, the others' 0 (their least-squares value)
+  for (int j = 0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double tb = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    yp(zc + j) = (P.G.row(i).head(zc).dot(zp) - tb) / -P.G(i, zc + j);
+  }
+  return found;
+}
+
+bool Hierarchy::reduced_multipliers_ok(const LsqProblem& P, int mv,
+                                       const Eigen::Ref<const Vec>& y,
+                                       const std::vector<int8_t>& W) {
+  const int k = P.cols, qr = P.qrows, hard = P.rows - mv, zc = k - mv;
+  const auto Q = P.Q.topLeftCorner(qr, k);
+  auto res = dres_.head(qr);
+  res.noalias() = Q * y;
+  res -= P.c.head(qr);
+  auto g = gvec_.head(k);
+  g.noalias() = Q.transpose() * res;
+  const double qn = Q.norm();
+  const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
+  const double round =
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
+  const double tol = kKktTol * gref + round;
+  auto sign_bad = [&](int i, double mu) {
+    if (W[i] == 2) return false;
+    return ((W[i] == 1) ? -mu : mu) < -tol;
+  };
+  // a working slack row's multiplier from its slack column alone (no other working row has
+  // an entry there): mu G(i, zc + j) = g(zc + j); its z part leaves the rows without slack
+  auto gz = u_.head(k);
+  gz.setZero();
+  gz.head(zc) = g.head(zc);
+  for (int j = 0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double mu = g(zc + j) / P.G(i, zc + j);
+    if (sign_bad(i, mu)) return false;
+    gz.head(zc) -= mu * P.G.row(i).head(zc).transpose();
+  }
+  // the rows without slack: G_h^T u = g_z - sum mu_s g_s in least squares (reduced_set_point's
+  // QR of G_h^T in wqr_, its rows in widx_)
+  const int kw = static_cast<int>(widx_.size());
+  if (kw == 0) return true;
+  auto u = gz.head(zc);
+  wqr_.apply_qt(u);
+  wqr_.solve_r(u);
+  auto mu = mu_.head(kw);
+  mu.setZero();
+  for (int i = 0; i < wqr_.rank(); ++i) mu(wqr_.perm(i)) = u(i);
+  for (int j = 0; j < kw; ++j)
+    if (sign_bad(widx_[j], mu(j))) return false;
+  return true;
+}
+
 bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                                 std::vector<int8_t>& W, int* found) {
   const int k = P.cols;
   *found = 0;
   if (!ws.stored) return false;
   bool consistent = false;
-  *found = stored_set_point(P, ws, W, &consistent);
+  // a level's slack rows (mv > 0): the trial in z alone, the working rows' slacks eliminated
+  const int reduced =
+      (reduce_slacks && slack_rows_ > 0) ? reduced_set_point(P, slack_rows_, ws, W, &consistent)
+                                         : -1;
+  *found = (reduced >= 0) ? reduced : stored_set_point(P, ws, W, &consistent);
   if (*found != static_cast<int>(ws.id.size()) || !consistent) return false;
   auto yp = xc_.head(k);
   auto gy = gy_.head(P.rows);
@@ -545,7 +680,9 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
     const double su = kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)));
     if (gy(i) < P.lo(i) - sl || gy(i) > P.hi(i) + su) return false;
   }
-  if (!multipliers_ok(P, yp, W, nullptr, nullptr, false)) return false;
+  if (reduced >= 0 ? !reduced_multipliers_ok(P, slack_rows_, yp, W)
+                   : !multipliers_ok(P, yp, W, nullptr, nullptr, false))
+    return false;
   y.head(k) = yp;
   return true;
 }
@@ -1022,7 +1159,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   int iters = 0;
   int found = 0;
+  slack_rows_ = mv;
   const bool hit = warm && try_working_set(P, working_[stage], y, W_, &found);
+  slack_rows_ = 0;
   const bool seeded =
       !hit && warm && seed_on_miss && found > 0 &&
       seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);

@@ -115,6 +115,9 @@ class Hierarchy {
   /// A warm trial computes of Q Qf only the columns its least-squares step reads (default)
   /// or all of them, as the active set (A/B).
   bool trial_qt_tail = true;
+  /// A level's warm trial on the problem in z alone (default): its working slack rows'
+  /// slacks eliminated (w = (g_z z - t) / s), the others' 0; or on the full (z, w) (A/B).
+  bool reduce_slacks = true;
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
   int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
@@ -167,6 +170,20 @@ class Hierarchy {
   /// or an infinite bound); *consistent: the point meets the set's rows.
   int stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
                        bool* consistent);
+  /// Map a stored working set onto P's rows (into W: equality rows 2, stored rows their
+  /// side); returns the number of stored rows matched.
+  int map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W);
+  /// stored_set_point of a level whose last mv rows of P have one slack column each (column
+  /// P.cols - mv + j, objective row P.qrows - mv + j): the least squares in z alone (Pr_),
+  /// each working slack row's slack eliminated (w = (g_z z - t) / s: its objective term a row
+  /// in z), the others' slack 0, the rows without slack the working rows of Pr_'s QR (wqr_);
+  /// the point (z, w) into xc_. -1: not reducible (a working slack row without weight).
+  int reduced_set_point(const LsqProblem& P, int mv, const Working& ws, std::vector<int8_t>& W,
+                        bool* consistent);
+  /// multipliers_ok after reduced_set_point (no drop): a working slack row's multiplier from
+  /// its slack column, the others' from the QR of the working rows without slack.
+  bool reduced_multipliers_ok(const LsqProblem& P, int mv, const Eigen::Ref<const Vec>& y,
+                              const std::vector<int8_t>& W);
   /// Try a stored working set: solve on it, check feasibility and multiplier signs. *found:
   /// the stored rows matched (its point stays in xc_ for seed_working_set on a miss).
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
@@ -232,6 +249,8 @@ class Hierarchy {
 
   std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
   LsqProblem P_;
+  LsqProblem Pr_;        ///< a level's warm trial in z alone (reduced_set_point)
+  int slack_rows_ = 0;   ///< slack rows of the level being tried (0: none, or not a level)
   Vec y_;
   std::vector<int8_t> W_;
 
