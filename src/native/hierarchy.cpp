@@ -115,7 +115,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   kqr_.reserve(max_qrows, max_cols, 1);
   cqr_.reserve(max_cols, max_cols, 1);
   kqr_t_.reserve(max_cols, max_qrows, 1);
-  fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
+  // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
+  fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
   for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
@@ -130,7 +131,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
   Ab_.setZero(std::max(max_eq, 1), n);
-  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max(n, 1));
+  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
@@ -169,7 +170,15 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   full.setZero();
   // every inherited row projected at once (one matrix product, not k_ vector products)
   auto CZ = CinZ_.topLeftCorner(k_, r_);
-  CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
+  if (carry_projection) {
+    // rows inherited since the last projection; the older ones were carried through every
+    // change of Z since (carry_z)
+    if (kz_ < k_)
+      CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() = Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
+  } else {
+    CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
+  }
+  kz_ = carry_projection ? k_ : 0;
   auto cx = cinx_.head(k_);
   cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
@@ -192,6 +201,22 @@ void Hierarchy::add_bound_rows(LsqProblem& P) {
   }
 }
 
+void Hierarchy::carry_z(PivotedQR& qr, int rank) {
+  if (!carry_projection || kz_ == 0) return;
+  // rank reflectors on kz x r (about 4 rank kz r flops) against one product with the new Z
+  // when the rows are next needed (2 kz n (r - rank)): many reflectors, or few rows left,
+  // and the projection is dropped, recomputed where a level needs it
+  if (2 * rank * r_ > n_ * (r_ - rank)) {
+    kz_ = 0;
+    return;
+  }
+  // Cin Z <- Cin Z Qf, its first rank columns dropped: the projection of the rows inherited
+  // so far onto the new Z, at the cost of the rank reflectors (not a product with Z)
+  auto CZ = CinZ_.topLeftCorner(kz_, r_);
+  qr.apply_q_right(CZ);
+  for (int i = 0; i < r_ - rank; ++i) CinZ_.col(i).head(kz_) = CinZ_.col(rank + i).head(kz_);
+}
+
 void Hierarchy::freeze(double scale) {
   const int f = fqr_.cols();
   if (f == 0 || r_ == 0) return;
@@ -204,6 +229,7 @@ void Hierarchy::freeze(double scale) {
   if (rank == 0) return;
   auto Zr = Z_.leftCols(r_);
   fqr_.apply_q_right(Zr);  // Z Qf: its last r - rank columns span Z null(F)
+  carry_z(fqr_, rank);
   for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
   r_ -= rank;
 }
@@ -670,6 +696,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
   const int reduced =
       (reduce_slacks && slack_rows_ > 0) ? reduced_set_point(P, slack_rows_, ws, W, &consistent)
                                          : -1;
+  if (reduced >= 0) ++reduced_trials_;
   *found = (reduced >= 0) ? reduced : stored_set_point(P, ws, W, &consistent);
   if (*found != static_cast<int>(ws.id.size()) || !consistent) return false;
   auto yp = xc_.head(k);
@@ -772,6 +799,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   Z_.setIdentity();
   r_ = n_;
   k_ = 0;
+  kz_ = 0;
   const int me = meq_[0];
   if (me) {
     const auto A = Aeq.topRows(me);
@@ -1092,6 +1120,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
       auto Zr2 = Z_.leftCols(r_);
       mqr_.apply_q_right(Zr2);
+      carry_z(mqr_, rank);
       for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
       r_ -= rank;
     } else if (rank) {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
@@ -1312,6 +1341,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   seeded_ = 0;
   downdates_ = 0;
   qr_closed_forms_ = 0;
+  reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +

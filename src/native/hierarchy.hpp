@@ -118,6 +118,12 @@ class Hierarchy {
   /// A level's warm trial on the problem in z alone (default): its working slack rows'
   /// slacks eliminated (w = (g_z z - t) / s), the others' 0; or on the full (z, w) (A/B).
   bool reduce_slacks = true;
+  /// The inherited rows' projection Cin Z carried from level to level through the same
+  /// orthogonal transforms as Z (default; a row is projected once, when it is inherited), or
+  /// recomputed by a product with Z at every level (A/B).
+  bool carry_projection = true;
+  /// Warm trials of the last call solved in z alone (reduce_slacks).
+  int reduced_trials() const { return reduced_trials_; }
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
   int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
@@ -159,6 +165,9 @@ class Hierarchy {
                const std::vector<char>* skip);
   void add_inherited_rows(LsqProblem& P);
   void add_bound_rows(LsqProblem& P);
+  /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
+  /// projection of the inherited rows (carry_projection); call before r_ changes.
+  void carry_z(PivotedQR& qr, int rank);
   /// Z <- Z null(F) with F^T the r x f matrix already in fqr_ (rank relative to scale).
   void freeze(double scale);
   void snap(Vec& x) const;
@@ -226,7 +235,8 @@ class Hierarchy {
   Mat Z_;  ///< n x r orthonormal basis of the remaining freedom
   int r_ = 0;
   Mat Cin_;  ///< inherited rows (capacity x n)
-  Mat CinZ_;  ///< workspace: the inherited rows projected, Cin Z (capacity x n)
+  Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
+  int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
   Vec cinx_;  ///< workspace: Cin x
   Vec lin_, uin_;
   std::vector<int> inid_;
@@ -251,6 +261,7 @@ class Hierarchy {
   LsqProblem P_;
   LsqProblem Pr_;        ///< a level's warm trial in z alone (reduced_set_point)
   int slack_rows_ = 0;   ///< slack rows of the level being tried (0: none, or not a level)
+  int reduced_trials_ = 0;  ///< warm trials of this call solved in z alone
   Vec y_;
   std::vector<int8_t> W_;
 
