@@ -131,6 +131,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
   Ab_.setZero(std::max(max_eq, 1), n);
+  Cl_.setZero(std::max(max_in, 1), n);
+  CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
@@ -1132,13 +1134,20 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   // ---- exact active-set least squares in y = (z, w)
   mov_.clear();  // level rows z can move, with a finite side
-  auto zc = zc_.head(r_);
+  // the level's rows projected, C Z, by one product (rows copied contiguous first: no
+  // temporary), used for the moving rows' test, their rows of P, the freeze of the violated
+  // rows and the carried projection of the rows the level leaves to the next
+  auto CZl = CZl_.topLeftCorner(mi, r_);
+  if (mi) {
+    auto Cl = Cl_.topRows(mi);
+    Cl = C.middleRows(i0, mi);
+    CZl.noalias() = Cl * Zr;
+  }
   for (int i = 0; i < mi; ++i) {
     const int g = i0 + i;
     if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
     const double cn = C.row(g).norm();
-    zc.noalias() = Zr.transpose() * C.row(g).transpose();
-    if (zc.norm() > 1e-9 * cn) mov_.push_back(i);
+    if (CZl.row(i).norm() > 1e-9 * cn) mov_.push_back(i);
   }
   const int mv = static_cast<int>(mov_.size());
   int ndamp = 0;
@@ -1182,7 +1191,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     const double v = C.row(row).dot(x_);
     P.Q(qme + ndamp + j, r_ + j) = sw(row);
     g.setZero();
-    g.head(r_).noalias() = Zr.transpose() * C.row(row).transpose();
+    g.head(r_) = CZl.row(mov_[j]).transpose();
     g(r_ + j) = -1.0;
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
   }
@@ -1250,12 +1259,17 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     double fro = 0.0;
     for (int i = 0; i < mi; ++i) {
       if (!viol_[i]) continue;
-      Ft.col(f++).noalias() = Zr.transpose() * C.row(i0 + i).transpose();
+      Ft.col(f++) = CZl.row(i).transpose();
       fro += C.row(i0 + i).squaredNorm();
     }
     fscale = std::max(fscale, std::sqrt(fro));
   }
+  const int k_before = k_;
   inherit(C, lo, hi, i0, mi, &viol_);
+  if (carry_projection && kz_ == k_before) {  // the inherited rows' projections, at hand
+    for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
+    kz_ = k_;
+  }
   freeze(fscale);
   return kOk;
 }

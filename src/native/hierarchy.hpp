@@ -285,6 +285,8 @@ class Hierarchy {
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ab_;  ///< a level's equality rows, copied contiguous (max_eq x n): Eigen's GEMM copies a
             ///< strided (row-major input) left factor into a heap temporary otherwise
+  Mat Cl_;   ///< a level's inequality rows, copied contiguous (max_in x n)
+  Mat CZl_;  ///< their projection C Z (max_in x n: the left r columns)
   Mat Ztmp_;
   PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
   /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
