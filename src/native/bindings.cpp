@@ -146,6 +146,18 @@ NB_MODULE(_native, m) {
       .def_rw("reuse_finish", &Hierarchy::reuse_finish,
               "The exact finish of an ill-conditioned level starts from the optimal end's "
               "factorisation and step (True, default) or recomputes them (False; A/B).")
+      .def_rw("trial_qt_tail", &Hierarchy::trial_qt_tail,
+              "A warm trial computes only the columns of Q Qf its least-squares step reads "
+              "(True, default) or all of them (False; for comparisons).")
+      .def_rw("reduce_slacks", &Hierarchy::reduce_slacks,
+              "A level's warm trial in z alone, the working slack rows' slacks eliminated "
+              "(True, default), or on the full (z, w) (False; for comparisons).")
+      .def_rw("carry_projection", &Hierarchy::carry_projection,
+              "The inherited rows' projection carried from level to level through the "
+              "changes of the null-space basis (True, default) or recomputed per level "
+              "(False; for comparisons).")
+      .def_prop_ro("reduced_trials", &Hierarchy::reduced_trials,
+                   "Warm trials of the last call solved in z alone (reduce_slacks).")
       .def_prop_ro("qr_closed_forms", &Hierarchy::qr_closed_forms,
                    "Levels whose closed form came from a QR (no SVD) in the last call.")
       .def_prop_ro("n", &Hierarchy::n)

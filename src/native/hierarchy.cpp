@@ -104,6 +104,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   const int max_qrows = std::max({max_eq + n + max_in, n, min_[0] + (has_bounds ? n : 0), 1});
   const int max_grows = capacity_ + (has_bounds ? n : 0) + max_in + 1;
   P_.resize(max_qrows, max_grows, max_cols);
+  Pr_.resize(max_qrows, max_grows, std::max(n, 1));
   y_.setZero(max_cols);
   W_.assign(max_grows, 0);
   working_.resize(blocks + 1);
@@ -116,7 +117,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   cqr_.reserve(max_cols, max_cols, 1);
   kqr_t_.reserve(max_cols, max_qrows, 1);
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
-  fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
+  // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
+  fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
   for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
@@ -131,7 +133,9 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   svds_.resize(blocks);
   Ztmp_.setZero(n, n);
   Ab_.setZero(std::max(max_eq, 1), n);
-  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max(n, 1));
+  Cl_.setZero(std::max(max_in, 1), n);
+  CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
+  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
@@ -170,7 +174,15 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   full.setZero();
   // every inherited row projected at once (one matrix product, not k_ vector products)
   auto CZ = CinZ_.topLeftCorner(k_, r_);
-  CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
+  if (carry_projection) {
+    // rows inherited since the last projection; the older ones were carried through every
+    // change of Z since (carry_z)
+    if (kz_ < k_)
+      CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() = Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
+  } else {
+    CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
+  }
+  kz_ = carry_projection ? k_ : 0;
   auto cx = cinx_.head(k_);
   cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
@@ -193,6 +205,22 @@ void Hierarchy::add_bound_rows(LsqProblem& P) {
   }
 }
 
+void Hierarchy::carry_z(PivotedQR& qr, int rank) {
+  if (!carry_projection || kz_ == 0) return;
+  // rank reflectors on kz x r (about 4 rank kz r flops) against one product with the new Z
+  // when the rows are next needed (2 kz n (r - rank)): many reflectors, or few rows left,
+  // and the projection is dropped, recomputed where a level needs it
+  if (2 * rank * r_ > n_ * (r_ - rank)) {
+    kz_ = 0;
+    return;
+  }
+  // Cin Z <- Cin Z Qf, its first rank columns dropped: the projection of the rows inherited
+  // so far onto the new Z, at the cost of the rank reflectors (not a product with Z)
+  auto CZ = CinZ_.topLeftCorner(kz_, r_);
+  qr.apply_q_right(CZ);
+  for (int i = 0; i < r_ - rank; ++i) CinZ_.col(i).head(kz_) = CinZ_.col(rank + i).head(kz_);
+}
+
 void Hierarchy::freeze(double scale) {
   const int f = fqr_.cols();
   if (f == 0 || r_ == 0) return;
@@ -205,6 +233,7 @@ void Hierarchy::freeze(double scale) {
   if (rank == 0) return;
   auto Zr = Z_.leftCols(r_);
   fqr_.apply_q_right(Zr);  // Z Qf: its last r - rank columns span Z null(F)
+  carry_z(fqr_, rank);
   for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
   r_ -= rank;
 }
@@ -230,6 +259,36 @@ void Hierarchy::form_qt(const LsqProblem& P) {
   Qt = P.Q.topLeftCorner(P.qrows, P.cols);
   wqr_.apply_q_right(Qt);  // every transform of the working set's QR so far, in order
   qt_stale_ = false;
+}
+
+void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) {
+  if (!trial_qt_tail) {
+    factor_working(P, W);
+    return;
+  }
+  const int k = P.cols;
+  // not the active set's end any more: the exact finish must not reuse this factorisation
+  finish_ready_ = false;
+  // Qt_ holds only the null-space columns below (all ls_step reads); the active set starts
+  // from factor_working, so no downdate or append reads the stale leading columns
+  qt_stale_ = false;
+  widx_.clear();
+  for (int i = 0; i < P.rows; ++i)
+    if (W[i]) widx_.push_back(i);
+  const int kw = static_cast<int>(widx_.size());
+  MapMat GwT = wqr_.matrix(k, kw);
+  for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
+  wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
+  // (Q Qf)(i, :) = (Qf^T Q(i, :)^T)^T, row by row; only its columns rank.. (null(G_w)) are
+  // kept: the least-squares step reads no other (none at a vertex of the working set)
+  const int rho = wqr_.rank(), nk = k - rho;
+  if (nk == 0) return;
+  auto v = rowbuf_.head(k);
+  for (int i = 0; i < P.qrows; ++i) {
+    v = P.Q.row(i).head(k).transpose();
+    wqr_.apply_qt(v);
+    Qt_.row(i).segment(rho, nk) = v.tail(nk).transpose();
+  }
 }
 
 /// The minimum-residual step in null(G_w) = span(Qf(:, rank:)): min ||Q (y + N s) - c||.
@@ -529,24 +588,10 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   *consistent = false;
   if (!ws.stored) return 0;
   const int k = P.cols;
-  // the equality rows (lo = hi: hard or inherited rows fixed at their value) are in every
-  // working set, as in the cold start: store_working_set keeps the one-sided rows only, and
-  // a point on the stored rows alone is free to leave an equality row (issue 24: the
-  // humanoid's box form missed on every call, its point off two inherited rows lo = hi = 0)
-  for (int i = 0; i < P.rows; ++i) W[i] = (P.lo(i) == P.hi(i)) ? 2 : 0;
-  int found = 0;
-  for (size_t j = 0; j < ws.id.size(); ++j) {
-    for (int i = 0; i < P.rows; ++i) {
-      if (P.id[i] == ws.id[j]) {
-        if (W[i] != 2) W[i] = ws.side[j];
-        ++found;
-        break;
-      }
-    }
-  }
+  const int found = map_working_set(P, ws, W);
   if (!found && !ws.id.empty()) return 0;
   qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
-  factor_working(P, W);
+  factor_trial(P, W);
   const int kw = static_cast<int>(widx_.size());
   auto t = tvec_.head(kw);
   for (int j = 0; j < kw; ++j) {
@@ -573,13 +618,162 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   return found;
 }
 
+int Hierarchy::map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W) {
+  // the equality rows (lo = hi: hard or inherited rows fixed at their value) are in every
+  // working set, as in the cold start: store_working_set keeps the one-sided rows only, and
+  // a point on the stored rows alone is free to leave an equality row (issue 24: the
+  // humanoid's box form missed on every call, its point off two inherited rows lo = hi = 0)
+  for (int i = 0; i < P.rows; ++i) W[i] = (P.lo(i) == P.hi(i)) ? 2 : 0;
+  int found = 0;
+  for (size_t j = 0; j < ws.id.size(); ++j) {
+    for (int i = 0; i < P.rows; ++i) {
+      if (P.id[i] == ws.id[j]) {
+        if (W[i] != 2) W[i] = ws.side[j];
+        ++found;
+        break;
+      }
+    }
+  }
+  return found;
+}
+
+int Hierarchy::reduced_set_point(const LsqProblem& P, int mv, const Working& ws,
+                                 std::vector<int8_t>& W, bool* consistent) {
+  *consistent = false;
+  if (!ws.stored) return 0;
+  const int k = P.cols, hard = P.rows - mv, zc = k - mv;
+  const int found = map_working_set(P, ws, W);
+  if (!found && !ws.id.empty()) return 0;
+  // slack rows: row hard + j has its slack in column zc + j (G(i, zc + j) = -s_i < 0) and
+  // the objective row q0 + j = sw_j there; the rows above q0 have no slack entries
+  const int q0 = P.qrows - mv;
+  int ns = 0;
+  for (int j = 0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double t = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    // a working row without weight leaves its slack free in the objective: its point is the
+    // minimum norm over (z, w), which the reduced problem does not see (the full trial)
+    if (!std::isfinite(t) || !(P.Q(q0 + j, zc + j) > 0.0)) return -1;
+    ++ns;
+  }
+  LsqProblem& R = Pr_;
+  R.start(q0 + ns, zc);
+  R.Q.topLeftCorner(q0, zc) = P.Q.topLeftCorner(q0, zc);
+  R.c.head(q0) = P.c.head(q0);
+  // a working slack row at its bound t: w_j = (g_z z - t) / s, its objective term
+  // (sw_j w_j)^2 = ((sw_j / s) (g_z z - t))^2: a row of the objective in z
+  for (int j = 0, d = q0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double t = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    const double f = P.Q(q0 + j, zc + j) / -P.G(i, zc + j);
+    R.Q.row(d).head(zc) = f * P.G.row(i).head(zc);
+    R.c(d++) = f * t;
+  }
+  // the rows without slack, where working (the others are not read)
+  R.rows = hard;
+  for (int i = 0; i < hard; ++i) {
+    if (!W[i]) continue;
+    R.G.row(i).head(zc) = P.G.row(i).head(zc);
+    R.lo(i) = P.lo(i);
+    R.hi(i) = P.hi(i);
+  }
+  qscale_ = R.Q.topLeftCorner(R.qrows, zc).norm();
+  factor_trial(R, W);
+  const int kw = static_cast<int>(widx_.size());
+  auto t = tvec_.head(kw);
+  for (int j = 0; j < kw; ++j) {
+    const int i = widx_[j];
+    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    if (!std::isfinite(t(j))) return 0;
+  }
+  // z on the working rows without slack (minimum norm), then the least squares in their
+  // null space, as stored_set_point on the full problem
+  const int rho = wqr_.rank();
+  auto yp = xc_.head(k);
+  yp.setZero();
+  auto zp = yp.head(zc);
+  for (int i = 0; i < rho; ++i) zp(i) = t(wqr_.perm(i));
+  wqr_.solve_rt(zp);
+  wqr_.apply_q(zp);
+  *consistent = true;
+  if (kw) {
+    const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
+    for (int j = 0; j < kw && *consistent; ++j)
+      if (std::abs(P.G.row(widx_[j]).head(zc).dot(zp) - t(j)) > 1e-10 * tmax) *consistent = false;
+  }
+  auto step = step_.head(zc);
+  ls_step(R, zp, step);
+  zp += step;
+  // the slacks: a working row's from its bound, the others' 0 (their least-squares value)
+  for (int j = 0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double tb = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    yp(zc + j) = (P.G.row(i).head(zc).dot(zp) - tb) / -P.G(i, zc + j);
+  }
+  return found;
+}
+
+bool Hierarchy::reduced_multipliers_ok(const LsqProblem& P, int mv,
+                                       const Eigen::Ref<const Vec>& y,
+                                       const std::vector<int8_t>& W) {
+  const int k = P.cols, qr = P.qrows, hard = P.rows - mv, zc = k - mv;
+  const auto Q = P.Q.topLeftCorner(qr, k);
+  auto res = dres_.head(qr);
+  res.noalias() = Q * y;
+  res -= P.c.head(qr);
+  auto g = gvec_.head(k);
+  g.noalias() = Q.transpose() * res;
+  const double qn = Q.norm();
+  const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
+  const double round =
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
+  const double tol = kKktTol * gref + round;
+  auto sign_bad = [&](int i, double mu) {
+    if (W[i] == 2) return false;
+    return ((W[i] == 1) ? -mu : mu) < -tol;
+  };
+  // a working slack row's multiplier from its slack column alone (no other working row has
+  // an entry there): mu G(i, zc + j) = g(zc + j); its z part leaves the rows without slack
+  auto gz = u_.head(k);
+  gz.setZero();
+  gz.head(zc) = g.head(zc);
+  for (int j = 0; j < mv; ++j) {
+    const int i = hard + j;
+    if (!W[i]) continue;
+    const double mu = g(zc + j) / P.G(i, zc + j);
+    if (sign_bad(i, mu)) return false;
+    gz.head(zc) -= mu * P.G.row(i).head(zc).transpose();
+  }
+  // the rows without slack: G_h^T u = g_z - sum mu_s g_s in least squares (reduced_set_point's
+  // QR of G_h^T in wqr_, its rows in widx_)
+  const int kw = static_cast<int>(widx_.size());
+  if (kw == 0) return true;
+  auto u = gz.head(zc);
+  wqr_.apply_qt(u);
+  wqr_.solve_r(u);
+  auto mu = mu_.head(kw);
+  mu.setZero();
+  for (int i = 0; i < wqr_.rank(); ++i) mu(wqr_.perm(i)) = u(i);
+  for (int j = 0; j < kw; ++j)
+    if (sign_bad(widx_[j], mu(j))) return false;
+  return true;
+}
+
 bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                                 std::vector<int8_t>& W, int* found) {
   const int k = P.cols;
   *found = 0;
   if (!ws.stored) return false;
   bool consistent = false;
-  *found = stored_set_point(P, ws, W, &consistent);
+  // a level's slack rows (mv > 0): the trial in z alone, the working rows' slacks eliminated
+  const int reduced =
+      (reduce_slacks && slack_rows_ > 0) ? reduced_set_point(P, slack_rows_, ws, W, &consistent)
+                                         : -1;
+  if (reduced >= 0) ++reduced_trials_;
+  *found = (reduced >= 0) ? reduced : stored_set_point(P, ws, W, &consistent);
   if (*found != static_cast<int>(ws.id.size()) || !consistent) return false;
   auto yp = xc_.head(k);
   auto gy = gy_.head(P.rows);
@@ -589,7 +783,9 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
     const double su = kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)));
     if (gy(i) < P.lo(i) - sl || gy(i) > P.hi(i) + su) return false;
   }
-  if (!multipliers_ok(P, yp, W, nullptr, nullptr, false)) return false;
+  if (reduced >= 0 ? !reduced_multipliers_ok(P, slack_rows_, yp, W)
+                   : !multipliers_ok(P, yp, W, nullptr, nullptr, false))
+    return false;
   y.head(k) = yp;
   return true;
 }
@@ -679,6 +875,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   Z_.setIdentity();
   r_ = n_;
   k_ = 0;
+  kz_ = 0;
   const int me = meq_[0];
   if (me) {
     const auto A = Aeq.topRows(me);
@@ -999,6 +1196,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
       auto Zr2 = Z_.leftCols(r_);
       mqr_.apply_q_right(Zr2);
+      carry_z(mqr_, rank);
       for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
       r_ -= rank;
     } else if (rank) {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
@@ -1010,13 +1208,20 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   // ---- exact active-set least squares in y = (z, w)
   mov_.clear();  // level rows z can move, with a finite side
-  auto zc = zc_.head(r_);
+  // the level's rows projected, C Z, by one product (rows copied contiguous first: no
+  // temporary), used for the moving rows' test, their rows of P, the freeze of the violated
+  // rows and the carried projection of the rows the level leaves to the next
+  auto CZl = CZl_.topLeftCorner(mi, r_);
+  if (mi) {
+    auto Cl = Cl_.topRows(mi);
+    Cl = C.middleRows(i0, mi);
+    CZl.noalias() = Cl * Zr;
+  }
   for (int i = 0; i < mi; ++i) {
     const int g = i0 + i;
     if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
     const double cn = C.row(g).norm();
-    zc.noalias() = Zr.transpose() * C.row(g).transpose();
-    if (zc.norm() > 1e-9 * cn) mov_.push_back(i);
+    if (CZl.row(i).norm() > 1e-9 * cn) mov_.push_back(i);
   }
   const int mv = static_cast<int>(mov_.size());
   int ndamp = 0;
@@ -1061,7 +1266,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     const double v = C.row(row).dot(x_);
     P.Q(qme + ndamp + j, r_ + j) = sw(row);
     g.setZero();
-    g.head(r_).noalias() = Zr.transpose() * C.row(row).transpose();
+    g.head(r_) = CZl.row(mov_[j]).transpose();
     g(r_ + j) = -1.0;
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
   }
@@ -1073,7 +1278,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   int iters = 0;
   int found = 0;
+  slack_rows_ = mv;
   const bool hit = warm && try_working_set(P, working_[stage], y, W_, &found);
+  slack_rows_ = 0;
   const bool seeded =
       !hit && warm && seed_on_miss && found > 0 &&
       seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);
@@ -1133,12 +1340,17 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     double fro = 0.0;
     for (int i = 0; i < mi; ++i) {
       if (!viol_[i]) continue;
-      Ft.col(f++).noalias() = Zr.transpose() * C.row(i0 + i).transpose();
+      Ft.col(f++) = CZl.row(i).transpose();
       fro += C.row(i0 + i).squaredNorm();
     }
     fscale = std::max(fscale, std::sqrt(fro));
   }
+  const int k_before = k_;
   inherit(C, lo, hi, i0, mi, &viol_);
+  if (carry_projection && kz_ == k_before) {  // the inherited rows' projections, at hand
+    for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
+    kz_ = k_;
+  }
   freeze(fscale);
   return kOk;
 }
@@ -1225,6 +1437,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   downdates_ = 0;
   slack_steps_ = 0;
   qr_closed_forms_ = 0;
+  reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +

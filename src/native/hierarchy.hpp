@@ -131,6 +131,18 @@ class Hierarchy {
   bool reuse_finish = true;
   /// Least-squares steps taken by slack_ls in the last call.
   int slack_steps() const { return slack_steps_; }
+  /// A warm trial computes of Q Qf only the columns its least-squares step reads (default)
+  /// or all of them, as the active set (A/B).
+  bool trial_qt_tail = true;
+  /// A level's warm trial on the problem in z alone (default): its working slack rows'
+  /// slacks eliminated (w = (g_z z - t) / s), the others' 0; or on the full (z, w) (A/B).
+  bool reduce_slacks = true;
+  /// The inherited rows' projection Cin Z carried from level to level through the same
+  /// orthogonal transforms as Z (default; a row is projected once, when it is inherited), or
+  /// recomputed by a product with Z at every level (A/B).
+  bool carry_projection = true;
+  /// Warm trials of the last call solved in z alone (reduce_slacks).
+  int reduced_trials() const { return reduced_trials_; }
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
   int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
@@ -172,6 +184,9 @@ class Hierarchy {
                const std::vector<char>* skip);
   void add_inherited_rows(LsqProblem& P);
   void add_bound_rows(LsqProblem& P);
+  /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
+  /// projection of the inherited rows (carry_projection); call before r_ changes.
+  void carry_z(PivotedQR& qr, int rank);
   /// Z <- Z null(F) with F^T the r x f matrix already in fqr_ (rank relative to scale).
   void freeze(double scale);
   void snap(Vec& x) const;
@@ -183,6 +198,20 @@ class Hierarchy {
   /// or an infinite bound); *consistent: the point meets the set's rows.
   int stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
                        bool* consistent);
+  /// Map a stored working set onto P's rows (into W: equality rows 2, stored rows their
+  /// side); returns the number of stored rows matched.
+  int map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W);
+  /// stored_set_point of a level whose last mv rows of P have one slack column each (column
+  /// P.cols - mv + j, objective row P.qrows - mv + j): the least squares in z alone (Pr_),
+  /// each working slack row's slack eliminated (w = (g_z z - t) / s: its objective term a row
+  /// in z), the others' slack 0, the rows without slack the working rows of Pr_'s QR (wqr_);
+  /// the point (z, w) into xc_. -1: not reducible (a working slack row without weight).
+  int reduced_set_point(const LsqProblem& P, int mv, const Working& ws, std::vector<int8_t>& W,
+                        bool* consistent);
+  /// multipliers_ok after reduced_set_point (no drop): a working slack row's multiplier from
+  /// its slack column, the others' from the QR of the working rows without slack.
+  bool reduced_multipliers_ok(const LsqProblem& P, int mv, const Eigen::Ref<const Vec>& y,
+                              const std::vector<int8_t>& W);
   /// Try a stored working set: solve on it, check feasibility and multiplier signs. *found:
   /// the stored rows matched (its point stays in xc_ for seed_working_set on a miss).
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
@@ -203,6 +232,10 @@ class Hierarchy {
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
   /// Qt_ = Q Qf for the working set's current QR (all its transforms so far).
   void form_qt(const LsqProblem& P);
+  /// factor_working for a warm trial (trial_qt_tail): the same QR of G_w^T, but of Q Qf only
+  /// the columns rank.. that ls_step reads (none when G_w pins y); the active set's updates
+  /// need all of Q Qf and start from factor_working
+  void factor_trial(const LsqProblem& P, const std::vector<int8_t>& W);
   /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
   void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
   /// The step of ls_step by the slack structure of P (slack_ls): the minimum-norm step with
@@ -228,7 +261,8 @@ class Hierarchy {
   Mat Z_;  ///< n x r orthonormal basis of the remaining freedom
   int r_ = 0;
   Mat Cin_;  ///< inherited rows (capacity x n)
-  Mat CinZ_;  ///< workspace: the inherited rows projected, Cin Z (capacity x n)
+  Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
+  int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
   Vec cinx_;  ///< workspace: Cin x
   Vec lin_, uin_;
   std::vector<int> inid_;
@@ -251,6 +285,9 @@ class Hierarchy {
 
   std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
   LsqProblem P_;
+  LsqProblem Pr_;        ///< a level's warm trial in z alone (reduced_set_point)
+  int slack_rows_ = 0;   ///< slack rows of the level being tried (0: none, or not a level)
+  int reduced_trials_ = 0;  ///< warm trials of this call solved in z alone
   Vec y_;
   std::vector<int8_t> W_;
 
@@ -282,6 +319,8 @@ class Hierarchy {
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ab_;  ///< a level's equality rows, copied contiguous (max_eq x n): Eigen's GEMM copies a
             ///< strided (row-major input) left factor into a heap temporary otherwise
+  Mat Cl_;   ///< a level's inequality rows, copied contiguous (max_in x n)
+  Mat CZl_;  ///< their projection C Z (max_in x n: the left r columns)
   Mat Ztmp_;
   PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
   /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm

@@ -8,6 +8,10 @@
 //       src/native/hierarchy.cpp -o /tmp/driver
 //   /tmp/driver FILE.bin [repeats] [cold|warm] [XOUT.bin]
 //
+// QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
+// reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
+// compress_objective, wide_ls.
+//
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
 // (float64, n per solve, in order) to compare two builds.
 #include <algorithm>
@@ -17,6 +21,7 @@
 #include <fstream>
 #include <limits>
 #include <new>
+#include <string>
 #include <vector>
 
 #include "hierarchy.hpp"
@@ -60,6 +65,20 @@ int main(int argc, char** argv) {
     return 2;
   }
   Hierarchy h(n, meq, min, has_bounds, damping);
+  if (const char* off = std::getenv("QPCOORD_DRIVER_OFF")) {
+    const std::string list = std::string(",") + off + ",";
+    auto has = [&](const char* name) {
+      return list.find(std::string(",") + name + ",") != std::string::npos;
+    };
+    if (has("reduce_slacks")) h.reduce_slacks = false;
+    if (has("trial_qt_tail")) h.trial_qt_tail = false;
+    if (has("carry_projection")) h.carry_projection = false;
+    if (has("seed_on_miss")) h.seed_on_miss = false;
+    if (has("downdate")) h.downdate = false;
+    if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
+    if (has("compress_objective")) h.compress_objective = false;
+    if (has("wide_ls")) h.wide_ls = false;
+  }
   Vec x(n), res(L), detail(8);
   Mat stats(L + 2, 3);
   long long allocs_after_first = 0;
