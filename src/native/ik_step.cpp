@@ -134,8 +134,7 @@ struct Kernel {
   std::vector<int> qidx;  ///< posture: per row, the joint's q index
   int row0 = 0;
   View target, vel, sw, A, b;
-  nb::object pose_target;  ///< FrameTask: the pin.SE3 its target inverse was read from
-  Mat3 Rinv = Mat3::Identity();
+  Mat3 Rinv = Mat3::Identity();  ///< FrameTask: its target's inverse (R*^T, -R*^T p*)
   Vec3 pinv = Vec3::Zero();
   int band = -1;  ///< a band kind: its index in IKStep::bands_
 };
@@ -161,8 +160,8 @@ class IKStep {
     hi_.resize(nv);
     hi2_.resize(nv);
     for (const char* s : {"gain", "sqrt_weight", "A", "b", "target", "target_velocity",
-                          "_target_inv", "_target_t", "q_ref", "reference_at", "rotation",
-                          "translation", "matrix_version", "homogeneous"})
+                          "_target_T", "_target_t", "q_ref", "reference_at", "rotation",
+                          "translation", "matrix_version"})
       names_.push_back(nb::str(s));
   }
 
@@ -566,17 +565,15 @@ class IKStep {
       case kPose:
       case kPoseSplit: {
         const Frame& f = frames_[k.frame];
-        nb::object inv = attr(k.task, names_[6]);
-        if (inv.is_none()) return false;
-        if (inv.ptr() != k.pose_target.ptr()) {  // a new target: one read of its 4x4
-          View H;
-          if (!view_of(attr(inv, names_[13]), H, 2) || H.rows != 4 || H.cols != 4) return false;
-          for (int i = 0; i < 3; ++i) {
-            k.pinv[i] = H(i, 3);
-            for (int j = 0; j < 3; ++j) k.Rinv(i, j) = H(i, j);
-          }
-          k.pose_target = inv;
+        // the validated target T* (FrameTask._target_T, a 4x4 set_target copies into; None
+        // without a target): its inverse (R*^T, -R*^T p*) read at every step (12 numbers)
+        if (cached(k.task, names_[6], k.target, 2, 4) != 1 || k.target.cols != 4) return false;
+        Vec3 pt;
+        for (int i = 0; i < 3; ++i) {
+          pt[i] = k.target(i, 3);
+          for (int j = 0; j < 3; ++j) k.Rinv(j, i) = k.target(i, j);
         }
+        k.pinv.noalias() = -(k.Rinv * pt);
         const int hv = cached(k.task, names_[5], k.vel, 1, 6);
         if (hv < 0) return false;
         const Mat3 RE = k.Rinv * f.R;
@@ -900,6 +897,21 @@ void bind_ik_step(nb::module_& m) {
       nb::arg("T"), nb::arg("tol"),
       "The rigid-transform checks of FrameTask.set_target's fast path on a float64 4x4 "
       "(qpcoord.kinematics.frame_tasks._rigid_fast).");
+  m.def(
+      "spatial_rigid_copy",
+      [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> T, double tol,
+         nb::ndarray<double, nb::shape<4, 4>, nb::c_contig, nb::device::cpu> out) {
+        if (T.shape(0) != 4 || T.shape(1) != 4) return false;
+        const int64_t s0 = T.stride(0), s1 = T.stride(1);
+        if (!spatial::rigid_ok(T.data(), s0, s1, tol)) return false;
+        double* o = out.data();
+        for (int i = 0; i < 4; ++i)
+          for (int j = 0; j < 4; ++j) o[4 * i + j] = T.data()[i * s0 + j * s1];
+        return true;
+      },
+      nb::arg("T"), nb::arg("tol"), nb::arg("out").noconvert(),
+      "spatial_rigid_ok(T, tol) and, when it holds, T copied into out (a C-contiguous 4x4 "
+      "float64; untouched otherwise): FrameTask.set_target's fast path in one call.");
   m.def("spatial_log6", [](const Mat3& R, const Vec3& p) { return Vec6(spatial::log6(R, p)); });
   m.def("spatial_jlog6", [](const Mat3& R, const Vec3& p) { return Mat6(spatial::jlog6(R, p)); });
 }
