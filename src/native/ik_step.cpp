@@ -14,6 +14,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <vector>
@@ -868,7 +869,8 @@ void bind_ik_step(nb::module_& m) {
           static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
           const int kind = plan[s];
           if (kind < 0 || kind > 3) throw nb::value_error("integrate_configuration: bad kind");
-          const int nq = kind == 0 ? plan[s + 3] : kNq[kind], nv = kind == 0 ? plan[s + 3] : kNv[kind];
+          const int nq = kind == 0 ? plan[s + 3] : kNq[kind];
+          const int nv = kind == 0 ? plan[s + 3] : kNv[kind];
           if (plan[s + 1] < 0 || plan[s + 2] < 0 || plan[s + 1] + nq > (int)q.shape(0) ||
               plan[s + 2] + nv > v.size())
             throw nb::value_error("integrate_configuration: segment out of range");
@@ -899,19 +901,45 @@ void bind_ik_step(nb::module_& m) {
       "(qpcoord.kinematics.frame_tasks._rigid_fast).");
   m.def(
       "spatial_rigid_copy",
-      [](nb::ndarray<const double, nb::ndim<2>, nb::device::cpu> T, double tol,
-         nb::ndarray<double, nb::shape<4, 4>, nb::c_contig, nb::device::cpu> out) {
-        if (T.shape(0) != 4 || T.shape(1) != 4) return false;
-        const int64_t s0 = T.stride(0), s1 = T.stride(1);
-        if (!spatial::rigid_ok(T.data(), s0, s1, tol)) return false;
-        double* o = out.data();
-        for (int i = 0; i < 4; ++i)
-          for (int j = 0; j < 4; ++j) o[4 * i + j] = T.data()[i * s0 + j * s1];
-        return true;
+      [](nb::handle T, double tol, nb::handle out) {
+        constexpr int kOutFlags = PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE | PyBUF_FORMAT;
+        // the buffer protocol (no ndarray conversion: 0.1 us less per call, timeit)
+        Py_buffer o;
+        bool o_ok = PyObject_GetBuffer(out.ptr(), &o, kOutFlags) == 0;
+        double* dst = nullptr;
+        if (o_ok) {
+          o_ok = o.ndim == 2 && o.shape[0] == 4 && o.shape[1] == 4 && o.itemsize == 8 &&
+                 o.format && std::strcmp(o.format, "d") == 0;
+          dst = static_cast<double*>(o.buf);
+          PyBuffer_Release(&o);  // out is kept alive by the caller
+        } else {
+          PyErr_Clear();
+        }
+        if (!o_ok) throw nb::type_error("spatial_rigid_copy: out must be a C-contiguous 4x4 "
+                                        "float64 array, writable");
+        Py_buffer in;
+        if (PyObject_GetBuffer(T.ptr(), &in, PyBUF_STRIDES | PyBUF_FORMAT)) {
+          PyErr_Clear();
+          return false;  // not a buffer: the caller's full path
+        }
+        bool ok = in.ndim == 2 && in.shape[0] == 4 && in.shape[1] == 4 && in.itemsize == 8 &&
+                  in.format && std::strcmp(in.format, "d") == 0 && in.strides[0] % 8 == 0 &&
+                  in.strides[1] % 8 == 0;
+        if (ok) {
+          const auto* src = static_cast<const double*>(in.buf);
+          const int64_t s0 = in.strides[0] / 8, s1 = in.strides[1] / 8;
+          ok = spatial::rigid_ok(src, s0, s1, tol);
+          if (ok)
+            for (int i = 0; i < 4; ++i)
+              for (int j = 0; j < 4; ++j) dst[4 * i + j] = src[i * s0 + j * s1];
+        }
+        PyBuffer_Release(&in);
+        return ok;
       },
-      nb::arg("T"), nb::arg("tol"), nb::arg("out").noconvert(),
-      "spatial_rigid_ok(T, tol) and, when it holds, T copied into out (a C-contiguous 4x4 "
-      "float64; untouched otherwise): FrameTask.set_target's fast path in one call.");
+      nb::arg("T"), nb::arg("tol"), nb::arg("out"),
+      "spatial_rigid_ok(T, tol) on a float64 (native byte order) 4x4 buffer and, when it "
+      "holds, T copied into out (a C-contiguous 4x4 float64; untouched otherwise); False for "
+      "anything else. FrameTask.set_target's fast path in one call.");
   m.def("spatial_log6", [](const Mat3& R, const Vec3& p) { return Vec6(spatial::log6(R, p)); });
   m.def("spatial_jlog6", [](const Mat3& R, const Vec3& p) { return Mat6(spatial::jlog6(R, p)); });
 }

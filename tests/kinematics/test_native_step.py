@@ -383,9 +383,17 @@ def test_native_rigid_copy_checks_then_copies():
         decided.add(ok)
     assert decided == {True, False}
     out = np.zeros((4, 4))
-    assert not mod.spatial_rigid_copy(np.eye(3), tol, out) and not out.any()
-    with pytest.raises(TypeError):  # out must be a C-contiguous float64 4x4
-        mod.spatial_rigid_copy(np.eye(4), tol, np.zeros((4, 4), order="F"))
+    eye = np.eye(4)
+    others = [np.eye(3), eye.astype(np.float32), eye.astype(">f8"), np.eye(4)[:3], [[1.0] * 4] * 4]
+    for other in others:  # not a native-order float64 4x4: False (set_target's full path)
+        assert not mod.spatial_rigid_copy(other, tol, out) and not out.any()
+    for bad in (np.zeros((4, 4), order="F"), np.zeros((4, 4), np.float32), np.zeros(16), "x"):
+        with pytest.raises(TypeError, match="out must be"):
+            mod.spatial_rigid_copy(eye, tol, bad)
+    frozen = np.zeros((4, 4))
+    frozen.flags.writeable = False
+    with pytest.raises(TypeError, match="out must be"):
+        mod.spatial_rigid_copy(eye, tol, frozen)
 
 
 @needs_native
