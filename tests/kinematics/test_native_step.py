@@ -787,6 +787,16 @@ def test_bad_configurations_are_named(robots):
         ik.step(["a"] * 7)
     v, _ = ik.step(list(q))  # converted
     np.testing.assert_allclose(v, ik.step(q)[0], atol=1e-12)
+    np.testing.assert_allclose(ik.step(q.astype(">f8"))[0], ik.step(q)[0], atol=1e-12)
+    wide = np.zeros(2 * q.size)
+    wide[::2] = q
+    np.testing.assert_allclose(ik.step(wide[::2])[0], ik.step(q)[0], atol=1e-12)  # strided
+    # the native call reads q through the buffer protocol: anything but nq float64 values
+    # in native byte order is IK_BAD_Q (the Python side converts or names it first)
+    call, mod = ik._native._solver.step, native.load()
+    for other in (q.astype(np.float32), q.astype(">f8"), list(q), q[:5], np.stack([q, q]), 1.0):
+        assert call(other, 0.0, None, True, 10.0) == mod.IK_BAD_Q
+    assert call(wide[::2], 0.0, None, True, 10.0) == 0
 
 
 @needs_native
