@@ -138,6 +138,14 @@ NB_MODULE(_native, m) {
       .def_rw("wide_ls", &Hierarchy::wide_ls,
               "Least-squares step of a wide projected objective of full row rank from one QR "
               "of its transpose (True, default) or two QRs (False; for comparisons).")
+      .def_rw("slack_ls", &Hierarchy::slack_ls,
+              "A level's least-squares step with the slacks of its rows outside the working "
+              "set in closed form (True, default) or by the projected objective (False).")
+      .def_prop_ro("slack_steps", &Hierarchy::slack_steps,
+                   "Least-squares steps taken by slack_ls in the last call.")
+      .def_rw("reuse_finish", &Hierarchy::reuse_finish,
+              "The exact finish of an ill-conditioned level starts from the optimal end's "
+              "factorisation and step (True, default) or recomputes them (False; A/B).")
       .def_prop_ro("qr_closed_forms", &Hierarchy::qr_closed_forms,
                    "Levels whose closed form came from a QR (no SVD) in the last call.")
       .def_prop_ro("n", &Hierarchy::n)

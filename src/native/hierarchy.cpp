@@ -51,6 +51,7 @@ void LsqProblem::start(int qrows_, int cols_) {
   cols = cols_;
   rows = 0;
   dropped2 = 0.0;
+  zcols = slacks = slack_q0 = slack_g0 = 0;
   Q.topLeftCorner(qrows, cols).setZero();
   c.head(qrows).setZero();
 }
@@ -114,6 +115,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   kqr_.reserve(max_qrows, max_cols, 1);
   cqr_.reserve(max_cols, max_cols, 1);
   kqr_t_.reserve(max_cols, max_qrows, 1);
+  sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   fqr_.reserve(std::max(n, 1), n + max_in + 1, n);
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
@@ -210,6 +212,7 @@ void Hierarchy::freeze(double scale) {
 // ---------------------------------------------------------------------------------------
 void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W) {
   const int k = P.cols;
+  finish_ready_ = false;
   widx_.clear();
   for (int i = 0; i < P.rows; ++i)
     if (W[i]) widx_.push_back(i);
@@ -217,9 +220,16 @@ void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W
   MapMat GwT = wqr_.matrix(k, kw);
   for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
   wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
-  auto Qt = Qt_.topLeftCorner(P.qrows, k);
-  Qt = P.Q.topLeftCorner(P.qrows, k);
-  wqr_.apply_q_right(Qt);
+  // with the slack step the projected objective is rarely needed: formed on first use
+  qt_stale_ = true;
+  if (!(slack_ls && P.slacks > 0)) form_qt(P);
+}
+
+void Hierarchy::form_qt(const LsqProblem& P) {
+  auto Qt = Qt_.topLeftCorner(P.qrows, P.cols);
+  Qt = P.Q.topLeftCorner(P.qrows, P.cols);
+  wqr_.apply_q_right(Qt);  // every transform of the working set's QR so far, in order
+  qt_stale_ = false;
 }
 
 /// The minimum-residual step in null(G_w) = span(Qf(:, rank:)): min ||Q (y + N s) - c||.
@@ -235,6 +245,14 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   res -= P.c.head(qr);
   step.setZero();
   if (nk == 0 || qr == 0) return;
+  if (slack_ls && P.slacks > 0) {
+    if (slack_step(P, step)) {
+      ++slack_steps_;
+      return;
+    }
+    step.setZero();
+  }
+  if (qt_stale_) form_qt(P);
   const auto K = Qt_.block(0, rho, qr, nk);
   const double kmax = K.colwise().norm().maxCoeff();
   const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
@@ -274,6 +292,46 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
     for (int i = 0; i < nk; ++i) step(rho + kqr_.perm(i)) = u(i);
   }
   wqr_.apply_q(step);
+}
+
+/// min |s| s.t. G_w s = 0, Q s = -res in y = (z, w). Every slack j appears in one objective
+/// row alone (Q(q0 + j, zc + j) = sw_j != 0): the solutions all share s_j = -res_j / sw_j,
+/// and their z part solves (in minimum norm: the slacks' part is fixed)
+///   [G_w(:, z); Q(0:q0, z)] s_z = [-G_w(:, w) s_w; -res(0:q0)]
+/// by one pivoted QR of its transpose (zc x (kw + q0)). With full row rank the system is
+/// consistent: the projected least squares of ls_step has residual zero and this same
+/// minimum-norm step.
+bool Hierarchy::slack_step(const LsqProblem& P, Eigen::Ref<Vec> step) {
+  const int zc = P.zcols, ns = P.slacks, q0 = P.slack_q0, g0 = P.slack_g0;
+  const int kw = static_cast<int>(widx_.size()), mr = kw + q0;
+  if (wqr_.rank() < kw) return false;  // dependent working rows: the general path
+  if (mr > zc) return false;  // more conditions than unknowns: no exact step in general
+  const auto res = res_.head(P.qrows);
+  const double stol = std::max(P.qrows, P.cols) * kEps * std::max(qscale_, 1e-300);
+  for (int j = 0; j < ns; ++j) {
+    const double sw = P.Q(q0 + j, zc + j);
+    if (!(std::abs(sw) > stol)) return false;  // (near) zero weight: K is rank-deficient
+    step(zc + j) = -res(q0 + j) / sw;
+  }
+  MapMat T = sqr_.matrix(zc, mr);
+  auto b = tvec_.head(mr);
+  for (int c = 0; c < kw; ++c) {
+    const int i = widx_[c];
+    T.col(c) = P.G.row(i).head(zc).transpose();
+    b(c) = (i >= g0) ? -P.G(i, zc + i - g0) * step(zc + i - g0) : 0.0;
+  }
+  for (int r = 0; r < q0; ++r) T.col(kw + r) = P.Q.row(r).head(zc).transpose();
+  b.tail(q0) = -res.head(q0);
+  const double tmax = mr ? T.colwise().norm().maxCoeff() : 0.0;
+  const double tol = std::max(zc, mr) * kEps * std::max(tmax, qscale_);
+  if (mr && sqr_.factor(tol, 0.0) < mr) return false;
+  auto v = u_.head(zc);
+  if (mr)
+    sqr_.min_norm_transposed_solve(b, v);
+  else
+    v.setZero();
+  step.head(zc) = v;
+  return true;
 }
 
 bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
@@ -348,6 +406,9 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   int last_drop = -1;
   int zero_steps = 0;
   bool current = false;  // the working set's factorisation matches W (after an append)
+  // the exact finish right after an optimal end: its first step is that end's last one
+  bool reuse = exact_ && finish_ready_ && reuse_finish;
+  finish_ready_ = false;
   // the current working set's sub-threshold step was taken (see `stationary` below)
   bool finished = false;
   for (int it = 0; it < max_iter; ++it) {
@@ -356,9 +417,13 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       return false;
     }
     ++iters;
-    if (!current) factor_working(P, W);
+    if (reuse) {  // wqr_, widx_, res_ and step_ are those of this W and y
+      reuse = false;
+    } else {
+      if (!current) factor_working(P, W);
+      ls_step(P, y, step);  // res_ = Q y - c
+    }
     current = false;
-    ls_step(P, y, step);  // res_ = Q y - c
     const auto res = res_.head(qr);
     dres.noalias() = Q * step;
     const double gain = -(2.0 * res.dot(dres) + dres.squaredNorm());
@@ -382,7 +447,10 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     }
     if (stationary) {
       int drop = -1;
-      if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) return true;
+      if (multipliers_ok(P, y, W, &drop, &keep_, zero_steps > kBlandAfter)) {
+        finish_ready_ = true;
+        return true;
+      }
       W[drop] = 0;
       last_drop = drop;
       finished = false;
@@ -390,7 +458,8 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       if (downdate) {
         const auto pos = std::find(widx_.begin(), widx_.end(), drop);
         if (pos != widx_.end() &&
-            wqr_.remove(static_cast<int>(pos - widx_.begin()), Qt_.topLeftCorner(qr, k))) {
+            wqr_.remove(static_cast<int>(pos - widx_.begin()),
+                        Qt_.topLeftCorner(qt_stale_ ? 0 : qr, k))) {
           widx_.erase(pos);
           current = true;
           ++downdates_;
@@ -445,7 +514,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       // one row enters: update the working set's QR and Q Qf instead of refactorising
       if (wqr_.append(P.G.row(block).head(k).transpose())) {
         widx_.push_back(block);
-        wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
+        if (!qt_stale_) wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
         current = true;
       }
     } else {
@@ -986,6 +1055,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   add_bound_rows(P);
   auto y = y_.head(cols);
   auto g = rowbuf_.head(cols);
+  const int slack_g0 = P.rows;
   for (int j = 0; j < mv; ++j) {
     const int row = i0 + mov_[j];
     const double v = C.row(row).dot(x_);
@@ -994,6 +1064,12 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     g.head(r_).noalias() = Zr.transpose() * C.row(row).transpose();
     g(r_ + j) = -1.0;
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
+  }
+  if (P.rows == slack_g0 + mv && P.qrows == qme + ndamp + mv) {  // every level row kept
+    P.zcols = r_;
+    P.slacks = mv;
+    P.slack_q0 = qme + ndamp;
+    P.slack_g0 = slack_g0;
   }
   int iters = 0;
   int found = 0;
@@ -1147,6 +1223,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;
+  slack_steps_ = 0;
   qr_closed_forms_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)

@@ -67,6 +67,14 @@ struct LsqProblem {
   /// level's M and e replaced by R and (Qm^T e)(0:r) of M's QR): the tolerances that are
   /// relative to the objective's value or |c| count it, so they do not change
   double dropped2 = 0.0;
+  /// A level's slack structure (0 slacks: none, or not this layout): y = (z, w), z the first
+  /// `zcols` columns; slack j (column zcols + j) has one objective row, slack_q0 + j (the last
+  /// `slacks` rows of Q, sw_j on its column only), and one row of G, slack_g0 + j (the level
+  /// row it relaxes: the last `slacks` rows of G); no other row of Q or G touches it.
+  int zcols = 0;
+  int slacks = 0;
+  int slack_q0 = 0;
+  int slack_g0 = 0;
   /// |c| of the uncompressed objective
   double c_norm() const { return std::sqrt(c.head(qrows).squaredNorm() + dropped2); }
   void resize(int max_qrows, int max_grows, int max_cols);
@@ -112,6 +120,17 @@ class Hierarchy {
   /// A wide projected objective K of full row rank: its minimum-norm step from one QR of
   /// K^T (default) or from the QR of K and of [R11 R12]^T (A/B).
   bool wide_ls = true;
+  /// A level's least-squares step by its slack structure: each slack in closed form (its own
+  /// objective row) and z from the QR of the small system on z (working rows and equality
+  /// rows) when that has full row rank (default), or from the projected objective K = Q N
+  /// on all of y (A/B).
+  bool slack_ls = true;
+  /// The exact finish of an ill-conditioned level, called right after the active set ended
+  /// optimal on the same problem, starts from that end's factorisation and last step
+  /// (default) or factorises and steps again (A/B: the same numbers, recomputed).
+  bool reuse_finish = true;
+  /// Least-squares steps taken by slack_ls in the last call.
+  int slack_steps() const { return slack_steps_; }
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
   int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
@@ -182,8 +201,15 @@ class Hierarchy {
   /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
   /// Qt_ = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
+  /// Qt_ = Q Qf for the working set's current QR (all its transforms so far).
+  void form_qt(const LsqProblem& P);
   /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
   void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
+  /// The step of ls_step by the slack structure of P (slack_ls): the minimum-norm step with
+  /// G_w step = 0 and Q step = -res_ when the system, its slacks eliminated, has full row
+  /// rank (then consistent: the same step as the projected least squares); false: take the
+  /// general path.
+  bool slack_step(const LsqProblem& P, Eigen::Ref<Vec> step);
   /// Multiplier signs on W (factor_working of this W first); else the row to drop in *drop
   /// (the most negative multiplier, or with bland the lowest index); rows flagged in keep are
   /// not dropped.
@@ -235,7 +261,15 @@ class Hierarchy {
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
   PivotedQR kqr_t_;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
+  PivotedQR sqr_;  ///< slack_step: the transposed system on z
+  int slack_steps_ = 0;  ///< steps by slack_step in this call
   Mat Qt_;         ///< Q Qf
+  /// Qt_ not formed for the working set's QR (factor_working of a level with slacks and
+  /// slack_ls: ls_step forms it when its general path needs it; updates skip it till then)
+  bool qt_stale_ = true;
+  /// active_set returned optimal and nothing has factorised since: wqr_, widx_, Qt_, res_
+  /// and step_ are those of its final W and y (the exact finish's first iteration)
+  bool finish_ready_ = false;
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
   /// active_set decides stationarity and multiplier signs to rounding, not to kKktTol and a
   /// 1e-15 objective gain (the finish of an ill-conditioned or damped level, issue 24)

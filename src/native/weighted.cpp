@@ -30,25 +30,23 @@ constexpr double kSingular = 1e-14;  // methods/weighted.py _SINGULAR
 inline double scale_of(double b) { return std::isfinite(b) ? std::max(1.0, std::abs(b)) : 1.0; }
 
 
-/// In-place lower Cholesky of the leading k x k block of L (H = L L^T, LAPACK's pivots);
-/// false if a pivot is not positive. min_pivot: the smallest diagonal entry of L.
-bool cholesky(Eigen::Ref<Mat> L, int k, double& min_pivot) {
-  min_pivot = kInf;
+/// Householder QR of W (m x k, m >= k) in place: R on and above the diagonal (R_jj = beta_j),
+/// the vectors below it, their coefficients in tau (no allocation: work holds k entries).
+/// Returns the smallest |R_jj|. The R of W, not the Cholesky of W^T W: a rank-deficient W
+/// gives a diagonal entry at rounding of |W|, not of |W|^2.
+double householder_qr(Eigen::Ref<Mat> W, Eigen::Ref<Vec> tau, Eigen::Ref<Vec> work) {
+  const int m = static_cast<int>(W.rows()), k = static_cast<int>(W.cols());
+  double dmin = kInf;
   for (int j = 0; j < k; ++j) {
-    double s = L(j, j) - L.row(j).head(j).squaredNorm();
-    if (!(s > 0.0)) return false;
-    s = std::sqrt(s);
-    L(j, j) = s;
-    min_pivot = std::min(min_pivot, s);
-    const int below = k - j - 1;
-    if (below > 0) {  // column j below the diagonal: one matrix-vector product
-      if (j > 0)
-        L.col(j).segment(j + 1, below).noalias() -=
-            L.block(j + 1, 0, below, j) * L.row(j).head(j).transpose();
-      L.col(j).segment(j + 1, below) /= s;
-    }
+    double beta = 0.0;
+    W.col(j).tail(m - j).makeHouseholderInPlace(tau(j), beta);
+    W(j, j) = beta;
+    dmin = std::min(dmin, std::abs(beta));
+    if (j + 1 < k)
+      W.bottomRightCorner(m - j, k - j - 1)
+          .applyHouseholderOnTheLeft(W.col(j).tail(m - j - 1), tau(j), work.data());
   }
-  return true;
+  return dmin;
 }
 
 }  // namespace
@@ -86,13 +84,11 @@ Weighted::Weighted(int n, std::vector<int> meq, std::vector<int> min, bool has_b
     for (int i = 0; i < min_[b]; ++i) beta_in_(in0_[b] - min_[0] + i) = beta;
     beta *= rho_;
   }
-  H_.setZero(n_, n_);
   L_.setZero(n_, n_);
   J0_.setZero(std::max(nv, 1), std::max(nv, 1));
   G_.setZero(std::max(rows_, 1), std::max(nv, 1));
   xbar_.setZero(n_);
   x_.setZero(n_);
-  f_.setZero(n_);
   y_.setZero(std::max(nv, 1));
   e_.setZero(std::max(e, 1));
   coef_.setZero(std::max(n_, 1));
@@ -100,6 +96,10 @@ Weighted::Weighted(int n, std::vector<int> meq, std::vector<int> min, bool has_b
   cx_.setZero(std::max(c, 1));
   qp_.reserve(std::max(nv, 1), std::max(rows_, 1));
   if (me_h) rows_buf_.setZero(std::max({mes_, ms_, min_[0], 1}), n_);
+  Wq_.setZero(mes_ + std::max(n_, 1), n_);
+  hh_.setZero(std::max(n_, 1));
+  tau_.setZero(std::max(n_, 1));
+  rhs_.setZero(mes_ + std::max(n_, 1));
 }
 
 int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
@@ -125,10 +125,10 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
     buf = rows;
     out.noalias() = buf * Z_.leftCols(r);
   };
-  // H = sum_k rho^k (A_k Z)^T (A_k Z); hdiag: the x-space Hessian's largest diagonal entry
+  // H = sum_k rho^k (A_k Z)^T (A_k Z) = W^T W is never formed: its factor L = R^T comes from
+  // a Householder QR of W = diag(sqrt(rho^k)) M (H's Cholesky factor up to the signs of its
+  // columns, without squaring W); hdiag: the x-space Hessian's largest diagonal entry
   double hdiag = 0.0;
-  auto H = H_.topLeftCorner(r, r);
-  H.setZero();
   if (mes_) {
     const auto As = Aeq.middleRows(me_h, mes_);
     auto M = M_.topLeftCorner(mes_, r);
@@ -141,27 +141,34 @@ int Weighted::setup(const MatC& Aeq, const MatC& C, const VecC& sw) {
       for (int i = 0; i < mes_; ++i) d += beta_eq_(i) * As(i, j) * As(i, j);
       hdiag = std::max(hdiag, d);
     }
-    // H = M^T diag(beta) M (rows scaled by sqrt(beta) into a temporary: L_ as scratch)
-    for (int i = 0; i < mes_; ++i) M.row(i) *= std::sqrt(beta_eq_(i));
-    H.template selfadjointView<Eigen::Lower>().rankUpdate(M.transpose());
-    H.template triangularView<Eigen::StrictlyUpper>() = H.transpose();
-    for (int i = 0; i < mes_; ++i) M.row(i) /= std::sqrt(beta_eq_(i));
   }
-  // the Python rule: singular when Cholesky fails or a pivot^2 <= 1e-14 max diag
+  // the Python rule (_SINGULAR): fewer weighted rows than r, or a diagonal entry^2 of the R
+  // of W's QR at most 1e-14 of max diag H (the largest squared column norm of W)
   regularized_ = false;
   auto L = L_.topLeftCorner(r, r);
-  double min_pivot = 0.0;
-  L = H;
-  bool ok = r == 0 || cholesky(L, r, min_pivot);
-  const double hmax = r ? std::max(H.diagonal().maxCoeff(), 1e-300) : 1.0;
-  if (r && (!ok || min_pivot * min_pivot <= kSingular * hmax)) {
-    eps_ = reg_ * std::max(1.0, hdiag);
-    H.diagonal().array() += eps_;
-    regularized_ = true;
-    L = H;
-    ok = cholesky(L, r, min_pivot);
+  bool singular = r && mes_ < r;
+  if (r && !singular) {
+    auto W = Wq_.topLeftCorner(mes_, r);
+    for (int i = 0; i < mes_; ++i) W.row(i) = std::sqrt(beta_eq_(i)) * M_.row(i).head(r);
+    double hmax = 1e-300;
+    for (int j = 0; j < r; ++j) hmax = std::max(hmax, W.col(j).squaredNorm());
+    const double d = householder_qr(W, tau_.head(r), hh_.head(r));
+    singular = !(d * d > kSingular * hmax);  // NaN counts as singular
+    if (!singular) L.template triangularView<Eigen::Lower>() = W.topRows(r).transpose();
   }
-  if (!ok) return kWNotConverged;
+  if (singular) {
+    // [W; sqrt(eps) I] factored: L for H + eps I, and the unconstrained optimum as its
+    // least-squares solution (see Wq_)
+    eps_ = reg_ * std::max(1.0, hdiag);
+    regularized_ = true;
+    auto Wa = Wq_.topLeftCorner(mes_ + r, r);
+    Wa.setZero();
+    for (int i = 0; i < mes_; ++i) Wa.row(i) = std::sqrt(beta_eq_(i)) * M_.row(i).head(r);
+    Wa.bottomRows(r).diagonal().setConstant(std::sqrt(eps_));
+    householder_qr(Wa, tau_.head(r), hh_.head(r));
+    L.template triangularView<Eigen::Lower>() = Wa.topRows(r).transpose();
+  }
+  if (r && !(L.diagonal().cwiseAbs().minCoeff() > 0.0)) return kWNotConverged;
   // J0 = blockdiag(L^{-T}, 1 / (sqrt(rho^k) sw))
   auto J0 = J0_.topLeftCorner(nv, nv);
   J0.setZero();
@@ -279,27 +286,38 @@ int Weighted::solve(const MatC& Aeq, const VecC& beq, const MatC& C, const VecC&
     }
     x_ = xbar_;
   } else {
-    // the linear term: f = -sum_k rho^k M_k^T (be_k - A_k xbar) [+ eps Z^T xbar]
-    auto f = f_.head(r);
-    f.setZero();
+    // the soft equalities' targets e = be - A xbar (the linear term f = -M^T diag(beta) e
+    // [+ eps Z^T xbar] is never formed: see below)
     if (mes_) {
       auto e = e_.head(mes_);
       e = beq.segment(me_h, mes_);
       if (me_h) e.noalias() -= Aeq.middleRows(me_h, mes_) * xbar_;
-      e.array() *= beta_eq_.head(mes_).array();
-      f.noalias() -= M_.topLeftCorner(mes_, r).transpose() * e;
     }
-    if (regularized_ && me_h) f.noalias() += eps_ * (Z_.leftCols(r).transpose() * xbar_);
-    // the unconstrained optimum y_u = -J0 J0^T f (slacks 0)
+    // the unconstrained optimum y_u (slacks 0)
     auto y = y_.head(nv);
     y.setZero();
     auto J0 = J0_.topLeftCorner(nv, nv);
-    if (r) {  // two triangular solves with L (as LAPACK's dpotrs; J0 J0^T f loses digits)
+    if (r) {
+      // the unconstrained optimum as the least-squares solution of W z = sqrt(beta) e (with
+      // eps: [W; sqrt(eps) I] z = [sqrt(beta) e; -sqrt(eps) Z^T xbar]) from W's QR, not
+      // H^{-1} f: forming f and H costs ~eps_machine cond(H) in z, the QR eps_machine
+      // cond(W) = eps_machine sqrt(cond(H)) (Talos weighted IK: cond(H) ~ 1e12)
+      const int ma = mes_ + (regularized_ ? r : 0);
+      auto rhs = rhs_.head(ma);
+      if (mes_) rhs.head(mes_) = e_.head(mes_).cwiseProduct(beta_eq_.head(mes_).cwiseSqrt());
+      if (regularized_) {
+        if (me_h)
+          rhs.tail(r).noalias() = -std::sqrt(eps_) * (Z_.leftCols(r).transpose() * xbar_);
+        else
+          rhs.tail(r).setZero();
+      }
+      const auto Wa = Wq_.topLeftCorner(ma, r);
+      for (int j = 0; j < r; ++j)
+        rhs.tail(ma - j).applyHouseholderOnTheLeft(Wa.col(j).tail(ma - j - 1), tau_(j),
+                                                   hh_.data());
       auto yz = y.head(r);
-      yz = -f;
-      const auto L = L_.topLeftCorner(r, r);
-      L.template triangularView<Eigen::Lower>().solveInPlace(yz);
-      L.transpose().template triangularView<Eigen::Upper>().solveInPlace(yz);
+      yz = rhs.head(r);
+      Wa.topRows(r).template triangularView<Eigen::Upper>().solveInPlace(yz);
     }
     const int max_iter = 10 * (nv + rows_) + 100;
     const auto G = G_.topLeftCorner(rows_, nv);

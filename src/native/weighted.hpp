@@ -7,8 +7,12 @@
 // equalities are eliminated (x = xbar + Z z, xbar their minimum-norm solution, Z an orthonormal
 // basis of their null space, from an SVD with the rank rule of qpcoord.core.linalg); eps =
 // regularization * max(1, max diag of the x-space Hessian) is added, centred on x = 0, only
-// when the z-space Hessian is singular (a Cholesky pivot^2 under 1e-14 of its largest diagonal
-// entry, the Python rule), so that the optimum is unique and both engines agree.
+// when the z-space Hessian H = W^T W is singular (W: the soft equality rows times Z, row-scaled
+// by sqrt(rho^k)), so that the optimum is unique and both engines agree. The rule is
+// methods/weighted.py's _SINGULAR: W has fewer rows than z has entries, or a diagonal entry^2
+// of the R of a Householder QR of W (not the Cholesky of the formed H, whose pivots carry
+// rounding ~sqrt(eps_machine) |W|) is at most 1e-14 of H's largest diagonal entry. H is never
+// formed: L = R^T is its factor (of H + eps I: the R of [W; sqrt(eps) I]).
 //
 // The QP in y = (z, w) is solved by the dual active set of qp.hpp, whose factor J0 = L^{-T}
 // and constraint rows are built once per set-up: a call with refactor = false (the matrices
@@ -98,9 +102,15 @@ class Weighted {
   /// hard inequalities): a product with a strided (row-major) view of the caller's arrays
   /// made a heap temporary on every refactor
   Eigen::MatrixXd rows_buf_;
+  /// the weighted rows W (mes x r), QR-factored in place for the rank decision; when eps is
+  /// added, [W; sqrt(eps) I] ((mes + r) x r) factored in place (Householder vectors below
+  /// the diagonal, their coefficients in tau_): the unconstrained optimum is its least-squares
+  /// solution, not H^{-1} f (forming H and f costs ~eps_machine |W|^2 / eps in z, 2e-7)
+  Eigen::MatrixXd Wq_;
+  Eigen::VectorXd hh_, tau_, rhs_;  ///< Householder workspace (n), coefficients (n), rhs
   Eigen::VectorXd beta_eq_, beta_in_;  ///< rho^k of each soft equality / inequality row
-  Eigen::MatrixXd H_, L_, J0_, G_;
-  Eigen::VectorXd xbar_, x_, f_, y_, e_, coef_, glo_, ghi_, tlo_, thi_, flo_, fhi_, cx_;
+  Eigen::MatrixXd L_, J0_, G_;  ///< L = R^T of W's QR (H = L L^T), J0 = L^{-T}, rows
+  Eigen::VectorXd xbar_, x_, y_, e_, coef_, glo_, ghi_, tlo_, thi_, flo_, fhi_, cx_;
   qp::DualActiveSet qp_;
 };
 

@@ -17,10 +17,47 @@ from ..elimination import Reduced
 
 __all__ = ["solve_weighted"]
 
-#: ``H`` counts as singular when a Cholesky pivot² is under this fraction of its largest
-#: diagonal entry: rounding-level pivots (~1e-16) of a rank-deficient ``H`` pass LAPACK's
-#: test and then fail quadprog's; a level weighted ``weight_ratio**4 = 1e-12`` stays above.
+#: ``H = WᵀW`` (``W``: the levels' equality rows in ``z``, row ``i`` of level ``k`` scaled by
+#: ``√(weight_ratioᵏ)``) counts as singular when a diagonal entry² of the triangular factor
+#: ``R`` of a Householder QR of ``W`` (``RᵀR = H``: the same numbers as ``H``'s Cholesky pivots)
+#: is at most this fraction of ``H``'s largest diagonal entry (``W``'s largest squared column
+#: norm), i.e. ``|Rₖₖ| ≤ 1e-7·max‖W col‖`` (units of ``W``: residual per unit ``z``); or when
+#: ``W`` has fewer rows than ``z`` has entries. ``R`` is computed from ``W`` itself, not from
+#: ``H``: a rank-deficient ``W`` gives ``|Rₖₖ|`` at rounding, ~1e-16·‖W‖, 9 decades under the
+#: threshold, where the Cholesky pivots of the formed ``H`` carry its rounding ~√ε·‖W‖ = 1.5e-8
+#: ·‖W‖ (a factor ~7 under it: 1–5 of 50 exactly singular ``H`` passed as regular, issue 24).
+#: A level weighted ``weight_ratio**4 = 1e-12`` (unit rows: ``|Rₖₖ|² ≈ 1e-12``) is regular.
+#: The native engine (``src/native/weighted.cpp``) applies the same rule to its own QR.
 _SINGULAR = 1e-14
+
+
+def _qr(W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """LAPACK's Householder QR of ``W`` (``dgeqrf``: ``R`` on and above the diagonal)."""
+    qr, tau, _work, info = lapack.dgeqrf(W)
+    if info != 0:
+        raise ValueError(f"dgeqrf: illegal argument {-info}")
+    return qr, tau
+
+
+def _lstsq(qr: np.ndarray, tau: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, int]:
+    """The least-squares solution ``R⁻¹ (Qᵀ rhs)[:r]`` from :func:`_qr`'s factors."""
+    r = qr.shape[1]
+    qtc, _work, info = lapack.dormqr("L", "T", qr, tau, rhs, max(1, 2 * r))
+    if info != 0:
+        return rhs[:r], info
+    z, info = lapack.dtrtrs(qr[:r, :r], qtc[:r], lower=0)
+    return z, info
+
+
+def _singular(W: np.ndarray, r: int) -> tuple[bool, tuple | None]:
+    """The decision of :data:`_SINGULAR` on the stacked weighted rows ``W`` (m × r), with
+    :func:`_qr`'s factors of ``W`` (``None`` when it has fewer rows than columns)."""
+    if W.shape[0] < r:
+        return True, None
+    hmax = max(float(np.einsum("ij,ij->j", W, W).max()), 1e-300)
+    qr, tau = _qr(W)
+    d = np.abs(qr.diagonal()[:r])
+    return bool(not np.all(np.isfinite(d)) or float(d.min()) ** 2 <= _SINGULAR * hmax), (qr, tau)
 
 
 def solve_weighted(
@@ -38,17 +75,20 @@ def solve_weighted(
     r = R.r
     x = R.x
     if r == 0:
-        return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
+        return _stats(R, False)
     H = np.zeros((r, r))
     f = np.zeros(r)
     soft = []
     beta = 1.0
     hdiag = 0.0  # largest diagonal entry of the x-space Hessian Σ βₖ Aₖᵀ Aₖ
     dx = None
+    W, c = [], []  # the weighted rows √βₖ Mₖ (H = WᵀW) and their targets √βₖ eₖ
     for L in P.levels:
         if L.m_eq:
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
+            W.append(np.sqrt(beta) * M)
+            c.append(np.sqrt(beta) * e)
             H += beta * (M.T @ M)
             f -= beta * (M.T @ e)
             d = beta * np.einsum("ij,ij->j", L.Ae, L.Ae)
@@ -61,24 +101,30 @@ def solve_weighted(
     # ε‖x‖² only where the levels leave H singular, as PersistentQP: with ε scaled by the
     # x-space Hessian and centred on x = 0 (not on the hard phase's point, in the reduced
     # coordinates, where 1e-9·max diag pulled a last level weighted 1e-6 by ~1 %: 2e-3 in x)
-    cho, info = lapack.dpotrf(H, lower=0, clean=1)
-    if info != 0 or float(cho.diagonal().min()) ** 2 <= _SINGULAR * max(
-        float(H.diagonal().max()), 1e-300
-    ):
+    # the decision on the R of W's QR (no squaring); the unconstrained optimum is the
+    # least-squares solution of W z = c from that QR (with ε: of [W; √ε I] z = [c; −√ε Zᵀx̄]),
+    # not H⁻¹f: forming H and f costs ~ε_machine·cond(H) in z, the QR ε_machine·cond(W) =
+    # ε_machine·√cond(H) (the Talos weighted IK: cond(H) ~ 1e12), and with ε along H's null
+    # space ε_machine‖W‖²/ε (2e-7)
+    Wm = np.vstack(W) if W else np.zeros((0, r))
+    cm = np.concatenate(c) if c else np.zeros(0)
+    regularized, fac = _singular(Wm, r)
+    if regularized:
         eps = regularization * max(1.0, hdiag)
+        zc = R.project(x)
         H.flat[:: r + 1] += eps
-        f += eps * R.project(x)
-        cho, info = lapack.dpotrf(H, lower=0, clean=1)
-    # unconstrained optimum first: if it violates nothing it is the QP's optimum
-    if info == 0:
-        z, info = lapack.dpotrs(cho, -f, lower=0)
+        f += eps * zc
+        se = np.sqrt(eps)
+        fac = _qr(np.vstack((Wm, se * np.eye(r))))
+        cm = np.concatenate((cm, -se * zc))
+    z, info = _lstsq(*fac, cm)
     if info == 0:
         xc = x + R.lift(z)
         if R.feasible(xc) and all(
             (L.C @ xc <= L.hiw).all() and (L.C @ xc >= L.low).all() for L, _ in soft
         ):
             R.move_to(xc, verified=True)
-            return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
+            return _stats(R, regularized)
     mi = sum(L.m_in for L, _ in soft)
     if mi:
         C = np.vstack([L.C for L, _ in soft])
@@ -99,4 +145,14 @@ def solve_weighted(
         y0[:r] = R.project(x_warm - x)
     y = R.solve_qp(Hy, fy, D, dlo, dhi, y0, where="weighted QP")
     R.move_to(x + R.lift(y[:r]), verified=False)
-    return {"qp_calls": R.qp_calls, "retries": R.retries, "fallbacks": R.fallbacks}
+    return _stats(R, regularized)
+
+
+def _stats(R: Reduced, regularized: bool) -> dict:
+    """Solve statistics; ``regularized``: was ``ε‖x‖²`` added (:data:`_SINGULAR`)?"""
+    return {
+        "qp_calls": R.qp_calls,
+        "retries": R.retries,
+        "fallbacks": R.fallbacks,
+        "regularized": regularized,
+    }

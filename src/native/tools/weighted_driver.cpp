@@ -7,13 +7,16 @@
 //
 //   g++ -O2 -std=c++17 -DNDEBUG -DQPCOORD_NO_BINDINGS -I<eigen3> -Isrc/native \
 //       src/native/tools/weighted_driver.cpp src/native/weighted.cpp -o /tmp/wdriver
-//   /tmp/wdriver [n]
+//   /tmp/wdriver [n] [singular]
+// "singular": the levels' equality rows only in the first n/2 coordinates, so that H is
+// singular and eps is added (the least-squares unconstrained optimum of weighted.hpp).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <new>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "weighted.hpp"
@@ -39,6 +42,8 @@ int main(int argc, char** argv) {
   for (int i = 0; i < mi; ++i)
     for (int j = 0; j < n; ++j) C(i, j) = N(gen) / std::sqrt(double(n));
   Aeq.bottomRows(n).setIdentity();  // the last level: a posture
+  const bool singular = argc > 2 && std::string(argv[2]) == "singular";
+  if (singular) Aeq.block(meq[0], n / 2, me - meq[0], n - n / 2).setZero();
   Vec beq = Vec::Zero(me), lo(mi), hi(mi), sw = Vec::Ones(mi), lb(n), ub(n);
   for (int i = 0; i < mi; ++i) {
     lo(i) = -0.3 - 0.2 * std::abs(N(gen));
@@ -51,7 +56,7 @@ int main(int argc, char** argv) {
   const int steps = 2000;
   for (int mode = 0; mode < 2; ++mode) {
     const bool refactor = mode == 1;
-    long long allocs = 0, iters = 0, hits = 0;
+    long long allocs = 0, iters = 0, hits = 0, regularized = 0;
     double seconds = 0.0;
     for (int s = 0; s < steps; ++s) {
       for (int i = 0; i < meq[1]; ++i) beq(meq[0] + i) = 2.0 * std::sin(0.01 * s + i);
@@ -69,11 +74,13 @@ int main(int argc, char** argv) {
       }
       iters += static_cast<long long>(detail(2));
       hits += static_cast<long long>(detail(5));
+      regularized += static_cast<long long>(detail(6));
     }
     std::printf("n %d  refactor %d  solves %d  mean %.2f us  iterations/solve %.2f  "
-                "warm hits/solve %.2f  allocations after the first %lld\n",
+                "warm hits/solve %.2f  regularised/solve %.2f  allocations after the first "
+                "%lld\n",
                 n, int(refactor), steps, 1e6 * seconds / steps, double(iters) / steps,
-                double(hits) / steps, allocs);
+                double(hits) / steps, double(regularized) / steps, allocs);
   }
   return 0;
 }
