@@ -181,6 +181,16 @@ def _native_rigid() -> Any:
     return getattr(native.load(), "spatial_rigid_ok", None) if native.available() else None
 
 
+@cache
+def _native_rigid_copy() -> Any:
+    """The extension's check-and-copy of a 4×4 rigid transform (``spatial_rigid_copy``:
+    :func:`_native_rigid`'s checks, then the copy into a C-contiguous 4×4 output), or
+    ``None`` if it is not built (looked up once)."""
+    from ..core import native
+
+    return getattr(native.load(), "spatial_rigid_copy", None) if native.available() else None
+
+
 def _rigid_ok(value: np.ndarray) -> bool:
     """The checks of :func:`_rigid_fast` on a float64 4×4 array, in Python scalars."""
     (a, b, c, x), (d, e, f, y), (g, h, i, z), (l0, l1, l2, l3) = value.tolist()
@@ -445,11 +455,41 @@ class FrameTask(_ErrorTask):
             )
         self.mask = sel.copy()
         self._init_equality(robot, 6, sel, weights, name or f"frame {frame}")
-        self.target: pin.SE3 | None = None
-        self._target_inv: pin.SE3 | None = None
+        #: the validated target pose as a 4×4 (rotation, m), written in place by set_target;
+        #: ``_target_T`` is this array once a target is set (the native kernel reads it)
+        self._pose = np.eye(4)
+        self._target_T: np.ndarray | None = None
+        self._target_se3: pin.SE3 | None = None  # ``target``, built on first read
+        self._target_inv_se3: pin.SE3 | None = None  # ``_target_inv``, built on first read
         self.target_velocity: np.ndarray | None = None
         if target is not None:
             self.set_target(target)
+
+    @property
+    def target(self) -> pin.SE3 | None:
+        """The desired pose (``pin.SE3``, world, m), ``None`` before a target is set.
+
+        A new object after each :meth:`set_target` (built on its first read from the stored
+        4×4: a control loop that never reads it does not pay for it); assigning it is
+        :meth:`set_target` with the current ``target_velocity`` (``None`` removes the
+        target)."""
+        if self._target_se3 is None and self._target_T is not None:
+            self._target_se3 = pin.SE3(self._target_T)
+        return self._target_se3
+
+    @target.setter
+    def target(self, value: Any) -> None:
+        if value is None:
+            self._target_T = self._target_se3 = self._target_inv_se3 = None
+        else:
+            self.set_target(value, self.target_velocity)
+
+    @property
+    def _target_inv(self) -> pin.SE3 | None:
+        """``target.inverse()`` (``None`` without a target), built on first read."""
+        if self._target_inv_se3 is None and self._target_T is not None:
+            self._target_inv_se3 = self.target.inverse()
+        return self._target_inv_se3
 
     def set_target(self, target: Any, velocity: Any = None) -> None:
         """Set the desired pose (4×4 array or ``pin.SE3``; rotation, m).
@@ -468,9 +508,19 @@ class FrameTask(_ErrorTask):
             Not a rigid transform (wrong shape, rotation not orthonormal within
             :data:`RIGID_TOLERANCE`, det ≠ 1, last row not ``[0, 0, 0, 1]``), NaN/inf.
         """
-        T = _as_se3(target, "target")
         nu = None if velocity is None else _vector(velocity, 6, "velocity", "m/s, rad/s")
-        self.target, self._target_inv = T, T.inverse()
+        copy = _native_rigid_copy()
+        if (
+            copy is not None
+            and type(target) is np.ndarray
+            and copy(target, RIGID_TOLERANCE, self._pose)
+        ):  # a float64 4×4 checked and copied in one native call: no pin.SE3 built here
+            self._target_se3 = None
+        else:
+            self._target_se3 = _as_se3(target, "target")  # the full checks and messages
+            self._pose[...] = self._target_se3.homogeneous
+        self._target_T = self._pose
+        self._target_inv_se3 = None
         self.target_velocity = nu
 
     def set_target_from_configuration(self, q: Any) -> None:

@@ -183,6 +183,38 @@ def test_set_target_and_gain_are_followed(robots):
 
 
 @needs_native
+def test_a_target_rewritten_in_place_is_followed(robots):
+    """A control loop's one 4×4 target array rewritten in place and passed to set_target at
+    every step (the benchmark's loop): the kernel reads the task's stored copy, whatever the
+    caller does to its array afterwards, and the velocities are the Python engine's."""
+    robot = robots["panda"]
+    q = _start(robot)
+    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, "pose_plain", q))
+    T = _target_pose(robot, q)
+    qn = qp = q
+    for k in range(6):
+        T[:3, 3] += [0.004, -0.003, 0.002 * k]
+        for ik in (ikn, ikp):
+            ik._dynamic[0].set_target(T)
+        T[:3, 3] = 7.0  # the caller's array moves on: the targets do not
+        vn, _ = ikn.step(qn)
+        vp, _ = ikp.step(qp)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ikn._dynamic[0].task.b, ikp._dynamic[0].task.b, atol=1e-12)
+        T[:3, 3] = ikn._dynamic[0].target.translation
+        qn = robot.integrate(qn, vn, DT)
+        qp = robot.integrate(qp, vp, DT)
+    task = ikn._dynamic[0]
+    task.target = None  # no target: the task's own message
+    with pytest.raises(ValueError, match="no target"):
+        ikn.step(qn)
+    task.target = pin.SE3(T)  # assigning is set_target
+    vn, _ = ikn.step(qn)
+    ikp._dynamic[0].set_target(T)
+    np.testing.assert_allclose(vn, ikp.step(qn)[0], rtol=0, atol=1e-9)
+
+
+@needs_native
 @pytest.mark.parametrize("name", ["panda", "talos"])
 def test_limit_boxes_equal_the_python_refresh(robots, name):
     robot = _robot(robots, name)
@@ -316,6 +348,52 @@ def test_native_rigid_check_is_the_python_check():
         decided.add(expected)
     assert decided == {True, False}
     assert not mod.spatial_rigid_ok(np.eye(3), tol)
+
+
+@needs_native
+def test_native_rigid_copy_checks_then_copies():
+    """``spatial_rigid_copy`` (FrameTask.set_target's fast path) decides as
+    ``spatial_rigid_ok``; it copies the transform exactly when it accepts it and leaves
+    ``out`` untouched otherwise (Fortran order and strided inputs too)."""
+    from qpcoord.kinematics import frame_tasks as ft
+
+    mod = native.load()
+    assert ft._native_rigid_copy() is mod.spatial_rigid_copy
+    rng = np.random.default_rng(9)
+    tol = ft.RIGID_TOLERANCE
+    big = np.zeros((8, 8))
+    decided = set()
+    for k in range(400):
+        T = np.eye(4)
+        T[:3, :3] = pin.exp3(rng.normal(size=3))
+        T[:3, 3] = rng.normal(size=3)
+        if k % 3 == 1:
+            T[rng.integers(3), rng.integers(3)] += tol * rng.choice([0.5, 3.0])
+        elif k % 3 == 2:
+            T[rng.integers(4), rng.integers(4)] = np.nan
+        if k % 4 == 1:
+            T = np.asfortranarray(T)
+        elif k % 4 == 2:
+            big[::2, ::2] = T
+            T = big[::2, ::2]
+        out = np.full((4, 4), -5.0)
+        ok = mod.spatial_rigid_copy(T, tol, out)
+        assert ok == mod.spatial_rigid_ok(T, tol)
+        np.testing.assert_array_equal(out, T if ok else np.full((4, 4), -5.0))
+        decided.add(ok)
+    assert decided == {True, False}
+    out = np.zeros((4, 4))
+    eye = np.eye(4)
+    others = [np.eye(3), eye.astype(np.float32), eye.astype(">f8"), np.eye(4)[:3], [[1.0] * 4] * 4]
+    for other in others:  # not a native-order float64 4x4: False (set_target's full path)
+        assert not mod.spatial_rigid_copy(other, tol, out) and not out.any()
+    for bad in (np.zeros((4, 4), order="F"), np.zeros((4, 4), np.float32), np.zeros(16), "x"):
+        with pytest.raises(TypeError, match="out must be"):
+            mod.spatial_rigid_copy(eye, tol, bad)
+    frozen = np.zeros((4, 4))
+    frozen.flags.writeable = False
+    with pytest.raises(TypeError, match="out must be"):
+        mod.spatial_rigid_copy(eye, tol, frozen)
 
 
 @needs_native
@@ -712,6 +790,16 @@ def test_bad_configurations_are_named(robots):
         ik.step(["a"] * 7)
     v, _ = ik.step(list(q))  # converted
     np.testing.assert_allclose(v, ik.step(q)[0], atol=1e-12)
+    np.testing.assert_allclose(ik.step(q.astype(">f8"))[0], ik.step(q)[0], atol=1e-12)
+    wide = np.zeros(2 * q.size)
+    wide[::2] = q
+    np.testing.assert_allclose(ik.step(wide[::2])[0], ik.step(q)[0], atol=1e-12)  # strided
+    # the native call reads q through the buffer protocol: anything but nq float64 values
+    # in native byte order is IK_BAD_Q (the Python side converts or names it first)
+    call, mod = ik._native._solver.step, native.load()
+    for other in (q.astype(np.float32), q.astype(">f8"), list(q), q[:5], np.stack([q, q]), 1.0):
+        assert call(other, 0.0, None, True, 10.0) == mod.IK_BAD_Q
+    assert call(wide[::2], 0.0, None, True, 10.0) == 0
 
 
 @needs_native
