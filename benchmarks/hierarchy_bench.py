@@ -41,6 +41,14 @@ issue's goal: within 4×).
     python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds
     python benchmarks/hierarchy_bench.py --scenario panda9 --scenario random50 --steps 300
+
+``--wrapper``: instead, the parts of one warm ``Stack.solve(engine="native")`` — engine and
+time-limit resolution, ``refresh_stacked``, the native call, the output copies, the info dict,
+the ``Solution`` — each timed on the stack's own solver, and the whole call, on alternate moved
+steps, timed alone (issue 24: the Python around the native call)::
+
+    python benchmarks/hierarchy_bench.py --wrapper --scenario chain30 --scenario soth_sot \
+        --steps 2000
 """
 
 from __future__ import annotations
@@ -57,7 +65,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 import qpcoord as qc
-from qpcoord.core.native import NativeHierarchy
+from qpcoord.core.backends import DEFAULT_TIME_LIMIT, time_left
+from qpcoord.core.native import NativeHierarchy, resolve_engine
 
 
 def _unit_rows(M: np.ndarray) -> np.ndarray:
@@ -289,6 +298,61 @@ def run(name, build, steps, seed=0, python=True):
     return rows, flags
 
 
+#: The parts of one warm ``Stack.solve(engine="native")``, in its order (see :func:`wrapper`).
+WRAPPER_PARTS = (
+    "resolve_engine + time_left",
+    "refresh_stacked",
+    "native call (Hierarchy.run)",
+    "x, res copies",
+    "info dict",
+    "Solution",
+    "sum of the parts",
+    "Stack.solve (whole)",
+)
+
+
+def wrapper(name, build, steps):
+    """Median µs of each part of one warm ``Stack.solve(engine="native")`` (the calls it
+    makes, timed one by one on the stack's own native solver) and of the whole call, on
+    alternate moved steps, timed alone (no other solver between): what the Python around
+    the native call costs."""
+    sc = _scenario(build, np.random.default_rng(0))
+    stack, move = sc["stack"], sc["move"]
+    P = stack._compiled
+    stack.solve(engine="native")
+    nat = stack._native
+    times = {k: [] for k in WRAPPER_PARTS}
+    pc = time.perf_counter
+    for step in range(steps):
+        move(step, None)
+        if step % 2:
+            t = pc()
+            stack.solve(engine="native")
+            times["Stack.solve (whole)"].append(pc() - t)
+            continue
+        t0 = pc()
+        resolve_engine("native", "hierarchical", None)
+        time_left()
+        t1 = pc()
+        P.refresh_stacked()
+        t2 = pc()
+        code = nat._run(True, DEFAULT_TIME_LIMIT)
+        t3 = pc()
+        x, res = nat.x.copy(), nat.res.copy()
+        t4 = pc()
+        info = nat._info()
+        t5 = pc()
+        qc.Solution(x, "optimal", res, "native", t5 - t0, "hierarchical", info)
+        t6 = pc()
+        if code:
+            raise RuntimeError(f"{name}: native call, status {code}")
+        splits = (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5)
+        for key, dt in zip(WRAPPER_PARTS[:6], splits, strict=True):
+            times[key].append(dt)
+        times["sum of the parts"].append(t6 - t0)
+    return [(name, key, float(np.median(np.array(v[2:]) * 1e6))) for key, v in times.items()]
+
+
 def one_shot(steps):
     rng = np.random.default_rng(1)
     n = 7
@@ -331,6 +395,11 @@ def main(argv=None) -> int:
         help="time the re-solve contenders only (native warm, bare, DAQP); the Python engine "
         "the oracle of every 10th step",
     )
+    ap.add_argument(
+        "--wrapper",
+        action="store_true",
+        help="only the parts of one warm Stack.solve(engine='native'), timed alone",
+    )
     args = ap.parse_args(argv)
     steps = args.steps or (20 if args.quick else 300)
     if steps < 5:
@@ -339,6 +408,18 @@ def main(argv=None) -> int:
     print(f"# hierarchy_bench: {steps} steps per scenario, interleaved, 1 BLAS thread")
     print(f"# {platform.python_version()}, numpy {np.__version__}, {platform.machine()}")
     with threadpool_limits(1):
+        if args.wrapper:
+            print("\n| scenario | part of a warm Stack.solve | median µs |")
+            print("|---|---|---:|")
+            for key in chosen:
+                try:
+                    rows = wrapper(*SCENARIOS[key], max(steps, 10))
+                except FileNotFoundError as exc:  # example-robot-data missing
+                    print(f"<!-- {key}: skipped ({exc}) -->")
+                    continue
+                for r in rows:
+                    print(f"| {r[0]} | {r[1]} | {r[2]:.2f} |")
+            return 0
         print("\n| scenario | engine | median µs | p90 µs | p99 µs | max level diff vs python |")
         print("|---|---|---|---|---|---|")
         for key in chosen:
