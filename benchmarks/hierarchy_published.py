@@ -28,7 +28,7 @@ another problem; the ``(unit rows)`` copies divide each row and its bounds by th
 where every solver solves the same problem. The solvers run in a new (seeded) random order
 every step (``--order shuffle``, the default since 2026-11-28), so that each follows every
 other about equally often: the solver right after the Python engine finds the caches evicted
-(soth_sot: the native call 1.5–1.7× its time after another native call). ``--order fixed``
+(soth_sot: ``Stack.solve`` 1.7×, the bare call 1.3× its time timed alone). ``--order fixed``
 keeps the earlier order (python, native warm, cold, bare, daqp.solve, daqp Model: the native
 warm solve always right after the Python engine)::
 
