@@ -24,7 +24,9 @@ Scenarios (seeded):
 Per step (interleaved, one BLAS thread): ``Stack.solve(engine="python")``, the native engine
 cold (stored working sets ignored), "native warm" (``Stack.solve(engine="native")``), "native
 bare" (the native call alone, ``Hierarchy.run``, on a second solver warm from its own previous
-step, the stacked arrays already refreshed) and ``daqp.solve(..., break_points=...)`` with
+step, the stacked arrays already refreshed; warm and bare in alternating order since 2026-11-28,
+before bare always ran right after warm and found the stacked arrays in cache) and
+``daqp.solve(..., break_points=...)`` with
 ``H = I`` (minimum-norm completion; a positive-definite H avoids its −8 "unsupported" flag).
 Each engine's level values are checked against the Python engine's (``max |Δr| / max(1, r)``).
 With ``--no-python`` only the re-solve contenders are timed (native warm, native bare, DAQP):
@@ -39,6 +41,14 @@ issue's goal: within 4×).
     python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds
     python benchmarks/hierarchy_bench.py --scenario panda9 --scenario random50 --steps 300
+
+``--wrapper``: instead, the parts of one warm ``Stack.solve(engine="native")`` — engine and
+time-limit resolution, ``refresh_stacked``, the native call, the output copies, the info dict,
+the ``Solution`` — each timed on the stack's own solver, and the whole call, on alternate moved
+steps, timed alone (issue 24: the Python around the native call)::
+
+    python benchmarks/hierarchy_bench.py --wrapper --scenario chain30 --scenario soth_sot \
+        --steps 2000
 """
 
 from __future__ import annotations
@@ -55,7 +65,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 import qpcoord as qc
-from qpcoord.core.native import NativeHierarchy
+from qpcoord.core.backends import DEFAULT_TIME_LIMIT, time_left
+from qpcoord.core.native import NativeHierarchy, resolve_engine
 
 
 def _unit_rows(M: np.ndarray) -> np.ndarray:
@@ -244,15 +255,20 @@ def run(name, build, steps, seed=0, python=True):
             P.refresh()
             xc, _, _ = cold.solve(P, warm=False)
             times["native cold"].append(time.perf_counter() - t)
-        t = time.perf_counter()
-        sw = stack.solve(engine="native")
-        times["native warm"].append(time.perf_counter() - t)
-        P.refresh_stacked()
-        t = time.perf_counter()
-        code = run_bare(bool(step), math.inf)
-        times["native bare"].append(time.perf_counter() - t)
-        if code:
-            raise RuntimeError(f"{name}: native bare call, status {code}")
+        # native warm and bare in alternating order (the second finds the stacked arrays in
+        # cache; before 2026-11-28 bare always ran second)
+        for which in ("warm", "bare") if step % 2 == 0 else ("bare", "warm"):
+            if which == "warm":
+                t = time.perf_counter()
+                sw = stack.solve(engine="native")
+                times["native warm"].append(time.perf_counter() - t)
+                continue
+            P.refresh_stacked()
+            t = time.perf_counter()
+            code = run_bare(bool(step), math.inf)
+            times["native bare"].append(time.perf_counter() - t)
+            if code:
+                raise RuntimeError(f"{name}: native bare call, status {code}")
         got = [("python", sp.x), ("native cold", xc)] if python else []
         got += [("native warm", sw.x), ("native bare", bare.x.copy())]
         if dq is not None:
@@ -280,6 +296,61 @@ def run(name, build, steps, seed=0, python=True):
         us = np.array([t for i, t in enumerate(ts) if i >= 2 and i not in skip]) * 1e6
         rows.append((name, key, *np.percentile(us, [50, 90, 99]), worst[key]))
     return rows, flags
+
+
+#: The parts of one warm ``Stack.solve(engine="native")``, in its order (see :func:`wrapper`).
+WRAPPER_PARTS = (
+    "resolve_engine + time_left",
+    "refresh_stacked",
+    "native call (Hierarchy.run)",
+    "x, res copies",
+    "info dict",
+    "Solution",
+    "sum of the parts",
+    "Stack.solve (whole)",
+)
+
+
+def wrapper(name, build, steps):
+    """Median µs of each part of one warm ``Stack.solve(engine="native")`` (the calls it
+    makes, timed one by one on the stack's own native solver) and of the whole call, on
+    alternate moved steps, timed alone (no other solver between): what the Python around
+    the native call costs."""
+    sc = _scenario(build, np.random.default_rng(0))
+    stack, move = sc["stack"], sc["move"]
+    P = stack._compiled
+    stack.solve(engine="native")
+    nat = stack._native
+    times = {k: [] for k in WRAPPER_PARTS}
+    pc = time.perf_counter
+    for step in range(steps):
+        move(step, None)
+        if step % 2:
+            t = pc()
+            stack.solve(engine="native")
+            times["Stack.solve (whole)"].append(pc() - t)
+            continue
+        t0 = pc()
+        resolve_engine("native", "hierarchical", None)
+        time_left()
+        t1 = pc()
+        P.refresh_stacked()
+        t2 = pc()
+        code = nat._run(True, DEFAULT_TIME_LIMIT)
+        t3 = pc()
+        x, res = nat.x.copy(), nat.res.copy()
+        t4 = pc()
+        info = nat._info()
+        t5 = pc()
+        qc.Solution(x, "optimal", res, "native", t5 - t0, "hierarchical", info)
+        t6 = pc()
+        if code:
+            raise RuntimeError(f"{name}: native call, status {code}")
+        splits = (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5)
+        for key, dt in zip(WRAPPER_PARTS[:6], splits, strict=True):
+            times[key].append(dt)
+        times["sum of the parts"].append(t6 - t0)
+    return [(name, key, float(np.median(np.array(v[2:]) * 1e6))) for key, v in times.items()]
 
 
 def one_shot(steps):
@@ -324,6 +395,11 @@ def main(argv=None) -> int:
         help="time the re-solve contenders only (native warm, bare, DAQP); the Python engine "
         "the oracle of every 10th step",
     )
+    ap.add_argument(
+        "--wrapper",
+        action="store_true",
+        help="only the parts of one warm Stack.solve(engine='native'), timed alone",
+    )
     args = ap.parse_args(argv)
     steps = args.steps or (20 if args.quick else 300)
     if steps < 5:
@@ -332,6 +408,18 @@ def main(argv=None) -> int:
     print(f"# hierarchy_bench: {steps} steps per scenario, interleaved, 1 BLAS thread")
     print(f"# {platform.python_version()}, numpy {np.__version__}, {platform.machine()}")
     with threadpool_limits(1):
+        if args.wrapper:
+            print("\n| scenario | part of a warm Stack.solve | median µs |")
+            print("|---|---|---:|")
+            for key in chosen:
+                try:
+                    rows = wrapper(*SCENARIOS[key], max(steps, 10))
+                except FileNotFoundError as exc:  # example-robot-data missing
+                    print(f"<!-- {key}: skipped ({exc}) -->")
+                    continue
+                for r in rows:
+                    print(f"| {r[0]} | {r[1]} | {r[2]:.2f} |")
+            return 0
         print("\n| scenario | engine | median µs | p90 µs | p99 µs | max level diff vs python |")
         print("|---|---|---|---|---|---|")
         for key in chosen:

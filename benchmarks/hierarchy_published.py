@@ -25,7 +25,12 @@ right-hand side shifted by ``1e-3 sin(...)`` times its row's norm). Each solver'
 are checked against the Python engine's at every step (``max |Δr| / max(1, r)``). DAQP
 normalises each soft row, so on the published rows (norms 0.02–431 on the humanoid) it solves
 another problem; the ``(unit rows)`` copies divide each row and its bounds by the row's norm,
-where every solver solves the same problem::
+where every solver solves the same problem. The solvers run in a new (seeded) random order
+every step (``--order shuffle``, the default since 2026-11-28), so that each follows every
+other about equally often: the solver right after the Python engine finds the caches evicted
+(soth_sot: ``Stack.solve`` 1.7×, the bare call 1.3× its time timed alone). ``--order fixed``
+keeps the earlier order (python, native warm, cold, bare, daqp.solve, daqp Model: the native
+warm solve always right after the Python engine)::
 
     python benchmarks/hierarchy_published.py --resolve                 # ~1 min
     python benchmarks/hierarchy_published.py --resolve --steps 300 --problem soth_sot
@@ -155,7 +160,13 @@ def _update_solve(model, bu, bl):
 
 
 def resolve(
-    levels: list, bounds, n: int, steps: int, moved: bool, off: tuple[str, ...] = ()
+    levels: list,
+    bounds,
+    n: int,
+    steps: int,
+    moved: bool,
+    off: tuple[str, ...] = (),
+    order: str = "shuffle",
 ) -> tuple[dict, dict, set]:
     """Per-step times (s) and worst level gap to the Python engine of every solver of
     :data:`RESOLVE_KEYS` and of a bare native solver per ``Hierarchy`` switch in ``off``
@@ -190,26 +201,50 @@ def resolve(
         times[key].append(time.perf_counter() - t)
         return out
 
-    for step in range(steps):
-        if moved:
-            move(step)
-            _, bu, bl, sense, _ = daqp_problem(levels, box, n)
-        sp = timed("python", stack.solve, engine="python")
-        sw = timed("native warm", stack.solve, engine="native")
+    bares = [("native bare", run_bare), *((k, h._solver.run) for k, h in offs.items())]
+    out: dict = {}
+
+    def native_cold():
         P.refresh()
-        xc = timed("native cold", cold.solve, P, warm=False)[0]
+        out["native cold"] = timed("native cold", cold.solve, P, warm=False)[0]
+
+    def native_bare():
         P.refresh_stacked()
         # the bare solver and its switched-off copies, in alternating order (the later calls
         # on the same buffers find them in cache)
-        bares = [("native bare", run_bare), *((k, h._solver.run) for k, h in offs.items())]
         for key, run in bares if step % 2 == 0 else bares[::-1]:
             code = timed(key, run, step > 0, math.inf)
             if code:
                 raise RuntimeError(f"{key} call, status {code}")
-        xd, _, flag, _ = timed(
-            "daqp.solve", daqp.solve, H, f, A, bu, bl, sense, break_points=breaks
-        )
-        xm, _, flag_m, _ = timed("daqp Model warm", _update_solve, model, bu, bl)
+
+    def daqp_solve():
+        out["daqp"] = timed("daqp.solve", daqp.solve, H, f, A, bu, bl, sense, break_points=breaks)
+
+    def python():
+        out["python"] = timed("python", stack.solve, engine="python")
+
+    def native_warm():
+        out["native warm"] = timed("native warm", stack.solve, engine="native")
+
+    def daqp_model():
+        out["model"] = timed("daqp Model warm", _update_solve, model, bu, bl)
+
+    contenders = [python, native_warm, native_cold, native_bare, daqp_solve, daqp_model]
+    contenders_idx = range(len(contenders))
+    rng = np.random.default_rng(0)
+    for step in range(steps):
+        if moved:
+            move(step)
+            _, bu, bl, sense, _ = daqp_problem(levels, box, n)
+        # each solver in turn; "shuffle": a new (seeded) order every step, so that every
+        # solver follows every other one about equally often (the one right after the Python
+        # engine finds the caches evicted; a rotation would keep who-follows-whom); "fixed":
+        # always the order of RESOLVE_KEYS
+        for i in rng.permutation(len(contenders)) if order == "shuffle" else contenders_idx:
+            contenders[i]()
+        sp, sw, xc = out["python"], out["native warm"], out["native cold"]
+        xd, _, flag, _ = out["daqp"]
+        xm, _, flag_m, _ = out["model"]
         flags.update((int(flag), int(flag_m)))
         ref = sp.level_residuals
         for key, x in (
@@ -226,9 +261,15 @@ def resolve(
     return times, worst, flags
 
 
-def resolve_table(problems, steps: int, off: tuple[str, ...] = ()) -> None:
-    """Print the re-solve table (see the module's docstring); ``off``: see :func:`resolve`."""
-    print(f"{steps} steps per problem and kind (first 2 dropped), interleaved, BLAS 1 thread")
+def resolve_table(problems, steps: int, off: tuple[str, ...] = (), order: str = "shuffle") -> None:
+    """Print the re-solve table (see the module's docstring); ``off``, ``order``: see
+    :func:`resolve`."""
+    how = (
+        "solvers in a new random order every step"
+        if order == "shuffle"
+        else "fixed order python, native warm, cold, bare, daqp.solve, daqp Model"
+    )
+    print(f"{steps} steps per problem and kind (first 2 dropped), {how}, BLAS 1 thread")
     print("| problem | n | step | solver | median µs | p90 µs | p99 µs | max level gap vs python |")
     print("|---|---:|---|---|---:|---:|---:|---:|")
     for name in problems:
@@ -241,7 +282,7 @@ def resolve_table(problems, steps: int, off: tuple[str, ...] = ()) -> None:
                 lab = label + (" (unit rows)" if unit else "")
                 for moved in (False, True):
                     kind = "moved" if moved else "same"
-                    times, worst, flags = resolve(levels, P.bounds, P.n, steps, moved, off)
+                    times, worst, flags = resolve(levels, P.bounds, P.n, steps, moved, off, order)
                     for key in times:
                         us = np.percentile(np.array(times[key][2:]) * 1e6, [50, 90, 99])
                         print(
@@ -264,13 +305,20 @@ def main(argv=None) -> int:
         default=[],
         help="--resolve: also a bare native solver with this Hierarchy switch off (repeatable)",
     )
+    ap.add_argument(
+        "--order",
+        choices=("shuffle", "fixed"),
+        default="shuffle",
+        help="--resolve: the solvers' order per step: a new random one each step (default) or "
+        "fixed (the native engine right after the Python engine, as before 2026-11-28)",
+    )
     args = ap.parse_args(argv)
     if args.resolve:
         if args.steps < 5:
             ap.error(f"--steps must be at least 5, got {args.steps}")
         print(f"python {sys.version.split()[0]}, numpy {np.__version__}, daqp 0.11 (H = I)")
         with threadpool_limits(limits=1):
-            resolve_table(args.problem or RESOLVE_DEFAULT, args.steps, tuple(args.off))
+            resolve_table(args.problem or RESOLVE_DEFAULT, args.steps, tuple(args.off), args.order)
         return 0
     solvers = args.solver or qc.available_solvers()
     problems = args.problem or NAMES

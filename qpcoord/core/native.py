@@ -177,6 +177,10 @@ class NativeHierarchy:
         Relative damping threshold (see :mod:`qpcoord.core.linalg`).
     """
 
+    #: the bytes of ``stats`` that ``_counts`` were read from (see :meth:`_info`)
+    _stats_key = b""
+    _counts: tuple = ()
+
     def __init__(self, P: CompiledStack, damping: float) -> None:
         mod = load()
         blocks = [P.hard, *P.levels]
@@ -249,7 +253,31 @@ class NativeHierarchy:
 
     def _info(self) -> dict:
         """The info dict of the last call, from ``stats`` (per stage: iterations, warm hit,
-        closed form) and ``detail``: one pass over the stages' rows as Python floats."""
+        closed form) and ``detail``. The counts read from ``stats`` are kept with its bytes:
+        a warm re-solve whose stages did what they did at the previous call (the common
+        case of a control loop) skips the pass over them; each call returns new lists."""
+        key = self.stats.tobytes()
+        if key != self._stats_key:
+            self._stats_key = key
+            self._counts = self._count_stages()
+        its, hits, closed, qp_calls = self._counts
+        d = self.detail.tolist()
+        dev = d[5]
+        return {
+            "engine": "native",
+            "hard_iterations": its[0],
+            "active_set_iterations": its[1:-1],
+            "min_norm_iterations": its[-1],
+            "warm_start_hits": hits,
+            "warm_start_seeded": int(d[7]),
+            "closed_form_levels": closed[:],
+            "qp_calls": qp_calls,
+            "uncertified": [(int(d[6]), dev)] if dev > KKT_TOL else [],
+        }
+
+    def _count_stages(self) -> tuple[list[int], int, list[int], int]:
+        """``(iterations per stage, warm hits, closed-form levels, QP calls)`` from
+        ``stats``: one pass over the stages' rows as Python floats."""
         its = []
         hits = qp_calls = 0
         closed = []
@@ -267,19 +295,7 @@ class NativeHierarchy:
             if cf and 0 <= k < last:
                 closed.append(k)
             k += 1
-        d = self.detail.tolist()
-        dev = d[5]
-        return {
-            "engine": "native",
-            "hard_iterations": its[0],
-            "active_set_iterations": its[1:-1],
-            "min_norm_iterations": its[-1],
-            "warm_start_hits": hits,
-            "warm_start_seeded": int(d[7]),
-            "closed_form_levels": closed,
-            "qp_calls": qp_calls,
-            "uncertified": [(int(d[6]), dev)] if dev > KKT_TOL else [],
-        }
+        return its, hits, closed, qp_calls
 
     def _raise(self, code: int, P: CompiledStack) -> None:
         k = int(self.detail[2])

@@ -321,14 +321,10 @@ class Stack:
                     f"by {dev:.3g}, relative, after it was frozen; tolerance {KKT_TOL:g}) "
                     "with backend 'native'"
                 )
+        # positional (x, status, level_residuals, solver, solve_time, method, info), as the
+        # native IK step: 0.2 µs less than by keyword
         return Solution(
-            x=x,
-            status=status,
-            level_residuals=residuals,
-            solver="native",
-            solve_time=time.perf_counter() - t0,
-            method="hierarchical",
-            info=info,
+            x, status, residuals, "native", time.perf_counter() - t0, "hierarchical", info
         )
 
     def _solve_native_weighted(self, t0: float, warm_start, limit: float) -> Solution:

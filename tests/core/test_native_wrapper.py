@@ -1,0 +1,180 @@
+"""The Python around the native strict-hierarchy call (issue 24: ``Stack.solve`` within a few
+µs of the bare ``Hierarchy.run``), checked against what it replaced.
+
+- :meth:`CompiledStack.refresh_stacked` copies every task's numbers each call (skipping
+  unchanged matrices by ``matrix_version`` was tried and dropped: a value written into a
+  task's array behind its back, ``test_hygiene``'s NaN, would no longer reach the native
+  check): after every kind of change the stacked arrays equal those of a stack compiled
+  afresh, and the native solve equals a fresh Python solve;
+- :meth:`NativeHierarchy._info` keeps the counts it read from ``stats`` with its bytes: every
+  call's dict equals the one recomputed from ``stats`` / ``detail`` by the rules of the
+  Python engine, and its lists are new objects each call.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import qpcoord as qc
+from qpcoord.core import native
+from qpcoord.core.polish import KKT_TOL
+
+needs_native = pytest.mark.skipif(
+    not native.available(),
+    reason=f"the native engine (qpcoord._native) is not built: {native._load_error}",
+)
+
+STACKED = ("Aeq", "beq", "C", "clo", "chi", "csw", "lbs", "ubs")
+
+
+def _tasks(seed: int, n: int = 7):
+    rng = np.random.default_rng(seed)
+    pos = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3), name="pos")
+    wpos = qc.Equality(
+        rng.standard_normal((2, n)), rng.standard_normal(2), weight=[2.0, 0.5], name="wpos"
+    )
+    lim = qc.Inequality(rng.standard_normal((3, n)), -0.3, 0.4, name="lim")
+    post = qc.Equality(np.eye(n), rng.standard_normal(n), name="posture")
+    hard = qc.Inequality(rng.standard_normal((1, n)), -2.0, 2.0, name="hard")
+    box = qc.Bounds(-np.ones(n), np.ones(n))
+    return rng, (pos, wpos, lim, post, hard), box
+
+
+def _build(tasks, box) -> qc.Stack:
+    pos, wpos, lim, post, hard = tasks
+    return qc.Stack([[pos, wpos], lim, post], bounds=box, constraints=[hard])
+
+
+def _changes(rng, tasks, n: int = 7):
+    """Every way a task's matrix, weights or right-hand side changes, one per step."""
+    pos, wpos, lim, post, hard = tasks
+    return [
+        lambda: pos.update(b=rng.standard_normal(3)),  # right-hand side only
+        lambda: pos.update(A=rng.standard_normal((3, n))),  # a new A (new array, version)
+        lambda: wpos.update(weight=[0.3, 4.0]),  # weights only: √w·A changes
+        lambda: wpos._assign(A=rng.standard_normal((2, n))),  # in place, version counted
+        lambda: lim.update(C=rng.standard_normal((3, n))),
+        lambda: lim.update(weight=[1.0, 3.0, 0.2]),  # the violation weights sw
+        lambda: lim._assign(-0.2, 0.1, C=rng.standard_normal((3, n))),  # in place
+        lambda: lim._assign(-0.5, 0.5),  # limits only
+        lambda: post.update(b=rng.standard_normal(n), weight=np.linspace(0.5, 2.0, n)),
+        lambda: hard.update(C=rng.standard_normal((1, n)), lower=-1.5),
+        lambda: None,  # nothing changed: nothing copied, the same numbers
+    ]
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1])
+def test_stacked_arrays_follow_every_kind_of_change(seed):
+    """After each change the stacked arrays are a fresh compile's, and the warm native solve
+    equals a fresh stack's Python solve (level values 1e-9 relative, x)."""
+    rng, tasks, box = _tasks(seed)
+    s = _build(tasks, box)
+    s.solve(engine="native")
+    for change in _changes(rng, tasks) * 2:
+        change()
+        got = s.solve(engine="native")
+        P = s._compiled
+        fresh = _build(tasks, box)._compiled
+        fresh.refresh_stacked()
+        for name in STACKED:
+            np.testing.assert_array_equal(getattr(P, name), getattr(fresh, name), err_msg=name)
+        ref = _build(tasks, box).solve(engine="python")
+        rp, rn = ref.level_residuals, got.level_residuals
+        assert np.all(np.abs(rn - rp) <= 1e-9 * np.maximum(1.0, rp)), (rp, rn)
+        np.testing.assert_allclose(got.x, ref.x, atol=1e-7)
+
+
+@needs_native
+def test_engines_alternating_keep_the_stacked_arrays_current():
+    """A Python solve (which refreshes the levels' own views) between native solves, with
+    matrix changes in between: the native solve still sees every number."""
+    rng, tasks, box = _tasks(3)
+    s = _build(tasks, box)
+    for k, change in enumerate(_changes(rng, tasks)):
+        change()
+        got = s.solve(engine=("python", "native")[k % 2])
+        ref = _build(tasks, box).solve(engine="python")
+        np.testing.assert_allclose(got.level_residuals, ref.level_residuals, rtol=1e-9, atol=1e-12)
+
+
+@needs_native
+def test_a_matrix_replaced_behind_the_stacks_back_is_still_read():
+    """Assigning ``task.A`` (bypassing ``update``: no new ``matrix_version``) is still read
+    (same shape) or named (another shape)."""
+    t = qc.Equality(np.eye(3), [1.0, 2.0, 3.0], name="reach")
+    s = qc.Stack([t], bounds=qc.Bounds(-5.0, 5.0))
+    np.testing.assert_allclose(s.solve(engine="native").x, [1.0, 2.0, 3.0])
+    t.A = 2.0 * np.eye(3)  # same shape, same matrix_version
+    np.testing.assert_allclose(s.solve(engine="native").x, [0.5, 1.0, 1.5])
+    t.A = np.ones((2, 3))
+    with pytest.raises(ValueError, match=r"Equality 'reach': A changed shape from \(3, 3\)"):
+        s.solve(engine="native")
+
+
+def _info_reference(stats: np.ndarray, detail: np.ndarray, levels: int) -> dict:
+    """The info dict by its definition (the Python engine's counts), from the arrays."""
+    its = [int(v) for v in stats[:, 0]]
+    stages = range(stats.shape[0])
+    dev = float(detail[5])
+    return {
+        "engine": "native",
+        "hard_iterations": its[0],
+        "active_set_iterations": its[1:-1],
+        "min_norm_iterations": its[-1],
+        "warm_start_hits": int(np.count_nonzero(stats[:, 1])),
+        "warm_start_seeded": int(detail[7]),
+        "closed_form_levels": [k - 1 for k in stages if stats[k, 2] and 1 <= k <= levels],
+        "qp_calls": sum(1 for k in stages if stats[k, 0] or stats[k, 1]),
+        "uncertified": [(int(detail[6]), dev)] if dev > KKT_TOL else [],
+    }
+
+
+@needs_native
+def test_info_equals_its_definition_with_and_without_the_kept_counts():
+    """Moving targets (stages that change what they do) and unchanged re-solves (the kept
+    counts reused): each info is the one recomputed from the arrays, in new lists."""
+    rng = np.random.default_rng(7)
+    n = 12
+    A = rng.standard_normal((4, n))
+    pos = qc.Equality(A, rng.standard_normal(4))
+    lim = qc.Inequality(rng.standard_normal((5, n)), -0.2, 0.2)
+    post = qc.Equality(np.eye(n), np.zeros(n))
+    s = qc.Stack([pos, lim, post], bounds=qc.Bounds(-0.3 * np.ones(n), 0.3 * np.ones(n)))
+    seen = []
+    reused = 0
+    for step in range(24):
+        if step % 4 < 2:  # then twice the same stack (the second: the kept counts)
+            pos.update(b=2.0 * np.sin(0.7 * step + np.arange(4)))
+        key = s._native._stats_key if s._native is not None else None
+        sol = s.solve(engine="native")
+        nh = s._native
+        reused += key == nh._stats_key
+        assert sol.info == _info_reference(nh.stats, nh.detail, 3)
+        for old in seen:
+            assert sol.info["active_set_iterations"] is not old["active_set_iterations"]
+            assert sol.info["closed_form_levels"] is not old["closed_form_levels"]
+        sol.info["active_set_iterations"].append(-1)  # a caller's edit stays its own
+        sol.info["closed_form_levels"].append(-1)
+        seen.append(sol.info)
+    assert reused >= 4  # the unchanged re-solves did reuse the counts
+    assert len({tuple(i["active_set_iterations"][:-1]) for i in seen}) > 1  # and it moved
+
+
+@needs_native
+def test_the_solution_fields():
+    """Stack.solve's Solution (built positionally): types and values of every field."""
+    s = qc.Stack([qc.Equality(np.eye(3), [0.1, 2.0, 0.3])], bounds=qc.Bounds(-1.0, 1.0))
+    sol = s.solve(engine="native")
+    assert isinstance(sol, qc.Solution)
+    np.testing.assert_allclose(sol.x, [0.1, 1.0, 0.3], atol=1e-12)
+    assert sol.status == "optimal" and sol.solver == "native" and sol.method == "hierarchical"
+    np.testing.assert_allclose(sol.level_residuals, [1.0], rtol=1e-12)
+    assert 0.0 < sol.solve_time < 1.0
+    assert sol.info["engine"] == "native" and sol.info["uncertified"] == []
+    # the returned arrays are the caller's: the next solve does not write into them
+    x = sol.x.copy()
+    s.solve(engine="native")
+    sol.x[0] = 7.0
+    assert s.solve(engine="native").x[0] == pytest.approx(x[0])
