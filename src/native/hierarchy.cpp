@@ -1404,6 +1404,13 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   return kOk;
 }
 
+int Hierarchy::gemv_steps() {
+  int s = wqr_.gemv_steps();
+  for (const PivotedQR* q : {&kqr_, &fqr_, &cqr_, &kqr_t_, &sqr_, &mqr_, &tqr_})
+    s += q->gemv_steps;
+  return s;
+}
+
 double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
                               const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi,
                               const CRef<Vec>& sw, const Vec& x) const {
@@ -1432,6 +1439,12 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
   stats.setZero();
   detail.setZero();
+  for (PivotedQR* q : {&kqr_, &fqr_, &cqr_, &kqr_t_, &sqr_, &mqr_, &tqr_}) {
+    q->gemv_update = gemv_qr;
+    q->gemv_steps = 0;
+  }
+  wqr_.set_gemv_update(gemv_qr);
+  wqr_.gemv_steps() = 0;
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;

@@ -141,6 +141,12 @@ class Hierarchy {
   /// orthogonal transforms as Z (default; a row is projected once, when it is inherited), or
   /// recomputed by a product with Z at every level (A/B).
   bool carry_projection = true;
+  /// The pivoted QRs of the solve (closed forms, freezes, working sets, least-squares steps)
+  /// apply each reflector by one matrix-vector product and one rank-one update (default:
+  /// PivotedQR::gemv_update) or by a dot and an axpy per column (A/B).
+  bool gemv_qr = true;
+  /// Reflectors of the last call applied by gemv_qr's product and rank-one update.
+  int gemv_steps();
   /// Warm trials of the last call solved in z alone (reduce_slacks).
   int reduced_trials() const { return reduced_trials_; }
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
