@@ -125,7 +125,7 @@ class PivotedQR {
   bool gemv_update = false;
   /// gemv_update only for trailing blocks of at least this many rows below the pivot and
   /// columns (smaller ones: the per-column loop, whose overhead is lower)
-  static constexpr int kGemvMinRows = 16;
+  static constexpr int kGemvMinRows = 48;
   static constexpr int kGemvMinCols = 8;
   /// Reflectors applied by gemv_update since the counter was last reset (by its owner).
   int gemv_steps = 0;

@@ -142,8 +142,9 @@ class Hierarchy {
   /// recomputed by a product with Z at every level (A/B).
   bool carry_projection = true;
   /// The pivoted QRs of the solve (closed forms, freezes, working sets, least-squares steps)
-  /// apply each reflector by one matrix-vector product and one rank-one update (default:
-  /// PivotedQR::gemv_update) or by a dot and an axpy per column (A/B).
+  /// apply each reflector to a trailing block of at least 48 x 8 by one matrix-vector product
+  /// and one rank-one update (default: PivotedQR::gemv_update; the humanoid's 60 x 51 K and
+  /// its box form's 97 x 62 M) or by a dot and an axpy per column (A/B).
   bool gemv_qr = true;
   /// Reflectors of the last call applied by gemv_qr's product and rank-one update.
   int gemv_steps();
