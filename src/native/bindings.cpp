@@ -160,6 +160,12 @@ NB_MODULE(_native, m) {
               "The pivoted QRs apply each reflector by one matrix-vector product and one "
               "rank-one update (True, default) or by a dot and an axpy per column (False; "
               "for comparisons).")
+      .def_rw("compress_zero_tail", &Hierarchy::compress_zero_tail,
+              "A tall level's objective compressed also when its full pivoted QR stopped at "
+              "an exactly zero trailing block (True, default) or not (False; for "
+              "comparisons).")
+      .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,
+                   "Levels of the last call compressed by compress_zero_tail.")
       .def_prop_ro("gemv_steps", &Hierarchy::gemv_steps,
                    "Reflectors of the last call applied by gemv_qr's matrix-vector product "
                    "and rank-one update.")

@@ -1235,8 +1235,16 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // a tall level factorised by the QR (M P = Qm [R; 0]): its objective rows compressed to
   // R P^T and (Qm^T e)(0:r), exactly (an orthogonal transform; the rest of Qm^T e is
   // constant in y, kept in dropped2)
-  const int qme =
-      (by_qr && !qr_wide_ && compress_objective && mqr_.rank() == r_) ? r_ : me;
+  // (the full QR may stop at a pivot column exactly zero: then the whole trailing block is
+  // checked to be exactly zero, its rows of R are zero and the compression stays exact)
+  bool full_r = by_qr && !qr_wide_ && compress_objective && mqr_.rank() == r_;
+  if (by_qr && !qr_wide_ && compress_objective && compress_zero_tail && !full_r &&
+      mqr_.rows() == me && mqr_.cols() == r_) {
+    const int t = mqr_.rank();
+    full_r = (mqr_.matrix().bottomRightCorner(me - t, r_ - t).array() == 0.0).all();
+    if (full_r) ++zero_tail_compressions_;
+  }
+  const int qme = full_r ? r_ : me;
   P.start(qme + ndamp + mv, cols);
   if (qme < me) {
     const auto Af = mqr_.matrix();
@@ -1450,6 +1458,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   downdates_ = 0;
   slack_steps_ = 0;
   qr_closed_forms_ = 0;
+  zero_tail_compressions_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)

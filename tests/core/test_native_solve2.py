@@ -1,4 +1,5 @@
-"""The native engine's pivoted QRs by matrix-vector product and rank-one update (issue 24).
+"""The native engine's pivoted QRs by matrix-vector product and rank-one update, and the
+compression of a tall level whose full QR ends on an exactly zero block (issue 24).
 
 ``Hierarchy.gemv_qr`` (default on) applies each Householder reflector of the solve's pivoted
 QRs (closed forms, freezes, working sets, least-squares steps) to a trailing block of at
@@ -6,6 +7,12 @@ least 48 x 8 by one matrix-vector product and one rank-one update instead of a d
 axpy per column: the same arithmetic summed in another order. Each test runs it beside the
 old loop (switch off) on moving data and checks both against the Python engine (level values
 1e-9 relative, x where it is unique), and that the new path was taken.
+
+``Hierarchy.compress_zero_tail`` (default on): a tall level's least squares runs on the r
+rows of M's full pivoted QR also when that QR stopped at a pivot column exactly zero, the
+trailing block being exactly zero (its rows of R are zero: the same objective up to a
+constant); before, such a level (the humanoid box form's level 3, 97 rows, rank 54 of 62)
+ran on M's 97 rows.
 """
 
 from __future__ import annotations
@@ -26,33 +33,47 @@ needs_native = pytest.mark.skipif(
 )
 
 
-def _published(stem: str, box: bool = False):
-    """(stack, move(step)) of a published problem, moved as hierarchy_published.py does."""
+def _published(stem: str, box: bool = False, unit: bool = False):
+    """(stack, move(step)) of a published problem, moved as hierarchy_published.py does
+    (unit: its unit-row copy)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     import hierarchy_published as hp
 
     prob = load(stem, simple_as_bounds=box)
-    return qc.Stack(prob.levels, bounds=prob.bounds), hp._mover(prob.levels)
+    levels = hp.unit_rows(prob.levels) if unit else prob.levels
+    return qc.Stack(levels, bounds=prob.bounds), hp._mover(levels)
 
 
-def _run(stem: str, box: bool, steps: int, unique: bool) -> tuple[int, int]:
-    """Solve `steps` moved steps with gemv_qr on and off; returns the reflectors each applied
-    by the product (on, off)."""
+def _run(
+    stem: str,
+    box: bool,
+    steps: int,
+    unique: bool,
+    switch: str = "gemv_qr",
+    unit: bool = False,
+    gemv: bool = True,
+) -> tuple[int, int]:
+    """Solve `steps` moved steps with `switch` on and off; returns its path's counter summed
+    over the steps (on, off): reflectors applied by the product (gemv_qr) or levels
+    compressed (compress_zero_tail)."""
     from qpcoord.core.native import NativeHierarchy
 
-    stack, move = _published(stem, box)
+    counter = {"gemv_qr": "gemv_steps", "compress_zero_tail": "zero_tail_compressions"}[switch]
+    stack, move = _published(stem, box, unit)
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     old = NativeHierarchy(P, stack.damping)
-    old._solver.gemv_qr = False
-    assert new._solver.gemv_qr
+    if switch != "gemv_qr":
+        new._solver.gemv_qr = old._solver.gemv_qr = gemv
+    setattr(old._solver, switch, False)
+    assert getattr(new._solver, switch)
     on = off = 0
     for step in range(steps):
         move(step)
         xn, rn, _ = new.solve(P)
-        on += new._solver.gemv_steps
+        on += getattr(new._solver, counter)
         xo, ro, _ = old.solve(P)
-        off += old._solver.gemv_steps
+        off += getattr(old._solver, counter)
         sp = stack.solve(engine="python")
         for r in (rn, ro):
             np.testing.assert_allclose(r, sp.level_residuals, rtol=1e-9, atol=1e-10)
@@ -73,6 +94,30 @@ def test_humanoid_gemv_qr_equals_the_loop_and_python(box):
     on, off = _run("lexls_test01_humanoid", box, 4, unique=False)
     assert off == 0
     assert on > 0
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("box", "unit", "gemv"),
+    [(True, False, False), (False, True, True)],
+    ids=["box form, loop QR", "unit rows, gemv QR"],
+)
+def test_humanoid_compresses_its_zero_tail_level(box, unit, gemv):
+    """The humanoid's last tall level (97 rows, rank 52-54 of 60-62): in these two variants
+    its full pivoted QR ends on an exactly zero block (which one does depends on the
+    rounding of the QR); compressed to its R rows, the level values are those of the
+    uncompressed least squares and the Python engine's."""
+    on, off = _run(
+        "lexls_test01_humanoid",
+        box,
+        4,
+        unique=False,
+        switch="compress_zero_tail",
+        unit=unit,
+        gemv=gemv,
+    )
+    assert off == 0
+    assert on >= 3
 
 
 @needs_native
