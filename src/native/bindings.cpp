@@ -157,9 +157,9 @@ NB_MODULE(_native, m) {
               "changes of the null-space basis (True, default) or recomputed per level "
               "(False; for comparisons).")
       .def_rw("gemv_qr", &Hierarchy::gemv_qr,
-              "The pivoted QRs apply each reflector by one matrix-vector product and one "
-              "rank-one update (True, default) or by a dot and an axpy per column (False; "
-              "for comparisons).")
+              "The pivoted QRs apply each reflector to a block of at least 48 x 8 by one "
+              "matrix-vector product and one rank-one update (True; for comparisons) or by "
+              "a dot and an axpy per column (False, default: as fast).")
       .def_rw("compress_zero_tail", &Hierarchy::compress_zero_tail,
               "A tall level's objective compressed also when its full pivoted QR stopped at "
               "an exactly zero trailing block (True, default) or not (False; for "

@@ -150,9 +150,10 @@ class Hierarchy {
   bool carry_projection = true;
   /// The pivoted QRs of the solve (closed forms, freezes, working sets, least-squares steps)
   /// apply each reflector to a trailing block of at least 48 x 8 by one matrix-vector product
-  /// and one rank-one update (default: PivotedQR::gemv_update; the humanoid's 60 x 51 K and
-  /// its box form's 97 x 62 M) or by a dot and an axpy per column (A/B).
-  bool gemv_qr = true;
+  /// and one rank-one update (PivotedQR::gemv_update; the humanoid's 60 x 51 K and its box
+  /// form's 97 x 62 M) or by a dot and an axpy per column (default: the product saves 2-13 %
+  /// of the instructions on the humanoid but no wall time, benchmarks/README.md, solve2).
+  bool gemv_qr = false;
   /// Reflectors of the last call applied by gemv_qr's product and rank-one update.
   int gemv_steps();
   /// Warm trials of the last call solved in z alone (reduce_slacks).

@@ -12,6 +12,8 @@
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail.
 //
+// QPCOORD_DRIVER_ON=gemv_qr: switch that non-default option on.
+//
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
 // (float64, n per solve, in order) to compare two builds.
 #include <algorithm>
@@ -74,6 +76,9 @@ int main(int argc, char** argv) {
     if (has("trial_qt_tail")) h.trial_qt_tail = false;
     if (has("carry_projection")) h.carry_projection = false;
     if (has("gemv_qr")) h.gemv_qr = false;
+    if (std::getenv("QPCOORD_DRIVER_ON") &&
+        std::string(std::getenv("QPCOORD_DRIVER_ON")).find("gemv_qr") != std::string::npos)
+      h.gemv_qr = true;
     if (has("compress_zero_tail")) h.compress_zero_tail = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;
     if (has("downdate")) h.downdate = false;
