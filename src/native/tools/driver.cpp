@@ -76,9 +76,6 @@ int main(int argc, char** argv) {
     if (has("trial_qt_tail")) h.trial_qt_tail = false;
     if (has("carry_projection")) h.carry_projection = false;
     if (has("gemv_qr")) h.gemv_qr = false;
-    if (std::getenv("QPCOORD_DRIVER_ON") &&
-        std::string(std::getenv("QPCOORD_DRIVER_ON")).find("gemv_qr") != std::string::npos)
-      h.gemv_qr = true;
     if (has("compress_zero_tail")) h.compress_zero_tail = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;
     if (has("downdate")) h.downdate = false;
@@ -86,6 +83,8 @@ int main(int argc, char** argv) {
     if (has("compress_objective")) h.compress_objective = false;
     if (has("wide_ls")) h.wide_ls = false;
   }
+  if (const char* on = std::getenv("QPCOORD_DRIVER_ON"))
+    if ((std::string(",") + on + ",").find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
   Vec x(n), res(L), detail(8);
   Mat stats(L + 2, 3);
   long long allocs_after_first = 0;
