@@ -156,6 +156,19 @@ NB_MODULE(_native, m) {
               "The inherited rows' projection carried from level to level through the "
               "changes of the null-space basis (True, default) or recomputed per level "
               "(False; for comparisons).")
+      .def_rw("gemv_qr", &Hierarchy::gemv_qr,
+              "The pivoted QRs apply each reflector to a block of at least 48 x 8 by one "
+              "matrix-vector product and one rank-one update (True; for comparisons) or by "
+              "a dot and an axpy per column (False, default: as fast).")
+      .def_rw("compress_zero_tail", &Hierarchy::compress_zero_tail,
+              "A tall level's objective compressed also when its full pivoted QR stopped at "
+              "an exactly zero trailing block (True, default) or not (False; for "
+              "comparisons).")
+      .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,
+                   "Levels of the last call compressed by compress_zero_tail.")
+      .def_prop_ro("gemv_steps", &Hierarchy::gemv_steps,
+                   "Reflectors of the last call applied by gemv_qr's matrix-vector product "
+                   "and rank-one update.")
       .def_prop_ro("reduced_trials", &Hierarchy::reduced_trials,
                    "Warm trials of the last call solved in z alone (reduce_slacks).")
       .def_prop_ro("qr_closed_forms", &Hierarchy::qr_closed_forms,

@@ -91,30 +91,44 @@ class PivotedQR {
       }
       A(j, j) = beta;
       tau_(j) = tau;
-      // apply to the trailing columns
-      for (int c = j + 1; c < nc_; ++c) {
-        auto ac = A.col(c).segment(j, m_ - j);
-        const double w = ac(0) + A.col(j).segment(j + 1, m_ - j - 1).dot(ac.tail(m_ - j - 1));
-        const double tw = tau * w;
-        ac(0) -= tw;
-        ac.tail(m_ - j - 1) -= tw * A.col(j).segment(j + 1, m_ - j - 1);
-        // downdate the partial norm by the eliminated entry; recompute on cancellation
-        if (norms_(c) != 0.0) {
-          double t = std::abs(ac(0)) / norms_(c);
-          t = std::max(0.0, (1.0 + t) * (1.0 - t));
-          const double r = norms_(c) / orig_(c);
-          if (t * r * r <= tol3z) {
-            norms_(c) = ac.tail(m_ - j - 1).norm();
-            orig_(c) = norms_(c);
-          } else {
-            norms_(c) *= std::sqrt(t);
-          }
+      // apply to the trailing columns: H_j A(j:m, j+1:nc), v = [1; A(j+1:m, j)]
+      const int len = m_ - j - 1, nt = nc_ - j - 1;
+      if (gemv_update && len >= kGemvMinRows && nt >= kGemvMinCols) {
+        // w = tau A^T v by one matrix-vector product, A -= v w^T by one rank-one update
+        ++gemv_steps;
+        auto w = work_.head(nt);
+        w.noalias() = A.block(j + 1, j + 1, len, nt).transpose() * A.col(j).segment(j + 1, len);
+        w += A.row(j).segment(j + 1, nt).transpose();
+        w *= tau;
+        A.row(j).segment(j + 1, nt) -= w.transpose();
+        A.block(j + 1, j + 1, len, nt).noalias() -= A.col(j).segment(j + 1, len) * w.transpose();
+        for (int c = j + 1; c < nc_; ++c) downdate_norm(A, j, c, tol3z);
+      } else {
+        for (int c = j + 1; c < nc_; ++c) {
+          auto ac = A.col(c).segment(j, m_ - j);
+          const double w = ac(0) + A.col(j).segment(j + 1, len).dot(ac.tail(len));
+          const double tw = tau * w;
+          ac(0) -= tw;
+          ac.tail(len) -= tw * A.col(j).segment(j + 1, len);
+          downdate_norm(A, j, c, tol3z);
         }
       }
       ++rank_;
     }
     return rank_;
   }
+
+  /// factor() applies each reflector to the trailing columns by one matrix-vector product and
+  /// one rank-one update (Eigen's kernels) instead of a dot and an axpy per column (the same
+  /// arithmetic, summed in another order). Off by default (the results of the other users
+  /// stay bit for bit); Hierarchy::gemv_qr switches it on for its own factorisations.
+  bool gemv_update = false;
+  /// gemv_update only for trailing blocks of at least this many rows below the pivot and
+  /// columns (smaller ones: the per-column loop, whose overhead is lower)
+  static constexpr int kGemvMinRows = 48;
+  static constexpr int kGemvMinCols = 8;
+  /// Reflectors applied by gemv_update since the counter was last reset (by its owner).
+  int gemv_steps = 0;
 
   int rank() const { return rank_; }
   int rows() const { return m_; }
@@ -219,6 +233,20 @@ class PivotedQR {
     return Eigen::Map<const Mat, 0, Eigen::OuterStride<>>(buf_.data(), m_, nc_,
                                                           Eigen::OuterStride<>(std::max(m_, 1)));
   }
+  /// Downdate the partial norm of column c by its entry A(j, c) just eliminated (LAPACK's
+  /// dlaqp2); recompute it on cancellation.
+  EIGEN_ALWAYS_INLINE void downdate_norm(MapMat& A, int j, int c, double tol3z) {
+    if (norms_(c) == 0.0) return;
+    double t = std::abs(A(j, c)) / norms_(c);
+    t = std::max(0.0, (1.0 + t) * (1.0 - t));
+    const double r = norms_(c) / orig_(c);
+    if (t * r * r <= tol3z) {
+      norms_(c) = A.col(c).segment(j + 1, m_ - j - 1).norm();
+      orig_(c) = norms_(c);
+    } else {
+      norms_(c) *= std::sqrt(t);
+    }
+  }
   template <typename V>
   void reflect(int j, V& v) const {
     const auto A = cmatrix();
@@ -269,6 +297,10 @@ class WorkingQR {
 
   /// The k x kw matrix to fill before factor().
   MapMat matrix(int k, int kw) { return base_.matrix(k, kw); }
+  /// PivotedQR::gemv_update of the initial factorisation.
+  void set_gemv_update(bool on) { base_.gemv_update = on; }
+  /// PivotedQR::gemv_steps of the initial factorisation (reset: set it to 0).
+  int& gemv_steps() { return base_.gemv_steps; }
 
   /// Pivoted Householder QR of matrix() (see PivotedQR::factor); returns the rank.
   int factor(double abs_tol, double rel_tol) {

@@ -1235,8 +1235,16 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // a tall level factorised by the QR (M P = Qm [R; 0]): its objective rows compressed to
   // R P^T and (Qm^T e)(0:r), exactly (an orthogonal transform; the rest of Qm^T e is
   // constant in y, kept in dropped2)
-  const int qme =
-      (by_qr && !qr_wide_ && compress_objective && mqr_.rank() == r_) ? r_ : me;
+  // (the full QR may stop at a pivot column exactly zero: then the whole trailing block is
+  // checked to be exactly zero, its rows of R are zero and the compression stays exact)
+  bool full_r = by_qr && !qr_wide_ && compress_objective && mqr_.rank() == r_;
+  if (by_qr && !qr_wide_ && compress_objective && compress_zero_tail && !full_r &&
+      mqr_.rows() == me && mqr_.cols() == r_) {
+    const int t = mqr_.rank();
+    full_r = (mqr_.matrix().bottomRightCorner(me - t, r_ - t).array() == 0.0).all();
+    if (full_r) ++zero_tail_compressions_;
+  }
+  const int qme = full_r ? r_ : me;
   P.start(qme + ndamp + mv, cols);
   if (qme < me) {
     const auto Af = mqr_.matrix();
@@ -1404,6 +1412,13 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   return kOk;
 }
 
+int Hierarchy::gemv_steps() {
+  int s = wqr_.gemv_steps();
+  for (const PivotedQR* q : {&kqr_, &fqr_, &cqr_, &kqr_t_, &sqr_, &mqr_, &tqr_})
+    s += q->gemv_steps;
+  return s;
+}
+
 double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
                               const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi,
                               const CRef<Vec>& sw, const Vec& x) const {
@@ -1432,11 +1447,18 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
   stats.setZero();
   detail.setZero();
+  for (PivotedQR* q : {&kqr_, &fqr_, &cqr_, &kqr_t_, &sqr_, &mqr_, &tqr_}) {
+    q->gemv_update = gemv_qr;
+    q->gemv_steps = 0;
+  }
+  wqr_.set_gemv_update(gemv_qr);
+  wqr_.gemv_steps() = 0;
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;
   slack_steps_ = 0;
   qr_closed_forms_ = 0;
+  zero_tail_compressions_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)

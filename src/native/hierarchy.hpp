@@ -117,6 +117,13 @@ class Hierarchy {
   /// Least squares of a tall level whose closed form came from the QR of M on the compressed
   /// objective R (r rows instead of M's me; default) or on M itself (A/B).
   bool compress_objective = true;
+  /// compress_objective also when M's full pivoted QR stopped at a pivot column exactly zero
+  /// and the trailing block it left is exactly zero (its rows of R are zero: still exact;
+  /// the humanoid box form's level 3, 97 rows, rank 54 of 62; default), or not (A/B: the
+  /// least squares on M's me rows).
+  bool compress_zero_tail = true;
+  /// Levels of the last call compressed by compress_zero_tail.
+  int zero_tail_compressions() const { return zero_tail_compressions_; }
   /// A wide projected objective K of full row rank: its minimum-norm step from one QR of
   /// K^T (default) or from the QR of K and of [R11 R12]^T (A/B).
   bool wide_ls = true;
@@ -141,6 +148,14 @@ class Hierarchy {
   /// orthogonal transforms as Z (default; a row is projected once, when it is inherited), or
   /// recomputed by a product with Z at every level (A/B).
   bool carry_projection = true;
+  /// The pivoted QRs of the solve (closed forms, freezes, working sets, least-squares steps)
+  /// apply each reflector to a trailing block of at least 48 x 8 by one matrix-vector product
+  /// and one rank-one update (PivotedQR::gemv_update; the humanoid's 60 x 51 K and its box
+  /// form's 97 x 62 M) or by a dot and an axpy per column (default: the product saves 2-13 %
+  /// of the instructions on the humanoid but no wall time, benchmarks/README.md, solve2).
+  bool gemv_qr = false;
+  /// Reflectors of the last call applied by gemv_qr's product and rank-one update.
+  int gemv_steps();
   /// Warm trials of the last call solved in z alone (reduce_slacks).
   int reduced_trials() const { return reduced_trials_; }
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
@@ -326,6 +341,7 @@ class Hierarchy {
   /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
   /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
   PivotedQR tqr_;
+  int zero_tail_compressions_ = 0;  ///< levels compressed by compress_zero_tail in this call
   bool qr_wide_ = false;    ///< the last qr_closed_form factorised M^T (me <= r)
   int qr_closed_forms_ = 0;  ///< closed forms by QR in this call
   Mat rinv_;       ///< R^-1 of mqr_ (a bound on M's smallest singular value)

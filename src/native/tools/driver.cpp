@@ -10,7 +10,9 @@
 //
 // QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
-// compress_objective, wide_ls.
+// compress_objective, wide_ls, gemv_qr, compress_zero_tail.
+//
+// QPCOORD_DRIVER_ON=gemv_qr: switch that non-default option on.
 //
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
 // (float64, n per solve, in order) to compare two builds.
@@ -73,12 +75,16 @@ int main(int argc, char** argv) {
     if (has("reduce_slacks")) h.reduce_slacks = false;
     if (has("trial_qt_tail")) h.trial_qt_tail = false;
     if (has("carry_projection")) h.carry_projection = false;
+    if (has("gemv_qr")) h.gemv_qr = false;
+    if (has("compress_zero_tail")) h.compress_zero_tail = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;
     if (has("downdate")) h.downdate = false;
     if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
     if (has("compress_objective")) h.compress_objective = false;
     if (has("wide_ls")) h.wide_ls = false;
   }
+  if (const char* on = std::getenv("QPCOORD_DRIVER_ON"))
+    if ((std::string(",") + on + ",").find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
   Vec x(n), res(L), detail(8);
   Mat stats(L + 2, 3);
   long long allocs_after_first = 0;

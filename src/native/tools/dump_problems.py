@@ -33,14 +33,19 @@ PUBLISHED = {
     "humanoid_box": ("lexls_test01_humanoid", True),
     "soth_sot": ("soth_sot", False),
 }
+#: Their ``(unit rows)`` copies (each row and its bounds divided by the row's norm, as
+#: hierarchy_published's table): file stem -> the PUBLISHED entry.
+UNIT_ROWS = {"humanoid_unit": "humanoid", "humanoid_box_unit": "humanoid_box"}
 
 
 def published(name: str) -> tuple[qc.Stack, object]:
     """(stack, move(step, x)) of a published problem of :data:`PUBLISHED`."""
-    stem, box = PUBLISHED[name]
+    unit = name in UNIT_ROWS
+    stem, box = PUBLISHED[UNIT_ROWS.get(name, name)]
     prob = load(stem, simple_as_bounds=box)
-    mover = hp._mover(prob.levels)
-    return qc.Stack(prob.levels, bounds=prob.bounds), lambda step, x=None: mover(step)
+    levels = hp.unit_rows(prob.levels) if unit else prob.levels
+    mover = hp._mover(levels)
+    return qc.Stack(levels, bounds=prob.bounds), lambda step, x=None: mover(step)
 
 
 def dump(name, build, steps, out: pathlib.Path) -> None:
@@ -73,13 +78,13 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
     ap.add_argument("--steps", type=int, default=50)
-    names = [*hb.SCENARIOS, *PUBLISHED]
+    names = [*hb.SCENARIOS, *PUBLISHED, *UNIT_ROWS]
     ap.add_argument("--only", action="append", choices=names, help="these problems only")
     a = ap.parse_args()
     out = pathlib.Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     for name in a.only or names:
-        if name in PUBLISHED:
+        if name in PUBLISHED or name in UNIT_ROWS:
             dump_stack(name, *published(name), a.steps, out)
         else:
             dump(name, hb.SCENARIOS[name][1], a.steps, out)
