@@ -239,9 +239,8 @@ void Hierarchy::freeze(double scale) {
 }
 
 // ---------------------------------------------------------------------------------------
-void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W) {
+void Hierarchy::factor_rows(const LsqProblem& P, const std::vector<int8_t>& W) {
   const int k = P.cols;
-  finish_ready_ = false;
   widx_.clear();
   for (int i = 0; i < P.rows; ++i)
     if (W[i]) widx_.push_back(i);
@@ -249,6 +248,11 @@ void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W
   MapMat GwT = wqr_.matrix(k, kw);
   for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
   wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
+}
+
+void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W) {
+  finish_ready_ = false;
+  factor_rows(P, W);
   // with the slack step the projected objective is rarely needed: formed on first use
   qt_stale_ = true;
   if (!(slack_ls && P.slacks > 0)) form_qt(P);
@@ -272,13 +276,7 @@ void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) 
   // Qt_ holds only the null-space columns below (all ls_step reads); the active set starts
   // from factor_working, so no downdate or append reads the stale leading columns
   qt_stale_ = false;
-  widx_.clear();
-  for (int i = 0; i < P.rows; ++i)
-    if (W[i]) widx_.push_back(i);
-  const int kw = static_cast<int>(widx_.size());
-  MapMat GwT = wqr_.matrix(k, kw);
-  for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
-  wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
+  factor_rows(P, W);
   // (Q Qf)(i, :) = (Qf^T Q(i, :)^T)^T, row by row; only its columns rank.. (null(G_w)) are
   // kept: the least-squares step reads no other (none at a vertex of the working set)
   const int rho = wqr_.rank(), nk = k - rho;
@@ -592,30 +590,36 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   if (!found && !ws.id.empty()) return 0;
   qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
   factor_trial(P, W);
-  const int kw = static_cast<int>(widx_.size());
-  auto t = tvec_.head(kw);
-  for (int j = 0; j < kw; ++j) {
-    const int i = widx_[j];
-    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
-    if (!std::isfinite(t(j))) return 0;
-  }
-  // the point on the working set's rows: G_w y = t, y = Qf [R11^-T (P^T t)_(1:rank); 0]
-  const int rho = wqr_.rank();
   auto yp = xc_.head(k);
-  yp.setZero();
-  for (int i = 0; i < rho; ++i) yp(i) = t(wqr_.perm(i));
-  wqr_.solve_rt(yp);
-  wqr_.apply_q(yp);
-  {
-    const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
-    *consistent = true;
-    for (int j = 0; j < kw && *consistent; ++j)
-      if (std::abs(P.G.row(widx_[j]).head(k).dot(yp) - t(j)) > 1e-10 * tmax) *consistent = false;
-  }
+  if (!working_set_point(P, W, yp, consistent)) return 0;
   auto step = step_.head(k);
   ls_step(P, yp, step);
   yp += step;
   return found;
+}
+
+bool Hierarchy::working_set_point(const LsqProblem& P, const std::vector<int8_t>& W,
+                                  Eigen::Ref<Vec> y, bool* consistent) {
+  const int k = P.cols, kw = static_cast<int>(widx_.size());
+  auto t = tvec_.head(kw);
+  for (int j = 0; j < kw; ++j) {
+    const int i = widx_[j];
+    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
+    if (!std::isfinite(t(j))) return false;
+  }
+  // the point on the working set's rows: G_w y = t, y = Qf [R11^-T (P^T t)_(1:rank); 0]
+  const int rho = wqr_.rank();
+  y.setZero();
+  for (int i = 0; i < rho; ++i) y(i) = t(wqr_.perm(i));
+  wqr_.solve_rt(y);
+  wqr_.apply_q(y);
+  *consistent = true;
+  if (kw) {
+    const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
+    for (int j = 0; j < kw && *consistent; ++j)
+      if (std::abs(P.G.row(widx_[j]).head(k).dot(y) - t(j)) > 1e-10 * tmax) *consistent = false;
+  }
+  return true;
 }
 
 int Hierarchy::map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W) {
@@ -681,28 +685,12 @@ int Hierarchy::reduced_set_point(const LsqProblem& P, int mv, const Working& ws,
   }
   qscale_ = R.Q.topLeftCorner(R.qrows, zc).norm();
   factor_trial(R, W);
-  const int kw = static_cast<int>(widx_.size());
-  auto t = tvec_.head(kw);
-  for (int j = 0; j < kw; ++j) {
-    const int i = widx_[j];
-    t(j) = (W[i] == 1) ? P.hi(i) : P.lo(i);
-    if (!std::isfinite(t(j))) return 0;
-  }
-  // z on the working rows without slack (minimum norm), then the least squares in their
-  // null space, as stored_set_point on the full problem
-  const int rho = wqr_.rank();
+  // z on the working rows without slack (minimum norm; R's rows and bounds there are P's),
+  // then the least squares in their null space, as stored_set_point on the full problem
   auto yp = xc_.head(k);
   yp.setZero();
   auto zp = yp.head(zc);
-  for (int i = 0; i < rho; ++i) zp(i) = t(wqr_.perm(i));
-  wqr_.solve_rt(zp);
-  wqr_.apply_q(zp);
-  *consistent = true;
-  if (kw) {
-    const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
-    for (int j = 0; j < kw && *consistent; ++j)
-      if (std::abs(P.G.row(widx_[j]).head(zc).dot(zp) - t(j)) > 1e-10 * tmax) *consistent = false;
-  }
+  if (!working_set_point(R, W, zp, consistent)) return 0;
   auto step = step_.head(zc);
   ls_step(R, zp, step);
   zp += step;

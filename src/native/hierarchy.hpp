@@ -216,6 +216,11 @@ class Hierarchy {
   /// Map a stored working set onto P's rows (into W: equality rows 2, stored rows their
   /// side); returns the number of stored rows matched.
   int map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W);
+  /// The minimum-norm point on the working rows of factor_trial's factorisation of P (wqr_,
+  /// widx_): G_w y = t, t the rows' active bounds, into y (P.cols entries); *consistent: G_w y
+  /// = t holds to 1e-10 max(1, |t|). False (y unset) when an active bound is infinite.
+  bool working_set_point(const LsqProblem& P, const std::vector<int8_t>& W, Eigen::Ref<Vec> y,
+                         bool* consistent);
   /// stored_set_point of a level whose last mv rows of P have one slack column each (column
   /// P.cols - mv + j, objective row P.qrows - mv + j): the least squares in z alone (Pr_),
   /// each working slack row's slack eliminated (w = (g_z z - t) / s: its objective term a row
@@ -245,6 +250,9 @@ class Hierarchy {
   /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
   /// Qt_ = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
+  /// The working set's rows of W in widx_ and the pivoted QR of their G_w^T in wqr_ (the
+  /// common part of factor_working and factor_trial).
+  void factor_rows(const LsqProblem& P, const std::vector<int8_t>& W);
   /// Qt_ = Q Qf for the working set's current QR (all its transforms so far).
   void form_qt(const LsqProblem& P);
   /// factor_working for a warm trial (trial_qt_tail): the same QR of G_w^T, but of Q Qf only
