@@ -394,15 +394,11 @@ bool Hierarchy::slack_step(const LsqProblem& P, Eigen::Ref<Vec> step) {
 bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
                                const std::vector<int8_t>& W, int* drop,
                                const std::vector<char>* keep, bool bland) {
-  const int k = P.cols, qr = P.qrows;
+  const int k = P.cols;
   const int kw = static_cast<int>(widx_.size());
   if (kw == 0) return true;
-  const auto Q = P.Q.topLeftCorner(qr, k);
-  auto res = dres_.head(qr);
-  res.noalias() = Q * y;
-  res -= P.c.head(qr);
-  auto g = gvec_.head(k);
-  g.noalias() = Q.transpose() * res;
+  const double tol = sign_tolerance(P, y, qscale_);
+  const auto g = gvec_.head(k);
   // G_w^T u = g in least squares through the working set's QR; mu = sign * u
   auto u = u_.head(k);
   u = g;
@@ -411,13 +407,6 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>&
   auto mu = mu_.head(kw);
   mu.setZero();
   for (int i = 0; i < wqr_.rank(); ++i) mu(wqr_.perm(i)) = u(i);
-  // a multiplier counts as negative beyond the sign tolerance (relative to the gradient) and
-  // beyond the rounding of the gradient itself (g = Q^T (Q y - c) in floating point)
-  const double qn = qscale_;
-  const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
-  const double round =
-      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
-  const double tol = (exact_ ? 0.0 : kKktTol * gref) + round;
   int jmin = -1;
   double mmin = kInf;
   for (int j = 0; j < kw; ++j) {
@@ -438,6 +427,23 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>&
   if (jmin < 0) return true;
   if (drop) *drop = jmin;
   return false;
+}
+
+double Hierarchy::sign_tolerance(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
+                                 double qn) {
+  const int k = P.cols, qr = P.qrows;
+  const auto Q = P.Q.topLeftCorner(qr, k);
+  auto res = dres_.head(qr);
+  res.noalias() = Q * y;
+  res -= P.c.head(qr);
+  auto g = gvec_.head(k);
+  g.noalias() = Q.transpose() * res;
+  // a multiplier counts as negative beyond the sign tolerance (relative to the gradient) and
+  // beyond the rounding of the gradient itself (g = Q^T (Q y - c) in floating point)
+  const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
+  const double round =
+      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
+  return (exact_ ? 0.0 : kKktTol * gref) + round;
 }
 
 bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W,
@@ -707,18 +713,10 @@ int Hierarchy::reduced_set_point(const LsqProblem& P, int mv, const Working& ws,
 bool Hierarchy::reduced_multipliers_ok(const LsqProblem& P, int mv,
                                        const Eigen::Ref<const Vec>& y,
                                        const std::vector<int8_t>& W) {
-  const int k = P.cols, qr = P.qrows, hard = P.rows - mv, zc = k - mv;
-  const auto Q = P.Q.topLeftCorner(qr, k);
-  auto res = dres_.head(qr);
-  res.noalias() = Q * y;
-  res -= P.c.head(qr);
-  auto g = gvec_.head(k);
-  g.noalias() = Q.transpose() * res;
-  const double qn = Q.norm();
-  const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
-  const double round =
-      kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
-  const double tol = kKktTol * gref + round;
+  const int k = P.cols, hard = P.rows - mv, zc = k - mv;
+  // (P's own scale: qscale_ is the reduced problem's here)
+  const double tol = sign_tolerance(P, y, P.Q.topLeftCorner(P.qrows, k).norm());
+  const auto g = gvec_.head(k);
   auto sign_bad = [&](int i, double mu) {
     if (W[i] == 2) return false;
     return ((W[i] == 1) ? -mu : mu) < -tol;

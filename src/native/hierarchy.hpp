@@ -219,6 +219,10 @@ class Hierarchy {
   /// The minimum-norm point on the working rows of factor_trial's factorisation of P (wqr_,
   /// widx_): G_w y = t, t the rows' active bounds, into y (P.cols entries); *consistent: G_w y
   /// = t holds to 1e-10 max(1, |t|). False (y unset) when an active bound is infinite.
+  /// The gradient g = Q^T (Q y - c) of P at y into gvec_, and the tolerance below which a
+  /// multiplier counts as negative: kKktTol of max |g| (none in the exact finish) plus the
+  /// rounding of g itself, qn being the scale of Q (multipliers_ok, reduced_multipliers_ok).
+  double sign_tolerance(const LsqProblem& P, const Eigen::Ref<const Vec>& y, double qn);
   bool working_set_point(const LsqProblem& P, const std::vector<int8_t>& W, Eigen::Ref<Vec> y,
                          bool* consistent);
   /// stored_set_point of a level whose last mv rows of P have one slack column each (column
