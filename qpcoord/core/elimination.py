@@ -14,6 +14,7 @@ inherited-row buffers are allocated once (the per-step hot path).
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from .backends import OK, as_rows, available_solvers, solve_dense_qp, time_left
 from .errors import InfeasibleError, SolverError
@@ -164,7 +165,7 @@ class Reduced:
         self.certificates: list[float] = []  # KKT residual of each level that ran a QP
         self.uncertified: list[tuple[int, float]] = []  # (level, KKT residual)
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
-        self._asm = None  # (kdim, D, k, Z, G): the last QP matrix built by _assemble
+        self._asm = None  # (kdim, D, k, Z, T, G): the last QP matrix built by _assemble
         return self
 
     # -- inherited rows -----------------------------------------------------------------
@@ -252,19 +253,30 @@ class Reduced:
             return 0.0
         return self.relax * np.maximum(1.0, np.abs(bound))
 
-    def _assemble(self, kdim: int, D, dlo, dhi):
+    def _assemble(self, kdim: int, D, dlo, dhi, T: np.ndarray | None = None):
         """Constraint rows of a QP in ``y = (z, w)`` (``kdim`` entries, ``w`` unbounded).
 
-        The matrix depends only on ``(kdim, D, k, Z)``; it is kept and reused while those
+        With ``T`` (``r × r``, upper triangular, non-singular) the QP is in ``y = (u, w)``,
+        ``u = T z``: every row's ``z`` part is multiplied by ``T⁻¹`` and bounds on ``z``
+        become rows (see :meth:`solve_qp`).
+
+        The matrix depends only on ``(kdim, D, k, Z, T)``; it is kept and reused while those
         are the same objects (a level's QP, its retries, polish and certificate share it),
         only the bounds are recomputed."""
         r = self.r
         x = self.x
         k = self.k
-        box_rows = self.lb is not None and self.Z is not None
+        box_rows = self.lb is not None and (self.Z is not None or T is not None)
         c = self._asm
-        if c is not None and c[0] == kdim and c[1] is D and c[2] == k and c[3] is self.Z:
-            G = c[4]
+        if (
+            c is not None
+            and c[0] == kdim
+            and c[1] is D
+            and c[2] == k
+            and c[3] is self.Z
+            and c[4] is T
+        ):
+            G = c[5]
         else:
             blocks = []
             if D is not None and D.shape[0]:
@@ -275,13 +287,18 @@ class Reduced:
                     Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
                 blocks.append(Cz)
             if box_rows:
-                Zr = self.Z if kdim == r else np.hstack((self.Z, np.zeros((self.n, kdim - r))))
+                Z = self.Z if self.Z is not None else np.eye(r)
+                Zr = Z if kdim == r else np.hstack((Z, np.zeros((Z.shape[0], kdim - r))))
                 blocks.append(Zr)
             if not blocks:
                 G = np.zeros((0, kdim))
             else:
                 G = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
-            self._asm = (kdim, D, k, self.Z, G)
+            if T is not None and G.shape[0]:
+                # G[:, :r] T⁻¹ = (T⁻ᵀ G[:, :r]ᵀ)ᵀ: one triangular solve, no inverse formed
+                G = G.copy() if len(blocks) == 1 else G
+                G[:, :r] = solve_triangular(T, G[:, :r].T, trans="T", lower=False).T
+            self._asm = (kdim, D, k, self.Z, T, G)
         los, his = [], []
         if D is not None and D.shape[0]:
             los.append(dlo)
@@ -294,7 +311,7 @@ class Reduced:
             his.append(np.maximum(self._hi[:k] - cx, 0.0) + self._relax(self._hi[:k]))
         lb = ub = None
         if self.lb is not None:
-            if self.Z is None:
+            if self.Z is None and T is None:
                 lb = np.full(kdim, -np.inf)
                 ub = np.full(kdim, np.inf)
                 lb[:r] = np.minimum(self.lb - x, 0.0) - self._relax(self.lb)
@@ -335,12 +352,19 @@ class Reduced:
         dhi: np.ndarray | None = None,
         y0: np.ndarray | None = None,
         where: str = "",
+        T: np.ndarray | None = None,
     ) -> np.ndarray:
         """Solve ``min ½yᵀHy + fᵀy`` over ``y = (z, w)`` with the inherited rows and bounds
         on ``x̄ + Z z`` and the extra rows ``dlo ≤ D y ≤ dhi``; ``w`` (``len(y) − r`` slack
-        entries) is unbounded. Returns ``y``; raises :class:`SolverError` on failure."""
+        entries) is unbounded. Returns ``y``; raises :class:`SolverError` on failure.
+
+        With ``T`` (``r × r``, upper triangular, non-singular) the QP's variables are
+        ``y = (u, w)`` with ``u = T z``: ``H``, ``f`` and ``y0`` are given in them, ``D``
+        (and every inherited row and bound) in ``z``, and the returned ``y`` is in ``u``.
+        The weighted method passes the triangular factor of its weighted rows, so that its
+        QP has the identity as ``u``'s Hessian (errors ~ε·cond(T), not ε·cond(TᵀT))."""
         kdim = H.shape[0]
-        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi, T)
         opened = self.relax
         self.qp_calls += 1
         res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, y0)
@@ -355,14 +379,14 @@ class Reduced:
             self.retries += 1
             keep = self.relax
             self.relax = keep * 100.0
-            G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+            G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi, T)
             self.relax = keep
             self.used_relax = max(self.used_relax, keep * 100.0)
             opened = keep * 100.0
             self.qp_calls += 1
             res = solve_dense_qp(self.solver, H, f, G, lo, hi, lb, ub, None)
         if res.code != OK:
-            y = self._fallback(H, f, D, dlo, dhi, where)
+            y = self._fallback(H, f, D, dlo, dhi, where, T)
             if y is not None:
                 return y
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
@@ -372,7 +396,7 @@ class Reduced:
         if miss > CHECK_TOL:
             # a point outside the QP's own rows is a failure of the backend: the next
             # backend gets the QP (the issue-22 Panda IK: daqp 4.9e-6 outside, every step)
-            y = self._fallback(H, f, D, dlo, dhi, where)
+            y = self._fallback(H, f, D, dlo, dhi, where, T)
             if y is not None:
                 return y
             raise SolverError(
@@ -384,7 +408,7 @@ class Reduced:
         # polish against the unopened rows: the point lands exactly on the true bounds
         keep = self.relax
         self.relax = 0.0
-        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi)
+        G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi, T)
         self.relax = keep
         return polish(H, f, G, lo, hi, lb, ub, res.y, obj_slack=10.0 * opened)
 
@@ -411,7 +435,7 @@ class Reduced:
         finally:
             self.solver, self.relax, self._in_fallback = keep_solver, keep_relax, keep_fb
 
-    def _fallback(self, H, f, D, dlo, dhi, where: str) -> np.ndarray | None:
+    def _fallback(self, H, f, D, dlo, dhi, where: str, T=None) -> np.ndarray | None:
         """Solve a level QP the requested backend failed on with the next backend of
         :data:`FALLBACKS` that is installed; recorded in ``self.fallbacks``."""
         if self._in_fallback or not self.fallback:
@@ -427,7 +451,7 @@ class Reduced:
                 self.relax = RELAX.get(alt, RELAX_DEFAULT)
                 self.used_relax = max(self.used_relax, self.relax)
                 try:
-                    y = self.solve_qp(H, f, D, dlo, dhi, None, where)
+                    y = self.solve_qp(H, f, D, dlo, dhi, None, where, T)
                 except SolverError:
                     continue
                 self.fallbacks.append(f"{where}: {alt}")

@@ -10,10 +10,11 @@ priorities.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import lapack
+from scipy.linalg import lapack, solve_triangular
 
 from ..compile import CompiledStack
 from ..elimination import Reduced
+from ..errors import SolverError
 
 __all__ = ["solve_weighted"]
 
@@ -39,14 +40,15 @@ def _qr(W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return qr, tau
 
 
-def _lstsq(qr: np.ndarray, tau: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, int]:
-    """The least-squares solution ``R⁻¹ (Qᵀ rhs)[:r]`` from :func:`_qr`'s factors."""
+def _lstsq(qr: np.ndarray, tau: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """The least-squares solution ``R⁻¹ g`` from :func:`_qr`'s factors, ``g = (Qᵀ rhs)[:r]``:
+    returns ``(z, g, info)``."""
     r = qr.shape[1]
     qtc, _work, info = lapack.dormqr("L", "T", qr, tau, rhs, max(1, 2 * r))
     if info != 0:
-        return rhs[:r], info
+        return rhs[:r], rhs[:r], info
     z, info = lapack.dtrtrs(qr[:r, :r], qtc[:r], lower=0)
-    return z, info
+    return z, qtc[:r], info
 
 
 def _singular(W: np.ndarray, r: int) -> tuple[bool, tuple | None]:
@@ -117,7 +119,7 @@ def solve_weighted(
         se = np.sqrt(eps)
         fac = _qr(np.vstack((Wm, se * np.eye(r))))
         cm = np.concatenate((cm, -se * zc))
-    z, info = _lstsq(*fac, cm)
+    z, g, info = _lstsq(*fac, cm)
     if info == 0:
         xc = x + R.lift(z)
         if R.feasible(xc) and all(
@@ -125,27 +127,64 @@ def solve_weighted(
         ):
             R.move_to(xc, verified=True)
             return _stats(R, regularized)
+    # the QP in u = T z (T the triangular factor above, TᵀT = H): ½‖u‖² − gᵀu, the
+    # identity as u's Hessian; the rows in z become rows in u through T⁻¹ (solve_qp's T).
+    # Its errors are ε_machine·cond(T) = ε_machine·√cond(H), not ε_machine·cond(H) as
+    # with the formed H (the Talos / Panda weighted IK at weight_ratio 1e-3: x within
+    # 2e-3 of the optimum before; a zero pivot, info ≠ 0, keeps the formed H)
+    T = np.triu(fac[0][:r, :r]) if info == 0 else None
     mi = sum(L.m_in for L, _ in soft)
+    D = dlo = dhi = sw2 = None
     if mi:
         C = np.vstack([L.C for L, _ in soft])
-        sw = np.concatenate([b * L.sw for L, b in soft])
-        Hy = np.zeros((r + mi, r + mi))
-        Hy[:r, :r] = H
-        Hy[r:, r:] = np.diag(sw**2)
-        fy = np.concatenate((f, np.zeros(mi)))
+        sw2 = np.concatenate([b * L.sw for L, b in soft]) ** 2
         D = np.hstack((R.reduce(C), -np.eye(mi)))
         cx = C @ x
         dlo = np.concatenate([L.lo for L, _ in soft]) - cx
         dhi = np.concatenate([L.hi for L, _ in soft]) - cx
-    else:
-        Hy, fy, D, dlo, dhi = H, f, None, None, None
-    y0 = None
-    if x_warm is not None:
-        y0 = np.zeros(Hy.shape[0])
-        y0[:r] = R.project(x_warm - x)
-    y = R.solve_qp(Hy, fy, D, dlo, dhi, y0, where="weighted QP")
-    R.move_to(x + R.lift(y[:r]), verified=False)
+    z0 = None if x_warm is None else R.project(x_warm - x)
+    if T is not None:
+        try:
+            u = _solve_qp(R, np.eye(r), -g, sw2, D, dlo, dhi, None if z0 is None else T @ z0, T)
+        except SolverError:
+            # a backend that fails on the whitened rows (HiGHS on rows scaled by T⁻¹ up to
+            # 7e4) gets the QP in z, with the formed H, as before
+            u = None
+        if u is not None:
+            R.move_to(x + R.lift(solve_triangular(T, u, lower=False)), verified=False)
+            return _stats(R, regularized)
+    z = _solve_qp(R, H, f, sw2, D, dlo, dhi, z0, None)
+    R.move_to(x + R.lift(z), verified=False)
     return _stats(R, regularized)
+
+
+def _solve_qp(
+    R: Reduced,
+    Hz: np.ndarray,
+    fz: np.ndarray,
+    sw2: np.ndarray | None,
+    D: np.ndarray | None,
+    dlo: np.ndarray | None,
+    dhi: np.ndarray | None,
+    v0: np.ndarray | None,
+    T: np.ndarray | None,
+) -> np.ndarray:
+    """The weighted QP in ``v = (z or u = T z, w)``: ``½vᵀHzv + fzᵀv`` plus the squared
+    violations ``Σ sw2·w²`` of the soft rows ``dlo ≤ D (z, w) ≤ dhi``; returns ``v[:r]``."""
+    r = Hz.shape[0]
+    if sw2 is None:
+        Hy, fy = Hz, fz
+    else:
+        mi = sw2.shape[0]
+        Hy = np.zeros((r + mi, r + mi))
+        Hy[:r, :r] = Hz
+        Hy[r:, r:] = np.diag(sw2)
+        fy = np.concatenate((fz, np.zeros(mi)))
+    y0 = None
+    if v0 is not None:
+        y0 = np.zeros(Hy.shape[0])
+        y0[:r] = v0
+    return R.solve_qp(Hy, fy, D, dlo, dhi, y0, where="weighted QP", T=T)[:r]
 
 
 def _stats(R: Reduced, regularized: bool) -> dict:
