@@ -13,7 +13,7 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 
 from ..compile import CompiledStack
-from ..elimination import Reduced
+from ..elimination import WHITENED, Reduced
 from ..errors import SolverError
 
 __all__ = ["solve_weighted"]
@@ -128,11 +128,12 @@ def solve_weighted(
             R.move_to(xc, verified=True)
             return _stats(R, regularized)
     # the QP in u = T z (T the triangular factor above, TᵀT = H): ½‖u‖² − gᵀu, the
-    # identity as u's Hessian; the rows in z become rows in u through T⁻¹ (solve_qp's T).
+    # identity as u's Hessian; the rows in z become rows in u through T⁻¹ (solve_qp's T);
+    # for the dual active-set backends (WHITENED), the others get the formed H.
     # Its errors are ε_machine·cond(T) = ε_machine·√cond(H), not ε_machine·cond(H) as
     # with the formed H (the Talos / Panda weighted IK at weight_ratio 1e-3: x within
     # 2e-3 of the optimum before; a zero pivot, info ≠ 0, keeps the formed H)
-    T = np.triu(fac[0][:r, :r]) if info == 0 else None
+    T = np.triu(fac[0][:r, :r]) if info == 0 and R.solver in WHITENED else None
     mi = sum(L.m_in for L, _ in soft)
     D = dlo = dhi = sw2 = None
     if mi:
@@ -147,8 +148,8 @@ def solve_weighted(
         try:
             u = _solve_qp(R, np.eye(r), -g, sw2, D, dlo, dhi, None if z0 is None else T @ z0, T)
         except SolverError:
-            # a backend that fails on the whitened rows (HiGHS on rows scaled by T⁻¹ up to
-            # 7e4) gets the QP in z, with the formed H, as before
+            # no whitened backend solved it: the QP in z, with the formed H and every
+            # fallback, as for the other backends
             u = None
         if u is not None:
             R.move_to(x + R.lift(solve_triangular(T, u, lower=False)), verified=False)
