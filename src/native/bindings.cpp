@@ -164,6 +164,11 @@ NB_MODULE(_native, m) {
               "A tall level's objective compressed also when its full pivoted QR stopped at "
               "an exactly zero trailing block (True, default) or not (False; for "
               "comparisons).")
+      .def_rw("reuse_k_qr", &Hierarchy::reuse_k_qr,
+              "The least-squares step's QR of the projected objective reused while the "
+              "working set's QR is unchanged (True, default) or refactorised (False).")
+      .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,
+                   "Least-squares steps of the last call that reused K's QR (reuse_k_qr).")
       .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,
                    "Levels of the last call compressed by compress_zero_tail.")
       .def_prop_ro("gemv_steps", &Hierarchy::gemv_steps,

@@ -1,0 +1,145 @@
+"""The native active set's least-squares step reusing its QR of the projected objective
+(``Hierarchy.reuse_k_qr``, issue 24).
+
+A level's least-squares step factorises K = Q N, the objective projected on the null space
+of the working set's rows (the LexLS humanoid's level 4: 60 x 51-53, rank 50-51). K depends
+on the working set's QR alone, so its factorisation is kept while that QR does not change
+and reused by the next step: after a full step (the working set unchanged: the step that
+confirms stationarity), and by the exact finish of an ill-conditioned level whose warm trial
+hit (the finish starts from the trial's working set, point and K). Every step here equals
+the solver with the switch off and the Python engine (level values 1e-9 relative, x where
+unique), and the reuse was taken (``k_qr_reuses``).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hlsp import load
+from test_native import LEVEL_TOL, X_TOL, needs_native
+
+import qpcoord as qc
+
+
+def _pair(stack: qc.Stack):
+    """(P, new, plain): two native solvers of ``stack``, ``reuse_k_qr`` on and off."""
+    from qpcoord.core.native import NativeHierarchy
+
+    P = stack._compiled
+    new = NativeHierarchy(P, stack.damping)
+    plain = NativeHierarchy(P, stack.damping)
+    assert new._solver.reuse_k_qr  # the default
+    plain._solver.reuse_k_qr = False
+    return P, new, plain
+
+
+def _check(stack: qc.Stack, P, new, plain, unique_x: bool) -> int:
+    """Solve with both and the Python engine, compare; return the reuses of ``new``."""
+    xn, rn, _ = new.solve(P)
+    reuses = new._solver.k_qr_reuses
+    xp, rp, _ = plain.solve(P)
+    assert plain._solver.k_qr_reuses == 0
+    sp = stack.solve(engine="python")
+    ref = sp.level_residuals
+    for r in (rn, rp):
+        assert np.all(np.abs(r - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (r, ref)
+    assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rn, rp)
+    if unique_x:
+        scale = max(1.0, float(np.max(np.abs(sp.x))))
+        assert np.max(np.abs(xn - xp)) <= 1e-9 * scale
+        assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale
+    return reuses
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("box", "unit", "least"),
+    [(False, False, 5), (True, False, 5), (False, True, 1)],
+    ids=["rows", "box form", "unit rows"],
+)
+def test_moving_humanoid_reuses_k_and_equals_python(box, unit, least):
+    """The LexLS humanoid (88 variables, 5 levels) moved as hierarchy_published's re-solve
+    table: its level 4's rank-deficient K is reused (after full steps, and by the exact
+    finish after a warm hit), and the level values equal the refactorising solver's and the
+    Python engine's (x is the ill-conditioned minimum-norm point: not compared). The unit-row
+    copy's warm trials hit less often on that level: fewer reuses."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        import hierarchy_published as hp
+    finally:
+        sys.path.pop(0)
+    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
+    levels = hp.unit_rows(prob.levels) if unit else prob.levels
+    st = qc.Stack(levels, bounds=prob.bounds)
+    P, new, plain = _pair(st)
+    move = hp._mover(levels)
+    total = 0
+    for step in range(5):
+        move(step)
+        total += _check(st, P, new, plain, unique_x=False)
+    assert total >= least
+
+
+def _equality_under_bounds(seed: int, rank: int, cond: float):
+    """A 30 x 20 equality level of the given rank (singular values 1 .. cond) under a
+    unit-row inequality level and tight bounds: its closed form leaves the box, so its least
+    squares runs the active set on the bound rows (no slack: the K path), warm from step to
+    step as its target moves. Returns (stack, move(step))."""
+    rng = np.random.default_rng(seed)
+    n = 20
+    U, _ = np.linalg.qr(rng.standard_normal((30, rank)))
+    V, _ = np.linalg.qr(rng.standard_normal((n, rank)))
+    A = U @ np.diag(np.logspace(0, np.log10(cond), rank)) @ V.T
+    C = rng.standard_normal((6, n))
+    C /= np.linalg.norm(C, axis=1)[:, None]
+    ineq = qc.Inequality(C, rng.uniform(-0.2, 0.1, 6), np.full(6, np.inf))
+    b0 = 2.0 * rng.standard_normal(30)
+    eq = qc.Equality(A, b0)
+    last = qc.Equality(rng.standard_normal((4, n)), rng.standard_normal(4))
+    st = qc.Stack([ineq, eq, last], bounds=qc.Bounds(-0.3 * np.ones(n), 0.3 * np.ones(n)))
+    d = rng.standard_normal(30)
+
+    def move(step: int) -> None:
+        eq.update(b=b0 + 0.05 * np.sin(0.5 * step) * d)
+
+    return st, move
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("seed", "rank", "cond", "unique"),
+    [(0, 20, 1e-1, True), (1, 12, 1e-1, True), (2, 20, 1e-6, False), (4, 9, 1e-6, False)],
+    ids=["full rank", "rank-deficient K", "ill-conditioned", "ill-conditioned, rank 9"],
+)
+def test_equality_level_on_the_bounds(seed, rank, cond, unique):
+    """An equality level held by the bounds, moving: full-rank and rank-deficient K (the
+    minimum-norm step through the QR of [R11 R12]^T, also reused), well- and
+    ill-conditioned (sigma_min / sigma_max = 1e-6: the exact finish, started from the warm
+    trial's K): equal to the refactorising solver and the Python engine at every step, x
+    compared where the problem is well conditioned."""
+    st, move = _equality_under_bounds(seed, rank, cond)
+    P, new, plain = _pair(st)
+    total = 0
+    for step in range(8):
+        move(step)
+        total += _check(st, P, new, plain, unique_x=unique)
+    assert total > 0
+
+
+@needs_native
+def test_switch_off_is_the_default_numbers_where_nothing_is_reused():
+    """Where no step reuses K (a stack of equality levels: closed forms only), both
+    settings give the same numbers bit for bit."""
+    rng = np.random.default_rng(7)
+    n = 10
+    st = qc.Stack(
+        [qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3)) for _ in range(3)]
+    )
+    P, new, plain = _pair(st)
+    xn, rn, _ = new.solve(P)
+    xp, rp, _ = plain.solve(P)
+    assert new._solver.k_qr_reuses == 0
+    assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
