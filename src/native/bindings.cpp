@@ -167,6 +167,11 @@ NB_MODULE(_native, m) {
       .def_rw("reuse_k_qr", &Hierarchy::reuse_k_qr,
               "The least-squares step's QR of the projected objective reused while the "
               "working set's QR is unchanged (True, default) or refactorised (False).")
+      .def_rw("rz_min_norm", &Hierarchy::rz_min_norm,
+              "Minimum-norm solutions of [R11 R12] w = b by its RZ factorisation (True, "
+              "default) or by the QR of its transpose (False; for comparisons).")
+      .def_prop_ro("rz_factors", &Hierarchy::rz_factors,
+                   "RZ factorisations of the last call (rz_min_norm).")
       .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,
                    "Least-squares steps of the last call that reused K's QR (reuse_k_qr).")
       .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,

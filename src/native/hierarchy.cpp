@@ -115,6 +115,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   wqr_.reserve(max_cols, max_grows, max_qrows);
   kqr_.reserve(max_qrows, max_cols, 1);
   cqr_.reserve(max_cols, max_cols, 1);
+  krz_.reserve(max_cols, max_cols);
   kqr_t_.reserve(max_cols, max_qrows, 1);
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
@@ -137,6 +138,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
+  trz_.reserve(std::max(n, 1), std::max(n, 1));
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
 
@@ -294,7 +296,8 @@ void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) 
 /// Form K = Q N (N = Qf(:, rank:), the working set's null space) and factorise it for
 /// ls_step: k_mode_ kZero (K is rounding noise: the step is zero), kWide (a wide K of full
 /// row rank: the QR of K^T in kqr_t_) or kTall (the pivoted QR of K in kqr_, rank k_rank_;
-/// rank-deficient: the QR of [R11 R12]^T in cqr_). Sets k_valid_; false when K is zero.
+/// rank-deficient: the RZ of [R11 R12] in krz_, or its transpose's QR in cqr_). Sets
+/// k_valid_; false when K is zero.
 /// Numerical rank of K as qpcoord.core.linalg.numerical_rank with the scale of Q before
 /// projection: a K whose columns are rounding noise (the working set's rows span what Q can
 /// change) is rank 0, not a full-rank matrix of size 1e-16.
@@ -321,12 +324,22 @@ bool Hierarchy::factor_k(const LsqProblem& P) {
   const int rk = kqr_.factor(tol, 0.0);
   k_mode_ = KMode::kTall;
   k_rank_ = rk;
+  k_rz_ = false;
   if (rk > 0 && rk < nk) {
     const auto Kf = kqr_.matrix();
-    MapMat T = cqr_.matrix(nk, rk);  // [R11 R12]^T
-    T.setZero();
-    for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
-    cqr_.factor(0.0, 0.0);
+    if (rz_min_norm) {
+      MapMat T = krz_.matrix(rk, nk);  // [R11 R12]^T (its upper triangle is not read)
+      for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
+      k_rz_ = krz_.factor();  // R11 nonsingular (pivots above tol): false never expected
+      if (k_rz_) ++rz_factors_;
+    }
+    if (!k_rz_) {
+      MapMat T = cqr_.matrix(nk, rk);  // [R11 R12]^T
+      T.setZero();
+      for (int i = 0; i < rk; ++i)
+        T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
+      cqr_.factor(0.0, 0.0);
+    }
   }
   return true;
 }
@@ -378,7 +391,10 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
     for (int i = 0; i < rk; ++i) step(rho + kqr_.perm(i)) = rhs(i);
   } else if (rk > 0) {
     auto u = u_.head(nk);
-    cqr_.min_norm_transposed_solve(rhs.head(rk), u);
+    if (k_rz_)
+      krz_.min_norm_solve(rhs.head(rk), u);
+    else
+      cqr_.min_norm_transposed_solve(rhs.head(rk), u);
     for (int i = 0; i < nk; ++i) step(rho + kqr_.perm(i)) = u(i);
   }
   wqr_.apply_q(step);
@@ -1101,12 +1117,25 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
     auto u = ute_.head(me);
     u = e;
     mqr_.apply_qt(u);
-    MapMat T = tqr_.matrix(r, rank);
-    T.setZero();
-    for (int j = 0; j < rank; ++j) T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
-    if (tqr_.factor(0.0, 0.0) < rank) return -1;
+    // (rz_min_norm: the RZ of [R11 R12] instead, in trz_)
     auto w = u_.head(r);
-    tqr_.min_norm_transposed_solve(u.head(rank), w);
+    qr_rz_ = false;
+    if (rz_min_norm) {
+      MapMat T = trz_.matrix(rank, r);  // [R11 R12]^T (its upper triangle is not read)
+      for (int j = 0; j < rank; ++j)
+        T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
+      if (!trz_.factor()) return -1;
+      ++rz_factors_;
+      qr_rz_ = true;
+      trz_.min_norm_solve(u.head(rank), w);
+    } else {
+      MapMat T = tqr_.matrix(r, rank);
+      T.setZero();
+      for (int j = 0; j < rank; ++j)
+        T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
+      if (tqr_.factor(0.0, 0.0) < rank) return -1;
+      tqr_.min_norm_transposed_solve(u.head(rank), w);
+    }
     for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = w(i);
   } else {
     // M^T P = Qf [R11 R12; 0 0]: M = P L Qf1^T with L = [R11^T; R12^T] (me x rank, full
@@ -1148,7 +1177,10 @@ void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
     for (int j = 0; j < rank; ++j) {
       q.setZero();
       q(j) = 1.0;
-      tqr_.apply_q(q);
+      if (qr_rz_)
+        trz_.apply_zt(q);  // T's row space: Z^T [I; 0]
+      else
+        tqr_.apply_q(q);
       for (int i = 0; i < r; ++i) out(mqr_.perm(i), j) = q(i);
     }
   }
@@ -1491,6 +1523,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   downdates_ = 0;
   slack_steps_ = 0;
   k_qr_reuses_ = 0;
+  rz_factors_ = 0;
   k_valid_ = false;
   trial_ready_ = false;
   qr_closed_forms_ = 0;

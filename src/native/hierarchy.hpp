@@ -163,6 +163,14 @@ class Hierarchy {
   /// the exact finish of a level whose warm trial hit (the trial's working-set QR and K are
   /// those of the finish's first iteration). Off (A/B): K formed and factorised at every step.
   bool reuse_k_qr = true;
+  /// The minimum-norm solution of a rank-deficient [R11 R12] w = b (a rank-deficient tall
+  /// level's closed form, and its row space for the freeze; a rank-deficient K's step) by
+  /// the RZ factorisation of [R11 R12] (TrapezoidRZ: R12 folded into R11 by one reflector
+  /// per row, about 4 rank^2 (cols - rank) flops; default) or by the QR of [R11 R12]^T
+  /// (A/B: about 2 cols rank^2).
+  bool rz_min_norm = true;
+  /// RZ factorisations of the last call (rz_min_norm).
+  int rz_factors() const { return rz_factors_; }
   /// Least-squares steps of the last call that reused K's factorisation (reuse_k_qr).
   int k_qr_reuses() const { return k_qr_reuses_; }
   /// Warm trials of the last call solved in z alone (reduce_slacks).
@@ -345,6 +353,11 @@ class Hierarchy {
   enum class KMode : int8_t { kZero, kWide, kTall };
   KMode k_mode_ = KMode::kZero;  ///< how that K was solved: negligible, by K^T, by K's QR
   int k_rank_ = 0;               ///< numerical rank of that K (kTall)
+  bool k_rz_ = false;            ///< that K's minimum-norm step by krz_ (else cqr_)
+  TrapezoidRZ krz_;              ///< rz_min_norm: [R11 R12] of a rank-deficient K
+  TrapezoidRZ trz_;  ///< rz_min_norm: [R11 R12] of a rank-deficient tall M's closed form
+  bool qr_rz_ = false;  ///< the last qr_closed_form's [R11 R12] went by trz_ (else tqr_)
+  int rz_factors_ = 0;  ///< RZ factorisations of this call
   /// the last factorisation was stored_set_point's on a level's full problem (W: its mapped
   /// set; the exact finish after a hit starts from it, reuse_k_qr)
   bool trial_ready_ = false;

@@ -1,5 +1,6 @@
-"""The native active set's least-squares step reusing its QR of the projected objective
-(``Hierarchy.reuse_k_qr``, issue 24).
+"""The native engine's least squares with fewer factorisations (issue 24): the QR of the
+projected objective reused (``Hierarchy.reuse_k_qr``) and minimum-norm solutions of
+trapezoidal systems by an RZ factorisation (``Hierarchy.rz_min_norm``).
 
 A level's least-squares step factorises K = Q N, the objective projected on the null space
 of the working set's rows (the LexLS humanoid's level 4: 60 x 51-53, rank 50-51). K depends
@@ -9,6 +10,14 @@ confirms stationarity), and by the exact finish of an ill-conditioned level whos
 hit (the finish starts from the trial's working set, point and K). Every step here equals
 the solver with the switch off and the Python engine (level values 1e-9 relative, x where
 unique), and the reuse was taken (``k_qr_reuses``).
+
+A rank-deficient tall level's closed form (M P = Qm [R11 R12; 0 R22], R22 dropped), its row
+space (the freeze) and a rank-deficient K's step solve [R11 R12] w = b in minimum norm. With
+``rz_min_norm`` the R12 block is folded into R11 by one Householder reflector per row (the
+RZ factorisation, LAPACK's xTZRZF: about 4 rank^2 (cols - rank) flops) instead of a pivoted
+QR of [R11 R12]^T (about 2 cols rank^2): the humanoid's 60 x 52 and 53 x 51 blocks. The same
+solution and subspace in exact arithmetic; here equal to the QR's and the Python engine's,
+and taken (``rz_factors``).
 """
 
 from __future__ import annotations
@@ -23,25 +32,30 @@ from test_native import LEVEL_TOL, X_TOL, needs_native
 
 import qpcoord as qc
 
+#: each switch's counter of the path it takes
+COUNTER = {"reuse_k_qr": "k_qr_reuses", "rz_min_norm": "rz_factors"}
 
-def _pair(stack: qc.Stack):
-    """(P, new, plain): two native solvers of ``stack``, ``reuse_k_qr`` on and off."""
+
+def _pair(stack: qc.Stack, switch: str = "reuse_k_qr"):
+    """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off."""
     from qpcoord.core.native import NativeHierarchy
 
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     plain = NativeHierarchy(P, stack.damping)
-    assert new._solver.reuse_k_qr  # the default
-    plain._solver.reuse_k_qr = False
+    assert getattr(new._solver, switch)  # the default
+    setattr(plain._solver, switch, False)
     return P, new, plain
 
 
-def _check(stack: qc.Stack, P, new, plain, unique_x: bool) -> int:
-    """Solve with both and the Python engine, compare; return the reuses of ``new``."""
+def _check(stack: qc.Stack, P, new, plain, unique_x: bool, switch: str = "reuse_k_qr") -> int:
+    """Solve with both and the Python engine, compare; return ``new``'s count of the
+    switch's path."""
+    counter = COUNTER[switch]
     xn, rn, _ = new.solve(P)
-    reuses = new._solver.k_qr_reuses
+    taken = getattr(new._solver, counter)
     xp, rp, _ = plain.solve(P)
-    assert plain._solver.k_qr_reuses == 0
+    assert getattr(plain._solver, counter) == 0
     sp = stack.solve(engine="python")
     ref = sp.level_residuals
     for r in (rn, rp):
@@ -51,7 +65,7 @@ def _check(stack: qc.Stack, P, new, plain, unique_x: bool) -> int:
         scale = max(1.0, float(np.max(np.abs(sp.x))))
         assert np.max(np.abs(xn - xp)) <= 1e-9 * scale
         assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale
-    return reuses
+    return taken
 
 
 @needs_native
@@ -143,3 +157,70 @@ def test_switch_off_is_the_default_numbers_where_nothing_is_reused():
     xp, rp, _ = plain.solve(P)
     assert new._solver.k_qr_reuses == 0
     assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("box", "unit"), [(False, False), (True, False), (False, True)], ids=["rows", "box", "unit"]
+)
+def test_moving_humanoid_rz_equals_the_qr_and_python(box, unit):
+    """The moving humanoid: its last level's rank-deficient M (60-62 columns, rank 52-54)
+    and K (rank 50-51 of 51-53) go by RZ; level values equal the transposed QR's and the
+    Python engine's (x: the ill-conditioned minimum-norm point, not compared)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        import hierarchy_published as hp
+    finally:
+        sys.path.pop(0)
+    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
+    levels = hp.unit_rows(prob.levels) if unit else prob.levels
+    st = qc.Stack(levels, bounds=prob.bounds)
+    P, new, plain = _pair(st, "rz_min_norm")
+    move = hp._mover(levels)
+    total = 0
+    for step in range(4):
+        move(step)
+        total += _check(st, P, new, plain, unique_x=False, switch="rz_min_norm")
+    assert total >= 4
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_rank_deficient_tall_levels_closed_form_and_freeze(seed):
+    """Tall equality levels of low rank (30 x 24 of rank 9, 20 x 24 of rank 6) with their
+    closed forms feasible: the minimum-norm step and the row space frozen come from the RZ;
+    the last level and the minimum-norm stage then see the same null space. x is unique:
+    equal to the transposed QR's and the Python engine's, over changing targets."""
+    rng = np.random.default_rng(seed)
+    n = 24
+    A1 = rng.standard_normal((30, 9)) @ rng.standard_normal((9, n))
+    A2 = rng.standard_normal((20, 6)) @ rng.standard_normal((6, n))
+    A3 = rng.standard_normal((5, n))
+    b1, b2, b3 = (rng.standard_normal(m) for m in (30, 20, 5))
+    t1, t2, t3 = qc.Equality(A1, b1), qc.Equality(A2, b2), qc.Equality(A3, b3)
+    st = qc.Stack([t1, t2, t3])
+    P, new, plain = _pair(st, "rz_min_norm")
+    total = 0
+    for step in range(4):
+        t1.update(b=b1 + 0.3 * step * rng.standard_normal(30))
+        t2.update(b=b2 + 0.3 * np.cos(step) * rng.standard_normal(20))
+        total += _check(st, P, new, plain, unique_x=True, switch="rz_min_norm")
+    assert total >= 8  # both rank-deficient levels at every step
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("seed", "rank", "cond", "unique"),
+    [(1, 12, 1e-1, True), (4, 9, 1e-6, False)],
+    ids=["rank-deficient K", "ill-conditioned, rank 9"],
+)
+def test_rank_deficient_k_by_rz(seed, rank, cond, unique):
+    """An equality level held by the bounds (its active set's K rank-deficient): the
+    minimum-norm step by the RZ equals the transposed QR's and the Python engine's."""
+    st, move = _equality_under_bounds(seed, rank, cond)
+    P, new, plain = _pair(st, "rz_min_norm")
+    total = 0
+    for step in range(8):
+        move(step)
+        total += _check(st, P, new, plain, unique_x=unique, switch="rz_min_norm")
+    assert total > 0
