@@ -167,6 +167,11 @@ NB_MODULE(_native, m) {
       .def_rw("reuse_k_qr", &Hierarchy::reuse_k_qr,
               "The least-squares step's QR of the projected objective reused while the "
               "working set's QR is unchanged (True, default) or refactorised (False).")
+      .def_rw("identity_z", &Hierarchy::identity_z,
+              "Projections on a still-identity null-space basis copied (True, default) or "
+              "multiplied (False; for comparisons).")
+      .def_prop_ro("identity_products", &Hierarchy::identity_products,
+                   "Products with an identity null-space basis skipped in the last call.")
       .def_rw("rz_min_norm", &Hierarchy::rz_min_norm,
               "Minimum-norm solutions of [R11 R12] w = b by its RZ factorisation (True, "
               "default) or by the QR of its transpose (False; for comparisons).")

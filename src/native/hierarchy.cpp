@@ -179,8 +179,15 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   if (carry_projection) {
     // rows inherited since the last projection; the older ones were carried through every
     // change of Z since (carry_z)
-    if (kz_ < k_)
+    if (kz_ < k_ && identity_z && z_identity_) {  // Cin I: the rows themselves
+      CinZ_.block(kz_, 0, k_ - kz_, r_) = Cin_.middleRows(kz_, k_ - kz_);
+      ++identity_products_;
+    } else if (kz_ < k_) {
       CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() = Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
+    }
+  } else if (identity_z && z_identity_) {
+    CZ = Cin_.topRows(k_);
+    ++identity_products_;
   } else {
     CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
   }
@@ -234,6 +241,7 @@ void Hierarchy::freeze(double scale) {
   const int rank = fqr_.factor(tol, 0.0);
   if (rank == 0) return;
   auto Zr = Z_.leftCols(r_);
+  z_identity_ = false;
   fqr_.apply_q_right(Zr);  // Z Qf: its last r - rank columns span Z null(F)
   carry_z(fqr_, rank);
   for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
@@ -922,6 +930,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
                           MRef<Vec> detail, bool warm) {
   x_.setZero();
   Z_.setIdentity();
+  z_identity_ = true;
   r_ = n_;
   k_ = 0;
   kz_ = 0;
@@ -949,6 +958,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
     }
     r_ = n_ - rank;
     Z_.leftCols(r_) = svd.matrixV().rightCols(r_);
+    z_identity_ = false;
   }
   // hard inequality rows with their true bounds, then: is x already feasible?
   const int mi = min_[0];
@@ -1211,9 +1221,14 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   double M_scale = 0.0;  // |A|_F of the level's equalities (>= s_0 of M)
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
-    auto Ab = Ab_.topRows(me);
-    Ab = A;  // contiguous: the product below makes no temporary
-    M.noalias() = Ab * Zr;
+    if (identity_z && z_identity_) {  // A I: the rows themselves
+      M = A;
+      ++identity_products_;
+    } else {
+      auto Ab = Ab_.topRows(me);
+      Ab = A;  // contiguous: the product below makes no temporary
+      M.noalias() = Ab * Zr;
+    }
     e.noalias() = -A * x_;
     e += beq.segment(e0, me);
     const double scale = A.norm();
@@ -1258,8 +1273,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     inherit(C, lo, hi, i0, mi, nullptr);
     if (by_qr && !qr_wide_ && rank == r_) {  // M has full column rank: no freedom left
       r_ = 0;
+      z_identity_ = false;
     } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
       auto Zr2 = Z_.leftCols(r_);
+      z_identity_ = false;
       mqr_.apply_q_right(Zr2);
       carry_z(mqr_, rank);
       for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
@@ -1280,7 +1297,12 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   if (mi) {
     auto Cl = Cl_.topRows(mi);
     Cl = C.middleRows(i0, mi);
-    CZl.noalias() = Cl * Zr;
+    if (identity_z && z_identity_) {  // C I: the rows themselves
+      CZl = Cl;
+      ++identity_products_;
+    } else {
+      CZl.noalias() = Cl * Zr;
+    }
   }
   for (int i = 0; i < mi; ++i) {
     const int g = i0 + i;
@@ -1524,6 +1546,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   slack_steps_ = 0;
   k_qr_reuses_ = 0;
   rz_factors_ = 0;
+  identity_products_ = 0;
   k_valid_ = false;
   trial_ready_ = false;
   qr_closed_forms_ = 0;

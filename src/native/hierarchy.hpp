@@ -169,6 +169,12 @@ class Hierarchy {
   /// per row, about 4 rank^2 (cols - rank) flops; default) or by the QR of [R11 R12]^T
   /// (A/B: about 2 cols rank^2).
   bool rz_min_norm = true;
+  /// While Z is still the identity (no hard equality row, no level frozen yet: every
+  /// problem's first level), a level's projections A Z and C Z and the inherited rows' Cin Z
+  /// are copies of the rows (default), not matrix products with the identity (A/B).
+  bool identity_z = true;
+  /// Products with an identity Z skipped in the last call (identity_z).
+  int identity_products() const { return identity_products_; }
   /// RZ factorisations of the last call (rz_min_norm).
   int rz_factors() const { return rz_factors_; }
   /// Least-squares steps of the last call that reused K's factorisation (reuse_k_qr).
@@ -358,6 +364,8 @@ class Hierarchy {
   TrapezoidRZ trz_;  ///< rz_min_norm: [R11 R12] of a rank-deficient tall M's closed form
   bool qr_rz_ = false;  ///< the last qr_closed_form's [R11 R12] went by trz_ (else tqr_)
   int rz_factors_ = 0;  ///< RZ factorisations of this call
+  bool z_identity_ = false;  ///< Z_ is the n x n identity (r_ == n_; identity_z)
+  int identity_products_ = 0;  ///< products with the identity Z skipped in this call
   /// the last factorisation was stored_set_point's on a level's full problem (W: its mapped
   /// set; the exact finish after a hit starts from it, reuse_k_qr)
   bool trial_ready_ = false;

@@ -18,6 +18,12 @@ RZ factorisation, LAPACK's xTZRZF: about 4 rank^2 (cols - rank) flops) instead o
 QR of [R11 R12]^T (about 2 cols rank^2): the humanoid's 60 x 52 and 53 x 51 blocks. The same
 solution and subspace in exact arithmetic; here equal to the QR's and the Python engine's,
 and taken (``rz_factors``).
+
+``identity_z``: until a hard equality row or a level's freeze changes it, the null-space
+basis Z is the identity (every problem's first level when there are no hard equalities); its
+projections A Z, C Z and Cin Z are then the rows themselves, copied instead of multiplied
+(the humanoid's level 0: 72 x 88 by 88 x 88). A product with the identity is exact, so the
+numbers are the same bit for bit.
 """
 
 from __future__ import annotations
@@ -33,7 +39,11 @@ from test_native import LEVEL_TOL, X_TOL, needs_native
 import qpcoord as qc
 
 #: each switch's counter of the path it takes
-COUNTER = {"reuse_k_qr": "k_qr_reuses", "rz_min_norm": "rz_factors"}
+COUNTER = {
+    "reuse_k_qr": "k_qr_reuses",
+    "rz_min_norm": "rz_factors",
+    "identity_z": "identity_products",
+}
 
 
 def _pair(stack: qc.Stack, switch: str = "reuse_k_qr"):
@@ -224,3 +234,33 @@ def test_rank_deficient_k_by_rz(seed, rank, cond, unique):
         move(step)
         total += _check(st, P, new, plain, unique_x=unique, switch="rz_min_norm")
     assert total > 0
+
+
+@needs_native
+@pytest.mark.parametrize("hard", [False, True], ids=["no hard rows", "hard equality"])
+def test_identity_z_copies_are_the_products_bit_for_bit(hard):
+    """A stack of inequality and equality levels under bounds (optionally a hard equality
+    row first: Z is not the identity at level 0, nothing is copied), moving: the copies
+    give the products' numbers bit for bit, and the Python engine's."""
+    rng = np.random.default_rng(11)
+    n = 16
+    C = rng.standard_normal((10, n))
+    C /= np.linalg.norm(C, axis=1)[:, None]
+    lo0 = rng.uniform(-0.3, 0.2, 10)
+    ineq = qc.Inequality(C, lo0, np.full(10, np.inf))
+    eq = qc.Equality(rng.standard_normal((6, n)), rng.standard_normal(6))
+    last = qc.Equality(rng.standard_normal((5, n)), rng.standard_normal(5))
+    levels = [[ineq, qc.Equality(rng.standard_normal((2, n)), rng.standard_normal(2))], eq, last]
+    cons = [qc.Equality(rng.standard_normal((1, n)), [0.1])] if hard else None
+    st = qc.Stack(levels, bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=cons)
+    P, new, plain = _pair(st, "identity_z")
+    total = 0
+    for step in range(5):
+        ineq.update(lower=lo0 + 0.2 * np.sin(0.8 * step + np.arange(10)))
+        xn, rn, _ = new.solve(P)
+        total += new._solver.identity_products
+        xp, rp, _ = plain.solve(P)
+        assert plain._solver.identity_products == 0
+        assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
+        total += _check(st, P, new, plain, unique_x=True, switch="identity_z")
+    assert (total == 0) if hard else (total >= 10)
