@@ -164,6 +164,21 @@ NB_MODULE(_native, m) {
               "A tall level's objective compressed also when its full pivoted QR stopped at "
               "an exactly zero trailing block (True, default) or not (False; for "
               "comparisons).")
+      .def_rw("reuse_k_qr", &Hierarchy::reuse_k_qr,
+              "The least-squares step's QR of the projected objective reused while the "
+              "working set's QR is unchanged (True, default) or refactorised (False).")
+      .def_rw("identity_z", &Hierarchy::identity_z,
+              "Projections on a still-identity null-space basis copied (True, default) or "
+              "multiplied (False; for comparisons).")
+      .def_prop_ro("identity_products", &Hierarchy::identity_products,
+                   "Products with an identity null-space basis skipped in the last call.")
+      .def_rw("rz_min_norm", &Hierarchy::rz_min_norm,
+              "Minimum-norm solutions of [R11 R12] w = b by its RZ factorisation (True, "
+              "default) or by the QR of its transpose (False; for comparisons).")
+      .def_prop_ro("rz_factors", &Hierarchy::rz_factors,
+                   "RZ factorisations of the last call (rz_min_norm).")
+      .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,
+                   "Least-squares steps of the last call that reused K's QR (reuse_k_qr).")
       .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,
                    "Levels of the last call compressed by compress_zero_tail.")
       .def_prop_ro("gemv_steps", &Hierarchy::gemv_steps,

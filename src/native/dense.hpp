@@ -264,6 +264,101 @@ class PivotedQR {
   double first_ = 0.0, abs_tol_ = 0.0, rel_tol_ = 0.0;
 };
 
+/// RZ factorisation of an upper trapezoidal T = [R11 R12] (rank x nc, R11 upper triangular;
+/// LAPACK's xTZRZF): T = [R 0] Z, Z = H_0 H_1 ... H_{rank-1}, H_i = I - tau_i v_i v_i^T with
+/// v_i(i) = 1 and v_i nonzero only at i and at rank..nc-1. Each H_i folds row i's R12 part
+/// into its diagonal, from the last row up: about 4 rank^2 (nc - rank) flops, where the QR of
+/// T^T takes about 2 nc rank^2. The minimum-norm solution of T u = b is u = Z^T [R^-1 b; 0],
+/// and Z^T [I; 0] is an orthonormal basis of T's row space. T^T is stored (nc x rank,
+/// column-major): row i of T, and v_i's tail, are contiguous. No heap use after reserve().
+class TrapezoidRZ {
+ public:
+  void reserve(int max_rank, int max_cols) {
+    max_rank_ = std::max(max_rank, 1);
+    max_cols_ = std::max(max_cols, 1);
+    buf_.setZero(static_cast<Eigen::Index>(max_rank_) * max_cols_);
+    tau_.setZero(max_rank_);
+  }
+  /// T^T (nc x rank) to fill before factor(): its column i is row i of T from entry i down
+  /// (the entries above are not read).
+  MapMat matrix(int rank, int nc) {
+    rank_ = rank;
+    nc_ = nc;
+    return MapMat(buf_.data(), nc, rank, Eigen::OuterStride<>(std::max(nc, 1)));
+  }
+  int rank() const { return rank_; }
+  int cols() const { return nc_; }
+
+  /// Factorise in place; false when R is singular (a zero diagonal).
+  bool factor() {
+    MapMat B(buf_.data(), nc_, rank_, Eigen::OuterStride<>(std::max(nc_, 1)));
+    const int l = nc_ - rank_;
+    for (int i = rank_ - 1; i >= 0; --i) {
+      auto v = B.col(i).tail(l);
+      const double alpha = B(i, i);
+      const double xn2 = v.squaredNorm();
+      if (xn2 == 0.0) {
+        tau_(i) = 0.0;
+        if (alpha == 0.0) return false;
+        continue;
+      }
+      const double beta = -std::copysign(std::sqrt(alpha * alpha + xn2), alpha);
+      const double tau = (beta - alpha) / beta;
+      tau_(i) = tau;
+      v /= (alpha - beta);
+      B(i, i) = beta;
+      // rows j < i of T (columns of B): r <- r H_i on entries i and rank..
+      const double* vp = &B(rank_, i);
+      for (int j = 0; j < i; ++j) {
+        double* t = &B(rank_, j);
+        double d = B(i, j);
+        for (int q = 0; q < l; ++q) d += t[q] * vp[q];
+        const double sj = tau * d;
+        B(i, j) -= sj;
+        for (int q = 0; q < l; ++q) t[q] -= sj * vp[q];
+      }
+    }
+    return true;
+  }
+  /// v <- Z^T v = H_{rank-1} ... H_0 v (v: nc).
+  template <typename V>
+  void apply_zt(V&& x) const {
+    const auto B = cmatrix();
+    const int l = nc_ - rank_;
+    for (int i = 0; i < rank_; ++i) {
+      if (tau_(i) == 0.0) continue;
+      // plain loops over the short tail (l = nc - rank entries): Eigen's dot on these
+      // block types is the one PivotedQR::reflect uses, and a second caller made GCC stop
+      // inlining it there (+1.4 % instructions on the humanoid)
+      const double* v = B.data() + static_cast<Eigen::Index>(i) * B.outerStride() + rank_;
+      double d = x(i);
+      for (int t = 0; t < l; ++t) d += v[t] * x(rank_ + t);
+      const double s = tau_(i) * d;
+      x(i) -= s;
+      for (int t = 0; t < l; ++t) x(rank_ + t) -= s * v[t];
+    }
+  }
+  /// The minimum-norm solution of T u = b (b: rank, u: nc).
+  template <typename B_, typename V>
+  void min_norm_solve(const B_& b, V&& u) const {
+    const auto B = cmatrix();
+    u.head(rank_) = b;
+    u.tail(nc_ - rank_).setZero();
+    // R w = b with R^T the lower triangle of B's top rank x rank block
+    B.topRows(rank_).transpose().template triangularView<Eigen::Upper>().solveInPlace(
+        u.head(rank_));
+    apply_zt(u);
+  }
+
+ private:
+  Eigen::Map<const Mat, 0, Eigen::OuterStride<>> cmatrix() const {
+    return Eigen::Map<const Mat, 0, Eigen::OuterStride<>>(buf_.data(), nc_, rank_,
+                                                           Eigen::OuterStride<>(std::max(nc_, 1)));
+  }
+  Vec buf_, tau_;
+  int max_rank_ = 1, max_cols_ = 1, rank_ = 0, nc_ = 0;
+};
+
 /// The QR of the active set's working-set matrix G_w^T (k x kw) kept up to date as rows
 /// enter (one Householder reflector appended) and leave (the column deleted from R and the
 /// Hessenberg part restored by Givens rotations: a downdate, no refactorisation).

@@ -115,6 +115,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   wqr_.reserve(max_cols, max_grows, max_qrows);
   kqr_.reserve(max_qrows, max_cols, 1);
   cqr_.reserve(max_cols, max_cols, 1);
+  krz_.reserve(max_cols, max_cols);
   kqr_t_.reserve(max_cols, max_qrows, 1);
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
@@ -137,6 +138,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
+  trz_.reserve(std::max(n, 1), std::max(n, 1));
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
 }
 
@@ -177,8 +179,15 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   if (carry_projection) {
     // rows inherited since the last projection; the older ones were carried through every
     // change of Z since (carry_z)
-    if (kz_ < k_)
+    if (kz_ < k_ && identity_z && z_identity_) {  // Cin I: the rows themselves
+      CinZ_.block(kz_, 0, k_ - kz_, r_) = Cin_.middleRows(kz_, k_ - kz_);
+      ++identity_products_;
+    } else if (kz_ < k_) {
       CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() = Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
+    }
+  } else if (identity_z && z_identity_) {
+    CZ = Cin_.topRows(k_);
+    ++identity_products_;
   } else {
     CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
   }
@@ -232,6 +241,7 @@ void Hierarchy::freeze(double scale) {
   const int rank = fqr_.factor(tol, 0.0);
   if (rank == 0) return;
   auto Zr = Z_.leftCols(r_);
+  z_identity_ = false;
   fqr_.apply_q_right(Zr);  // Z Qf: its last r - rank columns span Z null(F)
   carry_z(fqr_, rank);
   for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
@@ -241,6 +251,8 @@ void Hierarchy::freeze(double scale) {
 // ---------------------------------------------------------------------------------------
 void Hierarchy::factor_rows(const LsqProblem& P, const std::vector<int8_t>& W) {
   const int k = P.cols;
+  k_valid_ = false;
+  trial_ready_ = false;
   widx_.clear();
   for (int i = 0; i < P.rows; ++i)
     if (W[i]) widx_.push_back(i);
@@ -289,10 +301,60 @@ void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) 
   }
 }
 
-/// The minimum-residual step in null(G_w) = span(Qf(:, rank:)): min ||Q (y + N s) - c||.
-/// Numerical rank of K = Q N as qpcoord.core.linalg.numerical_rank with the scale of Q
-/// before projection: a K whose columns are rounding noise (the working set's rows span what
-/// Q can change) is rank 0, not a full-rank matrix of size 1e-16.
+/// Form K = Q N (N = Qf(:, rank:), the working set's null space) and factorise it for
+/// ls_step: k_mode_ kZero (K is rounding noise: the step is zero), kWide (a wide K of full
+/// row rank: the QR of K^T in kqr_t_) or kTall (the pivoted QR of K in kqr_, rank k_rank_;
+/// rank-deficient: the RZ of [R11 R12] in krz_, or its transpose's QR in cqr_). Sets
+/// k_valid_; false when K is zero.
+/// Numerical rank of K as qpcoord.core.linalg.numerical_rank with the scale of Q before
+/// projection: a K whose columns are rounding noise (the working set's rows span what Q can
+/// change) is rank 0, not a full-rank matrix of size 1e-16.
+bool Hierarchy::factor_k(const LsqProblem& P) {
+  const int k = P.cols, qr = P.qrows, rho = wqr_.rank(), nk = k - rho;
+  if (qt_stale_) form_qt(P);
+  const auto K = Qt_.block(0, rho, qr, nk);
+  const double kmax = K.colwise().norm().maxCoeff();
+  const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
+  k_valid_ = true;
+  k_mode_ = KMode::kZero;
+  if (!(kmax > tol)) return false;
+  // a wide K (more free directions than objective rows) of full row rank: K s = -res is
+  // consistent and its minimum-norm solution comes from one QR of K^T (nk x qr), without
+  // the QR of K and the second one of [R11 R12]^T below
+  if (nk > qr && wide_ls) {
+    kqr_t_.matrix(nk, qr) = K.transpose();
+    if (kqr_t_.factor(tol, 0.0) == qr) {
+      k_mode_ = KMode::kWide;
+      return true;
+    }
+  }
+  kqr_.matrix(qr, nk) = K;
+  const int rk = kqr_.factor(tol, 0.0);
+  k_mode_ = KMode::kTall;
+  k_rank_ = rk;
+  k_rz_ = false;
+  if (rk > 0 && rk < nk) {
+    const auto Kf = kqr_.matrix();
+    if (rz_min_norm) {
+      MapMat T = krz_.matrix(rk, nk);  // [R11 R12]^T (its upper triangle is not read)
+      for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
+      k_rz_ = krz_.factor();  // R11 nonsingular (pivots above tol): false never expected
+      if (k_rz_) ++rz_factors_;
+    }
+    if (!k_rz_) {
+      MapMat T = cqr_.matrix(nk, rk);  // [R11 R12]^T
+      T.setZero();
+      for (int i = 0; i < rk; ++i)
+        T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
+      cqr_.factor(0.0, 0.0);
+    }
+  }
+  return true;
+}
+
+/// The minimum-residual step in null(G_w) = span(Qf(:, rank:)): min ||Q (y + N s) - c||, by
+/// slack_step or K's factorisation (factor_k, or the last one's on the same working set's
+/// QR with reuse_k_qr).
 void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
                         Eigen::Ref<Vec> step) {
   const int k = P.cols, qr = P.qrows, rho = wqr_.rank(), nk = k - rho;
@@ -302,35 +364,32 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   res -= P.c.head(qr);
   step.setZero();
   if (nk == 0 || qr == 0) return;
-  if (slack_ls && P.slacks > 0) {
-    if (slack_step(P, step)) {
-      ++slack_steps_;
-      return;
+  if (reuse_k_qr && k_valid_) {
+    // the same working set's QR as the last step: the same K (a K^T or slack_step decided
+    // by W and P alone: the same path), only the right-hand side changed
+    ++k_qr_reuses_;
+  } else {
+    k_valid_ = false;
+    if (slack_ls && P.slacks > 0) {
+      if (slack_step(P, step)) {
+        ++slack_steps_;
+        return;
+      }
+      step.setZero();
     }
-    step.setZero();
+    if (!factor_k(P)) return;
   }
-  if (qt_stale_) form_qt(P);
-  const auto K = Qt_.block(0, rho, qr, nk);
-  const double kmax = K.colwise().norm().maxCoeff();
-  const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
-  if (!(kmax > tol)) return;
   auto rhs = tvec_.head(qr);
   rhs = -res;
-  // a wide K (more free directions than objective rows) of full row rank: K s = -res is
-  // consistent and its minimum-norm solution comes from one QR of K^T (nk x qr), without
-  // the QR of K and the second one of [R11 R12]^T below
-  if (nk > qr && wide_ls) {
-    kqr_t_.matrix(nk, qr) = K.transpose();
-    if (kqr_t_.factor(tol, 0.0) == qr) {
-      auto s = u_.head(nk);
-      kqr_t_.min_norm_transposed_solve(rhs, s);
-      step.segment(rho, nk) = s;
-      wqr_.apply_q(step);
-      return;
-    }
+  if (k_mode_ == KMode::kZero) return;
+  if (k_mode_ == KMode::kWide) {
+    auto s = u_.head(nk);
+    kqr_t_.min_norm_transposed_solve(rhs, s);
+    step.segment(rho, nk) = s;
+    wqr_.apply_q(step);
+    return;
   }
-  kqr_.matrix(qr, nk) = K;
-  const int rk = kqr_.factor(tol, 0.0);
+  const int rk = k_rank_;
   kqr_.apply_qt(rhs);
   // step = Qf [0; s]; K P = Qk [R11 R12; 0 0]: with full column rank s(perm(i)) = u(i),
   // u = R11^-1 (Qk^T (-res))(0:rk); rank-deficient K: the minimum-norm s (as a complete
@@ -339,13 +398,11 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
     kqr_.solve_r(rhs);
     for (int i = 0; i < rk; ++i) step(rho + kqr_.perm(i)) = rhs(i);
   } else if (rk > 0) {
-    const auto Kf = kqr_.matrix();
-    MapMat T = cqr_.matrix(nk, rk);  // [R11 R12]^T
-    T.setZero();
-    for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
-    cqr_.factor(0.0, 0.0);
     auto u = u_.head(nk);
-    cqr_.min_norm_transposed_solve(rhs.head(rk), u);
+    if (k_rz_)
+      krz_.min_norm_solve(rhs.head(rk), u);
+    else
+      cqr_.min_norm_transposed_solve(rhs.head(rk), u);
     for (int i = 0; i < nk; ++i) step(rho + kqr_.perm(i)) = u(i);
   }
   wqr_.apply_q(step);
@@ -472,6 +529,11 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   // the exact finish right after an optimal end: its first step is that end's last one
   bool reuse = exact_ && finish_ready_ && reuse_finish;
   finish_ready_ = false;
+  // the exact finish right after a warm trial hit (reuse_k_qr): W and y are the trial's, so
+  // is its working set's QR (wqr_, widx_) and K's factorisation; the trial kept only the
+  // null-space columns of Q Qf (trial_qt_tail): formed in full when an update needs them
+  bool trial = exact_ && trial_ready_ && reuse_k_qr && !reuse;
+  trial_ready_ = false;
   // the current working set's sub-threshold step was taken (see `stationary` below)
   bool finished = false;
   for (int it = 0; it < max_iter; ++it) {
@@ -483,7 +545,12 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     if (reuse) {  // wqr_, widx_, res_ and step_ are those of this W and y
       reuse = false;
     } else {
-      if (!current) factor_working(P, W);
+      if (trial) {
+        trial = false;
+        if (trial_qt_tail) qt_stale_ = true;
+      } else if (!current) {
+        factor_working(P, W);
+      }
       ls_step(P, y, step);  // res_ = Q y - c
     }
     current = false;
@@ -524,6 +591,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
             wqr_.remove(static_cast<int>(pos - widx_.begin()),
                         Qt_.topLeftCorner(qt_stale_ ? 0 : qr, k))) {
           widx_.erase(pos);
+          k_valid_ = false;
           current = true;
           ++downdates_;
         }
@@ -577,6 +645,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       // one row enters: update the working set's QR and Q Qf instead of refactorising
       if (wqr_.append(P.G.row(block).head(k).transpose())) {
         widx_.push_back(block);
+        k_valid_ = false;
         if (!qt_stale_) wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
         current = true;
       }
@@ -601,6 +670,7 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   auto step = step_.head(k);
   ls_step(P, yp, step);
   yp += step;
+  trial_ready_ = true;  // wqr_ and K are those of W on P (the exact finish's start)
   return found;
 }
 
@@ -752,6 +822,7 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
                                 std::vector<int8_t>& W, int* found) {
   const int k = P.cols;
   *found = 0;
+  trial_ready_ = false;
   if (!ws.stored) return false;
   bool consistent = false;
   // a level's slack rows (mv > 0): the trial in z alone, the working rows' slacks eliminated
@@ -859,6 +930,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
                           MRef<Vec> detail, bool warm) {
   x_.setZero();
   Z_.setIdentity();
+  z_identity_ = true;
   r_ = n_;
   k_ = 0;
   kz_ = 0;
@@ -886,6 +958,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
     }
     r_ = n_ - rank;
     Z_.leftCols(r_) = svd.matrixV().rightCols(r_);
+    z_identity_ = false;
   }
   // hard inequality rows with their true bounds, then: is x already feasible?
   const int mi = min_[0];
@@ -1054,12 +1127,25 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
     auto u = ute_.head(me);
     u = e;
     mqr_.apply_qt(u);
-    MapMat T = tqr_.matrix(r, rank);
-    T.setZero();
-    for (int j = 0; j < rank; ++j) T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
-    if (tqr_.factor(0.0, 0.0) < rank) return -1;
+    // (rz_min_norm: the RZ of [R11 R12] instead, in trz_)
     auto w = u_.head(r);
-    tqr_.min_norm_transposed_solve(u.head(rank), w);
+    qr_rz_ = false;
+    if (rz_min_norm) {
+      MapMat T = trz_.matrix(rank, r);  // [R11 R12]^T (its upper triangle is not read)
+      for (int j = 0; j < rank; ++j)
+        T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
+      if (!trz_.factor()) return -1;
+      ++rz_factors_;
+      qr_rz_ = true;
+      trz_.min_norm_solve(u.head(rank), w);
+    } else {
+      MapMat T = tqr_.matrix(r, rank);
+      T.setZero();
+      for (int j = 0; j < rank; ++j)
+        T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
+      if (tqr_.factor(0.0, 0.0) < rank) return -1;
+      tqr_.min_norm_transposed_solve(u.head(rank), w);
+    }
     for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = w(i);
   } else {
     // M^T P = Qf [R11 R12; 0 0]: M = P L Qf1^T with L = [R11^T; R12^T] (me x rank, full
@@ -1101,7 +1187,10 @@ void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
     for (int j = 0; j < rank; ++j) {
       q.setZero();
       q(j) = 1.0;
-      tqr_.apply_q(q);
+      if (qr_rz_)
+        trz_.apply_zt(q);  // T's row space: Z^T [I; 0]
+      else
+        tqr_.apply_q(q);
       for (int i = 0; i < r; ++i) out(mqr_.perm(i), j) = q(i);
     }
   }
@@ -1132,9 +1221,14 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   double M_scale = 0.0;  // |A|_F of the level's equalities (>= s_0 of M)
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
-    auto Ab = Ab_.topRows(me);
-    Ab = A;  // contiguous: the product below makes no temporary
-    M.noalias() = Ab * Zr;
+    if (identity_z && z_identity_) {  // A I: the rows themselves
+      M = A;
+      ++identity_products_;
+    } else {
+      auto Ab = Ab_.topRows(me);
+      Ab = A;  // contiguous: the product below makes no temporary
+      M.noalias() = Ab * Zr;
+    }
     e.noalias() = -A * x_;
     e += beq.segment(e0, me);
     const double scale = A.norm();
@@ -1179,8 +1273,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     inherit(C, lo, hi, i0, mi, nullptr);
     if (by_qr && !qr_wide_ && rank == r_) {  // M has full column rank: no freedom left
       r_ = 0;
+      z_identity_ = false;
     } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
       auto Zr2 = Z_.leftCols(r_);
+      z_identity_ = false;
       mqr_.apply_q_right(Zr2);
       carry_z(mqr_, rank);
       for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
@@ -1201,7 +1297,12 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   if (mi) {
     auto Cl = Cl_.topRows(mi);
     Cl = C.middleRows(i0, mi);
-    CZl.noalias() = Cl * Zr;
+    if (identity_z && z_identity_) {  // C I: the rows themselves
+      CZl = Cl;
+      ++identity_products_;
+    } else {
+      CZl.noalias() = Cl * Zr;
+    }
   }
   for (int i = 0; i < mi; ++i) {
     const int g = i0 + i;
@@ -1443,6 +1544,11 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   seeded_ = 0;
   downdates_ = 0;
   slack_steps_ = 0;
+  k_qr_reuses_ = 0;
+  rz_factors_ = 0;
+  identity_products_ = 0;
+  k_valid_ = false;
+  trial_ready_ = false;
   qr_closed_forms_ = 0;
   zero_tail_compressions_ = 0;
   reduced_trials_ = 0;

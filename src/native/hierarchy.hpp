@@ -156,6 +156,29 @@ class Hierarchy {
   bool gemv_qr = false;
   /// Reflectors of the last call applied by gemv_qr's product and rank-one update.
   int gemv_steps();
+  /// The least-squares step's factorisation of the projected objective K = Q N (the pivoted
+  /// QR of K, and of [R11 R12]^T when K is rank-deficient, or of K^T when wide) kept while the
+  /// working set's QR does not change, and reused by the next step on the same working set
+  /// (default): after a full step (W unchanged: the step that confirms stationarity), and by
+  /// the exact finish of a level whose warm trial hit (the trial's working-set QR and K are
+  /// those of the finish's first iteration). Off (A/B): K formed and factorised at every step.
+  bool reuse_k_qr = true;
+  /// The minimum-norm solution of a rank-deficient [R11 R12] w = b (a rank-deficient tall
+  /// level's closed form, and its row space for the freeze; a rank-deficient K's step) by
+  /// the RZ factorisation of [R11 R12] (TrapezoidRZ: R12 folded into R11 by one reflector
+  /// per row, about 4 rank^2 (cols - rank) flops; default) or by the QR of [R11 R12]^T
+  /// (A/B: about 2 cols rank^2).
+  bool rz_min_norm = true;
+  /// While Z is still the identity (no hard equality row, no level frozen yet: every
+  /// problem's first level), a level's projections A Z and C Z and the inherited rows' Cin Z
+  /// are copies of the rows (default), not matrix products with the identity (A/B).
+  bool identity_z = true;
+  /// Products with an identity Z skipped in the last call (identity_z).
+  int identity_products() const { return identity_products_; }
+  /// RZ factorisations of the last call (rz_min_norm).
+  int rz_factors() const { return rz_factors_; }
+  /// Least-squares steps of the last call that reused K's factorisation (reuse_k_qr).
+  int k_qr_reuses() const { return k_qr_reuses_; }
   /// Warm trials of the last call solved in z alone (reduce_slacks).
   int reduced_trials() const { return reduced_trials_; }
   /// Levels whose closed form came from the QR of M (no SVD) in the last call.
@@ -265,6 +288,9 @@ class Hierarchy {
   void factor_trial(const LsqProblem& P, const std::vector<int8_t>& W);
   /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
   void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
+  /// Form the projected objective K = Q N of the working set's QR and factorise it for
+  /// ls_step (k_mode_, k_rank_; sets k_valid_); false when K is rounding noise (zero step).
+  bool factor_k(const LsqProblem& P);
   /// The step of ls_step by the slack structure of P (slack_ls): the minimum-norm step with
   /// G_w step = 0 and Q step = -res_ when the system, its slacks eliminated, has full row
   /// rank (then consistent: the same step as the projected least squares); false: take the
@@ -327,6 +353,23 @@ class Hierarchy {
   PivotedQR kqr_t_;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
   PivotedQR sqr_;  ///< slack_step: the transposed system on z
   int slack_steps_ = 0;  ///< steps by slack_step in this call
+  /// reuse_k_qr: kqr_ (and cqr_) or kqr_t_ hold the factorisation of the current working
+  /// set's K on the stage's problem (cleared whenever the working set's QR changes)
+  bool k_valid_ = false;
+  enum class KMode : int8_t { kZero, kWide, kTall };
+  KMode k_mode_ = KMode::kZero;  ///< how that K was solved: negligible, by K^T, by K's QR
+  int k_rank_ = 0;               ///< numerical rank of that K (kTall)
+  bool k_rz_ = false;            ///< that K's minimum-norm step by krz_ (else cqr_)
+  TrapezoidRZ krz_;              ///< rz_min_norm: [R11 R12] of a rank-deficient K
+  TrapezoidRZ trz_;  ///< rz_min_norm: [R11 R12] of a rank-deficient tall M's closed form
+  bool qr_rz_ = false;  ///< the last qr_closed_form's [R11 R12] went by trz_ (else tqr_)
+  int rz_factors_ = 0;  ///< RZ factorisations of this call
+  bool z_identity_ = false;  ///< Z_ is the n x n identity (r_ == n_; identity_z)
+  int identity_products_ = 0;  ///< products with the identity Z skipped in this call
+  /// the last factorisation was stored_set_point's on a level's full problem (W: its mapped
+  /// set; the exact finish after a hit starts from it, reuse_k_qr)
+  bool trial_ready_ = false;
+  int k_qr_reuses_ = 0;  ///< least-squares steps of this call that reused K's QR
   Mat Qt_;         ///< Q Qf
   /// Qt_ not formed for the working set's QR (factor_working of a level with slacks and
   /// slack_ls: ls_step forms it when its general path needs it; updates skip it till then)
