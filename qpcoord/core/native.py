@@ -200,7 +200,10 @@ class NativeHierarchy:
             P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs,
             self.x, self.res, self.stats, self.detail,
         )  # fmt: skip
+        self._solver.set_tasks(P, *P._task_rows, self.x, self.res)
         self._run = self._solver.run
+        self._step = self._solver.step
+        self._P = P
         self._levels = len(P.levels)
         self._mod = mod
         self._solved = False
@@ -243,13 +246,27 @@ class NativeHierarchy:
             An active-set solve did not converge or ran out of time, the result is not
             finite, or it fails the check of the bounds and hard rows.
         """
-        P.refresh_stacked()
-        code = self._run(self._solved and warm, _INF if time_left is None else time_left)
+        warm = self._solved and warm
+        left = _INF if time_left is None else time_left
+        if P is self._P:
+            # one native call: the tasks' numbers into the stacked arrays (as
+            # refresh_stacked), the solve, x and res copied, the info dict
+            out = self._step(warm, left, KKT_TOL)
+            if out.__class__ is tuple:
+                self._solved = True
+                return out
+            code = out
+            if code == self._mod.REFRESH_IN_PYTHON:  # a task's data is not float64 of its
+                P.refresh_stacked()  # shape, or the levels alias their tasks: converts/raises
+                code = self._run(warm, left)
+        else:
+            P.refresh_stacked()
+            code = self._run(warm, left)
         if code:
             self._solved = False  # the stored working sets may be from another problem
             self._raise(code, P)
         self._solved = True
-        return self.x.copy(), self.res.copy(), self._info()
+        return self.x.copy(), self.res.copy(), self._solver.info(KKT_TOL)
 
     def _info(self) -> dict:
         """The info dict of the last call, from ``stats`` (per stage: iterations, warm hit,

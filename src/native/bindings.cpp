@@ -7,6 +7,7 @@
 #include <array>
 
 #include "hierarchy.hpp"
+#include "refresh.hpp"
 #include "weighted.hpp"
 #include "ik_step.hpp"
 
@@ -49,6 +50,102 @@ struct Bound : Hierarchy {
                  cvec(a[6]), cvec(a[7]), warm, time_left, mvec(a[8]), mvec(a[9]), mmat(a[10]),
                  mvec(a[11]));
   }
+
+  /// The tasks' numbers copied into the bound arrays by step() (refresh.hpp), and the output
+  /// arrays' copy methods (the x and res step() returns).
+  qpcoord::refresh::Stacked stacked;
+  nb::object copy_x, copy_res;
+  /// info()'s keys in its order, then the value "native"
+  std::array<nb::object, 10> keys;
+
+  void set_tasks(nb::handle P, const std::vector<nb::object>& eq,
+                 const std::vector<int64_t>& eq_rows, const std::vector<int64_t>& eq_first,
+                 const std::vector<nb::object>& in, const std::vector<int64_t>& in_rows,
+                 const std::vector<int64_t>& in_first, nb::handle x, nb::handle res) {
+    if (!bound) throw nb::value_error("set_tasks: call bind first");
+    const int64_t n = static_cast<int64_t>(a[0].shape(1));
+    if (static_cast<int64_t>(a[2].shape(1)) != n || static_cast<int64_t>(a[6].shape(0)) != n ||
+        static_cast<int64_t>(a[7].shape(0)) != n)
+      throw nb::value_error("set_tasks: the bound arrays' columns differ");
+    if (eq.size() != eq_rows.size() || eq.size() != eq_first.size() ||
+        in.size() != in_rows.size() || in.size() != in_first.size())
+      throw nb::value_error("set_tasks: tasks, row counts and first rows differ in length");
+    for (size_t k = 0; k < eq.size(); ++k)
+      if (eq_rows[k] < 0 || eq_first[k] < 0 ||
+          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[0].shape(0)) ||
+          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[1].shape(0)))
+        throw nb::value_error("set_tasks: equality rows outside Aeq");
+    for (size_t k = 0; k < in.size(); ++k)
+      for (int i = 2; i < 6; ++i)
+        if (in_rows[k] < 0 || in_first[k] < 0 ||
+            in_first[k] + in_rows[k] > static_cast<int64_t>(a[i].shape(0)))
+          throw nb::value_error("set_tasks: inequality rows outside C");
+    const qpcoord::refresh::Stacked::Dest d{a[0].data(), a[1].data(), a[2].data(), a[3].data(),
+                                            a[4].data(), a[5].data(), a[6].data(), a[7].data()};
+    copy_x = x.attr("copy");
+    copy_res = res.attr("copy");
+    static const char* const kKeys[10] = {
+        "engine",           "hard_iterations",    "active_set_iterations",
+        "min_norm_iterations", "warm_start_hits", "warm_start_seeded",
+        "closed_form_levels", "qp_calls",         "uncertified",
+        "native"};
+    for (int i = 0; i < 10; ++i) keys[i] = nb::steal(PyUnicode_InternFromString(kKeys[i]));
+    stacked.set(P, eq, eq_rows, eq_first, in, in_rows, in_first, n,
+                static_cast<int64_t>(a[0].shape(0)), d);
+  }
+
+  /// The info dict of the last call (NativeHierarchy._info's keys and values, from the bound
+  /// stats / detail: one pass over the stages hard, levels, minimum-norm step).
+  nb::dict info(double kkt_tol) const {
+    if (!bound || !keys[0].is_valid()) throw nb::value_error("info: call set_tasks first");
+    const Arr& st = a[10];
+    const double* d = a[11].data();
+    const int stages = static_cast<int>(st.shape(0)), last = stages - 2;
+    const double* s = st.data();
+    nb::list levels, closed, uncertified;
+    long hits = 0, calls = 0;
+    for (int k = 0; k < stages; ++k) {
+      const double it = s[3 * k], h = s[3 * k + 1], c = s[3 * k + 2];
+      if (k > 0 && k < stages - 1) levels.append(static_cast<long>(it));
+      if (h != 0.0) ++hits;
+      if (c != 0.0 && k > 0 && k <= last) closed.append(k - 1);
+      if (it != 0.0 || h != 0.0) ++calls;
+    }
+    if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
+    nb::dict out;
+    out[keys[0]] = keys[9];  // "native"
+    out[keys[1]] = static_cast<long>(s[0]);
+    out[keys[2]] = levels;
+    out[keys[3]] = static_cast<long>(s[3 * (stages - 1)]);
+    out[keys[4]] = hits;
+    out[keys[5]] = static_cast<long>(d[7]);
+    out[keys[6]] = closed;
+    out[keys[7]] = calls;
+    out[keys[8]] = uncertified;
+    return out;
+  }
+
+  /// refresh + run + (x copy, res copy, info) in one call; an int status when the solve
+  /// failed, kRefreshInPython when the tasks need the Python refresh (nothing solved).
+  nb::object step(bool warm, double time_left, double kkt_tol) {
+    if (!stacked.bound()) throw nb::value_error("step: call set_tasks first");
+    if (!stacked.refresh()) return nb::int_(kRefreshInPython);
+    int code;
+    try {
+      code = run(warm, time_left);
+    } catch (const std::bad_alloc&) {
+      code = static_cast<int>(qpcoord::kBadInput);
+    }
+    if (code) return nb::int_(code);
+    nb::object x = nb::steal(PyObject_CallNoArgs(copy_x.ptr()));
+    if (!x.is_valid()) throw nb::python_error();
+    nb::object r = nb::steal(PyObject_CallNoArgs(copy_res.ptr()));
+    if (!r.is_valid()) throw nb::python_error();
+    return nb::make_tuple(x, r, info(kkt_tol));
+  }
+
+  /// step()'s answer when a task's data is not the common case (see refresh.hpp)
+  static constexpr int kRefreshInPython = -1;
 };
 
 bool dims_ok(const std::array<Arr, 12>& a) {
@@ -71,6 +168,7 @@ NB_MODULE(_native, m) {
   m.attr("BAD_INPUT") = static_cast<int>(qpcoord::kBadInput);
   m.attr("TIME_LIMIT") = static_cast<int>(qpcoord::kTimeLimit);
   m.attr("CHECK_FAILED") = static_cast<int>(qpcoord::kCheckFailed);
+  m.attr("REFRESH_IN_PYTHON") = Bound::kRefreshInPython;
 
   nb::class_<Bound>(m, "Hierarchy",
                     "Strict-hierarchy least squares of one stack structure (sizes fixed).")
@@ -119,6 +217,21 @@ NB_MODULE(_native, m) {
           },
           nb::arg("warm"), nb::arg("time_left"),
           "solve() on the bound arrays (their current numbers); returns the status code.")
+      .def("set_tasks", &Bound::set_tasks, nb::arg("P"), nb::arg("eq"), nb::arg("eq_rows"),
+           nb::arg("eq_first"), nb::arg("ineq"), nb::arg("in_rows"), nb::arg("in_first"),
+           nb::arg("x"), nb::arg("res"),
+           "After bind(): the compiled stack P, its Equality and Inequality tasks in the "
+           "stacked arrays' order with their row counts and first rows, and the bound x and "
+           "res (their copies are step()'s answer).")
+      .def("step", &Bound::step, nb::arg("warm"), nb::arg("time_left"), nb::arg("kkt_tol"),
+           "The tasks' numbers copied into the bound arrays (as CompiledStack.refresh_stacked),"
+           " run(), and on success (x.copy(), res.copy(), info(kkt_tol)); else the status "
+           "code, REFRESH_IN_PYTHON if a task needs the Python refresh (nothing solved).")
+      .def_prop_ro(
+          "fast_arrays", [](const Bound& h) { return h.stacked.fast(); },
+          "step() reads numpy arrays from their heads (True) or through the buffer protocol.")
+      .def("info", &Bound::info, nb::arg("kkt_tol"),
+           "The last call's info dict (NativeHierarchy._info's), built here.")
       .def_rw("seed_on_miss", &Hierarchy::seed_on_miss,
               "Seed a stage's active set (hard phase, level, minimum-norm step) from its missed stored "
               "working set (True, default) "
