@@ -273,7 +273,10 @@ class CompiledStack:
         per-step update): one loop over the tasks, no per-level pass, no copy afterwards.
 
         Checks that no task's matrix changed shape (``ValueError`` naming it); the numbers
-        themselves are checked by the native call (finite, no wrong-sided infinity).
+        themselves are checked by the native call (finite, no wrong-sided infinity). The
+        native strict hierarchy does these copies in its own call (``Hierarchy.step``,
+        ``src/native/refresh.hpp``, from ``_task_rows``) and comes here only for data it does
+        not copy (not float64 of the task's shape, or levels aliasing their tasks' arrays).
         """
         for t, shape, A, b in self._eq_ops:
             tA = t.A
