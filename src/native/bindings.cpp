@@ -128,7 +128,8 @@ struct Bound : Hierarchy {
   /// refresh + run + (x copy, res copy, info) in one call; an int status when the solve
   /// failed, kRefreshInPython when the tasks need the Python refresh (nothing solved).
   nb::object step(bool warm, double time_left, double kkt_tol) {
-    if (!stacked.bound()) throw nb::value_error("step: call set_tasks first");
+    if (!stacked.bound() || !copy_x.is_valid())
+      throw nb::value_error("step: call set_tasks first");
     if (!stacked.refresh()) return nb::int_(kRefreshInPython);
     int code;
     try {
@@ -147,6 +148,29 @@ struct Bound : Hierarchy {
   /// step()'s answer when a task's data is not the common case (see refresh.hpp)
   static constexpr int kRefreshInPython = -1;
 };
+
+/// Cyclic garbage collection of a Hierarchy that holds its stack's tasks (set_tasks): a task
+/// referring back to the stack that owns the solver makes a cycle through this object.
+int bound_traverse(PyObject* self, visitproc visit, void* arg) {
+  Py_VISIT(Py_TYPE(self));
+  if (!nb::inst_ready(self)) return 0;
+  const Bound* h = nb::inst_ptr<Bound>(self);
+  Py_VISIT(h->copy_x.ptr());
+  Py_VISIT(h->copy_res.ptr());
+  return h->stacked.traverse(visit, arg);
+}
+
+int bound_clear(PyObject* self) {
+  Bound* h = nb::inst_ptr<Bound>(self);
+  h->stacked.clear();
+  h->copy_x.reset();
+  h->copy_res.reset();
+  return 0;
+}
+
+PyType_Slot bound_slots[] = {{Py_tp_traverse, reinterpret_cast<void*>(bound_traverse)},
+                             {Py_tp_clear, reinterpret_cast<void*>(bound_clear)},
+                             {0, nullptr}};
 
 bool dims_ok(const std::array<Arr, 12>& a) {
   static constexpr int kNdim[12] = {2, 1, 2, 1, 1, 1, 1, 1, 1, 1, 2, 1};
@@ -171,7 +195,8 @@ NB_MODULE(_native, m) {
   m.attr("REFRESH_IN_PYTHON") = Bound::kRefreshInPython;
 
   nb::class_<Bound>(m, "Hierarchy",
-                    "Strict-hierarchy least squares of one stack structure (sizes fixed).")
+                    "Strict-hierarchy least squares of one stack structure (sizes fixed).",
+                    nb::type_slots(bound_slots))
       .def(nb::init<int, std::vector<int>, std::vector<int>, bool, double>(), nb::arg("n"),
            nb::arg("meq"), nb::arg("min"), nb::arg("has_bounds"), nb::arg("damping"))
       .def(

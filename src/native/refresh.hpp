@@ -157,6 +157,23 @@ class Stacked {
   }
 
   bool bound() const { return set_; }
+
+  /// The Python objects held (the compiled stack, its tasks), for the owner's tp_traverse:
+  /// a task that refers back to its stack makes a cycle the collector must see through.
+  int traverse(visitproc visit, void* arg) const {
+    Py_VISIT(P_.ptr());
+    for (const nb::object& t : eq_) Py_VISIT(t.ptr());
+    for (const nb::object& t : in_) Py_VISIT(t.ptr());
+    return 0;
+  }
+
+  /// Drop them (tp_clear; a collected cycle): refresh() then returns false.
+  void clear() {
+    set_ = false;
+    P_.reset();
+    eq_.clear();
+    in_.clear();
+  }
   /// Are numpy arrays read from their heads (else through the buffer protocol)?
   bool fast() const { return fast_.ok; }
 

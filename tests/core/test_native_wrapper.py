@@ -297,3 +297,20 @@ def test_the_native_info_equals_the_python_info_when_uncertified():
     info = nh._solver.info(KKT_TOL)
     assert info == nh._info() == _info_reference(nh.stats, nh.detail, 1)
     assert info["uncertified"] == [(0, 10 * KKT_TOL)]
+
+
+@needs_native
+def test_a_stack_in_a_cycle_through_its_native_solver_is_collected():
+    """The native solver holds the stack's tasks: a task referring back to the stack makes a
+    cycle through it, which the garbage collector must see through (``tp_traverse``)."""
+    import gc
+    import weakref
+
+    t = qc.Equality(np.eye(3), [1.0, 2.0, 3.0], name="reach")
+    s = qc.Stack([t], bounds=qc.Bounds(-5.0, 5.0))
+    s.solve(engine="native")
+    t.owner = s  # the cycle: stack -> solver -> task -> stack
+    alive = weakref.ref(s)
+    del s, t
+    gc.collect()
+    assert alive() is None
