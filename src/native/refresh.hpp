@@ -41,9 +41,9 @@ struct Fast {
   bool ok = false;
 };
 
-/// A float64 array (native byte order, whole-element strides) of `ndim` dimensions and the
-/// given shape: read from the numpy array's head (Fast) or through the buffer protocol
-/// (released at scope exit); ok is false (no Python error left set) for anything else.
+/// A float64 array (native byte order, aligned, whole-element strides) of `ndim` dimensions
+/// and the given shape: read from the numpy array's head (Fast) or through the buffer
+/// protocol (released at scope exit); ok is false (no Python error left set) otherwise.
 struct In {
   Py_buffer b{};
   bool got = false, ok = false;
@@ -55,6 +55,7 @@ struct In {
       if (h->descr == f.f64) {
         ok = h->nd == ndim && h->dimensions[0] == rows && (ndim == 1 || h->dimensions[1] == cols);
         for (int i = 0; ok && i < ndim; ++i) ok = h->strides[i] % 8 == 0;
+        ok = ok && reinterpret_cast<std::uintptr_t>(h->data) % alignof(double) == 0;
         if (!ok) return;
         p = reinterpret_cast<const double*>(h->data);
         s0 = h->strides[0] / 8;
@@ -70,6 +71,7 @@ struct In {
     ok = b.ndim == ndim && b.itemsize == 8 && b.format && std::strcmp(b.format, "d") == 0 &&
          b.shape[0] == rows && (ndim == 1 || b.shape[1] == cols);
     for (int i = 0; ok && i < ndim; ++i) ok = b.strides[i] % 8 == 0;
+    ok = ok && reinterpret_cast<std::uintptr_t>(b.buf) % alignof(double) == 0;
     if (!ok) return;
     p = static_cast<const double*>(b.buf);
     s0 = b.strides[0] / 8;

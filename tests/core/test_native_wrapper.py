@@ -190,6 +190,15 @@ class _Sub(np.ndarray):
     """An ndarray subclass (read through the buffer protocol by the native refresh)."""
 
 
+def _misaligned(values) -> np.ndarray:
+    """A float64 array whose data is not 8-byte aligned (a view into a byte buffer)."""
+    raw = np.frombuffer(bytearray(8 * len(values) + 1), dtype=np.uint8)[1:]
+    out = raw.view(np.float64)
+    out[:] = values
+    assert not out.flags.aligned
+    return out
+
+
 def _assert_like_fresh(s: qc.Stack, tasks, box) -> None:
     """The stacked arrays of ``s`` after its last native solve are a fresh compile's (Python
     refresh), and the solve equals a fresh stack's Python solve."""
@@ -245,12 +254,14 @@ def test_one_native_step_refreshes_without_the_python_refresh(monkeypatch):
         lambda t: setattr(t[2], "upper", np.array([0.4])),  # broadcast to the rows
         lambda t: setattr(t[2], "C", t[2].C.astype(np.float32)),
         lambda t: setattr(t[1], "sqrt_weight", np.array([1.5, 0.5], dtype=">f8")),
+        lambda t: setattr(t[0], "b", _misaligned([0.5, -1.0, 2.0])),
     ],
 )
 def test_data_the_native_step_does_not_copy_take_the_python_refresh(change, monkeypatch):
-    """Another dtype, byte order or a broadcast: the native step hands the refresh to
-    ``refresh_stacked`` (which converts or broadcasts as numpy does), with the same stacked
-    arrays and solution; the next plain step is native again."""
+    """Another dtype, byte order, a broadcast or unaligned data: the native step hands the
+    refresh to ``refresh_stacked`` (which converts or broadcasts as numpy does), with the
+    same stacked arrays and solution; with the tasks' own arrays back, the native step
+    copies them again."""
     rng, tasks, box = _tasks(6)
     s = _build(tasks, box)
     s.solve(engine="native")
@@ -258,12 +269,18 @@ def test_data_the_native_step_does_not_copy_take_the_python_refresh(change, monk
     P = s._compiled
     real = P.refresh_stacked
     monkeypatch.setattr(P, "refresh_stacked", lambda: calls.append(1) or real())
+    saved = [dict(vars(t)) for t in tasks]
     change(tasks)
     got = s.solve(engine="native")
     assert calls == [1]
     _assert_like_fresh(s, tasks, box)
     ref = _build(tasks, box).solve(engine="python")
     np.testing.assert_allclose(got.level_residuals, ref.level_residuals, rtol=1e-9, atol=1e-12)
+    for t, attrs in zip(tasks, saved, strict=True):
+        vars(t).update(attrs)
+    s.solve(engine="native")
+    assert calls == [1]
+    _assert_like_fresh(s, tasks, box)
 
 
 @needs_native
