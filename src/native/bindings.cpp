@@ -57,6 +57,7 @@ struct Bound : Hierarchy {
   nb::object copy_x, copy_res;
   /// info()'s keys in its order, then the value "native"
   std::array<nb::object, 10> keys;
+  nb::object info_template;  ///< info()'s keys, in order, with None
 
   void set_tasks(nb::handle P, const std::vector<nb::object>& eq,
                  const std::vector<int64_t>& eq_rows, const std::vector<int64_t>& eq_first,
@@ -90,6 +91,9 @@ struct Bound : Hierarchy {
         "closed_form_levels", "qp_calls",         "uncertified",
         "native"};
     for (int i = 0; i < 10; ++i) keys[i] = nb::steal(PyUnicode_InternFromString(kKeys[i]));
+    nb::dict tpl;
+    for (int i = 0; i < 9; ++i) tpl[keys[i]] = nb::none();
+    info_template = tpl;
     stacked.set(P, eq, eq_rows, eq_first, in, in_rows, in_first, n,
                 static_cast<int64_t>(a[0].shape(0)), d);
   }
@@ -112,16 +116,21 @@ struct Bound : Hierarchy {
       if (it != 0.0 || h != 0.0) ++calls;
     }
     if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
-    nb::dict out;
-    out[keys[0]] = keys[9];  // "native"
-    out[keys[1]] = static_cast<long>(s[0]);
-    out[keys[2]] = levels;
-    out[keys[3]] = static_cast<long>(s[3 * (stages - 1)]);
-    out[keys[4]] = hits;
-    out[keys[5]] = static_cast<long>(d[7]);
-    out[keys[6]] = closed;
-    out[keys[7]] = calls;
-    out[keys[8]] = uncertified;
+    // a copy of the template (the keys in order, hashed, room for all: no resize), each
+    // value then replaced in place
+    nb::dict out = nb::steal<nb::dict>(PyDict_Copy(info_template.ptr()));
+    if (!out.is_valid()) throw nb::python_error();
+    const nb::object vals[9] = {keys[9],  // "native"
+                                nb::int_(static_cast<long>(s[0])),
+                                levels,
+                                nb::int_(static_cast<long>(s[3 * (stages - 1)])),
+                                nb::int_(hits),
+                                nb::int_(static_cast<long>(d[7])),
+                                closed,
+                                nb::int_(calls),
+                                uncertified};
+    for (int i = 0; i < 9; ++i)
+      if (PyDict_SetItem(out.ptr(), keys[i].ptr(), vals[i].ptr()) != 0) throw nb::python_error();
     return out;
   }
 
