@@ -176,6 +176,7 @@ class Stacked {
     eq_.clear();
     in_.clear();
   }
+
   /// Are numpy arrays read from their heads (else through the buffer protocol)?
   bool fast() const { return fast_.ok; }
 
