@@ -28,6 +28,10 @@ step, the stacked arrays already refreshed; warm and bare in alternating order s
 before bare always ran right after warm and found the stacked arrays in cache) and
 ``daqp.solve(..., break_points=...)`` with
 ``H = I`` (minimum-norm completion; a positive-definite H avoids its −8 "unsupported" flag).
+DAQP's solve is timed on its arrays built before the timer ("daqp hierarchical (solve on built
+arrays)", as ``hierarchy_published.py --resolve`` times it; since 2026-11-28) and also with the
+building of its arrays from the tasks ("daqp hierarchical + building its arrays", the one
+column before): the native engine's times include copying the tasks' numbers into its arrays.
 Each engine's level values are checked against the Python engine's (``max |Δr| / max(1, r)``).
 With ``--no-python`` only the re-solve contenders are timed (native warm, native bare, DAQP):
 the Python engine (and the native cold solve) evict the caches before the next step's native
@@ -43,9 +47,11 @@ issue's goal: within 4×).
     python benchmarks/hierarchy_bench.py --scenario panda9 --scenario random50 --steps 300
 
 ``--wrapper``: instead, the parts of one warm ``Stack.solve(engine="native")`` — engine and
-time-limit resolution, ``refresh_stacked``, the native call, the output copies, the info dict,
-the ``Solution`` — each timed on the stack's own solver, and the whole call, on alternate moved
-steps, timed alone (issue 24: the Python around the native call)::
+time-limit resolution, the one native call ``Hierarchy.step`` (the tasks' numbers copied into
+the stacked arrays, the solve, the output copies, the info dict), the ``Solution`` — each timed
+on the stack's own solver, the whole call, and the parts of the Python path it replaced
+(``refresh_stacked``, ``Hierarchy.run``, copies, ``NativeHierarchy._info``), one kind per moved
+step in turn, timed alone (issue 24: the Python around the native call)::
 
     python benchmarks/hierarchy_bench.py --wrapper --scenario chain30 --scenario soth_sot \
         --steps 2000
@@ -67,6 +73,7 @@ from threadpoolctl import threadpool_limits
 import qpcoord as qc
 from qpcoord.core.backends import DEFAULT_TIME_LIMIT, time_left
 from qpcoord.core.native import NativeHierarchy, resolve_engine
+from qpcoord.core.polish import KKT_TOL
 
 
 def _unit_rows(M: np.ndarray) -> np.ndarray:
@@ -223,6 +230,14 @@ def _levels_residuals(stack: qc.Stack, x: np.ndarray) -> np.ndarray:
     return np.array([L.residual(x) for L in stack._compiled.levels])
 
 
+#: DAQP's columns: ``daqp.solve`` alone on the step's arrays built before the timer (what
+#: hierarchy_published's re-solve table times), and the same call with the building of its
+#: arrays from the tasks (``daqp_problem``; this column was "daqp hierarchical" before
+#: 2026-11-28)
+DAQP = "daqp hierarchical (solve on built arrays)"
+DAQP_BUILD = "daqp hierarchical + building its arrays"
+
+
 def run(name, build, steps, seed=0, python=True):
     """Per-engine percentiles of ``steps`` interleaved steps; ``python=False``: the re-solve
     contenders only, the Python engine the oracle of every 10th step (see the docstring)."""
@@ -238,7 +253,7 @@ def run(name, build, steps, seed=0, python=True):
     if not python:
         keys += ["native warm", "native bare"]
     if dq is not None:
-        keys.append("daqp hierarchical")
+        keys += [DAQP, DAQP_BUILD]
     times = {k: [] for k in keys}
     worst = dict.fromkeys(times, 0.0)
     flags = set()
@@ -272,15 +287,20 @@ def run(name, build, steps, seed=0, python=True):
         got = [("python", sp.x), ("native cold", xc)] if python else []
         got += [("native warm", sw.x), ("native bare", bare.x.copy())]
         if dq is not None:
+            # DAQP's solve timed on arrays built before the timer (as hierarchy_published's
+            # re-solve table; the native engine's stacked arrays are refreshed inside its
+            # time): DAQP is given the moved numbers as its own arrays, H and f too
             levels, bounds = dq
             t = time.perf_counter()
             A, bu, bl, sense, breaks = daqp_problem(levels, bounds, n)
-            xd, _f, flag, _info = daqp.solve(
-                np.eye(n), np.zeros(n), A, bu, bl, sense, break_points=breaks
-            )
-            times["daqp hierarchical"].append(time.perf_counter() - t)
+            H, f = np.eye(n), np.zeros(n)
+            t1 = time.perf_counter()
+            xd, _f, flag, _info = daqp.solve(H, f, A, bu, bl, sense, break_points=breaks)
+            t2 = time.perf_counter()
+            times[DAQP].append(t2 - t1)
+            times[DAQP_BUILD].append(t2 - t)
             flags.add(int(flag))
-            got.append(("daqp hierarchical", np.asarray(xd)))
+            got += [(DAQP, np.asarray(xd)), (DAQP_BUILD, np.asarray(xd))]
         if not python:
             if step % 10:
                 x_prev = sw.x
@@ -298,24 +318,30 @@ def run(name, build, steps, seed=0, python=True):
     return rows, flags
 
 
-#: The parts of one warm ``Stack.solve(engine="native")``, in its order (see :func:`wrapper`).
+#: The parts of one warm ``Stack.solve(engine="native")``, in its order (see :func:`wrapper`):
+#: since 2026-11-28 the refresh, the solve, the copies and the info dict are one native call
+#: (``Hierarchy.step``); the parts of the Python path it replaced (still the path of a task
+#: whose data is not float64 of its shape) are timed on other steps.
 WRAPPER_PARTS = (
     "resolve_engine + time_left",
-    "refresh_stacked",
-    "native call (Hierarchy.run)",
-    "x, res copies",
-    "info dict",
+    "Hierarchy.step (refresh, solve, x/res copies, info)",
     "Solution",
     "sum of the parts",
     "Stack.solve (whole)",
+    "Python path: refresh_stacked",
+    "Python path: native call (Hierarchy.run)",
+    "Python path: x, res copies",
+    "Python path: info dict (NativeHierarchy._info)",
+    "Python path: sum (without resolve_engine, Solution)",
 )
 
 
 def wrapper(name, build, steps):
     """Median µs of each part of one warm ``Stack.solve(engine="native")`` (the calls it
-    makes, timed one by one on the stack's own native solver) and of the whole call, on
-    alternate moved steps, timed alone (no other solver between): what the Python around
-    the native call costs."""
+    makes, timed one by one on the stack's own native solver), of the whole call, and of
+    the parts of the Python path (refresh in Python, ``Hierarchy.run``, copies, the Python
+    info dict), on moved steps in turn (one kind per step, timed alone): what the Python
+    around the native call costs."""
     sc = _scenario(build, np.random.default_rng(0))
     stack, move = sc["stack"], sc["move"]
     P = stack._compiled
@@ -325,31 +351,41 @@ def wrapper(name, build, steps):
     pc = time.perf_counter
     for step in range(steps):
         move(step, None)
-        if step % 2:
+        if step % 3 == 1:
             t = pc()
             stack.solve(engine="native")
             times["Stack.solve (whole)"].append(pc() - t)
+            continue
+        if step % 3 == 2:
+            t0 = pc()
+            P.refresh_stacked()
+            t1 = pc()
+            code = nat._run(True, DEFAULT_TIME_LIMIT)
+            t2 = pc()
+            x, res = nat.x.copy(), nat.res.copy()
+            t3 = pc()
+            nat._info()
+            t4 = pc()
+            if code:
+                raise RuntimeError(f"{name}: native call, status {code}")
+            for key, dt in zip(
+                WRAPPER_PARTS[5:], (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0), strict=True
+            ):
+                times[key].append(dt)
             continue
         t0 = pc()
         resolve_engine("native", "hierarchical", None)
         time_left()
         t1 = pc()
-        P.refresh_stacked()
+        out = nat._step(True, DEFAULT_TIME_LIMIT, KKT_TOL)
         t2 = pc()
-        code = nat._run(True, DEFAULT_TIME_LIMIT)
+        if out.__class__ is not tuple:
+            raise RuntimeError(f"{name}: native step, status {out}")
+        x, res, info = out
+        qc.Solution(x, "optimal", res, "native", t2 - t0, "hierarchical", info)
         t3 = pc()
-        x, res = nat.x.copy(), nat.res.copy()
-        t4 = pc()
-        info = nat._info()
-        t5 = pc()
-        qc.Solution(x, "optimal", res, "native", t5 - t0, "hierarchical", info)
-        t6 = pc()
-        if code:
-            raise RuntimeError(f"{name}: native call, status {code}")
-        splits = (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5)
-        for key, dt in zip(WRAPPER_PARTS[:6], splits, strict=True):
+        for key, dt in zip(WRAPPER_PARTS[:4], (t1 - t0, t2 - t1, t3 - t2, t3 - t0), strict=True):
             times[key].append(dt)
-        times["sum of the parts"].append(t6 - t0)
     return [(name, key, float(np.median(np.array(v[2:]) * 1e6))) for key, v in times.items()]
 
 

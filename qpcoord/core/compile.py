@@ -227,6 +227,8 @@ class CompiledStack:
         in_ops: list[tuple] = []  # (task, shape, C rows, lo, hi, sw)
         no_eq = (Aeq[:0], beq[:0])
         no_in = (C[:0], clo[:0], chi[:0], csw[:0])
+        eq_first: list[int] = []  # each op's first row in the stacked arrays
+        in_first: list[int] = []
         i = j = 0
         for B in blocks:
             i1, j1 = i + B.m_eq, j + B.m_in
@@ -235,21 +237,35 @@ class CompiledStack:
             B._use(*eq, *ineq)
             if len(B.eqs) == 1:  # one task: its rows are the block's
                 eq_ops.append((B.eqs[0], B._eq_shapes[0], *eq))
+                eq_first.append(i)
             else:
                 for t, shape in zip(B.eqs, B._eq_shapes, strict=True):
                     m = i + shape[0]
                     eq_ops.append((t, shape, Aeq[i:m], beq[i:m]))
+                    eq_first.append(i)
                     i = m
             if len(B.ineqs) == 1:
                 in_ops.append((B.ineqs[0], B._in_shapes[0], *ineq))
+                in_first.append(j)
             else:
                 for t, shape in zip(B.ineqs, B._in_shapes, strict=True):
                     m = j + shape[0]
                     in_ops.append((t, shape, C[j:m], clo[j:m], chi[j:m], csw[j:m]))
+                    in_first.append(j)
                     j = m
             i, j = i1, j1
         self._eq_ops = eq_ops
         self._in_ops = in_ops
+        # the same copies as (tasks, row counts, first rows) per kind, for the native
+        # engine's own refresh (NativeHierarchy: Hierarchy.set_tasks)
+        self._task_rows = (
+            [op[0] for op in eq_ops],
+            [op[1][0] for op in eq_ops],
+            eq_first,
+            [op[0] for op in in_ops],
+            [op[1][0] for op in in_ops],
+            in_first,
+        )
         self._aliased = False
 
     def refresh_stacked(self) -> None:
@@ -257,7 +273,10 @@ class CompiledStack:
         per-step update): one loop over the tasks, no per-level pass, no copy afterwards.
 
         Checks that no task's matrix changed shape (``ValueError`` naming it); the numbers
-        themselves are checked by the native call (finite, no wrong-sided infinity).
+        themselves are checked by the native call (finite, no wrong-sided infinity). The
+        native strict hierarchy does these copies in its own call (``Hierarchy.step``,
+        ``src/native/refresh.hpp``, from ``_task_rows``) and comes here only for data it does
+        not copy (not float64 of the task's shape, or levels aliasing their tasks' arrays).
         """
         for t, shape, A, b in self._eq_ops:
             tA = t.A

@@ -162,13 +162,19 @@ def resolve_engine(engine: str | None, method: str, solver: str | None) -> str:
 class NativeHierarchy:
     """The native solver of one compiled stack: structure and buffers built once.
 
-    The solver is bound once to the compiled stack's stacked arrays
-    (:meth:`CompiledStack.refresh_stacked <qpcoord.core.compile.CompiledStack.refresh_stacked>`
-    writes the tasks' numbers straight into them) and to its own output arrays: each
-    :meth:`solve` is that refresh and one native call with two scalars. The call also checks
-    the data (finite, no wrong-sided infinity), checks the returned ``x`` (bounds, hard rows:
-    as ``Stack._check``) and computes the level values; the solver keeps each level's final
-    working set and tries it first at the next call (warm start).
+    The solver is bound once to the compiled stack's stacked arrays, to its tasks and to its
+    own output arrays: each :meth:`solve` is one native call with three scalars
+    (``Hierarchy.step``) that copies the tasks' numbers into the stacked arrays (as
+    :meth:`CompiledStack.refresh_stacked
+    <qpcoord.core.compile.CompiledStack.refresh_stacked>`, ``src/native/refresh.hpp``),
+    solves, and returns copies of ``x`` and the level values with the info dict. A task whose
+    data is not a float64 array of its shape (another dtype or byte order, a broadcast), or
+    levels pointing at their tasks' arrays after a Python-engine solve, make that call hand
+    the refresh back to ``refresh_stacked`` (which converts, broadcasts or raises the message
+    naming the task) before the solve. The call also checks the data (finite, no wrong-sided
+    infinity), checks the returned ``x`` (bounds, hard rows: as ``Stack._check``) and computes
+    the level values; the solver keeps each level's final working set and tries it first at
+    the next call (warm start).
 
     Parameters
     ----------
@@ -200,7 +206,10 @@ class NativeHierarchy:
             P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs,
             self.x, self.res, self.stats, self.detail,
         )  # fmt: skip
+        self._solver.set_tasks(P, *P._task_rows, self.x, self.res)
         self._run = self._solver.run
+        self._step = self._solver.step
+        self._P = P
         self._levels = len(P.levels)
         self._mod = mod
         self._solved = False
@@ -243,17 +252,33 @@ class NativeHierarchy:
             An active-set solve did not converge or ran out of time, the result is not
             finite, or it fails the check of the bounds and hard rows.
         """
-        P.refresh_stacked()
-        code = self._run(self._solved and warm, _INF if time_left is None else time_left)
+        warm = self._solved and warm
+        left = _INF if time_left is None else time_left
+        if P is self._P:
+            # one native call: the tasks' numbers into the stacked arrays (as
+            # refresh_stacked), the solve, x and res copied, the info dict
+            out = self._step(warm, left, KKT_TOL)
+            if out.__class__ is tuple:
+                self._solved = True
+                return out
+            code = out
+            if code == self._mod.REFRESH_IN_PYTHON:  # a task's data is not float64 of its
+                P.refresh_stacked()  # shape, or the levels alias their tasks: converts/raises
+                code = self._run(warm, left)
+        else:
+            P.refresh_stacked()
+            code = self._run(warm, left)
         if code:
             self._solved = False  # the stored working sets may be from another problem
             self._raise(code, P)
         self._solved = True
-        return self.x.copy(), self.res.copy(), self._info()
+        return self.x.copy(), self.res.copy(), self._solver.info(KKT_TOL)
 
     def _info(self) -> dict:
         """The info dict of the last call, from ``stats`` (per stage: iterations, warm hit,
-        closed form) and ``detail``. The counts read from ``stats`` are kept with its bytes:
+        closed form) and ``detail`` (the Python reference of the native ``Hierarchy.info``
+        that :meth:`solve` returns; tests compare the IK step's with it). The counts read
+        from ``stats`` are kept with its bytes:
         a warm re-solve whose stages did what they did at the previous call (the common
         case of a control loop) skips the pass over them; each call returns new lists."""
         key = self.stats.tobytes()

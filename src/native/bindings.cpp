@@ -7,6 +7,7 @@
 #include <array>
 
 #include "hierarchy.hpp"
+#include "refresh.hpp"
 #include "weighted.hpp"
 #include "ik_step.hpp"
 
@@ -49,7 +50,136 @@ struct Bound : Hierarchy {
                  cvec(a[6]), cvec(a[7]), warm, time_left, mvec(a[8]), mvec(a[9]), mmat(a[10]),
                  mvec(a[11]));
   }
+
+  /// The tasks' numbers copied into the bound arrays by step() (refresh.hpp), and the output
+  /// arrays' copy methods (the x and res step() returns).
+  qpcoord::refresh::Stacked stacked;
+  nb::object copy_x, copy_res;
+  /// info()'s keys in its order, then the value "native"
+  std::array<nb::object, 10> keys;
+  nb::object info_template;  ///< info()'s keys, in order, with None
+
+  void set_tasks(nb::handle P, const std::vector<nb::object>& eq,
+                 const std::vector<int64_t>& eq_rows, const std::vector<int64_t>& eq_first,
+                 const std::vector<nb::object>& in, const std::vector<int64_t>& in_rows,
+                 const std::vector<int64_t>& in_first, nb::handle x, nb::handle res) {
+    if (!bound) throw nb::value_error("set_tasks: call bind first");
+    const int64_t n = static_cast<int64_t>(a[0].shape(1));
+    if (static_cast<int64_t>(a[2].shape(1)) != n || static_cast<int64_t>(a[6].shape(0)) != n ||
+        static_cast<int64_t>(a[7].shape(0)) != n)
+      throw nb::value_error("set_tasks: the bound arrays' columns differ");
+    if (eq.size() != eq_rows.size() || eq.size() != eq_first.size() ||
+        in.size() != in_rows.size() || in.size() != in_first.size())
+      throw nb::value_error("set_tasks: tasks, row counts and first rows differ in length");
+    for (size_t k = 0; k < eq.size(); ++k)
+      if (eq_rows[k] < 0 || eq_first[k] < 0 ||
+          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[0].shape(0)) ||
+          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[1].shape(0)))
+        throw nb::value_error("set_tasks: equality rows outside Aeq");
+    for (size_t k = 0; k < in.size(); ++k)
+      for (int i = 2; i < 6; ++i)
+        if (in_rows[k] < 0 || in_first[k] < 0 ||
+            in_first[k] + in_rows[k] > static_cast<int64_t>(a[i].shape(0)))
+          throw nb::value_error("set_tasks: inequality rows outside C");
+    const qpcoord::refresh::Stacked::Dest d{a[0].data(), a[1].data(), a[2].data(), a[3].data(),
+                                            a[4].data(), a[5].data(), a[6].data(), a[7].data()};
+    copy_x = x.attr("copy");
+    copy_res = res.attr("copy");
+    static const char* const kKeys[10] = {
+        "engine",           "hard_iterations",    "active_set_iterations",
+        "min_norm_iterations", "warm_start_hits", "warm_start_seeded",
+        "closed_form_levels", "qp_calls",         "uncertified",
+        "native"};
+    for (int i = 0; i < 10; ++i) keys[i] = nb::steal(PyUnicode_InternFromString(kKeys[i]));
+    nb::dict tpl;
+    for (int i = 0; i < 9; ++i) tpl[keys[i]] = nb::none();
+    info_template = tpl;
+    stacked.set(P, eq, eq_rows, eq_first, in, in_rows, in_first, n,
+                static_cast<int64_t>(a[0].shape(0)), d);
+  }
+
+  /// The info dict of the last call (NativeHierarchy._info's keys and values, from the bound
+  /// stats / detail: one pass over the stages hard, levels, minimum-norm step).
+  nb::dict info(double kkt_tol) const {
+    if (!bound || !keys[0].is_valid()) throw nb::value_error("info: call set_tasks first");
+    const Arr& st = a[10];
+    const double* d = a[11].data();
+    const int stages = static_cast<int>(st.shape(0)), last = stages - 2;
+    const double* s = st.data();
+    nb::list levels, closed, uncertified;
+    long hits = 0, calls = 0;
+    for (int k = 0; k < stages; ++k) {
+      const double it = s[3 * k], h = s[3 * k + 1], c = s[3 * k + 2];
+      if (k > 0 && k < stages - 1) levels.append(static_cast<long>(it));
+      if (h != 0.0) ++hits;
+      if (c != 0.0 && k > 0 && k <= last) closed.append(k - 1);
+      if (it != 0.0 || h != 0.0) ++calls;
+    }
+    if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
+    // a copy of the template (the keys in order, hashed, room for all: no resize), each
+    // value then replaced in place
+    nb::dict out = nb::steal<nb::dict>(PyDict_Copy(info_template.ptr()));
+    if (!out.is_valid()) throw nb::python_error();
+    const nb::object vals[9] = {keys[9],  // "native"
+                                nb::int_(static_cast<long>(s[0])),
+                                levels,
+                                nb::int_(static_cast<long>(s[3 * (stages - 1)])),
+                                nb::int_(hits),
+                                nb::int_(static_cast<long>(d[7])),
+                                closed,
+                                nb::int_(calls),
+                                uncertified};
+    for (int i = 0; i < 9; ++i)
+      if (PyDict_SetItem(out.ptr(), keys[i].ptr(), vals[i].ptr()) != 0) throw nb::python_error();
+    return out;
+  }
+
+  /// refresh + run + (x copy, res copy, info) in one call; an int status when the solve
+  /// failed, kRefreshInPython when the tasks need the Python refresh (nothing solved).
+  nb::object step(bool warm, double time_left, double kkt_tol) {
+    if (!stacked.bound() || !copy_x.is_valid())
+      throw nb::value_error("step: call set_tasks first");
+    if (!stacked.refresh()) return nb::int_(kRefreshInPython);
+    int code;
+    try {
+      code = run(warm, time_left);
+    } catch (const std::bad_alloc&) {
+      code = static_cast<int>(qpcoord::kBadInput);
+    }
+    if (code) return nb::int_(code);
+    nb::object x = nb::steal(PyObject_CallNoArgs(copy_x.ptr()));
+    if (!x.is_valid()) throw nb::python_error();
+    nb::object r = nb::steal(PyObject_CallNoArgs(copy_res.ptr()));
+    if (!r.is_valid()) throw nb::python_error();
+    return nb::make_tuple(x, r, info(kkt_tol));
+  }
+
+  /// step()'s answer when a task's data is not the common case (see refresh.hpp)
+  static constexpr int kRefreshInPython = -1;
 };
+
+/// Cyclic garbage collection of a Hierarchy that holds its stack's tasks (set_tasks): a task
+/// referring back to the stack that owns the solver makes a cycle through this object.
+int bound_traverse(PyObject* self, visitproc visit, void* arg) {
+  Py_VISIT(Py_TYPE(self));
+  if (!nb::inst_ready(self)) return 0;
+  const Bound* h = nb::inst_ptr<Bound>(self);
+  Py_VISIT(h->copy_x.ptr());
+  Py_VISIT(h->copy_res.ptr());
+  return h->stacked.traverse(visit, arg);
+}
+
+int bound_clear(PyObject* self) {
+  Bound* h = nb::inst_ptr<Bound>(self);
+  h->stacked.clear();
+  h->copy_x.reset();
+  h->copy_res.reset();
+  return 0;
+}
+
+PyType_Slot bound_slots[] = {{Py_tp_traverse, reinterpret_cast<void*>(bound_traverse)},
+                             {Py_tp_clear, reinterpret_cast<void*>(bound_clear)},
+                             {0, nullptr}};
 
 bool dims_ok(const std::array<Arr, 12>& a) {
   static constexpr int kNdim[12] = {2, 1, 2, 1, 1, 1, 1, 1, 1, 1, 2, 1};
@@ -71,9 +201,11 @@ NB_MODULE(_native, m) {
   m.attr("BAD_INPUT") = static_cast<int>(qpcoord::kBadInput);
   m.attr("TIME_LIMIT") = static_cast<int>(qpcoord::kTimeLimit);
   m.attr("CHECK_FAILED") = static_cast<int>(qpcoord::kCheckFailed);
+  m.attr("REFRESH_IN_PYTHON") = Bound::kRefreshInPython;
 
   nb::class_<Bound>(m, "Hierarchy",
-                    "Strict-hierarchy least squares of one stack structure (sizes fixed).")
+                    "Strict-hierarchy least squares of one stack structure (sizes fixed).",
+                    nb::type_slots(bound_slots))
       .def(nb::init<int, std::vector<int>, std::vector<int>, bool, double>(), nb::arg("n"),
            nb::arg("meq"), nb::arg("min"), nb::arg("has_bounds"), nb::arg("damping"))
       .def(
@@ -119,6 +251,21 @@ NB_MODULE(_native, m) {
           },
           nb::arg("warm"), nb::arg("time_left"),
           "solve() on the bound arrays (their current numbers); returns the status code.")
+      .def("set_tasks", &Bound::set_tasks, nb::arg("P"), nb::arg("eq"), nb::arg("eq_rows"),
+           nb::arg("eq_first"), nb::arg("ineq"), nb::arg("in_rows"), nb::arg("in_first"),
+           nb::arg("x"), nb::arg("res"),
+           "After bind(): the compiled stack P, its Equality and Inequality tasks in the "
+           "stacked arrays' order with their row counts and first rows, and the bound x and "
+           "res (their copies are step()'s answer).")
+      .def("step", &Bound::step, nb::arg("warm"), nb::arg("time_left"), nb::arg("kkt_tol"),
+           "The tasks' numbers copied into the bound arrays (as CompiledStack.refresh_stacked),"
+           " run(), and on success (x.copy(), res.copy(), info(kkt_tol)); else the status "
+           "code, REFRESH_IN_PYTHON if a task needs the Python refresh (nothing solved).")
+      .def_prop_ro(
+          "fast_arrays", [](const Bound& h) { return h.stacked.fast(); },
+          "step() reads numpy arrays from their heads (True) or through the buffer protocol.")
+      .def("info", &Bound::info, nb::arg("kkt_tol"),
+           "The last call's info dict (NativeHierarchy._info's), built here.")
       .def_rw("seed_on_miss", &Hierarchy::seed_on_miss,
               "Seed a stage's active set (hard phase, level, minimum-norm step) from its missed stored "
               "working set (True, default) "

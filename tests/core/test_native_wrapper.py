@@ -8,7 +8,12 @@
   afresh, and the native solve equals a fresh Python solve;
 - :meth:`NativeHierarchy._info` keeps the counts it read from ``stats`` with its bytes: every
   call's dict equals the one recomputed from ``stats`` / ``detail`` by the rules of the
-  Python engine, and its lists are new objects each call.
+  Python engine, and its lists are new objects each call;
+- since 2026-11-28 the refresh, the solve, the copies and the info dict are one native call
+  (``Hierarchy.step``, ``src/native/refresh.hpp``): its info equals ``_info``'s, and a task
+  whose data is not float64 of its shape (another dtype, byte order, a broadcast) takes the
+  Python refresh, with the same stacked arrays and solution; strided arrays and ndarray
+  subclasses are copied natively.
 """
 
 from __future__ import annotations
@@ -148,10 +153,11 @@ def test_info_equals_its_definition_with_and_without_the_kept_counts():
         if step % 4 < 2:  # then twice the same stack (the second: the kept counts)
             pos.update(b=2.0 * np.sin(0.7 * step + np.arange(4)))
         key = s._native._stats_key if s._native is not None else None
-        sol = s.solve(engine="native")
+        sol = s.solve(engine="native")  # its info built by the native step (Hierarchy.info)
         nh = s._native
+        py = nh._info()  # the Python reference, with its kept counts
         reused += key == nh._stats_key
-        assert sol.info == _info_reference(nh.stats, nh.detail, 3)
+        assert sol.info == _info_reference(nh.stats, nh.detail, 3) == py
         for old in seen:
             assert sol.info["active_set_iterations"] is not old["active_set_iterations"]
             assert sol.info["closed_form_levels"] is not old["closed_form_levels"]
@@ -178,3 +184,150 @@ def test_the_solution_fields():
     s.solve(engine="native")
     sol.x[0] = 7.0
     assert s.solve(engine="native").x[0] == pytest.approx(x[0])
+
+
+class _Sub(np.ndarray):
+    """An ndarray subclass (read through the buffer protocol by the native refresh)."""
+
+
+def _misaligned(values) -> np.ndarray:
+    """A float64 array whose data is not 8-byte aligned (a view into a byte buffer)."""
+    raw = np.frombuffer(bytearray(8 * len(values) + 1), dtype=np.uint8)[1:]
+    out = raw.view(np.float64)
+    out[:] = values
+    assert not out.flags.aligned
+    return out
+
+
+def _assert_like_fresh(s: qc.Stack, tasks, box) -> None:
+    """The stacked arrays of ``s`` after its last native solve are a fresh compile's (Python
+    refresh), and the solve equals a fresh stack's Python solve."""
+    P = s._compiled
+    fresh = _build(tasks, box)._compiled
+    fresh.refresh_stacked()
+    for name in STACKED:
+        np.testing.assert_array_equal(getattr(P, name), getattr(fresh, name), err_msg=name)
+
+
+@needs_native
+def test_one_native_step_refreshes_without_the_python_refresh(monkeypatch):
+    """Plain tasks (float64 arrays of their shapes, also strided, transposed or an ndarray
+    subclass; weighted rows; a moved box) are refreshed by the native step alone: the
+    Python refresh is never called, and the stacked arrays are a fresh compile's."""
+    rng, tasks, box = _tasks(5)
+    pos, wpos, lim, post, hard = tasks
+    s = _build(tasks, box)
+    s.solve(engine="native")
+    assert s._native._solver.fast_arrays  # numpy arrays read from their heads
+    calls = []
+    P = s._compiled
+    real = P.refresh_stacked
+    monkeypatch.setattr(P, "refresh_stacked", lambda: calls.append(1) or real())
+    n = 7
+    big = rng.standard_normal((6, 2 * n))
+    steps = [
+        lambda: pos.update(b=rng.standard_normal(3)),
+        lambda: setattr(pos, "A", big[::2, ::2]),  # strided (a view of the caller's)
+        lambda: setattr(wpos, "A", np.asfortranarray(rng.standard_normal((2, n)))),
+        lambda: setattr(lim, "C", rng.standard_normal((3, n)).view(_Sub)),  # buffer protocol
+        lambda: setattr(lim, "lower", big[0, :6:2] - 5.0),  # a strided vector
+        lambda: wpos.update(weight=[3.0, 0.25]),
+        lambda: box.update(lower=-0.5 * np.ones(n)),  # a new box version
+        lambda: None,
+    ]
+    for change in steps * 2:
+        change()
+        got = s.solve(engine="native")
+        _assert_like_fresh(s, tasks, box)
+        ref = _build(tasks, box).solve(engine="python")
+        rp, rn = ref.level_residuals, got.level_residuals
+        assert np.all(np.abs(rn - rp) <= 1e-9 * np.maximum(1.0, rp)), (rp, rn)
+    assert calls == []
+
+
+@needs_native
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda t: setattr(t[0], "b", np.array([1, -2, 3])),  # int64: converted by numpy
+        lambda t: setattr(t[0], "A", t[0].A.astype(">f8")),  # another byte order
+        lambda t: setattr(t[2], "upper", np.array([0.4])),  # broadcast to the rows
+        lambda t: setattr(t[2], "C", t[2].C.astype(np.float32)),
+        lambda t: setattr(t[1], "sqrt_weight", np.array([1.5, 0.5], dtype=">f8")),
+        lambda t: setattr(t[0], "b", _misaligned([0.5, -1.0, 2.0])),
+    ],
+)
+def test_data_the_native_step_does_not_copy_take_the_python_refresh(change, monkeypatch):
+    """Another dtype, byte order, a broadcast or unaligned data: the native step hands the
+    refresh to ``refresh_stacked`` (which converts or broadcasts as numpy does), with the
+    same stacked arrays and solution; with the tasks' own arrays back, the native step
+    copies them again."""
+    rng, tasks, box = _tasks(6)
+    s = _build(tasks, box)
+    s.solve(engine="native")
+    calls = []
+    P = s._compiled
+    real = P.refresh_stacked
+    monkeypatch.setattr(P, "refresh_stacked", lambda: calls.append(1) or real())
+    saved = [dict(vars(t)) for t in tasks]
+    change(tasks)
+    got = s.solve(engine="native")
+    assert calls == [1]
+    _assert_like_fresh(s, tasks, box)
+    ref = _build(tasks, box).solve(engine="python")
+    np.testing.assert_allclose(got.level_residuals, ref.level_residuals, rtol=1e-9, atol=1e-12)
+    for t, attrs in zip(tasks, saved, strict=True):
+        vars(t).update(attrs)
+    s.solve(engine="native")
+    assert calls == [1]
+    _assert_like_fresh(s, tasks, box)
+
+
+@needs_native
+def test_a_shape_change_in_place_and_a_nan_behind_a_view_are_still_caught():
+    """A task's array reshaped in place (same memory, another shape) is named as before;
+    a NaN written into a task array's base reaches the native check (``test_hygiene``)."""
+    t = qc.Equality(np.eye(4)[:2], [1.0, 2.0], name="reach")
+    s = qc.Stack([t], bounds=qc.Bounds(-5.0, 5.0))
+    s.solve(engine="native")
+    A = np.array(t.A)
+    t.A = A
+    A.shape = (4, 2)  # the same object, another shape
+    with pytest.raises(ValueError, match=r"Equality 'reach': A changed shape from \(2, 4\)"):
+        s.solve(engine="native")
+    t.A = np.eye(4)[:2].copy()
+    s.solve(engine="native")
+    t.b.base[1] = np.nan
+    with pytest.raises(ValueError, match="reach"):
+        s.solve(engine="native")
+
+
+@needs_native
+def test_the_native_info_equals_the_python_info_when_uncertified():
+    """The ``uncertified`` entry (a level value moved after its freeze): the native dict's
+    tuple and the Python one agree, for the detail the native call wrote."""
+    s = qc.Stack([qc.Equality(np.eye(3), [0.1, 2.0, 0.3])], bounds=qc.Bounds(-1.0, 1.0))
+    s.solve(engine="native")
+    nh = s._native
+    nh.detail[5] = 10 * KKT_TOL  # as a call would write it: level 0 moved by 10 x KKT_TOL
+    nh.detail[6] = 0
+    info = nh._solver.info(KKT_TOL)
+    assert info == nh._info() == _info_reference(nh.stats, nh.detail, 1)
+    assert info["uncertified"] == [(0, 10 * KKT_TOL)]
+
+
+@needs_native
+def test_a_stack_in_a_cycle_through_its_native_solver_is_collected():
+    """The native solver holds the stack's tasks: a task referring back to the stack makes a
+    cycle through it, which the garbage collector must see through (``tp_traverse``)."""
+    import gc
+    import weakref
+
+    t = qc.Equality(np.eye(3), [1.0, 2.0, 3.0], name="reach")
+    s = qc.Stack([t], bounds=qc.Bounds(-5.0, 5.0))
+    s.solve(engine="native")
+    t.owner = s  # the cycle: stack -> solver -> task -> stack
+    alive = weakref.ref(s)
+    del s, t
+    gc.collect()
+    assert alive() is None
