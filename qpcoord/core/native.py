@@ -56,7 +56,7 @@ DEFAULT_ENGINE = "native"
 #: Name of the extension module.
 MODULE = "qpcoord._native"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
-ABI_VERSION = 3
+ABI_VERSION = 4
 
 _INF = float("inf")
 

@@ -24,7 +24,7 @@
 
 namespace qpcoord {
 
-inline constexpr int kAbiVersion = 3;
+inline constexpr int kAbiVersion = 4;
 
 /// The SVD of the closed forms (used when the QR closed form does not apply: damping active
 /// or a rank the QR cannot settle): Eigen's one-sided Jacobi SVD with its QR preconditioner,
