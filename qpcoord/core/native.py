@@ -248,7 +248,10 @@ def variant() -> str | None:
 
 def built_variants() -> tuple[str, ...]:
     """The variants that are built, current and runnable on this CPU, lowest level first
-    (for tests and benchmarks that compare them; :func:`load` picks one of them)."""
+    (for tests and benchmarks that compare them; :func:`load` picks one of them); empty if
+    the native engine is not available."""
+    if not available():
+        return ()
     names = []
     for name in VARIANTS:
         try:
