@@ -12,6 +12,7 @@ other one.
 
 from __future__ import annotations
 
+import functools
 import os
 import platform
 import shutil
@@ -31,6 +32,7 @@ from test_solver_comparison import CASES, build, stack
 
 import qpcoord as qc
 from qpcoord.core import native
+from qpcoord.kinematics import frame_tasks
 from qpcoord.kinematics.frame_tasks import FrameTask
 
 BUILT = native.available()
@@ -42,11 +44,22 @@ needs_native = pytest.mark.skipif(
 X86_64_LINUX = sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64")
 
 
+def _fresh_caches(monkeypatch) -> None:
+    """Fresh copies, for this test, of the caches that keep a function of the module
+    ``load()`` gave first (frame_tasks' rigid-transform checks): the originals, restored
+    after the test, keep the module the rest of the suite uses."""
+    for name in ("_native_rigid", "_native_rigid_copy"):
+        monkeypatch.setattr(
+            frame_tasks, name, functools.cache(getattr(frame_tasks, name).__wrapped__)
+        )
+
+
 @pytest.fixture
 def fresh_load(monkeypatch):
     """``load()`` chooses again (as in a new process), with ``QPCOORD_NATIVE_ISA`` unset."""
     monkeypatch.setattr(native, "_module", None)
     monkeypatch.delenv(native.ISA_ENV, raising=False)
+    _fresh_caches(monkeypatch)
     return monkeypatch
 
 
@@ -54,6 +67,7 @@ def _use(monkeypatch, name: str) -> types.ModuleType:
     """Make ``name`` the build every adapter gets from ``load()`` (for this test)."""
     mod = native.import_variant(name)
     monkeypatch.setattr(native, "_module", mod)
+    _fresh_caches(monkeypatch)
     assert native.variant() == name
     return mod
 
@@ -305,7 +319,8 @@ def test_every_build_gives_the_same_ik_step(monkeypatch, method):
     frame = "panda_hand_tcp"
     runs = {}
     for name in VARIANTS:
-        _use(monkeypatch, name)
+        mod = _use(monkeypatch, name)
+        assert frame_tasks._native_rigid_copy() is mod.spatial_rigid_copy  # set_target's
         q = robot.random_configuration(3)
         target = robot.frame_pose(q, frame).copy()
         target[:3, 3] += [0.05, -0.03, 0.04]
