@@ -1,6 +1,6 @@
 """The ``qpcoord`` console command.
 
-``qpcoord solvers``        installed QP backends, with versions, default first
+``qpcoord solvers``        installed QP backends, with versions, default first; the native build
 ``qpcoord demo``           a small end-to-end stack solve (3R arm tracking a circle)
 ``qpcoord bench stack``    per-step solve-time benchmark of 3-level stacks
 ``qpcoord bench ik``       Panda differential IK, qpcoord vs Pink, per-step times and errors
@@ -28,6 +28,13 @@ def _cmd_solvers(args: argparse.Namespace) -> int:
         path = "direct (dense)" if name in _DIRECT else "qpsolvers"
         mark = "  <- default" if name == default else ""
         print(f"{name:<10} {version:<10} {path}{mark}")
+    from .core import native
+
+    build = native.variant()  # the build load() picks (QPCOORD_NATIVE_ISA overrides)
+    if build is None:
+        print("native engine: not built (the Python engine solves)")
+    else:
+        print(f"native engine: {build} ({native.VARIANTS[build][0]})")
     return 0
 
 

@@ -27,6 +27,7 @@ which engine a :meth:`Stack.solve <qpcoord.Stack.solve>` call uses.
 from __future__ import annotations
 
 import importlib
+import os
 import warnings
 from types import ModuleType
 from typing import NoReturn
@@ -41,8 +42,14 @@ __all__ = [
     "ENGINES",
     "DEFAULT_ENGINE",
     "NativeUnavailableError",
+    "VARIANTS",
+    "ISA_ENV",
     "available",
     "load",
+    "variant",
+    "built_variants",
+    "import_variant",
+    "cpu_level",
     "resolve_engine",
     "NativeHierarchy",
     "raise_status",
@@ -53,8 +60,17 @@ ENGINES = ("native", "python")
 #: What ``engine=None`` means where the native engine applies (method ``"hierarchical"``, no
 #: explicit ``solver``): the native engine where it is built, else Python with one warning.
 DEFAULT_ENGINE = "native"
-#: Name of the extension module.
+#: Name of the extension module (the baseline build: plain x86-64, or another architecture).
 MODULE = "qpcoord._native"
+#: The builds of the extension (the same sources, CMakeLists.txt), lowest level first:
+#: variant name -> (module, the x86-64 ISA level it needs: 1 baseline, 3 AVX2/FMA/BMI2...).
+VARIANTS = {
+    "baseline": (MODULE, 1),
+    "x86-64-v3": ("qpcoord._native_x86_64_v3", 3),
+}
+#: The environment variable that picks a variant (read at the first :func:`load`): one of
+#: :data:`VARIANTS`, or ``auto`` / unset for the highest-level build this CPU supports.
+ISA_ENV = "QPCOORD_NATIVE_ISA"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
 ABI_VERSION = 4
 
@@ -70,14 +86,124 @@ _load_error: str | None = None
 _warned = False
 
 
+def _import_module(name: str) -> ModuleType:
+    """Import one build of the extension by its module name."""
+    return importlib.import_module(name)
+
+
+def _requested() -> str | None:
+    """The variant :data:`ISA_ENV` asks for; ``None`` when unset, empty or ``"auto"``.
+
+    Raises
+    ------
+    ValueError
+        An unknown value (naming the variable and the value).
+    """
+    value = os.environ.get(ISA_ENV, "").strip()
+    if value in ("", "auto"):
+        return None
+    if value not in VARIANTS:
+        raise ValueError(
+            f"{ISA_ENV}={value!r} is not a native engine variant; choose one of "
+            f"{', '.join(VARIANTS)} or auto (or leave it unset)"
+        )
+    return value
+
+
+def cpu_level() -> int:
+    """The highest x86-64 ISA level (1 = baseline, 2, 3, 4) the running CPU and OS support,
+    as the baseline build measures it (CPUID and XGETBV, ``src/native/cpu_isa.hpp``); 1 off
+    x86-64.
+
+    Raises
+    ------
+    NativeUnavailableError
+        The baseline build is missing or cannot be loaded.
+    """
+    try:
+        base = _import_module(MODULE)
+    except ImportError as exc:
+        raise NativeUnavailableError(f"the native engine ({MODULE}) is not built ({exc})") from exc
+    level = getattr(base, "x86_64_level", None)
+    return int(level()) if level is not None else 1  # a build without the check: baseline
+
+
+def _checked_variant(name: str) -> ModuleType:
+    """The module of variant ``name`` after the CPU check; :class:`NativeUnavailableError`
+    if it is not built, cannot be loaded or is stale (another interface or ISA)."""
+    level = cpu_level()
+    if VARIANTS[name][1] > level:
+        raise ValueError(
+            f"the native engine variant {name!r} needs x86-64 level {VARIANTS[name][1]}, this "
+            f"CPU and OS support level {level}: it would stop the process on an illegal "
+            f"instruction; use {ISA_ENV}=baseline or auto"
+        )
+    module = VARIANTS[name][0]
+    try:
+        mod = _import_module(module)
+    except ImportError as exc:
+        raise NativeUnavailableError(f"{module} is not built or cannot be loaded ({exc})") from exc
+    abi, isa = getattr(mod, "ABI_VERSION", None), getattr(mod, "ISA", "baseline")
+    if abi != ABI_VERSION or isa != name:
+        raise NativeUnavailableError(
+            f"{module} is stale (interface {abi}, ISA {isa!r}; this qpcoord needs interface "
+            f"{ABI_VERSION}, ISA {name!r}): rebuild it (pip install -e .)"
+        )
+    return mod
+
+
 def _import() -> ModuleType:
-    """Import the extension (a separate function so that tests can simulate its absence)."""
-    return importlib.import_module(MODULE)
+    """Import the extension: the variant :data:`ISA_ENV` names, else the best built variant
+    the CPU supports, else the baseline (a separate function so that tests can simulate the
+    extension's absence).
+
+    A variant that is not built or is stale falls back to the baseline, silently unless
+    :data:`ISA_ENV` asked for it (then one ``RuntimeWarning``).
+
+    Raises
+    ------
+    ImportError
+        The baseline build is missing or cannot be loaded.
+    ValueError
+        :data:`ISA_ENV` holds an unknown value, or names a variant this CPU cannot run.
+    """
+    requested = _requested()
+    base = _import_module(MODULE)
+    if requested == "baseline":
+        return base
+    level = cpu_level()
+    if requested is None:
+        candidates = [v for v, (_, need) in VARIANTS.items() if 1 < need <= level]
+        candidates.reverse()  # the highest level first
+    else:
+        candidates = [requested]
+    for name in candidates:
+        try:
+            return _checked_variant(name)
+        except NativeUnavailableError as exc:
+            if requested is not None:
+                warnings.warn(
+                    f"{ISA_ENV}={requested}: {exc}; using the baseline build ({MODULE})",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+    return base
 
 
 def load() -> ModuleType:
     """The extension module; :class:`NativeUnavailableError` (an ``ImportError``) if it is
-    not built (no C++ compiler or Eigen at install time) or cannot be loaded."""
+    not built (no C++ compiler or Eigen at install time) or cannot be loaded.
+
+    The first call chooses the build (:func:`variant`): ``QPCOORD_NATIVE_ISA``
+    (:data:`ISA_ENV`) if set, else the highest-level build the running CPU supports.
+
+    Raises
+    ------
+    NativeUnavailableError
+        No usable build.
+    ValueError
+        ``QPCOORD_NATIVE_ISA`` holds an unknown value or a variant this CPU cannot run.
+    """
     global _module, _load_error
     if _module is not None:
         return _module
@@ -109,6 +235,58 @@ def available() -> bool:
     except NativeUnavailableError:
         return False
     return True
+
+
+def variant() -> str | None:
+    """The build of the native engine in use: ``"baseline"`` (``qpcoord._native``, plain
+    x86-64 or another architecture) or ``"x86-64-v3"`` (``qpcoord._native_x86_64_v3``: AVX2,
+    FMA, BMI2); ``None`` if the native engine is not available. Loads the engine."""
+    if not available():
+        return None
+    return str(getattr(_module, "ISA", "baseline"))
+
+
+def built_variants() -> tuple[str, ...]:
+    """The variants that are built, current and runnable on this CPU, lowest level first
+    (for tests and benchmarks that compare them; :func:`load` picks one of them); empty if
+    the native engine is not available."""
+    if not available():
+        return ()
+    names = []
+    for name in VARIANTS:
+        try:
+            import_variant(name)
+        except (NativeUnavailableError, ValueError):
+            continue
+        names.append(name)
+    return tuple(names)
+
+
+def import_variant(name: str) -> ModuleType:
+    """The module of one variant of :data:`VARIANTS`, whatever :func:`load` chose (to
+    compare the builds in one process: the adapters take the module from :func:`load`, so a
+    test swaps ``_module``).
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a variant, or this CPU cannot run it.
+    NativeUnavailableError
+        It is not built, cannot be loaded or is stale.
+    """
+    if name not in VARIANTS:
+        raise ValueError(
+            f"name={name!r} is not a native engine variant; choose one of {', '.join(VARIANTS)}"
+        )
+    if name == "baseline":
+        try:
+            mod = _import_module(MODULE)
+        except ImportError as exc:
+            raise NativeUnavailableError(f"{MODULE} is not built ({exc})") from exc
+        if getattr(mod, "ABI_VERSION", None) != ABI_VERSION:
+            raise NativeUnavailableError(f"{MODULE} is stale: rebuild it (pip install -e .)")
+        return mod
+    return _checked_variant(name)
 
 
 def resolve_engine(engine: str | None, method: str, solver: str | None) -> str:

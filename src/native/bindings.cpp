@@ -6,6 +6,7 @@
 
 #include <array>
 
+#include "cpu_isa.hpp"
 #include "hierarchy.hpp"
 #include "refresh.hpp"
 #include "weighted.hpp"
@@ -190,9 +191,22 @@ bool dims_ok(const std::array<Arr, 12>& a) {
 
 }  // namespace
 
-NB_MODULE(_native, m) {
+// One source, several modules (CMakeLists.txt): qpcoord._native for baseline x86-64 and, where
+// the compiler takes -march=x86-64-v3, qpcoord._native_x86_64_v3; ISA names the build's level.
+#ifndef QPCOORD_NATIVE_MODULE
+#define QPCOORD_NATIVE_MODULE _native
+#endif
+#ifndef QPCOORD_NATIVE_ISA
+#define QPCOORD_NATIVE_ISA "baseline"
+#endif
+
+NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
   m.doc() = "qpcoord's native strict-hierarchy engine (C++17, Eigen); use qpcoord.core.native";
   m.attr("ABI_VERSION") = qpcoord::kAbiVersion;
+  m.attr("ISA") = QPCOORD_NATIVE_ISA;
+  m.def("x86_64_level", &qpcoord::x86_64_level,
+        "The highest x86-64 ISA level (1 = baseline, 2, 3, 4) the running CPU and OS support "
+        "(CPUID and XGETBV; 1 off x86-64).");
   m.attr("OK") = static_cast<int>(qpcoord::kOk);
   m.attr("INFEASIBLE_EQ") = static_cast<int>(qpcoord::kInfeasibleEq);
   m.attr("INFEASIBLE_HARD") = static_cast<int>(qpcoord::kInfeasibleHard);

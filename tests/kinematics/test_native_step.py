@@ -952,10 +952,11 @@ void* realloc(void* p, size_t s) {
 """
 
 
-def run_counting_malloc(tmp_path: Path, script: str) -> str:
+def run_counting_malloc(tmp_path: Path, script: str, env: dict | None = None) -> str:
     """Run ``script`` (a template with ``{tests}``: this folder, ``{lib}``: the shim, whose
     ``qpcoord_malloc_calls()`` counts malloc/realloc calls) in a fresh Python with the
-    counting shim preloaded; its stdout. Skips without a C compiler or glibc."""
+    counting shim preloaded and ``env`` added to the environment; its stdout. Skips without
+    a C compiler or glibc."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None or not sys.platform.startswith("linux"):
         pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
@@ -966,7 +967,7 @@ def run_counting_malloc(tmp_path: Path, script: str) -> str:
         [sys.executable, "-c", script.format(tests=str(Path(__file__).parent), lib=str(lib))],
         capture_output=True,
         text=True,
-        env={**os.environ, "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
+        env={**os.environ, **(env or {}), "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -976,11 +977,13 @@ def run_counting_malloc(tmp_path: Path, script: str) -> str:
 _ALLOCATION_RUN = r"""
 import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
+from qpcoord.core import native
 sys.path.insert(0, {tests!r})
 from test_native_step import _kind_levels, _start, DT
 count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
 count.restype = ctypes.c_longlong
 robot = qc.robots.load("panda")
+print("variant", native.variant())
 for kind, method in [(k, m) for m in ("hierarchical", "weighted")
                      for k in ("position", "frame_position", "pose", "orientation", "com")]:
     q = _start(robot)
@@ -1000,12 +1003,15 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
 
 
 @needs_native
-def test_the_native_call_does_not_allocate(tmp_path):
+@pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
+def test_the_native_call_does_not_allocate(tmp_path, build):
     """The per-step native call (kernels, box, hierarchy or weighted QP, q_next) on the Panda
     makes no heap allocation after its first calls: malloc is counted by a preloaded shim
-    (glibc)."""
-    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN)
+    (glibc). Each build of the extension (baseline, x86-64-v3), chosen by
+    QPCOORD_NATIVE_ISA."""
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
+    assert counts.pop("variant") == build
     assert len(counts) == 10
     assert all(int(c) == 0 for c in counts.values()), counts
 

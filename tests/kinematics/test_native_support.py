@@ -10,6 +10,7 @@ import pytest
 from test_native_step import needs_native, run_counting_malloc
 
 import qpcoord as qc
+from qpcoord.core import native
 from qpcoord.kinematics.frame_tasks import ComBand, SupportPolygon
 from qpcoord.kinematics.native_step import native_kind
 from qpcoord.robots import absolute_angle_map, planar_chain
@@ -422,6 +423,7 @@ from test_native_support import _talos_stack, DT
 count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
 count.restype = ctypes.c_longlong
 robot = qc.robots.load("talos")
+print("variant", qc.core.native.variant())
 q = robot.reference_configuration("half_sitting")
 levels, polygon, band = _talos_stack(robot, q)
 q = robot.integrate(q, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
@@ -441,11 +443,12 @@ for name, stack in (("bands", [[polygon, band]]), ("whole", levels)):
 
 
 @needs_native
-def test_the_native_band_kernels_do_not_allocate(tmp_path, talos):
+@pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
+def test_the_native_band_kernels_do_not_allocate(tmp_path, talos, build):
     """The native call with both band kernels (and the robot's limit box) makes no heap
     allocation on Talos, alone and in the whole Talos stack (feet, polygon and band, hand,
     posture: the hierarchy's equality levels made 3 mallocs per call before their buffers
-    were made fixed-size)."""
-    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN)
+    were made fixed-size). Each build of the extension, chosen by QPCOORD_NATIVE_ISA."""
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
-    assert counts == {"bands": "0", "whole": "0"}, out
+    assert counts == {"variant": build, "bands": "0", "whole": "0"}, out

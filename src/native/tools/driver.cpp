@@ -8,6 +8,11 @@
 //       src/native/hierarchy.cpp -o /tmp/driver
 //   /tmp/driver FILE.bin [repeats] [cold|warm] [XOUT.bin]
 //
+// The x86-64-v3 build (qpcoord._native_x86_64_v3, which the loader picks on an AVX2/FMA CPU):
+// the same command with -march=x86-64-v3 (e.g. -o /tmp/driver_v3); compare the two binaries
+// alternated on the same files (the v3 build's FMA rounds otherwise: x equal to ~1e-12, not
+// bit for bit). valgrind's callgrind runs both (it emulates AVX2 and FMA, not AVX-512).
+//
 // QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
