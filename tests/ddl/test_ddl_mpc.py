@@ -100,14 +100,8 @@ def _cvxpy_weighted(mpc):
     return x.value
 
 
-@pytest.mark.parametrize("solver", qc.available_solvers())
-def test_every_backend_solves_the_mpc_qp_alike(solver):
-    """The same weighted MPC QP by every backend, against the persistent daqp answer.
-
-    The QP is ill-conditioned (cond(H) ≈ 1.5e9: the effort level weighs 1e-6), so ``x`` is
-    loosely determined along cheap directions; the cost is compared. The general path opens
-    its rows by 1e-6 and may beat the exact optimum by that much (measured 5e-9 of 2.9e-5).
-    """
+def _mpc_after_a_step_move() -> MPC:
+    """An MPC six steps into a 0.2 µm step move, its last step's QP in the stack's tasks."""
     plant = ddl.DualStage()
     y = plant.reset(FS)
     mpc = MPC()
@@ -117,6 +111,18 @@ def test_every_backend_solves_the_mpc_qp_alike(solver):
         y = plant.step(*mpc.step(y, r))
     mpc.step(y, r)
     mpc.sync_tasks()  # the last step's QP into the stack's tasks
+    return mpc
+
+
+@pytest.mark.parametrize("solver", qc.available_solvers())
+def test_every_backend_solves_the_mpc_qp_alike(solver):
+    """The same weighted MPC QP by every backend, against the persistent daqp answer.
+
+    The QP is ill-conditioned (cond(H) ≈ 1.5e9: the effort level weighs 1e-6), so ``x`` is
+    loosely determined along cheap directions; the cost is compared. The general path opens
+    its rows by 1e-6 and may beat the exact optimum by that much (measured 5e-9 of 2.9e-5).
+    """
+    mpc = _mpc_after_a_step_move()
     ref = mpc._pq.solve().x  # the QP of the last step, solved again
     sol = mpc.stack.solve(method="weighted", solver=solver)
     j_ref, j = _weighted_cost(mpc, ref), _weighted_cost(mpc, sol.x)
@@ -203,15 +209,7 @@ def test_the_python_weighted_qp_matches_the_native_one_on_the_mpc(solver):
     (7.9e-4 and a cost 1.1e-3 higher when it was given the whitened rows)."""
     if solver not in qc.available_solvers():
         pytest.skip(f"{solver} not installed")
-    plant = ddl.DualStage()
-    y = plant.reset(FS)
-    mpc = MPC()
-    mpc.reset(plant, FS, y, y)
-    r = y + 2e-7
-    for _ in range(5):
-        y = plant.step(*mpc.step(y, r))
-    mpc.step(y, r)
-    mpc.sync_tasks()
+    mpc = _mpc_after_a_step_move()
     native = mpc.stack.solve(method="weighted", engine="native")
     sol = mpc.stack.solve(method="weighted", solver=solver)
     assert sol.info["qp_calls"] > 0  # the constrained QP, not the closed form
