@@ -331,7 +331,7 @@ WRAPPER_PARTS = (
     "Python path: refresh_stacked",
     "Python path: native call (Hierarchy.run)",
     "Python path: x, res copies",
-    "Python path: info dict (NativeHierarchy._info)",
+    "Python path: info dict (Hierarchy.info)",
     "Python path: sum (without resolve_engine, Solution)",
 )
 
@@ -364,7 +364,7 @@ def wrapper(name, build, steps):
             t2 = pc()
             x, res = nat.x.copy(), nat.res.copy()
             t3 = pc()
-            nat._info()
+            nat._solver.info(KKT_TOL)
             t4 = pc()
             if code:
                 raise RuntimeError(f"{name}: native call, status {code}")

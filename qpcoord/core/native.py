@@ -361,10 +361,6 @@ class NativeHierarchy:
         Relative damping threshold (see :mod:`qpcoord.core.linalg`).
     """
 
-    #: the bytes of ``stats`` that ``_counts`` were read from (see :meth:`_info`)
-    _stats_key = b""
-    _counts: tuple = ()
-
     def __init__(self, P: CompiledStack, damping: float) -> None:
         mod = load()
         blocks = [P.hard, *P.levels]
@@ -388,7 +384,6 @@ class NativeHierarchy:
         self._run = self._solver.run
         self._step = self._solver.step
         self._P = P
-        self._levels = len(P.levels)
         self._mod = mod
         self._solved = False
 
@@ -451,54 +446,6 @@ class NativeHierarchy:
             self._raise(code, P)
         self._solved = True
         return self.x.copy(), self.res.copy(), self._solver.info(KKT_TOL)
-
-    def _info(self) -> dict:
-        """The info dict of the last call, from ``stats`` (per stage: iterations, warm hit,
-        closed form) and ``detail`` (the Python reference of the native ``Hierarchy.info``
-        that :meth:`solve` returns; tests compare the IK step's with it). The counts read
-        from ``stats`` are kept with its bytes:
-        a warm re-solve whose stages did what they did at the previous call (the common
-        case of a control loop) skips the pass over them; each call returns new lists."""
-        key = self.stats.tobytes()
-        if key != self._stats_key:
-            self._stats_key = key
-            self._counts = self._count_stages()
-        its, hits, closed, qp_calls = self._counts
-        d = self.detail.tolist()
-        dev = d[5]
-        return {
-            "engine": "native",
-            "hard_iterations": its[0],
-            "active_set_iterations": its[1:-1],
-            "min_norm_iterations": its[-1],
-            "warm_start_hits": hits,
-            "warm_start_seeded": int(d[7]),
-            "closed_form_levels": closed[:],
-            "qp_calls": qp_calls,
-            "uncertified": [(int(d[6]), dev)] if dev > KKT_TOL else [],
-        }
-
-    def _count_stages(self) -> tuple[list[int], int, list[int], int]:
-        """``(iterations per stage, warm hits, closed-form levels, QP calls)`` from
-        ``stats``: one pass over the stages' rows as Python floats."""
-        its = []
-        hits = qp_calls = 0
-        closed = []
-        k = -1  # stage index - 1: the levels are 0..L-1
-        last = self._levels
-        for it, hit, cf in self.stats.tolist():
-            its.append(int(it))
-            if hit:
-                hits += 1
-            # as the Python engine's count of QP calls: the stages (hard phase, levels,
-            # minimum-norm step) that needed the active set (its iterations or a stored
-            # working set) rather than a closed form
-            if it or hit:
-                qp_calls += 1
-            if cf and 0 <= k < last:
-                closed.append(k)
-            k += 1
-        return its, hits, closed, qp_calls
 
     def _raise(self, code: int, P: CompiledStack) -> None:
         k = int(self.detail[2])

@@ -196,7 +196,6 @@ class NativeIKStep(NativeHierarchy):
         self._solved = False
         self.x = np.zeros(P.n)
         self.res = np.zeros(len(P.levels))
-        self._levels = len(P.levels)  # NativeHierarchy._info: the Python reference of info
         self.stats = np.zeros((len(P.levels) + 2, 3))
         self.detail = np.zeros(8)
         self._model, self._data = robot.model, robot.data
@@ -375,7 +374,7 @@ class NativeIKStep(NativeHierarchy):
             self._solved = False
             self._fail(code, q, t, reference)
         self._solved = True
-        info = self._solver.info(KKT_TOL)  # the dict of _info, built in C++
+        info = self._solver.info(KKT_TOL)  # built in C++ (Hierarchy.info)
         status = "optimal"
         bad = info["uncertified"]
         if bad:

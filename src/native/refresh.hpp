@@ -195,12 +195,9 @@ class Stacked {
       if (!A.is_valid() || !b.is_valid() || !unit.is_valid()) return false;
       const In a(A.ptr(), 2, m, n, fast_), v(b.ptr(), 1, m, 1, fast_);
       if (!a.ok || !v.ok) return false;
-      if (unit.ptr() == Py_True) {
-        copy_rows(a, nullptr, 0, m, n, d_.Aeq + i * n);
-        copy_rows(v, nullptr, 0, m, 1, d_.beq + i);
-        continue;
-      }
-      const int truth = PyObject_IsTrue(unit.ptr());
+      const int truth = unit.ptr() == Py_True    ? 1
+                        : unit.ptr() == Py_False ? 0
+                                                 : PyObject_IsTrue(unit.ptr());
       if (truth < 0) {
         PyErr_Clear();
         return false;

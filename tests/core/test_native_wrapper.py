@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from native_info import info_reference
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -118,28 +119,10 @@ def test_a_matrix_replaced_behind_the_stacks_back_is_still_read():
         s.solve(engine="native")
 
 
-def _info_reference(stats: np.ndarray, detail: np.ndarray, levels: int) -> dict:
-    """The info dict by its definition (the Python engine's counts), from the arrays."""
-    its = [int(v) for v in stats[:, 0]]
-    stages = range(stats.shape[0])
-    dev = float(detail[5])
-    return {
-        "engine": "native",
-        "hard_iterations": its[0],
-        "active_set_iterations": its[1:-1],
-        "min_norm_iterations": its[-1],
-        "warm_start_hits": int(np.count_nonzero(stats[:, 1])),
-        "warm_start_seeded": int(detail[7]),
-        "closed_form_levels": [k - 1 for k in stages if stats[k, 2] and 1 <= k <= levels],
-        "qp_calls": sum(1 for k in stages if stats[k, 0] or stats[k, 1]),
-        "uncertified": [(int(detail[6]), dev)] if dev > KKT_TOL else [],
-    }
-
-
 @needs_native
-def test_info_equals_its_definition_with_and_without_the_kept_counts():
-    """Moving targets (stages that change what they do) and unchanged re-solves (the kept
-    counts reused): each info is the one recomputed from the arrays, in new lists."""
+def test_info_equals_its_definition_on_moving_and_unchanged_steps():
+    """Moving targets (stages that change what they do) and unchanged re-solves: each info
+    is the one recomputed from the arrays, in new lists."""
     rng = np.random.default_rng(7)
     n = 12
     A = rng.standard_normal((4, n))
@@ -148,23 +131,18 @@ def test_info_equals_its_definition_with_and_without_the_kept_counts():
     post = qc.Equality(np.eye(n), np.zeros(n))
     s = qc.Stack([pos, lim, post], bounds=qc.Bounds(-0.3 * np.ones(n), 0.3 * np.ones(n)))
     seen = []
-    reused = 0
     for step in range(24):
         if step % 4 < 2:  # then twice the same stack (the second: the kept counts)
             pos.update(b=2.0 * np.sin(0.7 * step + np.arange(4)))
-        key = s._native._stats_key if s._native is not None else None
         sol = s.solve(engine="native")  # its info built by the native step (Hierarchy.info)
         nh = s._native
-        py = nh._info()  # the Python reference, with its kept counts
-        reused += key == nh._stats_key
-        assert sol.info == _info_reference(nh.stats, nh.detail, 3) == py
+        assert sol.info == info_reference(nh.stats, nh.detail, 3)
         for old in seen:
             assert sol.info["active_set_iterations"] is not old["active_set_iterations"]
             assert sol.info["closed_form_levels"] is not old["closed_form_levels"]
         sol.info["active_set_iterations"].append(-1)  # a caller's edit stays its own
         sol.info["closed_form_levels"].append(-1)
         seen.append(sol.info)
-    assert reused >= 4  # the unchanged re-solves did reuse the counts
     assert len({tuple(i["active_set_iterations"][:-1]) for i in seen}) > 1  # and it moved
 
 
@@ -177,7 +155,7 @@ def test_the_solution_fields():
     np.testing.assert_allclose(sol.x, [0.1, 1.0, 0.3], atol=1e-12)
     assert sol.status == "optimal" and sol.solver == "native" and sol.method == "hierarchical"
     np.testing.assert_allclose(sol.level_residuals, [1.0], rtol=1e-12)
-    assert np.isfinite(sol.solve_time) and sol.solve_time > 0.0  # seconds (no wall bound)
+    assert np.isfinite(sol.solve_time) and sol.solve_time >= 0.0  # s: a duration, no bound
     assert sol.info["engine"] == "native" and sol.info["uncertified"] == []
     # the returned arrays are the caller's: the next solve does not write into them
     x = sol.x.copy()
@@ -312,7 +290,7 @@ def test_the_native_info_equals_the_python_info_when_uncertified():
     nh.detail[5] = 10 * KKT_TOL  # as a call would write it: level 0 moved by 10 x KKT_TOL
     nh.detail[6] = 0
     info = nh._solver.info(KKT_TOL)
-    assert info == nh._info() == _info_reference(nh.stats, nh.detail, 1)
+    assert info == info_reference(nh.stats, nh.detail, 1)
     assert info["uncertified"] == [(0, 10 * KKT_TOL)]
 
 
