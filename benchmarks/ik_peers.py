@@ -70,6 +70,7 @@ import logging
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -330,11 +331,14 @@ class PlacoLoop:
         from qpcoord.robots.external import example_robot_data_package_dir
 
         env["ROS_PACKAGE_PATH"] = str(example_robot_data_package_dir())
+        # stderr to a file, not a pipe: nobody reads it while the steps run, and a pipe
+        # the child fills (PlaCo's or Pinocchio's warnings) would block it for good
+        self._err = tempfile.TemporaryFile(mode="w+")
         self.proc = subprocess.Popen(
             [str(python), str(HERE / "placo_side.py")],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
+            stderr=self._err,
             text=True,
             env=env,
         )
@@ -342,8 +346,7 @@ class PlacoLoop:
         self.proc.stdin.flush()
         line = self.proc.stdout.readline()
         if not line:
-            err = self.proc.stderr.read().strip().splitlines()
-            raise RuntimeError(f"placo_side.py failed: {err[-1] if err else 'no output'}")
+            raise RuntimeError(f"placo_side.py failed: {self._last_error()}")
         hello = json.loads(line)
         self.version = hello["placo"]
         index = {n: i for i, n in enumerate(hello["joints"])}
@@ -357,21 +360,30 @@ class PlacoLoop:
         self.proc.stdin.flush()
         return self._answer()
 
+    def _last_error(self) -> str:
+        """The child's last stderr line (after it died), or ``"no output"``."""
+        self.proc.wait(timeout=10)
+        self._err.seek(0)
+        err = self._err.read().strip().splitlines()
+        return err[-1] if err else "no output"
+
     def _answer(self) -> float:
         """Read one step's answer: its time (s); ``self.q`` becomes its configuration."""
         line = self.proc.stdout.readline()
         if not line:
-            err = self.proc.stderr.read().strip().splitlines()
-            raise RuntimeError(f"placo_side.py died: {err[-1] if err else 'no output'}")
+            raise RuntimeError(f"placo_side.py died: {self._last_error()}")
         ans = json.loads(line)
         q = np.array(ans["q"])
         self.q = np.concatenate([q[:7], q[self.order]]) if self.free else q[self.order]
         return ans["t"]
 
     def request_all(self, steps: int) -> None:
-        """Ask for every step at once (back to back: the subprocess never waits on the pipe
-        between steps); then each :meth:`_answer` reads the next step's result."""
-        self.proc.stdin.write("".join(json.dumps({"k": k}) + "\n" for k in range(steps)))
+        """Ask for steps ``0 … steps−1`` back to back, in one request (the subprocess never
+        waits on the pipe between steps); then each :meth:`_answer` reads the next step's
+        result. (One request line per step, written at once, hung from ~5 000 steps on:
+        once they pass the pipe's 64 KiB the write blocks while the subprocess blocks on its
+        full stdout, which nobody reads until the write returns.)"""
+        self.proc.stdin.write(json.dumps({"run": steps}) + "\n")
         self.proc.stdin.flush()
 
     def close(self) -> None:
@@ -379,6 +391,7 @@ class PlacoLoop:
             self.proc.stdin.write("\n")
             self.proc.stdin.flush()
             self.proc.wait(timeout=10)
+        self._err.close()
 
 
 def _row(name: str, loop, meter: Meter, ts: np.ndarray, mode: str) -> dict:

@@ -102,16 +102,24 @@ def main() -> int:
         return (list(robot.state.q[:7]) if free else []) + joints
 
     _send({"ready": True, "joints": names, "placo": getattr(placo, "__version__", "?")})
-    for line in sys.stdin:
-        if not line.strip():
-            break
-        k = json.loads(line)["k"]
+
+    def step(k: int) -> None:
         t0 = time.perf_counter()
         set_target(k)
         solver.solve(True)
         robot.update_kinematics()
         t = time.perf_counter() - t0
         _send({"t": t, "q": q_out()})
+
+    for line in sys.stdin:
+        if not line.strip():
+            break
+        msg = json.loads(line)
+        if "run" in msg:  # back to back: steps 0 … run−1 with no request between them
+            for k in range(msg["run"]):
+                step(k)
+        else:
+            step(msg["k"])
     return 0
 
 

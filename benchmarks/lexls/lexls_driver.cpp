@@ -1,6 +1,7 @@
 // LexLS (jrl-umi3218/lexls, C++, header-only, BSD-2) on the problems dumped for the native
-// engine's driver (src/native/tools/dump_problems.py): issue 24's moonshot peer, run on this
-// machine rather than quoted from its paper. Not built by pip or CI: LexLS is not on PyPI.
+// engine's driver (src/native/tools/dump_problems.py; read by src/native/tools/dump_file.hpp,
+// the driver's reader too): issue 24's moonshot peer, run on this machine rather than quoted
+// from its paper. Not built by pip or CI: LexLS is not on PyPI.
 //
 //   git clone https://github.com/jrl-umi3218/lexls /tmp/lexls   (only include/ is needed)
 //   g++ -O2 -std=c++17 -DNDEBUG -I<eigen3> -I/tmp/lexls/include \
@@ -27,6 +28,8 @@
 
 #include <lexls/lexlsi.h>
 
+#include "../../src/native/tools/dump_file.hpp"
+
 using LexLS::Index;
 using Mat = Eigen::MatrixXd;
 using Vec = Eigen::VectorXd;
@@ -40,28 +43,12 @@ int main(int argc, char** argv) {
   const int repeats = argc > 2 ? std::atoi(argv[2]) : 10;
   const bool cold = argc > 3 && argv[3][0] == 'c';
   std::FILE* xout = argc > 4 ? std::fopen(argv[4], "wb") : nullptr;
-  std::ifstream f(argv[1], std::ios::binary);
-  auto rd_i = [&]() {
-    long long v;
-    f.read(reinterpret_cast<char*>(&v), 8);
-    return static_cast<int>(v);
-  };
-  const int n = rd_i(), blocks = rd_i();
-  const bool has_bounds = rd_i() != 0;
-  double damping;
-  f.read(reinterpret_cast<char*>(&damping), 8);
-  const int steps = rd_i();
-  std::vector<int> meq(blocks), min(blocks);
-  int me = 0, mi = 0;
-  for (auto& v : meq) me += (v = rd_i());
-  for (auto& v : min) mi += (v = rd_i());
-  const size_t per = size_t(me) * n + me + size_t(mi) * n + 3 * mi + 2 * n;
-  std::vector<double> data(per * steps);
-  f.read(reinterpret_cast<char*>(data.data()), std::streamsize(data.size() * 8));
-  if (!f) {
-    std::fprintf(stderr, "short file\n");
-    return 2;
-  }
+  qpcoord::tools::DumpFile dump;  // the reader of src/native/tools/driver.cpp too
+  if (!dump.read(argv[1])) return 2;
+  const int n = dump.n, blocks = dump.blocks, steps = dump.steps;
+  const bool has_bounds = dump.has_bounds;
+  const std::vector<int>& meq = dump.meq;
+  const std::vector<int>& min = dump.min;
   // objectives: [simple bounds], then every non-empty block
   std::vector<Index> dims;
   std::vector<LexLS::ObjectiveType> types;
@@ -95,18 +82,12 @@ int main(int argc, char** argv) {
   const double big = 1e30;
   for (int rep = 0; rep < repeats; ++rep) {
     for (int s = 0; s < steps; ++s) {
-      const double* base = data.data() + per * s;
+      const qpcoord::tools::DumpStep ds = dump.step(s);
       const auto t0 = std::chrono::steady_clock::now();
       solver.reset();
-      // offsets of the stacked arrays: Aeq, beq, C, lo, hi, sw, lb, ub
-      const double* Aeq = base;
-      const double* beq = Aeq + size_t(me) * n;
-      const double* C = beq + me;
-      const double* lo = C + size_t(mi) * n;
-      const double* hi = lo + mi;
-      const double* sw = hi + mi;
-      const double* lb = sw + mi;
-      const double* ub = lb + n;
+      // the stacked arrays: Aeq, beq, C, lo, hi, sw, lb, ub
+      const double *Aeq = ds.Aeq, *beq = ds.beq, *C = ds.C, *lo = ds.lo, *hi = ds.hi, *sw = ds.sw;
+      const double *lb = ds.lb, *ub = ds.ub;
       Index k = 0;
       if (has_bounds) {
         Mat& d = obj_data[0];

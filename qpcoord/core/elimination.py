@@ -53,6 +53,19 @@ FALLBACKS = ("quadprog", "daqp", "proxqp", "clarabel")
 WHITENED = frozenset({"daqp", "quadprog"})
 
 
+def whiten_rows(G: np.ndarray, T: np.ndarray, r: int) -> np.ndarray:
+    """Rows of a QP in ``z`` written in ``u = T z``: ``G[:, :r] ← G[:, :r] T⁻¹``, in place.
+
+    ``T`` (``r × r``) is upper triangular and non-singular; the columns after ``r`` (slacks)
+    are unchanged. ``G[:, :r] T⁻¹ = (T⁻ᵀ G[:, :r]ᵀ)ᵀ``: one triangular solve, no inverse
+    formed. Used by :meth:`Reduced.solve_qp` (``T=``) and the persistent daqp workspace
+    (:class:`qpcoord.core.persistent.PersistentQP`). Returns ``G``.
+    """
+    if G.shape[0]:
+        G[:, :r] = solve_triangular(T, G[:, :r].T, trans="T", lower=False).T
+    return G
+
+
 def _miss(G, lo, hi, lb, ub, y) -> float:
     """Largest relative violation ``(row − bound)/max(1, |bound|)`` of a QP point
     (``inf`` for a non-finite point; infinite bounds never count)."""
@@ -302,9 +315,7 @@ class Reduced:
             else:
                 G = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
             if T is not None and G.shape[0]:
-                # G[:, :r] T⁻¹ = (T⁻ᵀ G[:, :r]ᵀ)ᵀ: one triangular solve, no inverse formed
-                G = G.copy() if len(blocks) == 1 else G
-                G[:, :r] = solve_triangular(T, G[:, :r].T, trans="T", lower=False).T
+                G = whiten_rows(G.copy() if len(blocks) == 1 else G, T, r)
             self._asm = (kdim, D, k, self.Z, T, G)
         los, his = [], []
         if D is not None and D.shape[0]:

@@ -95,10 +95,11 @@ class NativeWeighted:
     """The native weighted QP of one compiled stack: structure and buffers built once.
 
     Bound once to the compiled stack's stacked arrays (as
-    :class:`~qpcoord.core.native.NativeHierarchy`; :meth:`CompiledStack.refresh_stacked
-    <qpcoord.core.compile.CompiledStack.refresh_stacked>` writes the tasks' numbers into them)
-    or to arrays of the caller's (``arrays``: ``PersistentQP`` keeps its own), and to its own
-    outputs.
+    :class:`~qpcoord.core.native.NativeHierarchy`: :meth:`solve` copies the tasks' numbers
+    into them natively, ``src/native/refresh.hpp``, and calls
+    :meth:`CompiledStack.refresh_stacked <qpcoord.core.compile.CompiledStack.refresh_stacked>`
+    only for data that copy does not take) or to arrays of the caller's (``arrays``:
+    ``PersistentQP`` keeps its own and fills them), and to its own outputs.
 
     Parameters
     ----------
@@ -138,9 +139,16 @@ class NativeWeighted:
             float(regularization),
             float(weight_ratio),
         )
-        if arrays is None:
+        own = arrays is None
+        if own:
             arrays = (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs)
         self._solver.bind(*arrays, self.x, self.res, self.detail, self.active)
+        # on P's own arrays, solve() refreshes them natively (src/native/refresh.hpp, as
+        # NativeHierarchy's step), refresh_stacked only for data it does not copy
+        self._P = P if own else None
+        if own:
+            self._solver.set_tasks(P, *P._task_rows)
+        self._refresh = self._solver.refresh
         self._mod = mod
         self._tasks = [t for B in blocks for t in (*B.eqs, *B.ineqs)]
         self._versions: list | None = None
@@ -205,7 +213,11 @@ class NativeWeighted:
             Iteration or time limit, a non-finite result, or a result that fails the check
             of the bounds and hard rows.
         """
-        P.refresh_stacked()
+        # the tasks' numbers into the stacked arrays in one native pass; the Python refresh
+        # for data it does not copy (not float64 of the task's shape, the levels aliasing
+        # their tasks' arrays), which converts, broadcasts or raises naming the task
+        if P is not self._P or not self._refresh():
+            P.refresh_stacked()
         versions = list(map(_MATRIX_VERSION, self._tasks))
         refactor = versions != self._versions
         self.run(P, warm, time_left, refactor=refactor)  # on an error: raises, set up again

@@ -42,9 +42,10 @@ from scipy.linalg import lapack
 
 from .backends import DEFAULT_TIME_LIMIT
 from .compile import CompiledStack
-from .elimination import CHECK_TOL
+from .elimination import CHECK_TOL, whiten_rows
 from .errors import InfeasibleError, SolverError
 from .linalg import all_finite
+from .methods.weighted import _qr
 from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .solution import Solution
 from .tasks import Equality
@@ -91,6 +92,36 @@ def _region(x0, X, r0, R) -> tuple:
     return (R.shape[0], np.ascontiguousarray(np.vstack((R, X))), np.concatenate((r0, x0)))
 
 
+def _whitening(W: list, s: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The whitening of the weighted QP: ``(T, Fw)``, or ``None`` if ``T`` is singular
+    (then daqp gets the formed Hessian).
+
+    ``W`` (list of blocks) are the weighted rows, ``H[:n, :n] = WᵀW``, the first
+    ``s.shape[0]`` of them the equality rows with ``f = −Wᵀ diag(s) b`` (``s``: the rows'
+    ``√βₖ·√w``), the rest the regularization's ``√ε I``. With the QR of ``W`` as the
+    weighted method's (:func:`qpcoord.core.methods.weighted._qr`, ``W = Q₁T``: no
+    squaring, errors ~ε·cond(W) = ε·√cond(H)): ``T`` upper triangular with ``TᵀT = H``,
+    and ``Fw = Q₁ᵀ diag(s)`` so that ``f_u = T⁻ᵀ f = −Fw b`` (``n × len(s)``) never goes
+    through the formed ``f``."""
+    if not W:
+        return None
+    Wm = np.vstack(W)
+    if Wm.shape[0] < n:
+        return None
+    qr, tau = _qr(Wm)
+    T = np.triu(qr[:n, :n])
+    if not (np.all(np.isfinite(T)) and np.all(T.diagonal() != 0.0)):
+        return None
+    if s.shape[0] == 0:  # no equality row (W is the regularization's): f = 0
+        return T, np.zeros((n, 0))
+    E = np.zeros((Wm.shape[0], s.shape[0]))
+    E[np.arange(s.shape[0]), np.arange(s.shape[0])] = s
+    QtE, _work, info = lapack.dormqr("L", "T", qr, tau, E, max(1, 2 * s.shape[0]))
+    if info != 0:
+        return None
+    return T, np.ascontiguousarray(QtE[:n])
+
+
 class PersistentQP:
     """The weighted QP of a fixed-matrix :class:`~qpcoord.Stack` on a persistent workspace (native
     or daqp).
@@ -123,7 +154,10 @@ class PersistentQP:
     :func:`qpcoord.core.methods.weighted.solve_weighted`. The native workspace adds ``ε``
     exactly where that function does (the Hessian singular on the hard equalities' null
     space), so its answer is ``stack.solve(method="weighted")``'s; the daqp workspace adds it
-    where the x-space Hessian has no Cholesky factor.
+    where the x-space Hessian has no Cholesky factor, and is given the QP in whitened
+    variables ``u = T x`` (``TᵀT = H`` from the QR of the weighted rows, as the weighted
+    method's :data:`~qpcoord.core.elimination.WHITENED` path): errors ε·√cond(H), not
+    ε·cond(H).
     """
 
     def __init__(self, stack: Stack, weight_ratio=None, regularization=None, engine=None) -> None:
@@ -176,9 +210,14 @@ class PersistentQP:
         eq_tasks = []
         beta = 1.0
         j = n
+        # the weighted rows √βₖ Aₖ (H[:n, :n] = WᵀW) and their √βₖ·√w: the daqp workspace's
+        # whitening
+        W, sw = [], []
         for L in P.levels:
             if L.m_eq:
                 H[:n, :n] += beta * (L.Ae.T @ L.Ae)
+                W.append(np.sqrt(beta) * L.Ae)
+                sw += [np.sqrt(beta) * t.sqrt_weight for t in L.eqs]
                 for t in L.eqs:
                     F.append(beta * (t.A.T * t.weight))
                     eq_tasks.append(t)
@@ -198,7 +237,14 @@ class PersistentQP:
             self.regularized = True
         if self.regularized:
             i = np.arange(n)
-            H[i, i] += self.regularization * max(1.0, float(H.diagonal()[:n].max()))
+            eps = self.regularization * max(1.0, float(H.diagonal()[:n].max()))
+            H[i, i] += eps
+            W.append(np.sqrt(eps) * np.eye(n))
+        wh = None
+        if self.engine == "python":
+            wh = _whitening(W, np.concatenate(sw) if sw else np.zeros(0), n)
+        self._T, self._Fw = (None, None) if wh is None else wh
+        self._fw_fresh = False
         hard = P.hard
         # rows after the simple bounds: hard equalities, hard inequalities, soft rows C x − s
         G = np.zeros((hard.m_eq + hard.m_in + mi, nv))
@@ -287,9 +333,19 @@ class PersistentQP:
         self.setups += 1
         if self.engine == "native":
             return
+        Hq, Gq = H, G
+        T = self._T
+        if T is not None:
+            # daqp gets the QP in u = T x (elimination.WHITENED): the identity as u's
+            # Hessian, every row (the bounds too, as rows of T⁻¹, in the same order of the
+            # limit vectors) through T⁻¹; f and the answer are mapped per step
+            Hq = H.copy()
+            Hq[:n, :n] = np.eye(n)
+            Gq = whiten_rows(np.vstack((np.eye(nv), G)) if self._bounded else G.copy(), T, n)
+            self._fw = np.zeros(nv)
         model = self._daqp.Model()
         model.settings = dict(model.settings, **DAQP_SETTINGS)
-        flag = model.setup(H, self._f, G, self._bu, self._bl, np.zeros(k, dtype=np.int32))
+        flag = model.setup(Hq, self._f, Gq, self._bu, self._bl, np.zeros(k, dtype=np.int32))
         if isinstance(flag, tuple):
             flag = flag[0]
         # a failed set-up (e.g. constraints daqp's presolve finds inconsistent) leaves no
@@ -444,11 +500,31 @@ class PersistentQP:
                 m = t.b.shape[0]
                 b[i : i + m] = t.b
                 i += m
-            f = self._f[:n]
-            np.dot(self._F, b, out=f)
-            np.negative(f, out=f)
+            if self._T is None:
+                f = self._f[:n]
+                np.dot(self._F, b, out=f)
+                np.negative(f, out=f)
+            else:
+                # whitened: f_u = T⁻ᵀ f = −Q₁ᵀ diag(s) b, not through the formed f (whose
+                # rounding, ε‖F‖‖b‖, T⁻ᵀ would amplify by cond(T)); f itself is not needed
+                fu = self._fw[:n]
+                np.dot(self._Fw, b, out=fu)
+                np.negative(fu, out=fu)
+                self._fw_fresh = True
         self._fill_limits(P)
         return self._solve_current()
+
+    def _unconstrained(self) -> np.ndarray | None:
+        """The unconstrained optimum ``−H⁻¹f`` (no soft row: ``nv = n``), or ``None``: from
+        the whitening factor where there is one (``x = −T⁻¹ f_u``, errors ~ε·cond(T)),
+        else from the Cholesky factor of the formed ``H``."""
+        if self._T is not None:
+            z, ok = lapack.dtrtrs(self._T, self._fw, lower=0)
+        else:
+            z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
+        if ok != 0:
+            return None
+        return np.negative(z, out=z)
 
     def _solve_current(
         self, check=None, unconstrained_first: bool = True
@@ -462,30 +538,37 @@ class PersistentQP:
         check = self._feasible if check is None else check
         n = self._n
         self._lam = None
+        T = self._T
+        if T is not None and not self._fw_fresh:  # the QP in u = T x: f_u = T⁻ᵀ f
+            fw = self._fw
+            fw[:] = self._f
+            fw[:n] = lapack.dtrtrs(T, self._f[:n], lower=0, trans=1)[0]
+        self._fw_fresh = False
         # consecutive steps are alike: the unconstrained optimum is tried first only when
         # the previous step had no active constraint (daqp's multipliers all zero)
         if self._chol is not None and self._try_unconstrained and unconstrained_first:
-            z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
-            if ok == 0:
-                np.negative(z, out=z)
-                if self._feasible(z):
-                    return z, 0
+            z = self._unconstrained()
+            if z is not None and self._feasible(z):
+                return z, 0
         model = self.model
         if model is None:
             return None, 0
-        model.update(f=self._f, bupper=self._bu, blower=self._bl)
+        model.update(f=self._f if T is None else self._fw, bupper=self._bu, blower=self._bl)
         y, _, flag, info = model.solve()
         if flag in (1, 2):
-            x = np.asarray(y[:n], dtype=float)
+            if T is None:
+                x = np.asarray(y[:n], dtype=float)
+            else:
+                x = lapack.dtrtrs(T, np.asarray(y[:n], dtype=float), lower=0)[0]
             if check(x):
                 lam = info.get("lam")
                 self._lam = lam
                 self._try_unconstrained = lam is None or not lam.any()
                 if self._try_unconstrained and self._chol is not None:
                     # nothing active: the exact unconstrained optimum is the answer
-                    z, ok = lapack.dpotrs(self._chol, self._f, lower=0)
-                    if ok == 0 and self._feasible(-z):
-                        return -z, 0
+                    z = self._unconstrained()
+                    if z is not None and self._feasible(z):
+                        return z, 0
                 return x, int(info.get("iterations", -1))
         return None, 0
 

@@ -63,13 +63,13 @@ from __future__ import annotations
 import re
 from abc import abstractmethod
 from collections.abc import Sequence
-from functools import cache
 from math import isfinite
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from ..core import native
 from ..core.tasks import Equality, Inequality
 from .robot import Robot
 from .tasks import KinematicTask
@@ -172,23 +172,39 @@ def _rigid_fast(value: Any) -> pin.SE3 | None:
     return pin.SE3(value)
 
 
-@cache
+#: ``[module, spatial_rigid_ok, spatial_rigid_copy]``: the extension's functions, keyed on
+#: the module object :func:`qpcoord.core.native.load` holds (``native._module``; ``None``
+#: when the engine is not built), so a build swapped afterwards (``QPCOORD_NATIVE_ISA`` and
+#: a fresh ``load()``, a test's ``native._module``) is followed at the next call.
+_RIGID: list = [object(), None, None]
+
+
+def _rigid_lookup() -> list:
+    """Fill :data:`_RIGID` from the module ``load()`` holds (choosing it if none is)."""
+    mod = native._module
+    if mod is None and native.available():  # not loaded yet: load() chooses the build
+        mod = native._module
+    _RIGID[:] = [
+        mod,
+        getattr(mod, "spatial_rigid_ok", None),
+        getattr(mod, "spatial_rigid_copy", None),
+    ]
+    return _RIGID
+
+
 def _native_rigid() -> Any:
-    """The extension's rigid-transform check, or ``None`` if it is not built (looked up
-    once)."""
-    from ..core import native
+    """The extension's rigid-transform check of the loaded build, or ``None`` if it is not
+    built (one identity test per call, looked up again only when the build changed)."""
+    c = _RIGID
+    return c[1] if native._module is c[0] else _rigid_lookup()[1]
 
-    return getattr(native.load(), "spatial_rigid_ok", None) if native.available() else None
 
-
-@cache
 def _native_rigid_copy() -> Any:
     """The extension's check-and-copy of a 4×4 rigid transform (``spatial_rigid_copy``:
-    :func:`_native_rigid`'s checks, then the copy into a C-contiguous 4×4 output), or
-    ``None`` if it is not built (looked up once)."""
-    from ..core import native
-
-    return getattr(native.load(), "spatial_rigid_copy", None) if native.available() else None
+    :func:`_native_rigid`'s checks, then the copy into a C-contiguous 4×4 output) of the
+    loaded build, or ``None`` if it is not built (as :func:`_native_rigid`)."""
+    c = _RIGID
+    return c[2] if native._module is c[0] else _rigid_lookup()[2]
 
 
 def _rigid_ok(value: np.ndarray) -> bool:

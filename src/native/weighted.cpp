@@ -8,6 +8,8 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/vector.h>
+
+#include "refresh.hpp"
 #endif
 
 #include <algorithm>
@@ -395,14 +397,64 @@ struct BoundWeighted : Weighted {
                  cvec(a[6]), cvec(a[7]), warm, time_left, refactor, mvec(a[8]), mvec(a[9]),
                  mvec(a[10]), mvec(a[11]));
   }
+
+  /// The tasks' numbers copied into the bound arrays by refresh() (refresh.hpp, as the
+  /// Hierarchy's step()): the compiled stack's refresh_stacked in one native pass.
+  refresh::Stacked stacked;
+
+  void set_tasks(nb::handle P, const std::vector<nb::object>& eq,
+                 const std::vector<int64_t>& eq_rows, const std::vector<int64_t>& eq_first,
+                 const std::vector<nb::object>& in, const std::vector<int64_t>& in_rows,
+                 const std::vector<int64_t>& in_first) {
+    if (!bound) throw nb::value_error("set_tasks: call bind first");
+    const int64_t n = static_cast<int64_t>(a[0].shape(1));
+    if (static_cast<int64_t>(a[2].shape(1)) != n || static_cast<int64_t>(a[6].shape(0)) != n ||
+        static_cast<int64_t>(a[7].shape(0)) != n)
+      throw nb::value_error("set_tasks: the bound arrays' columns differ");
+    if (eq.size() != eq_rows.size() || eq.size() != eq_first.size() ||
+        in.size() != in_rows.size() || in.size() != in_first.size())
+      throw nb::value_error("set_tasks: tasks, row counts and first rows differ in length");
+    for (size_t k = 0; k < eq.size(); ++k)
+      if (eq_rows[k] < 0 || eq_first[k] < 0 ||
+          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[0].shape(0)) ||
+          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[1].shape(0)))
+        throw nb::value_error("set_tasks: equality rows outside Aeq");
+    for (size_t k = 0; k < in.size(); ++k)
+      for (int i = 2; i < 6; ++i)
+        if (in_rows[k] < 0 || in_first[k] < 0 ||
+            in_first[k] + in_rows[k] > static_cast<int64_t>(a[i].shape(0)))
+          throw nb::value_error("set_tasks: inequality rows outside C");
+    const refresh::Stacked::Dest d{a[0].data(), a[1].data(), a[2].data(), a[3].data(),
+                                   a[4].data(), a[5].data(), a[6].data(), a[7].data()};
+    stacked.set(P, eq, eq_rows, eq_first, in, in_rows, in_first, n,
+                static_cast<int64_t>(a[0].shape(0)), d);
+  }
 };
+
+/// Cyclic garbage collection of a Weighted that holds its stack's tasks (set_tasks), as the
+/// Hierarchy's (bindings.cpp): a task referring back to its stack makes a cycle through it.
+int weighted_traverse(PyObject* self, visitproc visit, void* arg) {
+  Py_VISIT(Py_TYPE(self));
+  if (!nb::inst_ready(self)) return 0;
+  return nb::inst_ptr<BoundWeighted>(self)->stacked.traverse(visit, arg);
+}
+
+int weighted_clear(PyObject* self) {
+  nb::inst_ptr<BoundWeighted>(self)->stacked.clear();
+  return 0;
+}
+
+PyType_Slot weighted_slots[] = {{Py_tp_traverse, reinterpret_cast<void*>(weighted_traverse)},
+                                {Py_tp_clear, reinterpret_cast<void*>(weighted_clear)},
+                                {0, nullptr}};
 
 }  // namespace
 
 void bind_weighted(nanobind::module_& m) {
   nb::class_<BoundWeighted>(m, "Weighted",
                             "The weighted QP of one stack structure (sizes fixed): "
-                            "qpcoord.core.native_weighted.")
+                            "qpcoord.core.native_weighted.",
+                            nb::type_slots(weighted_slots))
       .def(nb::init<int, std::vector<int>, std::vector<int>, bool, double, double>(),
            nb::arg("n"), nb::arg("meq"), nb::arg("min"), nb::arg("has_bounds"),
            nb::arg("regularization"), nb::arg("weight_ratio"))
@@ -434,6 +486,19 @@ void bind_weighted(nanobind::module_& m) {
           nb::arg("warm"), nb::arg("time_left"), nb::arg("refactor"),
           "Solve on the bound arrays' current numbers; returns the status code (the "
           "Hierarchy's codes).")
+      .def("set_tasks", &BoundWeighted::set_tasks, nb::arg("P"), nb::arg("eq"),
+           nb::arg("eq_rows"), nb::arg("eq_first"), nb::arg("in_"), nb::arg("in_rows"),
+           nb::arg("in_first"),
+           "Bind the compiled stack P and its tasks (CompiledStack._task_rows) for refresh(); "
+           "the bound input arrays must be P's stacked arrays.")
+      .def(
+          "refresh", [](const BoundWeighted& w) { return w.stacked.refresh(); },
+          "Copy the tasks' current numbers and the box into the bound arrays (as "
+          "CompiledStack.refresh_stacked); False (nothing raised): the data is not the common "
+          "case, run the Python refresh.")
+      .def_prop_ro(
+          "fast_arrays", [](const BoundWeighted& w) { return w.stacked.fast(); },
+          "Are numpy arrays read from their heads (else through the buffer protocol)?")
       .def("forget", &Weighted::forget, "Forget the stored working set.")
       .def_prop_ro("n", &Weighted::n)
       .def_prop_ro("num_levels", &Weighted::num_levels)

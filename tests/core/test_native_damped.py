@@ -25,7 +25,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 from test_native import LEVEL_TOL, X_TOL, _same, needs_native
 
@@ -173,8 +173,7 @@ def test_exact_reference_is_damped_where_it_should_be():
 # ---------------------------------------------------------------------------------------
 
 
-@st.composite
-def damped_stacks(draw):
+def _damped_spec(draw):
     """Random stacks (n ≤ 6, 2–3 levels, the box always on: a damped direction's
     unconstrained gain is up to 1/τ) with one deliberately near-singular level anywhere in
     the stack (projected on the freedom the levels above leave): ``U diag(σ) Vᵀ`` with
@@ -215,7 +214,21 @@ def damped_stacks(draw):
         x0 = rng.uniform(-0.5, 0.5, n)
         A = rng.standard_normal((1, n))
         constraints = [qc.Equality(A, A @ x0)]
-    return dict(levels=levels, bounds=bounds, constraints=constraints, damping=damping)
+    return dict(
+        levels=levels, bounds=bounds, constraints=constraints, damping=damping, damped_level=which
+    )
+
+
+@st.composite
+def damped_stacks(draw):
+    """:func:`_damped_spec` drawn by hypothesis."""
+    return _damped_spec(draw)
+
+
+def replay_spec(values: list) -> dict:
+    """The stack :func:`_damped_spec` builds from recorded draws (a found example, in order)."""
+    it = iter(values)
+    return _damped_spec(lambda _strategy: next(it))
 
 
 def damped_stack(spec: dict) -> qc.Stack:
@@ -231,15 +244,48 @@ def damped_stack(spec: dict) -> qc.Stack:
     )
 
 
+#: Found by hypothesis (session 10, damping 1e-3, n = 6, the damped level 1 below a level
+#: with one equality row and one inequality row): the draws of :func:`_damped_spec`.
+#: Native vs Python: x 1.15e-7 apart (2 levels), level 2's value 3.1e-9 relative (3 levels).
+FOUND_X = [56, 6, 2, 1, 0.001, -5.0, 5, 1, True, False, False]
+FOUND_LEVELS = [56, 6, 3, 1, 0.001, -4.0, 5, 1, True, False, 1, True, False]
+
+
+def _same_damped(sp: qc.Solution, sn: qc.Solution, damped_level: int) -> None:
+    """The engines' answers compared where the damped problem defines them.
+
+    A damped level solves ``‖M z − e‖² + Σ (τ² − sᵢ²)(vᵢᵀz)²`` with ``z`` its step from the
+    point ``x̄`` the levels above left: the damping pulls towards ``x̄``. Where a level above
+    was solved by a QP whose optimum is a set (it leaves freedom), ``x̄`` is the point each
+    implementation keeps in that set — the Python engine the minimum-norm point of its QP's
+    active face (docs/stack.md, step 3), the native engine its active set's end, each
+    backend of the Python engine its own — and the damped level's answer, with everything
+    below it, depends on that choice, by a sensitivity that nothing bounds a priori (along a
+    free direction lying in the damped subspace the answer moves with ``x̄`` one to one).
+    There only the levels above the damped one, whose values are the lexicographic optimum,
+    are compared (to ``LEVEL_TOL``); where every level above ended in its closed form (the
+    same formula in both engines) or the damped level is the first, ``x̄`` is defined and
+    everything is compared (:func:`test_native._same`)."""
+    if set(range(damped_level)) <= set(sn.info["closed_form_levels"]):
+        _same(sp, sn)
+        return
+    rp, rn = sp.level_residuals[:damped_level], sn.level_residuals[:damped_level]
+    assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rp, rn)
+    assert sn.status == "optimal"
+
+
 @needs_native
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(damped_stacks())
+@example(spec=replay_spec(FOUND_X))
+@example(spec=replay_spec(FOUND_LEVELS))
 def test_native_matches_python_on_damped_stacks(spec):
     sp = damped_stack(spec).solve(engine="python")
     assume(sp.status == "optimal")  # the Python engine certified every level
     s = damped_stack(spec)
-    _same(sp, s.solve(engine="native"))
-    _same(sp, s.solve(engine="native"))  # warm: the stored working sets
+    _same_damped(sp, s.solve(engine="native"), spec["damped_level"])
+    # warm: the stored working sets
+    _same_damped(sp, s.solve(engine="native"), spec["damped_level"])
 
 
 def test_a_level_daqp_calls_infeasible_is_solved_by_the_fallback():
@@ -272,3 +318,75 @@ def test_a_level_daqp_calls_infeasible_is_solved_by_the_fallback():
     assert sp.status == "optimal"
     sn = stack().solve(engine="native")
     np.testing.assert_allclose(sp.level_residuals, sn.level_residuals, rtol=1e-9, atol=1e-12)
+
+
+def _damped_optimum(spec: dict, xbar: np.ndarray, active: list) -> tuple[np.ndarray, np.ndarray]:
+    """Level 1's damped problem of a :data:`FOUND_X` stack, solved on a given active set.
+
+    ``min ‖A₁x − b₁‖² + Σ (τ² − sᵢ²)(wᵢᵀ(x − x̄))²`` over ``A₀x = A₀x̄`` (level 0's frozen
+    row) and ``active`` (``(row, value)`` pairs held as equalities), ``wᵢ = Z vᵢ`` the damped
+    directions of ``M = A₁Z``, ``Z`` an orthonormal basis of ``null(A₀)``, ``τ = damping ·
+    max(s₀, ‖A₁‖_F)``: one KKT solve. Returns x and the multipliers of ``active``."""
+    (eq0, _), (eq1,) = spec["levels"]
+    A0, A1, b1 = eq0.A, eq1.A, eq1.b
+    n = A0.shape[1]
+    _, _, Vt0 = np.linalg.svd(A0)
+    Z = Vt0[1:].T
+    _, s, Vt = np.linalg.svd(A1 @ Z)
+    tau = spec["damping"] * max(s[0], float(np.linalg.norm(A1)))
+    W = Z @ Vt[s < tau].T
+    gain = tau * tau - s[s < tau] ** 2
+    H = A1.T @ A1 + (W * gain) @ W.T
+    g = A1.T @ b1 + (W * gain) @ (W.T @ xbar)
+    E = np.vstack([A0] + [r for r, _ in active])
+    f = np.r_[A0 @ xbar, [v for _, v in active]]
+    K = np.block([[H, E.T], [E, np.zeros((len(f), len(f)))]])
+    sol = np.linalg.solve(K, np.r_[g, f])
+    return sol[:n], sol[n + 1 :]
+
+
+def test_a_damped_level_depends_on_the_point_the_level_above_kept():
+    """The root cause of FOUND_X / FOUND_LEVELS: not the damping rule (each engine solves its
+    damped level exactly, to 1e-15 against a 50-digit solve, from its own level-0 point)
+    but level 0's optimum being a set: one equality row and a satisfied inequality row in
+    6 variables. The Python engine keeps the minimum-norm point of its QP's active face
+    (``A₀x = b₀``, ``x₃`` at its lower bound), the native engine another point of the same
+    set (its active set's end, 0.25 away in max-norm), and the damped level pulls towards
+    the point it starts from. Here: the Python engine's answer is the certified optimum
+    from the minimum-norm point, and the optimum from another optimal level-0 point 0.05
+    away is 5.9e-8 away -- a difference of the problem's definition, not of an engine (the
+    Python engine's own backends differ by up to 5.5e-7 in x here: piqp, clarabel, osqp)."""
+    spec = replay_spec(FOUND_X)
+    (eq0, in0), _ = spec["levels"]
+    lo, hi = spec["bounds"].lower, spec["bounds"].upper
+    sp = damped_stack(spec).solve(engine="python")
+    # level 0's minimum-norm point on the face the QP ends on: x_3 at its lower bound
+    e3 = np.eye(6)[3]
+    xbar = np.linalg.lstsq(np.vstack([eq0.A, e3]), np.r_[eq0.b, lo[3]], rcond=None)[0]
+    assert abs(eq0.A @ xbar - eq0.b).max() < 1e-15  # level 0 met exactly (value 0) ...
+    assert np.all(in0.lower <= in0.C @ xbar) and np.all(in0.C @ xbar <= in0.upper)
+    assert np.all(lo <= xbar) and np.all(xbar <= hi)  # ... within the bounds
+    # level 1's active set: x_0 at its upper bound, x_1 lower, x_5 upper, level 0's
+    # inequality row at its lower side; certified below by the multipliers' signs
+    eye = np.eye(6)
+    active = [(eye[0], hi[0]), (eye[1], lo[1]), (eye[5], hi[5]), (in0.C[0], in0.lower[0])]
+    sign = np.array([1.0, -1.0, 1.0, -1.0])  # an upper side pushes back with lam >= 0
+
+    def certified(xb):
+        x, lam = _damped_optimum(spec, xb, active)
+        assert np.all(sign * lam > 1e-5), lam  # strictly right signs: the optimum
+        assert np.all(lo - 1e-12 <= x) and np.all(x <= hi + 1e-12)
+        assert np.all(in0.C @ x >= in0.lower - 1e-12) and np.all(in0.C @ x <= in0.upper)
+        return x
+
+    x_ref = certified(xbar)
+    assert np.max(np.abs(sp.x - x_ref)) <= 1e-12, (sp.x, x_ref)
+    # another point of level 0's optimal set (the same face, moved within it): the damped
+    # level's optimum from it is a different x
+    _, _, Vt = np.linalg.svd(np.vstack([eq0.A, e3]))
+    other = xbar + 0.05 * Vt[-1]
+    assert abs(eq0.A @ other - eq0.b).max() < 1e-14
+    assert np.all(lo <= other) and np.all(other <= hi)
+    assert np.all(in0.lower <= in0.C @ other) and np.all(in0.C @ other <= in0.upper)
+    x_other = certified(other)
+    assert np.max(np.abs(x_other - x_ref)) > 1e-9

@@ -12,7 +12,6 @@ other one.
 
 from __future__ import annotations
 
-import functools
 import os
 import platform
 import shutil
@@ -44,22 +43,11 @@ needs_native = pytest.mark.skipif(
 X86_64_LINUX = sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64")
 
 
-def _fresh_caches(monkeypatch) -> None:
-    """Fresh copies, for this test, of the caches that keep a function of the module
-    ``load()`` gave first (frame_tasks' rigid-transform checks): the originals, restored
-    after the test, keep the module the rest of the suite uses."""
-    for name in ("_native_rigid", "_native_rigid_copy"):
-        monkeypatch.setattr(
-            frame_tasks, name, functools.cache(getattr(frame_tasks, name).__wrapped__)
-        )
-
-
 @pytest.fixture
 def fresh_load(monkeypatch):
     """``load()`` chooses again (as in a new process), with ``QPCOORD_NATIVE_ISA`` unset."""
     monkeypatch.setattr(native, "_module", None)
     monkeypatch.delenv(native.ISA_ENV, raising=False)
-    _fresh_caches(monkeypatch)
     return monkeypatch
 
 
@@ -67,7 +55,6 @@ def _use(monkeypatch, name: str) -> types.ModuleType:
     """Make ``name`` the build every adapter gets from ``load()`` (for this test)."""
     mod = native.import_variant(name)
     monkeypatch.setattr(native, "_module", mod)
-    _fresh_caches(monkeypatch)
     assert native.variant() == name
     return mod
 
@@ -122,6 +109,20 @@ def test_the_environment_variable_picks_the_build(fresh_load, name):
     fresh_load.setattr(native, "_module", None)
     fresh_load.setenv(native.ISA_ENV, "auto")
     assert native.variant() == VARIANTS[-1]
+
+
+@needs_native
+def test_frame_tasks_follow_a_build_swapped_after_their_first_use(fresh_load):
+    """frame_tasks' native rigid-transform functions are those of the module ``load()``
+    holds now, not of the one it held at their first call (they were ``functools.cache``d:
+    stale after ``QPCOORD_NATIVE_ISA`` and a fresh ``load()``)."""
+    for name in (*VARIANTS, VARIANTS[0]):
+        fresh_load.setattr(native, "_module", None)
+        fresh_load.setenv(native.ISA_ENV, name)
+        mod = native.load()
+        assert mod.ISA == name
+        assert frame_tasks._native_rigid() is mod.spatial_rigid_ok
+        assert frame_tasks._native_rigid_copy() is mod.spatial_rigid_copy
 
 
 @needs_native

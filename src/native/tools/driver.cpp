@@ -36,6 +36,7 @@
 
 #define QPCOORD_COUNT_MALLOC  // count malloc (Eigen allocates there), not only operator new
 #include "tools/count_allocations.hpp"
+#include "tools/dump_file.hpp"
 
 using namespace qpcoord;
 using RowMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
@@ -48,30 +49,18 @@ int main(int argc, char** argv) {
   }
   const int repeats = argc > 2 ? std::atoi(argv[2]) : 20;
   const bool cold = argc > 3 && argv[3][0] == 'c';
-  std::ifstream f(argv[1], std::ios::binary);
+  tools::DumpFile dump;  // the dump's reader, shared with benchmarks/lexls/lexls_driver.cpp
+  if (!dump.read(argv[1])) return 2;
   std::FILE* xout = argc > 4 ? std::fopen(argv[4], "wb") : nullptr;
-  auto rd_i = [&]() {
-    long long v;
-    f.read(reinterpret_cast<char*>(&v), 8);
-    return static_cast<int>(v);
-  };
-  const int n = rd_i(), blocks = rd_i();
-  const bool has_bounds = rd_i() != 0;
-  double damping;
-  f.read(reinterpret_cast<char*>(&damping), 8);
-  const int steps = rd_i();
-  std::vector<int> meq(blocks), min(blocks);
-  int me = 0, mi = 0;
-  for (auto& v : meq) me += (v = rd_i());
-  for (auto& v : min) mi += (v = rd_i());
+  const int n = dump.n, blocks = dump.blocks, steps = dump.steps;
+  const bool has_bounds = dump.has_bounds;
+  const double damping = dump.damping;
+  const std::vector<int>& meq = dump.meq;
+  const std::vector<int>& min = dump.min;
+  const int me = dump.me, mi = dump.mi;
   const int L = blocks - 1;
-  const size_t per = size_t(me) * n + me + size_t(mi) * n + 3 * mi + 2 * n;
-  std::vector<double> data(per * steps);
-  f.read(reinterpret_cast<char*>(data.data()), data.size() * 8);
-  if (!f) {
-    std::fprintf(stderr, "short file\n");
-    return 2;
-  }
+  const size_t per = dump.per;
+  const std::vector<double>& data = dump.data;
   Hierarchy h(n, meq, min, has_bounds, damping);
   if (const char* off = std::getenv("QPCOORD_DRIVER_OFF")) {
     const std::string list = std::string(",") + off + ",";
