@@ -21,6 +21,14 @@ is the one way to change them (validated, and counted in ``matrix_version`` / ``
 that every cached solver sees the change). Library code that must write per step without
 allocating uses the private, explicit paths: ``Equality._assign``, ``Inequality._assign``
 (checked, version-bumping) and ``Bounds._writable()`` followed by ``Bounds._touch()``.
+
+Rebinding rule. Rebinding an attribute a cached factorisation depends on -- ``task.A = J``,
+``task.C = ...``, ``task.weight = ...``, ``bounds.lower = ...`` / ``bounds.upper = ...`` -- is
+``update(...)`` of that argument: validated (``ValueError`` naming it), copied, and counted in
+``matrix_version`` / ``version``, so that the weighted engine, :class:`PersistentQP` and the
+compiled stacks never keep numbers the task no longer has. (Rebinding a right-hand side,
+``b`` or an inequality's ``lower`` / ``upper``, to an array of the caller's stays allowed: it
+is read at every solve and checked there; per-step code uses it to write in place.)
 """
 
 from __future__ import annotations
@@ -33,6 +41,11 @@ import numpy as np
 from .linalg import all_finite
 
 __all__ = ["Equality", "Inequality", "Bounds", "Task"]
+
+
+#: ``object.__setattr__``: the tasks' own writes of the guarded attributes (see
+#: ``_Task.__setattr__``)
+_setattr = object.__setattr__
 
 
 def _label(kind: str, name: str) -> str:
@@ -217,6 +230,16 @@ class _Task:
     #: right-hand sides and limits do not count. Lets a persistent solver
     #: (:class:`qpcoord.core.persistent.PersistentQP`) keep its factorisation while it holds.
     matrix_version = 0
+    #: Attributes a cached factorisation depends on: set once at construction, then changed
+    #: only by ``update`` (a rebinding, ``task.A = J``, is ``update(A=J)``: the module's
+    #: rebinding rule)
+    _MATRIX_ATTRS: frozenset = frozenset()
+
+    def __setattr__(self, name: str, value) -> None:
+        if name in self._MATRIX_ATTRS and name in self.__dict__:
+            self.update(**{name: value})  # validated, copied, counted in matrix_version
+            return
+        _setattr(self, name, value)
 
     @property
     def label(self) -> str:
@@ -225,14 +248,14 @@ class _Task:
 
     def _set_weight(self, w: np.ndarray, given=None) -> None:
         """Keep the validated weights ``w`` (``given``: what the caller passed, if known)."""
-        self.weight = w
+        _setattr(self, "weight", w)
         if (type(given) is float or type(given) is int) and given == 1:
-            self.unit_weight = True  # the default weight, broadcast: w is all ones
+            _setattr(self, "unit_weight", True)  # the default weight, broadcast: all ones
         else:
-            self.unit_weight = bool(w[0] == 1.0 and (w == 1.0).all())
+            _setattr(self, "unit_weight", bool(w[0] == 1.0 and (w == 1.0).all()))
         #: ``√weight`` (cached: weights rarely change between control steps); the weight
         #: itself when every weight is 1
-        self.sqrt_weight = w if self.unit_weight else _frozen(np.sqrt(w))
+        _setattr(self, "sqrt_weight", w if self.unit_weight else _frozen(np.sqrt(w)))
 
 
 class Equality(_Task):
@@ -252,6 +275,7 @@ class Equality(_Task):
     """
 
     kind = "Equality"
+    _MATRIX_ATTRS = frozenset(("A", "weight"))
 
     def __init__(self, A, b, weight=1.0, name: str = "") -> None:
         self.name = str(name)
@@ -285,14 +309,14 @@ class Equality(_Task):
         if weight is not None:
             neww = _weight(weight, m, label)
         if newA is not None:
-            self.A = newA
-            self.is_identity = _is_identity(newA)
+            _setattr(self, "A", newA)
+            _setattr(self, "is_identity", _is_identity(newA))
         if newb is not None:
-            self.b = newb
+            _setattr(self, "b", newb)
         if neww is not None:
             self._set_weight(neww)
         if newA is not None or neww is not None:
-            self.matrix_version += 1
+            _setattr(self, "matrix_version", self.matrix_version + 1)
         return self
 
     def _assign(self, A=None, b=None) -> Equality:
@@ -304,8 +328,8 @@ class Equality(_Task):
             if not all_finite(A):
                 raise ValueError(f"{self.label}: A contains a non-finite value")
             _w(self.A)[...] = A
-            self.is_identity = False
-            self.matrix_version += 1
+            _setattr(self, "is_identity", False)
+            _setattr(self, "matrix_version", self.matrix_version + 1)
         if b is not None:
             if not all_finite(b):
                 raise ValueError(f"{self.label}: b contains a non-finite value")
@@ -337,6 +361,7 @@ class Inequality(_Task):
     """
 
     kind = "Inequality"
+    _MATRIX_ATTRS = frozenset(("C", "weight"))
 
     def __init__(self, C, lower=None, upper=None, weight=1.0, name: str = "") -> None:
         self.name = str(name)
@@ -375,12 +400,13 @@ class Inequality(_Task):
         if weight is not None:
             neww = _weight(weight, m, label)
         if newC is not None:
-            self.C = newC
-        self.lower, self.upper = lo, hi
+            _setattr(self, "C", newC)
+        _setattr(self, "lower", lo)
+        _setattr(self, "upper", hi)
         if neww is not None:
             self._set_weight(neww)
         if newC is not None or neww is not None:
-            self.matrix_version += 1
+            _setattr(self, "matrix_version", self.matrix_version + 1)
         return self
 
     def _assign(self, lower: np.ndarray, upper: np.ndarray, C=None) -> Inequality:
@@ -394,7 +420,7 @@ class Inequality(_Task):
             if not all_finite(C):
                 raise ValueError(f"{self.label}: C contains a non-finite value")
             _w(self.C)[...] = C
-            self.matrix_version += 1
+            _setattr(self, "matrix_version", self.matrix_version + 1)
         _w(self.lower)[...] = lower
         _w(self.upper)[...] = upper
         return self
@@ -422,6 +448,14 @@ class Bounds:
 
     kind = "Bounds"
 
+    def __setattr__(self, name: str, value) -> None:
+        # bounds.lower = ... is update(lower=...): validated, counted in version (the
+        # module's rebinding rule); the class's own writes go through _set
+        if name == "lower" or name == "upper":
+            self.update(**{name: value})
+            return
+        _setattr(self, name, value)
+
     def __init__(self, lower=None, upper=None, name: str = "bounds") -> None:
         self.name = str(name)
         self.version = 0  # incremented by update(): stacks re-read the bounds then
@@ -440,7 +474,8 @@ class Bounds:
         if n is not None:
             # the validated copies, not the caller's arrays (a later update re-reads them)
             self._lower_in, self._upper_in = lo, hi
-            self.lower, self.upper = lo, hi
+            _setattr(self, "lower", lo)
+            _setattr(self, "upper", hi)
 
     def _validate(self, lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
         label = self.label
@@ -478,7 +513,8 @@ class Bounds:
         if self.n is not None:
             lo, hi = self._validate(new_lo, new_hi, self.n)  # names a wrong length
             self._lower_in, self._upper_in = lo, hi
-            self.lower, self.upper = lo, hi
+            _setattr(self, "lower", lo)
+            _setattr(self, "upper", hi)
         else:
             self._set(new_lo, new_hi)
         self.version += 1

@@ -330,7 +330,9 @@ def test_update_validates_numbers():
 def test_shape_changed_behind_the_stacks_back():
     t = Equality(np.ones((2, 3)), 0.0, name="reach")
     stack = qc.Stack([t])
-    t.A = np.ones((3, 3))  # bypasses update()
+    with pytest.raises(ValueError, match=r"Equality 'reach': update changes A's shape"):
+        t.A = np.ones((3, 3))  # an assignment is an update: checked at once
+    object.__setattr__(t, "A", np.ones((3, 3)))  # bypasses update(), as library code may
     with pytest.raises(
         ValueError, match=r"Equality 'reach': A changed shape from \(2, 3\) to \(3, 3\)"
     ):

@@ -10,6 +10,7 @@ from hypothesis.extra import numpy as hnp
 
 import qpcoord as qc
 from qpcoord.core.linalg import filtered_gains, filtered_svd, null_space
+from qpcoord.core.persistent import PersistentQP
 
 # ---------------------------------------------------------------------------------------
 # Equality
@@ -291,3 +292,86 @@ def test_filtered_svd_damps_only_below_the_threshold():
     _, s, _, rank, g = filtered_svd(M, 1e-6)[:5]  # τ = 1e-6 · s₀ = 1e-6
     assert rank == 3
     np.testing.assert_allclose(g, [1.0, 1e3, 1e-9 / 1e-12])
+
+
+# ---------------------------------------------------------------------------------------
+# the rebinding rule: task.A = J is update(A=J) (validated, counted in matrix_version), so a
+# cached factorisation (the weighted engine, PersistentQP) never keeps the old matrix
+
+
+def _weighted_pair(seed: int = 3, n: int = 6):
+    rng = np.random.default_rng(seed)
+    hand = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3), name="hand")
+    posture = qc.Equality(np.eye(n), np.zeros(n), name="posture")
+    keep = qc.Inequality(rng.standard_normal((2, n)), -0.2, 0.2, name="keep")
+    bounds = qc.Bounds(-np.ones(n), np.ones(n))
+    return [hand, [keep, posture]], bounds, rng
+
+
+def _fresh_weighted(levels, bounds) -> np.ndarray:
+    """The weighted answer of a stack built now (no cache) on copies of the tasks' numbers."""
+
+    def copy(t):
+        if isinstance(t, list):
+            return [copy(u) for u in t]
+        if isinstance(t, qc.Equality):
+            return qc.Equality(t.A, t.b, weight=t.weight)
+        return qc.Inequality(t.C, t.lower, t.upper, weight=t.weight)
+
+    box = qc.Bounds(bounds.lower, bounds.upper)
+    return qc.Stack([copy(t) for t in levels], bounds=box).solve(method="weighted").x
+
+
+@pytest.mark.parametrize("what", ["A", "weight", "C", "bounds"])
+def test_rebinding_a_matrix_weight_or_box_is_an_update_the_cached_solvers_see(what):
+    levels, bounds, rng = _weighted_pair()
+    hand, (keep, posture) = levels
+    stack = qc.Stack(levels, bounds=bounds)
+    pq = PersistentQP(stack)
+    stack.solve(method="weighted")  # the weighted engine factorises once
+    pq.solve()
+    v_task = (hand if what in ("A", "weight") else keep).matrix_version
+    if what == "A":
+        hand.A = rng.standard_normal((3, 6))
+    elif what == "weight":
+        hand.weight = 7.0
+        assert hand.weight.shape == (3,) and not hand.unit_weight
+        np.testing.assert_allclose(hand.sqrt_weight, np.sqrt(7.0))
+    elif what == "C":
+        keep.C = rng.standard_normal((2, 6))
+    else:
+        version = bounds.version
+        bounds.lower = -0.05 * np.ones(6)
+        assert bounds.version == version + 1
+    if what != "bounds":
+        assert (hand if what in ("A", "weight") else keep).matrix_version == v_task + 1
+    want = _fresh_weighted(levels, bounds)
+    np.testing.assert_allclose(stack.solve(method="weighted").x, want, atol=1e-9)
+    np.testing.assert_allclose(pq.solve().x, want, atol=1e-7)
+    # and the strict solve (compiled stacks read every step)
+    fresh = qc.Stack([hand, [keep, posture]], bounds=qc.Bounds(bounds.lower, bounds.upper))
+    np.testing.assert_allclose(stack.solve().x, fresh.solve().x, atol=1e-9)
+
+
+def test_a_rebound_matrix_is_validated_copied_and_read_only():
+    t = qc.Equality(np.eye(2), [1.0, 2.0], name="hand")
+    J = np.array([[1.0, 2.0], [3.0, 4.0]])
+    t.A = J
+    J[0, 0] = 99.0  # the task keeps its own copy
+    assert t.A[0, 0] == 1.0 and not t.A.flags.writeable and not t.is_identity
+    with pytest.raises(ValueError, match=r"Equality 'hand'.*shape"):
+        t.A = np.ones((3, 2))
+    with pytest.raises(ValueError, match="Equality 'hand'"):
+        t.A = np.array([[np.nan, 0.0], [0.0, 1.0]])
+    with pytest.raises(ValueError, match="Equality 'hand'"):
+        t.weight = -1.0
+    np.testing.assert_array_equal(t.A, [[1.0, 2.0], [3.0, 4.0]])  # all-or-nothing
+    box = qc.Bounds(-1.0, 1.0, name="vel")
+    box.upper = 0.5  # scalars stay scalars
+    assert box.version == 1 and box.resolve(2)[1].tolist() == [0.5, 0.5]
+    with pytest.raises(ValueError, match=r"Bounds 'vel': lower > upper"):
+        box.lower = 0.7
+    # right-hand sides may still be rebound to the caller's buffer (per-step code writes it)
+    buf = np.zeros(2)
+    t.b = buf
+    assert t.b is buf
