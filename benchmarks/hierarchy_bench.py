@@ -32,6 +32,10 @@ DAQP's solve is timed on its arrays built before the timer ("daqp hierarchical (
 arrays)", as ``hierarchy_published.py --resolve`` times it; since 2026-11-28) and also with the
 building of its arrays from the tasks ("daqp hierarchical + building its arrays", the one
 column before): the native engine's times include copying the tasks' numbers into its arrays.
+Since 2026-11-28 (session 11) also DAQP's own warm start, "daqp Model warm (update + solve)":
+one ``daqp.Model`` kept across the steps, given the new right-hand sides (and ``A`` on a step
+where it changed) by ``update`` and solved from its last working set, as
+``hierarchy_published.py``'s "daqp Model warm"; the faster of DAQP's two paths is its best.
 Each engine's level values are checked against the Python engine's (``max |Δr| / max(1, r)``).
 With ``--no-python`` only the re-solve contenders are timed (native warm, native bare, DAQP):
 the Python engine (and the native cold solve) evict the caches before the next step's native
@@ -236,6 +240,23 @@ def _levels_residuals(stack: qc.Stack, x: np.ndarray) -> np.ndarray:
 #: 2026-11-28)
 DAQP = "daqp hierarchical (solve on built arrays)"
 DAQP_BUILD = "daqp hierarchical + building its arrays"
+#: DAQP's own warm start (since 2026-11-28, session 11): one ``daqp.Model`` kept across the
+#: steps, given the step's new numbers by ``update`` (the right-hand sides, and ``A`` only on
+#: a step where it changed: DAQP then refactorises) and solved from its last working set;
+#: ``update`` + ``solve`` timed, as hierarchy_published's "daqp Model warm"
+DAQP_MODEL = "daqp Model warm (update + solve)"
+
+
+def _model_step(model, A, bu, bl, A_changed: bool):
+    """DAQP's warm path on the step's arrays: ``update`` (``A`` too if it changed), then
+    ``solve`` from the model's last working set; ``(x, exit flag)``."""
+    code = (
+        model.update(A=A, bupper=bu, blower=bl) if A_changed else model.update(bupper=bu, blower=bl)
+    )
+    if code < 0:
+        raise RuntimeError(f"daqp.Model.update failed (exit flag {code})")
+    x, _f, flag, _info = model.solve()
+    return x, flag
 
 
 def run(name, build, steps, seed=0, python=True):
@@ -253,7 +274,9 @@ def run(name, build, steps, seed=0, python=True):
     if not python:
         keys += ["native warm", "native bare"]
     if dq is not None:
-        keys += [DAQP, DAQP_BUILD]
+        keys += [DAQP, DAQP_BUILD, DAQP_MODEL]
+    model = None  # DAQP's warm model, set up at the first step
+    A_model = None
     times = {k: [] for k in keys}
     worst = dict.fromkeys(times, 0.0)
     flags = set()
@@ -301,6 +324,18 @@ def run(name, build, steps, seed=0, python=True):
             times[DAQP_BUILD].append(t2 - t)
             flags.add(int(flag))
             got += [(DAQP, np.asarray(xd)), (DAQP_BUILD, np.asarray(xd))]
+            if model is None:
+                model = daqp.Model()
+                if model.setup(H, f, A, bu, bl, sense, break_points=breaks)[0] < 0:
+                    raise RuntimeError(f"{name}: daqp.Model.setup failed")
+                A_model = A
+            changed = not np.array_equal(A, A_model)
+            A_model = A
+            t = time.perf_counter()
+            xm, flag = _model_step(model, A, bu, bl, changed)
+            times[DAQP_MODEL].append(time.perf_counter() - t)
+            flags.add(int(flag))
+            got.append((DAQP_MODEL, np.asarray(xm)))
         if not python:
             if step % 10:
                 x_prev = sw.x
