@@ -336,6 +336,11 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
       .def_rw("rz_min_norm", &Hierarchy::rz_min_norm,
               "Minimum-norm solutions of [R11 R12] w = b by its RZ factorisation (True, "
               "default) or by the QR of its transpose (False; for comparisons).")
+      .def_rw("least_distance", &Hierarchy::least_distance,
+              "The minimum-norm stage stepped as a least-distance problem (True, default) "
+              "or by the general least squares (False; for comparisons).")
+      .def_prop_ro("least_distance_steps", &Hierarchy::least_distance_steps,
+                   "Least-squares steps of the last call taken by least_distance.")
       .def_prop_ro("rz_factors", &Hierarchy::rz_factors,
                    "RZ factorisations of the last call (rz_min_norm).")
       .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,

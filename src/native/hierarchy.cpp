@@ -267,7 +267,7 @@ void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W
   factor_rows(P, W);
   // with the slack step the projected objective is rarely needed: formed on first use
   qt_stale_ = true;
-  if (!(slack_ls && P.slacks > 0)) form_qt(P);
+  if (!(slack_ls && P.slacks > 0) && !unit_q_) form_qt(P);
 }
 
 void Hierarchy::form_qt(const LsqProblem& P) {
@@ -278,7 +278,7 @@ void Hierarchy::form_qt(const LsqProblem& P) {
 }
 
 void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) {
-  if (!trial_qt_tail) {
+  if (!trial_qt_tail || unit_q_) {  // (unit_q_: factor_working forms no Q Qf either)
     factor_working(P, W);
     return;
   }
@@ -364,6 +364,18 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   res -= P.c.head(qr);
   step.setZero();
   if (nk == 0 || qr == 0) return;
+  if (unit_q_) {
+    // Q^T Q = I: K = Q N has orthonormal columns (K^T K = N^T N = I, full column rank), so
+    // the least squares min |K s + res| is s = -K^T res = -N^T g, g = Q^T res the gradient:
+    // the step -N N^T g from the working set's QR alone (its columns rho.. span null(G_w))
+    auto g = u_.head(k);
+    g.noalias() = Q.transpose() * res;
+    wqr_.apply_qt(g);
+    step.segment(rho, nk) = -g.segment(rho, nk);
+    wqr_.apply_q(step);
+    ++least_distance_steps_;
+    return;
+  }
   if (reuse_k_qr && k_valid_) {
     // the same working set's QR as the last step: the same K (a K^T or slack_step decided
     // by W and P alone: the same path), only the right-hand side changed
@@ -1471,6 +1483,13 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   P.c.head(n_) = -x_;
   add_inherited_rows(P);
   add_bound_rows(P);
+  // Z^T Z = I: the least squares min |Z y + x| is the least-distance problem
+  // min |y + Z^T x|^2 (+ const), stepped without the QR of the projected objective
+  struct UnitQ {  // cleared on every return
+    bool& flag;
+    ~UnitQ() { flag = false; }
+  } unit_q{unit_q_};
+  unit_q_ = least_distance;
   auto y = y_.head(r_);
   y.setZero();
   int iters = 0;
@@ -1544,6 +1563,8 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   seeded_ = 0;
   downdates_ = 0;
   slack_steps_ = 0;
+  least_distance_steps_ = 0;
+  unit_q_ = false;
   k_qr_reuses_ = 0;
   rz_factors_ = 0;
   identity_products_ = 0;

@@ -175,6 +175,14 @@ class Hierarchy {
   bool identity_z = true;
   /// Products with an identity Z skipped in the last call (identity_z).
   int identity_products() const { return identity_products_; }
+  /// The minimum-norm stage's least squares min |x + Z y| (Z with orthonormal columns: an
+  /// identity Hessian, |y + Z^T x|^2 + const) stepped as a least-distance problem: the step
+  /// on a working set is -N N^T g, N = the working rows' null space from their QR (updated
+  /// as rows enter and leave), g = Z^T (x + Z y) (default); or by the general least squares
+  /// (A/B: the QR of K = Z N at every working set and the projected objective Z Qf).
+  bool least_distance = true;
+  /// Least-squares steps of the last call taken by least_distance.
+  int least_distance_steps() const { return least_distance_steps_; }
   /// RZ factorisations of the last call (rz_min_norm).
   int rz_factors() const { return rz_factors_; }
   /// Least-squares steps of the last call that reused K's factorisation (reuse_k_qr).
@@ -353,6 +361,10 @@ class Hierarchy {
   PivotedQR kqr_t_;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
   PivotedQR sqr_;  ///< slack_step: the transposed system on z
   int slack_steps_ = 0;  ///< steps by slack_step in this call
+  /// the stage being solved has an objective Q with orthonormal columns (the minimum-norm
+  /// stage with least_distance): ls_step takes the least-distance step, no Q Qf is formed
+  bool unit_q_ = false;
+  int least_distance_steps_ = 0;  ///< steps by least_distance in this call
   /// reuse_k_qr: kqr_ (and cqr_) or kqr_t_ hold the factorisation of the current working
   /// set's K on the stage's problem (cleared whenever the working set's QR changes)
   bool k_valid_ = false;
