@@ -173,6 +173,16 @@ class Hierarchy {
   /// problem's first level), a level's projections A Z and C Z and the inherited rows' Cin Z
   /// are copies of the rows (default), not matrix products with the identity (A/B).
   bool identity_z = true;
+  /// The freeze of a rank-deficient tall level whose closed form came from the QR of M and
+  /// which leaves no violated row (the humanoid's 97-row level of rank 52 in 60): Z <- Z P N,
+  /// N an orthonormal basis of null([R11 R12]) from the factorisation the closed form already
+  /// made of it (the RZ's rank reflectors, or the QR of [R11 R12]^T, applied to the r - rank
+  /// last unit vectors), one product of Z with the r x (r - rank) N (default); off (A/B): the
+  /// row space basis of [R11 R12] P^T formed, factorised again by freeze() and its rank
+  /// reflectors applied to Z (the same subspace, another orthonormal basis of it).
+  bool null_space_freeze = true;
+  /// Levels of the last call frozen by null_space_freeze.
+  int null_space_freezes() const { return null_space_freezes_; }
   /// Products with an identity Z skipped in the last call (identity_z).
   int identity_products() const { return identity_products_; }
   /// RZ factorisations of the last call (rz_min_norm).
@@ -227,6 +237,9 @@ class Hierarchy {
   void carry_z(PivotedQR& qr, int rank);
   /// Z <- Z null(F) with F^T the r x f matrix already in fqr_ (rank relative to scale).
   void freeze(double scale);
+  /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (qr_rz_:
+  /// N from trz_, else from tqr_); the carried projection Cin Z follows by the same product.
+  void freeze_null_space(int rank);
   void snap(Vec& x) const;
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
@@ -396,6 +409,9 @@ class Hierarchy {
   /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
   /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
   PivotedQR tqr_;
+  int null_space_freezes_ = 0;  ///< levels frozen by null_space_freeze in this call
+  Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))
+  Mat cztmp_;  ///< null_space_freeze: the product Cin Z P N before it is copied back
   int zero_tail_compressions_ = 0;  ///< levels compressed by compress_zero_tail in this call
   bool qr_wide_ = false;    ///< the last qr_closed_form factorised M^T (me <= r)
   int qr_closed_forms_ = 0;  ///< closed forms by QR in this call
