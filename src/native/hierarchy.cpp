@@ -120,6 +120,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
   fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
+  fqr_.reserve_wy(std::max(n, capacity_));
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
   for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
@@ -137,6 +138,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Cl_.setZero(std::max(max_in, 1), n);
   CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
+  mqr_.reserve_wy(std::max({n, capacity_, 1}));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   trz_.reserve(std::max(n, 1), std::max(n, 1));
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
@@ -1577,6 +1579,10 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   for (PivotedQR* q : {&kqr_, &fqr_, &cqr_, &kqr_t_, &sqr_, &mqr_, &tqr_}) {
     q->gemv_update = gemv_qr;
     q->gemv_steps = 0;
+  }
+  for (PivotedQR* q : {&mqr_, &fqr_}) {
+    q->wy_right = wy_right;
+    q->wy_applications = 0;
   }
   wqr_.set_gemv_update(gemv_qr);
   wqr_.gemv_steps() = 0;

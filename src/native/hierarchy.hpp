@@ -181,6 +181,13 @@ class Hierarchy {
   /// row space basis of [R11 R12] P^T formed, factorised again by freeze() and its rank
   /// reflectors applied to Z (the same subspace, another orthonormal basis of it).
   bool null_space_freeze = true;
+  /// The changes of Z and of the carried projection Cin Z by a QR's reflectors (a wide
+  /// level's M^T, a freeze's F^T) of 12 to m / 3 reflectors (on at least 24 rows) applied
+  /// in the compact WY form,
+  /// B - ((B V) T) V^T by matrix products (default), or one reflector at a time (A/B).
+  bool wy_right = true;
+  /// apply_q_right calls of the last call that took the WY form (wy_right).
+  int wy_applications() const { return mqr_.wy_applications + fqr_.wy_applications; }
   /// Levels of the last call frozen by null_space_freeze.
   int null_space_freezes() const { return null_space_freezes_; }
   /// Products with an identity Z skipped in the last call (identity_z).

@@ -11,8 +11,16 @@ likewise). Switched off, the row space basis is formed, factorised again by the 
 its rank reflectors applied to Z: the same subspace in another orthonormal basis. A level
 that leaves violated rows takes the general freeze either way.
 
+``wy_right``: a change of Z (and of the carried projection Cin Z) by the reflectors of a
+QR (a wide level's M^T, a freeze's F^T) of 12 to m / 3 reflectors on at least 24 rows is
+applied in the compact WY form (LAPACK's dlarft and dlarfb): Qf = I - V T V^T, B Qf =
+B - ((B V) T) V^T by matrix products, not one reflector at a time (the humanoid's wide
+level 1: 21 reflectors on its 88 x 86 Z and on 72 inherited rows). The same transform, its
+sums in another order.
+
 Every step here equals the solver with the switch off and the Python engine (level values
-1e-9 relative, x where unique), and the path was taken (``null_space_freezes``).
+1e-9 relative, x where unique), and the path was taken (``null_space_freezes``,
+``wy_applications``).
 """
 
 from __future__ import annotations
@@ -28,27 +36,33 @@ from test_native_kqr import _equality_under_bounds
 
 import qpcoord as qc
 
+#: each switch's counter of the path it takes
+COUNTER = {"null_space_freeze": "null_space_freezes", "wy_right": "wy_applications"}
 
-def _pair(stack: qc.Stack, rz: bool = True):
-    """(P, new, plain): two native solvers of ``stack``, null_space_freeze on and off."""
+
+def _pair(stack: qc.Stack, rz: bool = True, switch: str = "null_space_freeze"):
+    """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off."""
     from qpcoord.core.native import NativeHierarchy
 
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     plain = NativeHierarchy(P, stack.damping)
-    assert new._solver.null_space_freeze  # the default
-    plain._solver.null_space_freeze = False
+    assert getattr(new._solver, switch)  # the default
+    setattr(plain._solver, switch, False)
     for h in (new, plain):
         h._solver.rz_min_norm = rz
     return P, new, plain
 
 
-def _check(stack: qc.Stack, P, new, plain, unique_x: bool) -> int:
+def _check(
+    stack: qc.Stack, P, new, plain, unique_x: bool, switch: str = "null_space_freeze"
+) -> int:
     """Solve with both and the Python engine, compare; return ``new``'s count of the path."""
+    counter = COUNTER[switch]
     xn, rn, _ = new.solve(P)
-    taken = new._solver.null_space_freezes
+    taken = getattr(new._solver, counter)
     xp, rp, _ = plain.solve(P)
-    assert plain._solver.null_space_freezes == 0
+    assert getattr(plain._solver, counter) == 0
     sp = stack.solve(engine="python")
     ref = sp.level_residuals
     for r in (rn, rp):
@@ -192,3 +206,50 @@ def test_violated_rows_take_the_general_freeze_bit_for_bit():
     assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
     sp = st.solve(engine="python")
     assert np.all(np.abs(rn - sp.level_residuals) <= LEVEL_TOL * np.maximum(1.0, rn))
+
+
+@needs_native
+@pytest.mark.parametrize(("box", "unit"), [(False, False), (True, False)], ids=["rows", "box form"])
+def test_moving_humanoid_wy_equals_python(box, unit):
+    """The moving humanoid: its wide level of 21 rows changes Z (and, rows form, the 72
+    inherited rows' projection) in the WY form at every step; level values equal the
+    reflector loop's and the Python engine's."""
+    hp = _published()
+    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
+    levels = hp.unit_rows(prob.levels) if unit else prob.levels
+    st = qc.Stack(levels, bounds=prob.bounds)
+    P, new, plain = _pair(st, switch="wy_right")
+    move = hp._mover(levels)
+    total = 0
+    for step in range(4):
+        move(step)
+        total += _check(st, P, new, plain, unique_x=False, switch="wy_right")
+    assert total >= 4
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("rows", [11, 12, 14, 20], ids=lambda r: f"{r} rows")
+def test_wide_levels_under_inherited_rows_by_wy(seed, rows):
+    """An inequality level of 30 rows over 64 variables (its rows inherited: the carried
+    projection), then wide equality levels of 11-20 rows (12 and more: the WY form on Z and
+    on Cin Z; 11: the loop), then a last level: x is unique and equals the loop's and the
+    Python engine's over changing targets."""
+    rng = np.random.default_rng(seed)
+    n = 64
+    C = rng.standard_normal((30, n))
+    C /= np.linalg.norm(C, axis=1)[:, None]
+    lo0 = rng.uniform(-1.0, -0.2, 30)
+    ineq = qc.Inequality(C, lo0, np.full(30, np.inf))
+    e1 = qc.Equality(rng.standard_normal((rows, n)), rng.standard_normal(rows))
+    e2 = qc.Equality(rng.standard_normal((rows, n)), rng.standard_normal(rows))
+    last = qc.Equality(rng.standard_normal((n, n)), rng.standard_normal(n))
+    st = qc.Stack([ineq, e1, e2, last], bounds=qc.Bounds(-5 * np.ones(n), 5 * np.ones(n)))
+    P, new, plain = _pair(st, switch="wy_right")
+    b1 = e1.b.copy()
+    total = 0
+    for step in range(4):
+        ineq.update(lower=lo0 + 0.3 * np.sin(0.7 * step + np.arange(30)))
+        e1.update(b=b1 + 0.2 * np.cos(step + np.arange(rows)))
+        total += _check(st, P, new, plain, unique_x=True, switch="wy_right")
+    assert (total > 0) == (rows >= 12)

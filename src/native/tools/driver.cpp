@@ -16,7 +16,7 @@
 // QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
-// identity_z, null_space_freeze.
+// identity_z, null_space_freeze, wy_right.
 //
 // QPCOORD_DRIVER_ON=gemv_qr: switch that non-default option on.
 //
@@ -87,6 +87,7 @@ int main(int argc, char** argv) {
     if (has("rz_min_norm")) h.rz_min_norm = false;
     if (has("identity_z")) h.identity_z = false;
     if (has("null_space_freeze")) h.null_space_freeze = false;
+    if (has("wy_right")) h.wy_right = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;
     if (has("downdate")) h.downdate = false;
     if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
