@@ -212,7 +212,7 @@ class PivotedQR {
   /// apply_q_right by the compact WY form (see reserve_wy); off: one reflector at a time.
   bool wy_right = false;
   /// apply_q_right_wy only from this many reflectors on (fewer: the loop's overhead is lower)
-  static constexpr int kWyMinReflectors = 12;
+  static constexpr int kWyMinReflectors = 16;
   /// ... and for a B of at least this many rows
   static constexpr int kWyMinRows = 24;
   /// apply_q_right calls that took the WY form since the counter was last reset (by its owner).

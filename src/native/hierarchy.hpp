@@ -182,7 +182,7 @@ class Hierarchy {
   /// reflectors applied to Z (the same subspace, another orthonormal basis of it).
   bool null_space_freeze = true;
   /// The changes of Z and of the carried projection Cin Z by a QR's reflectors (a wide
-  /// level's M^T, a freeze's F^T) of 12 to m / 3 reflectors (on at least 24 rows) applied
+  /// level's M^T, a freeze's F^T) of 16 to m / 3 reflectors (on at least 24 rows) applied
   /// in the compact WY form,
   /// B - ((B V) T) V^T by matrix products (default), or one reflector at a time (A/B).
   bool wy_right = true;
