@@ -343,7 +343,8 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
       .def_rw("null_space_freeze", &Hierarchy::null_space_freeze,
               "A rank-deficient tall level frozen by the null space of its QR (default) or not.")
       .def_rw("wy_right", &Hierarchy::wy_right,
-              "Z's changes by 8 or more reflectors in the compact WY form (default) or not.")
+              "Z's changes by 16 or more reflectors in the compact WY form (default in the "
+              "x86-64-v3 build) or not.")
       .def_prop_ro("wy_applications", &Hierarchy::wy_applications,
                    "Changes of Z or Cin Z of the last call in the compact WY form.")
       .def_prop_ro("null_space_freezes", &Hierarchy::null_space_freezes,

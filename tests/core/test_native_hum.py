@@ -16,7 +16,7 @@ QR (a wide level's M^T, a freeze's F^T) of 16 to m / 3 reflectors on at least 24
 applied in the compact WY form (LAPACK's dlarft and dlarfb): Qf = I - V T V^T, B Qf =
 B - ((B V) T) V^T by matrix products, not one reflector at a time (the humanoid's wide
 level 1: 21 reflectors on its 88 x 86 Z and on 72 inherited rows). The same transform, its
-sums in another order.
+sums in another order. On by default in the x86-64-v3 build (FMA), off in the baseline one.
 
 Every step here equals the solver with the switch off and the Python engine (level values
 1e-9 relative, x where unique), and the path was taken (``null_space_freezes``,
@@ -47,7 +47,9 @@ def _pair(stack: qc.Stack, rz: bool = True, switch: str = "null_space_freeze"):
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     plain = NativeHierarchy(P, stack.damping)
-    assert getattr(new._solver, switch)  # the default
+    # null_space_freeze: on by default; wy_right: on by default in the x86-64-v3 build only
+    assert getattr(new._solver, switch) or switch == "wy_right"
+    setattr(new._solver, switch, True)
     setattr(plain._solver, switch, False)
     for h in (new, plain):
         h._solver.rz_min_norm = rz
@@ -253,3 +255,17 @@ def test_wide_levels_under_inherited_rows_by_wy(seed, rows):
         e1.update(b=b1 + 0.2 * np.cos(step + np.arange(rows)))
         total += _check(st, P, new, plain, unique_x=True, switch="wy_right")
     assert (total > 0) == (rows >= 16)
+
+
+@needs_native
+def test_wy_right_default_per_build():
+    """wy_right is on by default in the x86-64-v3 build, off in the baseline build."""
+    from qpcoord.core import native
+
+    base = native.import_variant("baseline")
+    assert not base.Hierarchy(4, [0, 2], [0, 0], False, 0.0).wy_right
+    try:
+        v3 = native.import_variant("x86-64-v3")
+    except (native.NativeUnavailableError, ValueError):
+        pytest.skip("no x86-64-v3 build on this machine")
+    assert v3.Hierarchy(4, [0, 2], [0, 0], False, 0.0).wy_right
