@@ -189,11 +189,10 @@ class Hierarchy {
   /// reflectors applied to Z (the same subspace, another orthonormal basis of it).
   bool null_space_freeze = true;
   /// The changes of Z and of the carried projection Cin Z by a QR's reflectors (a wide
-  /// level's M^T, a freeze's F^T) of 16 to m / 3 reflectors (on at least 24 rows) applied
-  /// in the compact WY form,
-  /// B - ((B V) T) V^T by matrix products, or one reflector at a time. Default on in the
-  /// x86-64-v3 build (FMA: 1-4 % faster on the humanoid's forms, 3 % fewer instructions),
-  /// off in the baseline build (1.8 % fewer instructions but no faster: within noise).
+  /// level's M^T, a freeze's F^T), 16 to m / 3 of them on at least 24 rows, in the compact
+  /// WY form B - ((B V) T) V^T by matrix products, or one reflector at a time. Default on in
+  /// the x86-64-v3 build (FMA: 1-4 % faster on the humanoid's forms, 3 % fewer
+  /// instructions), off in the baseline build (1.8 % fewer instructions, no faster).
   bool wy_right = kWyRightDefault;
   /// apply_q_right calls of the last call that took the WY form (wy_right).
   int wy_applications() const { return mqr_.wy_applications + fqr_.wy_applications; }

@@ -269,3 +269,30 @@ def test_wy_right_default_per_build():
     except (native.NativeUnavailableError, ValueError):
         pytest.skip("no x86-64-v3 build on this machine")
     assert v3.Hierarchy(4, [0, 2], [0, 0], False, 0.0).wy_right
+
+
+@needs_native
+@pytest.mark.parametrize("variant", ["baseline", "x86-64-v3"])
+@pytest.mark.parametrize("switch", ["null_space_freeze", "wy_right"])
+def test_each_build_takes_the_paths(monkeypatch, variant, switch):
+    """Each build (baseline, x86-64-v3 where this CPU runs it) on the moving humanoid, each
+    switch forced on against off: the path is taken and the level values equal the Python
+    engine's (the builds round differently: FMA)."""
+    from qpcoord.core import native
+
+    try:
+        mod = native.import_variant(variant)
+    except (native.NativeUnavailableError, ValueError):
+        pytest.skip(f"no {variant} build on this machine")
+    monkeypatch.setattr(native, "_module", mod)
+    hp = _published()
+    prob = load("lexls_test01_humanoid")
+    st = qc.Stack(prob.levels, bounds=prob.bounds)
+    P, new, plain = _pair(st, switch=switch)
+    assert type(new._solver).__module__ == mod.__name__
+    move = hp._mover(prob.levels)
+    total = 0
+    for step in range(3):
+        move(step)
+        total += _check(st, P, new, plain, unique_x=False, switch=switch)
+    assert total >= 3
