@@ -345,6 +345,15 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
                    "RZ factorisations of the last call (rz_min_norm).")
       .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,
                    "Least-squares steps of the last call that reused K's QR (reuse_k_qr).")
+      .def_rw("null_space_freeze", &Hierarchy::null_space_freeze,
+              "A rank-deficient tall level frozen by the null space of its QR (default) or not.")
+      .def_rw("wy_right", &Hierarchy::wy_right,
+              "Z's changes by 16 or more reflectors in the compact WY form (default in the "
+              "x86-64-v3 build) or not.")
+      .def_prop_ro("wy_applications", &Hierarchy::wy_applications,
+                   "Changes of Z or Cin Z of the last call in the compact WY form.")
+      .def_prop_ro("null_space_freezes", &Hierarchy::null_space_freezes,
+                   "Levels of the last call frozen by null_space_freeze.")
       .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,
                    "Levels of the last call compressed by compress_zero_tail.")
       .def_prop_ro("gemv_steps", &Hierarchy::gemv_steps,

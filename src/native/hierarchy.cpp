@@ -120,6 +120,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
   fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
+  fqr_.reserve_wy(std::max(n, capacity_));
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
   for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
@@ -137,9 +138,12 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Cl_.setZero(std::max(max_in, 1), n);
   CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
   mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
+  mqr_.reserve_wy(std::max({n, capacity_, 1}));
   tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
   trz_.reserve(std::max(n, 1), std::max(n, 1));
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
+  nsp_.setZero(std::max(n, 1), std::max(n, 1));
+  cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
 }
 
 bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) const {
@@ -246,6 +250,32 @@ void Hierarchy::freeze(double scale) {
   carry_z(fqr_, rank);
   for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
   r_ -= rank;
+}
+
+void Hierarchy::freeze_null_space(int rank) {
+  const int l = r_ - rank;
+  auto N = nsp_.topLeftCorner(r_, l);
+  auto q = u_.head(r_);
+  for (int t = 0; t < l; ++t) {  // column t of N: Z_rz^T e_{rank+t} (or Qf e_{rank+t}), permuted
+    q.setZero();
+    q(rank + t) = 1.0;
+    if (qr_rz_)
+      trz_.apply_zt(q);
+    else
+      tqr_.apply_q(q);
+    for (int i = 0; i < r_; ++i) N(mqr_.perm(i), t) = q(i);
+  }
+  auto Zn = Ztmp_.leftCols(l);
+  Zn.noalias() = Z_.leftCols(r_) * N;
+  Z_.leftCols(l) = Zn;
+  z_identity_ = false;
+  if (carry_projection && kz_ > 0) {
+    auto CZ = cztmp_.topLeftCorner(kz_, l);
+    CZ.noalias() = CinZ_.topLeftCorner(kz_, r_) * N;
+    CinZ_.topLeftCorner(kz_, l) = CZ;
+  }
+  r_ = l;
+  ++null_space_freezes_;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1293,6 +1323,8 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       carry_z(mqr_, rank);
       for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
       r_ -= rank;
+    } else if (rank && by_qr && null_space_freeze) {  // Z <- Z P null([R11 R12])
+      freeze_null_space(rank);
     } else if (rank) {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
       row_space_basis(svd, by_qr, rank, fqr_.matrix(r_, rank));
       freeze(1.0);
@@ -1438,6 +1470,16 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       ++nviol;
     }
   }
+  if (nviol == 0 && rank && by_qr && !qr_wide_ && rank < r_ && null_space_freeze) {
+    const int k_before = k_;
+    inherit(C, lo, hi, i0, mi, &viol_);
+    if (carry_projection && kz_ == k_before) {
+      for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
+      kz_ = k_;
+    }
+    freeze_null_space(rank);
+    return kOk;
+  }
   // F^T = [V_rank, Z^T C_violated^T] (r x f), null(F) is what the level leaves free
   MapMat Ft = fqr_.matrix(r_, rank + nviol);
   double fscale = 1.0;
@@ -1557,6 +1599,10 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     q->gemv_update = gemv_qr;
     q->gemv_steps = 0;
   }
+  for (PivotedQR* q : {&mqr_, &fqr_}) {
+    q->wy_right = wy_right;
+    q->wy_applications = 0;
+  }
   wqr_.set_gemv_update(gemv_qr);
   wqr_.gemv_steps() = 0;
   timed_out_ = false;
@@ -1572,6 +1618,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   trial_ready_ = false;
   qr_closed_forms_ = 0;
   zero_tail_compressions_ = 0;
+  null_space_freezes_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)

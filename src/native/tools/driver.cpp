@@ -16,9 +16,10 @@
 // QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
-// identity_z, least_distance.
+// identity_z, least_distance, null_space_freeze, wy_right.
 //
-// QPCOORD_DRIVER_ON=gemv_qr: switch that non-default option on.
+// QPCOORD_DRIVER_ON=gemv_qr,wy_right: switch these non-default options on (wy_right is on by
+// default in a build with FMA, e.g. -march=x86-64-v3).
 //
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
 // (float64, n per solve, in order) to compare two builds.
@@ -76,14 +77,19 @@ int main(int argc, char** argv) {
     if (has("rz_min_norm")) h.rz_min_norm = false;
     if (has("identity_z")) h.identity_z = false;
     if (has("least_distance")) h.least_distance = false;
+    if (has("null_space_freeze")) h.null_space_freeze = false;
+    if (has("wy_right")) h.wy_right = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;
     if (has("downdate")) h.downdate = false;
     if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
     if (has("compress_objective")) h.compress_objective = false;
     if (has("wide_ls")) h.wide_ls = false;
   }
-  if (const char* on = std::getenv("QPCOORD_DRIVER_ON"))
-    if ((std::string(",") + on + ",").find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
+  if (const char* on = std::getenv("QPCOORD_DRIVER_ON")) {
+    const std::string list = std::string(",") + on + ",";
+    if (list.find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
+    if (list.find(",wy_right,") != std::string::npos) h.wy_right = true;
+  }
   Vec x(n), res(L), detail(8);
   Mat stats(L + 2, 3);
   long long allocs_after_first = 0;
