@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hlsp import load
-from test_native import LEVEL_TOL, X_TOL, needs_native
+from test_native import LEVEL_TOL, needs_native
+from test_native_kqr import _check as kqr_check
 from test_native_kqr import _equality_under_bounds
 
 import qpcoord as qc
@@ -59,22 +60,9 @@ def _pair(stack: qc.Stack, rz: bool = True, switch: str = "null_space_freeze"):
 def _check(
     stack: qc.Stack, P, new, plain, unique_x: bool, switch: str = "null_space_freeze"
 ) -> int:
-    """Solve with both and the Python engine, compare; return ``new``'s count of the path."""
-    counter = COUNTER[switch]
-    xn, rn, _ = new.solve(P)
-    taken = getattr(new._solver, counter)
-    xp, rp, _ = plain.solve(P)
-    assert getattr(plain._solver, counter) == 0
-    sp = stack.solve(engine="python")
-    ref = sp.level_residuals
-    for r in (rn, rp):
-        assert np.all(np.abs(r - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (r, ref)
-    assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rn, rp)
-    if unique_x:
-        scale = max(1.0, float(np.max(np.abs(sp.x))))
-        assert np.max(np.abs(xn - xp)) <= 1e-9 * scale
-        assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale
-    return taken
+    """test_native_kqr's comparison (both solvers, the Python engine; level values, x where
+    unique) with this file's counters: ``new``'s count of the switch's path."""
+    return kqr_check(stack, P, new, plain, unique_x, switch, counters=COUNTER)
 
 
 def _published():

@@ -58,10 +58,18 @@ def _pair(stack: qc.Stack, switch: str = "reuse_k_qr"):
     return P, new, plain
 
 
-def _check(stack: qc.Stack, P, new, plain, unique_x: bool, switch: str = "reuse_k_qr") -> int:
+def _check(
+    stack: qc.Stack,
+    P,
+    new,
+    plain,
+    unique_x: bool,
+    switch: str = "reuse_k_qr",
+    counters: dict | None = None,
+) -> int:
     """Solve with both and the Python engine, compare; return ``new``'s count of the
-    switch's path."""
-    counter = COUNTER[switch]
+    switch's path (its counter in ``counters``, default this file's :data:`COUNTER`)."""
+    counter = (COUNTER if counters is None else counters)[switch]
     xn, rn, _ = new.solve(P)
     taken = getattr(new._solver, counter)
     xp, rp, _ = plain.solve(P)
