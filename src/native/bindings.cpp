@@ -65,25 +65,9 @@ struct Bound : Hierarchy {
                  const std::vector<nb::object>& in, const std::vector<int64_t>& in_rows,
                  const std::vector<int64_t>& in_first, nb::handle x, nb::handle res) {
     if (!bound) throw nb::value_error("set_tasks: call bind first");
+    const qpcoord::refresh::Stacked::Dest d =
+        qpcoord::refresh::checked_dest(a, eq, eq_rows, eq_first, in, in_rows, in_first);
     const int64_t n = static_cast<int64_t>(a[0].shape(1));
-    if (static_cast<int64_t>(a[2].shape(1)) != n || static_cast<int64_t>(a[6].shape(0)) != n ||
-        static_cast<int64_t>(a[7].shape(0)) != n)
-      throw nb::value_error("set_tasks: the bound arrays' columns differ");
-    if (eq.size() != eq_rows.size() || eq.size() != eq_first.size() ||
-        in.size() != in_rows.size() || in.size() != in_first.size())
-      throw nb::value_error("set_tasks: tasks, row counts and first rows differ in length");
-    for (size_t k = 0; k < eq.size(); ++k)
-      if (eq_rows[k] < 0 || eq_first[k] < 0 ||
-          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[0].shape(0)) ||
-          eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[1].shape(0)))
-        throw nb::value_error("set_tasks: equality rows outside Aeq");
-    for (size_t k = 0; k < in.size(); ++k)
-      for (int i = 2; i < 6; ++i)
-        if (in_rows[k] < 0 || in_first[k] < 0 ||
-            in_first[k] + in_rows[k] > static_cast<int64_t>(a[i].shape(0)))
-          throw nb::value_error("set_tasks: inequality rows outside C");
-    const qpcoord::refresh::Stacked::Dest d{a[0].data(), a[1].data(), a[2].data(), a[3].data(),
-                                            a[4].data(), a[5].data(), a[6].data(), a[7].data()};
     copy_x = x.attr("copy");
     copy_res = res.attr("copy");
     static const char* const kKeys[10] = {

@@ -278,5 +278,38 @@ class Stacked {
   nb::object f64_;
 };
 
+/// set_tasks' checks, shared by the Hierarchy (bindings.cpp) and Weighted (weighted.cpp)
+/// bindings: the bound arrays a (Aeq beq C lo hi sw lb ub first: shape(0) rows, shape(1)
+/// columns) agree in their columns, the task lists match their row counts and first rows,
+/// and every task's rows lie inside its arrays; nb::value_error naming what is wrong.
+/// Returns where each array's data is (Stacked::set's destinations).
+template <typename Arrays>
+Stacked::Dest checked_dest(Arrays& a, const std::vector<nb::object>& eq,
+                           const std::vector<int64_t>& eq_rows,
+                           const std::vector<int64_t>& eq_first,
+                           const std::vector<nb::object>& in,
+                           const std::vector<int64_t>& in_rows,
+                           const std::vector<int64_t>& in_first) {
+  const int64_t n = static_cast<int64_t>(a[0].shape(1));
+  if (static_cast<int64_t>(a[2].shape(1)) != n || static_cast<int64_t>(a[6].shape(0)) != n ||
+      static_cast<int64_t>(a[7].shape(0)) != n)
+    throw nb::value_error("set_tasks: the bound arrays' columns differ");
+  if (eq.size() != eq_rows.size() || eq.size() != eq_first.size() ||
+      in.size() != in_rows.size() || in.size() != in_first.size())
+    throw nb::value_error("set_tasks: tasks, row counts and first rows differ in length");
+  for (size_t k = 0; k < eq.size(); ++k)
+    if (eq_rows[k] < 0 || eq_first[k] < 0 ||
+        eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[0].shape(0)) ||
+        eq_first[k] + eq_rows[k] > static_cast<int64_t>(a[1].shape(0)))
+      throw nb::value_error("set_tasks: equality rows outside Aeq");
+  for (size_t k = 0; k < in.size(); ++k)
+    for (int i = 2; i < 6; ++i)
+      if (in_rows[k] < 0 || in_first[k] < 0 ||
+          in_first[k] + in_rows[k] > static_cast<int64_t>(a[i].shape(0)))
+        throw nb::value_error("set_tasks: inequality rows outside C");
+  return Stacked::Dest{a[0].data(), a[1].data(), a[2].data(), a[3].data(),
+                       a[4].data(), a[5].data(), a[6].data(), a[7].data()};
+}
+
 }  // namespace refresh
 }  // namespace qpcoord
