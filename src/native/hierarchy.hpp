@@ -24,7 +24,8 @@
 
 namespace qpcoord {
 
-inline constexpr int kAbiVersion = 5;  // 5: the Weighted refresh (set_tasks, refresh), session 11 switches
+// 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches
+inline constexpr int kAbiVersion = 5;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
 #if defined(__FMA__)
