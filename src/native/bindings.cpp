@@ -8,6 +8,7 @@
 
 #include "cpu_isa.hpp"
 #include "hierarchy.hpp"
+#include "info_dict.hpp"
 #include "refresh.hpp"
 #include "weighted.hpp"
 #include "ik_step.hpp"
@@ -56,9 +57,8 @@ struct Bound : Hierarchy {
   /// arrays' copy methods (the x and res step() returns).
   qpcoord::refresh::Stacked stacked;
   nb::object copy_x, copy_res;
-  /// info()'s keys in its order, then the value "native"
-  std::array<nb::object, 10> keys;
-  nb::object info_template;  ///< info()'s keys, in order, with None
+  /// info()'s keys (info_dict.hpp: the rule shared with the IK step)
+  qpcoord::info::Keys info_keys;
 
   void set_tasks(nb::handle P, const std::vector<nb::object>& eq,
                  const std::vector<int64_t>& eq_rows, const std::vector<int64_t>& eq_first,
@@ -70,53 +70,15 @@ struct Bound : Hierarchy {
     const int64_t n = static_cast<int64_t>(a[0].shape(1));
     copy_x = x.attr("copy");
     copy_res = res.attr("copy");
-    static const char* const kKeys[10] = {
-        "engine",           "hard_iterations",    "active_set_iterations",
-        "min_norm_iterations", "warm_start_hits", "warm_start_seeded",
-        "closed_form_levels", "qp_calls",         "uncertified",
-        "native"};
-    for (int i = 0; i < 10; ++i) keys[i] = nb::steal(PyUnicode_InternFromString(kKeys[i]));
-    nb::dict tpl;
-    for (int i = 0; i < 9; ++i) tpl[keys[i]] = nb::none();
-    info_template = tpl;
     stacked.set(P, eq, eq_rows, eq_first, in, in_rows, in_first, n,
                 static_cast<int64_t>(a[0].shape(0)), d);
   }
 
-  /// The info dict of the last call (NativeHierarchy._info's keys and values, from the bound
-  /// stats / detail: one pass over the stages hard, levels, minimum-norm step).
+  /// The info dict of the last call (info_dict.hpp, from the bound stats / detail).
   nb::dict info(double kkt_tol) const {
-    if (!bound || !keys[0].is_valid()) throw nb::value_error("info: call set_tasks first");
+    if (!bound) throw nb::value_error("info: call bind first");
     const Arr& st = a[10];
-    const double* d = a[11].data();
-    const int stages = static_cast<int>(st.shape(0)), last = stages - 2;
-    const double* s = st.data();
-    nb::list levels, closed, uncertified;
-    long hits = 0, calls = 0;
-    for (int k = 0; k < stages; ++k) {
-      const double it = s[3 * k], h = s[3 * k + 1], c = s[3 * k + 2];
-      if (k > 0 && k < stages - 1) levels.append(static_cast<long>(it));
-      if (h != 0.0) ++hits;
-      if (c != 0.0 && k > 0 && k <= last) closed.append(k - 1);
-      if (it != 0.0 || h != 0.0) ++calls;
-    }
-    if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
-    // a copy of the template (the keys in order, hashed, room for all: no resize), each
-    // value then replaced in place
-    nb::dict out = nb::steal<nb::dict>(PyDict_Copy(info_template.ptr()));
-    if (!out.is_valid()) throw nb::python_error();
-    const nb::object vals[9] = {keys[9],  // "native"
-                                nb::int_(static_cast<long>(s[0])),
-                                levels,
-                                nb::int_(static_cast<long>(s[3 * (stages - 1)])),
-                                nb::int_(hits),
-                                nb::int_(static_cast<long>(d[7])),
-                                closed,
-                                nb::int_(calls),
-                                uncertified};
-    for (int i = 0; i < 9; ++i)
-      if (PyDict_SetItem(out.ptr(), keys[i].ptr(), vals[i].ptr()) != 0) throw nb::python_error();
-    return out;
+    return info_keys.make(st.data(), static_cast<int>(st.shape(0)), a[11].data(), kkt_tol);
   }
 
   /// refresh + run + (x copy, res copy, info) in one call; an int status when the solve

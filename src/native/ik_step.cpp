@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "hierarchy.hpp"
+#include "info_dict.hpp"
 #include "integrate.hpp"
 #include "spatial.hpp"
 #include "support_kernels.hpp"
@@ -433,36 +434,11 @@ class IKStep {
     return code;
   }
 
-  /// The solve's statistics as a dict (NativeIKStep._info's keys and values, built here:
-  /// one pass over the stages hard, levels, minimum-norm step of the bound stats / detail).
+  /// The solve's statistics as a dict (info_dict.hpp: the rule of the Hierarchy binding's
+  /// info, from the bound stats / detail).
   nb::dict info(double kkt_tol) const {
     const OutArr& st = out_[12];
-    const double* d = out_[13].data();
-    const int stages = static_cast<int>(st.shape(0)), last = stages - 2;
-    const double* s = st.data();
-    nb::list levels, closed, uncertified;
-    double hits = 0.0;
-    long calls = 0;
-    for (int k = 0; k < stages; ++k) {
-      const double it = s[3 * k], h = s[3 * k + 1], c = s[3 * k + 2];
-      if (k > 0 && k < stages - 1) levels.append(static_cast<long>(it));
-      hits += h;
-      if (c != 0.0 && k > 0 && k <= last) closed.append(k - 1);
-      if (it != 0.0 || h != 0.0) ++calls;
-    }
-    if (d[5] > kkt_tol) uncertified.append(nb::make_tuple(static_cast<long>(d[6]), d[5]));
-    nb::dict out;  // keys made once (info_keys_): no str built and hashed per call
-    const nb::str* key = info_keys_.data();
-    out[key[0]] = key[9];  // "native"
-    out[key[1]] = static_cast<long>(s[0]);
-    out[key[2]] = levels;
-    out[key[3]] = static_cast<long>(s[3 * (stages - 1)]);
-    out[key[4]] = static_cast<long>(hits);
-    out[key[5]] = static_cast<long>(d[7]);
-    out[key[6]] = closed;
-    out[key[7]] = calls;
-    out[key[8]] = uncertified;
-    return out;
+    return info_keys_.make(st.data(), static_cast<int>(st.shape(0)), out_[13].data(), kkt_tol);
   }
 
   /// The rows a kernel writes (for tests): its index in the order added.
@@ -840,12 +816,7 @@ class IKStep {
   std::vector<support::Band<View>> bands_;
   std::vector<nb::str> band_names_;  ///< their attribute names (set by the first one)
   std::vector<nb::str> names_;
-  /// info()'s keys in its order, then the value "native"
-  std::array<nb::str, 10> info_keys_{
-      nb::str("engine"), nb::str("hard_iterations"), nb::str("active_set_iterations"),
-      nb::str("min_norm_iterations"), nb::str("warm_start_hits"), nb::str("warm_start_seeded"),
-      nb::str("closed_form_levels"), nb::str("qp_calls"), nb::str("uncertified"),
-      nb::str("native")};
+  info::Keys info_keys_;  ///< info()'s keys (info_dict.hpp)
   nb::int_ one_ = nb::int_(1);
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
