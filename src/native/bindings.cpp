@@ -225,11 +225,10 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
           "fast_arrays", [](const Bound& h) { return h.stacked.fast(); },
           "step() reads numpy arrays from their heads (True) or through the buffer protocol.")
       .def("info", &Bound::info, nb::arg("kkt_tol"),
-           "The last call's info dict (NativeHierarchy._info's), built here.")
+           "The last call's info dict (info_dict.hpp; tests/native_info.py defines it).")
       .def_rw("seed_on_miss", &Hierarchy::seed_on_miss,
-              "Seed a stage's active set (hard phase, level, minimum-norm step) from its missed stored "
-              "working set (True, default) "
-              "or start it cold (False; for comparisons).")
+              "Seed a stage's active set (hard phase, level, minimum-norm step) from its missed "
+              "stored working set (True, default) or start it cold (False; for comparisons).")
       .def_rw("downdate", &Hierarchy::downdate,
               "Downdate the working set's QR when a row leaves (True, default) or "
               "refactorise it (False; for comparisons).")

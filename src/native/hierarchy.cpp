@@ -187,7 +187,8 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
       CinZ_.block(kz_, 0, k_ - kz_, r_) = Cin_.middleRows(kz_, k_ - kz_);
       ++identity_products_;
     } else if (kz_ < k_) {
-      CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() = Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
+      CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() =
+          Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
     }
   } else if (identity_z && z_identity_) {
     CZ = Cin_.topRows(k_);
