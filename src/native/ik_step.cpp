@@ -479,7 +479,9 @@ class IKStep {
     nb::object v = attr(eq, names_[12]);
     PyObject* next = PyNumber_Add(v.ptr(), one_.ptr());
     if (!next) throw nb::python_error();
-    const int rc = PyObject_SetAttr(eq.ptr(), names_[12].ptr(), next);
+    // object.__setattr__ (the tasks' own writes, qpcoord/core/tasks.py): not the task
+    // class's Python __setattr__ (its rebinding rule), a Python call per step
+    const int rc = PyObject_GenericSetAttr(eq.ptr(), names_[12].ptr(), next);
     Py_DECREF(next);
     if (rc != 0) throw nb::python_error();
   }
