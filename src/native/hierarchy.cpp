@@ -1471,21 +1471,15 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       ++nviol;
     }
   }
-  if (nviol == 0 && rank && by_qr && !qr_wide_ && rank < r_ && null_space_freeze) {
-    const int k_before = k_;
-    inherit(C, lo, hi, i0, mi, &viol_);
-    if (carry_projection && kz_ == k_before) {
-      for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
-      kz_ = k_;
-    }
-    freeze_null_space(rank);
-    return kOk;
-  }
-  // F^T = [V_rank, Z^T C_violated^T] (r x f), null(F) is what the level leaves free
-  MapMat Ft = fqr_.matrix(r_, rank + nviol);
+  // the freeze: onto null([R11 R12]) from the closed form's own QR (null_space_freeze: a
+  // rank-deficient tall M and no violated row), else F^T = [V_rank, Z^T C_violated^T]
+  // (r x f) factorised, null(F) being what the level leaves free
+  const bool by_null_space =
+      nviol == 0 && rank && by_qr && !qr_wide_ && rank < r_ && null_space_freeze;
   double fscale = 1.0;
-  row_space_basis(svd, by_qr, rank, Ft.leftCols(rank));
-  {
+  if (!by_null_space) {
+    MapMat Ft = fqr_.matrix(r_, rank + nviol);
+    row_space_basis(svd, by_qr, rank, Ft.leftCols(rank));
     int f = rank;
     double fro = 0.0;
     for (int i = 0; i < mi; ++i) {
@@ -1501,7 +1495,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
     kz_ = k_;
   }
-  freeze(fscale);
+  if (by_null_space)
+    freeze_null_space(rank);
+  else
+    freeze(fscale);
   return kOk;
 }
 
