@@ -512,12 +512,13 @@ class Bounds:
         new_hi = self._upper_in if upper is None else upper
         if self.n is not None:
             lo, hi = self._validate(new_lo, new_hi, self.n)  # names a wrong length
-            self._lower_in, self._upper_in = lo, hi
+            _setattr(self, "_lower_in", lo)
+            _setattr(self, "_upper_in", hi)
             _setattr(self, "lower", lo)
             _setattr(self, "upper", hi)
         else:
             self._set(new_lo, new_hi)
-        self.version += 1
+        _setattr(self, "version", self.version + 1)
         return self
 
     def _writable(self) -> tuple[np.ndarray, np.ndarray]:
@@ -531,8 +532,10 @@ class Bounds:
     def _touch(self) -> Bounds:
         """Mark ``lower``/``upper`` as changed after the library wrote them in place (the
         writer guarantees ``lower ≤ upper`` and no NaN)."""
-        self._lower_in, self._upper_in = self.lower, self.upper
-        self.version += 1
+        # per-step code: the instance dict written directly (not through Bounds.__setattr__)
+        d = self.__dict__
+        d["_lower_in"], d["_upper_in"] = d["lower"], d["upper"]
+        d["version"] += 1
         return self
 
     def __repr__(self) -> str:
