@@ -163,7 +163,7 @@ def test_the_solution_fields():
     np.testing.assert_allclose(sol.x, [0.1, 1.0, 0.3], atol=1e-12)
     assert sol.status == "optimal" and sol.solver == "native" and sol.method == "hierarchical"
     np.testing.assert_allclose(sol.level_residuals, [1.0], rtol=1e-12)
-    assert np.isfinite(sol.solve_time) and sol.solve_time >= 0.0  # s: a duration, no bound
+    assert type(sol.solve_time) is float and np.isfinite(sol.solve_time)  # s; not timed here
     assert sol.info["engine"] == "native" and sol.info["uncertified"] == []
     # the returned arrays are the caller's: the next solve does not write into them
     x = sol.x.copy()
