@@ -630,6 +630,12 @@ class PersistentQP:
             i += m
         self._f0 = -(self._F @ b0)
         self._Ft = -(self._F @ Bt)
+        # whitened (the Python engine): f_u = T⁻ᵀ f is affine in θ too, taken from the
+        # whitened map F_w = T⁻ᵀ F as the per-step refresh does (no triangular solve per
+        # step, and no rounding of the formed f amplified by cond(T))
+        self._fw_affine = (
+            None if self._T is None else (-(self._Fw @ b0), -(self._Fw @ Bt))
+        )
         self._fill_limits(P)
         k = self._bu.shape[0]
         self._lu0, self._ll0 = self._bu.copy(), self._bl.copy()
@@ -855,9 +861,16 @@ class PersistentQP:
                 return x
             self.write_tasks(theta)
             return self._fallback().x
-        f = self._f[: self._n]
-        np.dot(self._Ft, theta, out=f)
-        f += self._f0
+        if self._fw_affine is None:
+            f = self._f[: self._n]
+            np.dot(self._Ft, theta, out=f)
+            f += self._f0
+        else:  # whitened: f_u(θ) directly (_solve_current then skips T⁻ᵀ f)
+            fw0, Fwt = self._fw_affine
+            fu = self._fw[: self._n]
+            np.dot(Fwt, theta, out=fu)
+            fu += fw0
+            self._fw_fresh = True
         check = None
         if self._fused is not None:
             Lb, lb0, _, bb = self._fused

@@ -164,11 +164,15 @@ def test_stack_persistent_is_the_same_object_kind():
     assert isinstance(pq, PersistentQP) and pq.stack is stack
 
 
-def test_parametric_form_equals_the_task_form():
-    """b and limits affine in θ: solve_theta(θ) = solve() once the tasks hold those values."""
+@pytest.mark.parametrize("engine", [None, "python"])
+def test_parametric_form_equals_the_task_form(engine):
+    """b and limits affine in θ: solve_theta(θ) = solve() once the tasks hold those values,
+    on the default engine (native where built) and the Python one (its daqp workspace is
+    whitened: f_u(θ) is affine in θ through the whitened map, no triangular solve)."""
     stack, tasks, rng = build(13)
     track, soft, effort, hard_in, hard_eq, bounds = tasks
-    pq = stack.persistent()
+    pq = stack.persistent(engine=engine)
+    assert engine is None or pq.engine == engine
     p = 3
     maps = {
         track: (rng.normal(size=6), rng.normal(size=(6, p))),
