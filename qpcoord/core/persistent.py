@@ -633,9 +633,7 @@ class PersistentQP:
         # whitened (the Python engine): f_u = T⁻ᵀ f is affine in θ too, taken from the
         # whitened map F_w = T⁻ᵀ F as the per-step refresh does (no triangular solve per
         # step, and no rounding of the formed f amplified by cond(T))
-        self._fw_affine = (
-            None if self._T is None else (-(self._Fw @ b0), -(self._Fw @ Bt))
-        )
+        self._fw_affine = None if self._T is None else (-(self._Fw @ b0), -(self._Fw @ Bt))
         self._fill_limits(P)
         k = self._bu.shape[0]
         self._lu0, self._ll0 = self._bu.copy(), self._bl.copy()
