@@ -340,3 +340,29 @@ def test_daqp_alone_solves_the_false_infeasible_stacks_in_any_coordinates(case, 
     sol = qc.Stack(**_rotated(spec, Q), fallback=False).solve(engine="python", solver="daqp")
     assert sol.status == "optimal"
     _same_solution(sol, ref, Q @ sol.x)  # level residuals do not depend on the coordinates
+
+
+_PARALLEL_EDGES = Path(__file__).resolve().parents[1] / "data" / "talos_polygon_parallel_edges.npz"
+
+
+@pytest.mark.parametrize("solver", ["daqp", "quadprog"])
+def test_nearly_parallel_active_rows_do_not_send_the_refinement_far(solver):
+    """Talos, feet fixed (level 0), support polygon (level 1), CoM pulled forward (level 2),
+    joint-velocity damping (level 3), step 9 of
+    ``test_support_polygon_holds_the_com_with_feet_fixed``: the CoM reaches the polygon's
+    front edge, where two hull edges are parallel to 4e-10 and both active. The Python
+    engine's exact refinement of level 2 made both rows exactly tight: a step of 1e7 along
+    their difference, on level 2's optimal set (its value unchanged, certified), which
+    froze level 3 at 7.1e6 instead of 0.478; "optimal", no warning, and the robot's next
+    configuration was garbage. Now those rows count as one at the activity tolerance."""
+    from oracle import lexicographic
+
+    spec = _spec_from_npz(_PARALLEL_EDGES)
+    sol = qc.Stack(**spec).solve(engine="python", solver=solver)
+    assert sol.status == "optimal"
+    ref = lexicographic(spec["levels"])
+    # Clarabel's accuracy (the oracle's): ~1e-9 on the values, x unique (level 3 = I)
+    np.testing.assert_allclose(sol.level_residuals, ref.level_residuals, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(sol.x, ref.x, atol=1e-6)
+    if native.available():
+        _same_solution(sol, qc.Stack(**_spec_from_npz(_PARALLEL_EDGES)).solve(engine="native"))

@@ -432,14 +432,21 @@ def test_support_polygon_rows(talos_standing):
     np.testing.assert_allclose(t.upper[:4], 10.0 * (-0.01 - e[:4]), atol=1e-12)
 
 
-@pytest.mark.parametrize("engine", ["default", "native"])
+@pytest.mark.parametrize("engine", ["python", "native"])
 def test_support_polygon_holds_the_com_with_feet_fixed(talos_standing, engine, monkeypatch):
     """Feet (level 0), polygon (level 1), CoM pulled 30 cm forward (level 2): the CoM
-    stops at the shrunk front edge; a polygon ahead of the CoM pulls it in. The native
-    variant is a regression test: its active set cycled on the CoM level (a working set
-    numerically rank-deficient to 6e-16 relative, counted as full rank)."""
+    stops at the shrunk front edge; a polygon ahead of the CoM pulls it in. Both engines
+    are regression tests: the native active set cycled on the CoM level (a working set
+    numerically rank-deficient to 6e-16 relative, counted as full rank); the Python
+    engine's refinement, on two front edges parallel to 4e-10, returned a joint velocity
+    of 4e6 at step 9 (tests/core/test_hierarchy_regressions.py). This test ran the Python
+    engine as "default" until the native engine became the default."""
     if engine == "native":
         _native_default(monkeypatch)
+    else:
+        from qpcoord.core import native
+
+        monkeypatch.setattr(native, "DEFAULT_ENGINE", "python")
     robot, q0 = talos_standing
     soles = ["left_sole_link", "right_sole_link"]
     dt = 0.01

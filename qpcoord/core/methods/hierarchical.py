@@ -122,7 +122,11 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
         Em = np.vstack(E)
         tv = np.concatenate(t)
         U, s, Vt = svd(Em, full=True)
-        rk = numerical_rank(s, Em.shape)
+        # active rows dependent to within the activity tolerance are one constraint at that
+        # tolerance: their tiny singular value would turn the rows' tol-level disagreement
+        # into an arbitrarily long step (Talos' support polygon: two hull edges parallel to
+        # 4e-10, a step of 1e7 that the level's value does not see)
+        rk = min(numerical_rank(s, Em.shape), int(np.count_nonzero(s > tol * s[0])))
         zp = Vt[:rk].T @ ((U[:, :rk].T @ tv) / s[:rk])
         if not np.isfinite(zp).all() or np.abs(Em @ zp - tv).max() > 1e-9 * max(
             1.0, float(np.abs(tv).max())
