@@ -17,6 +17,34 @@ settings.register_profile("ci", derandomize=True, database=None)
 if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
     settings.load_profile("ci")
 
+#: ``QPCOORD_TEST_ENGINE=python`` runs the suite with the Python engine as the default of
+#: ``Stack.solve`` and the IK (``native``: the native one; unset: the library's default, the
+#: native engine where built). The issue's "every existing test passes on both engines":
+#: tests that do not name an engine run the native one in CI, and the Python engine only in
+#: such a run (about 14 min). The modules below test the native engine *as the default*
+#: (its selection, its warning, the native weighted path): they keep it in either run.
+TEST_ENGINE = os.environ.get("QPCOORD_TEST_ENGINE", "")
+if TEST_ENGINE not in ("", "python", "native"):
+    raise pytest.UsageError(f"QPCOORD_TEST_ENGINE must be python or native, got {TEST_ENGINE!r}")
+_NATIVE_DEFAULT_MODULES = frozenset({"test_native", "test_native_weighted", "test_native_step"})
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _test_engine(request):
+    """The default engine of this module's tests under ``QPCOORD_TEST_ENGINE`` (module
+    scope: hypothesis refuses function-scoped fixtures around ``@given`` tests)."""
+    if not TEST_ENGINE:
+        yield
+        return
+    from qpcoord.core import native
+
+    name = request.module.__name__.rpartition(".")[2]
+    engine = "native" if name in _NATIVE_DEFAULT_MODULES else TEST_ENGINE
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(native, "DEFAULT_ENGINE", engine)
+        yield
+
+
 #: Every installed QP backend, in qpcoord's preference order.
 SOLVERS = qc.available_solvers()
 
