@@ -310,6 +310,12 @@ class NativeIKStep(NativeHierarchy):
             writes_a = any(native_kind(t) != 5 for t in self.kernel_tasks)
             self._watched = [] if writes_a else [t for B in blocks for t in (*B.eqs, *B.ineqs)]
             self._versions: list | None = None
+        #: the copy of :attr:`q_next` the last ``step(..., integrate=True)`` returned with its
+        #: solution (a new array per step: :meth:`IK.step_integrate <qpcoord.IK.step_integrate>`
+        #: hands it out)
+        self.q_next_out: np.ndarray | None = None
+        if not self.weighted:  # the strict step's answer in one call (IKStep.solve_step)
+            solver.set_copies(self.x, self.res, self.q_next if plan is not None else None)
         self._solver = solver
 
     def _add_frame(self, solver: Any, fid: int) -> int:
@@ -369,12 +375,15 @@ class NativeIKStep(NativeHierarchy):
         robot._state = 0  # the robot's cached kinematics no longer match its data
         if self.weighted:
             return self._step_weighted(q, t, reference, integrate, t0)
-        code = self._solver.step(q, t, reference, self._solved, DEFAULT_TIME_LIMIT, integrate)
-        if code:
+        # one call: the step, then (x copy, res copy, info, q_next copy or None) built in C++
+        out = self._solver.solve_step(
+            q, t, reference, self._solved, DEFAULT_TIME_LIMIT, integrate, KKT_TOL
+        )
+        if type(out) is int:
             self._solved = False
-            self._fail(code, q, t, reference)
+            self._fail(out, q, t, reference)
         self._solved = True
-        info = self._solver.info(KKT_TOL)  # built in C++ (Hierarchy.info)
+        x, res, info, self.q_next_out = out
         status = "optimal"
         bad = info["uncertified"]
         if bad:
@@ -384,8 +393,7 @@ class NativeIKStep(NativeHierarchy):
         # positional (x, status, level_residuals, solver, solve_time, method, info): 0.2 µs
         # less than by keyword
         return Solution(
-            self.x.copy(), status, self.res.copy(), "native", time.perf_counter() - t0,
-            "hierarchical", info,
+            x, status, res, "native", time.perf_counter() - t0, "hierarchical", info
         )  # fmt: skip
 
     def _step_weighted(
@@ -407,6 +415,7 @@ class NativeIKStep(NativeHierarchy):
             self._fail(code, q, t, reference)
         self._solved = True
         info = weighted_info(self.detail, self._solver.refactored)
+        self.q_next_out = self.q_next.copy() if integrate else None
         return Solution(
             self.x.copy(), "optimal", self.res.copy(), "native", time.perf_counter() - t0,
             "weighted", info,
