@@ -36,7 +36,6 @@ using spatial::Mat6;
 using spatial::Vec3;
 using spatial::Vec6;
 
-using CArr = nb::ndarray<const double, nb::device::cpu>;
 using OutArr = nb::ndarray<double, nb::numpy, nb::c_contig, nb::device::cpu>;
 using CMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 using MMap = Eigen::Map<Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
@@ -57,17 +56,41 @@ struct View {
   double* w() const { return const_cast<double*>(p); }  // the memory behind a read-only view
 };
 
-/// Map `h` (a float64 numpy array of `ndim` dimensions) into v; false if it is not one.
+/// A float64 buffer (native byte order, strides whole elements) of a Python object, released
+/// at scope exit; ok is false (and no Python error set) for anything else.
+struct Buffer {
+  Py_buffer b{};
+  bool got = false, ok = false;
+  explicit Buffer(PyObject* o) {
+    got = PyObject_GetBuffer(o, &b, PyBUF_STRIDES | PyBUF_FORMAT) == 0;
+    if (!got) {
+      PyErr_Clear();
+      return;
+    }
+    ok = b.itemsize == 8 && b.format && std::strcmp(b.format, "d") == 0;
+    for (int i = 0; ok && i < b.ndim; ++i) ok = b.strides[i] % 8 == 0;
+  }
+  ~Buffer() {
+    if (got) PyBuffer_Release(&b);
+  }
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+};
+
+/// Map `h` (a float64 array of `ndim` dimensions, native byte order, read through the buffer
+/// protocol: a numpy array's DLPack export, which a nanobind ndarray cast goes through, costs
+/// more, and a kernel re-maps a target at every step after set_target) into v; false if it is
+/// not one.
 bool view_of(nb::handle h, View& v, size_t ndim) {
-  CArr a;
-  if (!nb::try_cast(h, a, false) || a.ndim() != ndim) return false;
-  v.keep = nb::borrow(h);
-  v.p = a.data();
-  v.rows = static_cast<int64_t>(a.shape(0));
-  v.s0 = a.stride(0);
+  const Buffer a(h.ptr());
+  if (!a.ok || a.b.ndim != static_cast<int>(ndim)) return false;
+  v.keep = nb::borrow(h);  // keeps the memory alive after the buffer's release
+  v.p = static_cast<const double*>(a.b.buf);
+  v.rows = static_cast<int64_t>(a.b.shape[0]);
+  v.s0 = a.b.strides[0] / 8;
   if (ndim == 2) {
-    v.cols = static_cast<int64_t>(a.shape(1));
-    v.s1 = a.stride(1);
+    v.cols = static_cast<int64_t>(a.b.shape[1]);
+    v.s1 = a.b.strides[1] / 8;
   } else {
     v.cols = 1;
     v.s1 = 1;
@@ -106,27 +129,6 @@ int cached(nb::handle owner, nb::handle name, View& v, size_t ndim, int64_t rows
   }
   return 1;
 }
-
-/// A float64 buffer (native byte order, strides whole elements) of a Python object, released
-/// at scope exit; ok is false (and no Python error set) for anything else.
-struct Buffer {
-  Py_buffer b{};
-  bool got = false, ok = false;
-  explicit Buffer(PyObject* o) {
-    got = PyObject_GetBuffer(o, &b, PyBUF_STRIDES | PyBUF_FORMAT) == 0;
-    if (!got) {
-      PyErr_Clear();
-      return;
-    }
-    ok = b.itemsize == 8 && b.format && std::strcmp(b.format, "d") == 0;
-    for (int i = 0; ok && i < b.ndim; ++i) ok = b.strides[i] % 8 == 0;
-  }
-  ~Buffer() {
-    if (got) PyBuffer_Release(&b);
-  }
-  Buffer(const Buffer&) = delete;
-  Buffer& operator=(const Buffer&) = delete;
-};
 
 enum Kind : int {
   kPosition = 0,
