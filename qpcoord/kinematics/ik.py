@@ -352,7 +352,7 @@ class IK:
             self.v_prev[...] = v
             for lim in self._recorders:
                 lim.record(v)
-            return native.q_next.copy(), v, sol
+            return native.q_next_out, v, sol
         v, sol = self.step(q, t, reference, warm_start)
         return self.robot.integrate(q, v, self.dt), v, sol
 

@@ -36,7 +36,6 @@ using spatial::Mat6;
 using spatial::Vec3;
 using spatial::Vec6;
 
-using CArr = nb::ndarray<const double, nb::device::cpu>;
 using OutArr = nb::ndarray<double, nb::numpy, nb::c_contig, nb::device::cpu>;
 using CMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 using MMap = Eigen::Map<Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
@@ -57,17 +56,41 @@ struct View {
   double* w() const { return const_cast<double*>(p); }  // the memory behind a read-only view
 };
 
-/// Map `h` (a float64 numpy array of `ndim` dimensions) into v; false if it is not one.
+/// A float64 buffer (native byte order, strides whole elements) of a Python object, released
+/// at scope exit; ok is false (and no Python error set) for anything else.
+struct Buffer {
+  Py_buffer b{};
+  bool got = false, ok = false;
+  explicit Buffer(PyObject* o) {
+    got = PyObject_GetBuffer(o, &b, PyBUF_STRIDES | PyBUF_FORMAT) == 0;
+    if (!got) {
+      PyErr_Clear();
+      return;
+    }
+    ok = b.itemsize == 8 && b.format && std::strcmp(b.format, "d") == 0;
+    for (int i = 0; ok && i < b.ndim; ++i) ok = b.strides[i] % 8 == 0;
+  }
+  ~Buffer() {
+    if (got) PyBuffer_Release(&b);
+  }
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+};
+
+/// Map `h` (a float64 array of `ndim` dimensions, native byte order, read through the buffer
+/// protocol: a numpy array's DLPack export, which a nanobind ndarray cast goes through, costs
+/// more, and a kernel re-maps a target at every step after set_target) into v; false if it is
+/// not one.
 bool view_of(nb::handle h, View& v, size_t ndim) {
-  CArr a;
-  if (!nb::try_cast(h, a, false) || a.ndim() != ndim) return false;
-  v.keep = nb::borrow(h);
-  v.p = a.data();
-  v.rows = static_cast<int64_t>(a.shape(0));
-  v.s0 = a.stride(0);
+  const Buffer a(h.ptr());
+  if (!a.ok || a.b.ndim != static_cast<int>(ndim)) return false;
+  v.keep = nb::borrow(h);  // keeps the memory alive after the buffer's release
+  v.p = static_cast<const double*>(a.b.buf);
+  v.rows = static_cast<int64_t>(a.b.shape[0]);
+  v.s0 = a.b.strides[0] / 8;
   if (ndim == 2) {
-    v.cols = static_cast<int64_t>(a.shape(1));
-    v.s1 = a.stride(1);
+    v.cols = static_cast<int64_t>(a.b.shape[1]);
+    v.s1 = a.b.strides[1] / 8;
   } else {
     v.cols = 1;
     v.s1 = 1;
@@ -106,27 +129,6 @@ int cached(nb::handle owner, nb::handle name, View& v, size_t ndim, int64_t rows
   }
   return 1;
 }
-
-/// A float64 buffer (native byte order, strides whole elements) of a Python object, released
-/// at scope exit; ok is false (and no Python error set) for anything else.
-struct Buffer {
-  Py_buffer b{};
-  bool got = false, ok = false;
-  explicit Buffer(PyObject* o) {
-    got = PyObject_GetBuffer(o, &b, PyBUF_STRIDES | PyBUF_FORMAT) == 0;
-    if (!got) {
-      PyErr_Clear();
-      return;
-    }
-    ok = b.itemsize == 8 && b.format && std::strcmp(b.format, "d") == 0;
-    for (int i = 0; ok && i < b.ndim; ++i) ok = b.strides[i] % 8 == 0;
-  }
-  ~Buffer() {
-    if (got) PyBuffer_Release(&b);
-  }
-  Buffer(const Buffer&) = delete;
-  Buffer& operator=(const Buffer&) = delete;
-};
 
 enum Kind : int {
   kPosition = 0,
@@ -432,6 +434,78 @@ class IKStep {
                      dt_, q_next_.data());
     }
     return code;
+  }
+
+  /// The x, res and q_next arrays whose copies solve_step returns (their bound copy
+  /// methods: the arrays bound as x, res and set_integrator's q_next).
+  void set_copies(nb::handle x, nb::handle res, nb::handle q_next) {
+    copy_x_ = x.attr("copy");
+    copy_res_ = res.attr("copy");
+    copy_q_next_ = q_next.is_none() ? nb::object() : nb::object(q_next.attr("copy"));
+  }
+
+  /// step() and, on success, (x.copy(), res.copy(), info(kkt_tol), q_next.copy() or None) in
+  /// one call (None: integrate was False); else step()'s status code (an int).
+  nb::object solve_step(nb::handle q, double t, nb::handle reference, bool warm,
+                        double time_left, bool integrate, double kkt_tol) {
+    if (!copy_x_.is_valid()) throw nb::value_error("solve_step: call set_copies first");
+    if (w_) throw nb::value_error("solve_step: the strict hierarchy's step (not weighted)");
+    const int code = step(q, t, reference, warm, time_left, integrate, true);
+    if (code) return nb::int_(code);
+    nb::object x = nb::steal(PyObject_CallNoArgs(copy_x_.ptr()));
+    if (!x.is_valid()) throw nb::python_error();
+    nb::object r = nb::steal(PyObject_CallNoArgs(copy_res_.ptr()));
+    if (!r.is_valid()) throw nb::python_error();
+    nb::object qn = nb::none();
+    if (integrate) {
+      if (!copy_q_next_.is_valid()) throw nb::value_error("solve_step: no q_next bound");
+      qn = nb::steal(PyObject_CallNoArgs(copy_q_next_.ptr()));
+      if (!qn.is_valid()) throw nb::python_error();
+    }
+    return nb::make_tuple(x, r, info(kkt_tol), qn);
+  }
+
+  /// The Python objects held (tasks, limits, the arrays they are read from, copy methods),
+  /// for tp_traverse: a task referring back to the IK that owns this step makes a cycle.
+  int traverse(visitproc visit, void* arg) const {
+    auto view = [&](const View& v) { return v.keep.is_valid() ? visit(v.keep.ptr(), arg) : 0; };
+    int rc = 0;
+    for (const nb::object* o : {&copy_x_, &copy_res_, &copy_q_next_})
+      if (o->is_valid() && (rc = visit(o->ptr(), arg))) return rc;
+    for (const View* v : {&J_, &com_, &Jcom_})
+      if ((rc = view(*v))) return rc;
+    for (const Frame& f : frames_)
+      if ((rc = view(f.Rj)) || (rc = view(f.pj))) return rc;
+    for (const Kernel& k : kernels_) {
+      for (const nb::object* o : {&k.task, &k.eq})
+        if (o->is_valid() && (rc = visit(o->ptr(), arg))) return rc;
+      for (const View* v : {&k.target, &k.vel, &k.sw, &k.A, &k.b})
+        if ((rc = view(*v))) return rc;
+    }
+    for (const Limit& L : limits_) {
+      if (L.lim.is_valid() && (rc = visit(L.lim.ptr(), arg))) return rc;
+      if ((rc = view(L.lower)) || (rc = view(L.upper))) return rc;
+    }
+    for (const auto& b : bands_)
+      for (const View* v : {&b.C, &b.lower, &b.upper, &b.sw, &b.lo, &b.hi, &b.points})
+        if ((rc = view(*v))) return rc;
+    return 0;
+  }
+
+  /// tp_clear: drop every Python object held; the step is unbound (step() returns
+  /// kBadInput) until compiled again.
+  void clear() {
+    bound_ = false;
+    copy_x_.reset();
+    copy_res_.reset();
+    copy_q_next_.reset();
+    J_ = View();
+    com_ = View();
+    Jcom_ = View();
+    frames_.clear();
+    kernels_.clear();
+    limits_.clear();
+    bands_.clear();
   }
 
   /// The solve's statistics as a dict (info_dict.hpp: the rule of the Hierarchy binding's
@@ -822,14 +896,33 @@ class IKStep {
   nb::int_ one_ = nb::int_(1);
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
+  nb::object copy_x_, copy_res_, copy_q_next_;  ///< set_copies: the outputs' copy methods
 };
+
+/// Cyclic garbage collection of an IKStep: it holds the IK's task objects (a task that refers
+/// back to its IK, e.g. through a monkeypatched attribute, makes a cycle through it).
+int ik_step_traverse(PyObject* self, visitproc visit, void* arg) {
+  Py_VISIT(Py_TYPE(self));
+  if (!nb::inst_ready(self)) return 0;
+  return nb::inst_ptr<IKStep>(self)->traverse(visit, arg);
+}
+
+int ik_step_clear(PyObject* self) {
+  if (nb::inst_ready(self)) nb::inst_ptr<IKStep>(self)->clear();
+  return 0;
+}
+
+PyType_Slot ik_step_slots[] = {{Py_tp_traverse, reinterpret_cast<void*>(ik_step_traverse)},
+                               {Py_tp_clear, reinterpret_cast<void*>(ik_step_clear)},
+                               {0, nullptr}};
 
 }  // namespace
 
 void bind_ik_step(nb::module_& m) {
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
-                     "hierarchy (qpcoord.kinematics.native_step builds it).")
+                     "hierarchy (qpcoord.kinematics.native_step builds it).",
+                     nb::type_slots(ik_step_slots))
       .def(nb::init<int, int, std::vector<int>, std::vector<int>, bool, double, double,
                     std::vector<int>>(),
            nb::arg("nq"), nb::arg("nv"), nb::arg("meq"), nb::arg("min"), nb::arg("has_bounds"),
@@ -849,6 +942,15 @@ void bind_ik_step(nb::module_& m) {
            nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false,
            nb::arg("refactor") = true)
       .def("info", &IKStep::info, nb::arg("kkt_tol"))
+      .def("set_copies", &IKStep::set_copies, nb::arg("x"), nb::arg("res"),
+           nb::arg("q_next").none(),
+           "The bound x, res and q_next (None: no integrator) whose copies solve_step "
+           "returns.")
+      .def("solve_step", &IKStep::solve_step, nb::arg("q"), nb::arg("t"),
+           nb::arg("reference").none(), nb::arg("warm"), nb::arg("time_left"),
+           nb::arg("integrate"), nb::arg("kkt_tol"),
+           "step() (strict hierarchy) and on success (x.copy(), res.copy(), info(kkt_tol), "
+           "q_next.copy() or None) in one call; else the status code.")
       .def_rw("limits_mode", &IKStep::limits_mode)
       .def_ro("failed", &IKStep::failed)
       .def_ro("refactored", &IKStep::refactored)
@@ -929,6 +1031,39 @@ void bind_ik_step(nb::module_& m) {
       "spatial_rigid_ok(T, tol) on a float64 (native byte order) 4x4 buffer and, when it "
       "holds, T copied into out (a C-contiguous 4x4 float64; untouched otherwise); False for "
       "anything else. FrameTask.set_target's fast path in one call.");
+  m.def(
+      "spatial_finite_copy",
+      [](nb::handle v, nb::handle out) {
+        constexpr int kOutFlags = PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE | PyBUF_FORMAT;
+        // the buffer protocol, as spatial_rigid_copy (no DLPack conversion)
+        Py_buffer o;
+        bool o_ok = PyObject_GetBuffer(out.ptr(), &o, kOutFlags) == 0;
+        double* dst = nullptr;
+        Py_ssize_t n = 0;
+        if (o_ok) {
+          o_ok = o.ndim == 1 && o.itemsize == 8 && o.format && std::strcmp(o.format, "d") == 0;
+          dst = static_cast<double*>(o.buf);
+          n = o_ok ? o.shape[0] : 0;
+          PyBuffer_Release(&o);  // out is kept alive by the caller
+        } else {
+          PyErr_Clear();
+        }
+        if (!o_ok) throw nb::type_error("spatial_finite_copy: out must be a C-contiguous float64 "
+                                        "vector, writable");
+        const Buffer in(v.ptr());  // not a float64 vector of out's size: False
+        if (!in.ok || in.b.ndim != 1 || in.b.shape[0] != n) return false;
+        const auto* src = static_cast<const double*>(in.b.buf);
+        const int64_t s0 = in.b.strides[0] / 8;
+        double sum = 0.0;  // NaN, inf or an overflow: not finite (the caller's full checks)
+        for (Py_ssize_t i = 0; i < n; ++i) sum += src[i * s0];
+        if (!std::isfinite(sum)) return false;
+        for (Py_ssize_t i = 0; i < n; ++i) dst[i] = src[i * s0];
+        return true;
+      },
+      nb::arg("v"), nb::arg("out"),
+      "Copy v into out (a C-contiguous float64 vector) when v is a float64 (native byte "
+      "order) vector of out's length whose entries sum to a finite number; False (out "
+      "untouched) for anything else. frame_tasks._vector's fast path in one call.");
   m.def("spatial_log6", [](const Mat3& R, const Vec3& p) { return Vec6(spatial::log6(R, p)); });
   m.def("spatial_jlog6", [](const Mat3& R, const Vec3& p) { return Mat6(spatial::jlog6(R, p)); });
 }
