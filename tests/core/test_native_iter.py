@@ -38,9 +38,7 @@ def _pair(stack: qc.Stack):
 def _iterations(info: dict) -> int:
     """Active-set iterations of one call (hard phase, levels, minimum-norm stage)."""
     return int(
-        sum(info["active_set_iterations"])
-        + info["hard_iterations"]
-        + info["min_norm_iterations"]
+        sum(info["active_set_iterations"]) + info["hard_iterations"] + info["min_norm_iterations"]
     )
 
 
