@@ -286,6 +286,11 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "or by the general least squares (False; for comparisons).")
       .def_prop_ro("least_distance_steps", &Hierarchy::least_distance_steps,
                    "Least-squares steps of the last call taken by least_distance.")
+      .def_rw("tight_batch", &Hierarchy::tight_batch,
+              "A step blocked at length zero adds every row blocking it at length zero (True, "
+              "default) or the lowest-index one (False; for comparisons).")
+      .def_prop_ro("batch_rows", &Hierarchy::batch_rows,
+                   "Rows of the last call added to a working set by tight_batch.")
       .def_prop_ro("rz_factors", &Hierarchy::rz_factors,
                    "RZ factorisations of the last call (rz_min_norm).")
       .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,

@@ -704,6 +704,10 @@ def test_a_missed_hard_phase_set_seeds_its_start():
     seeded = NativeHierarchy(P, s.damping)
     cold = NativeHierarchy(P, s.damping)
     cold._solver.seed_on_miss = False
+    # the cold start one row at a time: with tight_batch (session 12) the cold start adds
+    # the rows tight at its start together and takes as few iterations as the seeded one
+    # here (3 and 3 in total); seed_on_miss's gain is against the classic cold start
+    cold._solver.tight_batch = False
     its_seeded = its_cold = 0
     for step in range(20):
         xt = np.clip(xs + 0.4 * np.sin(0.7 * step + np.arange(n)), -0.9, 0.9)

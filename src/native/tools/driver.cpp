@@ -16,7 +16,7 @@
 // QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
-// identity_z, least_distance, null_space_freeze, wy_right.
+// identity_z, least_distance, null_space_freeze, wy_right, tight_batch.
 //
 // QPCOORD_DRIVER_ON=gemv_qr,wy_right: switch these non-default options on (wy_right is on by
 // default in a build with FMA, e.g. -march=x86-64-v3).
@@ -77,6 +77,7 @@ int main(int argc, char** argv) {
     if (has("rz_min_norm")) h.rz_min_norm = false;
     if (has("identity_z")) h.identity_z = false;
     if (has("least_distance")) h.least_distance = false;
+    if (has("tight_batch")) h.tight_batch = false;
     if (has("null_space_freeze")) h.null_space_freeze = false;
     if (has("wy_right")) h.wy_right = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;

@@ -1,0 +1,194 @@
+"""The native active set's cold start at a degenerate point (issue 24,
+``Hierarchy.tight_batch``).
+
+A level solved after another that left x on a vertex of the bounds (or of inherited
+inequality rows) starts its active set at a point where many rows are tight. Started cold
+(no stored working set: the first call, ``warm=False``), its first steps are blocked at
+length zero one row at a time: each blocking row enters by an iteration of its own (a
+least-squares step and a ratio test that move nothing). With ``tight_batch`` (default) a
+step blocked at length zero adds every row that blocks it at length zero at once (y does not
+move). The optimum is the same: here the level values equal the switch-off path's and the
+Python engine's (``LEVEL_TOL`` relative), x (unique: the minimum-norm completion) the same,
+on changing data, cold and warm, with ties in the ratio test (duplicated rows: dependent
+working rows), equal bounds, no freedom left and inherited inequality rows; the path was
+taken (``batch_rows``) and cost fewer iterations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_native import LEVEL_TOL, X_TOL, needs_native
+
+import qpcoord as qc
+
+
+def _pair(stack: qc.Stack):
+    """(P, new, plain): two native solvers of ``stack``, tight_batch on and off."""
+    from qpcoord.core.native import NativeHierarchy
+
+    P = stack._compiled
+    new = NativeHierarchy(P, stack.damping)
+    plain = NativeHierarchy(P, stack.damping)
+    assert new._solver.tight_batch  # the default
+    plain._solver.tight_batch = False
+    return P, new, plain
+
+
+def _iterations(info: dict) -> int:
+    """Active-set iterations of one call (hard phase, levels, minimum-norm stage)."""
+    return int(
+        sum(info["active_set_iterations"]) + info["hard_iterations"] + info["min_norm_iterations"]
+    )
+
+
+def _check(stack: qc.Stack, P, new, plain, warm: bool) -> tuple[int, int, int]:
+    """Solve with both (cold unless ``warm``) and with the Python engine: the same level
+    values, the same x (unique). Returns (rows batched by ``new``, its iterations, those of
+    ``plain``)."""
+    xn, rn, infon = new.solve(P, warm=warm)
+    batched = new._solver.batch_rows
+    xp, rp, infop = plain.solve(P, warm=warm)
+    assert plain._solver.batch_rows == 0
+    sp = stack.solve(engine="python")
+    ref = sp.level_residuals
+    for r in (rn, rp):
+        assert np.all(np.abs(r - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (r, ref)
+    scale = max(1.0, float(np.max(np.abs(sp.x))))
+    assert np.max(np.abs(xn - xp)) <= 1e-9 * scale, np.max(np.abs(xn - xp))
+    assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale, np.max(np.abs(xn - sp.x))
+    return batched, _iterations(infon), _iterations(infop)
+
+
+def _vertex_stack(
+    seed: int,
+    n: int = 12,
+    equal_bounds: int = 0,
+    duplicate: bool = False,
+    inequality_level: bool = False,
+):
+    """Bounds |x_j| <= 0.3, a first level of 4 equality rows far out of reach (its optimum
+    rests on many bounds: a vertex of the box in most directions), then equality levels of 3
+    and 2 rows that start there. ``equal_bounds`` variables get lb = ub; ``duplicate`` adds
+    hard inequality rows equal to the first bounds (rows tied with the bounds in every
+    ratio test: dependent working rows); ``inequality_level`` puts first an inequality level
+    whose rows end tight (inherited by the levels below). Returns (stack, move(step))."""
+    rng = np.random.default_rng(seed)
+    lb = np.full(n, -0.3)
+    ub = np.full(n, 0.3)
+    for j in range(equal_bounds):
+        lb[j] = ub[j] = rng.uniform(-0.2, 0.2)
+    A1 = rng.standard_normal((4, n))
+    b1 = 5.0 * rng.standard_normal(4)
+    e1 = qc.Equality(A1, b1)
+    A2 = rng.standard_normal((3, n))
+    e2 = qc.Equality(A2, rng.standard_normal(3))
+    A3 = rng.standard_normal((2, n))
+    e3 = qc.Equality(A3, rng.standard_normal(2))
+    levels: list = [e1, e2, e3]
+    if inequality_level:
+        C = rng.standard_normal((3, n))
+        C /= np.linalg.norm(C, axis=1)[:, None]
+        ineq = qc.Inequality(C, np.full(3, 0.05), np.full(3, np.inf))
+        levels.insert(0, ineq)
+    cons = None
+    if duplicate:
+        D = np.eye(n)[:4]
+        cons = [qc.Inequality(D, lb[:4].copy(), ub[:4].copy())]
+    st = qc.Stack(levels, bounds=qc.Bounds(lb, ub), constraints=cons)
+    d1 = rng.standard_normal(4)
+
+    def move(step: int) -> None:
+        e1.update(b=b1 + 0.3 * np.sin(0.7 * step) * d1)
+
+    return st, move
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+def test_cold_solves_on_changing_data(seed):
+    """Cold solves of a stack whose first level ends on a vertex of the box: the same level
+    values and x as the switch-off path and the Python engine at every step; rows were
+    batched and the iterations are no more than the one-row-at-a-time path's."""
+    st, move = _vertex_stack(seed)
+    P, new, plain = _pair(st)
+    batched = it_new = it_plain = 0
+    for step in range(5):
+        move(step)
+        b, i_n, i_p = _check(st, P, new, plain, warm=False)
+        batched += b
+        it_new += i_n
+        it_plain += i_p
+    assert batched > 0
+    assert it_new < it_plain, (it_new, it_plain)
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 3])
+def test_warm_steps_after_a_cold_first_call(seed):
+    """Warm from step to step (the stored working sets of a batched first call): the same
+    values and x as the switch-off path and the Python engine."""
+    st, move = _vertex_stack(seed)
+    P, new, plain = _pair(st)
+    for step in range(8):
+        move(step)
+        _check(st, P, new, plain, warm=True)
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("equal", "duplicate", "inequality"),
+    [(3, False, False), (0, True, False), (2, True, False), (0, False, True), (2, True, True)],
+    ids=["equal bounds", "ties and dependent rows", "both", "inherited rows", "all"],
+)
+def test_degenerate_cases(equal, duplicate, inequality):
+    """Equal bounds (equality rows of the working set from the start), hard rows duplicating
+    bounds (exact ties in the ratio test; the second of each pair is dependent on the
+    first in the working set), an inequality level whose rows are inherited: the same as the
+    switch-off path and the Python engine, cold and warm."""
+    batched = 0
+    for seed in (5, 6, 7):
+        st, move = _vertex_stack(
+            seed, equal_bounds=equal, duplicate=duplicate, inequality_level=inequality
+        )
+        P, new, plain = _pair(st)
+        for step in range(3):
+            move(step)
+            batched += _check(st, P, new, plain, warm=False)[0]
+            _check(st, P, new, plain, warm=True)
+    assert batched > 0
+
+
+@needs_native
+def test_no_freedom_left():
+    """Levels that fix every variable (the null space empty after the second level) on top
+    of a first level that ends on bounds: the same as the switch-off path and the Python
+    engine."""
+    rng = np.random.default_rng(11)
+    n = 6
+    A1 = rng.standard_normal((3, n))
+    A2 = rng.standard_normal((n, n))
+    e1 = qc.Equality(A1, 4.0 * rng.standard_normal(3))
+    e2 = qc.Equality(A2, 0.1 * rng.standard_normal(n))
+    st = qc.Stack([e1, e2], bounds=qc.Bounds(np.full(n, -0.2), np.full(n, 0.2)))
+    P, new, plain = _pair(st)
+    for step in range(3):
+        e1.update(b=A1 @ np.full(n, 0.5 + 0.1 * step))
+        _check(st, P, new, plain, warm=False)
+        _check(st, P, new, plain, warm=True)
+
+
+@needs_native
+def test_switch_off_batches_nothing():
+    """The switch off: no row batched; on: the counter is reset at every call (a warm call
+    after a batched cold one reports its own count)."""
+    st, move = _vertex_stack(0)
+    P, new, plain = _pair(st)
+    move(0)
+    new.solve(P, warm=False)
+    first = new._solver.batch_rows
+    assert first > 0
+    plain.solve(P, warm=False)
+    assert plain._solver.batch_rows == 0
+    new.solve(P, warm=True)  # the same data: every stored working set hits
+    assert new._solver.batch_rows == 0
