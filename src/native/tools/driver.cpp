@@ -16,7 +16,8 @@
 // QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
-// identity_z, least_distance, null_space_freeze, wy_right.
+// identity_z, least_distance, null_space_freeze, wy_right, full_rank_freeze, wide_freeze,
+// small_rinv.
 //
 // QPCOORD_DRIVER_ON=gemv_qr,wy_right: switch these non-default options on (wy_right is on by
 // default in a build with FMA, e.g. -march=x86-64-v3).
@@ -79,6 +80,9 @@ int main(int argc, char** argv) {
     if (has("least_distance")) h.least_distance = false;
     if (has("null_space_freeze")) h.null_space_freeze = false;
     if (has("wy_right")) h.wy_right = false;
+    if (has("full_rank_freeze")) h.full_rank_freeze = false;
+    if (has("wide_freeze")) h.wide_freeze = false;
+    if (has("small_rinv")) h.small_rinv = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;
     if (has("downdate")) h.downdate = false;
     if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
