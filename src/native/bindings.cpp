@@ -304,7 +304,8 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
       .def_prop_ro("full_rank_freezes", &Hierarchy::full_rank_freezes,
                    "Levels of the last call frozen by full_rank_freeze.")
       .def_rw("wide_freeze", &Hierarchy::wide_freeze,
-              "A wide level frozen by the reflectors of its M^T's QR (default) or by the freeze.")
+              "A wide level frozen by the reflectors of its M^T's QR, or by the freeze "
+              "(default).")
       .def_prop_ro("wide_freezes", &Hierarchy::wide_freezes,
                    "Levels of the last call frozen by wide_freeze.")
       .def_rw("small_rinv", &Hierarchy::small_rinv,

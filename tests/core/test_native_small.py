@@ -6,12 +6,14 @@ remaining freedom (the closed form's rank is r) and which leaves no violated row
 freedom left: r <- 0 directly, not by forming F^T (an orthonormal basis of the whole space)
 and factorising it. The same x and level values bit for bit (Z is not read again).
 
-``Hierarchy.wide_freeze``: a wide level (M = A Z with me <= r, its closed form by the QR
-of M^T) solved by the active set (its closed form left the bounds or the inherited rows)
-and leaving no violated row: Z <- Z Qf, its first rank columns dropped, by M^T's own
-reflectors (as after a feasible closed form), not by forming Qf's first rank columns,
-factorising them again and applying those reflectors: the same subspace in another
-orthonormal basis.
+``Hierarchy.wide_freeze`` (off by default: the native IK step and Stack.solve, whose rows
+differ by rounding, then took different active-set paths at one step of
+tests/kinematics/test_native_step.py's position loop): a wide level (M = A Z with
+me <= r, its closed form by the QR of M^T) solved by the active set (its closed form left
+the bounds or the inherited rows) and leaving no violated row: Z <- Z Qf, its first rank
+columns dropped, by M^T's own reflectors (as after a feasible closed form), not by forming
+Qf's first rank columns, factorising them again and applying those reflectors: the same
+subspace in another orthonormal basis.
 
 Every step equals the solver with the switch off and the Python engine (level values
 1e-9 relative, x where unique); the counters show the path taken, and where it must not be
@@ -36,13 +38,15 @@ COUNTER = {"full_rank_freeze": "full_rank_freezes", "wide_freeze": "wide_freezes
 
 
 def _pair(stack: qc.Stack, switch: str):
-    """(P, new, plain): two native solvers of ``stack``, ``switch`` on (its default) and off."""
+    """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off (its default:
+    full_rank_freeze on, wide_freeze off)."""
     from qpcoord.core.native import NativeHierarchy
 
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     plain = NativeHierarchy(P, stack.damping)
-    assert getattr(new._solver, switch)
+    assert getattr(new._solver, switch) == (switch == "full_rank_freeze")
+    setattr(new._solver, switch, True)
     setattr(plain._solver, switch, False)
     return P, new, plain
 
@@ -135,7 +139,7 @@ def test_rank_deficient_wide_level_under_inherited_rows(seed):
 def test_violated_rows_take_the_general_freeze_bit_for_bit(switch):
     """A level with equality rows (wide, or of full rank) and an inequality row it cannot
     meet (violated at its optimum): the freeze must hold that row too, so neither shortcut
-    is taken and the numbers are the switch off's bit for bit."""
+    is taken (switched on) and the numbers are the switch off's bit for bit."""
     rng = np.random.default_rng(9)
     n = 6
     c = rng.standard_normal(n)
