@@ -304,6 +304,20 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
                    "Changes of Z or Cin Z of the last call in the compact WY form.")
       .def_prop_ro("null_space_freezes", &Hierarchy::null_space_freezes,
                    "Levels of the last call frozen by null_space_freeze.")
+      .def_rw("full_rank_freeze", &Hierarchy::full_rank_freeze,
+              "A level of full rank left without freedom directly (default) or by the freeze.")
+      .def_prop_ro("full_rank_freezes", &Hierarchy::full_rank_freezes,
+                   "Levels of the last call frozen by full_rank_freeze.")
+      .def_rw("wide_freeze", &Hierarchy::wide_freeze,
+              "A wide level frozen by the reflectors of its M^T's QR, or by the freeze "
+              "(default).")
+      .def_prop_ro("wide_freezes", &Hierarchy::wide_freezes,
+                   "Levels of the last call frozen by wide_freeze.")
+      .def_rw("small_rinv", &Hierarchy::small_rinv,
+              "The QR closed form's bound on sigma_rank by back substitution up to rank 16 "
+              "(default) or by Eigen's blocked triangular solve.")
+      .def_prop_ro("small_rinvs", &Hierarchy::small_rinvs,
+                   "QR closed forms of the last call bounded by small_rinv.")
       .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,
                    "Levels of the last call compressed by compress_zero_tail.")
       .def_prop_ro("gemv_steps", &Hierarchy::gemv_steps,

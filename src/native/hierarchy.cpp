@@ -1201,9 +1201,29 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
   // threshold, rank tolerance), every singular value up to the rank passes it and the SVD's
   // closed form is the plain minimum-norm least-squares solution
   auto Ri = rinv_.topLeftCorner(rank, rank);
-  Ri.setIdentity();
-  Af.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solveInPlace(Ri);
-  const double inv = Ri.norm();
+  double inv = 0.0;
+  if (small_rinv && rank <= kSmallRinvMax) {
+    // column j of R11^-1 by back substitution on its j + 1 leading entries (the rest are
+    // zero), summed into |R11^-1|_F^2: no blocked solve with an identity right-hand side
+    double sum = 0.0;
+    for (int j = 0; j < rank; ++j) {
+      auto x = Ri.col(j).head(j + 1);
+      x.setZero();
+      x(j) = 1.0;
+      for (int i = j; i >= 0; --i) {
+        const double xi = x(i) / Af(i, i);
+        x(i) = xi;
+        for (int l = 0; l < i; ++l) x(l) -= xi * Af(l, i);
+      }
+      sum += x.squaredNorm();
+    }
+    inv = std::sqrt(sum);
+    ++small_rinvs_;
+  } else {
+    Ri.setIdentity();
+    Af.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solveInPlace(Ri);
+    inv = Ri.norm();
+  }
   if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return -1;
   if (wide && rank == me) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
     mqr_.min_norm_transposed_solve(e, dz);
@@ -1525,8 +1545,15 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // (r x f) factorised, null(F) being what the level leaves free
   const bool by_null_space =
       nviol == 0 && rank && by_qr && !qr_wide_ && rank < r_ && null_space_freeze;
+  // full_rank_freeze: the level's equalities have rank r (M of full column rank) and no row
+  // is violated: F^T is an orthonormal basis of the whole space, null(F) = {0}
+  const bool no_freedom = full_rank_freeze && nviol == 0 && rank == r_;
+  // wide_freeze: a wide M factorised by the QR of M^T, no row violated: null(M) spans the
+  // last r - rank columns of Qf, Z <- Z Qf by M^T's own reflectors (as a feasible closed form)
+  const bool by_wide = wide_freeze && !no_freedom && nviol == 0 && rank && by_qr && qr_wide_;
+  const bool by_f = !by_null_space && !no_freedom && !by_wide;
   double fscale = 1.0;
-  if (!by_null_space) {
+  if (by_f) {
     MapMat Ft = fqr_.matrix(r_, rank + nviol);
     row_space_basis(svd, by_qr, rank, Ft.leftCols(rank));
     int f = rank;
@@ -1544,10 +1571,24 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
     kz_ = k_;
   }
-  if (by_null_space)
+  if (by_null_space) {
     freeze_null_space(rank);
-  else
+  } else if (no_freedom) {  // what freeze() ends with for F of rank r (carry_z drops Cin Z)
+    r_ = 0;
+    kz_ = 0;
+    z_identity_ = false;
+    ++full_rank_freezes_;
+  } else if (by_wide) {
+    auto Zr2 = Z_.leftCols(r_);
+    z_identity_ = false;
+    mqr_.apply_q_right(Zr2);
+    carry_z(mqr_, rank);
+    for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
+    r_ -= rank;
+    ++wide_freezes_;
+  } else {
     freeze(fscale);
+  }
   return kOk;
 }
 
@@ -1667,6 +1708,9 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   qr_closed_forms_ = 0;
   zero_tail_compressions_ = 0;
   null_space_freezes_ = 0;
+  full_rank_freezes_ = 0;
+  wide_freezes_ = 0;
+  small_rinvs_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);
   if (has_deadline_)

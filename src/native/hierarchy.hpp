@@ -189,6 +189,34 @@ class Hierarchy {
   /// row space basis of [R11 R12] P^T formed, factorised again by freeze() and its rank
   /// reflectors applied to Z (the same subspace, another orthonormal basis of it).
   bool null_space_freeze = true;
+  /// A level solved by the active set whose equalities have full column rank r in Z (the QR
+  /// or SVD closed form's rank is r) and which leaves no violated row: no freedom is left,
+  /// r <- 0 without the freeze's QR of F (default; the same x bit for bit, Z is not read
+  /// again), or by the freeze (A/B: F^T, an orthonormal basis of the whole space, factorised
+  /// and applied to Z).
+  bool full_rank_freeze = true;
+  /// Levels of the last call frozen by full_rank_freeze.
+  int full_rank_freezes() const { return full_rank_freezes_; }
+  /// A wide level (M = A Z with me <= r, its closed form by the QR of M^T) solved by the
+  /// active set and leaving no violated row: Z <- Z Qf, its first rank columns dropped, by
+  /// the reflectors of M^T's QR (as after a feasible closed form), or by the freeze: Qf's
+  /// first rank columns formed, factorised again and applied (default: the same subspace,
+  /// another orthonormal basis of it). Off by default: 3.4 % fewer instructions on the Panda
+  /// stack, but the IK step and Stack.solve, whose rows differ by rounding, then took
+  /// different active-set paths at one step of tests/kinematics/test_native_step.py's
+  /// position loop (5 against 4 iterations), which requires the same path.
+  bool wide_freeze = false;
+  /// Levels of the last call frozen by wide_freeze.
+  int wide_freezes() const { return wide_freezes_; }
+  /// The QR closed form's bound 1/|R11^-1|_F on sigma_rank(M) for a rank up to
+  /// kSmallRinvMax: R11^-1 by a back substitution per column on its leading entries
+  /// (default), or (A/B) by Eigen's blocked triangular solve of an identity right-hand side
+  /// (the same bound, its sums in another order; it only gates the QR closed form and the
+  /// exact finish of an ill-conditioned level).
+  bool small_rinv = true;
+  static constexpr int kSmallRinvMax = 16;
+  /// QR closed forms of the last call whose bound came by small_rinv.
+  int small_rinvs() const { return small_rinvs_; }
   /// The changes of Z and of the carried projection Cin Z by a QR's reflectors (a wide
   /// level's M^T, a freeze's F^T), 16 to m / 3 of them on at least 24 rows, in the compact
   /// WY form B - ((B V) T) V^T by matrix products, or one reflector at a time. Default on in
@@ -455,6 +483,9 @@ class Hierarchy {
   /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
   PivotedQR tqr_;
   int null_space_freezes_ = 0;  ///< levels frozen by null_space_freeze in this call
+  int full_rank_freezes_ = 0;  ///< levels frozen by full_rank_freeze in this call
+  int wide_freezes_ = 0;       ///< levels frozen by wide_freeze in this call
+  int small_rinvs_ = 0;        ///< closed forms of this call bounded by small_rinv
   Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))
   Mat cztmp_;  ///< null_space_freeze: the product Cin Z P N before it is copied back
   int zero_tail_compressions_ = 0;  ///< levels compressed by compress_zero_tail in this call

@@ -16,10 +16,11 @@
 // QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
-// identity_z, least_distance, null_space_freeze, wy_right, tight_batch.
+// identity_z, least_distance, null_space_freeze, wy_right, tight_batch, full_rank_freeze,
+// wide_freeze, small_rinv.
 //
-// QPCOORD_DRIVER_ON=gemv_qr,wy_right: switch these non-default options on (wy_right is on by
-// default in a build with FMA, e.g. -march=x86-64-v3).
+// QPCOORD_DRIVER_ON=gemv_qr,wy_right,wide_freeze: switch these non-default options on
+// (wy_right is on by default in a build with FMA, e.g. -march=x86-64-v3).
 //
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
 // (float64, n per solve, in order) to compare two builds.
@@ -80,6 +81,9 @@ int main(int argc, char** argv) {
     if (has("tight_batch")) h.tight_batch = false;
     if (has("null_space_freeze")) h.null_space_freeze = false;
     if (has("wy_right")) h.wy_right = false;
+    if (has("full_rank_freeze")) h.full_rank_freeze = false;
+    if (has("wide_freeze")) h.wide_freeze = false;
+    if (has("small_rinv")) h.small_rinv = false;
     if (has("seed_on_miss")) h.seed_on_miss = false;
     if (has("downdate")) h.downdate = false;
     if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
@@ -90,6 +94,7 @@ int main(int argc, char** argv) {
     const std::string list = std::string(",") + on + ",";
     if (list.find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
     if (list.find(",wy_right,") != std::string::npos) h.wy_right = true;
+    if (list.find(",wide_freeze,") != std::string::npos) h.wide_freeze = true;
   }
   Vec x(n), res(L), detail(8);
   Mat stats(L + 2, 3);
