@@ -33,6 +33,22 @@ inline bool in_box(double v, double lo, double hi) {
 }
 inline double finite_abs(double v) { return std::isfinite(v) ? std::abs(v) : 0.0; }
 
+/// The ratio test of one row: the step length (>= 0; inf if it never blocks) at which a row
+/// whose product with the step is gp and with the current point gy reaches its bound, the
+/// bound's side in sd (+1 upper, -1 lower, 0 none); |gp| <= tiny does not block.
+inline double bound_step(double gp, double gy, double lo, double hi, double tiny, int8_t& sd) {
+  sd = 0;
+  if (gp > tiny && std::isfinite(hi)) {
+    sd = 1;
+    return std::max((hi - gy) / gp, 0.0);
+  }
+  if (gp < -tiny && std::isfinite(lo)) {
+    sd = -1;
+    return std::max((lo - gy) / gp, 0.0);
+  }
+  return kInf;
+}
+
 
 }  // namespace
 
@@ -555,15 +571,8 @@ void Hierarchy::add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
   const double tiny = 1e-13 * smax;
   for (int i = 0; i < m; ++i) {
     if (W[i] || i == dropped) continue;  // (the dropped row: active_set's keep rule)
-    double t = kInf;
-    int8_t sd = 0;
-    if (gp(i) > tiny && std::isfinite(P.hi(i))) {
-      t = std::max((P.hi(i) - gy(i)) / gp(i), 0.0);
-      sd = 1;
-    } else if (gp(i) < -tiny && std::isfinite(P.lo(i))) {
-      t = std::max((P.lo(i) - gy(i)) / gp(i), 0.0);
-      sd = -1;
-    }
+    int8_t sd;
+    const double t = bound_step(gp(i), gy(i), P.lo(i), P.hi(i), tiny, sd);
     if (!(t * smax <= 1e-14 * yscale)) continue;  // active_set's `moved` test
     W[i] = sd;
     ++batch_rows_;
@@ -690,15 +699,8 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       const double tiny = 1e-13 * smax;
       for (int i = 0; i < m; ++i) {
         if (W[i]) continue;
-        double t = kInf;
-        int8_t sd = 0;
-        if (gp(i) > tiny && std::isfinite(P.hi(i))) {
-          t = std::max((P.hi(i) - gy(i)) / gp(i), 0.0);
-          sd = 1;
-        } else if (gp(i) < -tiny && std::isfinite(P.lo(i))) {
-          t = std::max((P.lo(i) - gy(i)) / gp(i), 0.0);
-          sd = -1;
-        }
+        int8_t sd;
+        const double t = bound_step(gp(i), gy(i), P.lo(i), P.hi(i), tiny, sd);
         if (t < alpha) {
           alpha = t;
           block = i;
@@ -954,15 +956,8 @@ bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int har
   int8_t side = 0;
   for (int i = 0; i < hard_rows; ++i) {
     const double gd = P.G.row(i).head(zcols).dot(zp);
-    double a = kInf;
-    int8_t sd = 0;
-    if (gd > tiny && std::isfinite(P.hi(i))) {
-      a = std::max(P.hi(i) / gd, 0.0);
-      sd = 1;
-    } else if (gd < -tiny && std::isfinite(P.lo(i))) {
-      a = std::max(P.lo(i) / gd, 0.0);
-      sd = -1;
-    }
+    int8_t sd;
+    const double a = bound_step(gd, 0.0, P.lo(i), P.hi(i), tiny, sd);  // from z = 0
     if (a < alpha) {
       alpha = a;
       block = i;

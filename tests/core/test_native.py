@@ -47,6 +47,30 @@ needs_native = pytest.mark.skipif(
 )
 
 
+def switch_pair(stack: qc.Stack, switch: str):
+    """``(P, new, plain)``: two native solvers of ``stack``, the ``Hierarchy`` switch
+    ``switch`` on in ``new`` (asserted to be its default) and off in ``plain``: the A/B pair
+    of the switch test modules (test_native_lsupd, _minnorm, _iter, ...)."""
+    from qpcoord.core.native import NativeHierarchy
+
+    P = stack._compiled
+    new = NativeHierarchy(P, stack.damping)
+    plain = NativeHierarchy(P, stack.damping)
+    assert getattr(new._solver, switch)  # the default
+    setattr(plain._solver, switch, False)
+    return P, new, plain
+
+
+def published_module():
+    """``benchmarks/hierarchy_published.py`` imported (the LexLS humanoid and its moves)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        import hierarchy_published as hp
+    finally:
+        sys.path.pop(0)
+    return hp
+
+
 def _same(sp: qc.Solution, sn: qc.Solution) -> None:
     rp, rn = sp.level_residuals, sn.level_residuals
     assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rp, rn)

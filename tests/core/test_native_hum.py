@@ -25,13 +25,10 @@ Every step here equals the solver with the switch off and the Python engine (lev
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hlsp import load
-from test_native import LEVEL_TOL, needs_native
+from test_native import LEVEL_TOL, needs_native, published_module
 from test_native_kqr import _check as kqr_check
 from test_native_kqr import _equality_under_bounds
 
@@ -65,15 +62,6 @@ def _check(
     return kqr_check(stack, P, new, plain, unique_x, switch, counters=COUNTER)
 
 
-def _published():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    try:
-        import hierarchy_published as hp
-    finally:
-        sys.path.pop(0)
-    return hp
-
-
 @needs_native
 @pytest.mark.parametrize(
     ("box", "unit"),
@@ -85,7 +73,7 @@ def test_moving_humanoid_null_space_freeze_equals_python(box, unit):
     rank 52 in 60 (box form: 54 in 62) is frozen by the null space of its QR at every step;
     level values equal the general freeze's and the Python engine's (x: the ill-conditioned
     minimum-norm point, not compared)."""
-    hp = _published()
+    hp = published_module()
     prob = load("lexls_test01_humanoid", simple_as_bounds=box)
     levels = hp.unit_rows(prob.levels) if unit else prob.levels
     st = qc.Stack(levels, bounds=prob.bounds)
@@ -204,7 +192,7 @@ def test_moving_humanoid_wy_equals_python(box, unit):
     """The moving humanoid: its wide level of 21 rows changes Z (and, rows form, the 72
     inherited rows' projection) in the WY form at every step; level values equal the
     reflector loop's and the Python engine's."""
-    hp = _published()
+    hp = published_module()
     prob = load("lexls_test01_humanoid", simple_as_bounds=box)
     levels = hp.unit_rows(prob.levels) if unit else prob.levels
     st = qc.Stack(levels, bounds=prob.bounds)
@@ -273,7 +261,7 @@ def test_each_build_takes_the_paths(monkeypatch, variant, switch):
     except (native.NativeUnavailableError, ValueError):
         pytest.skip(f"no {variant} build on this machine")
     monkeypatch.setattr(native, "_module", mod)
-    hp = _published()
+    hp = published_module()
     prob = load("lexls_test01_humanoid")
     st = qc.Stack(prob.levels, bounds=prob.bounds)
     P, new, plain = _pair(st, switch=switch)

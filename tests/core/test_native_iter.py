@@ -18,21 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native import LEVEL_TOL, X_TOL, needs_native
+from test_native import LEVEL_TOL, X_TOL, needs_native, switch_pair
 
 import qpcoord as qc
 
 
 def _pair(stack: qc.Stack):
     """(P, new, plain): two native solvers of ``stack``, tight_batch on and off."""
-    from qpcoord.core.native import NativeHierarchy
-
-    P = stack._compiled
-    new = NativeHierarchy(P, stack.damping)
-    plain = NativeHierarchy(P, stack.damping)
-    assert new._solver.tight_batch  # the default
-    plain._solver.tight_batch = False
-    return P, new, plain
+    return switch_pair(stack, "tight_batch")
 
 
 def _iterations(info: dict) -> int:

@@ -27,6 +27,7 @@ from test_native import (
     _eigen_include,
     _hard_random_stack,
     needs_native,
+    switch_pair,
 )
 
 import qpcoord as qc
@@ -34,14 +35,7 @@ import qpcoord as qc
 
 def _pair(stack: qc.Stack):
     """(new, plain): two native solvers of ``stack``, ``slack_ls`` on and off."""
-    from qpcoord.core.native import NativeHierarchy
-
-    P = stack._compiled
-    new = NativeHierarchy(P, stack.damping)
-    plain = NativeHierarchy(P, stack.damping)
-    assert new._solver.slack_ls  # the default
-    plain._solver.slack_ls = False
-    return P, new, plain
+    return switch_pair(stack, "slack_ls")
 
 
 def _check(stack, P, new, plain, unique_x: bool = True) -> tuple[int, int]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native import LEVEL_TOL, X_TOL, needs_native
+from test_native import LEVEL_TOL, X_TOL, needs_native, switch_pair
 
 import qpcoord as qc
 
@@ -28,14 +28,7 @@ ORACLE_X_TOL = 1e-6
 
 def _pair(stack: qc.Stack):
     """(P, new, plain): two native solvers of ``stack``, least_distance on and off."""
-    from qpcoord.core.native import NativeHierarchy
-
-    P = stack._compiled
-    new = NativeHierarchy(P, stack.damping)
-    plain = NativeHierarchy(P, stack.damping)
-    assert new._solver.least_distance  # the default
-    plain._solver.least_distance = False
-    return P, new, plain
+    return switch_pair(stack, "least_distance")
 
 
 def _check(stack: qc.Stack, P, new, plain, oracle: tuple | None = None) -> int:

@@ -22,13 +22,10 @@ taken (a violated row, a rank below r), it is not.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hlsp import load
-from test_native import LEVEL_TOL, needs_native
+from test_native import LEVEL_TOL, needs_native, published_module
 from test_native_kqr import _check as kqr_check
 
 import qpcoord as qc
@@ -182,15 +179,6 @@ def test_rank_deficient_tall_level_is_not_full_rank():
     assert np.all(np.abs(rn - sp.level_residuals) <= LEVEL_TOL * np.maximum(1.0, rn))
 
 
-def _published():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    try:
-        import hierarchy_published as hp
-    finally:
-        sys.path.pop(0)
-    return hp
-
-
 @needs_native
 @pytest.mark.parametrize(
     ("box", "unit"),
@@ -202,7 +190,7 @@ def test_moving_humanoid_equals_python(box, unit, switch):
     """The LexLS humanoid moved as hierarchy_published's re-solve table: level values equal
     the switch off's and the Python engine's (x: the ill-conditioned minimum-norm point, not
     compared)."""
-    hp = _published()
+    hp = published_module()
     prob = load("lexls_test01_humanoid", simple_as_bounds=box)
     levels = hp.unit_rows(prob.levels) if unit else prob.levels
     st = qc.Stack(levels, bounds=prob.bounds)
