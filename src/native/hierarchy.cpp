@@ -269,6 +269,15 @@ void Hierarchy::freeze(double scale) {
   r_ -= rank;
 }
 
+void Hierarchy::freeze_wide(int rank) {
+  auto Zr = Z_.leftCols(r_);
+  z_identity_ = false;
+  mqr_.apply_q_right(Zr);
+  carry_z(mqr_, rank);
+  for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
+  r_ -= rank;
+}
+
 void Hierarchy::freeze_null_space(int rank) {
   const int l = r_ - rank;
   auto N = nsp_.topLeftCorner(r_, l);
@@ -1382,12 +1391,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       r_ = 0;
       z_identity_ = false;
     } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
-      auto Zr2 = Z_.leftCols(r_);
-      z_identity_ = false;
-      mqr_.apply_q_right(Zr2);
-      carry_z(mqr_, rank);
-      for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
-      r_ -= rank;
+      freeze_wide(rank);
     } else if (rank && by_qr && null_space_freeze) {  // Z <- Z P null([R11 R12])
       freeze_null_space(rank);
     } else if (rank) {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
@@ -1574,12 +1578,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     z_identity_ = false;
     ++full_rank_freezes_;
   } else if (by_wide) {
-    auto Zr2 = Z_.leftCols(r_);
-    z_identity_ = false;
-    mqr_.apply_q_right(Zr2);
-    carry_z(mqr_, rank);
-    for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
-    r_ -= rank;
+    freeze_wide(rank);
     ++wide_freezes_;
   } else {
     freeze(fscale);

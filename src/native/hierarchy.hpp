@@ -303,6 +303,9 @@ class Hierarchy {
   /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (qr_rz_:
   /// N from trz_, else from tqr_); the carried projection Cin Z follows by the same product.
   void freeze_null_space(int rank);
+  /// Z <- Z Qf(:, rank:) after a wide M's QR in mqr_ (M^T = Qf R: null(M) is spanned by
+  /// Qf's last r - rank columns); the carried projection follows (carry_z).
+  void freeze_wide(int rank);
   void snap(Vec& x) const;
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
