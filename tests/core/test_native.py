@@ -47,18 +47,44 @@ needs_native = pytest.mark.skipif(
 )
 
 
-def switch_pair(stack: qc.Stack, switch: str):
+def switch_pair(stack: qc.Stack, switch: str, default: bool | None = True):
     """``(P, new, plain)``: two native solvers of ``stack``, the ``Hierarchy`` switch
-    ``switch`` on in ``new`` (asserted to be its default) and off in ``plain``: the A/B pair
-    of the switch test modules (test_native_lsupd, _minnorm, _iter, ...)."""
+    ``switch`` on in ``new`` and off in ``plain``: the A/B pair of the switch test modules
+    (test_native_kqr, _lsupd, _minnorm, _hum, _small, _iter). ``default``: the switch's
+    default, asserted (``None``: not asserted, e.g. one that differs between builds)."""
     from qpcoord.core.native import NativeHierarchy
 
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     plain = NativeHierarchy(P, stack.damping)
-    assert getattr(new._solver, switch)  # the default
+    assert default is None or getattr(new._solver, switch) == default
+    setattr(new._solver, switch, True)
     setattr(plain._solver, switch, False)
     return P, new, plain
+
+
+def switch_check(
+    stack: qc.Stack, P, new, plain, counter: str, unique_x: bool = True, warm: bool = True
+):
+    """Solve with both solvers of a :func:`switch_pair` (``warm``: from their stored working
+    sets, else cold) and with the Python engine: the same level values (``LEVEL_TOL``
+    relative) and, ``unique_x``, the same x (1e-9 between the pair, ``X_TOL`` against the
+    Python engine). ``counter``: the ``Hierarchy`` counter of the switch's path, 0 in
+    ``plain``. Returns ``(new's count, new's info, plain's info, the Python Solution)``."""
+    xn, rn, infon = new.solve(P, warm=warm)
+    taken = getattr(new._solver, counter)
+    xp, rp, infop = plain.solve(P, warm=warm)
+    assert getattr(plain._solver, counter) == 0
+    sp = stack.solve(engine="python")
+    ref = sp.level_residuals
+    for r in (rn, rp):
+        assert np.all(np.abs(r - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (r, ref)
+    assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rn, rp)
+    if unique_x:
+        scale = max(1.0, float(np.max(np.abs(sp.x))))
+        assert np.max(np.abs(xn - xp)) <= 1e-9 * scale, np.max(np.abs(xn - xp))
+        assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale, np.max(np.abs(xn - sp.x))
+    return taken, infon, infop, sp
 
 
 def published_module():

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hlsp import load
-from test_native import LEVEL_TOL, needs_native, published_module
+from test_native import LEVEL_TOL, needs_native, published_module, switch_pair
 from test_native_kqr import _check as kqr_check
 from test_native_kqr import _equality_under_bounds
 
@@ -39,16 +39,10 @@ COUNTER = {"null_space_freeze": "null_space_freezes", "wy_right": "wy_applicatio
 
 
 def _pair(stack: qc.Stack, rz: bool = True, switch: str = "null_space_freeze"):
-    """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off."""
-    from qpcoord.core.native import NativeHierarchy
-
-    P = stack._compiled
-    new = NativeHierarchy(P, stack.damping)
-    plain = NativeHierarchy(P, stack.damping)
+    """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off, both with
+    ``rz_min_norm = rz``."""
     # null_space_freeze: on by default; wy_right: on by default in the x86-64-v3 build only
-    assert getattr(new._solver, switch) or switch == "wy_right"
-    setattr(new._solver, switch, True)
-    setattr(plain._solver, switch, False)
+    P, new, plain = switch_pair(stack, switch, default=None if switch == "wy_right" else True)
     for h in (new, plain):
         h._solver.rz_min_norm = rz
     return P, new, plain

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native import LEVEL_TOL, X_TOL, needs_native, switch_pair
+from test_native import needs_native, switch_check, switch_pair
 
 import qpcoord as qc
 
@@ -39,17 +39,7 @@ def _check(stack: qc.Stack, P, new, plain, warm: bool) -> tuple[int, int, int]:
     """Solve with both (cold unless ``warm``) and with the Python engine: the same level
     values, the same x (unique). Returns (rows batched by ``new``, its iterations, those of
     ``plain``)."""
-    xn, rn, infon = new.solve(P, warm=warm)
-    batched = new._solver.batch_rows
-    xp, rp, infop = plain.solve(P, warm=warm)
-    assert plain._solver.batch_rows == 0
-    sp = stack.solve(engine="python")
-    ref = sp.level_residuals
-    for r in (rn, rp):
-        assert np.all(np.abs(r - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (r, ref)
-    scale = max(1.0, float(np.max(np.abs(sp.x))))
-    assert np.max(np.abs(xn - xp)) <= 1e-9 * scale, np.max(np.abs(xn - xp))
-    assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale, np.max(np.abs(xn - sp.x))
+    batched, infon, infop, _ = switch_check(stack, P, new, plain, "batch_rows", warm=warm)
     return batched, _iterations(infon), _iterations(infop)
 
 

@@ -28,13 +28,10 @@ numbers are the same bit for bit.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hlsp import load
-from test_native import LEVEL_TOL, X_TOL, needs_native
+from test_native import needs_native, published_module, switch_check, switch_pair
 
 import qpcoord as qc
 
@@ -48,14 +45,7 @@ COUNTER = {
 
 def _pair(stack: qc.Stack, switch: str = "reuse_k_qr"):
     """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off."""
-    from qpcoord.core.native import NativeHierarchy
-
-    P = stack._compiled
-    new = NativeHierarchy(P, stack.damping)
-    plain = NativeHierarchy(P, stack.damping)
-    assert getattr(new._solver, switch)  # the default
-    setattr(plain._solver, switch, False)
-    return P, new, plain
+    return switch_pair(stack, switch)
 
 
 def _check(
@@ -70,20 +60,7 @@ def _check(
     """Solve with both and the Python engine, compare; return ``new``'s count of the
     switch's path (its counter in ``counters``, default this file's :data:`COUNTER`)."""
     counter = (COUNTER if counters is None else counters)[switch]
-    xn, rn, _ = new.solve(P)
-    taken = getattr(new._solver, counter)
-    xp, rp, _ = plain.solve(P)
-    assert getattr(plain._solver, counter) == 0
-    sp = stack.solve(engine="python")
-    ref = sp.level_residuals
-    for r in (rn, rp):
-        assert np.all(np.abs(r - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (r, ref)
-    assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rn, rp)
-    if unique_x:
-        scale = max(1.0, float(np.max(np.abs(sp.x))))
-        assert np.max(np.abs(xn - xp)) <= 1e-9 * scale
-        assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale
-    return taken
+    return switch_check(stack, P, new, plain, counter, unique_x)[0]
 
 
 @needs_native
@@ -98,11 +75,7 @@ def test_moving_humanoid_reuses_k_and_equals_python(box, unit, least):
     finish after a warm hit), and the level values equal the refactorising solver's and the
     Python engine's (x is the ill-conditioned minimum-norm point: not compared). The unit-row
     copy's warm trials hit less often on that level: fewer reuses."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    try:
-        import hierarchy_published as hp
-    finally:
-        sys.path.pop(0)
+    hp = published_module()
     prob = load("lexls_test01_humanoid", simple_as_bounds=box)
     levels = hp.unit_rows(prob.levels) if unit else prob.levels
     st = qc.Stack(levels, bounds=prob.bounds)
@@ -185,11 +158,7 @@ def test_moving_humanoid_rz_equals_the_qr_and_python(box, unit):
     """The moving humanoid: its last level's rank-deficient M (60-62 columns, rank 52-54)
     and K (rank 50-51 of 51-53) go by RZ; level values equal the transposed QR's and the
     Python engine's (x: the ill-conditioned minimum-norm point, not compared)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    try:
-        import hierarchy_published as hp
-    finally:
-        sys.path.pop(0)
+    hp = published_module()
     prob = load("lexls_test01_humanoid", simple_as_bounds=box)
     levels = hp.unit_rows(prob.levels) if unit else prob.levels
     st = qc.Stack(levels, bounds=prob.bounds)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import importlib.util
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +26,7 @@ from test_native import (
     _eigen_include,
     _hard_random_stack,
     needs_native,
+    published_module,
     switch_pair,
 )
 
@@ -114,11 +114,7 @@ def test_moving_humanoid_equals_the_plain_step(box):
     hierarchy_published's re-solve table: level values equal the plain step's and the
     Python engine's. The slack step is taken at level 0's warm trials and iterations; the
     box form's level 0 rows are bounds (no slack reaches its active sets: only equal)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    try:
-        import hierarchy_published as hp
-    finally:
-        sys.path.pop(0)
+    hp = published_module()
 
     prob = load("lexls_test01_humanoid", simple_as_bounds=box)
     st = qc.Stack(prob.levels, bounds=prob.bounds)
@@ -177,11 +173,7 @@ def test_exact_finish_from_the_optimal_end_is_the_same(case):
     from qpcoord.core.native import NativeHierarchy
 
     if case == "humanoid":
-        sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-        try:
-            import hierarchy_published as hp
-        finally:
-            sys.path.pop(0)
+        hp = published_module()
         prob = load("lexls_test01_humanoid")
         st = qc.Stack(prob.levels, bounds=prob.bounds)
         mover = hp._mover(prob.levels)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native import LEVEL_TOL, X_TOL, needs_native, switch_pair
+from test_native import needs_native, switch_check, switch_pair
 
 import qpcoord as qc
 
@@ -35,20 +35,12 @@ def _check(stack: qc.Stack, P, new, plain, oracle: tuple | None = None) -> int:
     """Solve with both, the Python engine (and the oracle on ``oracle`` = (levels, bounds,
     constraints), the stack's arguments); the minimum-norm x is unique: compare it. Returns
     ``new``'s least-distance steps."""
-    xn, rn, _ = new.solve(P)
-    taken = new._solver.least_distance_steps
-    xp, rp, _ = plain.solve(P)
-    assert plain._solver.least_distance_steps == 0
-    sp = stack.solve(engine="python")
-    ref = sp.level_residuals
-    for r in (rn, rp):
-        assert np.all(np.abs(r - ref) <= LEVEL_TOL * np.maximum(1.0, ref)), (r, ref)
-    scale = max(1.0, float(np.max(np.abs(sp.x))))
-    assert np.max(np.abs(xn - xp)) <= 1e-9 * scale, np.max(np.abs(xn - xp))
-    assert np.max(np.abs(xn - sp.x)) <= X_TOL * scale, np.max(np.abs(xn - sp.x))
+    taken, _, _, sp = switch_check(stack, P, new, plain, "least_distance_steps")
     if oracle is not None:
         from oracle import lexicographic
 
+        xn = new.x
+        scale = max(1.0, float(np.max(np.abs(sp.x))))
         ox = lexicographic(*oracle).x
         assert np.max(np.abs(xn - ox)) <= ORACLE_X_TOL * scale, np.max(np.abs(xn - ox))
     return taken

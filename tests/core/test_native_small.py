@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hlsp import load
-from test_native import LEVEL_TOL, needs_native, published_module
+from test_native import LEVEL_TOL, needs_native, published_module, switch_pair
 from test_native_kqr import _check as kqr_check
 
 import qpcoord as qc
@@ -37,15 +37,7 @@ COUNTER = {"full_rank_freeze": "full_rank_freezes", "wide_freeze": "wide_freezes
 def _pair(stack: qc.Stack, switch: str):
     """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off (its default:
     full_rank_freeze on, wide_freeze off)."""
-    from qpcoord.core.native import NativeHierarchy
-
-    P = stack._compiled
-    new = NativeHierarchy(P, stack.damping)
-    plain = NativeHierarchy(P, stack.damping)
-    assert getattr(new._solver, switch) == (switch == "full_rank_freeze")
-    setattr(new._solver, switch, True)
-    setattr(plain._solver, switch, False)
-    return P, new, plain
+    return switch_pair(stack, switch, default=switch == "full_rank_freeze")
 
 
 def _check(stack: qc.Stack, P, new, plain, unique_x: bool, switch: str) -> int:

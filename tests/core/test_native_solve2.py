@@ -18,12 +18,10 @@ ran on M's 97 rows.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hlsp import load
+from test_native import published_module
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -37,8 +35,7 @@ needs_native = pytest.mark.skipif(
 def _published(stem: str, box: bool = False, unit: bool = False):
     """(stack, move(step)) of a published problem, moved as hierarchy_published.py does
     (unit: its unit-row copy)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    import hierarchy_published as hp
+    hp = published_module()
 
     prob = load(stem, simple_as_bounds=box)
     levels = hp.unit_rows(prob.levels) if unit else prob.levels

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 from hlsp import load
 from hypothesis import HealthCheck, assume, given, settings
-from test_native import LEVEL_TOL, X_TOL, _same, stacks
+from test_native import LEVEL_TOL, X_TOL, _same, published_module, stacks
 from test_native_weighted import _same as same_weighted
 from test_solver_comparison import CASES, build, stack
 
@@ -292,11 +292,7 @@ def test_the_builds_agree_on_random_stacks(spec):
 def test_every_build_solves_the_moving_humanoid(monkeypatch, name):
     """The LexLS humanoid (88 variables, 5 levels) moved as hierarchy_published's re-solve
     table, warm: the level values of the Python engine (x is not unique there)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    try:
-        import hierarchy_published as hp
-    finally:
-        sys.path.pop(0)
+    hp = published_module()
 
     _use(monkeypatch, name)
     prob = load("lexls_test01_humanoid")

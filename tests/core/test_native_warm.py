@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hlsp import load
+from test_native import published_module
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -60,11 +61,7 @@ def _check(stack: qc.Stack, xn, rn, xo, ro, unique: bool = True) -> None:
 def _moving_soth(steps: int):
     """soth_sot (30 variables: 30 joint-limit rows as level 0, then 3 / 3 / 6 / 6 equality
     rows), every right-hand side moved as hierarchy_published.py's re-solve table does."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    import hierarchy_published as hp
+    hp = published_module()
 
     prob = load("soth_sot")
     stack = qc.Stack(prob.levels, bounds=prob.bounds)
