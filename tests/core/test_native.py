@@ -97,6 +97,16 @@ def published_module():
     return hp
 
 
+def published_stack(stem: str, box: bool = False, unit: bool = False):
+    """``(stack, move(step))`` of a published problem (``tests/data/hlsp``), moved as
+    ``hierarchy_published.py``'s re-solve table does (``box``: simple rows as bounds;
+    ``unit``: its unit-row copy)."""
+    hp = published_module()
+    prob = load(stem, simple_as_bounds=box)
+    levels = hp.unit_rows(prob.levels) if unit else prob.levels
+    return qc.Stack(levels, bounds=prob.bounds), hp._mover(levels)
+
+
 def _same(sp: qc.Solution, sn: qc.Solution) -> None:
     rp, rn = sp.level_residuals, sn.level_residuals
     assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rp, rn)

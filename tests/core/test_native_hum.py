@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hlsp import load
-from test_native import LEVEL_TOL, needs_native, published_module, switch_pair
+from test_native import LEVEL_TOL, needs_native, published_module, published_stack, switch_pair
 from test_native_kqr import _check as kqr_check
 from test_native_kqr import _equality_under_bounds
 
@@ -67,12 +67,8 @@ def test_moving_humanoid_null_space_freeze_equals_python(box, unit):
     rank 52 in 60 (box form: 54 in 62) is frozen by the null space of its QR at every step;
     level values equal the general freeze's and the Python engine's (x: the ill-conditioned
     minimum-norm point, not compared)."""
-    hp = published_module()
-    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
-    levels = hp.unit_rows(prob.levels) if unit else prob.levels
-    st = qc.Stack(levels, bounds=prob.bounds)
+    st, move = published_stack("lexls_test01_humanoid", box, unit)
     P, new, plain = _pair(st)
-    move = hp._mover(levels)
     total = 0
     for step in range(4):
         move(step)
@@ -186,12 +182,8 @@ def test_moving_humanoid_wy_equals_python(box, unit):
     """The moving humanoid: its wide level of 21 rows changes Z (and, rows form, the 72
     inherited rows' projection) in the WY form at every step; level values equal the
     reflector loop's and the Python engine's."""
-    hp = published_module()
-    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
-    levels = hp.unit_rows(prob.levels) if unit else prob.levels
-    st = qc.Stack(levels, bounds=prob.bounds)
+    st, move = published_stack("lexls_test01_humanoid", box, unit)
     P, new, plain = _pair(st, switch="wy_right")
-    move = hp._mover(levels)
     total = 0
     for step in range(4):
         move(step)

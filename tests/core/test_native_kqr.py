@@ -30,8 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hlsp import load
-from test_native import needs_native, published_module, switch_check, switch_pair
+from test_native import needs_native, published_stack, switch_check, switch_pair
 
 import qpcoord as qc
 
@@ -75,12 +74,8 @@ def test_moving_humanoid_reuses_k_and_equals_python(box, unit, least):
     finish after a warm hit), and the level values equal the refactorising solver's and the
     Python engine's (x is the ill-conditioned minimum-norm point: not compared). The unit-row
     copy's warm trials hit less often on that level: fewer reuses."""
-    hp = published_module()
-    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
-    levels = hp.unit_rows(prob.levels) if unit else prob.levels
-    st = qc.Stack(levels, bounds=prob.bounds)
+    st, move = published_stack("lexls_test01_humanoid", box, unit)
     P, new, plain = _pair(st)
-    move = hp._mover(levels)
     total = 0
     for step in range(5):
         move(step)
@@ -158,12 +153,8 @@ def test_moving_humanoid_rz_equals_the_qr_and_python(box, unit):
     """The moving humanoid: its last level's rank-deficient M (60-62 columns, rank 52-54)
     and K (rank 50-51 of 51-53) go by RZ; level values equal the transposed QR's and the
     Python engine's (x: the ill-conditioned minimum-norm point, not compared)."""
-    hp = published_module()
-    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
-    levels = hp.unit_rows(prob.levels) if unit else prob.levels
-    st = qc.Stack(levels, bounds=prob.bounds)
+    st, move = published_stack("lexls_test01_humanoid", box, unit)
     P, new, plain = _pair(st, "rz_min_norm")
-    move = hp._mover(levels)
     total = 0
     for step in range(4):
         move(step)

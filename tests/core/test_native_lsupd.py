@@ -27,6 +27,7 @@ from test_native import (
     _hard_random_stack,
     needs_native,
     published_module,
+    published_stack,
     switch_pair,
 )
 
@@ -114,12 +115,8 @@ def test_moving_humanoid_equals_the_plain_step(box):
     hierarchy_published's re-solve table: level values equal the plain step's and the
     Python engine's. The slack step is taken at level 0's warm trials and iterations; the
     box form's level 0 rows are bounds (no slack reaches its active sets: only equal)."""
-    hp = published_module()
-
-    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
-    st = qc.Stack(prob.levels, bounds=prob.bounds)
+    st, move = published_stack("lexls_test01_humanoid", box)
     P, new, plain = _pair(st)
-    move = hp._mover(prob.levels)
     total = 0
     for step in range(6):
         move(step)

@@ -24,8 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hlsp import load
-from test_native import LEVEL_TOL, needs_native, published_module, switch_pair
+from test_native import LEVEL_TOL, needs_native, published_stack, switch_pair
 from test_native_kqr import _check as kqr_check
 
 import qpcoord as qc
@@ -182,12 +181,8 @@ def test_moving_humanoid_equals_python(box, unit, switch):
     """The LexLS humanoid moved as hierarchy_published's re-solve table: level values equal
     the switch off's and the Python engine's (x: the ill-conditioned minimum-norm point, not
     compared)."""
-    hp = published_module()
-    prob = load("lexls_test01_humanoid", simple_as_bounds=box)
-    levels = hp.unit_rows(prob.levels) if unit else prob.levels
-    st = qc.Stack(levels, bounds=prob.bounds)
+    st, move = published_stack("lexls_test01_humanoid", box, unit)
     P, new, plain = _pair(st, switch)
-    move = hp._mover(levels)
     for step in range(4):
         move(step)
         _check(st, P, new, plain, unique_x=False, switch=switch)

@@ -20,8 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hlsp import load
-from test_native import published_module
+from test_native import published_stack
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -30,16 +29,6 @@ needs_native = pytest.mark.skipif(
     not native.available(),
     reason=f"the native engine (qpcoord._native) is not built: {native._load_error}",
 )
-
-
-def _published(stem: str, box: bool = False, unit: bool = False):
-    """(stack, move(step)) of a published problem, moved as hierarchy_published.py does
-    (unit: its unit-row copy)."""
-    hp = published_module()
-
-    prob = load(stem, simple_as_bounds=box)
-    levels = hp.unit_rows(prob.levels) if unit else prob.levels
-    return qc.Stack(levels, bounds=prob.bounds), hp._mover(levels)
 
 
 def _run(
@@ -58,7 +47,7 @@ def _run(
     from qpcoord.core.native import NativeHierarchy
 
     counter = {"gemv_qr": "gemv_steps", "compress_zero_tail": "zero_tail_compressions"}[switch]
-    stack, move = _published(stem, box, unit)
+    stack, move = published_stack(stem, box, unit)
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     old = NativeHierarchy(P, stack.damping)
