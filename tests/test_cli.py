@@ -53,6 +53,8 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_second():
     assert len(commands) == 2, commands
     assert commands[0].endswith("qpcoord reproduce --quick")
     assert 'pip install -e ".[test]"' in commands[1] and "pytest" in commands[1]
+    # the suite again on the Python engine (the oracle): both engines checked on every CI run
+    assert "QPCOORD_TEST_ENGINE=python python -m pytest" in commands[1]
     ci = (ROOT / ".ci" / "run").read_text()
     pattern = re.search(r"grep -m1 -E '(.*?)' README.md", ci).group(1)
     assert re.search(pattern, "    " + commands[1])

@@ -15,6 +15,10 @@ from pathlib import Path
 
 import pytest
 
+#: the examples run as their own processes (``qpcoord reproduce``), on the library's default
+#: engine whatever ``QPCOORD_TEST_ENGINE`` says: not repeated in the Python-engine pass
+pytestmark = pytest.mark.engine_independent
+
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = sorted((ROOT / "examples").glob("*.py"))
 VERDICTS = ROOT / "tests" / "studies" / "verdicts.json"

@@ -851,6 +851,7 @@ def _small_damped_scenario(rng) -> dict:
     return {"stack": s, "move": move, "daqp": None}
 
 
+@pytest.mark.engine_independent
 @needs_native
 @pytest.mark.skipif(shutil.which("g++") is None, reason="no C++ compiler (g++)")
 def test_the_native_call_allocates_nothing_after_the_first(tmp_path):

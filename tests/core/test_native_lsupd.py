@@ -125,6 +125,7 @@ def test_moving_humanoid_equals_the_plain_step(box):
     assert (total == 0) if box else (total > 0)
 
 
+@pytest.mark.engine_independent
 @needs_native
 def test_the_slack_step_allocates_nothing(tmp_path):
     """The C++ driver (counts malloc; src/native/tools/driver.cpp) on the moving humanoid

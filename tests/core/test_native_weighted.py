@@ -481,6 +481,7 @@ def _eigen_include() -> str | None:
     return "/usr/include/eigen3" if os.path.isdir("/usr/include/eigen3") else None
 
 
+@pytest.mark.engine_independent
 @needs_native
 def test_no_allocation_after_the_first_call(tmp_path):
     """``src/native/tools/weighted_driver.cpp`` counts heap allocations (malloc, where Eigen

@@ -202,6 +202,7 @@ def _eigen_include() -> str | None:
     return "/usr/include/eigen3" if os.path.isdir("/usr/include/eigen3") else None
 
 
+@pytest.mark.engine_independent
 @pytest.mark.skipif(not native.available(), reason="the native extension is not built")
 def test_no_allocation_on_the_regularised_path(tmp_path):
     """``weighted_driver.cpp ... singular``: the levels' rows in half the coordinates, so ``ε``

@@ -1005,6 +1005,7 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
 """
 
 
+@pytest.mark.engine_independent
 @needs_native
 @pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
 def test_the_native_call_does_not_allocate(tmp_path, build):

@@ -442,6 +442,7 @@ for name, stack in (("bands", [[polygon, band]]), ("whole", levels)):
 """
 
 
+@pytest.mark.engine_independent
 @needs_native
 @pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
 def test_the_native_band_kernels_do_not_allocate(tmp_path, talos, build):

@@ -245,6 +245,7 @@ def _build_wheel(source: Path, out: Path) -> Path:
     pytest.fail("could not build a wheel:\n" + "\n----\n".join(errors))
 
 
+@pytest.mark.engine_independent
 def test_wheel_ships_and_loads_the_descriptions(tmp_path):
     # build from a copy so the checkout gets no build/ or egg-info directories
     source = tmp_path / "source"
