@@ -254,10 +254,11 @@ class Hierarchy {
   /// the active set at that point when it is feasible (the set then differs from the optimal
   /// one by the rows to drop, not by every row the ratio test from z = 0 loses), else the
   /// seed as before. The same optimum and fewer iterations on a miss (chain30 7.7 -> 5.6 per
-  /// solve) but not fewer instructions: the grown sets keep the degenerate rows of a cold
-  /// start's vertex, where the seed from z = 0 sheds them, and the warm trials' QR of the
-  /// larger sets costs more than the iterations saved (chain30 +10 %). Off by default
-  /// (benchmarks/README.md, 2026-11-28, branch `chain`).
+  /// solve) but not fewer instructions: a level whose optimum is not unique keeps the vertex
+  /// the grown set started on (chain30's level 3: 18 rows), where the seed from z = 0 sheds
+  /// the rows not tight at z = 0 (3-8 rows), and the warm trials' QR of the larger sets costs
+  /// more than the iterations saved (chain30 +10 %). Off by default (benchmarks/README.md,
+  /// 2026-11-28, branch `chain`).
   bool grow_seed = false;
   /// Stages of the last call whose active set started from a grown stored set (grow_seed).
   int grown_seeds() const { return grown_seeds_; }
