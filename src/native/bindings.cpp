@@ -291,6 +291,11 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "default) or the lowest-index one (False; for comparisons).")
       .def_prop_ro("batch_rows", &Hierarchy::batch_rows,
                    "Rows of the last call added to a working set by tight_batch.")
+      .def_rw("grow_seed", &Hierarchy::grow_seed,
+              "A missed stored set of a stage without slack rows grown by the rows its point "
+              "violates before the seed (True) or the seed alone (False, default).")
+      .def_prop_ro("grown_seeds", &Hierarchy::grown_seeds,
+                   "Stages of the last call started from a grown stored set (grow_seed).")
       .def_prop_ro("rz_factors", &Hierarchy::rz_factors,
                    "RZ factorisations of the last call (rz_min_norm).")
       .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,

@@ -20,6 +20,7 @@ constexpr double kAbsFloor = 1e-14;
 constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every row to this
 constexpr int kIterFactor = 6;
 constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
+constexpr int kGrowRounds = 3;          // grow_seed: sets grown from the stored one at most
 constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
 constexpr double kQrMargin = 4.0;       // QR closed form: sigma_min bound over the SVD's floor
 // a level with a singular value under this fraction of the largest (or a damped one) is
@@ -140,11 +141,12 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
   for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
-                 &tmpr_, &xc_, &xold_, &e_, &ute_})
+                 &tmpr_, &xc_, &xold_, &e_, &ute_, &ygrow_})
     v->setZero(big);
   widx_.reserve(max_grows);
   mov_.reserve(std::max(max_in, 1));
   keep_.assign(max_grows, 0);
+  wgrow_.assign(max_grows, 0);
   viol_.assign(std::max(max_in, 1), 0);
   Ms_.resize(blocks);
   for (int b = 0; b < blocks; ++b) Ms_[b].setZero(meq_[b], n);  // M = A Z in its left r columns
@@ -954,6 +956,12 @@ bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int har
                                  int zcols, Eigen::Ref<Vec> y, std::vector<int8_t>& W) {
   const int k = P.cols, m = P.rows;
   (void)ws;  // its point is in xc_ already (try_working_set's stored_set_point)
+  // no slack rows (every row must hold at the start): the stored set grown by the rows its
+  // point violates (trial_ready_: that point and W's mapping are stored_set_point's)
+  if (grow_seed && hard_rows == m && zcols == k && trial_ready_ && grow_stored_set(P, y, W)) {
+    ++grown_seeds_;
+    return true;
+  }
   auto yp = xc_.head(k);
   if (!yp.allFinite()) return false;
   // ratio test from z = 0 towards z_p on the rows without slack (feasible at z = 0)
@@ -1005,6 +1013,48 @@ bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int har
   }
   if (block >= 0) W[block] = side;
   return true;
+}
+
+bool Hierarchy::grow_stored_set(const LsqProblem& P, Eigen::Ref<Vec> y,
+                                std::vector<int8_t>& W) {
+  const int k = P.cols, m = P.rows;
+  auto yp = xc_.head(k);
+  auto gy = gy_.head(m);
+  auto step = step_.head(k);
+  std::copy(W.begin(), W.begin() + m, wgrow_.begin());
+  ygrow_.head(k) = yp;
+  trial_ready_ = false;  // wqr_ and K: the grown sets' from the first round on
+  for (int round = 0; yp.allFinite(); ++round) {
+    gy.noalias() = P.G.topLeftCorner(m, k) * yp;
+    int added = 0;
+    bool tight = true;
+    for (int i = 0; i < m && tight; ++i) {
+      if (W[i]) {  // (2: lo = hi)
+        const double b = (W[i] == 1) ? P.hi(i) : P.lo(i);
+        tight = std::abs(gy(i) - b) <= kWarmFeasTol * std::max(1.0, std::abs(b));
+      } else if (gy(i) > P.hi(i)) {
+        W[i] = 1;
+        ++added;
+      } else if (gy(i) < P.lo(i)) {
+        W[i] = -1;
+        ++added;
+      }
+    }
+    if (!tight) break;
+    if (!added) {  // feasible, W tight: the active set's start
+      y.head(k) = yp;
+      return true;
+    }
+    if (round == kGrowRounds) break;
+    factor_trial(P, W);
+    bool consistent = false;
+    if (!working_set_point(P, W, yp, &consistent) || !consistent) break;
+    ls_step(P, yp, step);
+    yp += step;
+  }
+  std::copy(wgrow_.begin(), wgrow_.begin() + m, W.begin());
+  yp = ygrow_.head(k);
+  return false;
 }
 
 void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>& W,
@@ -1693,6 +1743,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   slack_steps_ = 0;
   least_distance_steps_ = 0;
   batch_rows_ = 0;
+  grown_seeds_ = 0;
   unit_q_ = false;
   k_qr_reuses_ = 0;
   rz_factors_ = 0;

@@ -248,6 +248,20 @@ class Hierarchy {
   bool tight_batch = true;
   /// Rows of the last call added to a working set by tight_batch (besides the blocking row).
   int batch_rows() const { return batch_rows_; }
+  /// A stage without slack rows (a level of equalities only, the minimum-norm step) whose
+  /// stored working set missed: before the seed's ratio test from z = 0, grow the stored set
+  /// by the rows its point violates and re-solve on it, a few rounds (kGrowRounds), and start
+  /// the active set at that point when it is feasible (the set then differs from the optimal
+  /// one by the rows to drop, not by every row the ratio test from z = 0 loses), else the
+  /// seed as before. The same optimum and fewer iterations on a miss (chain30 7.7 -> 5.6 per
+  /// solve) but not fewer instructions: a level whose optimum is not unique keeps the vertex
+  /// the grown set started on (chain30's level 3: 18 rows), where the seed from z = 0 sheds
+  /// the rows not tight at z = 0 (3-8 rows), and the warm trials' QR of the larger sets costs
+  /// more than the iterations saved (chain30 +10 %). Off by default (benchmarks/README.md,
+  /// 2026-11-28, branch `chain`).
+  bool grow_seed = false;
+  /// Stages of the last call whose active set started from a grown stored set (grow_seed).
+  int grown_seeds() const { return grown_seeds_; }
   /// RZ factorisations of the last call (rz_min_norm).
   int rz_factors() const { return rz_factors_; }
   /// Least-squares steps of the last call that reused K's factorisation (reuse_k_qr).
@@ -358,6 +372,11 @@ class Hierarchy {
   /// point and W's mapping are reused, not recomputed).
   bool seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows, int zcols,
                         Eigen::Ref<Vec> y, std::vector<int8_t>& W);
+  /// grow_seed: from the stored set's point (xc_, stored_set_point's), add to W every row
+  /// that point violates and move to the point of the grown set (its QR and least-squares
+  /// step), at most kGrowRounds times; true with y that point when it meets every row and W's
+  /// rows are tight there (the active set's start), else false with W and xc_ as on entry.
+  bool grow_stored_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W);
   /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
   /// Qt_ = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
@@ -442,6 +461,7 @@ class Hierarchy {
   bool unit_q_ = false;
   int least_distance_steps_ = 0;  ///< steps by least_distance in this call
   int batch_rows_ = 0;  ///< rows added by tight_batch in this call
+  int grown_seeds_ = 0;  ///< stages of this call started from a grown stored set (grow_seed)
   /// reuse_k_qr: kqr_ (and cqr_) or kqr_t_ hold the factorisation of the current working
   /// set's K on the stage's problem (cleared whenever the working set's QR changes)
   bool k_valid_ = false;
@@ -475,6 +495,8 @@ class Hierarchy {
       e_, ute_;
   std::vector<int> widx_, mov_;
   std::vector<char> keep_, viol_;
+  std::vector<int8_t> wgrow_;  ///< grow_stored_set: the stored set's W, restored on failure
+  Vec ygrow_;                  ///< grow_stored_set: the stored set's point, restored on failure
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ab_;  ///< a level's equality rows, copied contiguous (max_eq x n): Eigen's GEMM copies a
             ///< strided (row-major input) left factor into a heap temporary otherwise

@@ -19,7 +19,7 @@
 // identity_z, least_distance, null_space_freeze, wy_right, tight_batch, full_rank_freeze,
 // wide_freeze, small_rinv.
 //
-// QPCOORD_DRIVER_ON=gemv_qr,wy_right,wide_freeze: switch these non-default options on
+// QPCOORD_DRIVER_ON=gemv_qr,wy_right,wide_freeze,grow_seed: switch these non-default options on
 // (wy_right is on by default in a build with FMA, e.g. -march=x86-64-v3).
 //
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
@@ -95,6 +95,7 @@ int main(int argc, char** argv) {
     if (list.find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
     if (list.find(",wy_right,") != std::string::npos) h.wy_right = true;
     if (list.find(",wide_freeze,") != std::string::npos) h.wide_freeze = true;
+    if (list.find(",grow_seed,") != std::string::npos) h.grow_seed = true;
   }
   Vec x(n), res(L), detail(8);
   Mat stats(L + 2, 3);
