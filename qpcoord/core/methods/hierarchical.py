@@ -35,7 +35,15 @@ from scipy.linalg import qr
 from ..compile import CompiledStack
 from ..elimination import Reduced
 from ..linalg import filtered_svd, numerical_rank, svd
-from ..polish import KKT_FEAS_TOL, KKT_TOL, active_set_ls, kkt_residual, prepare, pull_back
+from ..polish import (
+    KKT_FEAS_TOL,
+    KKT_TOL,
+    active_rank,
+    active_set_ls,
+    kkt_residual,
+    prepare,
+    pull_back,
+)
 from ..tolerance import at_bounds
 
 __all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
@@ -172,10 +180,8 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
         tv = np.concatenate(t)
         U, s, Vt = svd(Em, full=True)
         # active rows dependent to within the activity tolerance are one constraint at that
-        # tolerance: their tiny singular value would turn the rows' tol-level disagreement
-        # into an arbitrarily long step (Talos' support polygon: two hull edges parallel to
-        # 4e-10, a step of 1e7 that the level's value does not see)
-        rk = min(numerical_rank(s, Em.shape), int(np.count_nonzero(s > tol * s[0])))
+        # tolerance (polish.active_rank)
+        rk = active_rank(s, Em.shape, tol)
         zp = Vt[:rk].T @ ((U[:, :rk].T @ tv) / s[:rk])
         if not np.isfinite(zp).all() or np.abs(Em @ zp - tv).max() > 1e-9 * max(
             1.0, float(np.abs(tv).max())
