@@ -61,6 +61,13 @@ REFINE_SLACK = 1e-7
 #: ``KKT_TOL`` can be far from the optimum, and the freeze passes it on.
 ILL_CONDITIONED = 1e-3
 _ABS_FLOOR = 1e-14
+#: A certified level point farther from the origin of the level's step than this many times
+#: the minimum-norm point of the level's optimal set is replaced by that point
+#: (:meth:`_Certifier.near`): VIOLATION_TOL / KKT_FEAS_TOL. The lower levels' feasibility
+#: and activity tolerances are ``KKT_FEAS_TOL`` relative to ``‖x‖``; beyond this ratio they
+#: exceed ``VIOLATION_TOL`` of the minimum-norm point's scale, the threshold at which the
+#: level's own rows were classified.
+FAR_RATIO = VIOLATION_TOL / KKT_FEAS_TOL
 
 
 #: A level row, or combination of a level's rows, whose projection on the remaining freedom
@@ -334,6 +341,51 @@ class _Certifier:
         self.R.continued += 1
         y, kkt = self._no_worse(y, kkt, ya)
         return self._no_worse(y, kkt, self._working_set_solve(y))
+
+    def min_norm_point(self, y):
+        """The minimum-norm point (in ``z``) of the level's optimal set, from its point ``y``:
+        ``min ‖z‖²`` subject to the level's rows and ``Q y' = Q y`` (the least-squares
+        optimal set is where ``Q y`` takes its unique optimal value; the slacks are fixed by
+        it), by :func:`active_set_ls` from ``y`` (feasible)."""
+        r, mv = self.r, self.mv
+        Qn = np.hstack((np.eye(r), np.zeros((r, mv)))) if mv else np.eye(r)
+        qy = self.Q @ y
+        G = np.vstack((self.G, self.Q))
+        ym, _conv = active_set_ls(
+            Qn, np.zeros(r), G, np.concatenate((self.lo, qy)), np.concatenate((self.hi, qy)), y
+        )
+        return ym
+
+    def near(self, z, z_qp, x):
+        """``(z, ok)``: the certified point ``z`` checked against the level's optimal set's
+        minimum-norm point (:data:`FAR_RATIO`), replaced by that point if it is farther than
+        the ratio allows and the replacement is certified and no worse; ``ok`` False if it
+        is far and cannot be replaced.
+
+        The certificate accepts any point of the optimal set; a point far out in it (the
+        tip of a wedge of two nearly parallel active rows: session 12's 1e7 step) is frozen
+        with ``x`` and every lower level's tolerances scale with ``‖x‖``. The level's QP point
+        ``z_qp`` (regularised towards ``z = 0``) is no longer than the minimum-norm point
+        ``z*``; only when ``‖z‖ > FAR_RATIO · max(1, ‖x‖, ‖z_qp‖)`` is ``z*`` computed."""
+        floor = max(1.0, float(np.linalg.norm(x)))
+        nz = float(np.linalg.norm(z))
+        if nz <= FAR_RATIO * max(floor, float(np.linalg.norm(z_qp))):
+            return z, True
+        y = self._with_slacks(z)
+        ym = self.min_norm_point(y)
+        if nz <= FAR_RATIO * max(floor, float(np.linalg.norm(ym[: self.r]))):
+            return z, True
+        ok, kkt = self._check(y)
+        self.R.continued += 1
+        yk, _ = self._no_worse(y, kkt, ym)
+        if yk is y:  # ym is optimal for the far point's value of Q y: the level from there
+            yc, _conv = active_set_ls(
+                self.Q, self.c, self.G, self.lo, self.hi, ym, prepared=self.prep
+            )
+            yk, _ = self._no_worse(y, kkt, yc)
+        if yk is y or float(np.linalg.norm(yk[: self.r])) > FAR_RATIO * floor:
+            return z, False
+        return yk[: self.r], True
 
     def run(self, candidates, H, f, Dy, where):
         best, best_obj, best_kkt = None, np.inf, np.inf
@@ -621,7 +673,10 @@ def solve_hierarchical(
             dhi,
             (L.sw[idx] * dm) if mv else None,
         )
+        z_qp = z
         z, ok, kkt = cert.run([zp, z] if zp is not None else [z], H, f, Dy, where)
+        if ok:
+            z, ok = cert.near(z, z_qp, x)
         R.certificates.append(kkt)
         if not ok:
             R.uncertified.append((k, kkt))
