@@ -1630,7 +1630,7 @@ int Hierarchy::independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, in
 /// (the Talos support polygon, a function of the CoM and the feet: with the feet frozen by an
 /// ill-conditioned level (condition 3e6, targets 1e5), its 6 projected rows have rank 2 plus
 /// singular values ~1e-13; the active set stepped along them to y = 1e17 (level value 4.5
-/// for 2e4) and did not converge on the next level: tests/data/talos_extreme_feet.npz).
+/// for 2e4) and did not converge on the next level: tests/data/talos_extreme_feet_{10,11}.npz).
 /// Uses fqr_ (free until the level's freeze) and tmpr_.
 void Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
                                           const Eigen::Ref<const Vec>& norms) {

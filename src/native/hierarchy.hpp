@@ -306,12 +306,12 @@ class Hierarchy {
   /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (qr_rz_:
   /// N from trz_, else from tqr_); the carried projection Cin Z follows by the same product.
   void freeze_null_space(int rank);
-  /// The moving level rows' projections (rows mov_ of CZl) without the directions in which
-  /// they are dependent to within the movable tolerance (robust: see hierarchy.cpp).
   /// The rank of a level's M without directions dependent on the frozen rows to within the
   /// movable tolerance (robust: see hierarchy.cpp).
   int independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, int me, int rank,
                        double scale);
+  /// Rows of R (a level's moving rows' projections) without the directions in which they
+  /// are dependent to within the movable tolerance (robust: see hierarchy.cpp).
   void drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
                                  const Eigen::Ref<const Vec>& norms);
   /// Z <- Z Qf(:, rank:) after a wide M's QR in mqr_ (M^T = Qf R: null(M) is spanned by
