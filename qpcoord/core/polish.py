@@ -28,7 +28,7 @@ import numpy as np
 from .linalg import numerical_rank, svd
 from .tolerance import at_bounds, within
 
-__all__ = ["polish", "prepare", "kkt_residual", "active_set_ls", "pull_back"]
+__all__ = ["polish", "prepare", "kkt_residual", "active_set_ls", "pull_back", "active_rank"]
 
 #: Relative distances to a bound under which a row is taken as active (tried in turn).
 ACTIVE_TOLS = (1e-7, 1e-5)
@@ -41,6 +41,20 @@ PROX = 1e-6
 #: Refinement steps of the fallback.
 PROX_STEPS = 2
 _EPS = float(np.finfo(float).eps)
+
+
+def active_rank(s: np.ndarray, shape: tuple[int, int], tol: float) -> int:
+    """Rank of a guessed active set's rows (singular values ``s``, matrix of ``shape``)
+    when rows within ``tol`` of a bound were taken as active: the numerical rank, and no
+    singular value under ``tol`` of the largest. Rows dependent to within the activity
+    tolerance are one constraint at that tolerance: their tiny singular value would turn
+    the rows' ``tol``-level disagreement into an arbitrarily long step (Talos' support
+    polygon: two hull edges parallel to 4e-10, a step of 1e7 that the level's value did not
+    see; :func:`polish` on two rows parallel to 1e-10 whose bounds differ by 1e-9: a step
+    of 10 along a direction of curvature 1e-9, within the objective's slack)."""
+    if s.size == 0:
+        return 0
+    return min(numerical_rank(s, shape), int(np.count_nonzero(s > tol * s[0])))
 
 
 def polish(H, f, G, lo, hi, lb, ub, y: np.ndarray, obj_slack: float = 0.0) -> np.ndarray:
@@ -77,7 +91,7 @@ def _polish_at(H, f, G, lo, hi, lb, ub, y, tol, slack, prox: float = 0.0):
     b = np.concatenate(rhs)
     if A.shape[0]:
         U, s, Vt = svd(A, full=True)
-        rank = numerical_rank(s, A.shape)
+        rank = active_rank(s, A.shape, tol)
         Ur, sr, Vr = U[:, :rank], s[:rank], Vt[:rank].T
         # on the active set: the exact solve starts from its minimum-norm point, the
         # proximal one from the smallest move of y onto it

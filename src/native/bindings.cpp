@@ -313,6 +313,8 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "A level of full rank left without freedom directly (default) or by the freeze.")
       .def_prop_ro("full_rank_freezes", &Hierarchy::full_rank_freezes,
                    "Levels of the last call frozen by full_rank_freeze.")
+      .def_prop_ro("dependent_drops", &Hierarchy::dependent_drops,
+                   "Levels of the last call whose rows lost directions dependent to rounding.")
       .def_rw("wide_freeze", &Hierarchy::wide_freeze,
               "A wide level frozen by the reflectors of its M^T's QR, or by the freeze "
               "(default).")

@@ -19,6 +19,9 @@ constexpr double kViolationTol = 1e-6;  // VIOLATION_TOL: a row counts as violat
 constexpr double kAbsFloor = 1e-14;
 constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every row to this
 constexpr int kIterFactor = 6;
+// a level row (or combination of rows) whose projection on the remaining freedom is under this
+// fraction of the row's norm is dependent on the frozen rows (rounding of the freeze)
+constexpr double kMovableTol = 1e-9;
 constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
 constexpr int kGrowRounds = 3;          // grow_seed: sets grown from the stored one at most
 constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
@@ -145,6 +148,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
     v->setZero(big);
   widx_.reserve(max_grows);
   mov_.reserve(std::max(max_in, 1));
+  depn_.setZero(std::max(max_in, 1));
   keep_.assign(max_grows, 0);
   wgrow_.assign(max_grows, 0);
   viol_.assign(std::max(max_in, 1), 0);
@@ -1419,6 +1423,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       svd.compute(Ms_[stage], Eigen::ComputeThinU | Eigen::ComputeThinV);
       const Vec& s = svd.singularValues();
       rank = numerical_rank(s, me, r_, scale);
+      rank = independent_rank(svd, Aeq, e0, me, rank, scale);
       if (rank) {
         tau = damping_ * std::max(s(0), scale);
         auto ute = ute_.head(rank);
@@ -1471,9 +1476,14 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     const int g = i0 + i;
     if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
     const double cn = C.row(g).norm();
-    if (CZl.row(i).norm() > 1e-9 * cn) mov_.push_back(i);
+    if (CZl.row(i).norm() > kMovableTol * cn) mov_.push_back(i);
   }
   const int mv = static_cast<int>(mov_.size());
+  if (mv > 1) {
+    auto nrm = depn_.head(mv);
+    for (int j = 0; j < mv; ++j) nrm(j) = C.row(i0 + mov_[j]).norm();
+    drop_dependent_directions(CZl, mov_, nrm);
+  }
   int ndamp = 0;
   static const Vec kNoSvd;  // empty: no equality rows, or the QR path (no SVD this call)
   const Vec& s = (me && !by_qr) ? svd.singularValues() : kNoSvd;
@@ -1636,6 +1646,61 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   return kOk;
 }
 
+/// The rank of a level's M = A Z (its SVD in svds_ of the stage, numerical rank `rank`)
+/// without the directions in which the level's rows are dependent on the frozen rows to
+/// within kMovableTol: a left singular vector u_i with s_i <= kMovableTol |A^T u_i| is a
+/// combination of the level's rows within kMovableTol of the frozen rows' span, rounding of
+/// the freeze (the movable test of the inequality rows, drop_dependent_directions); it is
+/// left to the lower levels as an exactly dependent one would be, not damped and frozen (the
+/// Talos CoM level below the support polygon, which pins the CoM: 2 directions of ~1e-13
+/// frozen, the posture level 23 % above its optimum). Only s_i <= kMovableTol * scale can
+/// qualify (|A^T u_i| <= |A|_F = scale): no product otherwise.
+int Hierarchy::independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, int me, int rank,
+                                double scale) {
+  const Vec& s = svd.singularValues();
+  auto v = rowbuf_.head(n_);
+  for (int i = 0; i < rank; ++i) {
+    if (s(i) > kMovableTol * scale) continue;
+    v.noalias() = Aeq.middleRows(e0, me).transpose() * svd.matrixU().col(i);
+    if (s(i) <= kMovableTol * v.norm()) {
+      ++dependent_drops_;
+      return i;
+    }
+  }
+  return rank;
+}
+
+/// Rows rows[j] of R (their first r_ columns: projections C_i Z of rows of norm norms[j])
+/// with every direction in which they are dependent to within kMovableTol of their own rows'
+/// norms removed: each row is replaced by its projection on the span of the pivot rows of a
+/// pivoted QR of the rows scaled by 1 / |C_i|, stopped at the first pivot whose distance to the
+/// span of the previous ones is at most kMovableTol. The per-row movable test
+/// (|C_i Z| > kMovableTol |C_i|, both engines) generalised to rows together: a row, or a
+/// combination of rows, within kMovableTol of the frozen rows' span is rounding of the freeze
+/// (the Talos support polygon, a function of the CoM and the feet: with the feet frozen by an
+/// ill-conditioned level (condition 3e6, targets 1e5), its 6 projected rows have rank 2 plus
+/// singular values ~1e-13; the active set stepped along them to y = 1e17 (level value 4.5
+/// for 2e4) and did not converge on the next level: tests/data/talos_extreme_feet_{10,11}.npz).
+/// Uses fqr_ (free until the level's freeze) and tmpr_.
+void Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
+                                          const Eigen::Ref<const Vec>& norms) {
+  const int m = static_cast<int>(rows.size());
+  if (m < 2 || r_ == 0) return;
+  MapMat T = fqr_.matrix(r_, m);
+  for (int j = 0; j < m; ++j) T.col(j) = R.row(rows[j]).head(r_).transpose() / norms(j);
+  const int rank = fqr_.factor(kMovableTol, 0.0);
+  if (rank >= std::min(m, r_)) return;
+  auto v = tmpr_.head(r_);
+  for (int j = 0; j < m; ++j) {
+    v = R.row(rows[j]).head(r_).transpose();
+    fqr_.apply_qt(v);
+    v.tail(r_ - rank).setZero();
+    fqr_.apply_q(v);
+    R.row(rows[j]).head(r_) = v.transpose();
+  }
+  ++dependent_drops_;
+}
+
 int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   const int stage = static_cast<int>(meq_.size());
   if (r_ == 0) return kOk;
@@ -1754,6 +1819,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   zero_tail_compressions_ = 0;
   null_space_freezes_ = 0;
   full_rank_freezes_ = 0;
+  dependent_drops_ = 0;
   wide_freezes_ = 0;
   small_rinvs_ = 0;
   reduced_trials_ = 0;

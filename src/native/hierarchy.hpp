@@ -197,6 +197,9 @@ class Hierarchy {
   bool full_rank_freeze = true;
   /// Levels of the last call frozen by full_rank_freeze.
   int full_rank_freezes() const { return full_rank_freezes_; }
+  /// Levels of the last call whose moving rows had directions dependent to within the
+  /// movable tolerance removed (drop_dependent_directions).
+  int dependent_drops() const { return dependent_drops_; }
   /// A wide level (M = A Z with me <= r, its closed form by the QR of M^T) solved by the
   /// active set and leaving no violated row: Z <- Z Qf, its first rank columns dropped, by
   /// the reflectors of M^T's QR (as after a feasible closed form), or by the freeze: Qf's
@@ -317,6 +320,14 @@ class Hierarchy {
   /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (qr_rz_:
   /// N from trz_, else from tqr_); the carried projection Cin Z follows by the same product.
   void freeze_null_space(int rank);
+  /// The rank of a level's M without directions dependent on the frozen rows to within the
+  /// movable tolerance (robust: see hierarchy.cpp).
+  int independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, int me, int rank,
+                       double scale);
+  /// Rows of R (a level's moving rows' projections) without the directions in which they
+  /// are dependent to within the movable tolerance (robust: see hierarchy.cpp).
+  void drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
+                                 const Eigen::Ref<const Vec>& norms);
   /// Z <- Z Qf(:, rank:) after a wide M's QR in mqr_ (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
@@ -509,6 +520,8 @@ class Hierarchy {
   PivotedQR tqr_;
   int null_space_freezes_ = 0;  ///< levels frozen by null_space_freeze in this call
   int full_rank_freezes_ = 0;  ///< levels frozen by full_rank_freeze in this call
+  int dependent_drops_ = 0;    ///< levels whose moving rows lost dependent directions
+  Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   int wide_freezes_ = 0;       ///< levels frozen by wide_freeze in this call
   int small_rinvs_ = 0;        ///< closed forms of this call bounded by small_rinv
   Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))

@@ -30,11 +30,20 @@ curvatures in one level spread over more than 10³ (row norms over ~30×).
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import qr
 
 from ..compile import CompiledStack
 from ..elimination import Reduced
 from ..linalg import filtered_svd, numerical_rank, svd
-from ..polish import KKT_FEAS_TOL, KKT_TOL, active_set_ls, kkt_residual, prepare, pull_back
+from ..polish import (
+    KKT_FEAS_TOL,
+    KKT_TOL,
+    active_rank,
+    active_set_ls,
+    kkt_residual,
+    prepare,
+    pull_back,
+)
 from ..tolerance import at_bounds
 
 __all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
@@ -52,6 +61,61 @@ REFINE_SLACK = 1e-7
 #: ``KKT_TOL`` can be far from the optimum, and the freeze passes it on.
 ILL_CONDITIONED = 1e-3
 _ABS_FLOOR = 1e-14
+#: A certified level point farther from the origin of the level's step than this many times
+#: the minimum-norm point of the level's optimal set is replaced by that point
+#: (:meth:`_Certifier.near`): VIOLATION_TOL / KKT_FEAS_TOL. The lower levels' feasibility
+#: and activity tolerances are ``KKT_FEAS_TOL`` relative to ``‖x‖``; beyond this ratio they
+#: exceed ``VIOLATION_TOL`` of the minimum-norm point's scale, the threshold at which the
+#: level's own rows were classified.
+FAR_RATIO = VIOLATION_TOL / KKT_FEAS_TOL
+
+
+#: A level row, or combination of a level's rows, whose projection on the remaining freedom
+#: is at most this fraction of its own norm lies in the frozen rows' span to rounding of the
+#: freeze (``eps·κ`` of the frozen levels, ≤ 2e-9 for ``κ`` up to ``1/damping`` = 1e7 at the
+#: default damping): it moves nothing and is left as dependent (the native engine's
+#: ``kMovableTol``; the single-row case is the movable test of the level's inequality rows).
+MOVABLE_TOL = 1e-9
+
+
+def _independent_rank(A: np.ndarray, U: np.ndarray, s: np.ndarray, rank: int, scale: float):
+    """The rank of a level's ``M = A Z`` (SVD ``U, s``, numerical rank ``rank``) without the
+    directions in which the level's rows are dependent on the frozen ones to within
+    :data:`MOVABLE_TOL`: a left singular vector ``uᵢ`` with ``sᵢ ≤ MOVABLE_TOL·‖Aᵀuᵢ‖`` is a
+    combination of the rows that the freeze left only by rounding. Such a direction is left
+    to the lower levels, as an exactly dependent one is, instead of being damped and frozen
+    (Talos with targets at 1e5: the CoM level below a support polygon that already pins the
+    CoM froze 2 directions of ~1e-13 and the posture level below ended 1.6 %–8 % above its
+    optimum; ``tests/data/talos_extreme_feet_*.npz``). Only ``sᵢ ≤ MOVABLE_TOL·scale`` can
+    qualify (``‖Aᵀuᵢ‖ ≤ ‖A‖_F = scale``)."""
+    for i in range(rank):
+        if s[i] > MOVABLE_TOL * scale:
+            continue
+        if s[i] <= MOVABLE_TOL * float(np.linalg.norm(A.T @ U[:, i])):
+            return i
+    return rank
+
+
+def _drop_dependent(D: np.ndarray, norms: np.ndarray) -> np.ndarray:
+    """The projected rows ``D`` (rows ``Cᵢ Z`` of rows of norms ``norms``) without the
+    directions in which they are dependent to within :data:`MOVABLE_TOL` of their own norms:
+    each row projected on the span of the pivot rows of a pivoted QR of the rows scaled to
+    ``Dᵢ / ‖Cᵢ‖``, stopped at the first pivot whose distance to the span of the previous
+    ones is at most ``MOVABLE_TOL`` (the per-row movable test generalised to the rows
+    together). The Talos support polygon is a function of the CoM and the feet; with the
+    feet frozen by an ill-conditioned level its 6 projected rows have rank 2 plus singular
+    values ~1e-13, and stepping along those (the native engine: to ``y`` = 1e17) is a step
+    along rounding. ``D`` itself when nothing is dropped."""
+    m, r = D.shape
+    if m < 2 or r == 0:
+        return D
+    Q, Rf, _ = qr(D.T / norms, mode="economic", pivoting=True)
+    d = np.abs(np.diag(Rf))
+    rank = int(np.argmax(d <= MOVABLE_TOL)) if (d <= MOVABLE_TOL).any() else d.size
+    if rank >= min(m, r):
+        return D
+    Qr = Q[:, :rank]
+    return (D @ Qr) @ Qr.T
 
 
 def _finite_abs(v: np.ndarray) -> np.ndarray:
@@ -123,10 +187,8 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
         tv = np.concatenate(t)
         U, s, Vt = svd(Em, full=True)
         # active rows dependent to within the activity tolerance are one constraint at that
-        # tolerance: their tiny singular value would turn the rows' tol-level disagreement
-        # into an arbitrarily long step (Talos' support polygon: two hull edges parallel to
-        # 4e-10, a step of 1e7 that the level's value does not see)
-        rk = min(numerical_rank(s, Em.shape), int(np.count_nonzero(s > tol * s[0])))
+        # tolerance (polish.active_rank)
+        rk = active_rank(s, Em.shape, tol)
         zp = Vt[:rk].T @ ((U[:, :rk].T @ tv) / s[:rk])
         if not np.isfinite(zp).all() or np.abs(Em @ zp - tv).max() > 1e-9 * max(
             1.0, float(np.abs(tv).max())
@@ -280,6 +342,51 @@ class _Certifier:
         y, kkt = self._no_worse(y, kkt, ya)
         return self._no_worse(y, kkt, self._working_set_solve(y))
 
+    def min_norm_point(self, y):
+        """The minimum-norm point (in ``z``) of the level's optimal set, from its point ``y``:
+        ``min ‖z‖²`` subject to the level's rows and ``Q y' = Q y`` (the least-squares
+        optimal set is where ``Q y`` takes its unique optimal value; the slacks are fixed by
+        it), by :func:`active_set_ls` from ``y`` (feasible)."""
+        r, mv = self.r, self.mv
+        Qn = np.hstack((np.eye(r), np.zeros((r, mv)))) if mv else np.eye(r)
+        qy = self.Q @ y
+        G = np.vstack((self.G, self.Q))
+        ym, _conv = active_set_ls(
+            Qn, np.zeros(r), G, np.concatenate((self.lo, qy)), np.concatenate((self.hi, qy)), y
+        )
+        return ym
+
+    def near(self, z, z_qp, x):
+        """``(z, ok)``: the certified point ``z`` checked against the level's optimal set's
+        minimum-norm point (:data:`FAR_RATIO`), replaced by that point if it is farther than
+        the ratio allows and the replacement is certified and no worse; ``ok`` False if it
+        is far and cannot be replaced.
+
+        The certificate accepts any point of the optimal set; a point far out in it (the
+        tip of a wedge of two nearly parallel active rows: session 12's 1e7 step) is frozen
+        with ``x`` and every lower level's tolerances scale with ``‖x‖``. The level's QP point
+        ``z_qp`` (regularised towards ``z = 0``) is no longer than the minimum-norm point
+        ``z*``; only when ``‖z‖ > FAR_RATIO · max(1, ‖x‖, ‖z_qp‖)`` is ``z*`` computed."""
+        floor = max(1.0, float(np.linalg.norm(x)))
+        nz = float(np.linalg.norm(z))
+        if nz <= FAR_RATIO * max(floor, float(np.linalg.norm(z_qp))):
+            return z, True
+        y = self._with_slacks(z)
+        ym = self.min_norm_point(y)
+        if nz <= FAR_RATIO * max(floor, float(np.linalg.norm(ym[: self.r]))):
+            return z, True
+        ok, kkt = self._check(y)
+        self.R.continued += 1
+        yk, _ = self._no_worse(y, kkt, ym)
+        if yk is y:  # ym is optimal for the far point's value of Q y: the level from there
+            yc, _conv = active_set_ls(
+                self.Q, self.c, self.G, self.lo, self.hi, ym, prepared=self.prep
+            )
+            yk, _ = self._no_worse(y, kkt, yc)
+        if yk is y or float(np.linalg.norm(yk[: self.r])) > FAR_RATIO * floor:
+            return z, False
+        return yk[: self.r], True
+
     def run(self, candidates, H, f, Dy, where):
         best, best_obj, best_kkt = None, np.inf, np.inf
         for z in candidates:
@@ -372,7 +479,10 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
         A = L.Ae
         M = A if Z is None else A @ Z
         e = L.be - A @ x if moved else L.be
-        _U, _s, Vt, rank, g, _tau = filtered_svd(M, damping, float(np.sqrt(np.vdot(A, A))))
+        scale = float(np.sqrt(np.vdot(A, A)))
+        _U, _s, Vt, rank, g, _tau = filtered_svd(M, damping, scale)
+        rank = _independent_rank(A, _U, _s, rank, scale)
+        g = g[:rank]
         if rank:
             dz = Vt[:rank].T @ (g * (_U[:, :rank].T @ e))
             x += dz if Z is None else Z @ dz
@@ -443,6 +553,9 @@ def solve_hierarchical(
             M = R.reduce(L.Ae)
             e = L.be - L.Ae @ x
             U, s, Vt, rank, g, tau = _level_svd(L, M, damping)
+            if rank and not L.identity:
+                rank = _independent_rank(L.Ae, U, s, rank, float(np.sqrt(np.vdot(L.Ae, L.Ae))))
+                g = g[:rank]
             if rank:
                 xc = x + R.lift(Vt[:rank].T @ (g * (U[:, :rank].T @ e)))
             else:
@@ -471,10 +584,12 @@ def solve_hierarchical(
             D = R.reduce(L.C)
             dn = np.sqrt(np.einsum("ij,ij->i", D, D))
             cn = np.sqrt(np.einsum("ij,ij->i", L.C, L.C))
-            movable = dn > 1e-9 * cn
+            movable = dn > MOVABLE_TOL * cn
             mv = int(movable.sum())
             if mv:
                 idx = np.flatnonzero(movable)
+                D[idx] = _drop_dependent(D[idx], cn[idx])
+                dn[idx] = np.sqrt(np.einsum("ij,ij->i", D[idx], D[idx]))
                 dm = dn[idx]
                 Dm = D[idx] / dm[:, None]
                 cx = L.C[idx] @ x
@@ -536,7 +651,7 @@ def solve_hierarchical(
             cxv = Cv @ xn
             target = np.where(cxv > L.hi[viol_rows], L.hi[viol_rows], L.lo[viol_rows])
             swv = L.sw[viol_rows]
-            ls_rows.append(swv[:, None] * R.reduce(Cv))
+            ls_rows.append(swv[:, None] * D[viol_rows])
             ls_rhs.append(swv * (target - Cv @ x))
         # also for exact backends: their optimum carries the regularisation's ~1e-9 bias
         zp = _refine(R, L, x, z, ls_rows, ls_rhs, viol_rows)
@@ -558,7 +673,10 @@ def solve_hierarchical(
             dhi,
             (L.sw[idx] * dm) if mv else None,
         )
+        z_qp = z
         z, ok, kkt = cert.run([zp, z] if zp is not None else [z], H, f, Dy, where)
+        if ok:
+            z, ok = cert.near(z, z_qp, x)
         R.certificates.append(kkt)
         if not ok:
             R.uncertified.append((k, kkt))
@@ -573,7 +691,7 @@ def solve_hierarchical(
         R.move_to(xn, verified=False)
         fscale = 1.0  # rows of Vt are unit vectors
         if viol_rows.any():
-            F.append(R.reduce(L.C[viol_rows]))
+            F.append(D[viol_rows])  # (the rows' projections as the level solved them)
             fscale = max(fscale, float(np.linalg.norm(L.C[viol_rows])))
         if L.m_in:
             # rows kept as inequalities are inherited with their bounds opened to the
