@@ -109,8 +109,10 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   CinZ_.resize(std::max(capacity_, 1), std::max(n, 1));
   cinx_.resize(std::max(capacity_, 1));
   lin_.resize(std::max(capacity_, 1));
+  cin_norm_.resize(std::max(capacity_, 1));
   uin_.resize(std::max(capacity_, 1));
   inid_.assign(std::max(capacity_, 1), -1);
+  id_pos_.assign(static_cast<size_t>(capacity_) + n, -1);
   lb_.resize(n);
   ub_.resize(n);
   // largest stage: (z, w) with w over a level's rows, or the hard phase (slack per hard row
@@ -183,11 +185,17 @@ void Hierarchy::inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>
     if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
     const double v = C.row(g).dot(x_);
     Cin_.row(k_) = C.row(g);
+    cin_norm_(k_) = -1.0;  // |Cin_.row(k_)| on first use (cin_norm)
     lin_(k_) = std::min(lo(g), v);  // opened to the current value: may stay, never grow
     uin_(k_) = std::max(hi(g), v);
     inid_[k_] = g;
     ++k_;
   }
+}
+
+double Hierarchy::cin_norm(int i) {
+  if (cin_norm_(i) < 0.0) cin_norm_(i) = Cin_.row(i).norm();
+  return cin_norm_(i);
 }
 
 void Hierarchy::add_inherited_rows(LsqProblem& P) {
@@ -219,7 +227,7 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
     full.head(r_) = CZ.row(i).transpose();
     const double l = std::min(lin_(i) - cx(i), 0.0);
     const double u = std::max(uin_(i) - cx(i), 0.0);
-    P.add_row(full, l, u, inid_[i], Cin_.row(i).norm());
+    P.add_row(full, l, u, inid_[i], cin_norm(i));
   }
 }
 
@@ -808,13 +816,41 @@ int Hierarchy::map_working_set(const LsqProblem& P, const Working& ws, std::vect
   // humanoid's box form missed on every call, its point off two inherited rows lo = hi = 0)
   for (int i = 0; i < P.rows; ++i) W[i] = (P.lo(i) == P.hi(i)) ? 2 : 0;
   int found = 0;
+  // each stored id's first row of P by a table of row ids (id_pos_: ids are C's rows and
+  // capacity_ + the bounds), not by a search of P's rows per stored id (the same rows): for
+  // more than kIdTableMin stored rows among more than kIdTableRows (below, the search's
+  // steps are fewer than the table's 2 passes over P's rows: the Panda's 9 bound rows)
+  constexpr size_t kIdTableMin = 4;
+  constexpr int kIdTableRows = 16;
+  const bool use_table = ws.id.size() > kIdTableMin && P.rows > kIdTableRows;
+  const int nid = static_cast<int>(id_pos_.size());
+  bool table = use_table;
+  for (int i = P.rows - 1; i >= 0 && table; --i) {
+    const int id = P.id[i];
+    if (id < 0 || id >= nid) {
+      table = false;
+    } else {
+      id_pos_[id] = i;  // descending: the first row of an id is kept
+    }
+  }
   for (size_t j = 0; j < ws.id.size(); ++j) {
+    const int id = ws.id[j];
+    int i = -1;
+    if (table) {
+      i = (id >= 0 && id < nid) ? id_pos_[id] : -1;
+    } else {
+      for (int q = 0; q < P.rows && i < 0; ++q)
+        if (P.id[q] == id) i = q;
+    }
+    if (i >= 0) {
+      if (W[i] != 2) W[i] = ws.side[j];
+      ++found;
+    }
+  }
+  if (use_table) {
     for (int i = 0; i < P.rows; ++i) {
-      if (P.id[i] == ws.id[j]) {
-        if (W[i] != 2) W[i] = ws.side[j];
-        ++found;
-        break;
-      }
+      const int id = P.id[i];
+      if (id >= 0 && id < nid) id_pos_[id] = -1;
     }
   }
   return found;
@@ -1061,6 +1097,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   for (int i = 0; i < mi; ++i) {
     if (!std::isfinite(lo(i)) && !std::isfinite(hi(i))) continue;
     Cin_.row(k_) = C.row(i);
+    cin_norm_(k_) = -1.0;  // |Cin_.row(k_)| on first use (cin_norm)
     lin_(k_) = lo(i);
     uin_(k_) = hi(i);
     inid_[k_] = i;
@@ -1093,14 +1130,14 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
     g.setZero();
     g.head(r_).noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
     const double gap = std::max({lin_(i) - v, v - uin_(i), 0.0});
-    if (g.head(r_).norm() <= 1e-12 * Cin_.row(i).norm()) {  // fixed by the hard equalities
+    if (g.head(r_).norm() <= 1e-12 * cin_norm(i)) {  // fixed by the hard equalities
       worst_fixed = std::max(
           worst_fixed, gap / std::max({1.0, finite_abs(lin_(i)), finite_abs(uin_(i))}));
       continue;
     }
     g(r_ + i) = -1.0;
     y(r_ + i) = (v > uin_(i)) ? v - uin_(i) : ((v < lin_(i)) ? v - lin_(i) : 0.0);
-    P.add_row(g, lin_(i) - v, uin_(i) - v, inid_[i], Cin_.row(i).norm());
+    P.add_row(g, lin_(i) - v, uin_(i) - v, inid_[i], cin_norm(i));
   }
   for (int j = 0; j < nb; ++j) {
     g.setZero();

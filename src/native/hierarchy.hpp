@@ -293,6 +293,9 @@ class Hierarchy {
   bool feasible(const Eigen::Ref<const Vec>& x) const;
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
                const std::vector<char>* skip);
+  /// |Cin_.row(i)| (the scale below which inherited row i's projection cannot bind),
+  /// computed on first use in a call and kept: every level's add_inherited_rows reads it
+  double cin_norm(int i);
   void add_inherited_rows(LsqProblem& P);
   void add_bound_rows(LsqProblem& P);
   /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
@@ -402,6 +405,8 @@ class Hierarchy {
   int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
   Vec cinx_;  ///< workspace: Cin x
   Vec lin_, uin_;
+  /// |Cin_.row(i)| once computed, else -1 (cin_norm)
+  Vec cin_norm_;
   std::vector<int> inid_;
   int k_ = 0;
   Vec lb_, ub_;
@@ -474,6 +479,8 @@ class Hierarchy {
   Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,
       e_, ute_;
   std::vector<int> widx_, mov_;
+  /// map_working_set: row of P of each row id (capacity_ + n ids; -1 between calls)
+  std::vector<int> id_pos_;
   std::vector<char> keep_, viol_;
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ab_;  ///< a level's equality rows, copied contiguous (max_eq x n): Eigen's GEMM copies a
