@@ -112,7 +112,6 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   cin_norm_.resize(std::max(capacity_, 1));
   uin_.resize(std::max(capacity_, 1));
   inid_.assign(std::max(capacity_, 1), -1);
-  id_pos_.assign(static_cast<size_t>(capacity_) + n, -1);
   lb_.resize(n);
   ub_.resize(n);
   // largest stage: (z, w) with w over a level's rows, or the hard phase (slack per hard row
@@ -816,41 +815,13 @@ int Hierarchy::map_working_set(const LsqProblem& P, const Working& ws, std::vect
   // humanoid's box form missed on every call, its point off two inherited rows lo = hi = 0)
   for (int i = 0; i < P.rows; ++i) W[i] = (P.lo(i) == P.hi(i)) ? 2 : 0;
   int found = 0;
-  // each stored id's first row of P by a table of row ids (id_pos_: ids are C's rows and
-  // capacity_ + the bounds), not by a search of P's rows per stored id (the same rows): for
-  // more than kIdTableMin stored rows among more than kIdTableRows (below, the search's
-  // steps are fewer than the table's 2 passes over P's rows: the Panda's 9 bound rows)
-  constexpr size_t kIdTableMin = 4;
-  constexpr int kIdTableRows = 16;
-  const bool use_table = ws.id.size() > kIdTableMin && P.rows > kIdTableRows;
-  const int nid = static_cast<int>(id_pos_.size());
-  bool table = use_table;
-  for (int i = P.rows - 1; i >= 0 && table; --i) {
-    const int id = P.id[i];
-    if (id < 0 || id >= nid) {
-      table = false;
-    } else {
-      id_pos_[id] = i;  // descending: the first row of an id is kept
-    }
-  }
   for (size_t j = 0; j < ws.id.size(); ++j) {
-    const int id = ws.id[j];
-    int i = -1;
-    if (table) {
-      i = (id >= 0 && id < nid) ? id_pos_[id] : -1;
-    } else {
-      for (int q = 0; q < P.rows && i < 0; ++q)
-        if (P.id[q] == id) i = q;
-    }
-    if (i >= 0) {
-      if (W[i] != 2) W[i] = ws.side[j];
-      ++found;
-    }
-  }
-  if (use_table) {
     for (int i = 0; i < P.rows; ++i) {
-      const int id = P.id[i];
-      if (id >= 0 && id < nid) id_pos_[id] = -1;
+      if (P.id[i] == ws.id[j]) {
+        if (W[i] != 2) W[i] = ws.side[j];
+        ++found;
+        break;
+      }
     }
   }
   return found;

@@ -479,8 +479,6 @@ class Hierarchy {
   Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,
       e_, ute_;
   std::vector<int> widx_, mov_;
-  /// map_working_set: row of P of each row id (capacity_ + n ids; -1 between calls)
-  std::vector<int> id_pos_;
   std::vector<char> keep_, viol_;
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ab_;  ///< a level's equality rows, copied contiguous (max_eq x n): Eigen's GEMM copies a

@@ -1,20 +1,16 @@
-"""The native engine's per-level bookkeeping of the inherited rows and the stored working
-sets (issue 24, helper "reuse", session 13).
+"""The native engine's per-level bookkeeping of the inherited rows (issue 24, helper
+"reuse", session 13).
 
-Two changes that keep every number bit for bit (no switch; the driver's x on the nine dumps
-of session 12 is byte-identical, warm and cold, baseline and x86-64-v3 builds):
+``Hierarchy::cin_norm``: an inherited row's norm |C_i| (the scale below which its projection
+cannot bind) is computed once per call, on first use, not at every level's
+``add_inherited_rows`` (soth_sot: 30 rows x 5 levels). The same numbers bit for bit (no
+switch; the driver's x on the nine dumps of session 12 is byte-identical, warm and cold,
+baseline and x86-64-v3 builds).
 
-* ``Hierarchy::cin_norm``: an inherited row's norm |C_i| (the scale below which its
-  projection cannot bind) is computed once per call, on first use, not at every level's
-  ``add_inherited_rows`` (soth_sot: 30 rows x 5 levels).
-* ``Hierarchy::map_working_set``: a stored working set's rows are found in the level's
-  problem by a table of row ids when it has more than 4 rows among more than 16 rows of P
-  (soth_sot's 27-28 of 30 inherited joint limits), else by the search per stored row (the
-  Panda's 9 bound rows).
-
-A wrong mapping would not give a wrong answer (the trial would miss and the active set
-start cold) but would lose the warm start: the tests check the level values and x against
-the Python engine and that the stored sets still hit.
+The tests run moved stacks whose later levels inherit many rows (soth_sot's 30 joint
+limits, 27-28 active; rows with infinite sides and a zero row) warm against the Python
+engine (level values, x), and check that the stored working sets still hit: the warm trial
+reads the same rows and norms as before.
 """
 
 from __future__ import annotations
@@ -49,20 +45,20 @@ def _run(stack: qc.Stack, move, steps: int) -> tuple[int, int]:
 
 
 @needs_native
-def test_soth_sot_stored_sets_mapped_by_the_id_table():
+def test_soth_sot_inherited_rows_warm():
     # level 0: 30 joint limits (27-28 stay active and are inherited), then 3/3/6/6 equality
-    # rows: every level's stored set (> 4 rows of P's 30) goes through the id table
+    # rows: every level adds the 30 inherited rows with their kept norms
     stack, move = published_stack("soth_sot")
     steps = 12
     hits, levels = _run(stack, move, steps)
-    # the driver on 50 moved steps: 5.98 of 6 stages hit per solve; a broken mapping misses
+    # the driver on 50 moved steps: 5.98 of 6 stages hit per solve
     assert hits >= (steps - 1) * levels, (hits, steps, levels)
 
 
 @needs_native
-def test_bounds_only_sets_mapped_by_the_search():
-    # 9 variables, bounds only (9 rows of P: the search per stored row), a 3-row then a
-    # 9-row equality level pushing several bounds active
+def test_bounds_only_warm():
+    # 9 variables, bounds only (no inherited row), a 3-row then a 9-row equality level
+    # pushing several bounds active
     rng = np.random.default_rng(7)
     A1 = rng.standard_normal((3, 9))
     A2 = rng.standard_normal((9, 9))
@@ -82,8 +78,8 @@ def test_bounds_only_sets_mapped_by_the_search():
 @needs_native
 def test_inherited_rows_with_infinite_sides_and_zero_rows():
     # inherited rows skipped by inherit (both sides infinite) and a zero row (its norm 0:
-    # its projection never binds) keep the ids sparse; the table and the cached norms must
-    # still match the Python engine on every moved step
+    # its projection never binds); the kept norms must match the Python engine on every
+    # moved step
     rng = np.random.default_rng(11)
     n = 24
     C = rng.standard_normal((20, n))
