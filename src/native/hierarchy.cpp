@@ -113,6 +113,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   CinZ_.resize(std::max(capacity_, 1), std::max(n, 1));
   cinx_.resize(std::max(capacity_, 1));
   lin_.resize(std::max(capacity_, 1));
+  cin_norm_.resize(std::max(capacity_, 1));
   uin_.resize(std::max(capacity_, 1));
   inid_.assign(std::max(capacity_, 1), -1);
   lb_.resize(n);
@@ -189,11 +190,17 @@ void Hierarchy::inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>
     if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
     const double v = C.row(g).dot(x_);
     Cin_.row(k_) = C.row(g);
+    cin_norm_(k_) = -1.0;  // |Cin_.row(k_)| on first use (cin_norm)
     lin_(k_) = std::min(lo(g), v);  // opened to the current value: may stay, never grow
     uin_(k_) = std::max(hi(g), v);
     inid_[k_] = g;
     ++k_;
   }
+}
+
+double Hierarchy::cin_norm(int i) {
+  if (cin_norm_(i) < 0.0) cin_norm_(i) = Cin_.row(i).norm();
+  return cin_norm_(i);
 }
 
 void Hierarchy::add_inherited_rows(LsqProblem& P) {
@@ -225,7 +232,7 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
     full.head(r_) = CZ.row(i).transpose();
     const double l = std::min(lin_(i) - cx(i), 0.0);
     const double u = std::max(uin_(i) - cx(i), 0.0);
-    P.add_row(full, l, u, inid_[i], Cin_.row(i).norm());
+    P.add_row(full, l, u, inid_[i], cin_norm(i));
   }
 }
 
@@ -1115,6 +1122,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   for (int i = 0; i < mi; ++i) {
     if (!std::isfinite(lo(i)) && !std::isfinite(hi(i))) continue;
     Cin_.row(k_) = C.row(i);
+    cin_norm_(k_) = -1.0;  // |Cin_.row(k_)| on first use (cin_norm)
     lin_(k_) = lo(i);
     uin_(k_) = hi(i);
     inid_[k_] = i;
@@ -1147,14 +1155,14 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
     g.setZero();
     g.head(r_).noalias() = Z_.leftCols(r_).transpose() * Cin_.row(i).transpose();
     const double gap = std::max({lin_(i) - v, v - uin_(i), 0.0});
-    if (g.head(r_).norm() <= 1e-12 * Cin_.row(i).norm()) {  // fixed by the hard equalities
+    if (g.head(r_).norm() <= 1e-12 * cin_norm(i)) {  // fixed by the hard equalities
       worst_fixed = std::max(
           worst_fixed, gap / std::max({1.0, finite_abs(lin_(i)), finite_abs(uin_(i))}));
       continue;
     }
     g(r_ + i) = -1.0;
     y(r_ + i) = (v > uin_(i)) ? v - uin_(i) : ((v < lin_(i)) ? v - lin_(i) : 0.0);
-    P.add_row(g, lin_(i) - v, uin_(i) - v, inid_[i], Cin_.row(i).norm());
+    P.add_row(g, lin_(i) - v, uin_(i) - v, inid_[i], cin_norm(i));
   }
   for (int j = 0; j < nb; ++j) {
     g.setZero();

@@ -310,6 +310,9 @@ class Hierarchy {
   bool feasible(const Eigen::Ref<const Vec>& x) const;
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
                const std::vector<char>* skip);
+  /// |Cin_.row(i)| (the scale below which inherited row i's projection cannot bind),
+  /// computed on first use in a call and kept: every level's add_inherited_rows reads it
+  double cin_norm(int i);
   void add_inherited_rows(LsqProblem& P);
   void add_bound_rows(LsqProblem& P);
   /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
@@ -432,6 +435,8 @@ class Hierarchy {
   int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
   Vec cinx_;  ///< workspace: Cin x
   Vec lin_, uin_;
+  /// |Cin_.row(i)| once computed, else -1 (cin_norm)
+  Vec cin_norm_;
   std::vector<int> inid_;
   int k_ = 0;
   Vec lb_, ub_;
