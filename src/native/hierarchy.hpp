@@ -25,7 +25,7 @@
 namespace qpcoord {
 
 // 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches
-inline constexpr int kAbiVersion = 7;
+inline constexpr int kAbiVersion = 8;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
 #if defined(__FMA__)
