@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_native import needs_native, switch_check, switch_pair
-from test_native_iter import _vertex_stack
+from test_native_iter import _vertex_stack, no_freedom_stack
 
 import qpcoord as qc
 
@@ -130,13 +130,8 @@ def test_no_freedom_left():
     """Levels that fix every variable (the null space empty after the second level) on top of
     a first level that ends on bounds: the same as the switch-off path and the Python
     engine, cold then warm over moving targets."""
-    rng = np.random.default_rng(11)
-    n = 6
-    A1 = rng.standard_normal((3, n))
-    A2 = rng.standard_normal((n, n))
-    e1 = qc.Equality(A1, 4.0 * rng.standard_normal(3))
-    e2 = qc.Equality(A2, 0.1 * rng.standard_normal(n))
-    st = qc.Stack([e1, e2], bounds=qc.Bounds(np.full(n, -0.2), np.full(n, 0.2)))
+    st, e1, A1 = no_freedom_stack()
+    n = A1.shape[1]
     P, new, plain = _pair(st)
     for step in range(5):
         e1.update(b=A1 @ np.full(n, 0.5 - 0.3 * step))

@@ -142,11 +142,10 @@ def test_degenerate_cases(equal, duplicate, inequality):
     assert batched > 0
 
 
-@needs_native
-def test_no_freedom_left():
-    """Levels that fix every variable (the null space empty after the second level) on top
-    of a first level that ends on bounds: the same as the switch-off path and the Python
-    engine."""
+def no_freedom_stack() -> tuple[qc.Stack, qc.Equality, np.ndarray]:
+    """``(stack, e1, A1)``: 6 variables in a box of ±0.2, a 3-row level far outside it (ends on
+    bounds), then a square level that fixes every variable (no freedom left below it); move
+    the first level's target with ``e1.update(b=A1 @ ...)`` (also test_native_chain)."""
     rng = np.random.default_rng(11)
     n = 6
     A1 = rng.standard_normal((3, n))
@@ -154,6 +153,16 @@ def test_no_freedom_left():
     e1 = qc.Equality(A1, 4.0 * rng.standard_normal(3))
     e2 = qc.Equality(A2, 0.1 * rng.standard_normal(n))
     st = qc.Stack([e1, e2], bounds=qc.Bounds(np.full(n, -0.2), np.full(n, 0.2)))
+    return st, e1, A1
+
+
+@needs_native
+def test_no_freedom_left():
+    """Levels that fix every variable (the null space empty after the second level) on top
+    of a first level that ends on bounds: the same as the switch-off path and the Python
+    engine."""
+    st, e1, A1 = no_freedom_stack()
+    n = A1.shape[1]
     P, new, plain = _pair(st)
     for step in range(3):
         e1.update(b=A1 @ np.full(n, 0.5 + 0.1 * step))
