@@ -1484,14 +1484,13 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     const int g = i0 + i;
     if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
     const double cn = C.row(g).norm();
-    if (CZl.row(i).norm() > kMovableTol * cn) mov_.push_back(i);
+    if (CZl.row(i).norm() > kMovableTol * cn) {
+      depn_(static_cast<int>(mov_.size())) = cn;  // the row's norm, for the drop below
+      mov_.push_back(i);
+    }
   }
   const int mv = static_cast<int>(mov_.size());
-  if (mv > 1) {
-    auto nrm = depn_.head(mv);
-    for (int j = 0; j < mv; ++j) nrm(j) = C.row(i0 + mov_[j]).norm();
-    drop_dependent_directions(CZl, mov_, nrm);
-  }
+  if (mv > 1) drop_dependent_directions(CZl, mov_, depn_.head(mv));
   int ndamp = 0;
   static const Vec kNoSvd;  // empty: no equality rows, or the QR path (no SVD this call)
   const Vec& s = (me && !by_qr) ? svd.singularValues() : kNoSvd;

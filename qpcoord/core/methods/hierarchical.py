@@ -480,11 +480,11 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
         M = A if Z is None else A @ Z
         e = L.be - A @ x if moved else L.be
         scale = float(np.sqrt(np.vdot(A, A)))
-        _U, _s, Vt, rank, g, _tau = filtered_svd(M, damping, scale)
-        rank = _independent_rank(A, _U, _s, rank, scale)
+        U, s, Vt, rank, g, _tau = filtered_svd(M, damping, scale)
+        rank = _independent_rank(A, U, s, rank, scale)
         g = g[:rank]
         if rank:
-            dz = Vt[:rank].T @ (g * (_U[:, :rank].T @ e))
+            dz = Vt[:rank].T @ (g * (U[:, :rank].T @ e))
             x += dz if Z is None else Z @ dz
             r -= rank
             if r:  # no basis needed once the freedom is used up
