@@ -291,6 +291,12 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "default) or the lowest-index one (False; for comparisons).")
       .def_prop_ro("batch_rows", &Hierarchy::batch_rows,
                    "Rows of the last call added to a working set by tight_batch.")
+      .def_rw("gram_screen", &Hierarchy::gram_screen,
+              "The dependence test of a level's moving rows skips its pivoted QR where a "
+              "Cholesky of their shifted Gram matrix proves them independent (True, default; "
+              "x bit for bit the same) or always factorises (False; for comparisons).")
+      .def_prop_ro("gram_screens", &Hierarchy::gram_screens,
+                   "Levels of the last call whose dependence QR gram_screen skipped.")
       .def_rw("grow_seed", &Hierarchy::grow_seed,
               "A missed stored set of a stage without slack rows grown by the rows its point "
               "violates before the seed (True) or the seed alone (False, default).")

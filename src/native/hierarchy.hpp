@@ -25,7 +25,7 @@
 namespace qpcoord {
 
 // 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches
-inline constexpr int kAbiVersion = 8;
+inline constexpr int kAbiVersion = 9;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
 #if defined(__FMA__)
@@ -200,6 +200,13 @@ class Hierarchy {
   /// Levels of the last call whose moving rows had directions dependent to within the
   /// movable tolerance removed (drop_dependent_directions).
   int dependent_drops() const { return dependent_drops_; }
+  /// drop_dependent_directions first proves the moving rows independent by a Cholesky of
+  /// their shifted Gram matrix (a symmetric product and k^3/3 flops, k = min(rows, r)) and
+  /// skips its pivoted QR when the proof holds (True, default; the same x bit for bit: the QR
+  /// then finds full rank and changes nothing), or always factorises (False; for comparisons).
+  bool gram_screen = true;
+  /// Levels of the last call whose pivoted QR of the moving rows gram_screen skipped.
+  int gram_screens() const { return gram_screens_; }
   /// A wide level (M = A Z with me <= r, its closed form by the QR of M^T) solved by the
   /// active set and leaving no violated row: Z <- Z Qf, its first rank columns dropped, by
   /// the reflectors of M^T's QR (as after a feasible closed form), or by the freeze: Qf's
@@ -331,6 +338,9 @@ class Hierarchy {
   /// are dependent to within the movable tolerance (robust: see hierarchy.cpp).
   void drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
                                  const Eigen::Ref<const Vec>& norms);
+  /// True when the r x m matrix T proves every pivot of its column-pivoted QR above the
+  /// movable tolerance (gram_screen: see hierarchy.cpp).
+  bool independent_by_gram(const Eigen::Ref<const Mat>& T);
   /// Z <- Z Qf(:, rank:) after a wide M's QR in mqr_ (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
@@ -527,6 +537,8 @@ class Hierarchy {
   int full_rank_freezes_ = 0;  ///< levels frozen by full_rank_freeze in this call
   int dependent_drops_ = 0;    ///< levels whose moving rows lost dependent directions
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
+  Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
+  int gram_screens_ = 0;       ///< levels whose dependence QR gram_screen skipped
   int wide_freezes_ = 0;       ///< levels frozen by wide_freeze in this call
   int small_rinvs_ = 0;        ///< closed forms of this call bounded by small_rinv
   Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))

@@ -89,6 +89,7 @@ int main(int argc, char** argv) {
     if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
     if (has("compress_objective")) h.compress_objective = false;
     if (has("wide_ls")) h.wide_ls = false;
+    if (has("gram_screen")) h.gram_screen = false;
   }
   if (const char* on = std::getenv("QPCOORD_DRIVER_ON")) {
     const std::string list = std::string(",") + on + ",";
