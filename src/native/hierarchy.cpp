@@ -1417,7 +1417,13 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     tau = damping_ * scale;
     auto dz = tmpr_.head(r_);
     const double rank_tol = std::max(me, r_) * kEps * scale;
-    const int qr_rank = qr_closed_form(M, e, rank_tol, std::max(tau, rank_tol), dz);
+    // the QR closed form only where sigma_rank(M) is well above kMovableTol * scale too: no
+    // direction of M can then be dependent on the frozen rows to within kMovableTol (the
+    // SVD path's independent_rank considers none), which the QR path does not test (without
+    // this floor, damping 0 solved rows dependent to 1e-10 exactly, x ~ 1e10, where the
+    // Python engine leaves them to the lower levels: tests/core/test_native_damped.py)
+    const double floor = std::max({tau, rank_tol, kMovableTol * scale});
+    const int qr_rank = qr_closed_form(M, e, rank_tol, floor, dz);
     by_qr = qr_rank > 0;
     if (by_qr) {
       rank = qr_rank;

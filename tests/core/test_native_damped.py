@@ -390,3 +390,39 @@ def test_a_damped_level_depends_on_the_point_the_level_above_kept():
     assert np.all(in0.lower <= in0.C @ other) and np.all(in0.C @ other <= in0.upper)
     x_other = certified(other)
     assert np.max(np.abs(x_other - x_ref)) > 1e-9
+
+
+def _dependent_to_rounding(eps: float, damping: float, seed: int = 0) -> qc.Stack:
+    """n = 6; level 0 freezes x[0:3]; level 1: two equality rows [R | F], F's second row of
+    norm ``eps`` (the first ~1): with x[0:3] frozen, their projection has singular values ~1
+    and ~eps; level 2: x = 0 (x unique)."""
+    rng = np.random.default_rng(seed)
+    n, f = 6, 3
+    A0 = np.hstack([np.eye(f), np.zeros((f, n - f))])
+    b0 = rng.standard_normal(f)
+    F = np.vstack([rng.standard_normal(n - f), eps * rng.standard_normal(n - f)])
+    A1 = np.hstack([rng.standard_normal((2, f)), F])
+    b1 = A1[:, :f] @ b0 + rng.standard_normal(2)
+    levels = [qc.Equality(A0, b0), qc.Equality(A1, b1), qc.Equality(np.eye(n), np.zeros(n))]
+    return qc.Stack(levels, damping=damping)
+
+
+@needs_native
+@pytest.mark.parametrize("damping", [0.0, 1e-12])
+@pytest.mark.parametrize("eps", [1e-6, 3e-10, 1e-10, 1e-12, 1e-14])
+def test_rows_dependent_to_rounding_are_left_at_any_damping(eps, damping):
+    """A level's direction within MOVABLE_TOL (1e-9) of the frozen rows' span is rounding of
+    the freeze, left to the lower levels (docs/stack.md), whatever the damping. The native
+    engine's QR closed form (taken where no damping applies) did not test it: at damping 0
+    (and 1e-12 for eps 1e-10) it solved the eps row exactly, ``x`` ~ 2.5e10 and level 1 2.7e10
+    above the Python engine's, status "inaccurate". It now takes the QR path only where
+    sigma_rank(M) > 4 MOVABLE_TOL |A|_F, else the SVD path and its independent_rank."""
+    sp = _dependent_to_rounding(eps, damping).solve(engine="python")
+    sn = _dependent_to_rounding(eps, damping).solve(engine="native")
+    assert sp.status == sn.status == "optimal", (sp.status, sn.status)
+    ref = sp.level_residuals
+    assert np.all(np.abs(sn.level_residuals - ref) <= LEVEL_TOL * np.maximum(1.0, ref))
+    scale = max(1.0, float(np.max(np.abs(sp.x))))
+    assert np.max(np.abs(sn.x - sp.x)) <= X_TOL * scale
+    if eps <= 1e-10:  # the eps direction left: level 1 keeps the eps row's residual
+        assert np.max(np.abs(sp.x)) < 10.0
