@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -75,3 +79,53 @@ def missing_extension(monkeypatch):
     monkeypatch.setattr(native, "_import", fail)
     monkeypatch.setattr(native, "_module", None)
     monkeypatch.setattr(native, "_warned", False)
+
+
+#: src/native: the C++ drivers' sources (the allocation tests of tests/core build them once
+#: per session here, 13-23 s each with -O1 on a 2-core machine, instead of once per test)
+NATIVE_SRC = Path(__file__).resolve().parents[1] / "src" / "native"
+
+
+def _eigen_include() -> str | None:
+    """Eigen's headers as the build finds them (cmeel-eigen), else Debian's, else None."""
+    for p in sys.path:
+        inc = Path(p) / "cmeel.prefix" / "include" / "eigen3"
+        if (inc / "Eigen" / "Dense").is_file():
+            return str(inc)
+    deb = Path("/usr/include/eigen3")
+    return str(deb) if (deb / "Eigen" / "Dense").is_file() else None
+
+
+def _build(tmp_path_factory, name: str, sources: list[str], defines: list[str]) -> Path:
+    """``g++ -O1`` of ``sources`` (paths under src/native) into a session directory; skipped
+    without g++ or Eigen's headers, failed instead under ``QPCOORD_REQUIRE_NATIVE=1`` (CI: the
+    test extra has them)."""
+    eigen, gxx = _eigen_include(), shutil.which("g++")
+    if eigen is None or gxx is None:
+        if os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
+            pytest.fail("no g++ or Eigen headers (cmeel-eigen) to build the C++ driver")
+        pytest.skip("no g++ or Eigen headers to build the C++ driver")
+    exe = tmp_path_factory.mktemp(name) / name
+    subprocess.run(
+        [gxx, "-O1", "-std=c++17", "-DNDEBUG", *defines, f"-I{eigen}", f"-I{NATIVE_SRC}",
+         *(str(NATIVE_SRC / s) for s in sources), "-o", str(exe)],
+        check=True, capture_output=True, timeout=600,
+    )  # fmt: skip
+    return exe
+
+
+@pytest.fixture(scope="session")
+def hierarchy_driver(tmp_path_factory) -> Path:
+    """``src/native/tools/driver.cpp`` with the hierarchy (``driver FILE reps warm|cold``)."""
+    return _build(tmp_path_factory, "driver", ["tools/driver.cpp", "hierarchy.cpp"], [])
+
+
+@pytest.fixture(scope="session")
+def weighted_driver(tmp_path_factory) -> Path:
+    """``src/native/tools/weighted_driver.cpp`` with the weighted solver."""
+    return _build(
+        tmp_path_factory,
+        "wdriver",
+        ["tools/weighted_driver.cpp", "weighted.cpp"],
+        ["-DQPCOORD_NO_BINDINGS"],
+    )

@@ -15,7 +15,6 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
-import shutil
 import subprocess
 import sys
 import warnings
@@ -784,16 +783,6 @@ def test_a_missed_hard_phase_set_seeds_its_start():
     assert its_seeded < its_cold
 
 
-def _eigen_include() -> str | None:
-    """Eigen's headers as the build finds them (cmeel-eigen), else Debian's, else None."""
-    for p in sys.path:
-        inc = Path(p) / "cmeel.prefix" / "include" / "eigen3"
-        if (inc / "Eigen" / "Dense").is_file():
-            return str(inc)
-    deb = Path("/usr/include/eigen3")
-    return str(deb) if (deb / "Eigen" / "Dense").is_file() else None
-
-
 def _hard_row_scenario(rng) -> dict:
     """Hard rows that x = 0 breaks (the least-violation phase runs), one level, moving."""
     n = 8
@@ -853,19 +842,13 @@ def _small_damped_scenario(rng) -> dict:
 
 @pytest.mark.engine_independent
 @needs_native
-@pytest.mark.skipif(shutil.which("g++") is None, reason="no C++ compiler (g++)")
-def test_the_native_call_allocates_nothing_after_the_first(tmp_path):
+def test_the_native_call_allocates_nothing_after_the_first(tmp_path, hierarchy_driver):
     """The C++ driver (src/native/tools/driver.cpp; tools/count_allocations.hpp counts malloc,
     calloc, realloc and the aligned forms, where Eigen's storage allocates) replays moving
     stacks that exercise every stage — the hard phase, levels with misses, seeded starts, QR
     appends and downdates, the minimum-norm step, damped closed forms by the SVD on small
     levels whose width changes — warm and cold: no heap allocation in any call after the
     first pass, and every call succeeds."""
-    eigen = _eigen_include()
-    if eigen is None:
-        if os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":  # CI: the test extra has them
-            pytest.fail("Eigen's headers not found (cmeel-eigen, a test dependency)")
-        pytest.skip("Eigen's headers not found")
     root = Path(__file__).resolve().parents[2]
     tools = root / "src" / "native" / "tools"
     spec = importlib.util.spec_from_file_location("dump_problems", tools / "dump_problems.py")
@@ -878,13 +861,7 @@ def test_the_native_call_allocates_nothing_after_the_first(tmp_path):
     }
     for name, make in scenarios.items():
         dp.dump(name, make, 12, tmp_path)
-    exe = tmp_path / "driver"
-    subprocess.run(
-        ["g++", "-O1", "-std=c++17", "-DNDEBUG", f"-I{eigen}", f"-I{root / 'src' / 'native'}",
-         str(tools / "driver.cpp"), str(root / "src" / "native" / "hierarchy.cpp"),
-         "-o", str(exe)],
-        check=True, capture_output=True, timeout=300,
-    )  # fmt: skip
+    exe = hierarchy_driver
     for name in scenarios:
         for mode in ("warm", "cold"):
             out = subprocess.run(

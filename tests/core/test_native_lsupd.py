@@ -23,7 +23,6 @@ from test_native import (
     LEVEL_TOL,
     X_TOL,
     _conflict_scenario,
-    _eigen_include,
     _hard_random_stack,
     needs_native,
     published_module,
@@ -127,14 +126,11 @@ def test_moving_humanoid_equals_the_plain_step(box):
 
 @pytest.mark.engine_independent
 @needs_native
-def test_the_slack_step_allocates_nothing(tmp_path):
+def test_the_slack_step_allocates_nothing(tmp_path, hierarchy_driver):
     """The C++ driver (counts malloc; src/native/tools/driver.cpp) on the moving humanoid
     and conflicting levels, warm and cold, with the slack step on (the default): no heap
     allocation after the first pass. (That the step runs on these problems: the tests
     above.)"""
-    eigen = _eigen_include()
-    if eigen is None:
-        pytest.skip("Eigen's headers not found")
     root = Path(__file__).resolve().parents[2]
     tools = root / "src" / "native" / "tools"
     spec = importlib.util.spec_from_file_location("dump_problems", tools / "dump_problems.py")
@@ -142,13 +138,7 @@ def test_the_slack_step_allocates_nothing(tmp_path):
     spec.loader.exec_module(dp)
     dp.dump_stack("humanoid", *dp.published("humanoid"), 6, tmp_path)
     dp.dump("conflict", _conflict_scenario, 10, tmp_path)
-    exe = tmp_path / "driver"
-    subprocess.run(
-        ["g++", "-O1", "-std=c++17", "-DNDEBUG", f"-I{eigen}", f"-I{root / 'src' / 'native'}",
-         str(tools / "driver.cpp"), str(root / "src" / "native" / "hierarchy.cpp"),
-         "-o", str(exe)],
-        check=True, capture_output=True, timeout=300,
-    )  # fmt: skip
+    exe = hierarchy_driver
     for name in ("humanoid", "conflict"):
         for mode in ("warm", "cold"):
             out = subprocess.run(

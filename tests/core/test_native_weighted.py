@@ -471,40 +471,16 @@ def test_persistent_native_regions_match_daqp(seed):
 # ---------------------------------------------------------------------------------------
 
 
-def _eigen_include() -> str | None:
-    import sys
-
-    for p in sys.path:
-        inc = os.path.join(p, "cmeel.prefix", "include", "eigen3")
-        if os.path.isdir(inc):
-            return inc
-    return "/usr/include/eigen3" if os.path.isdir("/usr/include/eigen3") else None
-
-
 @pytest.mark.engine_independent
 @needs_native
-def test_no_allocation_after_the_first_call(tmp_path):
+def test_no_allocation_after_the_first_call(weighted_driver):
     """``src/native/tools/weighted_driver.cpp`` counts heap allocations (malloc, where Eigen
     allocates, and ``operator new``) over 2 000 solves after the first: 0 with the factor
     kept and 0 with it rebuilt every call (the rebuild made 3 mallocs per call, products with
     strided views of the rows, until they were copied into a contiguous buffer)."""
-    import shutil
     import subprocess
 
-    eigen, gxx = _eigen_include(), shutil.which("g++")
-    if eigen is None or gxx is None:
-        if os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":  # CI: the test extra has them
-            pytest.fail("no g++ or Eigen headers (cmeel-eigen) to build the driver")
-        pytest.skip("no g++ or Eigen headers to build the driver")
-    root = os.path.join(os.path.dirname(__file__), "..", "..")
-    src = os.path.join(root, "src", "native")
-    exe = str(tmp_path / "wdriver")
-    subprocess.run(
-        [gxx, "-O1", "-std=c++17", "-DNDEBUG", "-DQPCOORD_NO_BINDINGS", f"-I{eigen}", f"-I{src}",
-         os.path.join(src, "tools", "weighted_driver.cpp"), os.path.join(src, "weighted.cpp"),
-         "-o", exe],
-        check=True, capture_output=True,
-    )  # fmt: skip
+    exe = str(weighted_driver)
     out = subprocess.run([exe, "12"], check=True, capture_output=True, text=True).stdout
     lines = out.strip().splitlines()
     assert len(lines) == 2, out

@@ -12,8 +12,6 @@ the unconstrained optimum is the least-squares solution of ``[W; √ε I]`` (not
 
 from __future__ import annotations
 
-import os
-import shutil
 import subprocess
 
 import numpy as np
@@ -192,35 +190,13 @@ def test_python_engine_reports_the_regularisation():
     np.testing.assert_allclose(full.x, [2.0, -1.0], rtol=0, atol=1e-15)
 
 
-def _eigen_include() -> str | None:
-    import sys
-
-    for p in sys.path:
-        inc = os.path.join(p, "cmeel.prefix", "include", "eigen3")
-        if os.path.isdir(inc):
-            return inc
-    return "/usr/include/eigen3" if os.path.isdir("/usr/include/eigen3") else None
-
-
 @pytest.mark.engine_independent
 @pytest.mark.skipif(not native.available(), reason="the native extension is not built")
-def test_no_allocation_on_the_regularised_path(tmp_path):
+def test_no_allocation_on_the_regularised_path(weighted_driver):
     """``weighted_driver.cpp ... singular``: the levels' rows in half the coordinates, so ``ε``
     is added every call (the QR of ``[W; √ε I]`` at each refactor, its least-squares solve at
     each call): 0 heap allocations over 2 000 solves, factor kept or rebuilt."""
-    eigen, gxx = _eigen_include(), shutil.which("g++")
-    if eigen is None or gxx is None:
-        if os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
-            pytest.fail("no g++ or Eigen headers (cmeel-eigen) to build the driver")
-        pytest.skip("no g++ or Eigen headers to build the driver")
-    src = os.path.join(os.path.dirname(__file__), "..", "..", "src", "native")
-    exe = str(tmp_path / "wdriver")
-    subprocess.run(
-        [gxx, "-O1", "-std=c++17", "-DNDEBUG", "-DQPCOORD_NO_BINDINGS", f"-I{eigen}", f"-I{src}",
-         os.path.join(src, "tools", "weighted_driver.cpp"), os.path.join(src, "weighted.cpp"),
-         "-o", exe],
-        check=True, capture_output=True,
-    )  # fmt: skip
+    exe = str(weighted_driver)
     out = subprocess.run([exe, "12", "singular"], check=True, capture_output=True, text=True)
     lines = out.stdout.strip().splitlines()
     assert len(lines) == 2, out.stdout
