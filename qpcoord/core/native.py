@@ -411,8 +411,10 @@ class NativeHierarchy:
             (stages solved by the active set rather than a closed form: the Python
             engine's count of QP calls),
             ``uncertified`` (``[(level, deviation)]`` when a level's value at ``x`` moved
-            from the one it was frozen with by more than ``KKT_TOL`` relative: the lower
-            levels left its optimal set by rounding).
+            from the one it was frozen with by more than ``KKT_TOL`` relative to
+            ``max(1, value, scale)``, ``scale`` the level's ``‖b‖ + ‖A x‖`` (inequality
+            rows: their nearer bound and ``C x``, weighted): the lower levels left its
+            optimal set by more than rounding).
 
         Raises
         ------

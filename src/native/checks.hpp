@@ -34,20 +34,38 @@ inline int numerical_rank(const Eigen::VectorXd& s, int rows, int cols, double s
 
 /// Value of one level at x: sqrt of the squared equality residuals of rows [e0, e0 + me) of
 /// (Aeq, beq) plus the squared weighted violations sw_i dist(C_i x, [lo_i, hi_i]) of rows
-/// [i0, i0 + mi) of C.
+/// [i0, i0 + mi) of C. With `scale`, also the level's scale at x, as the Python engine's
+/// certificate measures a level (|c| + |Q y|, polish.kkt_residual): |beq| + |Aeq x| over the
+/// equality rows plus |sw b| + |sw C x| over the inequality rows, b each row's bound nearer
+/// to C_i x (0 if both are infinite), from the same products. The native end check compares
+/// a level's value with its frozen one relative to max(1, value, scale): rounding of a level
+/// whose data is large (targets ~1e5 on extreme Talos states) is not a lost optimum.
 template <class MA, class VB, class MC, class VL, class VX>
 double level_value(const MA& Aeq, const VB& beq, int e0, int me, const MC& C, const VL& lo,
-                   const VL& hi, const VL& sw, int i0, int mi, const VX& x) {
-  double total = 0.0;
+                   const VL& hi, const VL& sw, int i0, int mi, const VX& x,
+                   double* scale = nullptr) {
+  double total = 0.0, target = 0.0, value = 0.0;
   for (int i = e0; i < e0 + me; ++i) {
-    const double d = Aeq.row(i).dot(x) - beq(i);
+    const double v = Aeq.row(i).dot(x);
+    const double d = v - beq(i);
     total += d * d;
+    if (scale) {
+      target += beq(i) * beq(i);
+      value += v * v;
+    }
   }
   for (int i = i0; i < i0 + mi; ++i) {
     const double v = C.row(i).dot(x);
     const double gap = sw(i) * (v - std::min(std::max(v, lo(i)), hi(i)));
     total += gap * gap;
+    if (scale) {
+      const bool lower = std::isfinite(lo(i)) && (!std::isfinite(hi(i)) || v - lo(i) < hi(i) - v);
+      const double b = lower ? lo(i) : (std::isfinite(hi(i)) ? hi(i) : 0.0);
+      target += sw(i) * sw(i) * b * b;
+      value += sw(i) * sw(i) * v * v;
+    }
   }
+  if (scale) *scale = std::sqrt(target) + std::sqrt(value);
   return std::sqrt(total);
 }
 

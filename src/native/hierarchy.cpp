@@ -1919,10 +1919,15 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     return kCheckFailed;
   }
   // each level keeps the value it was frozen with (lower levels move in its optimal set
-  // only): the worst deviation, relative, is reported (Python: status "inaccurate")
+  // only): the worst deviation, relative to max(1, the frozen value, the level's scale at x
+  // as the Python certificate's), is reported (Python: status "inaccurate")
   for (int k = 0; k < L; ++k) {
-    res_out(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_);
-    const double dev = std::abs(res_out(k) - frozen_value_(k)) / std::max(1.0, frozen_value_(k));
+    const int b = k + 1;
+    double scale = 0.0;
+    res_out(k) = qpcoord::level_value(Aeq, beq, eq0_[b], meq_[b], C, lo, hi, sw, in0_[b],
+                                      min_[b], x_, &scale);
+    const double dev =
+        std::abs(res_out(k) - frozen_value_(k)) / std::max({1.0, frozen_value_(k), scale});
     if (dev > detail(5)) {
       detail(5) = dev;
       detail(6) = k;
