@@ -322,8 +322,8 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
       .def_prop_ro("dependent_drops", &Hierarchy::dependent_drops,
                    "Levels of the last call whose rows lost directions dependent to rounding.")
       .def_rw("wide_freeze", &Hierarchy::wide_freeze,
-              "A wide level frozen by the reflectors of its M^T's QR, or by the freeze "
-              "(default).")
+              "A wide level frozen by the reflectors of its M^T's QR (True, default), or by "
+              "the freeze (False; for comparisons).")
       .def_prop_ro("wide_freezes", &Hierarchy::wide_freezes,
                    "Levels of the last call frozen by wide_freeze.")
       .def_rw("small_rinv", &Hierarchy::small_rinv,

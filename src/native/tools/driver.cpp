@@ -17,9 +17,9 @@
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
 // identity_z, least_distance, null_space_freeze, wy_right, tight_batch, full_rank_freeze,
-// wide_freeze, small_rinv.
+// wide_freeze, small_rinv, gram_screen.
 //
-// QPCOORD_DRIVER_ON=gemv_qr,wy_right,wide_freeze,grow_seed: switch these non-default options on
+// QPCOORD_DRIVER_ON=gemv_qr,wy_right,grow_seed: switch these non-default options on
 // (wy_right is on by default in a build with FMA, e.g. -march=x86-64-v3).
 //
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
