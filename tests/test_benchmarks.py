@@ -125,3 +125,31 @@ def test_stack_bench_one_shot_table():
     dx = float(note.split("max |dx| ")[1].split(";")[0])
     assert dx < 1e-6
     assert "daqp exit flags [1]" in note
+
+
+def test_engine_agreement_table():
+    """``engine_agreement.py``: the category table over the seeds asked for, and every row
+    it lists as silent is one (both "optimal", a level value apart by more than 1e-6; seeds
+    232-234 hold one in session 14, seed 233)."""
+    from qpcoord.core import native
+
+    if not native.available():
+        pytest.skip("the native engine is not built")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "engine_agreement.py"), "--seeds", "3",
+         "--first", "232"],
+        capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = proc.stdout
+    assert "# engine_agreement: seeds 232-234" in out
+    for cat in ("flagged", "scale", "silent", "other", "error"):
+        assert f"| {cat} |" in out
+    count = int(next(ln for ln in out.splitlines() if ln.startswith("| silent |")).split("|")[2])
+    tail = out.split("silent:")[-1].splitlines() if count else []
+    rows = [ln for ln in tail if ln.startswith("| ") and ln[2].isdigit()]
+    assert len(rows) == count
+    for row in rows:
+        cells = [c.strip() for c in row.split("|")]
+        assert cells[6] == cells[7] == "optimal" and float(cells[8]) > 1e-6, row
