@@ -18,9 +18,11 @@ beyond 1e-9 relative to ``max(1, value)``, x beyond 1e-7 relative, or another st
 
     python benchmarks/engine_agreement.py [--seeds 400] [--first 0] [--show silent]
 
-Session 14, seeds 0-399: 74 disagreements: 48 flagged, 20 scale, 4 silent (161, 233, 272,
+Session 14, seeds 0-399: 71 disagreements: 15 flagged, 49 scale, 4 silent (161, 233, 272,
 350; 233: level 2 at 19.1 natively against 1.02, the native level 1 having moved x to the
-box for a gain of ~1e-8), 1 error (347: daqp "infeasible" at level 2 in the Python engine).
+box for a gain of ~1e-8), 2 other, 1 error (347: daqp "infeasible" at level 2 in the Python
+engine). Before the native end check's scale became ``‖b‖ + ‖A‖_F·‖x‖`` (it was
+``‖b‖ + ‖A x‖``): 74, of them 48 flagged (41 "inaccurate" natively only) and 20 scale.
 """
 
 from __future__ import annotations

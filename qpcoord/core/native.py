@@ -412,9 +412,9 @@ class NativeHierarchy:
             engine's count of QP calls),
             ``uncertified`` (``[(level, deviation)]`` when a level's value at ``x`` moved
             from the one it was frozen with by more than ``KKT_TOL`` relative to
-            ``max(1, value, scale)``, ``scale`` the level's ``‖b‖ + ‖A x‖`` (inequality
-            rows: their nearer bound and ``C x``, weighted): the lower levels left its
-            optimal set by more than rounding).
+            ``max(1, value, scale)``, ``scale`` the level's ``‖b‖ + ‖A‖_F·‖x‖`` (inequality
+            rows: their nearer bound, weighted), the size of its value's rounding: the
+            lower levels left its optimal set by more than rounding).
 
         Raises
         ------

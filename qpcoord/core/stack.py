@@ -178,8 +178,8 @@ class Stack:
             active set ends only on a working set whose multipliers have the right signs);
             its own check is that every level keeps, at the returned ``x``, the value it was
             frozen with (to ``KKT_TOL`` relative to ``max(1, value, scale)``, the level's scale
-            ``‖b‖ + ‖A x‖`` as the Python certificate's): ``"inaccurate"`` / ``SolverError``
-            if not.
+            ``‖b‖ + ‖A‖_F·‖x‖``, the size of its value's rounding): ``"inaccurate"`` /
+            ``SolverError`` if not.
         time_limit : float, optional
             Bound (s) on the whole solve, fallbacks included: no QP starts after it and
             each backend gets the time left (``None``: ``DEFAULT_TIME_LIMIT`` = 10 s of

@@ -34,24 +34,25 @@ inline int numerical_rank(const Eigen::VectorXd& s, int rows, int cols, double s
 
 /// Value of one level at x: sqrt of the squared equality residuals of rows [e0, e0 + me) of
 /// (Aeq, beq) plus the squared weighted violations sw_i dist(C_i x, [lo_i, hi_i]) of rows
-/// [i0, i0 + mi) of C. With `scale`, also the level's scale at x, as the Python engine's
-/// certificate measures a level (|c| + |Q y|, polish.kkt_residual): |beq| + |Aeq x| over the
-/// equality rows plus |sw b| + |sw C x| over the inequality rows, b each row's bound nearer
-/// to C_i x (0 if both are infinite), from the same products. The native end check compares
-/// a level's value with its frozen one relative to max(1, value, scale): rounding of a level
-/// whose data is large (targets ~1e5 on extreme Talos states) is not a lost optimum.
+/// [i0, i0 + mi) of C. With `scale`, also the level's scale at x, the size of the rounding
+/// of its value: |b| + |A|_F |x| over its rows (the equality rows' targets beq, the
+/// inequality rows' bounds nearer to C_i x (0 if both are infinite), each weighted by sw_i,
+/// and their matrix), from the same pass. The native end check compares a level's value with
+/// its frozen one relative to max(1, value, scale): rounding of a level whose data is large
+/// (targets ~1e5 on extreme Talos states) or whose x is (|x| ~ 1e7 past a direction
+/// inverted up to 1/damping) is not a lost optimum.
 template <class MA, class VB, class MC, class VL, class VX>
 double level_value(const MA& Aeq, const VB& beq, int e0, int me, const MC& C, const VL& lo,
                    const VL& hi, const VL& sw, int i0, int mi, const VX& x,
                    double* scale = nullptr) {
-  double total = 0.0, target = 0.0, value = 0.0;
+  double total = 0.0, target = 0.0, matrix = 0.0;
   for (int i = e0; i < e0 + me; ++i) {
     const double v = Aeq.row(i).dot(x);
     const double d = v - beq(i);
     total += d * d;
     if (scale) {
       target += beq(i) * beq(i);
-      value += v * v;
+      matrix += Aeq.row(i).squaredNorm();
     }
   }
   for (int i = i0; i < i0 + mi; ++i) {
@@ -62,10 +63,10 @@ double level_value(const MA& Aeq, const VB& beq, int e0, int me, const MC& C, co
       const bool lower = std::isfinite(lo(i)) && (!std::isfinite(hi(i)) || v - lo(i) < hi(i) - v);
       const double b = lower ? lo(i) : (std::isfinite(hi(i)) ? hi(i) : 0.0);
       target += sw(i) * sw(i) * b * b;
-      value += sw(i) * sw(i) * v * v;
+      matrix += sw(i) * sw(i) * C.row(i).squaredNorm();
     }
   }
-  if (scale) *scale = std::sqrt(target) + std::sqrt(value);
+  if (scale) *scale = std::sqrt(target) + std::sqrt(matrix) * x.norm();
   return std::sqrt(total);
 }
 

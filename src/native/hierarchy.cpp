@@ -1919,8 +1919,8 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     return kCheckFailed;
   }
   // each level keeps the value it was frozen with (lower levels move in its optimal set
-  // only): the worst deviation, relative to max(1, the frozen value, the level's scale at x
-  // as the Python certificate's), is reported (Python: status "inaccurate")
+  // only): the worst deviation, relative to max(1, the frozen value, the level's scale at x,
+  // |b| + |A|_F |x|: the size of its rounding), is reported (Python: status "inaccurate")
   for (int k = 0; k < L; ++k) {
     const int b = k + 1;
     double scale = 0.0;

@@ -402,7 +402,7 @@ def test_rows_dependent_on_the_frozen_rows_to_rounding_are_not_stepped_along(pat
     Both engines say "optimal": until session 14 the native end check compared level 0's
     value (7.6e-8, rounding at ``‖b‖`` 1e5) with the frozen one relative to
     ``max(1, value)`` and said "inaccurate"; it is now relative to ``max(1, value, scale)``,
-    the level's ``‖b‖ + ‖A x‖`` as the Python certificate's."""
+    the level's ``‖b‖ + ‖A‖_F·‖x‖`` (the size of its value's rounding)."""
     spec = _spec_from_npz(path)
     sol = {e: qc.Stack(**_spec_from_npz(path)).solve(engine=e) for e in ("python", "native")}
     if not native.available():
