@@ -1828,9 +1828,10 @@ int Hierarchy::gemv_steps() {
 
 double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
                               const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi,
-                              const CRef<Vec>& sw, const Vec& x) const {
+                              const CRef<Vec>& sw, const Vec& x, double* scale) const {
   const int b = k + 1;
-  return qpcoord::level_value(Aeq, beq, eq0_[b], meq_[b], C, lo, hi, sw, in0_[b], min_[b], x);
+  return qpcoord::level_value(Aeq, beq, eq0_[b], meq_[b], C, lo, hi, sw, in0_[b], min_[b], x,
+                              scale);
 }
 
 int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
@@ -1922,10 +1923,8 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   // only): the worst deviation, relative to max(1, the frozen value, the level's scale at x,
   // |b| + |A|_F |x|: the size of its rounding), is reported (Python: status "inaccurate")
   for (int k = 0; k < L; ++k) {
-    const int b = k + 1;
     double scale = 0.0;
-    res_out(k) = qpcoord::level_value(Aeq, beq, eq0_[b], meq_[b], C, lo, hi, sw, in0_[b],
-                                      min_[b], x_, &scale);
+    res_out(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_, &scale);
     const double dev =
         std::abs(res_out(k) - frozen_value_(k)) / std::max({1.0, frozen_value_(k), scale});
     if (dev > detail(5)) {

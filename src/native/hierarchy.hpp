@@ -24,7 +24,8 @@
 
 namespace qpcoord {
 
-// 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches
+// 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches;
+// 9 (session 14): Hierarchy.gram_screen / gram_screens
 inline constexpr int kAbiVersion = 9;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
@@ -455,7 +456,7 @@ class Hierarchy {
 
   double level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                      const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
-                     const Vec& x) const;
+                     const Vec& x, double* scale = nullptr) const;
   bool out_of_time() const {
     return has_deadline_ && std::chrono::steady_clock::now() >= deadline_;
   }

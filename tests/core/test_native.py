@@ -86,14 +86,18 @@ def switch_check(
     return taken, infon, infop, sp
 
 
-def published_module():
-    """``benchmarks/hierarchy_published.py`` imported (the LexLS humanoid and its moves)."""
+def benchmark_module(name: str):
+    """The script ``benchmarks/<name>.py`` imported as a module."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     try:
-        import hierarchy_published as hp
+        return importlib.import_module(name)
     finally:
         sys.path.pop(0)
-    return hp
+
+
+def published_module():
+    """``benchmarks/hierarchy_published.py`` imported (the LexLS humanoid and its moves)."""
+    return benchmark_module("hierarchy_published")
 
 
 def published_stack(stem: str, box: bool = False, unit: bool = False):

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
-from test_native import LEVEL_TOL, X_TOL, _same, needs_native
+from test_native import LEVEL_TOL, X_TOL, _same, benchmark_module, needs_native
 
 import qpcoord as qc
 
@@ -435,15 +435,7 @@ def test_a_level_met_to_rounding_at_a_large_x_is_not_flagged():
     on level 0 to 3.2e-6, ``‖x‖∞`` 2.4e7) ends with level 0 at 3.4e-9, rounding of ``A₀x`` at
     that ``x``; with ``‖b‖ + ‖A x‖`` (≈ 2‖b‖: ``A₀x ≈ b₀``) as the scale the native engine said
     "inaccurate" there (1.0e-9 > ``KKT_TOL``), the Python engine "optimal"."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    try:
-        import engine_agreement
-    finally:
-        sys.path.pop(0)
-    build, (_, _, _, damping) = engine_agreement.make(1)
+    build, (_, _, _, damping) = benchmark_module("engine_agreement").make(1)
     assert damping == 0.0
     sn = build().solve(engine="native")
     sp = build().solve(engine="python")

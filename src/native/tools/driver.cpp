@@ -95,7 +95,6 @@ int main(int argc, char** argv) {
     const std::string list = std::string(",") + on + ",";
     if (list.find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
     if (list.find(",wy_right,") != std::string::npos) h.wy_right = true;
-    if (list.find(",wide_freeze,") != std::string::npos) h.wide_freeze = true;
     if (list.find(",grow_seed,") != std::string::npos) h.grow_seed = true;
   }
   Vec x(n), res(L), detail(8);
