@@ -326,6 +326,12 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "the freeze (False; for comparisons).")
       .def_prop_ro("wide_freezes", &Hierarchy::wide_freezes,
                    "Levels of the last call frozen by wide_freeze.")
+      .def_rw("freeze_memo", &Hierarchy::freeze_memo,
+              "A level's freeze whose inputs (Z, Cin Z, the level's rows, kind, rank, violated "
+              "rows) are bit for bit the previous call's: its stored outputs restored (True, "
+              "default), or every freeze computed (False; for comparisons).")
+      .def_prop_ro("freeze_memo_hits", &Hierarchy::freeze_memo_hits,
+                   "Freezes of the last call restored by freeze_memo.")
       .def_rw("small_rinv", &Hierarchy::small_rinv,
               "The QR closed form's bound on sigma_rank by back substitution up to rank 16 "
               "(default) or by Eigen's blocked triangular solve.")

@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 
 namespace qpcoord {
@@ -36,6 +38,63 @@ inline bool in_box(double v, double lo, double hi) {
   return v >= widen_lo(lo) && v <= widen_hi(hi);
 }
 inline double finite_abs(double v) { return std::isfinite(v) ? std::abs(v) : 0.0; }
+
+/// a and b (the same shape) equal bit for bit (0.0 and -0.0 differ: freeze_memo restores
+/// outputs only for inputs that are the same bits)
+template <typename A, typename B>
+bool same_bits(const A& a, const B& b) {
+  for (Eigen::Index j = 0; j < a.cols(); ++j)
+    if (std::memcmp(a.col(j).data(), b.col(j).data(), sizeof(double) * a.rows()) != 0)
+      return false;
+  return true;
+}
+
+/// freeze_memo's copy of a level's rows a (m x n, any strides): true when buf holds them bit
+/// for bit in the layout `layout` names (1 rows, 2 columns contiguous in a, 3 neither: entry
+/// by entry), else they are copied into buf (its first m n entries) in a's layout, layout set
+/// and false returned. One memcmp for a block of C-ordered rows (numpy's stacked arrays).
+template <typename R>
+bool same_rows_or_copy(const R& a, Vec& buf, int& layout) {
+  const Eigen::Index m = a.rows(), n = a.cols();
+  if (m == 0 || n == 0) {
+    const bool same = layout == 1;
+    layout = 1;
+    return same;
+  }
+  const int now = (a.outerStride() == 1) ? 1 : ((a.innerStride() == 1) ? 2 : 3);
+  double* out = buf.data();
+  const std::size_t row = sizeof(double) * n, col = sizeof(double) * m;
+  if (now == 1 && a.innerStride() == n) {  // the block is one contiguous run
+    if (layout == 1 && std::memcmp(a.data(), out, row * m) == 0) return true;
+    std::memcpy(out, a.data(), row * m);
+  } else if (now == 1) {
+    bool same = layout == 1;
+    for (Eigen::Index i = 0; same && i < m; ++i)
+      same = std::memcmp(a.data() + i * a.innerStride(), out + i * n, row) == 0;
+    if (same) return true;
+    for (Eigen::Index i = 0; i < m; ++i)
+      std::memcpy(out + i * n, a.data() + i * a.innerStride(), row);
+  } else if (now == 2) {
+    bool same = layout == 2;
+    for (Eigen::Index j = 0; same && j < n; ++j)
+      same = std::memcmp(a.data() + j * a.outerStride(), out + j * m, col) == 0;
+    if (same) return true;
+    for (Eigen::Index j = 0; j < n; ++j)
+      std::memcpy(out + j * m, a.data() + j * a.outerStride(), col);
+  } else {
+    bool same = layout == 3;
+    for (Eigen::Index j = 0; same && j < n; ++j)
+      for (Eigen::Index i = 0; same && i < m; ++i) {
+        const double v = a(i, j);
+        same = std::memcmp(&v, out + j * m + i, sizeof v) == 0;
+      }
+    if (same) return true;
+    for (Eigen::Index j = 0; j < n; ++j)
+      for (Eigen::Index i = 0; i < m; ++i) out[j * m + i] = a(i, j);
+  }
+  layout = now;
+  return false;
+}
 
 /// The ratio test of one row: the step length (>= 0; inf if it never blocks) at which a row
 /// whose product with the step is gp and with the current point gy reaches its bound, the
@@ -168,6 +227,17 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
   nsp_.setZero(std::max(n, 1), std::max(n, 1));
   cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
+  memos_.resize(blocks);
+  for (int b = 1; b < blocks; ++b) {  // the levels' freezes (not the hard phase's)
+    FreezeMemo& f = memos_[b];
+    f.Z_in.setZero(n, n);
+    f.Z_out.setZero(n, n);
+    f.CinZ_in.setZero(std::max(capacity_, 1), std::max(n, 1));
+    f.CinZ_out.setZero(std::max(capacity_, 1), std::max(n, 1));
+    f.A.setZero(static_cast<Eigen::Index>(meq_[b]) * n);
+    f.C.setZero(static_cast<Eigen::Index>(min_[b]) * n);
+    f.viol.assign(std::max(min_[b], 1), 0);
+  }
 }
 
 bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) const {
@@ -290,6 +360,69 @@ void Hierarchy::freeze_wide(int rank) {
   carry_z(mqr_, rank);
   for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
   r_ -= rank;
+}
+
+bool Hierarchy::freeze_lookup(int stage, int kind, int rank, double fscale,
+                              const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C, int i0,
+                              int mi, bool with_viol) {
+  FreezeMemo& f = memos_[stage];
+  f.pending = false;
+  const auto A = Aeq.middleRows(e0, me);
+  const auto Cl = C.middleRows(i0, mi);
+  // the level's rows first (a changed Jacobian differs at its first entries, the IK's every
+  // call): when they changed, only they are kept -- the rest is stored once they repeat
+  const bool same_a = same_rows_or_copy(A, f.A, f.a_layout);  // (both always: each copies
+  const bool same_c = same_rows_or_copy(Cl, f.C, f.c_layout);  // what changed)
+  if (!(same_a && same_c)) {
+    f.valid = false;
+    return false;
+  }
+  const auto Zr = Z_.leftCols(r_);
+  const auto CZ = CinZ_.topLeftCorner(kz_, r_);
+  bool hit = f.valid && f.kind == kind && f.rank == rank && f.r_in == r_ && f.kz_in == kz_ &&
+             f.zid_in == z_identity_ && std::memcmp(&f.fscale, &fscale, sizeof fscale) == 0;
+  for (int i = 0; hit && with_viol && i < mi; ++i) hit = f.viol[i] == viol_[i];
+  hit = hit && std::memcmp(f.Z_in.data(), Zr.data(), sizeof(double) * n_ * r_) == 0 &&
+        same_bits(f.CinZ_in.topLeftCorner(kz_, r_), CZ);
+  if (hit) {
+    Z_.leftCols(f.r_out) = f.Z_out.leftCols(f.r_out);
+    r_ = f.r_out;
+    z_identity_ = f.zid_out;
+    kz_ = f.kz_out;
+    CinZ_.topLeftCorner(kz_, r_) = f.CinZ_out.topLeftCorner(kz_, r_);
+    if (kind == 2 || kind == 4) ++null_space_freezes_;  // as freeze_null_space counts
+    ++freeze_memo_hits_;
+    return true;
+  }
+  // the rows repeat, the rest not (yet): the inputs taken, the outputs by freeze_store
+  f.valid = false;
+  f.pending = true;
+  f.kind = kind;
+  f.rank = rank;
+  f.r_in = r_;
+  f.kz_in = kz_;
+  f.zid_in = z_identity_;
+  f.fscale = fscale;
+  for (int i = 0; i < mi; ++i) f.viol[i] = with_viol ? viol_[i] : 0;
+  f.Z_in.leftCols(r_) = Zr;
+  f.CinZ_in.topLeftCorner(kz_, r_) = CZ;
+  return false;
+}
+
+void Hierarchy::freeze_computed(int stage) {
+  // Z is not the previous call's any more (to rounding it may be, not bit for bit): the
+  // lower levels' freezes have other inputs, and are not looked up in this call
+  if (!memo_gate()) return;
+  z_repeats_ = false;
+  FreezeMemo& f = memos_[stage];
+  if (!f.pending) return;
+  f.pending = false;
+  f.r_out = r_;
+  f.kz_out = kz_;
+  f.zid_out = z_identity_;
+  f.Z_out.leftCols(r_) = Z_.leftCols(r_);
+  f.CinZ_out.topLeftCorner(kz_, r_) = CinZ_.topLeftCorner(kz_, r_);
+  f.valid = true;
 }
 
 void Hierarchy::freeze_null_space(int rank) {
@@ -1460,13 +1593,20 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     if (by_qr && !qr_wide_ && rank == r_) {  // M has full column rank: no freedom left
       r_ = 0;
       z_identity_ = false;
-    } else if (by_qr && qr_wide_) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
-      freeze_wide(rank);
-    } else if (rank && by_qr && null_space_freeze) {  // Z <- Z P null([R11 R12])
-      freeze_null_space(rank);
-    } else if (rank) {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
-      row_space_basis(svd, by_qr, rank, fqr_.matrix(r_, rank));
-      freeze(1.0);
+    } else if (rank) {
+      // (freeze_memo: the same inputs as this level's last freeze: its outputs restored)
+      const int kind = (by_qr && qr_wide_) ? 1 : ((by_qr && null_space_freeze) ? 2 : 3);
+      if (!(memo_gate() && freeze_lookup(stage, kind, rank, 1.0, Aeq, e0, me, C, i0, mi, false))) {
+        if (kind == 1) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
+          freeze_wide(rank);
+        } else if (kind == 2) {  // Z <- Z P null([R11 R12])
+          freeze_null_space(rank);
+        } else {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
+          row_space_basis(svd, by_qr, rank, fqr_.matrix(r_, rank));
+          freeze(1.0);
+        }
+        freeze_computed(stage);
+      }
     }
     stats(stage, 2) = 1.0;
     return kOk;
@@ -1625,8 +1765,31 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // last r - rank columns of Qf, Z <- Z Qf by M^T's own reflectors (as a feasible closed form)
   const bool by_wide = wide_freeze && !no_freedom && nviol == 0 && rank && by_qr && qr_wide_;
   const bool by_f = !by_null_space && !no_freedom && !by_wide;
-  double fscale = 1.0;
-  if (by_f) {
+  const int k_before = k_;
+  inherit(C, lo, hi, i0, mi, &viol_);
+  if (carry_projection && kz_ == k_before) {  // the inherited rows' projections, at hand
+    for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
+    kz_ = k_;
+  }
+  if (no_freedom) {  // what freeze() ends with for F of rank r (carry_z drops Cin Z)
+    r_ = 0;
+    kz_ = 0;
+    z_identity_ = false;
+    ++full_rank_freezes_;
+    return kOk;
+  }
+  if (by_wide) ++wide_freezes_;
+  // (freeze_memo: the same inputs as this level's last freeze: its outputs restored; the
+  // violated rows are inputs of the general freeze only)
+  const int kind = by_null_space ? 4 : (by_wide ? 5 : 6);
+  if (memo_gate() && freeze_lookup(stage, kind, rank, 1.0, Aeq, e0, me, C, i0, mi, by_f))
+    return kOk;
+  if (by_null_space) {
+    freeze_null_space(rank);
+  } else if (by_wide) {
+    freeze_wide(rank);
+  } else {
+    // F^T = [B, (C_violated Z)^T], B an orthonormal basis of M's row space
     MapMat Ft = fqr_.matrix(r_, rank + nviol);
     row_space_basis(svd, by_qr, rank, Ft.leftCols(rank));
     int f = rank;
@@ -1636,27 +1799,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       Ft.col(f++) = CZl.row(i).transpose();
       fro += C.row(i0 + i).squaredNorm();
     }
-    fscale = std::max(fscale, std::sqrt(fro));
+    freeze(std::max(1.0, std::sqrt(fro)));
   }
-  const int k_before = k_;
-  inherit(C, lo, hi, i0, mi, &viol_);
-  if (carry_projection && kz_ == k_before) {  // the inherited rows' projections, at hand
-    for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
-    kz_ = k_;
-  }
-  if (by_null_space) {
-    freeze_null_space(rank);
-  } else if (no_freedom) {  // what freeze() ends with for F of rank r (carry_z drops Cin Z)
-    r_ = 0;
-    kz_ = 0;
-    z_identity_ = false;
-    ++full_rank_freezes_;
-  } else if (by_wide) {
-    freeze_wide(rank);
-    ++wide_freezes_;
-  } else {
-    freeze(fscale);
-  }
+  freeze_computed(stage);
   return kOk;
 }
 
@@ -1885,6 +2030,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   dependent_drops_ = 0;
   gram_screens_ = 0;
   wide_freezes_ = 0;
+  freeze_memo_hits_ = 0;
   small_rinvs_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);
@@ -1895,6 +2041,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   lb_ = lb;
   ub_ = ub;
   int st = hard_phase(Aeq, beq, C, lo, hi, stats, detail, warm);
+  z_repeats_ = true;  // (freeze_memo: the first freeze's lookup compares Z itself)
   if (st != kOk) return st;
   for (int k = 0; k < L; ++k) {
     st = level(k, Aeq, beq, C, lo, hi, sw, stats, warm);

@@ -25,8 +25,9 @@
 namespace qpcoord {
 
 // 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches;
-// 9 (session 14): Hierarchy.gram_screen / gram_screens
-inline constexpr int kAbiVersion = 9;
+// 9 (session 14): Hierarchy.gram_screen / gram_screens;
+// 10 (session 15): Hierarchy.freeze_memo / freeze_memo_hits
+inline constexpr int kAbiVersion = 10;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
 #if defined(__FMA__)
@@ -221,6 +222,16 @@ class Hierarchy {
   bool wide_freeze = true;
   /// Levels of the last call frozen by wide_freeze.
   int wide_freezes() const { return wide_freezes_; }
+  /// A level's freeze (its change of Z, of r and of the carried projection Cin Z) whose
+  /// inputs are bit for bit those of the same level's freeze in the previous call -- Z and
+  /// Cin Z on entry, the level's rows A and C, the freeze's kind, rank, violated rows and
+  /// scale -- restores that freeze's outputs, stored then, instead of computing them again
+  /// (default; a re-solve whose matrices did not change: targets or bounds moved only). The
+  /// freeze is a function of those inputs alone: the same x bit for bit, with no stored
+  /// output whenever one input differs (False: every freeze computed, for comparisons).
+  bool freeze_memo = true;
+  /// Freezes of the last call restored by freeze_memo.
+  int freeze_memo_hits() const { return freeze_memo_hits_; }
   /// The QR closed form's bound 1/|R11^-1|_F on sigma_rank(M) for a rank up to
   /// kSmallRinvMax: R11^-1 by a back substitution per column on its leading entries
   /// (default), or (A/B) by Eigen's blocked triangular solve of an identity right-hand side
@@ -347,6 +358,21 @@ class Hierarchy {
   /// Z <- Z Qf(:, rank:) after a wide M's QR in mqr_ (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
+  /// freeze_memo: true when the stage's stored freeze had these inputs (kind, rank, fscale,
+  /// Z and Cin Z now, the level's rows A and C, the violated rows when with_viol): Z_, r_,
+  /// z_identity_, kz_ and Cin Z are then set to its outputs. Else false: the level's rows
+  /// are kept when they differ from the last lookup's (nothing else: rows that change at
+  /// every call, an IK's, cost one comparison and one copy), the other inputs when they
+  /// repeat (the outputs then by freeze_store).
+  bool freeze_lookup(int stage, int kind, int rank, double fscale, const CRef<Mat>& Aeq, int e0,
+                     int me, const CRef<Mat>& C, int i0, int mi, bool with_viol);
+  /// freeze_memo: the outputs of the freeze just made, stored with freeze_lookup's inputs
+  /// (when it took them); the lower levels' freezes of this call are not looked up (their Z
+  /// differs from the previous call's: a comparison and copies for nothing, the IK's case).
+  void freeze_computed(int stage);
+  /// freeze_memo on and no freeze of this call computed so far (Z may repeat the last call's)
+  bool memo_gate() const { return freeze_memo && z_repeats_; }
+  bool z_repeats_ = false;
   void snap(Vec& x) const;
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
@@ -543,6 +569,21 @@ class Hierarchy {
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
   int gram_screens_ = 0;       ///< levels whose dependence QR gram_screen skipped
   int wide_freezes_ = 0;       ///< levels frozen by wide_freeze in this call
+  /// freeze_memo: one stage's last freeze, its inputs and its outputs (buffers of fixed
+  /// size, allocated by the constructor)
+  struct FreezeMemo {
+    bool valid = false;     ///< a whole freeze stored: inputs and outputs
+    bool pending = false;   ///< inputs taken by the lookup, outputs due from freeze_store
+    int kind = -1, rank = 0, r_in = 0, kz_in = 0, r_out = 0, kz_out = 0;
+    bool zid_in = false, zid_out = false;
+    double fscale = 0.0;
+    Mat Z_in, Z_out, CinZ_in, CinZ_out;
+    Vec A, C;  ///< the level's rows at the last lookup, in their layout (same_rows_or_copy)
+    int a_layout = 0, c_layout = 0;  ///< 0: nothing stored yet
+    std::vector<char> viol;
+  };
+  std::vector<FreezeMemo> memos_;  ///< per stage (freeze_memo)
+  int freeze_memo_hits_ = 0;       ///< freezes of this call restored by freeze_memo
   int small_rinvs_ = 0;        ///< closed forms of this call bounded by small_rinv
   Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))
   Mat cztmp_;  ///< null_space_freeze: the product Cin Z P N before it is copied back
