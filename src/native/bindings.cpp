@@ -332,6 +332,12 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "default), or every freeze computed (False; for comparisons).")
       .def_prop_ro("freeze_memo_hits", &Hierarchy::freeze_memo_hits,
                    "Freezes of the last call restored by freeze_memo.")
+      .def_rw("trial_memo", &Hierarchy::trial_memo,
+              "A stage's warm trial whose working rows and objective are bit for bit the "
+              "previous call's, its factorisations untouched since: reused (True, default), or "
+              "every trial factorised (False; for comparisons).")
+      .def_prop_ro("trial_memo_hits", &Hierarchy::trial_memo_hits,
+                   "Trials of the last call whose factorisations trial_memo reused.")
       .def_rw("small_rinv", &Hierarchy::small_rinv,
               "The QR closed form's bound on sigma_rank by back substitution up to rank 16 "
               "(default) or by Eigen's blocked triangular solve.")

@@ -192,16 +192,25 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
     w.id.reserve(max_grows);
     w.side.reserve(max_grows);
   }
-  wqr_.reserve(max_cols, max_grows, max_qrows);
-  kqr_.reserve(max_qrows, max_cols, 1);
-  cqr_.reserve(max_cols, max_cols, 1);
-  krz_.reserve(max_cols, max_cols);
-  kqr_t_.reserve(max_cols, max_qrows, 1);
+  // one working set's and K's factorisations per stage (hard phase, levels, minimum norm):
+  // trial_memo finds a stage's last trial there at its next call
+  trials_.resize(blocks + 1);
+  for (TrialState& t : trials_) {
+    t.wqr.reserve(max_cols, max_grows, max_qrows);
+    t.kqr.reserve(max_qrows, max_cols, 1);
+    t.cqr.reserve(max_cols, max_cols, 1);
+    t.krz.reserve(max_cols, max_cols);
+    t.kqr_t.reserve(max_cols, max_qrows, 1);
+    t.Qt.setZero(max_qrows, max_cols);
+    t.key_widx.reserve(max_grows);
+    t.key_G.setZero(static_cast<Eigen::Index>(max_grows) * max_cols);
+    t.key_Q.setZero(static_cast<Eigen::Index>(max_qrows) * max_cols);
+  }
+  ts_ = &trials_[0];
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
   fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
   fqr_.reserve_wy(std::max(n, capacity_));
-  Qt_.setZero(max_qrows, max_cols);
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
   for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
                  &tmpr_, &xc_, &xold_, &e_, &ute_, &ygrow_})
@@ -454,19 +463,20 @@ void Hierarchy::freeze_null_space(int rank) {
 // ---------------------------------------------------------------------------------------
 void Hierarchy::factor_rows(const LsqProblem& P, const std::vector<int8_t>& W) {
   const int k = P.cols;
-  k_valid_ = false;
+  ts_->k_valid = false;
   trial_ready_ = false;
   widx_.clear();
   for (int i = 0; i < P.rows; ++i)
     if (W[i]) widx_.push_back(i);
   const int kw = static_cast<int>(widx_.size());
-  MapMat GwT = wqr_.matrix(k, kw);
+  MapMat GwT = ts_->wqr.matrix(k, kw);
   for (int j = 0; j < kw; ++j) GwT.col(j) = P.G.row(widx_[j]).head(k).transpose();
-  wqr_.factor(0.0, std::max(k, kw) * kEps * 10.0);
+  ts_->wqr.factor(0.0, std::max(k, kw) * kEps * 10.0);
 }
 
 void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W) {
   finish_ready_ = false;
+  ts_->intact = false;
   factor_rows(P, W);
   // with the slack step the projected objective is rarely needed: formed on first use
   qt_stale_ = true;
@@ -474,82 +484,151 @@ void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W
 }
 
 void Hierarchy::form_qt(const LsqProblem& P) {
-  auto Qt = Qt_.topLeftCorner(P.qrows, P.cols);
+  auto Qt = ts_->Qt.topLeftCorner(P.qrows, P.cols);
   Qt = P.Q.topLeftCorner(P.qrows, P.cols);
-  wqr_.apply_q_right(Qt);  // every transform of the working set's QR so far, in order
+  ts_->wqr.apply_q_right(Qt);  // every transform of the working set's QR so far, in order
   qt_stale_ = false;
 }
 
+int Hierarchy::trial_switches() const {
+  return (trial_qt_tail ? 1 : 0) | (gemv_qr ? 2 : 0) | (rz_min_norm ? 4 : 0) |
+         (wide_ls ? 8 : 0) | (slack_ls ? 16 : 0) | (reuse_k_qr ? 32 : 0);
+}
+
+bool Hierarchy::trial_restore(const LsqProblem& P, const std::vector<int8_t>& W) {
+  TrialState& t = *ts_;
+  const int k = P.cols, qr = P.qrows;
+  if (!t.intact || t.key_k != k || t.key_qrows != qr || t.key_unit_q != unit_q_ ||
+      t.key_switches != trial_switches() || t.key_slacks[0] != P.slacks ||
+      t.key_slacks[1] != P.zcols || t.key_slacks[2] != P.slack_q0 ||
+      t.key_slacks[3] != P.slack_g0)
+    return false;
+  int kw = 0;
+  const int kmax = static_cast<int>(t.key_widx.size());
+  for (int i = 0; i < P.rows; ++i) {
+    if (!W[i]) continue;
+    if (kw >= kmax || t.key_widx[kw] != i) return false;
+    ++kw;
+  }
+  if (kw != kmax) return false;
+  const double* g = t.key_G.data();
+  for (int j = 0; j < kw; ++j, g += k) {
+    const auto row = P.G.row(t.key_widx[j]).head(k);
+    for (int c = 0; c < k; ++c)
+      if (std::memcmp(&g[c], &row.coeffRef(c), sizeof(double)) != 0) return false;
+  }
+  const double* q = t.key_Q.data();
+  for (int c = 0; c < k; ++c, q += qr)
+    if (std::memcmp(q, P.Q.col(c).data(), sizeof(double) * qr) != 0) return false;
+  // the same factorisations as factor_trial's: its flags as it leaves them (K, when the
+  // trial's ls_step made it, is still the factorisation of this trial's K: k_valid kept)
+  widx_ = t.key_widx;
+  finish_ready_ = false;
+  trial_ready_ = false;
+  qt_stale_ = t.key_qt_stale;
+  ++trial_memo_hits_;
+  return true;
+}
+
+void Hierarchy::trial_keep(const LsqProblem& P) {
+  TrialState& t = *ts_;
+  const int k = P.cols, qr = P.qrows, kw = static_cast<int>(widx_.size());
+  t.key_k = k;
+  t.key_qrows = qr;
+  t.key_unit_q = unit_q_;
+  t.key_qt_stale = qt_stale_;
+  t.key_switches = trial_switches();
+  t.key_slacks = {P.slacks, P.zcols, P.slack_q0, P.slack_g0};
+  t.key_widx = widx_;
+  double* g = t.key_G.data();
+  for (int j = 0; j < kw; ++j, g += k)
+    for (int c = 0; c < k; ++c) g[c] = P.G(widx_[j], c);
+  double* q = t.key_Q.data();
+  for (int c = 0; c < k; ++c, q += qr)
+    std::memcpy(q, P.Q.col(c).data(), sizeof(double) * qr);
+  t.intact = true;
+}
+
 void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) {
+  // (trial_memo: the stage's last trial had these rows and objective, its factorisations
+  // untouched since: nothing to compute. Only above every computed freeze of the call:
+  // below one, Z and with it every projected row differ from the last call's)
+  if (trial_memo && z_repeats_ && trial_restore(P, W)) return;
+  factor_trial_computed(P, W);
+  if (trial_memo && z_repeats_) trial_keep(P);
+}
+
+void Hierarchy::factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W) {
   if (!trial_qt_tail || unit_q_) {  // (unit_q_: factor_working forms no Q Qf either)
     factor_working(P, W);
     return;
   }
+  ts_->intact = false;
   const int k = P.cols;
   // not the active set's end any more: the exact finish must not reuse this factorisation
   finish_ready_ = false;
-  // Qt_ holds only the null-space columns below (all ls_step reads); the active set starts
+  // Qt holds only the null-space columns below (all ls_step reads); the active set starts
   // from factor_working, so no downdate or append reads the stale leading columns
   qt_stale_ = false;
   factor_rows(P, W);
   // (Q Qf)(i, :) = (Qf^T Q(i, :)^T)^T, row by row; only its columns rank.. (null(G_w)) are
   // kept: the least-squares step reads no other (none at a vertex of the working set)
-  const int rho = wqr_.rank(), nk = k - rho;
+  const int rho = ts_->wqr.rank(), nk = k - rho;
   if (nk == 0) return;
   auto v = rowbuf_.head(k);
   for (int i = 0; i < P.qrows; ++i) {
     v = P.Q.row(i).head(k).transpose();
-    wqr_.apply_qt(v);
-    Qt_.row(i).segment(rho, nk) = v.tail(nk).transpose();
+    ts_->wqr.apply_qt(v);
+    ts_->Qt.row(i).segment(rho, nk) = v.tail(nk).transpose();
   }
 }
 
 /// Form K = Q N (N = Qf(:, rank:), the working set's null space) and factorise it for
-/// ls_step: k_mode_ kZero (K is rounding noise: the step is zero), kWide (a wide K of full
-/// row rank: the QR of K^T in kqr_t_) or kTall (the pivoted QR of K in kqr_, rank k_rank_;
-/// rank-deficient: the RZ of [R11 R12] in krz_, or its transpose's QR in cqr_). Sets
-/// k_valid_; false when K is zero.
+/// ls_step: k_mode kZero (K is rounding noise: the step is zero), kWide (a wide K of full
+/// row rank: the QR of K^T in kqr_t) or kTall (the pivoted QR of K in kqr, rank k_rank;
+/// rank-deficient: the RZ of [R11 R12] in krz, or its transpose's QR in cqr). Sets
+/// k_valid; false when K is zero (all in the stage's TrialState).
 /// Numerical rank of K as qpcoord.core.linalg.numerical_rank with the scale of Q before
 /// projection: a K whose columns are rounding noise (the working set's rows span what Q can
 /// change) is rank 0, not a full-rank matrix of size 1e-16.
 bool Hierarchy::factor_k(const LsqProblem& P) {
-  const int k = P.cols, qr = P.qrows, rho = wqr_.rank(), nk = k - rho;
+  const int k = P.cols, qr = P.qrows, rho = ts_->wqr.rank(), nk = k - rho;
   if (qt_stale_) form_qt(P);
-  const auto K = Qt_.block(0, rho, qr, nk);
+  const auto K = ts_->Qt.block(0, rho, qr, nk);
   const double kmax = K.colwise().norm().maxCoeff();
   const double tol = std::max(qr, nk) * kEps * std::max(kmax, qscale_);
-  k_valid_ = true;
-  k_mode_ = KMode::kZero;
+  ts_->k_valid = true;
+  ts_->k_mode = KMode::kZero;
   if (!(kmax > tol)) return false;
   // a wide K (more free directions than objective rows) of full row rank: K s = -res is
   // consistent and its minimum-norm solution comes from one QR of K^T (nk x qr), without
   // the QR of K and the second one of [R11 R12]^T below
   if (nk > qr && wide_ls) {
-    kqr_t_.matrix(nk, qr) = K.transpose();
-    if (kqr_t_.factor(tol, 0.0) == qr) {
-      k_mode_ = KMode::kWide;
+    ts_->kqr_t.matrix(nk, qr) = K.transpose();
+    if (ts_->kqr_t.factor(tol, 0.0) == qr) {
+      ts_->k_mode = KMode::kWide;
       return true;
     }
   }
-  kqr_.matrix(qr, nk) = K;
-  const int rk = kqr_.factor(tol, 0.0);
-  k_mode_ = KMode::kTall;
-  k_rank_ = rk;
-  k_rz_ = false;
+  ts_->kqr.matrix(qr, nk) = K;
+  const int rk = ts_->kqr.factor(tol, 0.0);
+  ts_->k_mode = KMode::kTall;
+  ts_->k_rank = rk;
+  ts_->k_rz = false;
   if (rk > 0 && rk < nk) {
-    const auto Kf = kqr_.matrix();
+    const auto Kf = ts_->kqr.matrix();
     if (rz_min_norm) {
-      MapMat T = krz_.matrix(rk, nk);  // [R11 R12]^T (its upper triangle is not read)
+      MapMat T = ts_->krz.matrix(rk, nk);  // [R11 R12]^T (its upper triangle is not read)
       for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
-      k_rz_ = krz_.factor();  // R11 nonsingular (pivots above tol): false never expected
-      if (k_rz_) ++rz_factors_;
+      ts_->k_rz = ts_->krz.factor();  // R11 nonsingular (pivots above tol): false never expected
+      if (ts_->k_rz) ++rz_factors_;
     }
-    if (!k_rz_) {
-      MapMat T = cqr_.matrix(nk, rk);  // [R11 R12]^T
+    if (!ts_->k_rz) {
+      MapMat T = ts_->cqr.matrix(nk, rk);  // [R11 R12]^T
       T.setZero();
       for (int i = 0; i < rk; ++i)
         T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
-      cqr_.factor(0.0, 0.0);
+      ts_->cqr.factor(0.0, 0.0);
     }
   }
   return true;
@@ -560,7 +639,7 @@ bool Hierarchy::factor_k(const LsqProblem& P) {
 /// QR with reuse_k_qr).
 void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
                         Eigen::Ref<Vec> step) {
-  const int k = P.cols, qr = P.qrows, rho = wqr_.rank(), nk = k - rho;
+  const int k = P.cols, qr = P.qrows, rho = ts_->wqr.rank(), nk = k - rho;
   const auto Q = P.Q.topLeftCorner(qr, k);
   auto res = res_.head(qr);
   res.noalias() = Q * y;
@@ -573,18 +652,18 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
     // the step -N N^T g from the working set's QR alone (its columns rho.. span null(G_w))
     auto g = u_.head(k);
     g.noalias() = Q.transpose() * res;
-    wqr_.apply_qt(g);
+    ts_->wqr.apply_qt(g);
     step.segment(rho, nk) = -g.segment(rho, nk);
-    wqr_.apply_q(step);
+    ts_->wqr.apply_q(step);
     ++least_distance_steps_;
     return;
   }
-  if (reuse_k_qr && k_valid_) {
+  if (reuse_k_qr && ts_->k_valid) {
     // the same working set's QR as the last step: the same K (a K^T or slack_step decided
     // by W and P alone: the same path), only the right-hand side changed
     ++k_qr_reuses_;
   } else {
-    k_valid_ = false;
+    ts_->k_valid = false;
     if (slack_ls && P.slacks > 0) {
       if (slack_step(P, step)) {
         ++slack_steps_;
@@ -596,31 +675,31 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
   }
   auto rhs = tvec_.head(qr);
   rhs = -res;
-  if (k_mode_ == KMode::kZero) return;
-  if (k_mode_ == KMode::kWide) {
+  if (ts_->k_mode == KMode::kZero) return;
+  if (ts_->k_mode == KMode::kWide) {
     auto s = u_.head(nk);
-    kqr_t_.min_norm_transposed_solve(rhs, s);
+    ts_->kqr_t.min_norm_transposed_solve(rhs, s);
     step.segment(rho, nk) = s;
-    wqr_.apply_q(step);
+    ts_->wqr.apply_q(step);
     return;
   }
-  const int rk = k_rank_;
-  kqr_.apply_qt(rhs);
+  const int rk = ts_->k_rank;
+  ts_->kqr.apply_qt(rhs);
   // step = Qf [0; s]; K P = Qk [R11 R12; 0 0]: with full column rank s(perm(i)) = u(i),
   // u = R11^-1 (Qk^T (-res))(0:rk); rank-deficient K: the minimum-norm s (as a complete
   // orthogonal decomposition), u the min-norm solution of [R11 R12] u = (Qk^T (-res))(0:rk)
   if (rk == nk) {
-    kqr_.solve_r(rhs);
-    for (int i = 0; i < rk; ++i) step(rho + kqr_.perm(i)) = rhs(i);
+    ts_->kqr.solve_r(rhs);
+    for (int i = 0; i < rk; ++i) step(rho + ts_->kqr.perm(i)) = rhs(i);
   } else if (rk > 0) {
     auto u = u_.head(nk);
-    if (k_rz_)
-      krz_.min_norm_solve(rhs.head(rk), u);
+    if (ts_->k_rz)
+      ts_->krz.min_norm_solve(rhs.head(rk), u);
     else
-      cqr_.min_norm_transposed_solve(rhs.head(rk), u);
-    for (int i = 0; i < nk; ++i) step(rho + kqr_.perm(i)) = u(i);
+      ts_->cqr.min_norm_transposed_solve(rhs.head(rk), u);
+    for (int i = 0; i < nk; ++i) step(rho + ts_->kqr.perm(i)) = u(i);
   }
-  wqr_.apply_q(step);
+  ts_->wqr.apply_q(step);
 }
 
 /// min |s| s.t. G_w s = 0, Q s = -res in y = (z, w). Every slack j appears in one objective
@@ -633,7 +712,7 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
 bool Hierarchy::slack_step(const LsqProblem& P, Eigen::Ref<Vec> step) {
   const int zc = P.zcols, ns = P.slacks, q0 = P.slack_q0, g0 = P.slack_g0;
   const int kw = static_cast<int>(widx_.size()), mr = kw + q0;
-  if (wqr_.rank() < kw) return false;  // dependent working rows: the general path
+  if (ts_->wqr.rank() < kw) return false;  // dependent working rows: the general path
   if (mr > zc) return false;  // more conditions than unknowns: no exact step in general
   const auto res = res_.head(P.qrows);
   const double stol = std::max(P.qrows, P.cols) * kEps * std::max(qscale_, 1e-300);
@@ -674,11 +753,11 @@ bool Hierarchy::multipliers_ok(const LsqProblem& P, const Eigen::Ref<const Vec>&
   // G_w^T u = g in least squares through the working set's QR; mu = sign * u
   auto u = u_.head(k);
   u = g;
-  wqr_.apply_qt(u);
-  wqr_.solve_r(u);
+  ts_->wqr.apply_qt(u);
+  ts_->wqr.solve_r(u);
   auto mu = mu_.head(kw);
   mu.setZero();
-  for (int i = 0; i < wqr_.rank(); ++i) mu(wqr_.perm(i)) = u(i);
+  for (int i = 0; i < ts_->wqr.rank(); ++i) mu(ts_->wqr.perm(i)) = u(i);
   int jmin = -1;
   double mmin = kInf;
   for (int j = 0; j < kw; ++j) {
@@ -733,9 +812,9 @@ void Hierarchy::add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
     W[i] = sd;
     ++batch_rows_;
     // (a failed append leaves the row in W: the next iteration refactorises)
-    if (current && wqr_.append(P.G.row(i).head(k).transpose())) {
+    if (current && ts_->wqr.append(P.G.row(i).head(k).transpose())) {
       widx_.push_back(i);
-      if (!qt_stale_) wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
+      if (!qt_stale_) ts_->wqr.apply_last_right(ts_->Qt.topLeftCorner(qr, k));
     } else {
       current = false;
     }
@@ -744,6 +823,7 @@ void Hierarchy::add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
 
 bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W,
                            int& iters) {
+  ts_->intact = false;  // (trial_memo: its updates change the stage's factorisations)
   const int k = P.cols;
   const int m = P.rows;
   const int qr = P.qrows;
@@ -776,7 +856,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   bool reuse = exact_ && finish_ready_ && reuse_finish;
   finish_ready_ = false;
   // the exact finish right after a warm trial hit (reuse_k_qr): W and y are the trial's, so
-  // is its working set's QR (wqr_, widx_) and K's factorisation; the trial kept only the
+  // is its working set's QR (wqr, widx_) and K's factorisation; the trial kept only the
   // null-space columns of Q Qf (trial_qt_tail): formed in full when an update needs them
   bool trial = exact_ && trial_ready_ && reuse_k_qr && !reuse;
   trial_ready_ = false;
@@ -788,7 +868,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       return false;
     }
     ++iters;
-    if (reuse) {  // wqr_, widx_, res_ and step_ are those of this W and y
+    if (reuse) {  // wqr, widx_, res_ and step_ are those of this W and y
       reuse = false;
     } else {
       if (trial) {
@@ -808,7 +888,11 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     // stationary on W: the step no longer decreases the objective measurably (relative to
     // its value, with a floor at rounding of the data's scale), or it is rounding itself
     qy = res + c;
-    const double floor = 1e-28 * std::max(cn * cn, qy.squaredNorm());
+    // (the rounding of res = Q y - c is relative to |Q| |y|, not to |Q y| ~ |c|, where y is
+    // large and Q y cancels: a 30 x 8 level whose point sat at |y| ~ 650 gained ~1e-26 per
+    // step of ~1e-10, rounding, without end -- tests/core/test_native_memo.py's seed 4857)
+    const double qys = exact_ ? 0.0 : qscale_ * yscale;
+    const double floor = 1e-28 * std::max({cn * cn, qy.squaredNorm(), qys * qys});
     // (exact_: a step is taken unless it is rounding: on a direction of curvature tau^2 a
     // step gaining 1e-19 of the objective can still move y by ~1)
     bool stationary = exact_ ? (gain <= floor || smax <= 8.0 * kEps * yscale)
@@ -835,10 +919,10 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       if (downdate) {
         const auto pos = std::find(widx_.begin(), widx_.end(), drop);
         if (pos != widx_.end() &&
-            wqr_.remove(static_cast<int>(pos - widx_.begin()),
-                        Qt_.topLeftCorner(qt_stale_ ? 0 : qr, k))) {
+            ts_->wqr.remove(static_cast<int>(pos - widx_.begin()),
+                        ts_->Qt.topLeftCorner(qt_stale_ ? 0 : qr, k))) {
           widx_.erase(pos);
-          k_valid_ = false;
+          ts_->k_valid = false;
           current = true;
           ++downdates_;
         }
@@ -885,10 +969,10 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       finished = false;
       W[block] = side;
       // one row enters: update the working set's QR and Q Qf instead of refactorising
-      if (wqr_.append(P.G.row(block).head(k).transpose())) {
+      if (ts_->wqr.append(P.G.row(block).head(k).transpose())) {
         widx_.push_back(block);
-        k_valid_ = false;
-        if (!qt_stale_) wqr_.apply_last_right(Qt_.topLeftCorner(qr, k));
+        ts_->k_valid = false;
+        if (!qt_stale_) ts_->wqr.apply_last_right(ts_->Qt.topLeftCorner(qr, k));
         current = true;
       } else {
         current = false;
@@ -920,7 +1004,7 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   auto step = step_.head(k);
   ls_step(P, yp, step);
   yp += step;
-  trial_ready_ = true;  // wqr_ and K are those of W on P (the exact finish's start)
+  trial_ready_ = true;  // wqr and K are those of W on P (the exact finish's start)
   return found;
 }
 
@@ -934,11 +1018,11 @@ bool Hierarchy::working_set_point(const LsqProblem& P, const std::vector<int8_t>
     if (!std::isfinite(t(j))) return false;
   }
   // the point on the working set's rows: G_w y = t, y = Qf [R11^-T (P^T t)_(1:rank); 0]
-  const int rho = wqr_.rank();
+  const int rho = ts_->wqr.rank();
   y.setZero();
-  for (int i = 0; i < rho; ++i) y(i) = t(wqr_.perm(i));
-  wqr_.solve_rt(y);
-  wqr_.apply_q(y);
+  for (int i = 0; i < rho; ++i) y(i) = t(ts_->wqr.perm(i));
+  ts_->wqr.solve_rt(y);
+  ts_->wqr.apply_q(y);
   *consistent = true;
   if (kw) {
     const double tmax = std::max(1.0, t.cwiseAbs().maxCoeff());
@@ -1054,15 +1138,15 @@ bool Hierarchy::reduced_multipliers_ok(const LsqProblem& P, int mv,
     gz.head(zc) -= mu * P.G.row(i).head(zc).transpose();
   }
   // the rows without slack: G_h^T u = g_z - sum mu_s g_s in least squares (reduced_set_point's
-  // QR of G_h^T in wqr_, its rows in widx_)
+  // QR of G_h^T in wqr, its rows in widx_)
   const int kw = static_cast<int>(widx_.size());
   if (kw == 0) return true;
   auto u = gz.head(zc);
-  wqr_.apply_qt(u);
-  wqr_.solve_r(u);
+  ts_->wqr.apply_qt(u);
+  ts_->wqr.solve_r(u);
   auto mu = mu_.head(kw);
   mu.setZero();
-  for (int i = 0; i < wqr_.rank(); ++i) mu(wqr_.perm(i)) = u(i);
+  for (int i = 0; i < ts_->wqr.rank(); ++i) mu(ts_->wqr.perm(i)) = u(i);
   for (int j = 0; j < kw; ++j)
     if (sign_bad(widx_[j], mu(j))) return false;
   return true;
@@ -1168,7 +1252,7 @@ bool Hierarchy::grow_stored_set(const LsqProblem& P, Eigen::Ref<Vec> y,
   auto step = step_.head(k);
   std::copy(W.begin(), W.begin() + m, wgrow_.begin());
   ygrow_.head(k) = yp;
-  trial_ready_ = false;  // wqr_ and K: the grown sets' from the first round on
+  trial_ready_ = false;  // wqr and K: the grown sets' from the first round on
   for (int round = 0; yp.allFinite(); ++round) {
     gy.noalias() = P.G.topLeftCorner(m, k) * yp;
     int added = 0;
@@ -1219,6 +1303,8 @@ void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>
 int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                           const CRef<Vec>& lo, const CRef<Vec>& hi, MRef<Mat> stats,
                           MRef<Vec> detail, bool warm) {
+  ts_ = &trials_[0];
+  z_repeats_ = true;  // (trial_memo's gate in the hard phase; set again after it)
   x_.setZero();
   Z_.setIdentity();
   z_identity_ = true;
@@ -1514,6 +1600,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   const int b = k + 1;
   const int me = meq_[b], mi = min_[b], e0 = eq0_[b], i0 = in0_[b];
   const int stage = b;
+  ts_ = &trials_[stage];
   if (r_ == 0) {
     inherit(C, lo, hi, i0, mi, nullptr);
     return kOk;
@@ -1910,6 +1997,7 @@ bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T) {
 
 int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   const int stage = static_cast<int>(meq_.size());
+  ts_ = &trials_[stage];
   if (r_ == 0) return kOk;
   const auto Zr = Z_.leftCols(r_);
   auto zx = tmpr_.head(r_);
@@ -1965,9 +2053,12 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
 }
 
 int Hierarchy::gemv_steps() {
-  int s = wqr_.gemv_steps();
-  for (const PivotedQR* q : {&kqr_, &fqr_, &cqr_, &kqr_t_, &sqr_, &mqr_, &tqr_})
-    s += q->gemv_steps;
+  int s = 0;
+  for (TrialState& t : trials_) {
+    s += t.wqr.gemv_steps();
+    for (const PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) s += q->gemv_steps;
+  }
+  for (const PivotedQR* q : {&fqr_, &sqr_, &mqr_, &tqr_}) s += q->gemv_steps;
   return s;
 }
 
@@ -2000,16 +2091,22 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
   stats.setZero();
   detail.setZero();
-  for (PivotedQR* q : {&kqr_, &fqr_, &cqr_, &kqr_t_, &sqr_, &mqr_, &tqr_}) {
+  for (PivotedQR* q : {&fqr_, &sqr_, &mqr_, &tqr_}) {
     q->gemv_update = gemv_qr;
     q->gemv_steps = 0;
+  }
+  for (TrialState& t : trials_) {
+    for (PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) {
+      q->gemv_update = gemv_qr;
+      q->gemv_steps = 0;
+    }
+    t.wqr.set_gemv_update(gemv_qr);
+    t.wqr.gemv_steps() = 0;
   }
   for (PivotedQR* q : {&mqr_, &fqr_}) {
     q->wy_right = wy_right;
     q->wy_applications = 0;
   }
-  wqr_.set_gemv_update(gemv_qr);
-  wqr_.gemv_steps() = 0;
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;
@@ -2021,7 +2118,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   k_qr_reuses_ = 0;
   rz_factors_ = 0;
   identity_products_ = 0;
-  k_valid_ = false;
+  ts_->k_valid = false;
   trial_ready_ = false;
   qr_closed_forms_ = 0;
   zero_tail_compressions_ = 0;
@@ -2031,6 +2128,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   gram_screens_ = 0;
   wide_freezes_ = 0;
   freeze_memo_hits_ = 0;
+  trial_memo_hits_ = 0;
   small_rinvs_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);

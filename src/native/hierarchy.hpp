@@ -16,6 +16,7 @@
 #pragma once
 
 #include <Eigen/Dense>
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <vector>
@@ -26,7 +27,7 @@ namespace qpcoord {
 
 // 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches;
 // 9 (session 14): Hierarchy.gram_screen / gram_screens;
-// 10 (session 15): Hierarchy.freeze_memo / freeze_memo_hits
+// 10 (session 15): Hierarchy.freeze_memo / freeze_memo_hits, trial_memo / trial_memo_hits
 inline constexpr int kAbiVersion = 10;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
@@ -232,6 +233,16 @@ class Hierarchy {
   bool freeze_memo = true;
   /// Freezes of the last call restored by freeze_memo.
   int freeze_memo_hits() const { return freeze_memo_hits_; }
+  /// A stage's warm trial (the pivoted QR of its stored working set's rows, Q Qf's null-space
+  /// columns, then K's factorisation) whose rows and objective are bit for bit those of the
+  /// same stage's trial in the previous call, its factorisations untouched since (the trial
+  /// hit: no active-set update followed), uses them as they are (default; a re-solve whose
+  /// matrices did not change). Every stage keeps its own factorisations for this. Looked up
+  /// only above every freeze the call computed (below one, Z differs). The same x bit for
+  /// bit (False: every trial factorised, for comparisons).
+  bool trial_memo = true;
+  /// Trials of the last call whose factorisations trial_memo reused.
+  int trial_memo_hits() const { return trial_memo_hits_; }
   /// The QR closed form's bound 1/|R11^-1|_F on sigma_rank(M) for a rank up to
   /// kSmallRinvMax: R11^-1 by a back substitution per column on its leading entries
   /// (default), or (A/B) by Eigen's blocked triangular solve of an identity right-hand side
@@ -390,7 +401,7 @@ class Hierarchy {
   /// Map a stored working set onto P's rows (into W: equality rows 2, stored rows their
   /// side); returns the number of stored rows matched.
   int map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W);
-  /// The minimum-norm point on the working rows of factor_trial's factorisation of P (wqr_,
+  /// The minimum-norm point on the working rows of factor_trial's factorisation of P (wqr,
   /// widx_): G_w y = t, t the rows' active bounds, into y (P.cols entries); *consistent: G_w y
   /// = t holds to 1e-10 max(1, |t|). False (y unset) when an active bound is infinite.
   /// The gradient g = Q^T (Q y - c) of P at y into gvec_, and the tolerance below which a
@@ -402,7 +413,7 @@ class Hierarchy {
   /// stored_set_point of a level whose last mv rows of P have one slack column each (column
   /// P.cols - mv + j, objective row P.qrows - mv + j): the least squares in z alone (Pr_),
   /// each working slack row's slack eliminated (w = (g_z z - t) / s: its objective term a row
-  /// in z), the others' slack 0, the rows without slack the working rows of Pr_'s QR (wqr_);
+  /// in z), the others' slack 0, the rows without slack the working rows of Pr_'s QR (wqr);
   /// the point (z, w) into xc_. -1: not reducible (a working slack row without weight).
   int reduced_set_point(const LsqProblem& P, int mv, const Working& ws, std::vector<int8_t>& W,
                         bool* consistent);
@@ -430,18 +441,27 @@ class Hierarchy {
   /// step), at most kGrowRounds times; true with y that point when it meets every row and W's
   /// rows are tight there (the active set's start), else false with W and xc_ as on entry.
   bool grow_stored_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W);
-  /// Factorise the working set W: pivoted QR of G_w^T (wqr_), its rows in widx_, and
-  /// Qt_ = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
+  /// Factorise the working set W: pivoted QR of G_w^T (wqr), its rows in widx_, and
+  /// Qt = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
-  /// The working set's rows of W in widx_ and the pivoted QR of their G_w^T in wqr_ (the
+  /// The working set's rows of W in widx_ and the pivoted QR of their G_w^T in wqr (the
   /// common part of factor_working and factor_trial).
   void factor_rows(const LsqProblem& P, const std::vector<int8_t>& W);
-  /// Qt_ = Q Qf for the working set's current QR (all its transforms so far).
+  /// Qt = Q Qf for the working set's current QR (all its transforms so far).
   void form_qt(const LsqProblem& P);
   /// factor_working for a warm trial (trial_qt_tail): the same QR of G_w^T, but of Q Qf only
   /// the columns rank.. that ls_step reads (none when G_w pins y); the active set's updates
   /// need all of Q Qf and start from factor_working
   void factor_trial(const LsqProblem& P, const std::vector<int8_t>& W);
+  /// factor_trial's factorisations, computed (trial_memo missed or off).
+  void factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W);
+  /// trial_memo: true when the stage's TrialState is intact and keyed by P's working rows of
+  /// W and its objective, bit for bit (then widx_ and the flags are set as factor_trial
+  /// leaves them); trial_keep stores the key of the trial just factorised.
+  bool trial_restore(const LsqProblem& P, const std::vector<int8_t>& W);
+  void trial_keep(const LsqProblem& P);
+  /// The switches that change a trial's factorisations, as bits (part of trial_memo's key).
+  int trial_switches() const;
   /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
   void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
   /// Form the projected objective K = Q N of the working set's QR and factorise it for
@@ -504,11 +524,36 @@ class Hierarchy {
 
   // workspace, sized at construction: the per-call path does not allocate (the closed-form
   // SVDs are one object per stage, whose sizes repeat from one call to the next)
-  WorkingQR wqr_;  ///< G_w^T of the working set (k x kw), updated as rows enter and leave
-  PivotedQR kqr_;  ///< the projected objective K = Q N (qrows x (k - rank))
+  enum class KMode : int8_t { kZero, kWide, kTall };
+  /// A stage's (hard phase, level, minimum norm) working set and K factorisations, one per
+  /// stage: trial_memo finds the stage's last warm trial there at its next call.
+  struct TrialState {
+    WorkingQR wqr;  ///< G_w^T of the working set (k x kw), updated as rows enter and leave
+    PivotedQR kqr;  ///< the projected objective K = Q N (qrows x (k - rank))
+    PivotedQR cqr;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
+    PivotedQR kqr_t;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
+    TrapezoidRZ krz;  ///< rz_min_norm: [R11 R12] of a rank-deficient K
+    Mat Qt;           ///< Q Qf
+    /// reuse_k_qr: kqr (and cqr) or kqr_t hold the factorisation of the current working
+    /// set's K on the stage's problem (cleared whenever the working set's QR changes)
+    bool k_valid = false;
+    KMode k_mode = KMode::kZero;  ///< how that K was solved: negligible, by K^T, by K's QR
+    int k_rank = 0;               ///< numerical rank of that K (kTall)
+    bool k_rz = false;            ///< that K's minimum-norm step by krz (else cqr)
+    /// trial_memo: wqr, Qt (and K when k_valid) are the factorisations factor_trial made of
+    /// the key below, nothing having changed them since
+    bool intact = false;
+    int key_k = -1, key_qrows = -1;  ///< the trial's P.cols, P.qrows
+    bool key_unit_q = false, key_qt_stale = false;
+    int key_switches = -1;  ///< trial_switches() then
+    std::array<int, 4> key_slacks{};  ///< P.slacks, zcols, slack_q0, slack_g0 (ls_step's path)
+    std::vector<int> key_widx;  ///< its working rows
+    Vec key_G, key_Q;           ///< their G_w (kw x k) and the objective Q (qrows x k)
+  };
+  std::vector<TrialState> trials_;  ///< per stage
+  TrialState* ts_ = nullptr;        ///< the stage being solved's
+  int trial_memo_hits_ = 0;         ///< trials of this call restored by trial_memo
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
-  PivotedQR cqr_;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
-  PivotedQR kqr_t_;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
   PivotedQR sqr_;  ///< slack_step: the transposed system on z
   int slack_steps_ = 0;  ///< steps by slack_step in this call
   /// the stage being solved has an objective Q with orthonormal columns (the minimum-norm
@@ -517,14 +562,6 @@ class Hierarchy {
   int least_distance_steps_ = 0;  ///< steps by least_distance in this call
   int batch_rows_ = 0;  ///< rows added by tight_batch in this call
   int grown_seeds_ = 0;  ///< stages of this call started from a grown stored set (grow_seed)
-  /// reuse_k_qr: kqr_ (and cqr_) or kqr_t_ hold the factorisation of the current working
-  /// set's K on the stage's problem (cleared whenever the working set's QR changes)
-  bool k_valid_ = false;
-  enum class KMode : int8_t { kZero, kWide, kTall };
-  KMode k_mode_ = KMode::kZero;  ///< how that K was solved: negligible, by K^T, by K's QR
-  int k_rank_ = 0;               ///< numerical rank of that K (kTall)
-  bool k_rz_ = false;            ///< that K's minimum-norm step by krz_ (else cqr_)
-  TrapezoidRZ krz_;              ///< rz_min_norm: [R11 R12] of a rank-deficient K
   TrapezoidRZ trz_;  ///< rz_min_norm: [R11 R12] of a rank-deficient tall M's closed form
   bool qr_rz_ = false;  ///< the last qr_closed_form's [R11 R12] went by trz_ (else tqr_)
   int rz_factors_ = 0;  ///< RZ factorisations of this call
@@ -534,11 +571,10 @@ class Hierarchy {
   /// set; the exact finish after a hit starts from it, reuse_k_qr)
   bool trial_ready_ = false;
   int k_qr_reuses_ = 0;  ///< least-squares steps of this call that reused K's QR
-  Mat Qt_;         ///< Q Qf
-  /// Qt_ not formed for the working set's QR (factor_working of a level with slacks and
+  /// Qt not formed for the working set's QR (factor_working of a level with slacks and
   /// slack_ls: ls_step forms it when its general path needs it; updates skip it till then)
   bool qt_stale_ = true;
-  /// active_set returned optimal and nothing has factorised since: wqr_, widx_, Qt_, res_
+  /// active_set returned optimal and nothing has factorised since: wqr, widx_, Qt, res_
   /// and step_ are those of its final W and y (the exact finish's first iteration)
   bool finish_ready_ = false;
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved

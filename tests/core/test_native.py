@@ -51,18 +51,19 @@ def switch_pair(stack: qc.Stack, switch: str, default: bool | None = True):
     ``switch`` on in ``new`` and off in ``plain``: the A/B pair of the switch test modules
     (test_native_kqr, _lsupd, _minnorm, _hum, _small, _iter). ``default``: the switch's
     default, asserted (``None``: not asserted, e.g. one that differs between builds). Both
-    have ``freeze_memo`` off unless it is the switch."""
+    have the memos (``freeze_memo``, ``trial_memo``) off unless one is the switch."""
     from qpcoord.core.native import NativeHierarchy
 
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     plain = NativeHierarchy(P, stack.damping)
     assert default is None or getattr(new._solver, switch) == default
-    if switch != "freeze_memo":
-        # a path's counters count the freezes made, which the memo restores instead on a
-        # re-solve of the same matrices (test_native_memo compares the memo itself)
-        for h in (new, plain):
-            h._solver.freeze_memo = False
+    for memo in ("freeze_memo", "trial_memo"):
+        if switch != memo:
+            # a path's counters count the freezes and factorisations made, which the memos
+            # reuse instead on a re-solve of the same matrices (test_native_memo tests them)
+            for h in (new, plain):
+                setattr(h._solver, memo, False)
     setattr(new._solver, switch, True)
     setattr(plain._solver, switch, False)
     return P, new, plain

@@ -16,11 +16,15 @@ taken (``batch_rows``) and cost fewer iterations.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
-from test_native import needs_native, switch_check, switch_pair
+from test_native import LEVEL_TOL, needs_native, switch_check, switch_pair
 
 import qpcoord as qc
+
+_DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def _pair(stack: qc.Stack):
@@ -184,3 +188,26 @@ def test_switch_off_batches_nothing():
     assert plain._solver.batch_rows == 0
     new.solve(P, warm=True)  # the same data: every stored working set hits
     assert new._solver.batch_rows == 0
+
+
+@needs_native
+def test_steps_of_rounding_at_a_large_point_end_the_active_set():
+    """A stationary point far from the origin ends the level (session 15): level 0, 5
+    inequality rows of rank 3 in 8 variables, leaves level 1 (6 equality rows, satisfiable)
+    a point at |y| ~ 650 after a drop; the least-squares steps there are rounding of
+    Q y - c (relative to |Q| |y|, not to |Q y| ~ |c|: 1e-10 long, gaining 1e-26 each),
+    which the stationarity floor, relative to |c| only, took for progress: "the active set of
+    level 1 did not converge" until the iteration cap (found by test_native_memo's generator,
+    seed 4857; the Python engine solved it). Now it ends, with the Python engine's level
+    values."""
+    d = np.load(_DATA / "native_rounding_steps_4857.npz")
+    tasks = [qc.Inequality(d["C0"], upper=d["u0"])]
+    tasks += [qc.Equality(d[f"A{i}"], d[f"b{i}"]) for i in range(1, 5)]
+    stack = qc.Stack(tasks)
+    native = stack.solve(engine="native")
+    python = stack.solve(engine="python")
+    assert native.status == python.status == "optimal"
+    ref = python.level_residuals
+    np.testing.assert_allclose(
+        native.level_residuals, ref, rtol=LEVEL_TOL, atol=LEVEL_TOL * max(1.0, np.abs(ref).max())
+    )

@@ -1,15 +1,24 @@
-"""The native engine's memo of the freezes (``Hierarchy.freeze_memo``, issue 24, session 15).
+"""The native engine's memos of a re-solve whose matrices did not change (issue 24, session 15).
 
-A level's freeze -- the change of the null-space basis Z, of the free dimension r and of
-the carried projection of the inherited rows -- is a function of Z and of that projection on
-entry, of the level's rows and of the freeze's kind, rank and violated rows; none of them
-depends on the targets or on the bounds' values. A re-solve whose matrices did not change
-(targets, bounds moved: the benchmarks' re-solves, an LTI coordinator) restores the stored
-outputs of the level's last freeze instead of applying its reflectors to Z again. The tests
-compare a solver with the memo on against one with it off, bit for bit (x's and the level
-values' bits, the info dicts), along sequences in which each level's matrix stays, changes,
-or comes back to an earlier value (a memo keyed on too little would restore a stale Z there),
-and check that the memo was used where the matrices repeat and not used where they change.
+``Hierarchy.freeze_memo``: a level's freeze -- the change of the null-space basis Z, of the
+free dimension r and of the carried projection of the inherited rows -- is a function of Z
+and of that projection on entry, of the level's rows and of the freeze's kind, rank and
+violated rows; none of them depends on the targets or on the bounds' values. A re-solve whose
+matrices did not change (targets, bounds moved: the benchmarks' re-solves, an LTI
+coordinator) restores the stored outputs of the level's last freeze instead of applying its
+reflectors to Z again.
+
+``Hierarchy.trial_memo``: a stage's warm trial factorises its stored working set's rows
+(pivoted QR of G_w^T), the objective's null-space columns (Q Qf) and K = Q N; each stage
+keeps its own factorisations, and a trial whose working rows and objective are bit for bit
+the last trial's of the stage, nothing having updated them since (it hit), uses them as
+they are.
+
+The tests compare solvers with the memos on against one with both off, bit for bit (x's and
+the level values' bits, the info dicts), along sequences in which each level's matrix stays,
+changes, or comes back to an earlier value (a memo keyed on too little would restore a stale
+factorisation there), and check that the memos are used where the matrices repeat and not
+where they change.
 """
 
 from __future__ import annotations
@@ -18,7 +27,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_native import needs_native, published_stack, switch_pair
+from test_native import benchmark_module, needs_native, published_stack, switch_pair
 
 import qpcoord as qc
 
@@ -28,16 +37,29 @@ def _bits(v: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(v, dtype=np.float64).view(np.uint64)
 
 
-def _same_step(P, new, plain, warm: bool = True) -> int:
-    """One solve by each: x, level values and info bit for bit the same; returns the memo's
-    hits in ``new`` (``plain`` has none)."""
+MEMOS = ("freeze_memo", "trial_memo")
+
+
+def _memo_pair(stack: qc.Stack, memos=MEMOS):
+    """``(P, new, plain)``: native solvers of ``stack``, ``new`` with the memos ``memos`` on
+    (the others off), ``plain`` with none (both on by default)."""
+    P, new, plain = switch_pair(stack, "freeze_memo")
+    for memo in MEMOS:
+        setattr(new._solver, memo, memo in memos)
+        setattr(plain._solver, memo, False)
+    return P, new, plain
+
+
+def _same_step(P, new, plain, warm: bool = True) -> tuple[int, int]:
+    """One solve by each: x, level values and info bit for bit the same; returns ``new``'s
+    (freeze_memo_hits, trial_memo_hits) (``plain`` has none)."""
     xn, rn, infon = new.solve(P, warm=warm)
     xp, rp, infop = plain.solve(P, warm=warm)
     np.testing.assert_array_equal(_bits(xn), _bits(xp))
     np.testing.assert_array_equal(_bits(rn), _bits(rp))
     assert infon == infop
-    assert plain._solver.freeze_memo_hits == 0
-    return new._solver.freeze_memo_hits
+    assert plain._solver.freeze_memo_hits == 0 and plain._solver.trial_memo_hits == 0
+    return new._solver.freeze_memo_hits, new._solver.trial_memo_hits
 
 
 def _random_stack(seed: int):
@@ -72,9 +94,10 @@ def _move(task, rng, A=None) -> None:
 
 
 @needs_native
-@settings(max_examples=40, deadline=None)
+@pytest.mark.parametrize("memos", [MEMOS, MEMOS[:1], MEMOS[1:]], ids=["both", "freeze", "trial"])
+@settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 10_000))
-def test_memo_equals_the_freezes_computed_along_changing_matrices(seed):
+def test_memos_equal_the_factorisations_computed_along_changing_matrices(seed, memos):
     """Each step moves every target and, per level, keeps the matrix, switches to the other
     one or back (then the stored freeze of the first matrices may be restored: correct only
     if the memo's key holds every input): the solver with the memo equals the one without,
@@ -108,7 +131,7 @@ def test_memo_restores_every_freeze_of_a_re_solve_and_none_of_a_changed_stack():
         rows.append(J / np.linalg.norm(J, axis=1, keepdims=True))
     tasks = [qc.Equality(J, rng.uniform(-0.5, 0.5, J.shape[0])) for J in rows]
     stack = qc.Stack(tasks, bounds=qc.Bounds(-0.5 * np.ones(n), 0.5 * np.ones(n)))
-    P, new, plain = switch_pair(stack, "freeze_memo")
+    P, new, plain = _memo_pair(stack)
     base = [t.b.copy() for t in tasks]
     hits = []
     for step in range(12):
@@ -116,9 +139,11 @@ def test_memo_restores_every_freeze_of_a_re_solve_and_none_of_a_changed_stack():
             t.update(b=b0 + 0.2 * np.sin(0.05 * step + np.arange(b0.shape[0])))
         hits.append(_same_step(P, new, plain))
     assert plain._solver.wide_freezes > 0  # the binding levels' freezes
-    assert hits[-1] > 0 and hits[-1] == hits[-2]  # every freeze of the warm re-solve
+    freezes = [h[0] for h in hits]
+    assert freezes[-1] > 0 and freezes[-1] == freezes[-2]  # every freeze of the re-solve
+    assert sum(h[1] for h in hits[4:]) > 0  # warm trials reused
     tasks[0].update(A=rows[0] + 1e-3 * rng.standard_normal(rows[0].shape))
-    assert _same_step(P, new, plain) == 0
+    assert _same_step(P, new, plain) == (0, 0)
 
 
 @needs_native
@@ -127,18 +152,40 @@ def test_memo_on_the_moving_published_humanoid(unit):
     """The LexLS humanoid moved as hierarchy_published's re-solve table (targets only): bit
     for bit the freezes' results, and restored freezes from the third step on."""
     st_, move = published_stack("lexls_test01_humanoid", False, unit)
-    P, new, plain = switch_pair(st_, "freeze_memo")
+    P, new, plain = _memo_pair(st_)
     hits = []
     for step in range(5):
         move(step)
         hits.append(_same_step(P, new, plain))
-    assert hits[-1] > 0
+    assert hits[-1][0] > 0
 
 
 @needs_native
-def test_memo_switch_and_counter_are_exposed():
-    """``freeze_memo`` is on by default, settable, and its counter is 0 before any solve."""
+def test_soth_re_solve_reuses_every_trial():
+    """The published soth problem re-solved with moved targets (hierarchy_bench's soth_sot:
+    30 joint-limit rows, then 3 / 3 / 6 / 6 equality rows): every stage's stored working set
+    hits, and once warm every trial's factorisations are reused and every freeze restored,
+    bit for bit what computing them gives."""
+    bench = benchmark_module("hierarchy_bench")
+    scen = bench._scenario(bench.soth_sot, np.random.default_rng(0))
+    P, new, plain = _memo_pair(scen["stack"])
+    hits = []
+    for step in range(14):  # the freezes' memo is warm after two calls per level
+        scen["move"](step)
+        hits.append(_same_step(P, new, plain))
+    stages = new._solver.num_levels + 1  # levels and the minimum-norm step
+    assert hits[-1] == (new._solver.num_levels, stages)
+
+
+@needs_native
+def test_memo_switches_and_counters_are_exposed():
+    """Both memos are on by default, settable, and count 0 before any solve."""
+    from qpcoord.core.native import NativeHierarchy
+
     stack = qc.Stack([qc.Equality(np.eye(3)[:2], np.ones(2)), qc.Equality(np.eye(3), np.zeros(3))])
-    P, new, plain = switch_pair(stack, "freeze_memo")
-    assert new._solver.freeze_memo and not plain._solver.freeze_memo
-    assert new._solver.freeze_memo_hits == 0
+    h = NativeHierarchy(stack._compiled, stack.damping)
+    for memo in MEMOS:
+        assert getattr(h._solver, memo) is True
+        setattr(h._solver, memo, False)
+        assert getattr(h._solver, memo) is False
+    assert h._solver.freeze_memo_hits == 0 and h._solver.trial_memo_hits == 0
