@@ -338,6 +338,12 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "every trial factorised (False; for comparisons).")
       .def_prop_ro("trial_memo_hits", &Hierarchy::trial_memo_hits,
                    "Trials of the last call whose factorisations trial_memo reused.")
+      .def_rw("closed_form_memo", &Hierarchy::closed_form_memo,
+              "A level whose rows and Z on entry are bit for bit the previous call's keeps "
+              "M = A Z and its closed form's QR or SVD (True, default), or computes them "
+              "(False; for comparisons).")
+      .def_prop_ro("closed_form_memo_hits", &Hierarchy::closed_form_memo_hits,
+                   "Levels of the last call whose closed-form factorisation was reused.")
       .def_rw("small_rinv", &Hierarchy::small_rinv,
               "The QR closed form's bound on sigma_rank by back substitution up to rank 16 "
               "(default) or by Eigen's blocked triangular solve.")

@@ -43,6 +43,7 @@ inline double finite_abs(double v) { return std::isfinite(v) ? std::abs(v) : 0.0
 /// outputs only for inputs that are the same bits)
 template <typename A, typename B>
 bool same_bits(const A& a, const B& b) {
+  if (a.rows() == 0) return true;  // (no memcmp of empty, possibly null, data)
   for (Eigen::Index j = 0; j < a.cols(); ++j)
     if (std::memcmp(a.col(j).data(), b.col(j).data(), sizeof(double) * a.rows()) != 0)
       return false;
@@ -194,17 +195,38 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   }
   // one working set's and K's factorisations per stage (hard phase, levels, minimum norm):
   // trial_memo finds a stage's last trial there at its next call
+  // each sized for its own stage: a level's problem has at most n + min_[b] columns (z and
+  // its slacks), the inequality rows of the blocks above (inherited), the bounds and its own
+  // rows, and meq_[b] + n + min_[b] objective rows (equalities or their R, damping, slacks);
+  // the minimum-norm stage n columns and n objective rows; the hard phase's phase 1 a slack
+  // column and an objective row per hard inequality row and per bound
   trials_.resize(blocks + 1);
-  for (TrialState& t : trials_) {
-    t.wqr.reserve(max_cols, max_grows, max_qrows);
-    t.kqr.reserve(max_qrows, max_cols, 1);
-    t.cqr.reserve(max_cols, max_cols, 1);
-    t.krz.reserve(max_cols, max_cols);
-    t.kqr_t.reserve(max_cols, max_qrows, 1);
-    t.Qt.setZero(max_qrows, max_cols);
-    t.key_widx.reserve(max_grows);
-    t.key_G.setZero(static_cast<Eigen::Index>(max_grows) * max_cols);
-    t.key_Q.setZero(static_cast<Eigen::Index>(max_qrows) * max_cols);
+  int above = 0;  // inequality rows of the blocks above stage b
+  for (int b = 0; b <= blocks; ++b) {
+    int cols = hard_cols, grows = min_[0] + (has_bounds ? n : 0) + 1,
+        qrows = min_[0] + (has_bounds ? n : 0);
+    if (b > 0 && b < blocks) {
+      cols = n + min_[b];
+      grows = above + (has_bounds ? n : 0) + min_[b] + 1;
+      qrows = meq_[b] + n + min_[b];
+    } else if (b == blocks) {
+      cols = n;
+      grows = capacity_ + (has_bounds ? n : 0) + 1;
+      qrows = n;
+    }
+    cols = std::max(cols, 1);
+    qrows = std::max(qrows, 1);
+    if (b < blocks) above += min_[b];
+    TrialState& t = trials_[b];
+    t.wqr.reserve(cols, grows, qrows);
+    t.kqr.reserve(qrows, cols, 1);
+    t.cqr.reserve(cols, cols, 1);
+    t.krz.reserve(cols, cols);
+    t.kqr_t.reserve(cols, qrows, 1);
+    t.Qt.setZero(qrows, cols);
+    t.key_widx.reserve(grows);
+    t.key_G.setZero(static_cast<Eigen::Index>(cols) * cols);  // kw <= k rows kept (trial_keep)
+    t.key_Q.setZero(static_cast<Eigen::Index>(qrows) * cols);
   }
   ts_ = &trials_[0];
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
@@ -229,10 +251,17 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Ab_.setZero(std::max(max_eq, 1), n);
   Cl_.setZero(std::max(max_in, 1), n);
   CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
-  mqr_.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}), std::max({n, capacity_, 1}));
-  mqr_.reserve_wy(std::max({n, capacity_, 1}));
-  tqr_.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
-  trz_.reserve(std::max(n, 1), std::max(n, 1));
+  // each level's closed-form factorisations, sized for its own equality rows
+  cforms_.resize(blocks);
+  for (int b = 0; b < blocks; ++b) {
+    ClosedForm& f = cforms_[b];
+    f.mqr.reserve(std::max({n, meq_[b], 1}), std::max({n, meq_[b], 1}),
+                  std::max({n, capacity_, 1}));
+    f.mqr.reserve_wy(std::max({n, capacity_, 1}));
+    f.tqr.reserve(std::max({n, meq_[b], 1}), std::max(n, 1), 1);
+    f.trz.reserve(std::max(n, 1), std::max(n, 1));
+  }
+  cf_ = &cforms_[0];
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
   nsp_.setZero(std::max(n, 1), std::max(n, 1));
   cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
@@ -365,34 +394,53 @@ void Hierarchy::freeze(double scale) {
 void Hierarchy::freeze_wide(int rank) {
   auto Zr = Z_.leftCols(r_);
   z_identity_ = false;
-  mqr_.apply_q_right(Zr);
-  carry_z(mqr_, rank);
+  cf_->mqr.apply_q_right(Zr);
+  carry_z(cf_->mqr, rank);
   for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
   r_ -= rank;
 }
 
-bool Hierarchy::freeze_lookup(int stage, int kind, int rank, double fscale,
-                              const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C, int i0,
-                              int mi, bool with_viol) {
+bool Hierarchy::memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C,
+                           int i0, int mi) {
   FreezeMemo& f = memos_[stage];
-  f.pending = false;
-  const auto A = Aeq.middleRows(e0, me);
-  const auto Cl = C.middleRows(i0, mi);
+  f.rows_same = f.z_same = false;
+  if (!memo_gate()) {  // Z differs from the last call's (or no memo): nothing kept
+    f.valid = f.zm_valid = false;
+    return false;
+  }
   // the level's rows first (a changed Jacobian differs at its first entries, the IK's every
-  // call): when they changed, only they are kept -- the rest is stored once they repeat
-  const bool same_a = same_rows_or_copy(A, f.A, f.a_layout);  // (both always: each copies
-  const bool same_c = same_rows_or_copy(Cl, f.C, f.c_layout);  // what changed)
-  if (!(same_a && same_c)) {
-    f.valid = false;
+  // call): when they changed, only they are kept -- Z is kept once they repeat
+  const bool same_a = same_rows_or_copy(Aeq.middleRows(e0, me), f.A, f.a_layout);
+  const bool same_c = same_rows_or_copy(C.middleRows(i0, mi), f.C, f.c_layout);
+  f.rows_same = same_a && same_c;
+  if (!f.rows_same) {
+    f.valid = f.zm_valid = false;
     return false;
   }
   const auto Zr = Z_.leftCols(r_);
+  f.z_same = f.zm_valid && f.r_in == r_ && f.zid_in == z_identity_ &&
+             (r_ == 0 || std::memcmp(f.Z_in.data(), Zr.data(), sizeof(double) * n_ * r_) == 0);
+  if (!f.z_same) {  // the stored freeze had another Z: Z kept for the next call
+    f.valid = false;
+    f.Z_in.leftCols(r_) = Zr;
+    f.r_in = r_;
+    f.zid_in = z_identity_;
+    f.zm_valid = true;
+  }
+  return f.z_same;
+}
+
+bool Hierarchy::freeze_lookup(int stage, int kind, int rank, double fscale, int mi,
+                              bool with_viol) {
+  FreezeMemo& f = memos_[stage];
+  f.pending = false;
+  if (!freeze_memo || !f.rows_same) return false;  // (memo_entry: the rows changed)
+  // Z on entry is the last call's (z_same) and the stored freeze had it (valid): the rest
   const auto CZ = CinZ_.topLeftCorner(kz_, r_);
-  bool hit = f.valid && f.kind == kind && f.rank == rank && f.r_in == r_ && f.kz_in == kz_ &&
-             f.zid_in == z_identity_ && std::memcmp(&f.fscale, &fscale, sizeof fscale) == 0;
+  bool hit = f.z_same && f.valid && f.kind == kind && f.rank == rank && f.kz_in == kz_ &&
+             std::memcmp(&f.fscale, &fscale, sizeof fscale) == 0;
   for (int i = 0; hit && with_viol && i < mi; ++i) hit = f.viol[i] == viol_[i];
-  hit = hit && std::memcmp(f.Z_in.data(), Zr.data(), sizeof(double) * n_ * r_) == 0 &&
-        same_bits(f.CinZ_in.topLeftCorner(kz_, r_), CZ);
+  hit = hit && same_bits(f.CinZ_in.topLeftCorner(kz_, r_), CZ);
   if (hit) {
     Z_.leftCols(f.r_out) = f.Z_out.leftCols(f.r_out);
     r_ = f.r_out;
@@ -403,17 +451,14 @@ bool Hierarchy::freeze_lookup(int stage, int kind, int rank, double fscale,
     ++freeze_memo_hits_;
     return true;
   }
-  // the rows repeat, the rest not (yet): the inputs taken, the outputs by freeze_store
+  // the rows repeat (Z_in is this call's Z), the rest is taken: outputs by freeze_computed
   f.valid = false;
   f.pending = true;
   f.kind = kind;
   f.rank = rank;
-  f.r_in = r_;
   f.kz_in = kz_;
-  f.zid_in = z_identity_;
   f.fscale = fscale;
   for (int i = 0; i < mi; ++i) f.viol[i] = with_viol ? viol_[i] : 0;
-  f.Z_in.leftCols(r_) = Zr;
   f.CinZ_in.topLeftCorner(kz_, r_) = CZ;
   return false;
 }
@@ -441,11 +486,11 @@ void Hierarchy::freeze_null_space(int rank) {
   for (int t = 0; t < l; ++t) {  // column t of N: Z_rz^T e_{rank+t} (or Qf e_{rank+t}), permuted
     q.setZero();
     q(rank + t) = 1.0;
-    if (qr_rz_)
-      trz_.apply_zt(q);
+    if (cf_->rz)
+      cf_->trz.apply_zt(q);
     else
-      tqr_.apply_q(q);
-    for (int i = 0; i < r_; ++i) N(mqr_.perm(i), t) = q(i);
+      cf_->tqr.apply_q(q);
+    for (int i = 0; i < r_; ++i) N(cf_->mqr.perm(i), t) = q(i);
   }
   auto Zn = Ztmp_.leftCols(l);
   Zn.noalias() = Z_.leftCols(r_) * N;
@@ -518,7 +563,7 @@ bool Hierarchy::trial_restore(const LsqProblem& P, const std::vector<int8_t>& W)
       if (std::memcmp(&g[c], &row.coeffRef(c), sizeof(double)) != 0) return false;
   }
   const double* q = t.key_Q.data();
-  for (int c = 0; c < k; ++c, q += qr)
+  for (int c = 0; c < k && qr > 0; ++c, q += qr)
     if (std::memcmp(q, P.Q.col(c).data(), sizeof(double) * qr) != 0) return false;
   // the same factorisations as factor_trial's: its flags as it leaves them (K, when the
   // trial's ls_step made it, is still the factorisation of this trial's K: k_valid kept)
@@ -533,6 +578,12 @@ bool Hierarchy::trial_restore(const LsqProblem& P, const std::vector<int8_t>& W)
 void Hierarchy::trial_keep(const LsqProblem& P) {
   TrialState& t = *ts_;
   const int k = P.cols, qr = P.qrows, kw = static_cast<int>(widx_.size());
+  // (more working rows than columns, or a problem larger than the stage's key: not kept)
+  if (static_cast<Eigen::Index>(kw) * k > t.key_G.size() ||
+      static_cast<Eigen::Index>(qr) * k > t.key_Q.size()) {
+    t.intact = false;
+    return;
+  }
   t.key_k = k;
   t.key_qrows = qr;
   t.key_unit_q = unit_q_;
@@ -544,7 +595,7 @@ void Hierarchy::trial_keep(const LsqProblem& P) {
   for (int j = 0; j < kw; ++j, g += k)
     for (int c = 0; c < k; ++c) g[c] = P.G(widx_[j], c);
   double* q = t.key_Q.data();
-  for (int c = 0; c < k; ++c, q += qr)
+  for (int c = 0; c < k && qr > 0; ++c, q += qr)
     std::memcpy(q, P.Q.col(c).data(), sizeof(double) * qr);
   t.intact = true;
 }
@@ -1450,22 +1501,21 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   return kOk;
 }
 
-int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e,
-                              double tol, double floor, Eigen::Ref<Vec> dz) {
+int Hierarchy::qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floor) {
   const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
   const bool wide = me <= r;
-  qr_wide_ = wide;
+  cf_->wide = wide;
   const int p = wide ? me : r;  // columns of the factorised matrix
   const int m = wide ? r : me;  // its rows
   if (wide)
-    mqr_.matrix(r, me) = M.transpose();
+    cf_->mqr.matrix(r, me) = M.transpose();
   else
-    mqr_.matrix(me, r) = M;
+    cf_->mqr.matrix(me, r) = M;
   // pivoted QR, every step (the full R: a tall level's compressed objective); the rank is
   // the first pivot of norm <= tol (|R(j, j)| is that pivot column's norm), as a
   // factorisation stopping there would give
-  const int steps = mqr_.factor(0.0, 0.0);
-  const auto Af = mqr_.matrix();
+  const int steps = cf_->mqr.factor(0.0, 0.0);
+  const auto Af = cf_->mqr.matrix();
   int rank = steps;
   if (rank_revealing_qr) {
     rank = 0;
@@ -1511,56 +1561,87 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
     inv = Ri.norm();
   }
   if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return -1;
-  if (wide && rank == me) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
-    mqr_.min_norm_transposed_solve(e, dz);
-  } else if (!wide && rank == r) {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
-    auto u = ute_.head(me);
-    u = e;
-    mqr_.apply_qt(u);
-    mqr_.solve_r(u);
-    for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = u(i);
-  } else if (!wide) {
-    // M P = Qf [R11 R12; 0 0] (R22 dropped): dz = P w, w the minimum-norm solution of
-    // [R11 R12] w = (Qf^T e)(0:rank), through the QR of T = [R11 R12]^T (r x rank)
-    auto u = ute_.head(me);
-    u = e;
-    mqr_.apply_qt(u);
-    // (rz_min_norm: the RZ of [R11 R12] instead, in trz_)
-    auto w = u_.head(r);
-    qr_rz_ = false;
+  // a rank-deficient M: the factorisation of [R11 R12] (tall) or of L = [R11^T; R12^T] (wide)
+  cf_->rz = false;
+  if (!wide && rank < r) {
+    // (rz_min_norm: the RZ of [R11 R12] in trz, else the QR of T = [R11 R12]^T in tqr)
     if (rz_min_norm) {
-      MapMat T = trz_.matrix(rank, r);  // [R11 R12]^T (its upper triangle is not read)
+      MapMat T = cf_->trz.matrix(rank, r);  // [R11 R12]^T (its upper triangle is not read)
       for (int j = 0; j < rank; ++j)
         T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
-      if (!trz_.factor()) return -1;
+      if (!cf_->trz.factor()) return -1;
       ++rz_factors_;
-      qr_rz_ = true;
-      trz_.min_norm_solve(u.head(rank), w);
+      cf_->rz = true;
     } else {
-      MapMat T = tqr_.matrix(r, rank);
+      MapMat T = cf_->tqr.matrix(r, rank);
       T.setZero();
       for (int j = 0; j < rank; ++j)
         T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
-      if (tqr_.factor(0.0, 0.0) < rank) return -1;
-      tqr_.min_norm_transposed_solve(u.head(rank), w);
+      if (cf_->tqr.factor(0.0, 0.0) < rank) return -1;
     }
-    for (int i = 0; i < r; ++i) dz(mqr_.perm(i)) = w(i);
+  } else if (wide && rank < me) {
+    MapMat L = cf_->tqr.matrix(me, rank);
+    L.setZero();
+    for (int j = 0; j < rank; ++j) L.col(j).tail(me - j) = Af.row(j).segment(j, me - j).transpose();
+    if (cf_->tqr.factor(0.0, 0.0) < rank) return -1;
+  }
+  cf_->smin = 1.0 / inv;
+  return rank;
+}
+
+int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e,
+                              double tol, double floor, bool same_m, Eigen::Ref<Vec> dz) {
+  ClosedForm& f = *cf_;
+  const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
+  const int switches = (rank_revealing_qr ? 1 : 0) | (small_rinv ? 2 : 0) |
+                       (rz_min_norm ? 4 : 0) | (gemv_qr ? 8 : 0);
+  // (closed_form_memo: M bit for bit the one factorised at this level's last call, with the
+  // same tolerances: its factorisation, or its failure, is still in f)
+  if (same_m && f.valid && f.key_switches == switches &&
+      std::memcmp(&f.key_tol, &tol, sizeof tol) == 0 &&
+      std::memcmp(&f.key_floor, &floor, sizeof floor) == 0) {
+    ++closed_form_memo_hits_;
+  } else {
+    f.rank = qr_factor(M, tol, floor);
+    f.valid = closed_form_memo;  // (the factorisation of the M now in Ms_ of the stage)
+    f.key_tol = tol;
+    f.key_floor = floor;
+    f.key_switches = switches;
+  }
+  const int rank = f.rank;
+  if (rank <= 0) return -1;
+  const bool wide = f.wide;
+  if (wide && rank == me) {  // M = P R^T Qf^T: the minimum-norm solution of M dz = e
+    f.mqr.min_norm_transposed_solve(e, dz);
+  } else if (!wide && rank == r) {  // M P = Qf R: dz = P R^-1 (Qf^T e)(0:r)
+    auto u = ute_.head(me);
+    u = e;
+    f.mqr.apply_qt(u);
+    f.mqr.solve_r(u);
+    for (int i = 0; i < r; ++i) dz(f.mqr.perm(i)) = u(i);
+  } else if (!wide) {
+    // M P = Qf [R11 R12; 0 0] (R22 dropped): dz = P w, w the minimum-norm solution of
+    // [R11 R12] w = (Qf^T e)(0:rank), by the RZ of [R11 R12] or the QR of its transpose
+    auto u = ute_.head(me);
+    u = e;
+    f.mqr.apply_qt(u);
+    auto w = u_.head(r);
+    if (f.rz)
+      f.trz.min_norm_solve(u.head(rank), w);
+    else
+      f.tqr.min_norm_transposed_solve(u.head(rank), w);
+    for (int i = 0; i < r; ++i) dz(f.mqr.perm(i)) = w(i);
   } else {
     // M^T P = Qf [R11 R12; 0 0]: M = P L Qf1^T with L = [R11^T; R12^T] (me x rank, full
     // column rank); dz = Qf [v; 0], v the least-squares solution of L v = P^T e (QR of L)
-    MapMat L = tqr_.matrix(me, rank);
-    L.setZero();
-    for (int j = 0; j < rank; ++j) L.col(j).tail(me - j) = Af.row(j).segment(j, me - j).transpose();
-    if (tqr_.factor(0.0, 0.0) < rank) return -1;
     auto u = ute_.head(me);
-    for (int i = 0; i < me; ++i) u(i) = e(mqr_.perm(i));
-    tqr_.apply_qt(u);
-    tqr_.solve_r(u);
+    for (int i = 0; i < me; ++i) u(i) = e(f.mqr.perm(i));
+    f.tqr.apply_qt(u);
+    f.tqr.solve_r(u);
     dz.setZero();
-    for (int i = 0; i < rank; ++i) dz(tqr_.perm(i)) = u(i);
-    mqr_.apply_q(dz);
+    for (int i = 0; i < rank; ++i) dz(f.tqr.perm(i)) = u(i);
+    f.mqr.apply_q(dz);
   }
-  qr_smin_ = 1.0 / inv;
   ++qr_closed_forms_;
   return rank;
 }
@@ -1571,12 +1652,12 @@ void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
   if (!by_qr) {
     if (rank == 0) return;  // no equality rows (no SVD computed): nothing to fill
     out = svd.matrixV().topLeftCorner(r, rank);  // [M 0]'s padding rows below r are zero
-  } else if (qr_wide_) {  // M^T P = Qf R: Qf's first rank columns
+  } else if (cf_->wide) {  // M^T P = Qf R: Qf's first rank columns
     out.setZero();
     for (int i = 0; i < rank; ++i) {
       out(i, i) = 1.0;
       auto col = out.col(i);
-      mqr_.apply_q(col);
+      cf_->mqr.apply_q(col);
     }
   } else if (rank == r) {  // M has full column rank: the whole space
     out.setIdentity();
@@ -1585,11 +1666,11 @@ void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
     for (int j = 0; j < rank; ++j) {
       q.setZero();
       q(j) = 1.0;
-      if (qr_rz_)
-        trz_.apply_zt(q);  // T's row space: Z^T [I; 0]
+      if (cf_->rz)
+        cf_->trz.apply_zt(q);  // T's row space: Z^T [I; 0]
       else
-        tqr_.apply_q(q);
-      for (int i = 0; i < r; ++i) out(mqr_.perm(i), j) = q(i);
+        cf_->tqr.apply_q(q);
+      for (int i = 0; i < r; ++i) out(cf_->mqr.perm(i), j) = q(i);
     }
   }
 }
@@ -1601,10 +1682,15 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   const int me = meq_[b], mi = min_[b], e0 = eq0_[b], i0 = in0_[b];
   const int stage = b;
   ts_ = &trials_[stage];
+  cf_ = &cforms_[stage];
   if (r_ == 0) {
     inherit(C, lo, hi, i0, mi, nullptr);
     return kOk;
   }
+  // (the memos: A, C and Z on entry bit for bit the last call's -- M = A Z is then the one
+  // in Ms_[stage], and its factorisations those the stage keeps)
+  const bool same_m = memo_entry(stage, Aeq, e0, me, C, i0, mi) && closed_form_memo;
+  if (!same_m) cf_->svd_valid = false;
   const auto Zr = Z_.leftCols(r_);
   // ---- damped closed form of the projected equalities
   int rank = 0;
@@ -1623,7 +1709,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     if (identity_z && z_identity_) {  // A I: the rows themselves
       M = A;
       ++identity_products_;
-    } else {
+    } else if (!same_m) {
       auto Ab = Ab_.topRows(me);
       Ab = A;  // contiguous: the product below makes no temporary
       M.noalias() = Ab * Zr;
@@ -1643,7 +1729,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     // this floor, damping 0 solved rows dependent to 1e-10 exactly, x ~ 1e10, where the
     // Python engine leaves them to the lower levels: tests/core/test_native_damped.py)
     const double floor = std::max({tau, rank_tol, kMovableTol * scale});
-    const int qr_rank = qr_closed_form(M, e, rank_tol, floor, dz);
+    const int qr_rank = qr_closed_form(M, e, rank_tol, floor, same_m, dz);
     by_qr = qr_rank > 0;
     if (by_qr) {
       rank = qr_rank;
@@ -1654,8 +1740,11 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       // the SVD of [M 0] (me x n, zero columns padded to the stage's fixed width): the same
       // singular values and U; V's first rank columns are M's, padded with zero rows. A fixed
       // size keeps JacobiSVD's workspace (no allocation when r changes)
-      Ms_[stage].rightCols(n_ - r_).setZero();
-      svd.compute(Ms_[stage], Eigen::ComputeThinU | Eigen::ComputeThinV);
+      if (!cf_->svd_valid) {  // (closed_form_memo: else the SVD of this M, the last call's)
+        Ms_[stage].rightCols(n_ - r_).setZero();
+        svd.compute(Ms_[stage], Eigen::ComputeThinU | Eigen::ComputeThinV);
+        cf_->svd_valid = closed_form_memo;
+      }
       const Vec& s = svd.singularValues();
       rank = numerical_rank(s, me, r_, scale);
       rank = independent_rank(svd, Aeq, e0, me, rank, scale);
@@ -1677,13 +1766,13 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     x_ = xc;
     snap(x_);
     inherit(C, lo, hi, i0, mi, nullptr);
-    if (by_qr && !qr_wide_ && rank == r_) {  // M has full column rank: no freedom left
+    if (by_qr && !cf_->wide && rank == r_) {  // M has full column rank: no freedom left
       r_ = 0;
       z_identity_ = false;
     } else if (rank) {
       // (freeze_memo: the same inputs as this level's last freeze: its outputs restored)
-      const int kind = (by_qr && qr_wide_) ? 1 : ((by_qr && null_space_freeze) ? 2 : 3);
-      if (!(memo_gate() && freeze_lookup(stage, kind, rank, 1.0, Aeq, e0, me, C, i0, mi, false))) {
+      const int kind = (by_qr && cf_->wide) ? 1 : ((by_qr && null_space_freeze) ? 2 : 3);
+      if (!(memo_gate() && freeze_lookup(stage, kind, rank, 1.0, mi, false))) {
         if (kind == 1) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
           freeze_wide(rank);
         } else if (kind == 2) {  // Z <- Z P null([R11 R12])
@@ -1738,21 +1827,21 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // constant in y, kept in dropped2)
   // (the full QR may stop at a pivot column exactly zero: then the whole trailing block is
   // checked to be exactly zero, its rows of R are zero and the compression stays exact)
-  bool full_r = by_qr && !qr_wide_ && compress_objective && mqr_.rank() == r_;
-  if (by_qr && !qr_wide_ && compress_objective && compress_zero_tail && !full_r &&
-      mqr_.rows() == me && mqr_.cols() == r_) {
-    const int t = mqr_.rank();
-    full_r = (mqr_.matrix().bottomRightCorner(me - t, r_ - t).array() == 0.0).all();
+  bool full_r = by_qr && !cf_->wide && compress_objective && cf_->mqr.rank() == r_;
+  if (by_qr && !cf_->wide && compress_objective && compress_zero_tail && !full_r &&
+      cf_->mqr.rows() == me && cf_->mqr.cols() == r_) {
+    const int t = cf_->mqr.rank();
+    full_r = (cf_->mqr.matrix().bottomRightCorner(me - t, r_ - t).array() == 0.0).all();
     if (full_r) ++zero_tail_compressions_;
   }
   const int qme = full_r ? r_ : me;
   P.start(qme + ndamp + mv, cols);
   if (qme < me) {
-    const auto Af = mqr_.matrix();
-    for (int j = 0; j < r_; ++j) P.Q.col(mqr_.perm(j)).head(j + 1) = Af.col(j).head(j + 1);
+    const auto Af = cf_->mqr.matrix();
+    for (int j = 0; j < r_; ++j) P.Q.col(cf_->mqr.perm(j)).head(j + 1) = Af.col(j).head(j + 1);
     auto u = ute_.head(me);
     u = e;
-    mqr_.apply_qt(u);
+    cf_->mqr.apply_qt(u);
     P.c.head(r_) = u.head(r_);
     P.dropped2 = u.tail(me - r_).squaredNorm();
   } else if (me) {
@@ -1811,7 +1900,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // an ill-conditioned or damped level: finished to rounding (a point optimal to kKktTol can
   // be far from the optimum along a direction of curvature s^2 or tau^2, and is frozen)
   if (me && rank &&
-      (by_qr ? qr_smin_ < kIllConditioned * M_scale
+      (by_qr ? cf_->smin < kIllConditioned * M_scale
              : s(rank - 1) < std::max(tau, kIllConditioned * s(0)))) {
     exact_ = true;
     const bool done = active_set(P, y, W_, iters);
@@ -1844,13 +1933,13 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // rank-deficient tall M and no violated row), else F^T = [V_rank, Z^T C_violated^T]
   // (r x f) factorised, null(F) being what the level leaves free
   const bool by_null_space =
-      nviol == 0 && rank && by_qr && !qr_wide_ && rank < r_ && null_space_freeze;
+      nviol == 0 && rank && by_qr && !cf_->wide && rank < r_ && null_space_freeze;
   // full_rank_freeze: the level's equalities have rank r (M of full column rank) and no row
   // is violated: F^T is an orthonormal basis of the whole space, null(F) = {0}
   const bool no_freedom = full_rank_freeze && nviol == 0 && rank == r_;
   // wide_freeze: a wide M factorised by the QR of M^T, no row violated: null(M) spans the
   // last r - rank columns of Qf, Z <- Z Qf by M^T's own reflectors (as a feasible closed form)
-  const bool by_wide = wide_freeze && !no_freedom && nviol == 0 && rank && by_qr && qr_wide_;
+  const bool by_wide = wide_freeze && !no_freedom && nviol == 0 && rank && by_qr && cf_->wide;
   const bool by_f = !by_null_space && !no_freedom && !by_wide;
   const int k_before = k_;
   inherit(C, lo, hi, i0, mi, &viol_);
@@ -1869,7 +1958,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // (freeze_memo: the same inputs as this level's last freeze: its outputs restored; the
   // violated rows are inputs of the general freeze only)
   const int kind = by_null_space ? 4 : (by_wide ? 5 : 6);
-  if (memo_gate() && freeze_lookup(stage, kind, rank, 1.0, Aeq, e0, me, C, i0, mi, by_f))
+  if (memo_gate() && freeze_lookup(stage, kind, rank, 1.0, mi, by_f))
     return kOk;
   if (by_null_space) {
     freeze_null_space(rank);
@@ -2058,7 +2147,8 @@ int Hierarchy::gemv_steps() {
     s += t.wqr.gemv_steps();
     for (const PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) s += q->gemv_steps;
   }
-  for (const PivotedQR* q : {&fqr_, &sqr_, &mqr_, &tqr_}) s += q->gemv_steps;
+  for (const ClosedForm& f : cforms_) s += f.mqr.gemv_steps + f.tqr.gemv_steps;
+  for (const PivotedQR* q : {&fqr_, &sqr_}) s += q->gemv_steps;
   return s;
 }
 
@@ -2091,9 +2181,17 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
   stats.setZero();
   detail.setZero();
-  for (PivotedQR* q : {&fqr_, &sqr_, &mqr_, &tqr_}) {
+  for (PivotedQR* q : {&fqr_, &sqr_}) {
     q->gemv_update = gemv_qr;
     q->gemv_steps = 0;
+  }
+  for (ClosedForm& f : cforms_) {
+    for (PivotedQR* q : {&f.mqr, &f.tqr}) {
+      q->gemv_update = gemv_qr;
+      q->gemv_steps = 0;
+    }
+    f.mqr.wy_right = wy_right;
+    f.mqr.wy_applications = 0;
   }
   for (TrialState& t : trials_) {
     for (PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) {
@@ -2103,10 +2201,8 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     t.wqr.set_gemv_update(gemv_qr);
     t.wqr.gemv_steps() = 0;
   }
-  for (PivotedQR* q : {&mqr_, &fqr_}) {
-    q->wy_right = wy_right;
-    q->wy_applications = 0;
-  }
+  fqr_.wy_right = wy_right;
+  fqr_.wy_applications = 0;
   timed_out_ = false;
   seeded_ = 0;
   downdates_ = 0;
@@ -2129,6 +2225,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   wide_freezes_ = 0;
   freeze_memo_hits_ = 0;
   trial_memo_hits_ = 0;
+  closed_form_memo_hits_ = 0;
   small_rinvs_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);

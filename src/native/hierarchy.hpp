@@ -27,7 +27,7 @@ namespace qpcoord {
 
 // 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches;
 // 9 (session 14): Hierarchy.gram_screen / gram_screens;
-// 10 (session 15): Hierarchy.freeze_memo / freeze_memo_hits, trial_memo / trial_memo_hits
+// 10 (session 15): Hierarchy.freeze_memo, trial_memo, closed_form_memo and their *_hits
 inline constexpr int kAbiVersion = 10;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
@@ -233,6 +233,14 @@ class Hierarchy {
   bool freeze_memo = true;
   /// Freezes of the last call restored by freeze_memo.
   int freeze_memo_hits() const { return freeze_memo_hits_; }
+  /// A level whose rows A and Z on entry are bit for bit those of its previous call takes
+  /// M = A Z as it is (the stage keeps it) and its closed form's factorisation (the QR of M
+  /// and of its [R11 R12], or its SVD) as that call left it, instead of computing them again
+  /// (default; a re-solve whose matrices did not change). The same x bit for bit (False:
+  /// every product and factorisation computed, for comparisons).
+  bool closed_form_memo = true;
+  /// Levels of the last call whose closed-form factorisation closed_form_memo reused.
+  int closed_form_memo_hits() const { return closed_form_memo_hits_; }
   /// A stage's warm trial (the pivoted QR of its stored working set's rows, Q Qf's null-space
   /// columns, then K's factorisation) whose rows and objective are bit for bit those of the
   /// same stage's trial in the previous call, its factorisations untouched since (the trial
@@ -259,7 +267,11 @@ class Hierarchy {
   /// instructions), off in the baseline build (1.8 % fewer instructions, no faster).
   bool wy_right = kWyRightDefault;
   /// apply_q_right calls of the last call that took the WY form (wy_right).
-  int wy_applications() const { return mqr_.wy_applications + fqr_.wy_applications; }
+  int wy_applications() const {
+    int w = fqr_.wy_applications;
+    for (const ClosedForm& f : cforms_) w += f.mqr.wy_applications;
+    return w;
+  }
   /// Levels of the last call frozen by null_space_freeze.
   int null_space_freezes() const { return null_space_freezes_; }
   /// Products with an identity Z skipped in the last call (identity_z).
@@ -332,11 +344,20 @@ class Hierarchy {
   /// rank tolerance). Then the SVD's numerical rank is this rank, no singular value is
   /// damped, and the SVD's truncated closed form is the minimum-norm least-squares solution
   /// of the complete orthogonal decomposition (R22 dropped), computed here. Returns the rank
-  /// or -1: use the SVD.
+  /// or -1: use the SVD. same_m: M is bit for bit the one in the stage's Ms_ at its last
+  /// call (closed_form_memo reuses that call's factorisation, or its failure).
   int qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol,
-                     double floor, Eigen::Ref<Vec> dz);
+                     double floor, bool same_m, Eigen::Ref<Vec> dz);
+  /// qr_closed_form's factorisations (cf_: mqr, and tqr or trz when M is rank-deficient):
+  /// the rank, or -1 (no clear gap: the SVD).
+  int qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floor);
+  /// The memos' entry test of level stage: true when its rows A and C and Z on entry are bit
+  /// for bit those of its last call (then M = A Z is the one in Ms_); keeps what differs.
+  /// False whenever both memos are off or a freeze of this call was computed (memo_gate).
+  bool memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C, int i0,
+                  int mi);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
-  /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in tqr_).
+  /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in the stage's tqr).
   void row_space_basis(const Svd& svd, bool by_qr, int rank,
                        Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out);
   bool feasible(const Eigen::Ref<const Vec>& x) const;
@@ -352,8 +373,8 @@ class Hierarchy {
   void carry_z(PivotedQR& qr, int rank);
   /// Z <- Z null(F) with F^T the r x f matrix already in fqr_ (rank relative to scale).
   void freeze(double scale);
-  /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (qr_rz_:
-  /// N from trz_, else from tqr_); the carried projection Cin Z follows by the same product.
+  /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (rz:
+  /// N from the stage's trz, else from its tqr); the carried projection Cin Z follows by the same product.
   void freeze_null_space(int rank);
   /// The rank of a level's M without directions dependent on the frozen rows to within the
   /// movable tolerance (robust: see hierarchy.cpp).
@@ -366,7 +387,7 @@ class Hierarchy {
   /// True when the r x m matrix T proves every pivot of its column-pivoted QR above the
   /// movable tolerance (gram_screen: see hierarchy.cpp).
   bool independent_by_gram(const Eigen::Ref<const Mat>& T);
-  /// Z <- Z Qf(:, rank:) after a wide M's QR in mqr_ (M^T = Qf R: null(M) is spanned by
+  /// Z <- Z Qf(:, rank:) after a wide M's QR in the stage's mqr (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
   /// freeze_memo: true when the stage's stored freeze had these inputs (kind, rank, fscale,
@@ -375,14 +396,13 @@ class Hierarchy {
   /// are kept when they differ from the last lookup's (nothing else: rows that change at
   /// every call, an IK's, cost one comparison and one copy), the other inputs when they
   /// repeat (the outputs then by freeze_store).
-  bool freeze_lookup(int stage, int kind, int rank, double fscale, const CRef<Mat>& Aeq, int e0,
-                     int me, const CRef<Mat>& C, int i0, int mi, bool with_viol);
+  bool freeze_lookup(int stage, int kind, int rank, double fscale, int mi, bool with_viol);
   /// freeze_memo: the outputs of the freeze just made, stored with freeze_lookup's inputs
   /// (when it took them); the lower levels' freezes of this call are not looked up (their Z
   /// differs from the previous call's: a comparison and copies for nothing, the IK's case).
   void freeze_computed(int stage);
   /// freeze_memo on and no freeze of this call computed so far (Z may repeat the last call's)
-  bool memo_gate() const { return freeze_memo && z_repeats_; }
+  bool memo_gate() const { return (freeze_memo || closed_form_memo || trial_memo) && z_repeats_; }
   bool z_repeats_ = false;
   void snap(Vec& x) const;
 
@@ -553,6 +573,27 @@ class Hierarchy {
   std::vector<TrialState> trials_;  ///< per stage
   TrialState* ts_ = nullptr;        ///< the stage being solved's
   int trial_memo_hits_ = 0;         ///< trials of this call restored by trial_memo
+  /// A level's closed form from the QR of M = A Z (one per stage): closed_form_memo finds
+  /// the factorisation of the level's M of the previous call there when A and Z repeat.
+  struct ClosedForm {
+    PivotedQR mqr;  ///< M (tall) or M^T (wide): the closed form without an SVD
+    /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
+    /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
+    PivotedQR tqr;
+    TrapezoidRZ trz;     ///< rz_min_norm: [R11 R12] of a rank-deficient tall M
+    bool wide = false;   ///< M^T factorised (me <= r)
+    bool rz = false;     ///< [R11 R12] went by trz (else tqr)
+    double smin = 0.0;   ///< lower bound 1/|R^-1|_F of sigma_min(M)
+    int rank = -1;       ///< qr_factor's result (-1: the SVD path)
+    /// closed_form_memo: the stage's M (Ms_) is the one factorised here (and, svd_valid,
+    /// by its SVD), with these tolerances and switches
+    bool valid = false, svd_valid = false;
+    double key_tol = 0.0, key_floor = 0.0;
+    int key_switches = -1;
+  };
+  std::vector<ClosedForm> cforms_;  ///< per stage
+  ClosedForm* cf_ = nullptr;        ///< the level being solved's
+  int closed_form_memo_hits_ = 0;   ///< closed forms of this call whose factorisation was reused
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR sqr_;  ///< slack_step: the transposed system on z
   int slack_steps_ = 0;  ///< steps by slack_step in this call
@@ -562,8 +603,6 @@ class Hierarchy {
   int least_distance_steps_ = 0;  ///< steps by least_distance in this call
   int batch_rows_ = 0;  ///< rows added by tight_batch in this call
   int grown_seeds_ = 0;  ///< stages of this call started from a grown stored set (grow_seed)
-  TrapezoidRZ trz_;  ///< rz_min_norm: [R11 R12] of a rank-deficient tall M's closed form
-  bool qr_rz_ = false;  ///< the last qr_closed_form's [R11 R12] went by trz_ (else tqr_)
   int rz_factors_ = 0;  ///< RZ factorisations of this call
   bool z_identity_ = false;  ///< Z_ is the n x n identity (r_ == n_; identity_z)
   int identity_products_ = 0;  ///< products with the identity Z skipped in this call
@@ -581,7 +620,6 @@ class Hierarchy {
   /// active_set decides stationarity and multiplier signs to rounding, not to kKktTol and a
   /// 1e-15 objective gain (the finish of an ill-conditioned or damped level, issue 24)
   bool exact_ = false;
-  double qr_smin_ = 0.0;  ///< lower bound 1/|R^-1|_F of sigma_min(M) from the last QR closed form
   Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,
       e_, ute_;
   std::vector<int> widx_, mov_;
@@ -594,10 +632,6 @@ class Hierarchy {
   Mat Cl_;   ///< a level's inequality rows, copied contiguous (max_in x n)
   Mat CZl_;  ///< their projection C Z (max_in x n: the left r columns)
   Mat Ztmp_;
-  PivotedQR mqr_;  ///< a level's M (tall) or M^T (wide): the closed form without an SVD
-  /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
-  /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
-  PivotedQR tqr_;
   int null_space_freezes_ = 0;  ///< levels frozen by null_space_freeze in this call
   int full_rank_freezes_ = 0;  ///< levels frozen by full_rank_freeze in this call
   int dependent_drops_ = 0;    ///< levels whose moving rows lost dependent directions
@@ -614,7 +648,10 @@ class Hierarchy {
     bool zid_in = false, zid_out = false;
     double fscale = 0.0;
     Mat Z_in, Z_out, CinZ_in, CinZ_out;
-    Vec A, C;  ///< the level's rows at the last lookup, in their layout (same_rows_or_copy)
+    Vec A, C;  ///< the level's rows at the last entry, in their layout (same_rows_or_copy)
+    bool rows_same = false;  ///< memo_entry of this call: A and C repeat
+    bool z_same = false;     ///< memo_entry of this call: A, C and Z repeat
+    bool zm_valid = false;   ///< Z_in, r_in, zid_in hold the last entry's Z
     int a_layout = 0, c_layout = 0;  ///< 0: nothing stored yet
     std::vector<char> viol;
   };
@@ -624,9 +661,8 @@ class Hierarchy {
   Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))
   Mat cztmp_;  ///< null_space_freeze: the product Cin Z P N before it is copied back
   int zero_tail_compressions_ = 0;  ///< levels compressed by compress_zero_tail in this call
-  bool qr_wide_ = false;    ///< the last qr_closed_form factorised M^T (me <= r)
   int qr_closed_forms_ = 0;  ///< closed forms by QR in this call
-  Mat rinv_;       ///< R^-1 of mqr_ (a bound on M's smallest singular value)
+  Mat rinv_;       ///< R^-1 of the stage's mqr (a bound on M's smallest singular value)
   std::vector<Svd> svds_;
 };
 

@@ -14,7 +14,12 @@ keeps its own factorisations, and a trial whose working rows and objective are b
 the last trial's of the stage, nothing having updated them since (it hit), uses them as
 they are.
 
-The tests compare solvers with the memos on against one with both off, bit for bit (x's and
+``Hierarchy.closed_form_memo``: a level whose rows and Z on entry are bit for bit its last
+call's keeps M = A Z (each stage holds its own) and the factorisations of its closed form
+(the pivoted QR of M, the RZ or QR of its [R11 R12], or M's SVD; each stage keeps its own):
+only the solves with the new targets run.
+
+The tests compare solvers with the memos on against one with all off, bit for bit (x's and
 the level values' bits, the info dicts), along sequences in which each level's matrix stays,
 changes, or comes back to an earlier value (a memo keyed on too little would restore a stale
 factorisation there), and check that the memos are used where the matrices repeat and not
@@ -37,12 +42,12 @@ def _bits(v: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(v, dtype=np.float64).view(np.uint64)
 
 
-MEMOS = ("freeze_memo", "trial_memo")
+MEMOS = ("freeze_memo", "trial_memo", "closed_form_memo")
 
 
 def _memo_pair(stack: qc.Stack, memos=MEMOS):
     """``(P, new, plain)``: native solvers of ``stack``, ``new`` with the memos ``memos`` on
-    (the others off), ``plain`` with none (both on by default)."""
+    (the others off), ``plain`` with none (all on by default)."""
     P, new, plain = switch_pair(stack, "freeze_memo")
     for memo in MEMOS:
         setattr(new._solver, memo, memo in memos)
@@ -50,16 +55,16 @@ def _memo_pair(stack: qc.Stack, memos=MEMOS):
     return P, new, plain
 
 
-def _same_step(P, new, plain, warm: bool = True) -> tuple[int, int]:
+def _same_step(P, new, plain, warm: bool = True) -> tuple[int, int, int]:
     """One solve by each: x, level values and info bit for bit the same; returns ``new``'s
-    (freeze_memo_hits, trial_memo_hits) (``plain`` has none)."""
+    hits (freeze_memo, trial_memo, closed_form_memo) (``plain`` has none)."""
     xn, rn, infon = new.solve(P, warm=warm)
     xp, rp, infop = plain.solve(P, warm=warm)
     np.testing.assert_array_equal(_bits(xn), _bits(xp))
     np.testing.assert_array_equal(_bits(rn), _bits(rp))
     assert infon == infop
-    assert plain._solver.freeze_memo_hits == 0 and plain._solver.trial_memo_hits == 0
-    return new._solver.freeze_memo_hits, new._solver.trial_memo_hits
+    assert all(getattr(plain._solver, m + "_hits") == 0 for m in MEMOS)
+    return tuple(getattr(new._solver, m + "_hits") for m in MEMOS)
 
 
 def _random_stack(seed: int):
@@ -94,7 +99,11 @@ def _move(task, rng, A=None) -> None:
 
 
 @needs_native
-@pytest.mark.parametrize("memos", [MEMOS, MEMOS[:1], MEMOS[1:]], ids=["both", "freeze", "trial"])
+@pytest.mark.parametrize(
+    "memos",
+    [MEMOS, MEMOS[:1], MEMOS[1:2], MEMOS[2:]],
+    ids=["all", "freeze", "trial", "closed form"],
+)
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_memos_equal_the_factorisations_computed_along_changing_matrices(seed, memos):
@@ -142,8 +151,9 @@ def test_memo_restores_every_freeze_of_a_re_solve_and_none_of_a_changed_stack():
     freezes = [h[0] for h in hits]
     assert freezes[-1] > 0 and freezes[-1] == freezes[-2]  # every freeze of the re-solve
     assert sum(h[1] for h in hits[4:]) > 0  # warm trials reused
+    assert hits[-1][2] == 4  # every level's closed form
     tasks[0].update(A=rows[0] + 1e-3 * rng.standard_normal(rows[0].shape))
-    assert _same_step(P, new, plain) == (0, 0)
+    assert _same_step(P, new, plain) == (0, 0, 0)
 
 
 @needs_native
@@ -157,7 +167,7 @@ def test_memo_on_the_moving_published_humanoid(unit):
     for step in range(5):
         move(step)
         hits.append(_same_step(P, new, plain))
-    assert hits[-1][0] > 0
+    assert hits[-1][0] > 0 and hits[-1][2] > 0
 
 
 @needs_native
@@ -173,8 +183,10 @@ def test_soth_re_solve_reuses_every_trial():
     for step in range(14):  # the freezes' memo is warm after two calls per level
         scen["move"](step)
         hits.append(_same_step(P, new, plain))
-    stages = new._solver.num_levels + 1  # levels and the minimum-norm step
-    assert hits[-1] == (new._solver.num_levels, stages)
+    levels = new._solver.num_levels
+    # every freeze, every stage's trial (levels, minimum norm), the equality levels' closed
+    # forms (level 0 has no equality row)
+    assert hits[-1] == (levels, levels + 1, levels - 1)
 
 
 @needs_native
@@ -188,4 +200,4 @@ def test_memo_switches_and_counters_are_exposed():
         assert getattr(h._solver, memo) is True
         setattr(h._solver, memo, False)
         assert getattr(h._solver, memo) is False
-    assert h._solver.freeze_memo_hits == 0 and h._solver.trial_memo_hits == 0
+    assert all(getattr(h._solver, m + "_hits") == 0 for m in MEMOS)
