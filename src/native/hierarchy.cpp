@@ -193,42 +193,15 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
     w.id.reserve(max_grows);
     w.side.reserve(max_grows);
   }
-  // one working set's and K's factorisations per stage (hard phase, levels, minimum norm):
-  // trial_memo finds a stage's last trial there at its next call
-  // each sized for its own stage: a level's problem has at most n + min_[b] columns (z and
-  // its slacks), the inequality rows of the blocks above (inherited), the bounds and its own
-  // rows, and meq_[b] + n + min_[b] objective rows (equalities or their R, damping, slacks);
-  // the minimum-norm stage n columns and n objective rows; the hard phase's phase 1 a slack
-  // column and an objective row per hard inequality row and per bound
-  trials_.resize(blocks + 1);
-  int above = 0;  // inequality rows of the blocks above stage b
-  for (int b = 0; b <= blocks; ++b) {
-    int cols = hard_cols, grows = min_[0] + (has_bounds ? n : 0) + 1,
-        qrows = min_[0] + (has_bounds ? n : 0);
-    if (b > 0 && b < blocks) {
-      cols = n + min_[b];
-      grows = above + (has_bounds ? n : 0) + min_[b] + 1;
-      qrows = meq_[b] + n + min_[b];
-    } else if (b == blocks) {
-      cols = n;
-      grows = capacity_ + (has_bounds ? n : 0) + 1;
-      qrows = n;
-    }
-    cols = std::max(cols, 1);
-    qrows = std::max(qrows, 1);
-    if (b < blocks) above += min_[b];
-    TrialState& t = trials_[b];
-    t.wqr.reserve(cols, grows, qrows);
-    t.kqr.reserve(qrows, cols, 1);
-    t.cqr.reserve(cols, cols, 1);
-    t.krz.reserve(cols, cols);
-    t.kqr_t.reserve(cols, qrows, 1);
-    t.Qt.setZero(qrows, cols);
-    t.key_widx.reserve(grows);
-    t.key_G.setZero(static_cast<Eigen::Index>(cols) * cols);  // kw <= k rows kept (trial_keep)
-    t.key_Q.setZero(static_cast<Eigen::Index>(qrows) * cols);
-  }
-  ts_ = &trials_[0];
+  // the first call's working-set and K factorisations, shared by its stages (the memos'
+  // per-stage ones are allocated at the second call: a one-shot solve never pays for them)
+  shared_trial_.wqr.reserve(max_cols, max_grows, max_qrows);
+  shared_trial_.kqr.reserve(max_qrows, max_cols, 1);
+  shared_trial_.cqr.reserve(max_cols, max_cols, 1);
+  shared_trial_.krz.reserve(max_cols, max_cols);
+  shared_trial_.kqr_t.reserve(max_cols, max_qrows, 1);
+  shared_trial_.Qt.setZero(max_qrows, max_cols);
+  ts_ = &shared_trial_;
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
   fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
@@ -251,7 +224,54 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Ab_.setZero(std::max(max_eq, 1), n);
   Cl_.setZero(std::max(max_in, 1), n);
   CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
-  // each level's closed-form factorisations, sized for its own equality rows
+  shared_cf_.mqr.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}),
+                        std::max({n, capacity_, 1}));
+  shared_cf_.mqr.reserve_wy(std::max({n, capacity_, 1}));
+  shared_cf_.tqr.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
+  shared_cf_.trz.reserve(std::max(n, 1), std::max(n, 1));
+  cf_ = &shared_cf_;
+  rinv_.setZero(std::max(n, 1), std::max(n, 1));
+  nsp_.setZero(std::max(n, 1), std::max(n, 1));
+  cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
+}
+
+void Hierarchy::allocate_per_stage() {
+  const int n = n_, blocks = static_cast<int>(meq_.size());
+  const int nb = has_bounds_ ? n : 0;
+  // each stage's working-set and K factorisations (trial_memo), sized for its own problem:
+  // a level's has at most n + min_[b] columns (z and its slacks), the inequality rows of the
+  // blocks above (inherited), the bounds and its own rows, and meq_[b] + n + min_[b]
+  // objective rows (equalities or their R, damping, slacks); the minimum-norm stage n columns
+  // and n objective rows; the hard phase's phase 1 a slack column and an objective row per
+  // hard inequality row and per bound
+  trials_.resize(blocks + 1);
+  int above = 0;  // inequality rows of the blocks above stage b
+  for (int b = 0; b <= blocks; ++b) {
+    int cols = n + min_[0] + nb, grows = min_[0] + nb + 1, qrows = min_[0] + nb;
+    if (b > 0 && b < blocks) {
+      cols = n + min_[b];
+      grows = above + nb + min_[b] + 1;
+      qrows = meq_[b] + n + min_[b];
+    } else if (b == blocks) {
+      cols = n;
+      grows = capacity_ + nb + 1;
+      qrows = n;
+    }
+    cols = std::max(cols, 1);
+    qrows = std::max(qrows, 1);
+    if (b < blocks) above += min_[b];
+    TrialState& t = trials_[b];
+    t.wqr.reserve(cols, grows, qrows);
+    t.kqr.reserve(qrows, cols, 1);
+    t.cqr.reserve(cols, cols, 1);
+    t.krz.reserve(cols, cols);
+    t.kqr_t.reserve(cols, qrows, 1);
+    t.Qt.setZero(qrows, cols);
+    t.key_widx.reserve(grows);
+    t.key_G.setZero(static_cast<Eigen::Index>(cols) * cols);  // kw <= k rows kept (trial_keep)
+    t.key_Q.setZero(static_cast<Eigen::Index>(qrows) * cols);
+  }
+  // each level's closed-form factorisations (closed_form_memo), sized for its equality rows
   cforms_.resize(blocks);
   for (int b = 0; b < blocks; ++b) {
     ClosedForm& f = cforms_[b];
@@ -261,12 +281,9 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
     f.tqr.reserve(std::max({n, meq_[b], 1}), std::max(n, 1), 1);
     f.trz.reserve(std::max(n, 1), std::max(n, 1));
   }
-  cf_ = &cforms_[0];
-  rinv_.setZero(std::max(n, 1), std::max(n, 1));
-  nsp_.setZero(std::max(n, 1), std::max(n, 1));
-  cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
+  // each level's memo entry and freeze (freeze_memo; not the hard phase's)
   memos_.resize(blocks);
-  for (int b = 1; b < blocks; ++b) {  // the levels' freezes (not the hard phase's)
+  for (int b = 1; b < blocks; ++b) {
     FreezeMemo& f = memos_[b];
     f.Z_in.setZero(n, n);
     f.Z_out.setZero(n, n);
@@ -276,6 +293,10 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
     f.C.setZero(static_cast<Eigen::Index>(min_[b]) * n);
     f.viol.assign(std::max(min_[b], 1), 0);
   }
+  // the first call's shared factorisations are not used again
+  shared_trial_ = TrialState();
+  shared_cf_ = ClosedForm();
+  per_stage_ = true;
 }
 
 bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) const {
@@ -402,6 +423,7 @@ void Hierarchy::freeze_wide(int rank) {
 
 bool Hierarchy::memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C,
                            int i0, int mi) {
+  if (!per_stage_) return false;  // (the first call: no memo allocated yet)
   FreezeMemo& f = memos_[stage];
   f.rows_same = f.z_same = false;
   if (!memo_gate()) {  // Z differs from the last call's (or no memo): nothing kept
@@ -604,9 +626,10 @@ void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) 
   // (trial_memo: the stage's last trial had these rows and objective, its factorisations
   // untouched since: nothing to compute. Only above every computed freeze of the call:
   // below one, Z and with it every projected row differ from the last call's)
-  if (trial_memo && z_repeats_ && trial_restore(P, W)) return;
+  const bool memo = trial_memo && per_stage_ && z_repeats_;
+  if (memo && trial_restore(P, W)) return;
   factor_trial_computed(P, W);
-  if (trial_memo && z_repeats_) trial_keep(P);
+  if (memo) trial_keep(P);
 }
 
 void Hierarchy::factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W) {
@@ -1354,7 +1377,7 @@ void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>
 int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                           const CRef<Vec>& lo, const CRef<Vec>& hi, MRef<Mat> stats,
                           MRef<Vec> detail, bool warm) {
-  ts_ = &trials_[0];
+  ts_ = stage_trial(0);
   z_repeats_ = true;  // (trial_memo's gate in the hard phase; set again after it)
   x_.setZero();
   Z_.setIdentity();
@@ -1681,8 +1704,8 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   const int b = k + 1;
   const int me = meq_[b], mi = min_[b], e0 = eq0_[b], i0 = in0_[b];
   const int stage = b;
-  ts_ = &trials_[stage];
-  cf_ = &cforms_[stage];
+  ts_ = stage_trial(stage);
+  cf_ = per_stage_ ? &cforms_[stage] : &shared_cf_;
   if (r_ == 0) {
     inherit(C, lo, hi, i0, mi, nullptr);
     return kOk;
@@ -2086,7 +2109,7 @@ bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T) {
 
 int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   const int stage = static_cast<int>(meq_.size());
-  ts_ = &trials_[stage];
+  ts_ = stage_trial(stage);
   if (r_ == 0) return kOk;
   const auto Zr = Z_.leftCols(r_);
   auto zx = tmpr_.head(r_);
@@ -2147,7 +2170,11 @@ int Hierarchy::gemv_steps() {
     s += t.wqr.gemv_steps();
     for (const PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) s += q->gemv_steps;
   }
+  for (const ClosedForm* f : {&shared_cf_}) s += f->mqr.gemv_steps + f->tqr.gemv_steps;
   for (const ClosedForm& f : cforms_) s += f.mqr.gemv_steps + f.tqr.gemv_steps;
+  s += shared_trial_.wqr.gemv_steps();
+  for (const PivotedQR* q : {&shared_trial_.kqr, &shared_trial_.cqr, &shared_trial_.kqr_t})
+    s += q->gemv_steps;
   for (const PivotedQR* q : {&fqr_, &sqr_}) s += q->gemv_steps;
   return s;
 }
@@ -2185,22 +2212,29 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     q->gemv_update = gemv_qr;
     q->gemv_steps = 0;
   }
-  for (ClosedForm& f : cforms_) {
+  if (calls_ > 0 && !per_stage_ && (freeze_memo || trial_memo || closed_form_memo))
+    allocate_per_stage();  // (the second call: once)
+  ++calls_;
+  auto set_cf = [&](ClosedForm& f) {
     for (PivotedQR* q : {&f.mqr, &f.tqr}) {
       q->gemv_update = gemv_qr;
       q->gemv_steps = 0;
     }
     f.mqr.wy_right = wy_right;
     f.mqr.wy_applications = 0;
-  }
-  for (TrialState& t : trials_) {
+  };
+  auto set_trial = [&](TrialState& t) {
     for (PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) {
       q->gemv_update = gemv_qr;
       q->gemv_steps = 0;
     }
     t.wqr.set_gemv_update(gemv_qr);
     t.wqr.gemv_steps() = 0;
-  }
+  };
+  set_cf(shared_cf_);
+  for (ClosedForm& f : cforms_) set_cf(f);
+  set_trial(shared_trial_);
+  for (TrialState& t : trials_) set_trial(t);
   fqr_.wy_right = wy_right;
   fqr_.wy_applications = 0;
   timed_out_ = false;

@@ -268,7 +268,7 @@ class Hierarchy {
   bool wy_right = kWyRightDefault;
   /// apply_q_right calls of the last call that took the WY form (wy_right).
   int wy_applications() const {
-    int w = fqr_.wy_applications;
+    int w = fqr_.wy_applications + shared_cf_.mqr.wy_applications;
     for (const ClosedForm& f : cforms_) w += f.mqr.wy_applications;
     return w;
   }
@@ -402,7 +402,9 @@ class Hierarchy {
   /// differs from the previous call's: a comparison and copies for nothing, the IK's case).
   void freeze_computed(int stage);
   /// freeze_memo on and no freeze of this call computed so far (Z may repeat the last call's)
-  bool memo_gate() const { return (freeze_memo || closed_form_memo || trial_memo) && z_repeats_; }
+  bool memo_gate() const {
+    return per_stage_ && (freeze_memo || closed_form_memo || trial_memo) && z_repeats_;
+  }
   bool z_repeats_ = false;
   void snap(Vec& x) const;
 
@@ -542,8 +544,9 @@ class Hierarchy {
   Vec y_;
   std::vector<int8_t> W_;
 
-  // workspace, sized at construction: the per-call path does not allocate (the closed-form
-  // SVDs are one object per stage, whose sizes repeat from one call to the next)
+  // workspace, sized at construction (the memos' per-stage part at the second call): the
+  // per-call path does not allocate after that (the closed-form SVDs are one object per
+  // stage, whose sizes repeat from one call to the next)
   enum class KMode : int8_t { kZero, kWide, kTall };
   /// A stage's (hard phase, level, minimum norm) working set and K factorisations, one per
   /// stage: trial_memo finds the stage's last warm trial there at its next call.
@@ -570,8 +573,15 @@ class Hierarchy {
     std::vector<int> key_widx;  ///< its working rows
     Vec key_G, key_Q;           ///< their G_w (kw x k) and the objective Q (qrows x k)
   };
-  std::vector<TrialState> trials_;  ///< per stage
+  std::vector<TrialState> trials_;  ///< per stage (from the second call: allocate_per_stage)
+  TrialState shared_trial_;         ///< every stage's in the first call (a one-shot solve)
   TrialState* ts_ = nullptr;        ///< the stage being solved's
+  bool per_stage_ = false;          ///< trials_, cforms_ and memos_ allocated and in use
+  long calls_ = 0;                  ///< solve calls so far
+  /// The memos' per-stage factorisations and stored inputs, allocated at the second call
+  /// (the first, and a one-shot solve, share one set; nothing allocates after the second).
+  void allocate_per_stage();
+  TrialState* stage_trial(int stage) { return per_stage_ ? &trials_[stage] : &shared_trial_; }
   int trial_memo_hits_ = 0;         ///< trials of this call restored by trial_memo
   /// A level's closed form from the QR of M = A Z (one per stage): closed_form_memo finds
   /// the factorisation of the level's M of the previous call there when A and Z repeat.
@@ -591,7 +601,8 @@ class Hierarchy {
     double key_tol = 0.0, key_floor = 0.0;
     int key_switches = -1;
   };
-  std::vector<ClosedForm> cforms_;  ///< per stage
+  std::vector<ClosedForm> cforms_;  ///< per stage (from the second call)
+  ClosedForm shared_cf_;            ///< every level's in the first call
   ClosedForm* cf_ = nullptr;        ///< the level being solved's
   int closed_form_memo_hits_ = 0;   ///< closed forms of this call whose factorisation was reused
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
@@ -640,7 +651,7 @@ class Hierarchy {
   int gram_screens_ = 0;       ///< levels whose dependence QR gram_screen skipped
   int wide_freezes_ = 0;       ///< levels frozen by wide_freeze in this call
   /// freeze_memo: one stage's last freeze, its inputs and its outputs (buffers of fixed
-  /// size, allocated by the constructor)
+  /// size, allocated by allocate_per_stage)
   struct FreezeMemo {
     bool valid = false;     ///< a whole freeze stored: inputs and outputs
     bool pending = false;   ///< inputs taken by the lookup, outputs due from freeze_store
