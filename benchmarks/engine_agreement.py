@@ -23,6 +23,8 @@ Session 14, seeds 0-399: 71 disagreements: 15 flagged, 49 scale, 4 silent (161, 
 box for a gain of ~1e-8), 2 other, 1 error (347: daqp "infeasible" at level 2 in the Python
 engine). Before the native end check's scale became ``‖b‖ + ‖A‖_F·‖x‖`` (it was
 ``‖b‖ + ‖A x‖``): 74, of them 48 flagged (41 "inaccurate" natively only) and 20 scale.
+Session 15 (the memos, the active set's stationarity floor relative to ``‖Q‖·‖y‖``): the same
+71, category for category.
 """
 
 from __future__ import annotations
