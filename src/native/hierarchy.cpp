@@ -62,27 +62,8 @@ bool same_rows_or_copy(const R& a, Vec& buf, int& layout) {
     layout = 1;
     return same;
   }
-  const int now = (a.outerStride() == 1) ? 1 : ((a.innerStride() == 1) ? 2 : 3);
   double* out = buf.data();
-  const std::size_t row = sizeof(double) * n, col = sizeof(double) * m;
-  if (now == 1 && a.innerStride() == n) {  // the block is one contiguous run
-    if (layout == 1 && std::memcmp(a.data(), out, row * m) == 0) return true;
-    std::memcpy(out, a.data(), row * m);
-  } else if (now == 1) {
-    bool same = layout == 1;
-    for (Eigen::Index i = 0; same && i < m; ++i)
-      same = std::memcmp(a.data() + i * a.innerStride(), out + i * n, row) == 0;
-    if (same) return true;
-    for (Eigen::Index i = 0; i < m; ++i)
-      std::memcpy(out + i * n, a.data() + i * a.innerStride(), row);
-  } else if (now == 2) {
-    bool same = layout == 2;
-    for (Eigen::Index j = 0; same && j < n; ++j)
-      same = std::memcmp(a.data() + j * a.outerStride(), out + j * m, col) == 0;
-    if (same) return true;
-    for (Eigen::Index j = 0; j < n; ++j)
-      std::memcpy(out + j * m, a.data() + j * a.outerStride(), col);
-  } else {
+  if (a.outerStride() != 1 && a.innerStride() != 1) {  // entry by entry
     bool same = layout == 3;
     for (Eigen::Index j = 0; same && j < n; ++j)
       for (Eigen::Index i = 0; same && i < m; ++i) {
@@ -92,7 +73,24 @@ bool same_rows_or_copy(const R& a, Vec& buf, int& layout) {
     if (same) return true;
     for (Eigen::Index j = 0; j < n; ++j)
       for (Eigen::Index i = 0; i < m; ++i) out[j * m + i] = a(i, j);
+    layout = 3;
+    return false;
   }
+  // runs of contiguous entries: the rows (1) or the columns (2); one run when they follow
+  // each other
+  const int now = (a.outerStride() == 1) ? 1 : 2;
+  Eigen::Index runs = (now == 1) ? m : n, len = (now == 1) ? n : m;
+  const Eigen::Index stride = (now == 1) ? a.innerStride() : a.outerStride();
+  if (stride == len) {
+    len *= runs;
+    runs = 1;
+  }
+  const std::size_t bytes = sizeof(double) * len;
+  bool same = layout == now;
+  for (Eigen::Index k = 0; same && k < runs; ++k)
+    same = std::memcmp(a.data() + k * stride, out + k * len, bytes) == 0;
+  if (same) return true;
+  for (Eigen::Index k = 0; k < runs; ++k) std::memcpy(out + k * len, a.data() + k * stride, bytes);
   layout = now;
   return false;
 }

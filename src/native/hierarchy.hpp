@@ -353,7 +353,7 @@ class Hierarchy {
   int qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floor);
   /// The memos' entry test of level stage: true when its rows A and C and Z on entry are bit
   /// for bit those of its last call (then M = A Z is the one in Ms_); keeps what differs.
-  /// False whenever both memos are off or a freeze of this call was computed (memo_gate).
+  /// False whenever the memos are off or a freeze of this call was computed (memo_gate).
   bool memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C, int i0,
                   int mi);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
@@ -390,18 +390,17 @@ class Hierarchy {
   /// Z <- Z Qf(:, rank:) after a wide M's QR in the stage's mqr (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
-  /// freeze_memo: true when the stage's stored freeze had these inputs (kind, rank, fscale,
-  /// Z and Cin Z now, the level's rows A and C, the violated rows when with_viol): Z_, r_,
-  /// z_identity_, kz_ and Cin Z are then set to its outputs. Else false: the level's rows
-  /// are kept when they differ from the last lookup's (nothing else: rows that change at
-  /// every call, an IK's, cost one comparison and one copy), the other inputs when they
-  /// repeat (the outputs then by freeze_store).
+  /// freeze_memo: true when the stage's stored freeze had these inputs (memo_entry found the
+  /// rows and Z on entry the same; kind, rank, fscale, Cin Z now, the violated rows when
+  /// with_viol): Z_, r_, z_identity_, kz_ and Cin Z are then set to its outputs. Else false;
+  /// when the rows repeat, the other inputs are taken (the outputs by freeze_computed).
   bool freeze_lookup(int stage, int kind, int rank, double fscale, int mi, bool with_viol);
-  /// freeze_memo: the outputs of the freeze just made, stored with freeze_lookup's inputs
-  /// (when it took them); the lower levels' freezes of this call are not looked up (their Z
-  /// differs from the previous call's: a comparison and copies for nothing, the IK's case).
+  /// A freeze was computed: its outputs stored with freeze_lookup's inputs (when it took
+  /// them); the lower levels look nothing up in this call (their Z differs from the previous
+  /// call's: a comparison and copies for nothing, the IK's case).
   void freeze_computed(int stage);
-  /// freeze_memo on and no freeze of this call computed so far (Z may repeat the last call's)
+  /// a memo on, its buffers allocated, and no freeze of this call computed so far (Z may
+  /// repeat the last call's)
   bool memo_gate() const {
     return per_stage_ && (freeze_memo || closed_form_memo || trial_memo) && z_repeats_;
   }
@@ -654,7 +653,7 @@ class Hierarchy {
   /// size, allocated by allocate_per_stage)
   struct FreezeMemo {
     bool valid = false;     ///< a whole freeze stored: inputs and outputs
-    bool pending = false;   ///< inputs taken by the lookup, outputs due from freeze_store
+    bool pending = false;   ///< inputs taken by the lookup, outputs due from freeze_computed
     int kind = -1, rank = 0, r_in = 0, kz_in = 0, r_out = 0, kz_out = 0;
     bool zid_in = false, zid_out = false;
     double fscale = 0.0;
