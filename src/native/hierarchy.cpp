@@ -193,12 +193,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   }
   // the first call's working-set and K factorisations, shared by its stages (the memos'
   // per-stage ones are allocated at the second call: a one-shot solve never pays for them)
-  shared_trial_.wqr.reserve(max_cols, max_grows, max_qrows);
-  shared_trial_.kqr.reserve(max_qrows, max_cols, 1);
-  shared_trial_.cqr.reserve(max_cols, max_cols, 1);
-  shared_trial_.krz.reserve(max_cols, max_cols);
-  shared_trial_.kqr_t.reserve(max_cols, max_qrows, 1);
-  shared_trial_.Qt.setZero(max_qrows, max_cols);
+  shared_trial_.reserve(max_cols, max_grows, max_qrows, false);
   ts_ = &shared_trial_;
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
@@ -222,15 +217,31 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Ab_.setZero(std::max(max_eq, 1), n);
   Cl_.setZero(std::max(max_in, 1), n);
   CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
-  shared_cf_.mqr.reserve(std::max({n, max_eq, 1}), std::max({n, max_eq, 1}),
-                        std::max({n, capacity_, 1}));
-  shared_cf_.mqr.reserve_wy(std::max({n, capacity_, 1}));
-  shared_cf_.tqr.reserve(std::max({n, max_eq, 1}), std::max(n, 1), 1);
-  shared_cf_.trz.reserve(std::max(n, 1), std::max(n, 1));
+  shared_cf_.reserve(n, max_eq, capacity_);
   cf_ = &shared_cf_;
   rinv_.setZero(std::max(n, 1), std::max(n, 1));
   nsp_.setZero(std::max(n, 1), std::max(n, 1));
   cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
+}
+
+void Hierarchy::TrialState::reserve(int cols, int grows, int qrows, bool keys) {
+  wqr.reserve(cols, grows, qrows);
+  kqr.reserve(qrows, cols, 1);
+  cqr.reserve(cols, cols, 1);
+  krz.reserve(cols, cols);
+  kqr_t.reserve(cols, qrows, 1);
+  Qt.setZero(qrows, cols);
+  if (!keys) return;
+  key_widx.reserve(grows);
+  key_G.setZero(static_cast<Eigen::Index>(cols) * cols);  // kw <= k rows kept (trial_keep)
+  key_Q.setZero(static_cast<Eigen::Index>(qrows) * cols);
+}
+
+void Hierarchy::ClosedForm::reserve(int n, int me, int capacity) {
+  mqr.reserve(std::max({n, me, 1}), std::max({n, me, 1}), std::max({n, capacity, 1}));
+  mqr.reserve_wy(std::max({n, capacity, 1}));
+  tqr.reserve(std::max({n, me, 1}), std::max(n, 1), 1);
+  trz.reserve(std::max(n, 1), std::max(n, 1));
 }
 
 void Hierarchy::allocate_per_stage() {
@@ -258,27 +269,11 @@ void Hierarchy::allocate_per_stage() {
     cols = std::max(cols, 1);
     qrows = std::max(qrows, 1);
     if (b < blocks) above += min_[b];
-    TrialState& t = trials_[b];
-    t.wqr.reserve(cols, grows, qrows);
-    t.kqr.reserve(qrows, cols, 1);
-    t.cqr.reserve(cols, cols, 1);
-    t.krz.reserve(cols, cols);
-    t.kqr_t.reserve(cols, qrows, 1);
-    t.Qt.setZero(qrows, cols);
-    t.key_widx.reserve(grows);
-    t.key_G.setZero(static_cast<Eigen::Index>(cols) * cols);  // kw <= k rows kept (trial_keep)
-    t.key_Q.setZero(static_cast<Eigen::Index>(qrows) * cols);
+    trials_[b].reserve(cols, grows, qrows, true);
   }
   // each level's closed-form factorisations (closed_form_memo), sized for its equality rows
   cforms_.resize(blocks);
-  for (int b = 0; b < blocks; ++b) {
-    ClosedForm& f = cforms_[b];
-    f.mqr.reserve(std::max({n, meq_[b], 1}), std::max({n, meq_[b], 1}),
-                  std::max({n, capacity_, 1}));
-    f.mqr.reserve_wy(std::max({n, capacity_, 1}));
-    f.tqr.reserve(std::max({n, meq_[b], 1}), std::max(n, 1), 1);
-    f.trz.reserve(std::max(n, 1), std::max(n, 1));
-  }
+  for (int b = 0; b < blocks; ++b) cforms_[b].reserve(n, meq_[b], capacity_);
   // each level's memo entry and freeze (freeze_memo; not the hard phase's)
   memos_.resize(blocks);
   for (int b = 1; b < blocks; ++b) {

@@ -571,6 +571,9 @@ class Hierarchy {
     std::array<int, 4> key_slacks{};  ///< P.slacks, zcols, slack_q0, slack_g0 (ls_step's path)
     std::vector<int> key_widx;  ///< its working rows
     Vec key_G, key_Q;           ///< their G_w (kw x k) and the objective Q (qrows x k)
+    /// Buffers for problems of up to cols columns, grows rows and qrows objective rows
+    /// (keys: trial_memo's too).
+    void reserve(int cols, int grows, int qrows, bool keys);
   };
   std::vector<TrialState> trials_;  ///< per stage (from the second call: allocate_per_stage)
   TrialState shared_trial_;         ///< every stage's in the first call (a one-shot solve)
@@ -599,6 +602,8 @@ class Hierarchy {
     bool valid = false, svd_valid = false;
     double key_tol = 0.0, key_floor = 0.0;
     int key_switches = -1;
+    /// Buffers for a level of me equality rows in n variables, capacity inherited rows.
+    void reserve(int n, int me, int capacity);
   };
   std::vector<ClosedForm> cforms_;  ///< per stage (from the second call)
   ClosedForm shared_cf_;            ///< every level's in the first call
