@@ -245,6 +245,9 @@ void Hierarchy::ClosedForm::reserve(int n, int me, int capacity) {
 }
 
 void Hierarchy::allocate_per_stage() {
+  // the first call's shared factorisations are not used again (freed first: a lower peak)
+  shared_trial_ = TrialState();
+  shared_cf_ = ClosedForm();
   const int n = n_, blocks = static_cast<int>(meq_.size());
   const int nb = has_bounds_ ? n : 0;
   // each stage's working-set and K factorisations (trial_memo), sized for its own problem:
@@ -286,9 +289,6 @@ void Hierarchy::allocate_per_stage() {
     f.C.setZero(static_cast<Eigen::Index>(min_[b]) * n);
     f.viol.assign(std::max(min_[b], 1), 0);
   }
-  // the first call's shared factorisations are not used again
-  shared_trial_ = TrialState();
-  shared_cf_ = ClosedForm();
   per_stage_ = true;
 }
 
@@ -445,15 +445,13 @@ bool Hierarchy::memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, cons
   return f.z_same;
 }
 
-bool Hierarchy::freeze_lookup(int stage, int kind, int rank, double fscale, int mi,
-                              bool with_viol) {
+bool Hierarchy::freeze_lookup(int stage, FreezeKind kind, int rank, int mi, bool with_viol) {
   FreezeMemo& f = memos_[stage];
   f.pending = false;
   if (!freeze_memo || !f.rows_same) return false;  // (memo_entry: the rows changed)
   // Z on entry is the last call's (z_same) and the stored freeze had it (valid): the rest
   const auto CZ = CinZ_.topLeftCorner(kz_, r_);
-  bool hit = f.z_same && f.valid && f.kind == kind && f.rank == rank && f.kz_in == kz_ &&
-             std::memcmp(&f.fscale, &fscale, sizeof fscale) == 0;
+  bool hit = f.z_same && f.valid && f.kind == kind && f.rank == rank && f.kz_in == kz_;
   for (int i = 0; hit && with_viol && i < mi; ++i) hit = f.viol[i] == viol_[i];
   hit = hit && same_bits(f.CinZ_in.topLeftCorner(kz_, r_), CZ);
   if (hit) {
@@ -462,7 +460,7 @@ bool Hierarchy::freeze_lookup(int stage, int kind, int rank, double fscale, int 
     z_identity_ = f.zid_out;
     kz_ = f.kz_out;
     CinZ_.topLeftCorner(kz_, r_) = f.CinZ_out.topLeftCorner(kz_, r_);
-    if (kind == 2 || kind == 4) ++null_space_freezes_;  // as freeze_null_space counts
+    if (kind == FreezeKind::kNullSpace) ++null_space_freezes_;  // as freeze_null_space counts
     ++freeze_memo_hits_;
     return true;
   }
@@ -472,7 +470,6 @@ bool Hierarchy::freeze_lookup(int stage, int kind, int rank, double fscale, int 
   f.kind = kind;
   f.rank = rank;
   f.kz_in = kz_;
-  f.fscale = fscale;
   for (int i = 0; i < mi; ++i) f.viol[i] = with_viol ? viol_[i] : 0;
   f.CinZ_in.topLeftCorner(kz_, r_) = CZ;
   return false;
@@ -1611,17 +1608,14 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
   const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
   const int switches = (rank_revealing_qr ? 1 : 0) | (small_rinv ? 2 : 0) |
                        (rz_min_norm ? 4 : 0) | (gemv_qr ? 8 : 0);
-  // (closed_form_memo: M bit for bit the one factorised at this level's last call, with the
-  // same tolerances: its factorisation, or its failure, is still in f)
-  if (same_m && f.valid && f.key_switches == switches &&
-      std::memcmp(&f.key_tol, &tol, sizeof tol) == 0 &&
-      std::memcmp(&f.key_floor, &floor, sizeof floor) == 0) {
+  // (closed_form_memo: M bit for bit the one factorised at this level's last call -- A and
+  // Z are, and with A the tolerances, functions of |A|_F, r and the damping: its
+  // factorisation, or its failure, is still in f)
+  if (same_m && f.valid && f.key_switches == switches) {
     ++closed_form_memo_hits_;
   } else {
     f.rank = qr_factor(M, tol, floor);
     f.valid = closed_form_memo;  // (the factorisation of the M now in Ms_ of the stage)
-    f.key_tol = tol;
-    f.key_floor = floor;
     f.key_switches = switches;
   }
   const int rank = f.rank;
@@ -1787,11 +1781,13 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       z_identity_ = false;
     } else if (rank) {
       // (freeze_memo: the same inputs as this level's last freeze: its outputs restored)
-      const int kind = (by_qr && cf_->wide) ? 1 : ((by_qr && null_space_freeze) ? 2 : 3);
-      if (!(memo_gate() && freeze_lookup(stage, kind, rank, 1.0, mi, false))) {
-        if (kind == 1) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
+      const FreezeKind kind = (by_qr && cf_->wide) ? FreezeKind::kWide
+                              : (by_qr && null_space_freeze) ? FreezeKind::kNullSpace
+                                                             : FreezeKind::kGeneral;
+      if (!(memo_gate() && freeze_lookup(stage, kind, rank, mi, false))) {
+        if (kind == FreezeKind::kWide) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
           freeze_wide(rank);
-        } else if (kind == 2) {  // Z <- Z P null([R11 R12])
+        } else if (kind == FreezeKind::kNullSpace) {  // Z <- Z P null([R11 R12])
           freeze_null_space(rank);
         } else {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
           row_space_basis(svd, by_qr, rank, fqr_.matrix(r_, rank));
@@ -1973,8 +1969,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   if (by_wide) ++wide_freezes_;
   // (freeze_memo: the same inputs as this level's last freeze: its outputs restored; the
   // violated rows are inputs of the general freeze only)
-  const int kind = by_null_space ? 4 : (by_wide ? 5 : 6);
-  if (memo_gate() && freeze_lookup(stage, kind, rank, 1.0, mi, by_f))
+  const FreezeKind kind = by_null_space ? FreezeKind::kNullSpace
+                          : by_wide     ? FreezeKind::kWide
+                                        : FreezeKind::kGeneral;
+  if (memo_gate() && freeze_lookup(stage, kind, rank, mi, by_f))
     return kOk;
   if (by_null_space) {
     freeze_null_space(rank);

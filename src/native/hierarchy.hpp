@@ -390,11 +390,15 @@ class Hierarchy {
   /// Z <- Z Qf(:, rank:) after a wide M's QR in the stage's mqr (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
+  /// The freeze a level makes (freeze_memo's key: the same function of the same inputs
+  /// whether the level ended by its closed form or its active set): Z <- Z Qf by a wide M^T's
+  /// reflectors, Z <- Z P N from the QR of [R11 R12], or the QR of F^T = [B, violated rows].
+  enum class FreezeKind : int8_t { kWide, kNullSpace, kGeneral };
   /// freeze_memo: true when the stage's stored freeze had these inputs (memo_entry found the
-  /// rows and Z on entry the same; kind, rank, fscale, Cin Z now, the violated rows when
+  /// rows and Z on entry the same; kind, rank, Cin Z now, the violated rows when
   /// with_viol): Z_, r_, z_identity_, kz_ and Cin Z are then set to its outputs. Else false;
   /// when the rows repeat, the other inputs are taken (the outputs by freeze_computed).
-  bool freeze_lookup(int stage, int kind, int rank, double fscale, int mi, bool with_viol);
+  bool freeze_lookup(int stage, FreezeKind kind, int rank, int mi, bool with_viol);
   /// A freeze was computed: its outputs stored with freeze_lookup's inputs (when it took
   /// them); the lower levels look nothing up in this call (their Z differs from the previous
   /// call's: a comparison and copies for nothing, the IK's case).
@@ -600,7 +604,6 @@ class Hierarchy {
     /// closed_form_memo: the stage's M (Ms_) is the one factorised here (and, svd_valid,
     /// by its SVD), with these tolerances and switches
     bool valid = false, svd_valid = false;
-    double key_tol = 0.0, key_floor = 0.0;
     int key_switches = -1;
     /// Buffers for a level of me equality rows in n variables, capacity inherited rows.
     void reserve(int n, int me, int capacity);
@@ -659,9 +662,9 @@ class Hierarchy {
   struct FreezeMemo {
     bool valid = false;     ///< a whole freeze stored: inputs and outputs
     bool pending = false;   ///< inputs taken by the lookup, outputs due from freeze_computed
-    int kind = -1, rank = 0, r_in = 0, kz_in = 0, r_out = 0, kz_out = 0;
+    FreezeKind kind = FreezeKind::kGeneral;
+    int rank = 0, r_in = 0, kz_in = 0, r_out = 0, kz_out = 0;
     bool zid_in = false, zid_out = false;
-    double fscale = 0.0;
     Mat Z_in, Z_out, CinZ_in, CinZ_out;
     Vec A, C;  ///< the level's rows at the last entry, in their layout (same_rows_or_copy)
     bool rows_same = false;  ///< memo_entry of this call: A and C repeat
