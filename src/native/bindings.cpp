@@ -338,6 +338,12 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "every trial factorised (False; for comparisons).")
       .def_prop_ro("trial_memo_hits", &Hierarchy::trial_memo_hits,
                    "Trials of the last call whose factorisations trial_memo reused.")
+      .def_rw("bound_rows_memo", &Hierarchy::bound_rows_memo,
+              "A stage whose Z on entry is bit for bit the previous call's copies its bound "
+              "rows (Z's rows scaled to unit norm) from that call's (True, default), or "
+              "projects and scales every row (False; for comparisons).")
+      .def_prop_ro("bound_rows_memo_hits", &Hierarchy::bound_rows_memo_hits,
+                   "Stages of the last call whose bound rows bound_rows_memo copied.")
       .def_rw("closed_form_memo", &Hierarchy::closed_form_memo,
               "A level whose rows and Z on entry are bit for bit the previous call's keeps "
               "M = A Z and its closed form's QR or SVD (True, default), or computes them "

@@ -32,6 +32,24 @@ inline int numerical_rank(const Eigen::VectorXd& s, int rows, int cols, double s
   return rank;
 }
 
+/// Row i of A dotted with x. A row stored contiguously (the stacked arrays are numpy's
+/// C-ordered ones, seen column-major with outer stride 1) is read as one vector: Eigen then
+/// vectorises the sum (else a strided loop); the sum's order, and so its rounding, differ.
+template <class M, class V>
+double row_dot(const M& A, Eigen::Index i, const V& x) {
+  if (A.outerStride() == 1)
+    return Eigen::Map<const Eigen::VectorXd>(A.data() + i * A.innerStride(), A.cols()).dot(x);
+  return A.row(i).dot(x);
+}
+
+/// |row i of A|^2 (as row_dot: one vector where the row is contiguous).
+template <class M>
+double row_squared_norm(const M& A, Eigen::Index i) {
+  if (A.outerStride() == 1)
+    return Eigen::Map<const Eigen::VectorXd>(A.data() + i * A.innerStride(), A.cols()).squaredNorm();
+  return A.row(i).squaredNorm();
+}
+
 /// Value of one level at x: sqrt of the squared equality residuals of rows [e0, e0 + me) of
 /// (Aeq, beq) plus the squared weighted violations sw_i dist(C_i x, [lo_i, hi_i]) of rows
 /// [i0, i0 + mi) of C. With `scale`, also the level's scale at x, the size of the rounding
@@ -47,23 +65,23 @@ double level_value(const MA& Aeq, const VB& beq, int e0, int me, const MC& C, co
                    double* scale = nullptr) {
   double total = 0.0, target = 0.0, matrix = 0.0;
   for (int i = e0; i < e0 + me; ++i) {
-    const double v = Aeq.row(i).dot(x);
+    const double v = row_dot(Aeq, i, x);
     const double d = v - beq(i);
     total += d * d;
     if (scale) {
       target += beq(i) * beq(i);
-      matrix += Aeq.row(i).squaredNorm();
+      matrix += row_squared_norm(Aeq, i);
     }
   }
   for (int i = i0; i < i0 + mi; ++i) {
-    const double v = C.row(i).dot(x);
+    const double v = row_dot(C, i, x);
     const double gap = sw(i) * (v - std::min(std::max(v, lo(i)), hi(i)));
     total += gap * gap;
     if (scale) {
       const bool lower = std::isfinite(lo(i)) && (!std::isfinite(hi(i)) || v - lo(i) < hi(i) - v);
       const double b = lower ? lo(i) : (std::isfinite(hi(i)) ? hi(i) : 0.0);
       target += sw(i) * sw(i) * b * b;
-      matrix += sw(i) * sw(i) * C.row(i).squaredNorm();
+      matrix += sw(i) * sw(i) * row_squared_norm(C, i);
     }
   }
   if (scale) *scale = std::sqrt(target) + std::sqrt(matrix) * x.norm();
@@ -89,7 +107,7 @@ int check_point(const VX& x, bool has_bounds, const VLB& lb, const VLB& ub, cons
     const double scale = std::max(1.0, beq.head(me).cwiseAbs().maxCoeff());
     double worst = 0.0, sq = 0.0;
     for (int i = 0; i < me; ++i) {
-      const double d = Aeq.row(i).dot(x) - beq(i);
+      const double d = row_dot(Aeq, i, x) - beq(i);
       worst = std::max(worst, std::abs(d));
       sq += d * d;
     }
@@ -99,7 +117,7 @@ int check_point(const VX& x, bool has_bounds, const VLB& lb, const VLB& ub, cons
     }
   }
   for (int i = 0; i < mi; ++i) {
-    const double v = C.row(i).dot(x);
+    const double v = row_dot(C, i, x);
     if (!(v >= widen_lo_by(lo(i), kCheckTol) && v <= widen_hi_by(hi(i), kCheckTol))) {
       where = static_cast<double>(i);
       return 3;

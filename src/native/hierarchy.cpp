@@ -134,16 +134,17 @@ void LsqProblem::start(int qrows_, int cols_) {
   c.head(qrows).setZero();
 }
 
-void LsqProblem::add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid,
-                         double ref_norm) {
-  if (!std::isfinite(l) && !std::isfinite(u)) return;
+double LsqProblem::add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid,
+                           double ref_norm) {
+  if (!std::isfinite(l) && !std::isfinite(u)) return 0.0;
   const double nrm = g.norm();
-  if (!(nrm > 1e-12 * std::max(ref_norm, 1e-300))) return;  // cannot bind: constant row
+  if (!(nrm > 1e-12 * std::max(ref_norm, 1e-300))) return 0.0;  // cannot bind: constant row
   G.row(rows).head(cols) = g.transpose() / nrm;
   lo(rows) = l / nrm;
   hi(rows) = u / nrm;
   id[rows] = gid;
   ++rows;
+  return nrm;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -279,6 +280,14 @@ void Hierarchy::allocate_per_stage() {
   for (int b = 0; b < blocks; ++b) cforms_[b].reserve(n, meq_[b], capacity_);
   // each level's memo entry and freeze (freeze_memo; not the hard phase's)
   memos_.resize(blocks);
+  // each level's and the minimum-norm step's bound rows (bound_rows_memo)
+  bound_memos_.resize(blocks + 1);
+  for (int b = 1; has_bounds_ && b <= blocks; ++b) {
+    BoundRowsMemo& m = bound_memos_[b];
+    m.Z.setZero(n, n);
+    m.G.setZero(n, n);
+    m.nrm.setZero(n);
+  }
   for (int b = 1; b < blocks; ++b) {
     FreezeMemo& f = memos_[b];
     f.Z_in.setZero(n, n);
@@ -359,16 +368,45 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   }
 }
 
-void Hierarchy::add_bound_rows(LsqProblem& P) {
+void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
   if (!has_bounds_) return;
-  auto full = rowbuf_.head(P.cols);
+  const int r0 = P.rows, cols = P.cols;
+  // (bound_rows_memo: the rows depend on Z alone, their bounds on x too; no row is skipped
+  // unless a variable has no finite bound, or Z a zero row)
+  BoundRowsMemo* memo = (bound_rows_memo && memo_gate()) ? &bound_memos_[stage] : nullptr;
+  bool all_finite = true;
+  for (int j = 0; j < n_ && all_finite; ++j)
+    all_finite = std::isfinite(lb_(j)) || std::isfinite(ub_(j));
+  if (memo && memo->valid && all_finite && memo->r == r_ &&
+      (r_ == 0 ||
+       std::memcmp(memo->Z.data(), Z_.data(), sizeof(double) * n_ * r_) == 0)) {
+    P.G.block(r0, 0, n_, r_) = memo->G.topLeftCorner(n_, r_);
+    if (cols > r_) P.G.block(r0, r_, n_, cols - r_).setZero();
+    for (int j = 0; j < n_; ++j) {  // (as add_row: the bound over the row's norm)
+      P.lo(r0 + j) = std::min(lb_(j) - x_(j), 0.0) / memo->nrm(j);
+      P.hi(r0 + j) = std::max(ub_(j) - x_(j), 0.0) / memo->nrm(j);
+      P.id[r0 + j] = capacity_ + j;
+    }
+    P.rows += n_;
+    ++bound_rows_memo_hits_;
+    return;
+  }
+  auto full = rowbuf_.head(cols);
   full.setZero();
   for (int j = 0; j < n_; ++j) {
     full.head(r_) = Z_.row(j).head(r_).transpose();
     const double l = std::min(lb_(j) - x_(j), 0.0);
     const double u = std::max(ub_(j) - x_(j), 0.0);
-    P.add_row(full, l, u, capacity_ + j, 1.0);
+    const double nrm = P.add_row(full, l, u, capacity_ + j, 1.0);
+    if (memo) memo->nrm(j) = nrm;
   }
+  if (!memo) return;
+  // stored when every row was kept (a skipped row shifts the others: not one block)
+  memo->valid = (P.rows - r0 == n_);
+  if (!memo->valid) return;
+  memo->r = r_;
+  memo->Z.leftCols(r_) = Z_.leftCols(r_);
+  memo->G.topLeftCorner(n_, r_) = P.G.block(r0, 0, n_, r_);
 }
 
 void Hierarchy::carry_z(PivotedQR& qr, int rank) {
@@ -1867,7 +1905,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
         P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i).head(r_);
   }
   add_inherited_rows(P);
-  add_bound_rows(P);
+  add_bound_rows(P, stage);
   auto y = y_.head(cols);
   auto g = rowbuf_.head(cols);
   const int slack_g0 = P.rows;
@@ -2119,7 +2157,7 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   P.Q.topLeftCorner(n_, r_) = Zr;
   P.c.head(n_) = -x_;
   add_inherited_rows(P);
-  add_bound_rows(P);
+  add_bound_rows(P, stage);
   // Z^T Z = I: the least squares min |Z y + x| is the least-distance problem
   // min |y + Z^T x|^2 (+ const), stepped without the QR of the projected objective
   struct UnitQ {  // cleared on every return
@@ -2203,7 +2241,8 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     q->gemv_update = gemv_qr;
     q->gemv_steps = 0;
   }
-  if (calls_ > 0 && !per_stage_ && (freeze_memo || trial_memo || closed_form_memo))
+  if (calls_ > 0 && !per_stage_ &&
+      (freeze_memo || trial_memo || closed_form_memo || bound_rows_memo))
     allocate_per_stage();  // (the second call: once)
   ++calls_;
   auto set_cf = [&](ClosedForm& f) {
@@ -2251,6 +2290,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   freeze_memo_hits_ = 0;
   trial_memo_hits_ = 0;
   closed_form_memo_hits_ = 0;
+  bound_rows_memo_hits_ = 0;
   small_rinvs_ = 0;
   reduced_trials_ = 0;
   has_deadline_ = std::isfinite(time_left);

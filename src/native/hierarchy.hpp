@@ -28,7 +28,8 @@ namespace qpcoord {
 // 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches;
 // 9 (session 14): Hierarchy.gram_screen / gram_screens;
 // 10 (session 15): Hierarchy.freeze_memo, trial_memo, closed_form_memo and their *_hits
-inline constexpr int kAbiVersion = 10;
+// 11 (session 16): Hierarchy.bound_rows_memo / bound_rows_memo_hits
+inline constexpr int kAbiVersion = 11;
 
 /// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
 #if defined(__FMA__)
@@ -91,7 +92,8 @@ struct LsqProblem {
   void resize(int max_qrows, int max_grows, int max_cols);
   void start(int qrows_, int cols_);
   /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind.
-  void add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm);
+  /// Returns the row's norm, or 0 when it was skipped.
+  double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm);
 };
 
 /// The strict-hierarchy solver of one stack structure (sizes fixed at construction).
@@ -251,6 +253,14 @@ class Hierarchy {
   bool trial_memo = true;
   /// Trials of the last call whose factorisations trial_memo reused.
   int trial_memo_hits() const { return trial_memo_hits_; }
+  /// A stage's bound rows (the rows of Z scaled to unit norm, one per variable) whose Z on
+  /// entry is bit for bit the same stage's in the previous call are copied as one block from
+  /// that call's (default; only their bounds, which move with x, are computed), or every row
+  /// projected and scaled (False, for comparisons). Looked up only above every freeze the
+  /// call computed (below one, Z differs). The same x bit for bit.
+  bool bound_rows_memo = true;
+  /// Stages of the last call whose bound rows bound_rows_memo copied.
+  int bound_rows_memo_hits() const { return bound_rows_memo_hits_; }
   /// The QR closed form's bound 1/|R11^-1|_F on sigma_rank(M) for a rank up to
   /// kSmallRinvMax: R11^-1 by a back substitution per column on its leading entries
   /// (default), or (A/B) by Eigen's blocked triangular solve of an identity right-hand side
@@ -367,7 +377,19 @@ class Hierarchy {
   /// computed on first use in a call and kept: every level's add_inherited_rows reads it
   double cin_norm(int i);
   void add_inherited_rows(LsqProblem& P);
-  void add_bound_rows(LsqProblem& P);
+  /// The bounds as rows of P (Z's rows scaled to unit norm; bound_rows_memo: copied from
+  /// the stage's last call when its Z repeats).
+  void add_bound_rows(LsqProblem& P, int stage);
+  /// bound_rows_memo: a stage's bound rows as add_bound_rows wrote them (every variable's
+  /// row kept), keyed on the Z (its first r columns) they were projected from.
+  struct BoundRowsMemo {
+    bool valid = false;
+    int r = -1;
+    Mat Z, G;  ///< the key Z (n x r) and the scaled rows (n x r)
+    Vec nrm;   ///< each row's norm before scaling (the bounds are scaled by it)
+  };
+  std::vector<BoundRowsMemo> bound_memos_;  ///< per stage (levels and the minimum-norm step)
+  int bound_rows_memo_hits_ = 0;
   /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
   /// projection of the inherited rows (carry_projection); call before r_ changes.
   void carry_z(PivotedQR& qr, int rank);
@@ -406,7 +428,8 @@ class Hierarchy {
   /// a memo on, its buffers allocated, and no freeze of this call computed so far (Z may
   /// repeat the last call's)
   bool memo_gate() const {
-    return per_stage_ && (freeze_memo || closed_form_memo || trial_memo) && z_repeats_;
+    return per_stage_ && (freeze_memo || closed_form_memo || trial_memo || bound_rows_memo) &&
+           z_repeats_;
   }
   bool z_repeats_ = false;
   void snap(Vec& x) const;

@@ -51,15 +51,15 @@ def switch_pair(stack: qc.Stack, switch: str, default: bool | None = True):
     ``switch`` on in ``new`` and off in ``plain``: the A/B pair of the switch test modules
     (test_native_kqr, _lsupd, _minnorm, _hum, _small, _iter). ``default``: the switch's
     default, asserted (``None``: not asserted, e.g. one that differs between builds). Both
-    have the memos (``freeze_memo``, ``trial_memo``, ``closed_form_memo``) off unless one
-    is the switch."""
+    have the memos (``freeze_memo``, ``trial_memo``, ``closed_form_memo``,
+    ``bound_rows_memo``) off unless one is the switch."""
     from qpcoord.core.native import NativeHierarchy
 
     P = stack._compiled
     new = NativeHierarchy(P, stack.damping)
     plain = NativeHierarchy(P, stack.damping)
     assert default is None or getattr(new._solver, switch) == default
-    for memo in ("freeze_memo", "trial_memo", "closed_form_memo"):
+    for memo in ("freeze_memo", "trial_memo", "closed_form_memo", "bound_rows_memo"):
         if switch != memo:
             # a path's counters count the freezes and factorisations made, which the memos
             # reuse instead on a re-solve of the same matrices (test_native_memo tests them)

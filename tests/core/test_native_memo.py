@@ -19,6 +19,10 @@ call's keeps M = A Z (each stage holds its own) and the factorisations of its cl
 (the pivoted QR of M, the RZ or QR of its [R11 R12], or M's SVD; each stage keeps its own):
 only the solves with the new targets run.
 
+``Hierarchy.bound_rows_memo`` (session 16): a stage whose Z on entry is bit for bit its last
+call's copies its bound rows (Z's rows scaled to unit norm) as one block from that call's;
+only their bounds, which move with x and the box, are computed.
+
 The tests compare solvers with the memos on against one with all off, bit for bit (x's and
 the level values' bits, the info dicts), along sequences in which each level's matrix stays,
 changes, or comes back to an earlier value (a memo keyed on too little would restore a stale
@@ -42,7 +46,7 @@ def _bits(v: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(v, dtype=np.float64).view(np.uint64)
 
 
-MEMOS = ("freeze_memo", "trial_memo", "closed_form_memo")
+MEMOS = ("freeze_memo", "trial_memo", "closed_form_memo", "bound_rows_memo")
 
 
 def _memo_pair(stack: qc.Stack, memos=MEMOS):
@@ -57,7 +61,7 @@ def _memo_pair(stack: qc.Stack, memos=MEMOS):
 
 def _same_step(P, new, plain, warm: bool = True) -> tuple[int, int, int]:
     """One solve by each: x, level values and info bit for bit the same; returns ``new``'s
-    hits (freeze_memo, trial_memo, closed_form_memo) (``plain`` has none)."""
+    hits (freeze_memo, trial_memo, closed_form_memo, bound_rows_memo) (``plain`` has none)."""
     xn, rn, infon = new.solve(P, warm=warm)
     xp, rp, infop = plain.solve(P, warm=warm)
     np.testing.assert_array_equal(_bits(xn), _bits(xp))
@@ -101,8 +105,8 @@ def _move(task, rng, A=None) -> None:
 @needs_native
 @pytest.mark.parametrize(
     "memos",
-    [MEMOS, MEMOS[:1], MEMOS[1:2], MEMOS[2:]],
-    ids=["all", "freeze", "trial", "closed form"],
+    [MEMOS, MEMOS[:1], MEMOS[1:2], MEMOS[2:3], MEMOS[3:]],
+    ids=["all", "freeze", "trial", "closed form", "bound rows"],
 )
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 10_000))
@@ -113,7 +117,7 @@ def test_memos_equal_the_factorisations_computed_along_changing_matrices(seed, m
     bit for bit, each step, warm or cold. (Seeds 0-59 of this generator: 251 restored
     freezes in 600 steps.)"""
     stack, tasks, mats, rng = _random_stack(seed)
-    P, new, plain = switch_pair(stack, "freeze_memo")
+    P, new, plain = _memo_pair(stack, memos)
     current = [0] * len(tasks)
     for _step in range(10):
         for i, task in enumerate(tasks):
@@ -152,8 +156,9 @@ def test_memo_restores_every_freeze_of_a_re_solve_and_none_of_a_changed_stack():
     assert freezes[-1] > 0 and freezes[-1] == freezes[-2]  # every freeze of the re-solve
     assert sum(h[1] for h in hits[4:]) > 0  # warm trials reused
     assert hits[-1][2] == 4  # every level's closed form
+    assert hits[-1][3] > 0  # the bound rows of the stages that ran an active set
     tasks[0].update(A=rows[0] + 1e-3 * rng.standard_normal(rows[0].shape))
-    assert _same_step(P, new, plain) == (0, 0, 0)
+    assert _same_step(P, new, plain) == (0, 0, 0, 0)
 
 
 @needs_native
@@ -186,12 +191,13 @@ def test_soth_re_solve_reuses_every_trial():
     levels = new._solver.num_levels
     # every freeze, every stage's trial (levels, minimum norm), the equality levels' closed
     # forms (level 0 has no equality row)
-    assert hits[-1] == (levels, levels + 1, levels - 1)
+    # (no box: no bound rows)
+    assert hits[-1] == (levels, levels + 1, levels - 1, 0)
 
 
 @needs_native
 def test_memo_switches_and_counters_are_exposed():
-    """Both memos are on by default, settable, and count 0 before any solve."""
+    """The memos are on by default, settable, and count 0 before any solve."""
     from qpcoord.core.native import NativeHierarchy
 
     stack = qc.Stack([qc.Equality(np.eye(3)[:2], np.ones(2)), qc.Equality(np.eye(3), np.zeros(3))])
@@ -201,3 +207,31 @@ def test_memo_switches_and_counters_are_exposed():
         setattr(h._solver, memo, False)
         assert getattr(h._solver, memo) is False
     assert all(getattr(h._solver, m + "_hits") == 0 for m in MEMOS)
+
+
+@needs_native
+def test_bound_rows_memo_follows_the_box_and_its_open_sides():
+    """chain30's stack (hierarchy_bench) with the box moved every step, a variable's bounds
+    both open on some steps (its row is skipped: the rows are no block, nothing is copied)
+    and one side open on others: bit for bit the rows projected and scaled at each call, the
+    rows copied wherever Z repeats and every variable has a finite side."""
+    bench = benchmark_module("hierarchy_bench")
+    scen = bench._scenario(bench.chain30, np.random.default_rng(0))
+    stack, bounds = scen["stack"], scen["daqp"][1]
+    P, new, plain = _memo_pair(stack, ("freeze_memo", "bound_rows_memo"))
+    n = 30
+    copied = []
+    for step in range(16):
+        scen["move"](step)
+        lo = -0.5 - 0.05 * np.sin(0.3 * step + np.arange(n))
+        hi = 0.5 + 0.05 * np.cos(0.2 * step + np.arange(n))
+        if step % 4 == 1:
+            lo[7], hi[7] = -np.inf, np.inf  # both sides open: no row for x_7
+        elif step % 4 == 3:
+            hi[3] = np.inf  # one side open: the row stays
+        bounds.update(lower=lo, upper=hi)
+        hits = _same_step(P, new, plain)
+        copied.append(hits[3])
+        if step % 4 == 1:
+            assert hits[3] == 0
+    assert sum(copied[2:]) > 0

@@ -17,7 +17,8 @@
 // reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
 // compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
 // identity_z, least_distance, null_space_freeze, wy_right, tight_batch, full_rank_freeze,
-// wide_freeze, small_rinv, gram_screen, freeze_memo, trial_memo, closed_form_memo.
+// wide_freeze, small_rinv, gram_screen, freeze_memo, trial_memo, closed_form_memo,
+// bound_rows_memo.
 //
 // QPCOORD_DRIVER_ON=gemv_qr,wy_right,grow_seed: switch these non-default options on
 // (wy_right is on by default in a build with FMA, e.g. -march=x86-64-v3).
@@ -93,6 +94,7 @@ int main(int argc, char** argv) {
     if (has("freeze_memo")) h.freeze_memo = false;
     if (has("trial_memo")) h.trial_memo = false;
     if (has("closed_form_memo")) h.closed_form_memo = false;
+    if (has("bound_rows_memo")) h.bound_rows_memo = false;
   }
   if (const char* on = std::getenv("QPCOORD_DRIVER_ON")) {
     const std::string list = std::string(",") + on + ",";
