@@ -171,6 +171,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Cin_.resize(std::max(capacity_, 1), n);
   CinZ_.resize(std::max(capacity_, 1), std::max(n, 1));
   cinx_.resize(std::max(capacity_, 1));
+  feas_.resize(std::max(capacity_, 1));
   lin_.resize(std::max(capacity_, 1));
   cin_norm_.resize(std::max(capacity_, 1));
   uin_.resize(std::max(capacity_, 1));
@@ -301,12 +302,16 @@ void Hierarchy::allocate_per_stage() {
   per_stage_ = true;
 }
 
-bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) const {
+bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) {
   if (has_bounds_)
     for (int j = 0; j < n_; ++j)
       if (!in_box(x(j), lb_(j), ub_(j))) return false;
+  if (k_ == 0) return true;
+  // one product (Cin_ is column-major: a row's dot product would read it with a stride)
+  auto cx = feas_.head(k_);
+  cx.noalias() = Cin_.topRows(k_) * x;
   for (int i = 0; i < k_; ++i)
-    if (!in_box(Cin_.row(i).dot(x), lin_(i), uin_(i))) return false;
+    if (!in_box(cx(i), lin_(i), uin_(i))) return false;
   return true;
 }
 
@@ -1809,7 +1814,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   bool ok = feasible(xc);
   if (ok)
-    for (int i = 0; i < mi && ok; ++i) ok = in_box(C.row(i0 + i).dot(xc), lo(i0 + i), hi(i0 + i));
+    for (int i = 0; i < mi && ok; ++i) ok = in_box(row_dot(C, i0 + i, xc), lo(i0 + i), hi(i0 + i));
   if (ok) {
     x_ = xc;
     snap(x_);

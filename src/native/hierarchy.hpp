@@ -370,7 +370,8 @@ class Hierarchy {
   /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in the stage's tqr).
   void row_space_basis(const Svd& svd, bool by_qr, int rank,
                        Eigen::Ref<Mat, 0, Eigen::OuterStride<>> out);
-  bool feasible(const Eigen::Ref<const Vec>& x) const;
+  /// x in the bounds and the inherited rows' boxes (the rows by one product Cin x).
+  bool feasible(const Eigen::Ref<const Vec>& x);
   void inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0, int m,
                const std::vector<char>* skip);
   /// |Cin_.row(i)| (the scale below which inherited row i's projection cannot bind),
@@ -541,6 +542,7 @@ class Hierarchy {
   Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
   int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
   Vec cinx_;  ///< workspace: Cin x
+  Vec feas_;  ///< workspace: Cin x of feasible()
   Vec lin_, uin_;
   /// |Cin_.row(i)| once computed, else -1 (cin_norm)
   Vec cin_norm_;
