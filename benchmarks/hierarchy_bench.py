@@ -16,6 +16,11 @@ Scenarios (seeded):
   posture; the robot's position and speed limits as the box), stepped by its own native
   solution. Rows are not unit-norm: DAQP's soft penalty is another problem there, so DAQP is
   not run on it. Needs example-robot-data (skipped with a note if missing).
+* ``talos_unit``: the same IK stack with every row scaled to unit norm (its target or bounds
+  with it) and unit weights, refreshed from the IK stack each step outside the timers and
+  stepped by its own native solution: DAQP's row-normalised soft penalty is then the same
+  lexicographic problem (as the humanoid's unit rows in ``hierarchy_published.py``), so DAQP
+  runs on it (its box the robot's limits, ±1e30 where open; since 2026-12-02, session 16).
 * ``soth_sot``: the published soth problem of ``hierarchy_published.py`` (30 variables: 30
   joint-limit rows as level 0, then 3 / 3 / 6 / 6 equality rows) with unit rows (DAQP's soft
   penalty is then the same problem), every right-hand side moved as that file's re-solve
@@ -161,6 +166,52 @@ def talos(rng):
     return {"stack": ik.stack, "move": move, "daqp": None}
 
 
+def _unit_task(t):
+    """A copy of task ``t`` with every row scaled to unit norm (its target or bounds with it)
+    and unit weights, and a function that refreshes the copy from ``t``'s current numbers."""
+
+    def scaled():
+        M = t.A if isinstance(t, qc.Equality) else t.C
+        norms = np.linalg.norm(M, axis=1)
+        s = 1.0 / np.where(norms > 0.0, norms, 1.0)
+        if isinstance(t, qc.Equality):
+            return {"A": M * s[:, None], "b": t.b * s}
+        return {"C": M * s[:, None], "lower": t.lower * s, "upper": t.upper * s}
+
+    first = scaled()
+    u = qc.Equality(**first) if isinstance(t, qc.Equality) else qc.Inequality(**first)
+    return u, lambda: u.update(**scaled())
+
+
+def talos_unit(rng):
+    """The Talos IK stack of :func:`talos` with every row scaled to unit norm and unit weights
+    (DAQP's row-normalised soft penalty is then the same lexicographic problem, as the
+    humanoid's unit rows of ``hierarchy_published.py``), stepped by its own native solution;
+    the IK stack is refreshed at each step (new configuration, new hand target) and the copy
+    from it, outside every timer. DAQP's box: the limits, ±1e30 where open."""
+    base = talos(rng)
+    ik_stack = base["stack"]
+    bounds = ik_stack._compiled.bounds
+    levels, refresh = [], []
+    for lev in ik_stack.levels:
+        lev = lev if isinstance(lev, list) else [lev]
+        copies = [_unit_task(t) for t in lev]
+        levels.append([u for u, _ in copies])
+        refresh += [r for _, r in copies]
+    box = qc.Bounds(bounds.lower.copy(), bounds.upper.copy())
+    daqp_box = qc.Bounds(np.maximum(bounds.lower, -1e30), np.minimum(bounds.upper, 1e30))
+
+    def move(step, x=None):
+        base["move"](step, x)
+        for r in refresh:
+            r()
+        box.update(lower=bounds.lower, upper=bounds.upper)
+        daqp_box.update(lower=np.maximum(bounds.lower, -1e30), upper=np.minimum(bounds.upper, 1e30))
+
+    move(0)
+    return {"stack": qc.Stack(levels, bounds=box), "move": move, "daqp": (levels, daqp_box)}
+
+
 def soth_sot(rng):
     """The published soth problem (unit rows), moved as hierarchy_published's re-solve."""
     del rng  # the published data; the motion is deterministic
@@ -186,6 +237,7 @@ SCENARIOS = {
     "panda9": ("panda9", panda9),
     "chain30": ("chain30 (n=30, box + 3/3/6/6 eq rows)", chain30),
     "talos": ("talos IK (n=38, 4 levels)", talos),
+    "talos_unit": ("talos IK, unit rows (n=38, 4 levels)", talos_unit),
     "soth_sot": ("soth_sot (n=30, unit rows, 30 ineq + 3/3/6/6 eq rows)", soth_sot),
 }
 

@@ -153,3 +153,35 @@ def test_engine_agreement_table():
     for row in rows:
         cells = [c.strip() for c in row.split("|")]
         assert cells[6] == cells[7] == "optimal" and float(cells[8]) > 1e-6, row
+
+
+def test_hierarchy_bench_talos_unit_rows_is_daqp_s_problem():
+    """``hierarchy_bench.py``'s ``talos_unit``: the Talos IK stack with unit rows and unit
+    weights (each row that stack's row over its norm, after every move); the native engine
+    and DAQP's hierarchical mode, given it, reach the Python engine's level values (DAQP's
+    soft penalty normalises each row: the same lexicographic problem). No time is asserted."""
+    pytest.importorskip("pinocchio")
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import hierarchy_bench as hb
+    finally:
+        sys.path.pop(0)
+    try:
+        talos_sc = hb._scenario(hb.talos, np.random.default_rng(0))
+    except FileNotFoundError as exc:  # example-robot-data missing
+        pytest.skip(str(exc))
+    del talos_sc
+    rows, flags = hb.run("talos unit", hb.talos_unit, 12, python=True)
+    assert flags <= {1, 2}  # optimal, soft optimal
+    worst = {key: diff for _name, key, _m, _p90, _p99, diff in rows}
+    assert worst["native warm"] <= 1e-9
+    assert worst[hb.DAQP] <= 1e-5  # DAQP's own tolerance (6e-7 measured)
+    sc = hb._scenario(hb.talos_unit, np.random.default_rng(0))
+    sc["move"](1, np.full(sc["stack"].n, 0.01))
+    for lev in sc["stack"].levels:
+        for t in lev:
+            M = t.A if hasattr(t, "A") else t.C
+            norms = np.linalg.norm(M, axis=1)  # (a zero row of the IK stack stays zero)
+            assert np.all((np.abs(norms - 1.0) <= 1e-12) | (norms == 0.0)), norms
