@@ -171,7 +171,6 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Cin_.resize(std::max(capacity_, 1), n);
   CinZ_.resize(std::max(capacity_, 1), std::max(n, 1));
   cinx_.resize(std::max(capacity_, 1));
-  feas_.resize(std::max(capacity_, 1));
   lin_.resize(std::max(capacity_, 1));
   cin_norm_.resize(std::max(capacity_, 1));
   uin_.resize(std::max(capacity_, 1));
@@ -308,7 +307,7 @@ bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) {
       if (!in_box(x(j), lb_(j), ub_(j))) return false;
   if (k_ == 0) return true;
   // one product (Cin_ is column-major: a row's dot product would read it with a stride)
-  auto cx = feas_.head(k_);
+  auto cx = cinx_.head(k_);
   cx.noalias() = Cin_.topRows(k_) * x;
   for (int i = 0; i < k_; ++i)
     if (!in_box(cx(i), lin_(i), uin_(i))) return false;
@@ -379,10 +378,10 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
   // (bound_rows_memo: the rows depend on Z alone, their bounds on x too; no row is skipped
   // unless a variable has no finite bound, or Z a zero row)
   BoundRowsMemo* memo = (bound_rows_memo && memo_gate()) ? &bound_memos_[stage] : nullptr;
-  bool all_finite = true;
+  bool all_finite = memo != nullptr;  // (only the memo reads it: every variable has a side)
   for (int j = 0; j < n_ && all_finite; ++j)
     all_finite = std::isfinite(lb_(j)) || std::isfinite(ub_(j));
-  if (memo && memo->valid && all_finite && memo->r == r_ &&
+  if (all_finite && memo->valid && memo->r == r_ &&
       (r_ == 0 ||
        std::memcmp(memo->Z.data(), Z_.data(), sizeof(double) * n_ * r_) == 0)) {
     P.G.block(r0, 0, n_, r_) = memo->G.topLeftCorner(n_, r_);

@@ -227,8 +227,8 @@ class Hierarchy {
   int wide_freezes() const { return wide_freezes_; }
   /// A level's freeze (its change of Z, of r and of the carried projection Cin Z) whose
   /// inputs are bit for bit those of the same level's freeze in the previous call -- Z and
-  /// Cin Z on entry, the level's rows A and C, the freeze's kind, rank, violated rows and
-  /// scale -- restores that freeze's outputs, stored then, instead of computing them again
+  /// Cin Z on entry, the level's rows A and C, the freeze's kind, rank and violated rows --
+  /// restores that freeze's outputs, stored then, instead of computing them again
   /// (default; a re-solve whose matrices did not change: targets or bounds moved only). The
   /// freeze is a function of those inputs alone: the same x bit for bit, with no stored
   /// output whenever one input differs (False: every freeze computed, for comparisons).
@@ -541,8 +541,7 @@ class Hierarchy {
   Mat Cin_;  ///< inherited rows (capacity x n)
   Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
   int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
-  Vec cinx_;  ///< workspace: Cin x
-  Vec feas_;  ///< workspace: Cin x of feasible()
+  Vec cinx_;  ///< workspace: Cin x (add_inherited_rows, feasible; read where it is formed)
   Vec lin_, uin_;
   /// |Cin_.row(i)| once computed, else -1 (cin_norm)
   Vec cin_norm_;
