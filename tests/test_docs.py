@@ -179,6 +179,9 @@ def test_output_check_compares_numbers_with_the_stated_tolerance() -> None:
     assert check_output("[1.  0.5]", "[1. 0.5]") is None
 
 
+#: The pages show what a user's session prints: the library's default engine (native where
+#: built), whatever default the Python-engine pass of the suite sets.
+@pytest.mark.engine_independent
 @pytest.mark.parametrize("page", [p.relative_to(ROOT).as_posix() for p in _pages()])
 def test_the_snippets_of_a_page_run_and_print_what_it_shows(
     page, tmp_path, monkeypatch, capsys, request
