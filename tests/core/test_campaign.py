@@ -1,4 +1,4 @@
-"""Seeded campaign over the degeneracy kinds of a hierarchy, judged against the exact
+"""Seeded campaign over the degeneracy kinds of issue 22, judged against the exact
 lexicographic reference (``tests/oracle.py``, ``polish=True``): no level may come out worse than the
 reference by 1e-6 of its scale while the solution says ``"optimal"``."""
 

@@ -1,5 +1,5 @@
-"""The Python engine's certificate against a point far out in a level's optimal set: the
-far point, reproduced by reverting its fix, is flagged, not returned as
+"""The Python engine's certificate against a point far out in a level's optimal set (robust,
+issue 24): session 12's bug, reproduced by reverting its fix, is flagged, not returned as
 "optimal"."""
 
 from __future__ import annotations
