@@ -1,5 +1,5 @@
 """The native and Python engines on adversarial stacks: rows dependent on the frozen rows to
-``eps`` (1e-15 to 1e-5), damping 0 to 1e-7 (issue 24, session 14).
+``eps`` (1e-15 to 1e-5), damping 0 to 1e-7.
 
 Each seed builds a stack of ``n`` = 4-8 variables: level 0 ``f`` random equality rows, then
 one or two levels of 1-3 rows, each a random combination of level 0's rows plus ``eps`` times
@@ -18,13 +18,11 @@ beyond 1e-9 relative to ``max(1, value)``, x beyond 1e-7 relative, or another st
 
     python benchmarks/engine_agreement.py [--seeds 400] [--first 0] [--show silent]
 
-Session 14, seeds 0-399: 71 disagreements: 15 flagged, 49 scale, 4 silent (161, 233, 272,
-350; 233: level 2 at 19.1 natively against 1.02, the native level 1 having moved x to the
+Seeds 0-399 (``--seeds 400``): 71 disagreements: 15 flagged, 49 scale, 4 silent (161, 233,
+272, 350; 233: level 2 at 19.1 natively against 1.02, the native level 1 having moved x to the
 box for a gain of ~1e-8), 2 other, 1 error (347: daqp "infeasible" at level 2 in the Python
-engine). Before the native end check's scale became ``‖b‖ + ‖A‖_F·‖x‖`` (it was
-``‖b‖ + ‖A x‖``): 74, of them 48 flagged (41 "inaccurate" natively only) and 20 scale.
-Session 15 (the memos, the active set's stationarity floor relative to ``‖Q‖·‖y‖``): the same
-71, category for category.
+engine). With the native end check's scale ``‖b‖ + ‖A x‖`` instead of ``‖b‖ + ‖A‖_F·‖x‖``:
+74, of them 48 flagged (41 "inaccurate" natively only) and 20 scale.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ Scenarios (seeded):
   penalty is the same lexicographic problem as qpcoord's. Per step the targets move a little.
 * ``panda9``: the Panda's size, 9 variables: a 3-row position task above a 9-row posture task,
   box on the velocities (random well-conditioned 3 × 9 Jacobian, moving target).
-* ``chain30``: issue 24's "30 variables, 5 levels": joint-velocity box, then 3 / 3 / 6 / 6
+* ``chain30``: 30 variables, 5 levels: joint-velocity box, then 3 / 3 / 6 / 6
   equality rows with a serial chain's structure (the rows of a point on link ``L`` depend on
   joints ``0..L`` only: tip, mid-chain, then two 6-row levels), unit rows, moving targets; the
   box binds.
@@ -20,7 +20,7 @@ Scenarios (seeded):
   with it) and unit weights, refreshed from the IK stack each step outside the timers and
   stepped by its own native solution: DAQP's row-normalised soft penalty is then the same
   lexicographic problem (as the humanoid's unit rows in ``hierarchy_published.py``), so DAQP
-  runs on it (its box the robot's limits, ±1e30 where open; since 2026-12-02, session 16).
+  runs on it (its box the robot's limits, ±1e30 where open).
 * ``soth_sot``: the published soth problem of ``hierarchy_published.py`` (30 variables: 30
   joint-limit rows as level 0, then 3 / 3 / 6 / 6 equality rows) with unit rows (DAQP's soft
   penalty is then the same problem), every right-hand side moved as that file's re-solve
@@ -29,15 +29,15 @@ Scenarios (seeded):
 Per step (interleaved, one BLAS thread): ``Stack.solve(engine="python")``, the native engine
 cold (stored working sets ignored), "native warm" (``Stack.solve(engine="native")``), "native
 bare" (the native call alone, ``Hierarchy.run``, on a second solver warm from its own previous
-step, the stacked arrays already refreshed; warm and bare in alternating order since 2026-11-28,
-before bare always ran right after warm and found the stacked arrays in cache) and
+step, the stacked arrays already refreshed; warm and bare in alternating order, so
+that bare does not always run right after warm and find the stacked arrays in cache) and
 ``daqp.solve(..., break_points=...)`` with
 ``H = I`` (minimum-norm completion; a positive-definite H avoids its −8 "unsupported" flag).
 DAQP's solve is timed on its arrays built before the timer ("daqp hierarchical (solve on built
-arrays)", as ``hierarchy_published.py --resolve`` times it; since 2026-11-28) and also with the
+arrays)", as ``hierarchy_published.py --resolve`` times it) and also with the
 building of its arrays from the tasks ("daqp hierarchical + building its arrays", the one
 column before): the native engine's times include copying the tasks' numbers into its arrays.
-Since 2026-11-28 (session 11) also DAQP's own warm start, "daqp Model warm (update + solve)":
+Also DAQP's own warm start, "daqp Model warm (update + solve)":
 one ``daqp.Model`` kept across the steps, given the new right-hand sides (and ``A`` on a step
 where it changed) by ``update`` and solved from its last working set, as
 ``hierarchy_published.py``'s "daqp Model warm"; the faster of DAQP's two paths is its best.
@@ -49,7 +49,7 @@ call — "native warm" measured right after a Python-engine solve costs up to 2�
 solves, and the step after it is not timed.
 Then the one-shot cost: ``qc.solve_stack`` of a 7-variable, 3-level stack (each engine) vs one
 direct ``daqp.solve`` of the weighted QP, with the ratio of medians to that direct call (the
-issue's goal: within 4×).
+goal: within 4×).
 
     python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds
@@ -60,7 +60,7 @@ time-limit resolution, the one native call ``Hierarchy.step`` (the tasks' number
 the stacked arrays, the solve, the output copies, the info dict), the ``Solution`` — each timed
 on the stack's own solver, the whole call, and the parts of the Python path it replaced
 (``refresh_stacked``, ``Hierarchy.run``, copies, ``NativeHierarchy._info``), one kind per moved
-step in turn, timed alone (issue 24: the Python around the native call)::
+step in turn, timed alone (the Python around the native call)::
 
     python benchmarks/hierarchy_bench.py --wrapper --scenario chain30 --scenario soth_sot \
         --steps 2000
@@ -288,11 +288,10 @@ def _levels_residuals(stack: qc.Stack, x: np.ndarray) -> np.ndarray:
 
 #: DAQP's columns: ``daqp.solve`` alone on the step's arrays built before the timer (what
 #: hierarchy_published's re-solve table times), and the same call with the building of its
-#: arrays from the tasks (``daqp_problem``; this column was "daqp hierarchical" before
-#: 2026-11-28)
+#: arrays from the tasks (``daqp_problem``)
 DAQP = "daqp hierarchical (solve on built arrays)"
 DAQP_BUILD = "daqp hierarchical + building its arrays"
-#: DAQP's own warm start (since 2026-11-28, session 11): one ``daqp.Model`` kept across the
+#: DAQP's own warm start: one ``daqp.Model`` kept across the
 #: steps, given the step's new numbers by ``update`` (the right-hand sides, and ``A`` only on
 #: a step where it changed: DAQP then refactorises) and solved from its last working set;
 #: ``update`` + ``solve`` timed, as hierarchy_published's "daqp Model warm"
@@ -346,7 +345,7 @@ def run(name, build, steps, seed=0, python=True):
             xc, _, _ = cold.solve(P, warm=False)
             times["native cold"].append(time.perf_counter() - t)
         # native warm and bare in alternating order (the second finds the stacked arrays in
-        # cache; before 2026-11-28 bare always ran second)
+        # cache, so neither is always second)
         for which in ("warm", "bare") if step % 2 == 0 else ("bare", "warm"):
             if which == "warm":
                 t = time.perf_counter()
@@ -406,7 +405,7 @@ def run(name, build, steps, seed=0, python=True):
 
 
 #: The parts of one warm ``Stack.solve(engine="native")``, in its order (see :func:`wrapper`):
-#: since 2026-11-28 the refresh, the solve, the copies and the info dict are one native call
+#: the refresh, the solve, the copies and the info dict are one native call
 #: (``Hierarchy.step``); the parts of the Python path it replaced (still the path of a task
 #: whose data is not float64 of its shape) are timed on other steps.
 WRAPPER_PARTS = (

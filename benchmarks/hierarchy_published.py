@@ -14,7 +14,7 @@ BLAS is limited to one thread (threadpoolctl)::
 
 Backends that fail (e.g. the 10 s time limit) show the error's first words instead.
 
-``--resolve``: the issue-24 re-solve table instead — per problem, per step, interleaved:
+``--resolve``: the re-solve table instead — per problem, per step, interleaved:
 the Python engine (default backend), the native engine warm (``Stack.solve``), cold
 (stored working sets ignored) and bare (the native call alone on the refreshed buffers, warm
 from its own last step), DAQP's hierarchical mode from Python (``daqp.solve`` with ``H = I``,
@@ -26,10 +26,10 @@ are checked against the Python engine's at every step (``max |Δr| / max(1, r)``
 normalises each soft row, so on the published rows (norms 0.02–431 on the humanoid) it solves
 another problem; the ``(unit rows)`` copies divide each row and its bounds by the row's norm,
 where every solver solves the same problem. The solvers run in a new (seeded) random order
-every step (``--order shuffle``, the default since 2026-11-28), so that each follows every
+every step (``--order shuffle``, the default), so that each follows every
 other about equally often: the solver right after the Python engine finds the caches evicted
 (soth_sot: ``Stack.solve`` 1.7×, the bare call 1.3× its time timed alone). ``--order fixed``
-keeps the earlier order (python, native warm, cold, bare, daqp.solve, daqp Model: the native
+runs one order (python, native warm, cold, bare, daqp.solve, daqp Model: the native
 warm solve always right after the Python engine)::
 
     python benchmarks/hierarchy_published.py --resolve                 # ~1 min
@@ -68,7 +68,7 @@ from threadpoolctl import threadpool_limits  # noqa: E402
 import qpcoord as qc  # noqa: E402
 from qpcoord.core.native import NativeHierarchy  # noqa: E402
 
-#: The re-solve table's default problems: the two large ones of issue 24, the rest are tiny.
+#: The re-solve table's default problems: the two large ones, the rest are tiny.
 RESOLVE_DEFAULT = ("lexls_test01_humanoid", "soth_sot", "hdaqp_basic", "soth_plus")
 
 
@@ -297,7 +297,7 @@ def main(argv=None) -> int:
     ap.add_argument("--solver", action="append", help="backend (repeatable; default: all)")
     ap.add_argument("--problem", action="append", choices=NAMES, help="problem (repeatable)")
     ap.add_argument("--repeats", type=int, default=20, help="timed re-solves (default 20)")
-    ap.add_argument("--resolve", action="store_true", help="the re-solve table (issue 24)")
+    ap.add_argument("--resolve", action="store_true", help="the re-solve table")
     ap.add_argument("--steps", type=int, default=100, help="--resolve: steps (default 100)")
     ap.add_argument(
         "--off",
@@ -310,7 +310,7 @@ def main(argv=None) -> int:
         choices=("shuffle", "fixed"),
         default="shuffle",
         help="--resolve: the solvers' order per step: a new random one each step (default) or "
-        "fixed (the native engine right after the Python engine, as before 2026-11-28)",
+        "fixed (the native engine right after the Python engine)",
     )
     args = ap.parse_args(argv)
     if args.resolve:

@@ -1,4 +1,4 @@
-"""Per-step differential IK: qpcoord (native / Python engines) vs Pink vs PlaCo (issue 24).
+"""Per-step differential IK: qpcoord (native / Python engines) vs Pink vs PlaCo.
 
 Scenarios (same targets, same start, same hard limits for every solver, 1 kHz):
 

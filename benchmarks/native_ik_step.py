@@ -1,4 +1,4 @@
-"""Per-step time of the native IK step vs the previous path vs the Python engine (issue 24).
+"""Per-step time of the native IK step vs Python tasks + native solve vs the Python engine.
 
 Scenarios (those of ``ik_peers.py``, 1 kHz): the Franka Panda's hand on a 0.1 m horizontal
 circle run in 2 s through its start (``panda-position``: a ``FramePositionTask``;
@@ -13,8 +13,9 @@ from the same start with its own IK and tasks:
   and one native call (task rows, limit box, strict hierarchy), then ``robot.integrate``;
 - ``native step_integrate``: the same IK's ``step_integrate``: ``q_next`` written by the
   native call (no ``robot.integrate``);
-- ``python tasks + native solve``: the path before the native step: ``IK.refresh`` (the
-  tasks' Python ``_refresh``, the limit boxes) then ``Stack.solve(engine="native")``;
+- ``python tasks + native solve``: the tasks refreshed in Python, the stack solved natively:
+  ``IK.refresh`` (the tasks' Python ``_refresh``, the limit boxes) then
+  ``Stack.solve(engine="native")``;
 - ``python engine``: ``IK(engine="python")`` (Python refresh, Python strict hierarchy, daqp).
 
 A timed step is what a control loop does: ``set_target`` + the step + ``robot.integrate``

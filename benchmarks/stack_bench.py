@@ -9,11 +9,11 @@ stack``)::
     python benchmarks/stack_bench.py --profile --solver daqp   # cProfile of the n=7 hot path
     python benchmarks/stack_bench.py --one-shot-only   # only the one-shot table (~20 s)
 
-After the re-solve table, a **one-shot** table (issue 24): per step of the same closed loop,
+After the re-solve table, a **one-shot** table: per step of the same closed loop,
 a stack built from scratch and solved once (``qc.solve_stack`` of new tasks and bounds, both
 engines) beside the floor, one direct ``daqp.solve`` of the weighted QP of the same numbers
 (the soft limits as slack variables; ``H`` and ``f`` formed inside its timer), with the ratio
-of each median to the floor's (the issue's goal for the native engine: within 4×).
+of each median to the floor's (the goal for the native engine: within 4×).
 
 See benchmarks/README.md for the scenario and the measured table.
 """

@@ -1,4 +1,4 @@
-"""Native vs Python+daqp for ``method="weighted"`` and :class:`PersistentQP` (issue 24).
+"""Native vs Python+daqp for ``method="weighted"`` and :class:`PersistentQP`.
 
     python benchmarks/weighted_bench.py                # 3 runs of every scenario (~2 min)
     python benchmarks/weighted_bench.py --quick        # a smoke run

@@ -39,7 +39,7 @@ with the hands' dampers active (``squeeze``), p99 ≈ 50 ms (a few slow hierarch
 on the loaded machine); Pink ≈ 0.97 ms. ``--quick`` (1.5 s a phase): relative error in
 ``carry`` ≤ 9e-5 (Pink 1.1e-2), hands ≥ ``d_s``, feet 1.1e-3 m.
 
-Claims (``summary["claims"]``, all ``"not in thesis"``, issue 23's acceptance; criteria
+Claims (``summary["claims"]``, all ``"not in thesis"``, acceptance criteria; criteria
 in the notes, statuses computed from the run): the relative pose is held while the pair
 moves; the hands never closer than ``d_s``; the feet stay put; Pink side by side.
 Figure: ``bimanual.png`` (relative pose error, hands' distance, feet drift over time).
@@ -231,7 +231,7 @@ def claims(by: dict[str, dict]) -> list[dict]:
             "relative-pose-held",
             "The hands' relative pose (level 1) is held while the left hand moves the pair "
             "(level 2).",
-            "not in thesis (issue 23 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"relative pose error during 'carry' (its second half) ≤ {held:.1e}, at its end "
             f"{carry['relative_error']:.1e}; left-hand error at its end "
             f"{carry['hand_error']:.1e} (log6 norms, m and rad)",
@@ -243,7 +243,7 @@ def claims(by: dict[str, dict]) -> list[dict]:
             "hands-kept-apart",
             "The wrists and grippers never come closer than d_s, even when the relative task "
             "asks them to.",
-            "not in thesis (issue 23 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"smallest distance between the two arms' wrist/gripper hulls {d:.6f} m "
             f"(d_s = {D_S:g} m); 'squeeze' leaves the relative error at "
             f"{ours['phases']['squeeze']['relative_error']:.3f}",
@@ -254,7 +254,7 @@ def claims(by: dict[str, dict]) -> list[dict]:
         claim(
             "feet-fixed",
             "Both soles stay put (level 0) while the arms move.",
-            "not in thesis (issue 23 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"max sole displacement {feet:.1e} m over {ours['steps']} steps of {DT:g} s "
             f"(grasp {ours['phases']['grasp']['feet_drift_m']:.1e} m, carry "
             f"{carry['feet_drift_m']:.1e} m)",

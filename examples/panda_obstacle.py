@@ -41,7 +41,7 @@ self pairs stopped at ``d_s``). Median step (IK + integrate): qpcoord ≈ 0.27 m
 every pair's distance every step; ≈ 3.4×). ``--quick`` (2 s a phase): the same distances,
 pose error after ``around`` 9.6e-5 (Pink 5.0e-2). A run prints its numbers.
 
-Claims (``summary["claims"]``, all ``"not in thesis"``, issue 23's acceptance; each
+Claims (``summary["claims"]``, all ``"not in thesis"``, acceptance criteria; each
 criterion stated in its note, status computed from the run): the hand and links never come
 closer than ``d_s`` to the sphere (tolerance 0.1 mm, the docs' stated tolerance); the self
 pairs never closer than ``d_s`` (same tolerance), and without them they collide; the pose
@@ -223,7 +223,7 @@ def claims(by: dict[str, dict], quick: bool = False) -> list[dict]:
         claim(
             "sphere-kept-at-ds",
             "A hand driven past and into a sphere never comes closer than d_s to it, at any step.",
-            "not in thesis (issue 23 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"smallest link–sphere distance {s:.6f} m (d_s = {D_S:g} m, d_s − min = "
             f"{D_S - s:.1e} m) over {ours['steps']} steps of {DT:g} s; the 'into' phase "
             f"ends {ours['phases']['into']['pose_error']:.3f} from the sphere's centre",
@@ -235,7 +235,7 @@ def claims(by: dict[str, dict], quick: bool = False) -> list[dict]:
         claim(
             "self-pairs-kept-at-ds",
             "The Panda's self-collision pairs never come closer than d_s.",
-            "not in thesis (issue 23 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"smallest self-pair distance {c:.6f} m with the self pairs, "
             f"{free['min_self_distance_m']:.4f} m without them (same targets)",
             "not in thesis",

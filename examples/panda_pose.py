@@ -195,7 +195,7 @@ def claims(ours: dict, pink_row: dict | None) -> list[dict]:
         claim(
             "pose-error-hard-limits",
             "The hand's full pose converges to ≤ 1e-6 (m, rad) with hard joint limits.",
-            "not in thesis (issue 21 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"after {DT * reach['steps']:g} s: position "
             f"{reach['position_error_m']:.2e} m, orientation {reach['orientation_error_rad']:.2e}"
             f" rad; limit violation {limits:.1e}",

@@ -80,7 +80,7 @@ SPEED_LIMIT = 1.5  # rad/s, joint speed bound (hard), low enough to bind
 SMOOTH_WEIGHT = 1e-2  # LowAccelerationTask row weight, inside level 2
 PINK_FEET_COST = 100.0  # Pink: feet position cost against the base's 1
 PINK_POSTURE_COST = 1e-3
-FEET_TOL = 1e-5  # m: feet drift criterion (issue 21: Talos feet ≤ 1e-5 m)
+FEET_TOL = 1e-5  # m: feet drift criterion (the Talos example's: feet ≤ 1e-5 m)
 QUAT_TOL = 1e-12  # |‖quaternion‖ − 1|
 
 
@@ -311,7 +311,7 @@ def claims(rows: list[dict], lowacc: dict) -> list[dict]:
             "floating-base-low-acceleration",
             "A low-acceleration task on a floating base has nv rows and columns (Pink 4.4's "
             "crashes).",
-            "not in thesis (peer defect, issue 21)",
+            "not in thesis (peer defect)",
             f"qpcoord LowAccelerationTask on Solo-12: {lowacc['ours_shape'][0]}×"
             f"{lowacc['ours_shape'][1]}, in level 2 of every qpcoord run; Pink: {lowacc['pink']}",
             "not in thesis",

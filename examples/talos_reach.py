@@ -19,7 +19,7 @@ no inequality task, so the support polygon cannot be posed; two CoM costs are sh
 posture as a ``PostureTask``. Printed side by side: feet drift, CoM excursion, hand error,
 median / p99 step time.
 
-Claims (``summary["claims"]``, all ``"not in thesis"``: issue 21's acceptance, each
+Claims (``summary["claims"]``, all ``"not in thesis"``: acceptance criteria, each
 criterion stated in its note and its status computed from the run): the feet drift at
 most 1e-5 m; the CoM never leaves the sole polygon by more than 1e-9 m at any step (its
 overshoot of the 2 cm-shrunk boundary, the Euler step's second-order error, is reported
@@ -59,8 +59,8 @@ OFFSET = np.array([0.4, 0.1, -0.3])  # m, hand target relative to its half_sitti
 MARGIN = 0.02  # m, the polygon is shrunk by this much
 HAND_GAIN = 5.0  # 1/s
 POSTURE_GAIN = 1.0  # 1/s
-FEET_TOL = 1e-5  # m, issue 21
-COM_TOL = 1e-9  # m, issue 21
+FEET_TOL = 1e-5  # m, feet drift criterion
+COM_TOL = 1e-9  # m, CoM beyond the sole polygon, criterion
 HAND_TOL = {False: 1e-5, True: 1e-4}  # m, hand error at the end of the full / quick run
 ACTIVE_TOL = 1e-9  # m/s, a polygon row within this of its bound is active
 
@@ -229,7 +229,7 @@ def claims(rows: list[dict], quick: bool = False) -> list[dict]:
         claim(
             "talos-feet-fixed",
             "Both soles stay put while the hand reaches (strict stack, feet at level 0).",
-            "not in thesis (issue 21 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"max sole displacement {strict['feet_drift_m']:.2e} m, rotation "
             f"{strict['feet_drift_rad']:.2e} rad over {strict['steps']} steps of {DT:g} s",
             "not in thesis",
@@ -239,7 +239,7 @@ def claims(rows: list[dict], quick: bool = False) -> list[dict]:
         claim(
             "talos-com-in-polygon",
             "The CoM ground projection never leaves the support polygon (level 1 inequality).",
-            "not in thesis (issue 21 acceptance)",
+            "not in thesis (acceptance criterion)",
             f"max distance beyond the sole polygon {strict['com_beyond_sole_polygon_m']:.6e} m "
             f"(negative: inside); beyond the {MARGIN:g} m-shrunk boundary the constraint "
             f"holds {strict['com_beyond_shrunk_polygon_m']:.2e} m "

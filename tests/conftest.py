@@ -23,7 +23,7 @@ if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
 
 #: ``QPCOORD_TEST_ENGINE=python`` runs the suite with the Python engine as the default of
 #: ``Stack.solve`` and the IK (``native``: the native one; unset: the library's default, the
-#: native engine where built). The issue's "every existing test passes on both engines":
+#: native engine where built). Every test passes on both engines:
 #: the README's test command (CI's) runs the suite a second time with
 #: ``QPCOORD_TEST_ENGINE=python``, without the ``engine_independent`` tests (builds and malloc
 #: counts of native calls, the same whatever the default engine).
@@ -82,7 +82,7 @@ def missing_extension(monkeypatch):
 
 
 #: src/native: the C++ drivers' sources (the allocation tests of tests/core build them once
-#: per session here, 13-23 s each with -O1 on a 2-core machine, instead of once per test)
+#: per pytest session here, 13-23 s each with -O1 on a 2-core machine, instead of once per test)
 NATIVE_SRC = Path(__file__).resolve().parents[1] / "src" / "native"
 
 

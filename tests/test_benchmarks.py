@@ -130,7 +130,7 @@ def test_stack_bench_one_shot_table():
 def test_engine_agreement_table():
     """``engine_agreement.py``: the category table over the seeds asked for, and every row
     it lists as silent is one (both "optimal", a level value apart by more than 1e-6; seeds
-    232-234 hold one in session 14, seed 233)."""
+    232-234 hold one, seed 233)."""
     from qpcoord.core import native
 
     if not native.available():

@@ -1,7 +1,7 @@
 """Every example script runs in --quick mode and writes its summary; the quick verdicts are
 the verdict file's (tests/studies/verdicts.json).
 
-The quick reproduction runs ONCE per session (``qpcoord.studies.reproduce.run(quick=True)``,
+The quick reproduction runs ONCE per pytest session (``qpcoord.studies.reproduce.run(quick=True)``,
 two scripts at a time, each its own ``python examples/<name>.py --quick`` process); the
 per-script tests and the verdict test read its results.
 """
@@ -23,9 +23,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = sorted((ROOT / "examples").glob("*.py"))
 VERDICTS = ROOT / "tests" / "studies" / "verdicts.json"
 
-#: Thesis claims the quick run must decide (issue 18): core, ch4 Thm 4.2, ch5 Thm 5.1, the
+#: Thesis claims the quick run must decide: core, ch4 Thm 4.2, ch5 Thm 5.1, the
 #: ch6 spec, appendix A. Appendix C's stochastic rows need the full run (appC_preisach.py's
-#: quick sizes are another helper's work, issue 18 finding 9).
+#: quick sizes are too small to decide them).
 QUICK_MUST_DECIDE = (
     "Def5.4-decoupling",
     "Thm4.2-periodic",

@@ -368,7 +368,7 @@ _DAQP_SETTINGS = (
     # slacks' scale: on a level QP whose z-block is only the 1e-9 regularisation that is
     # ~1e6 × O(1) with eps_prox = 1e-6, the iterate is ~2e-9 off the exact vertex, a row the
     # optimum meets (3e-10 margin) looks violated by more than primal_tol, is added, the
-    # working set turns singular and the singular step declares infeasibility (issue 24;
+    # working set turns singular and the singular step declares infeasibility (a kept case:
     # tests/data/daqp_false_infeasible_qp.npz). With eps_prox ≥ 1e-2 the iterate's error is
     # ~1e-15: measured, 17 of the 19 level QPs daqp failed on in 40 000 random stacks solved.
     dict(eps_prox=0.1, eta_prox=1e-12, primal_tol=1e-10),

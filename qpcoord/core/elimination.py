@@ -413,7 +413,7 @@ class Reduced:
         miss = _miss(G, lo, hi, lb, ub, res.y)
         if miss > CHECK_TOL:
             # a point outside the QP's own rows is a failure of the backend: the next
-            # backend gets the QP (the issue-22 Panda IK: daqp 4.9e-6 outside, every step)
+            # backend gets the QP (a stretched Panda IK: daqp 4.9e-6 outside, every step)
             y = self._fallback(H, f, D, dlo, dhi, where, T)
             if y is not None:
                 return y

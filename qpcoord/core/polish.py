@@ -2,7 +2,7 @@
 
 Interior-point, ADMM and augmented-Lagrangian backends return points that are optimal to
 their tolerances (≈1e-8 … 1e-10), not to machine precision. In a strict hierarchy a level's
-optimum is frozen for every lower level, so such errors propagate (helper measurements:
+optimum is frozen for every lower level, so such errors propagate (measured:
 2–4e-6 relative on ill-conditioned stacks). :func:`polish` guesses the active set from the
 returned point, solves the equality-constrained QP on it exactly (null-space method) and
 keeps the result only if it is feasible and no worse than the backend's point.

@@ -297,7 +297,8 @@ class IK:
         v : numpy.ndarray, shape (nv,)
             Velocity (rad/s, m/s): ``q_next = robot.integrate(q, v, dt)``.
         solution : Solution
-            The stack's solution (``info["level_ranks"]`` shows a rank loss near a
+            The stack's solution: ``status``, ``level_residuals``, ``info`` (with
+            ``engine="python"``, ``info["level_ranks"]`` shows a rank loss near a
             singularity).
         """
         if self._native is not None:

@@ -592,7 +592,7 @@ def build(
     lines : {"elements", "lumped"}
         Each muscle acts along its DAS3 elements (``robots/shoulder_elements.json``, force
         shared by the elements' ``f_max``; default: the lumped line loses up to 40 % of
-        the elements' moment arm at neutral and more elsewhere, issue 18 finding 8) or
+        the elements' moment arm at neutral and more elsewhere) or
         along one lumped line (``shoulder_muscles.json``, the thesis's "one resultant line
         of action per muscle").
     **overrides

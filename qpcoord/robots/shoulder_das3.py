@@ -1,8 +1,8 @@
 """Per-element muscle lines of the appendix A shoulder from the public DAS3 OpenSim model.
 
 ``robots/shoulder_muscles.json`` lumps each muscle's DAS3 elements into one line (force-weighted
-attachment points). The lumped line can lose much of the elements' moment arm (issue 18,
-finding 8: the middle deltoid's 6.9 mm of abduction arm at neutral against 11.4 mm for its
+attachment points). The lumped line can lose much of the elements' moment arm (the
+middle deltoid's 6.9 mm of abduction arm at neutral against 11.4 mm for its
 seven elements). This module reads the elements themselves from DAS3's ``das4_v4.osim``
 (Chadwick et al. 2014; repository ``AbdnBiomechEng/arm-model``, MIT licence) and writes
 ``robots/shoulder_elements.json``, from which :func:`qpcoord.robots.shoulder.build` makes

@@ -1,4 +1,4 @@
-"""Search of general 5R geometries for the thesis's arm of Example 4.1 (issue 18, finding 5).
+"""Search of general 5R geometries for the thesis's arm of Example 4.1.
 
 The thesis gives the 5R3D's link lengths (``l0 = … = l4 = 1 m``, ``l5 = 0.5 m``), its start
 ``q0`` and the Lissajous of Eq. 3.3, but no joint axes. qpcoord's arm

@@ -1,4 +1,4 @@
-"""The rule that judges Fig 4.7 / Remark 4.4 on the found 5R arms (issue 18 finding 5),
+"""The rule that judges Fig 4.7 / Remark 4.4 on the found 5R arms,
 fixed before the first run, in ``examples/ch4_long_runs.py``: per-arm outcomes and the claim
 status they give."""
 

@@ -101,7 +101,7 @@ def make_stack(kind: str, seed: int) -> Spec:
         rng.uniform() < 0.5
     ):
         # var_scaled: half the stacks keep the box in unscaled units (tight on the large-
-        # column variables, loose on the small ones: the 4x5 example)
+        # column variables, loose on the small ones, as in a 4x5 example)
         bscale = colscale if (kind != "var_scaled" or seed % 2) else np.ones(n)
         half = rng.uniform(0.005, 1.5, n) / bscale
         centre = rng.normal(scale=0.3, size=n) / bscale

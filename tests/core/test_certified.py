@@ -1,4 +1,4 @@
-"""The certified hierarchy (issue 22, "A certified hierarchy"): every level's KKT conditions
+"""The certified hierarchy: every level's KKT conditions
 are checked on the returned point; where they fail the level is made exact (active-set
 continuation, fallback backends) or the solution says ``status="inaccurate"``."""
 
@@ -15,7 +15,7 @@ from qpcoord.core.polish import active_set_ls, kkt_residual
 SOLVERS = qc.available_solvers()
 FAST = [s for s in ("daqp", "quadprog", "piqp", "clarabel", "highs", "osqp") if s in SOLVERS]
 
-# issue 22, item 1: one equality level, two active bounds, condition 5e3
+# one equality level, two active bounds, condition 5e3
 A1 = np.array(
     [
         [0.3, 1e3, -10, 700, -0.01],
@@ -95,7 +95,7 @@ def test_kkt_residual_sees_a_wrong_active_set():
 
 def test_fallback_on_a_point_outside_its_rows(monkeypatch):
     """A backend point outside its QP's rows by more than CHECK_TOL goes to the fallback
-    chain (issue 22, item 2: daqp 4.9e-6 outside, SolverError at every step)."""
+    chain (daqp 4.9e-6 outside gave SolverError at every step without it)."""
     import qpcoord.core.elimination as elim
 
     real = elim.solve_dense_qp
@@ -133,7 +133,7 @@ def test_a_level_met_exactly_with_zero_targets_is_certified(solver):
 
 
 def test_certificate_skips_the_nnls_when_the_gradient_is_zero(monkeypatch):
-    """Issue 22 (certification cost): μ = 0 certifies a point whose gradient is already
+    """Certification cost: μ = 0 certifies a point whose gradient is already
     under the tolerance, so no NNLS runs, active rows or not; a level met exactly needs
     neither the column scaling nor the NNLS. Same verdicts with the rows prepared once."""
     import scipy.optimize

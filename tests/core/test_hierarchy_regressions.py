@@ -399,9 +399,9 @@ def test_rows_dependent_on_the_frozen_rows_to_rounding_are_not_stepped_along(pat
     problem (checked: the polygon's satisfied row stays satisfied there). The cvxpy oracle
     cannot certify this scale (step 10: Clarabel "infeasible" at level 1; step 11: its
     self-check fails at 4e-6 on level 0, its level 3 is 2e-8 from this reference).
-    Both engines say "optimal": until session 14 the native end check compared level 0's
-    value (7.6e-8, rounding at ``‖b‖`` 1e5) with the frozen one relative to
-    ``max(1, value)`` and said "inaccurate"; it is now relative to ``max(1, value, scale)``,
+    Both engines say "optimal": the native end check compares level 0's value (7.6e-8,
+    rounding at ``‖b‖`` 1e5) with the frozen one relative to ``max(1, value, scale)``
+    (relative to ``max(1, value)`` it would say "inaccurate"),
     the level's ``‖b‖ + ‖A‖_F·‖x‖`` (the size of its value's rounding)."""
     spec = _spec_from_npz(path)
     sol = {e: qc.Stack(**_spec_from_npz(path)).solve(engine=e) for e in ("python", "native")}

@@ -1,4 +1,4 @@
-"""Hygiene of the core (issue 22, items 3-6): quiet backends, bounded solve time, no
+"""Hygiene of the core: quiet backends, bounded solve time, no
 non-finite number reaching a backend, read-only task data, clear errors on bad input.
 
 Each test here failed before the change it guards (the message or behaviour it replaced is
@@ -400,7 +400,7 @@ def test_nonfinite_data_on_the_closed_form_paths_is_named(method, bounded):
 
 
 def test_persistent_regularises_a_singular_hessian_instead_of_falling_back():
-    """Issue 22 item 8 traced to the regularisation. ``PersistentQP`` added ε to a copy of
+    """Regression, traced to the regularisation: ``PersistentQP`` once added ε to a copy of
     H's diagonal (``H.flat[::k][:n] += ε``), so it solved the unregularised QP -- exact when
     the levels make H positive definite (the general path, regularised in z around the hard
     phase's point, was 2e-3 away in x on the 3-level stack of test_persistent with

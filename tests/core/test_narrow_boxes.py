@@ -1,4 +1,4 @@
-"""Feasible stacks with boxes ~1.6e-8 wide or of width 0 (issue 22, item 5's last case).
+"""Feasible stacks with boxes ~1.6e-8 wide or of width 0.
 
 Found by a seeded search of 400 stacks: proxqp called 69 of them infeasible, quadprog 5,
 clarabel and highs 1 (the scipy-HiGHS LP of the hard phase, with its absolute 1e-7

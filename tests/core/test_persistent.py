@@ -91,7 +91,7 @@ def test_agrees_with_the_general_weighted_method():
     "solver", [s for s in ("daqp", "quadprog", "proxqp") if s in qc.available_solvers()]
 )
 def test_general_weighted_path_is_not_biased_by_its_regularisation(solver):
-    """Issue 22 item 8: the general path added ε = 1e-9·max diag in the reduced coordinates,
+    """Regression: the general path once added ε = 1e-9·max diag in the reduced coordinates,
     centred on the hard phase's point; against a last level weighted 1e-6
     (``weight_ratio=1e-3``) that pulled x by up to 9.4e-3 from PersistentQP's answer (30
     seeds, every backend). Now ε‖x‖², x-space scale, only where H is singular, as

@@ -1,4 +1,4 @@
-"""``polish`` on an active set guessed with two nearly parallel rows (robust, issue 24)."""
+"""``polish`` on an active set guessed with two nearly parallel rows."""
 
 from __future__ import annotations
 

@@ -206,7 +206,7 @@ def bounds_specs(draw, n: int):
 
 
 #: A level whose rows all lie in the span of the equality rows above it (common with
-#: half-integer data) used to be inverted with gain ~1e16 (fixed in d41e304; regression test
+#: half-integer data) was once inverted with gain ~1e16 (regression test
 #: test_conflicting_lower_level_in_span_of_higher_level). Set to True to filter such stacks
 #: out of the ``eq`` family again should that bug come back and drown every property.
 RANK_BUG_OPEN = False

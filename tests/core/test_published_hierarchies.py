@@ -5,7 +5,7 @@ reference (``tests/oracle.py``) and, for the humanoid, LexLS's published solutio
 Every level value must match the reference to ``REL`` of its value (a floor of ``FLOOR``
 of the level's scale for levels whose optimum is 0), or the solution must say
 ``"inaccurate"`` — which fails here too: these problems are expected to be certified.
-Issue 22 found: the humanoid's last level 4.9e-4 above the optimum (regularisation 1e-9)
+Uncertified: the humanoid's last level 4.9e-4 above the optimum (regularisation 1e-9)
 on every backend and 12 % above on HiGHS; soth's 30-variable stack letting level-0 joint
 limits slip by up to 9e-6 to improve level 2. Each is pinned below.
 """
@@ -106,7 +106,7 @@ def test_level_values_match_the_reference(name, as_bounds, solver):
 
 @pytest.mark.parametrize("solver", BACKENDS)
 def test_humanoid_last_level_is_exact_and_matches_lexls(solver):
-    """LexLS test_01 (88 variables, 5 levels). Issue 22: the last level came out 4.9e-4
+    """LexLS test_01 (88 variables, 5 levels). Uncertified, the last level came out 4.9e-4
     relative above the optimum with the default regularisation on every backend, 12 % on
     HiGHS. It must now match the exact reference and LexLS's published solution to 1e-6."""
     for as_bounds in (False, True):
@@ -123,8 +123,8 @@ def test_humanoid_last_level_is_exact_and_matches_lexls(solver):
 
 @pytest.mark.parametrize("solver", BACKENDS)
 def test_soth_sot_joint_limits_never_slip(solver):
-    """soth ``sot.txt`` (30 variables, 5 levels, level 0 = joint limits as rows). Issue 22:
-    several backends let the level-0 limits slip by up to 9e-6 to improve level 2."""
+    """soth ``sot.txt`` (30 variables, 5 levels, level 0 = joint limits as rows).
+    Uncertified, several backends let the level-0 limits slip by up to 9e-6 to improve level 2."""
     P, _ = _case("soth_sot", False)
     lim = P.levels[0]
     sol = _solve(P, solver)

@@ -17,7 +17,7 @@ optimum, and it is unique. (The cvxpy oracle of ``tests/oracle.py`` cannot decid
 case: Clarabel stops at ``optimal_inaccurate`` on level 1 at the oracle's tolerances, and
 its ~1e-9 accuracy would not separate the engines anyway.)
 
-Found (helper "oracle", round 2): the Python engine is within 5.6e-12 of it; the native
+Found: the Python engine is within 5.6e-12 of it; the native
 engine is exact on a cold solve but 4.5e-8 off after the step-79 solve (levels 2 and 3
 seeded from the stored working sets): its active set (``Hierarchy::active_set``,
 ``src/native/hierarchy.cpp``) calls a point stationary when the step on the working set

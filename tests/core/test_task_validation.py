@@ -1,5 +1,5 @@
-"""Every rejected task argument gets its exact message (issue 24: the one-shot path was made
-cheaper without weakening a check; these pin the messages the validation gives, argument by
+"""Every rejected task argument gets its exact message (the one-shot path is
+cheap without weakening a check; these pin the messages the validation gives, argument by
 argument, at construction and at ``update``)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The weighted method's "H singular → add ε‖x‖²" decision (issue 24, defect 2).
+"""The weighted method's "H singular → add ε‖x‖²" decision.
 
 ``H = WᵀW`` with ``W`` the levels' equality rows in the hard equalities' null space, row-scaled
 by ``√(weight_ratioᵏ)``. The decision is a rank decision on ``W`` itself (the ``R`` of its

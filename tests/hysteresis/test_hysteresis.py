@@ -251,7 +251,7 @@ def test_forc_program_reads_every_node():
 
 
 def test_compensator_beats_linear_command_tenfold_on_mismatched_stack():
-    """The issue's acceptance test: a stack that is not a mesh Preisach model (relays off
+    """Acceptance test: a stack that is not a mesh Preisach model (relays off
     the mesh + Bouc–Wen), 1.25 nm metrology; open-loop 1 Hz sine, errors after 1 s."""
     plant = hy.RelayPiezo(n_relays=1500, seed=4)
     model = hy.identify(plant, np.linspace(0, 10, 21), du=0.02, resolution=1.25e-9)

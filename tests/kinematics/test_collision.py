@@ -1,4 +1,4 @@
-"""Collision avoidance: velocity dampers from the robot's collision geometry (issue 23)."""
+"""Collision avoidance: velocity dampers from the robot's collision geometry."""
 
 from __future__ import annotations
 

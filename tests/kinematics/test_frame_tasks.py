@@ -472,7 +472,7 @@ def test_support_polygon_holds_the_com_with_feet_fixed(talos_standing, engine, m
             assert np.abs(f.compute_error(q)).max() <= 1e-6
         if pull:
             # measured: the CoM approaches the shrunk front edge monotonically and rests on
-            # it (max violation -2e-16 m); the issue asks for at most 1e-9 m at any step
+            # it (max violation -2e-16 m); the criterion is at most 1e-9 m at any step
             assert max(violations) <= 1e-9
             assert abs(violations[-1]) <= 1e-6  # resting on the shrunk edge
         else:

@@ -1,4 +1,4 @@
-"""IK cases of issue 22 (certified hierarchy): the near-singular speed-limited posture level
+"""IK cases of the certified hierarchy: the near-singular speed-limited posture level
 agrees across backends, and the stretched Panda with an out-of-reach target runs."""
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ def _panda_run(solver, steps):
 
 @pytest.mark.parametrize("solver", [s for s in ("daqp", "quadprog") if s in FAST])
 def test_stuck_panda_ik_runs_2000_steps(solver):
-    """Issue 22, item 2: with daqp every step from 1 068 on raised SolverError (a QP point
-    4.9e-6 outside its rows, the fallback not engaging); every step must now solve."""
+    """Without the fallback on a QP point outside its rows (daqp: 4.9e-6 outside), every step
+    from 1 068 on raised SolverError with daqp; every step must solve."""
     assert _panda_run(solver, 2000) == 0
 
 

@@ -1,4 +1,4 @@
-"""The native IK step's speed paths (issue 24, branch ``ik``): the strict step's answer in one
+"""The native IK step's speed paths: the strict step's answer in one
 native call (``IKStep.solve_step``), the native check-and-copy of a target vector
 (``spatial_finite_copy``, ``frame_tasks._vector``), and the IKStep's cyclic garbage
 collection (``tp_traverse`` / ``tp_clear``)."""

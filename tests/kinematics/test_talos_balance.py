@@ -1,4 +1,4 @@
-"""Issue 21's Talos acceptance: feet fixed, CoM in the support polygon (an inequality), hand
+"""The Talos balance acceptance: feet fixed, CoM in the support polygon (an inequality), hand
 reaching, posture, hard joint limits; strict stack vs one weighted QP.
 
 A shorter horizon than ``examples/talos_reach.py`` (0.6 s at dt = 1e-3 s, the hand moving
@@ -84,8 +84,8 @@ def test_strict_stack_keeps_feet_and_com_while_the_polygon_binds(runs):
     # worst 1.99985e-2 m inside the sole polygon (the 2 cm margin minus the Euler step's
     # 1.5e-6 m overshoot of the shrunk boundary), hand 3.6e-4 m from its target
     assert r["active"] >= 100  # the inequality really acts
-    assert r["drift"] <= 1e-5  # m, issue 21
-    assert r["beyond"] <= 1e-9  # m beyond the sole polygon, at every step (issue 21)
+    assert r["drift"] <= 1e-5  # m, feet drift criterion
+    assert r["beyond"] <= 1e-9  # m beyond the sole polygon, at every step
     # the QP keeps the level-1 rows (velocity level) and the feet rows exactly
     assert r["row_excess"] <= 1e-8
     assert r["level0"] <= 1e-10

@@ -395,7 +395,7 @@ def test_element_muscle_arm_is_the_force_weighted_mean_of_its_elements(wrap):
 
 
 def test_middle_deltoid_abducts_with_its_elements_arm_at_neutral():
-    """Issue 18 finding 8: the lumped middle deltoid has 6.9 mm of abduction arm at q = 0,
+    """The lumped middle deltoid has 6.9 mm of abduction arm at q = 0,
     its seven DAS3 elements 11.4 mm force-weighted (the model now uses the elements)."""
     j = shoulder.build().names.index("deltoideus medial")
     assert -shoulder.build(lines="lumped").moment_arms(np.zeros(3))[0, j] == pytest.approx(

@@ -1,4 +1,4 @@
-"""The general 5R geometry of the search (issue 18, finding 5) against qpcoord's arm."""
+"""The general 5R geometry of the search against qpcoord's arm."""
 
 from __future__ import annotations
 

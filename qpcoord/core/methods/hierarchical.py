@@ -241,7 +241,7 @@ class _Certifier:
     finished exactly too (:meth:`_exact`): a damped direction's curvature is only ``τ²``
     (1e-14 of the level's largest at the default damping), a near-singular one's ``s²``, so
     a point certified to ``KKT_TOL`` can lie far along it (anywhere in the box, damped), and
-    the freeze would pass that point on to every lower level (issue 24: a level below got
+    the freeze would pass that point on to every lower level (a level below then got
     1.42 instead of the exact 3.89). The exact point, unique in the frozen directions, is
     kept if certified and no worse.
     """
@@ -363,7 +363,7 @@ class _Certifier:
         is far and cannot be replaced.
 
         The certificate accepts any point of the optimal set; a point far out in it (the
-        tip of a wedge of two nearly parallel active rows: session 12's 1e7 step) is frozen
+        tip of a wedge of two nearly parallel active rows: a step of 1e7) is frozen
         with ``x`` and every lower level's tolerances scale with ``‖x‖``. The level's QP point
         ``z_qp`` (regularised towards ``z = 0``) is no longer than the minimum-norm point
         ``z*``; only when ``‖z‖ > FAR_RATIO · max(1, ‖x‖, ‖z_qp‖)`` is ``z*`` computed."""

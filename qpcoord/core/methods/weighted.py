@@ -26,7 +26,7 @@ __all__ = ["solve_weighted"]
 #: ``W`` has fewer rows than ``z`` has entries. ``R`` is computed from ``W`` itself, not from
 #: ``H``: a rank-deficient ``W`` gives ``|Rₖₖ|`` at rounding, ~1e-16·‖W‖, 9 decades under the
 #: threshold, where the Cholesky pivots of the formed ``H`` carry its rounding ~√ε·‖W‖ = 1.5e-8
-#: ·‖W‖ (a factor ~7 under it: 1–5 of 50 exactly singular ``H`` passed as regular, issue 24).
+#: ·‖W‖ (a factor ~7 under it: 1–5 of 50 exactly singular ``H`` passed as regular).
 #: A level weighted ``weight_ratio**4 = 1e-12`` (unit rows: ``|Rₖₖ|² ≈ 1e-12``) is regular.
 #: The native engine (``src/native/weighted.cpp``) applies the same rule to its own QR.
 _SINGULAR = 1e-14
