@@ -300,6 +300,7 @@ class Stack:
             solve_time=time.perf_counter() - t0,
             method=method,
             info=info,
+            stack=self,
         )
 
     def _solve_native(self, t0: float, warm_start, strict: bool, limit: float) -> Solution:
@@ -331,7 +332,7 @@ class Stack:
         # positional (x, status, level_residuals, solver, solve_time, method, info), as the
         # native IK step: 0.2 µs less than by keyword
         return Solution(
-            x, status, residuals, "native", time.perf_counter() - t0, "hierarchical", info
+            x, status, residuals, "native", time.perf_counter() - t0, "hierarchical", info, self
         )
 
     def _solve_native_weighted(self, t0: float, warm_start, limit: float) -> Solution:
@@ -351,6 +352,7 @@ class Stack:
             solve_time=time.perf_counter() - t0,
             method="weighted",
             info=info,
+            stack=self,
         )
 
     def persistent(

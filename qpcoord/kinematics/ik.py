@@ -330,6 +330,7 @@ class IK:
                 )
         except InfeasibleError as exc:
             raise self._named(exc, q) from None
+        sol.stack = self.stack  # the native step's Solution: for sol.explain()
         self.last = sol
         v = sol.x
         self.v_prev[...] = v
@@ -367,6 +368,7 @@ class IK:
                 sol = native.step(q, t, reference, True)
             except InfeasibleError as exc:
                 raise self._named(exc, q) from None
+            sol.stack = self.stack  # for sol.explain()
             self.last = sol
             v = sol.x
             self.v_prev[...] = v
