@@ -85,7 +85,8 @@ class ConflictRow:
         violates the conflict's rows least (the largest violation relative to
         ``max(1, |bound|)`` is minimised).
     violation : float
-        ``|value − bound|`` (same units, ≥ 0): how far the row is missed at that point.
+        How far the row is missed at that point (same units, ≥ 0: ``|value − bound|`` for
+        a row of an irreducible conflict).
     joint : str
         For a bound in an :class:`~qpcoord.IK`: the joint whose velocity ``x[row]`` is
         (``"name[k]"`` for coordinate ``k`` of a joint with several); else ``""``.
@@ -279,7 +280,10 @@ def find_conflict(P, lb, ub, tol: float = INFEAS_TOL) -> tuple[ConflictRow, ...]
             kind, bound = "upper", float(hi[i])
         if kinds[i] == _BOUND:
             kind += " bound"
-        out.append(ConflictRow(tasks[i], rows[i], kind, bound, v, abs(v - bound)))
+        # a row of an irreducible conflict is missed at that point; one kept because the
+        # filter ran out of time may hold there (violation 0)
+        miss = abs(v - bound) if kind == "equality" else max(0.0, lo[i] - v, v - hi[i])
+        out.append(ConflictRow(tasks[i], rows[i], kind, bound, v, float(miss)))
     return tuple(out)
 
 
@@ -296,7 +300,10 @@ def infeasible(message: str, P, lb, ub) -> InfeasibleError:
     """The :class:`InfeasibleError` an engine raises when the hard part of ``P`` has no
     common point: ``message`` (the engine's own words) followed by the rows
     :func:`find_conflict` names, which it carries as ``conflict``."""
-    conflict = find_conflict(P, lb, ub)
+    try:
+        conflict = find_conflict(P, lb, ub)
+    except (ValueError, np.linalg.LinAlgError) as exc:  # never hide the engine's error
+        return InfeasibleError(f"{message}; the rows in conflict could not be isolated ({exc})")
     return InfeasibleError(message + describe(conflict), conflict=conflict)
 
 

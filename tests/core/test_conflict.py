@@ -204,3 +204,39 @@ def test_bad_input_still_gets_its_own_error(engine):
     stack = qc.Stack([goal()], constraints=[Inequality(e(0), lower=1.0, name="a")])
     with pytest.raises(ValueError, match="unknown method"):
         stack.solve(method="fastest", engine=engine)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_out_of_time_the_rows_kept_still_conflict(engine, monkeypatch):
+    """The filter's LPs see no time left: it stops at once and names every row of the
+    (forced, whole-set) support -- not irreducible, still in conflict, never empty."""
+    monkeypatch.setattr(conflict_mod, "_SUPPORT_TOL", -1.0)
+    monkeypatch.setattr(conflict_mod, "time_left", lambda: 0.0)
+    rows = [
+        Inequality(e(0), lower=1.0, name="a"),
+        Inequality(e(1), upper=3.0, name="innocent"),
+        Inequality(e(0), upper=0.0, name="b"),
+    ]
+    err = infeasible(engine, constraints=rows)
+    assert names(err.conflict) == [
+        ("a", 0, "lower"),
+        ("innocent", 0, "upper"),
+        ("b", 0, "upper"),
+    ]
+    # x0 = 0.5 misses a and b by 0.5 (t = 0.5); the innocent row, not needed, is missed by
+    # at most t·max(1, |3|) wherever the LP put x1
+    a, innocent, b = err.conflict
+    assert [a.violation, b.violation] == pytest.approx([0.5, 0.5], abs=LP_TOL)
+    assert 0.0 <= innocent.violation <= 1.5 + LP_TOL
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_failed_search_never_hides_the_infeasibility(engine, monkeypatch):
+    def broken(*args, **kwargs):
+        raise ValueError("injected")
+
+    monkeypatch.setattr(conflict_mod, "find_conflict", broken)
+    err = infeasible(engine, constraints=[Inequality(e(0), lower=1.0), Inequality(e(0), upper=0.0)])
+    assert err.conflict == ()
+    assert "bounds and hard constraints are inconsistent" in str(err)
+    assert "the rows in conflict could not be isolated (injected)" in str(err)

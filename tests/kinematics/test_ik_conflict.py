@@ -20,7 +20,7 @@ def panda() -> qc.Robot:
     return qc.robots.load("panda")
 
 
-def band_case(panda, engine):
+def band_case(panda, engine, method="hierarchical"):
     """A hard band asking the hand to move +x at 50 m/s from the neutral pose (gain 100/s,
     face 0.5 m ahead): the speed limits cannot give it."""
     q = panda.neutral()
@@ -28,13 +28,17 @@ def band_case(panda, engine):
     band = qc.PositionBand(
         panda, lower=y + [0.5, -np.inf, -np.inf], upper=np.inf, gain=100.0, name="reach band"
     )
-    ik = qc.IK(panda, [qc.PostureTask(panda, q)], dt=0.01, constraints=[band], engine=engine)
+    ik = qc.IK(
+        panda, [qc.PostureTask(panda, q)], dt=0.01, constraints=[band], method=method,
+        engine=engine,
+    )  # fmt: skip
     return ik, q
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-def test_hard_band_against_the_speed_limits_names_the_joints(panda, engine):
-    ik, q = band_case(panda, engine)
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+def test_hard_band_against_the_speed_limits_names_the_joints(panda, engine, method):
+    ik, q = band_case(panda, engine, method)
     with pytest.raises(qc.InfeasibleError) as info:
         ik.step(q)
     rows = info.value.conflict
