@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .backends import time_left
+from .compile import CompiledStack
 from .elimination import INFEAS_TOL
 from .errors import InfeasibleError
 
@@ -114,7 +115,7 @@ class ConflictRow:
         )
 
 
-def _candidates(P, lb, ub):
+def _candidates(P: CompiledStack, lb: np.ndarray | None, ub: np.ndarray | None):
     """Every hard row as ``lo ≤ M x ≤ hi``: ``(M, lo, hi, kind, task, row)`` (rows with
     two infinite sides left out). Task rows are read from the tasks (both engines keep them
     current); ``lb``/``ub`` (``None``: no box) is the box the engine solved with."""
@@ -208,7 +209,9 @@ def _irreducible(rows: np.ndarray) -> bool:
     return k - 1 <= s.size and int(np.count_nonzero(s > _RANK_TOL * s[0])) == k - 1
 
 
-def find_conflict(P, lb, ub, tol: float = INFEAS_TOL) -> tuple[ConflictRow, ...]:
+def find_conflict(
+    P: CompiledStack, lb: np.ndarray | None, ub: np.ndarray | None, tol: float = INFEAS_TOL
+) -> tuple[ConflictRow, ...]:
     """The hard rows of compiled stack ``P`` found in conflict (see the module's method).
 
     Parameters
@@ -296,7 +299,9 @@ def describe(conflict: tuple[ConflictRow, ...]) -> str:
     )
 
 
-def infeasible(message: str, P, lb, ub) -> InfeasibleError:
+def infeasible(
+    message: str, P: CompiledStack, lb: np.ndarray | None, ub: np.ndarray | None
+) -> InfeasibleError:
     """The :class:`InfeasibleError` an engine raises when the hard part of ``P`` has no
     common point: ``message`` (the engine's own words) followed by the rows
     :func:`find_conflict` names, which it carries as ``conflict``."""
@@ -304,6 +309,11 @@ def infeasible(message: str, P, lb, ub) -> InfeasibleError:
         conflict = find_conflict(P, lb, ub)
     except (ValueError, np.linalg.LinAlgError) as exc:  # never hide the engine's error
         return InfeasibleError(f"{message}; the rows in conflict could not be isolated ({exc})")
+    if not conflict:
+        return InfeasibleError(
+            f"{message}; the rows in conflict could not be isolated (the elastic LP finds "
+            f"them consistent to {INFEAS_TOL:g}, relative, or ran out of time)"
+        )
     return InfeasibleError(message + describe(conflict), conflict=conflict)
 
 
