@@ -231,12 +231,19 @@ def test_out_of_time_the_rows_kept_still_conflict(engine, monkeypatch):
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-def test_a_failed_search_never_hides_the_infeasibility(engine, monkeypatch):
+@pytest.mark.parametrize("failure", ["raises", "finds none"])
+def test_a_failed_search_never_hides_the_infeasibility(engine, failure, monkeypatch):
+    """The search raising, or finding the rows consistent (an engine and the LP disagreeing
+    at the tolerance's edge), leaves the engine's InfeasibleError, saying so."""
+
     def broken(*args, **kwargs):
-        raise ValueError("injected")
+        if failure == "raises":
+            raise ValueError("injected")
+        return ()
 
     monkeypatch.setattr(conflict_mod, "find_conflict", broken)
     err = infeasible(engine, constraints=[Inequality(e(0), lower=1.0), Inequality(e(0), upper=0.0)])
     assert err.conflict == ()
     assert "bounds and hard constraints are inconsistent" in str(err)
-    assert "the rows in conflict could not be isolated (injected)" in str(err)
+    said = "(injected)" if failure == "raises" else "(the elastic LP finds them consistent"
+    assert f"the rows in conflict could not be isolated {said}" in str(err)
