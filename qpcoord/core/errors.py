@@ -14,7 +14,24 @@ class InfeasibleError(RuntimeError):
     """The hard part of a problem (bounds and hard constraints) has no solution.
 
     Soft levels of a stack never raise this: their violation is minimised instead.
+
+    Attributes
+    ----------
+    conflict : tuple of ConflictRow
+        The smallest set of hard rows found that cannot hold together (no row of it can be
+        dropped without the others becoming consistent), each named by its task and row, or
+        by the variable of a bound (and in an :class:`~qpcoord.IK` the limit and joint),
+        with its violation at the point that violates them least
+        (:class:`qpcoord.core.conflict.ConflictRow`, units there); the message names them
+        too. Empty where none was searched (e.g. a problem outside a stack).
     """
+
+    def __init__(self, message: str, conflict: tuple = ()) -> None:
+        super().__init__(message)
+        self.conflict = tuple(conflict)
+
+    def __reduce__(self):
+        return (type(self), (str(self), self.conflict))
 
 
 class SolverError(RuntimeError):

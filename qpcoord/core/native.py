@@ -35,7 +35,8 @@ from typing import NoReturn
 import numpy as np
 
 from .compile import CompiledStack
-from .errors import InfeasibleError, SolverError
+from .conflict import infeasible
+from .errors import SolverError
 from .polish import KKT_TOL
 
 __all__ = [
@@ -491,20 +492,29 @@ def raise_status(
         raise ValueError(f"native engine rejected the data (status {code})")
     if code == mod.INFEASIBLE_EQ:
         names = ", ".join(t.label for t in P.hard.eqs)
-        raise InfeasibleError(
+        raise infeasible(
             f"hard equality constraints are inconsistent ({names}): "
-            f"least-squares residual {d[0]:.3g}"
+            f"least-squares residual {d[0]:.3g}",
+            P,
+            P.lbs,
+            P.ubs,
         )
     if code == mod.INFEASIBLE_HARD and np.isinf(d[1]):
-        raise InfeasibleError(
+        raise infeasible(
             "constraints: the hard equalities fix x completely and it violates the bounds "
-            "or hard inequalities"
+            "or hard inequalities",
+            P,
+            P.lbs,
+            P.ubs,
         )
     if code == mod.INFEASIBLE_HARD:
-        raise InfeasibleError(
+        raise infeasible(
             "constraints: bounds and hard constraints are inconsistent (native engine's "
             + hard_phase.format(d[1])
-            + ")"
+            + ")",
+            P,
+            P.lbs,
+            P.ubs,
         )
     if code == mod.NOT_CONVERGED:
         raise SolverError(f"{prefix}native engine: the active set{stage} did not converge")

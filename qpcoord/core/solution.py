@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+
+from .explain import Explanation, explain
 
 __all__ = ["Solution"]
 
@@ -40,6 +43,9 @@ class Solution:
         certified KKT residual of each level that ran a QP), ``continued`` (levels made
         exact by the active-set continuation), ``uncertified`` (``(level, residual)``) and,
         when ``status == "inaccurate"``, ``inaccurate`` (``{"level", "kkt_residual"}``).
+    stack : Stack or None
+        The stack this solves (for :meth:`explain`); ``None`` for a solution built
+        elsewhere, and after pickling (the stack is not pickled with it).
     """
 
     x: np.ndarray
@@ -49,6 +55,33 @@ class Solution:
     solve_time: float
     method: str = "hierarchical"
     info: dict = field(default_factory=dict)
+    stack: Any = field(default=None, repr=False, compare=False)
+
+    def explain(self) -> Explanation:
+        """What gave way: per level and task the residual and the inequality rows active
+        or violated at ``x``, by name; the hard constraints' and bounds' active rows (see
+        :mod:`qpcoord.core.explain` for the tolerance). ``str()`` of the result is a
+        readable report; nothing is printed.
+
+        Reads the tasks' current numbers: call it before they are updated for the next
+        solve.
+
+        Raises
+        ------
+        ValueError
+            The solution has no stack (built outside :meth:`Stack.solve
+            <qpcoord.Stack.solve>`, or unpickled).
+        """
+        if self.stack is None:
+            raise ValueError(
+                "this Solution has no stack to explain (built outside Stack.solve, or unpickled)"
+            )
+        return explain(self.stack, self.x, self.level_residuals)
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["stack"] = None  # may hold a native engine, which does not pickle
+        return state
 
     def __repr__(self) -> str:
         res = ", ".join(f"{r:.3g}" for r in self.level_residuals)

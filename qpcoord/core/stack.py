@@ -10,8 +10,9 @@ import numpy as np
 
 from .backends import DEFAULT_TIME_LIMIT, check_solver, check_time_limit, deadline, time_left
 from .compile import compile_stack
+from .conflict import infeasible
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
-from .errors import SolverError
+from .errors import InfeasibleError, SolverError
 from .linalg import all_finite
 from .methods.hierarchical import solve_equality_chain, solve_hierarchical
 from .methods.nullspace import check_equality_only, solve_nullspace
@@ -228,6 +229,10 @@ class Stack:
         with deadline(limit) as budget:
             try:
                 return self._solve_python(t0, solver, method, warm_start, strict)
+            except InfeasibleError as exc:  # the engine's words, and the rows in conflict
+                P = self._compiled
+                err = infeasible(str(exc), P, P.lb, P.ub)
+                raise err.with_traceback(exc.__traceback__) from None
             except SolverError as exc:
                 if budget.expired() or "time limit" in str(exc):
                     raise _limit_error(limit, exc) from exc
@@ -295,6 +300,7 @@ class Stack:
             solve_time=time.perf_counter() - t0,
             method=method,
             info=info,
+            stack=self,
         )
 
     def _solve_native(self, t0: float, warm_start, strict: bool, limit: float) -> Solution:
@@ -326,7 +332,7 @@ class Stack:
         # positional (x, status, level_residuals, solver, solve_time, method, info), as the
         # native IK step: 0.2 µs less than by keyword
         return Solution(
-            x, status, residuals, "native", time.perf_counter() - t0, "hierarchical", info
+            x, status, residuals, "native", time.perf_counter() - t0, "hierarchical", info, self
         )
 
     def _solve_native_weighted(self, t0: float, warm_start, limit: float) -> Solution:
@@ -346,6 +352,7 @@ class Stack:
             solve_time=time.perf_counter() - t0,
             method="weighted",
             info=info,
+            stack=self,
         )
 
     def persistent(

@@ -26,8 +26,12 @@ model (``robot.with_frame("elbow")``: several frames of one robot in one IK).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from ..core.conflict import renamed
+from ..core.errors import InfeasibleError
 from ..core.linalg import filtered_svd
 from ..core.native import resolve_engine
 from ..core.native_weighted import resolve_weighted_engine
@@ -54,6 +58,16 @@ def _default_limits(robot: Robot) -> list[Limit]:
     if np.any(np.isfinite(speed.limit)):
         limits.append(speed)
     return limits
+
+
+def _joint_of_velocity(model, i: int) -> str:
+    """The name of the joint whose velocity ``v[i]`` is (``"name[k]"``: its ``k``-th of
+    several)."""
+    for j in range(1, model.njoints):
+        first, size = model.joints[j].idx_v, model.joints[j].nv
+        if first <= i < first + size:
+            return model.names[j] + (f"[{i - first}]" if size > 1 else "")
+    return ""
 
 
 def _same_robot(task_robot, robot: Robot) -> bool:
@@ -301,19 +315,23 @@ class IK:
             ``engine="python"``, ``info["level_ranks"]`` shows a rank loss near a
             singularity).
         """
-        if self._native is not None:
-            if warm_start is not None:
-                self.stack._warm(warm_start)  # validated; the engine keeps its working sets
-            sol = self._native.step(q, t, reference)
-        else:
-            q = self.robot.check_configuration(q)
-            self.refresh(q, t, reference)
-            sol = self.stack.solve(
-                solver=self.solver,
-                method=self.method,
-                warm_start=self.last if warm_start is None else warm_start,
-                engine=self._engine_arg,
-            )
+        try:
+            if self._native is not None:
+                if warm_start is not None:
+                    self.stack._warm(warm_start)  # validated; the engine keeps its working sets
+                sol = self._native.step(q, t, reference)
+            else:
+                q = self.robot.check_configuration(q)
+                self.refresh(q, t, reference)
+                sol = self.stack.solve(
+                    solver=self.solver,
+                    method=self.method,
+                    warm_start=self.last if warm_start is None else warm_start,
+                    engine=self._engine_arg,
+                )
+        except InfeasibleError as exc:
+            raise self._named(exc, q) from None
+        sol.stack = self.stack  # the native step's Solution: for sol.explain()
         self.last = sol
         v = sol.x
         self.v_prev[...] = v
@@ -347,7 +365,11 @@ class IK:
         if native is not None and native.integrates:
             if warm_start is not None:
                 self.stack._warm(warm_start)
-            sol = native.step(q, t, reference, True)
+            try:
+                sol = native.step(q, t, reference, True)
+            except InfeasibleError as exc:
+                raise self._named(exc, q) from None
+            sol.stack = self.stack  # for sol.explain()
             self.last = sol
             v = sol.x
             self.v_prev[...] = v
@@ -356,6 +378,25 @@ class IK:
             return native.q_next_out, v, sol
         v, sol = self.step(q, t, reference, warm_start)
         return self.robot.integrate(q, v, self.dt), v, sol
+
+    def _named(self, exc: InfeasibleError, q) -> InfeasibleError:
+        """``exc`` with each bound of its conflict named by the limit that sets that side of
+        the box at ``q`` (the nearest side value; the other side where the IK kept the end
+        nearer to 0, see :meth:`refresh`) and by the joint of that velocity. The IK's hard
+        tasks are named by their own task names already."""
+        if not any(r.is_bound for r in exc.conflict):
+            return exc
+        q = self.robot.check_configuration(q)
+        boxes = [(lim.task.name, *lim.box(q, self.dt)) for lim in self.limits]
+        rows = []
+        for r in exc.conflict:
+            if r.is_bound:
+                side = 1 if r.kind == "lower bound" else 2
+                gap = [(abs(b[s][r.row] - r.bound), s != side, b[0]) for b in boxes for s in (1, 2)]
+                joint = _joint_of_velocity(self.robot.model, r.row)
+                r = replace(r, task=min(gap)[2] if gap else r.task, joint=joint)
+            rows.append(r)
+        return renamed(exc, tuple(rows))
 
     def reset(self, v_prev=None) -> None:
         """Forget the previous step: ``v_prev`` (and that of the acceleration limits) back to
