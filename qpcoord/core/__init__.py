@@ -9,6 +9,8 @@ module                    holds
 ``compile``               the stacked, compiled form of a stack (rows per level)
 ``stack``                 :class:`Stack`, :func:`solve_stack`, :data:`METHODS`
 ``solution``              :class:`Solution`
+``explain``               :class:`~qpcoord.core.explain.Explanation` (``Solution.explain()``)
+``conflict``              :class:`~qpcoord.core.conflict.ConflictRow`, the named conflict
 ``methods.hierarchical``  lexicographic (strict) levels
 ``methods.nullspace``     the classic projection formula (thesis Def. 5.4)
 ``methods.weighted``      one QP, levels weighted by decades
