@@ -1,4 +1,4 @@
-"""The package layout: one-way layers, no import circle, the old module paths as aliases.
+"""The package layout: one-way layers, no import circle, the public names of ``qc``.
 
 The layers (``pyproject.toml``, ``[tool.importlinter]``) are checked with import-linter's
 ``layers`` contract; circles with grimp's import graph (the one import-linter builds), run-time
@@ -7,7 +7,6 @@ imports only: an import under ``if TYPE_CHECKING:`` is for annotations and is ne
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 from pathlib import Path
@@ -21,43 +20,6 @@ import qpcoord
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = Path(qpcoord.__file__).resolve().parent
-
-#: Module paths of qpcoord 0.1 -> their home in the layered layout (kept as warning aliases).
-MOVED = {
-    "qpcoord.tasks": "qpcoord.core.tasks",
-    "qpcoord.problem": "qpcoord.core.compile",
-    "qpcoord.stack": "qpcoord.core.stack",
-    "qpcoord.hierarchical": "qpcoord.core.methods.hierarchical",
-    "qpcoord.nullspace": "qpcoord.core.methods.nullspace",
-    "qpcoord.weighted": "qpcoord.core.methods.weighted",
-    "qpcoord.reduced": "qpcoord.core.elimination",
-    "qpcoord.polish": "qpcoord.core.polish",
-    "qpcoord.backends": "qpcoord.core.backends",
-    "qpcoord.persistent": "qpcoord.core.persistent",
-    "qpcoord.linalg": "qpcoord.core.linalg",
-    "qpcoord.tolerance": "qpcoord.core.tolerance",
-    "qpcoord.errors": "qpcoord.core.errors",
-    "qpcoord.robot": "qpcoord.kinematics.robot",
-    "qpcoord.kinematic_tasks": "qpcoord.kinematics.tasks",
-    "qpcoord.ik": "qpcoord.kinematics.ik",
-    "qpcoord.paths": "qpcoord.kinematics.paths",
-    "qpcoord.simulate": "qpcoord.kinematics.simulation",
-    "qpcoord.geometry": "qpcoord.coordination.geometry",
-    "qpcoord.potentials": "qpcoord.coordination.potentials",
-    "qpcoord.extension": "qpcoord.coordination.extensions",
-    "qpcoord.curvature": "qpcoord.coordination.curvature",
-    "qpcoord.schemes": "qpcoord.coordination.schemes",
-    "qpcoord.task_manifold": "qpcoord.coordination.task_manifold",
-    "qpcoord.analysis": "qpcoord.coordination.periodicity",
-    "qpcoord.reproduce": "qpcoord.studies.reproduce",
-    "qpcoord.reproduce_report": "qpcoord.studies.render",
-    "qpcoord.report": "qpcoord.studies.claims",  # and qpcoord.studies.files
-    "qpcoord.figures": "qpcoord.studies.figures",
-    "qpcoord.sweep": "qpcoord.studies.sweep",
-    "qpcoord.bench": "qpcoord.studies.bench_stack",
-    "qpcoord.bench_ik": "qpcoord.studies.bench_ik",
-    "qpcoord.demo": "qpcoord.studies.demo",
-}
 
 #: ``qc.__all__`` of qpcoord 0.1: every name must stay.
 PUBLIC_0_1 = """AlgorithmicSingularity Bounds Equality IK InfeasibleError Inequality JointLimits
@@ -182,50 +144,13 @@ def test_public_names_of_0_1_are_kept():
         assert getattr(qc, name) is not None
 
 
-_ALIAS_PROBE = """
-import importlib, json, sys, warnings
-import qpcoord as qc
-out = {}
-for old, new in json.loads(sys.argv[1]).items():
-    with warnings.catch_warnings(record=True) as w:
-        warnings.simplefilter("always")
-        mod = importlib.import_module(old)
-    dep = [str(x.message) for x in w if issubclass(x.category, DeprecationWarning)]
-    target = importlib.import_module(new)
-    public = [n for n in getattr(target, "__all__", []) if not n.startswith("_")]
-    same = all(getattr(mod, n) is getattr(target, n) for n in public)
-    out[old] = {"warned": dep, "same": same, "n_public": len(public),
-                "simulate_callable": callable(qc.simulate)}
-print(json.dumps(out))
-"""
+def test_qc_analysis_is_the_periodicity_module():
+    """``qc.analysis`` (DESIGN.md's name: ``qc.analysis.closure_errors``, ...) is the module
+    :mod:`qpcoord.coordination.periodicity`; it has no module file of its own."""
+    import qpcoord as qc
+    from qpcoord.coordination import periodicity
 
-
-def test_old_module_paths_are_warning_aliases():
-    """Each module path of 0.1 still imports, warns once (DeprecationWarning naming the new
-    path) and gives the same objects as the new module. Run in a fresh interpreter, so the
-    first import of each alias really happens there."""
-    proc = subprocess.run(
-        [sys.executable, "-c", _ALIAS_PROBE, json.dumps(MOVED)],
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    result = json.loads(proc.stdout)
-    assert set(result) == set(MOVED)
-    for old, r in result.items():
-        assert len(r["warned"]) == 1, (old, r["warned"])
-        assert MOVED[old] in r["warned"][0], (old, r["warned"][0])
-        assert r["same"], old
-        assert r["n_public"] > 0, old
-        assert r["simulate_callable"], old  # qc.simulate(...) survives `import qpcoord.simulate`
-
-
-def test_new_paths_do_not_warn():
-    """Importing qpcoord and every new module raises no DeprecationWarning."""
-    modules = sorted(set(MOVED.values()) | {"qpcoord.studies.files", "qpcoord.musculo"})
-    code = (
-        "import importlib, warnings\n"
-        "warnings.simplefilter('error', DeprecationWarning)\n"
-        f"for m in {modules!r}: importlib.import_module(m)\n"
-    )
-    subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code], check=True)
+    assert qc.analysis is periodicity
+    for name in ("closure_errors", "poincare_section", "detect_period"):
+        assert callable(getattr(qc.analysis, name)), name
+    assert not (PACKAGE / "analysis.py").exists()
