@@ -60,7 +60,7 @@ import math  # noqa: E402
 import daqp  # noqa: E402
 import numpy as np  # noqa: E402
 from campaign import level_scales  # noqa: E402
-from hierarchy_bench import daqp_problem  # noqa: E402
+from daqp_form import daqp_problem  # noqa: E402
 from hlsp import NAMES, load  # noqa: E402
 from oracle import lexicographic  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import time
 from operator import attrgetter
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from scipy.linalg import lapack
@@ -50,10 +50,7 @@ from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .solution import Solution
 from .tasks import Equality
 
-if TYPE_CHECKING:
-    from .stack import Stack
-
-__all__ = ["PersistentQP"]
+__all__ = ["PersistentQP", "WeightedStack"]
 
 _INF = 1e30  # daqp's infinity
 _MATRIX_VERSION = attrgetter("matrix_version")
@@ -122,6 +119,25 @@ def _whitening(W: list, s: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] 
     return T, np.ascontiguousarray(QtE[:n])
 
 
+class WeightedStack(Protocol):
+    """What a :class:`PersistentQP` reads of its :class:`~qpcoord.Stack`: the compiled rows,
+    the weighted method's parameters, and its general solve (the fallback)."""
+
+    weight_ratio: float
+    regularization: float
+
+    @property
+    def compiled(self) -> CompiledStack: ...
+
+    def solve(
+        self,
+        solver: str | None = None,
+        method: str = "hierarchical",
+        *,
+        engine: str | None = None,
+    ) -> Solution: ...
+
+
 class PersistentQP:
     """The weighted QP of a fixed-matrix :class:`~qpcoord.Stack` on a persistent workspace (native
     or daqp).
@@ -160,15 +176,20 @@ class PersistentQP:
     ε·cond(H).
     """
 
-    def __init__(self, stack: Stack, weight_ratio=None, regularization=None, engine=None) -> None:
+    def __init__(
+        self,
+        stack: WeightedStack,
+        weight_ratio: float | None = None,
+        regularization: float | None = None,
+        engine: str | None = None,
+    ) -> None:
         self.engine = resolve_weighted_engine(engine, None)
         if self.engine == "python":
             import daqp
         else:
             daqp = None
-        # duck-typed on the compiled data, so that this module needs no import of
-        # qpcoord.core.stack (which imports it: Stack.persistent)
-        if not isinstance(getattr(stack, "_compiled", None), CompiledStack):
+        # read through WeightedStack: qpcoord.core.stack imports this module (Stack.persistent)
+        if not isinstance(getattr(stack, "compiled", None), CompiledStack):
             raise ValueError(f"stack must be a qpcoord.Stack, got {type(stack).__name__}")
         self.stack = stack
         self.weight_ratio = stack.weight_ratio if weight_ratio is None else float(weight_ratio)
@@ -189,7 +210,7 @@ class PersistentQP:
         self.region_steps = 0
         self.qp_steps = 0
         self.last: Solution | None = None
-        P = stack._compiled
+        P = stack.compiled
         P.refresh()
         self._setup(P)
 
@@ -484,7 +505,7 @@ class PersistentQP:
 
     def _solve_x(self) -> tuple[np.ndarray | None, int]:
         """Checked ``x`` from the persistent workspace, or ``None`` (then: fall back)."""
-        P = self.stack._compiled
+        P = self.stack.compiled
         if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
             P.refresh()
             self._setup(P)
@@ -591,7 +612,7 @@ class PersistentQP:
         """
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
             raise ValueError(f"size must be an integer >= 1, got {size!r}")
-        P = self.stack._compiled
+        P = self.stack.compiled
         tasks = {id(t): t for t in self._all_tasks}
         spec = {}
         for t, m in maps.items():
@@ -810,7 +831,7 @@ class PersistentQP:
         """
         if self._pspec is None:
             raise ValueError("solve_theta: call parametrize() first")
-        P = self.stack._compiled
+        P = self.stack.compiled
         if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
             P.refresh()
             self._setup(P)

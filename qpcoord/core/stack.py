@@ -9,7 +9,7 @@ from math import isfinite
 import numpy as np
 
 from .backends import DEFAULT_TIME_LIMIT, check_solver, check_time_limit, deadline, time_left
-from .compile import compile_stack
+from .compile import CompiledStack, compile_stack
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
 from .errors import SolverError
 from .linalg import all_finite
@@ -18,6 +18,7 @@ from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
 from .native import NativeHierarchy, resolve_engine
 from .native_weighted import NativeWeighted, resolve_weighted_engine
+from .persistent import PersistentQP
 from .polish import KKT_TOL
 from .solution import Solution
 from .tasks import Bounds
@@ -133,6 +134,12 @@ class Stack:
         """The Python engine's workspace, built at its first use (a native solve never
         needs it)."""
         return Reduced(self._compiled.n, self._compiled.capacity, self._fallback)
+
+    @property
+    def compiled(self) -> CompiledStack:
+        """The stack's compiled form: its levels' stacked rows and the bounds, the arrays the
+        engines read (refreshed from the tasks at each solve; read-only use)."""
+        return self._compiled
 
     @property
     def n(self) -> int:
@@ -353,13 +360,11 @@ class Stack:
         weight_ratio: float | None = None,
         regularization: float | None = None,
         engine: str | None = None,
-    ):
+    ) -> PersistentQP:
         """A :class:`~qpcoord.core.persistent.PersistentQP` on this stack: its weighted QP on one
         workspace kept across control steps (the native weighted QP where built, else daqp;
         ``engine="python"``: daqp; the tasks' matrices must stay fixed; a change is detected
         and rebuilds the workspace)."""
-        from .persistent import PersistentQP
-
         return PersistentQP(
             self, weight_ratio=weight_ratio, regularization=regularization, engine=engine
         )

@@ -381,6 +381,11 @@ class _ErrorTask(KinematicTask):
             np.zeros((self._sel.size, robot.nv)), np.zeros(self._sel.size), w, name
         )
 
+    @property
+    def selected_rows(self) -> np.ndarray:
+        """The indices of the full error's rows this task keeps (its ``mask``), in order."""
+        return self._sel
+
     @abstractmethod
     def _evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``(e, J, ff)`` over all rows for a validated ``q``: the error (task units), its

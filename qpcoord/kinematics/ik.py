@@ -33,6 +33,7 @@ from ..core.native import resolve_engine
 from ..core.native_weighted import resolve_weighted_engine
 from ..core.stack import METHODS, Solution, Stack
 from ..core.tasks import Bounds, Equality, Inequality
+from .native_step import IKStepSpec, NativeIKStep
 from .robot import Robot
 from .tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
 
@@ -190,11 +191,9 @@ class IK:
         else:
             self.engine = resolve_engine(engine, method, solver)
         self._engine_arg = engine
-        self._native = None
+        self._native: NativeIKStep | None = None
         if self.engine == "native":
-            from .native_step import NativeIKStep  # the extension is loaded and built
-
-            self._native = NativeIKStep(self)
+            self._native = NativeIKStep(self._native_spec())
 
     def __getstate__(self) -> dict:
         """Pickling (e.g. a sweep's worker): the native step holds views of the robot's
@@ -206,9 +205,23 @@ class IK:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         if self.engine == "native":
-            from .native_step import NativeIKStep
+            self._native = NativeIKStep(self._native_spec())
 
-            self._native = NativeIKStep(self)
+    def _native_spec(self) -> IKStepSpec:
+        """What the native step reads of this IK (its stack's arrays are bound once)."""
+        return IKStepSpec(
+            robot=self.robot,
+            stack=self.stack.compiled,
+            box=self.bounds._writable() if self.limits else None,
+            tasks=tuple(self._dynamic),
+            limits=tuple(self.limits),
+            refresh_limits=self._refresh_limits,
+            dt=self.dt,
+            damping=self.stack.damping,
+            weighted=self.method == "weighted",
+            regularization=self.stack.regularization,
+            weight_ratio=self.stack.weight_ratio,
+        )
 
     def _collect(self, level, where: str) -> list:
         items = level if isinstance(level, (list, tuple)) else [level]

@@ -566,6 +566,18 @@ class Robot:
             )
         return self.frame_id
 
+    @property
+    def unit_blocks(self) -> tuple[tuple[int, int, str, str], ...]:
+        """The configuration's blocks that are not a vector space: ``(start, stop, joint,
+        kind)`` per joint, ``q[start:stop]`` a unit quaternion (``kind="quaternion"``) or a
+        unit ``(cos, sin)`` pair (``kind="(cos, sin) pair"``) of joint ``joint``."""
+        return tuple(self._unit_blocks)
+
+    def data_changed(self) -> None:
+        """Declare that code outside the robot (a native IK step) computed the kinematics of
+        another configuration in :attr:`data`: the next query recomputes its own."""
+        self._state = 0
+
     # ------------------------------------------------------------------ configurations
     def check_configuration(self, q: Any, what: str = "q") -> np.ndarray:
         """Return ``q`` as a float array of shape (nq,), or raise ``ValueError``.

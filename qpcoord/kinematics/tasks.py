@@ -712,6 +712,13 @@ class JointLimits(Limit):
             self._lower_q = self.lower[self._q_index]
             self._upper_q = self.upper[self._q_index]
 
+    @property
+    def q_index(self) -> np.ndarray | None:
+        """The ``q`` index of each limited joint (its ``v`` index in :attr:`joints`), or
+        ``None`` on a robot whose ``q`` and ``v`` share one layout (every joint of
+        :attr:`joints` is then limited at that index)."""
+        return self._q_index
+
     def box(self, q, dt):
         k = self.gain / dt
         if self._q_index is None:
