@@ -251,16 +251,16 @@ class Stack:
             used = "none"
             R = None
         else:
-            used = self._solvers.get(solver)
-            if used is None:
-                used = self._solvers[solver] = check_solver(solver)
+            known = self._solvers.get(solver)
+            used = known if known is not None else check_solver(solver)
+            self._solvers[solver] = used
             R = None
             # equality levels only: try the closed-form chain first, unless it missed the
             # bounds at the previous step (consecutive control steps are alike; a miss
             # costs the chain's time on top of the general path's)
             if method == "hierarchical" and P.equalities_only and not self._chain_missed:
                 x, info = solve_equality_chain(P, self.damping)
-                if P.lb is not None:
+                if P.lb is not None and P.ub is not None:
                     if not within(x, P.lb, P.ub, FEAS_TOL):
                         R = self._reset(used)
                         self._chain_missed = True
@@ -403,7 +403,8 @@ class Stack:
             raise SolverError(f"backend {solver!r} produced a non-finite solution")
         if R is not None and R.verified and not P.hard.m_eq:
             return  # x passed the (stricter) closed-form feasibility test after the last QP
-        if P.lb is not None and not within(x, P.lb, P.ub, CHECK_TOL):  # snapped: exact
+        # snapped into the bounds: met exactly
+        if P.lb is not None and P.ub is not None and not within(x, P.lb, P.ub, CHECK_TOL):
             i = int(np.argmax(np.maximum(P.lb - x, x - P.ub)))
             raise SolverError(
                 f"backend {solver!r} returned x[{i}] = {x[i]!r} outside the bounds "

@@ -34,7 +34,8 @@ is read at every solve and checked there; per-step code uses it to write in plac
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -233,9 +234,15 @@ class _Task:
     #: Attributes a cached factorisation depends on: set once at construction, then changed
     #: only by ``update`` (a rebinding, ``task.A = J``, is ``update(A=J)``: the module's
     #: rebinding rule)
-    _MATRIX_ATTRS: frozenset = frozenset()
+    _MATRIX_ATTRS: frozenset[str] = frozenset()
+    #: the validated row weights, their square roots and whether all are 1 (_set_weight)
+    weight: np.ndarray
+    sqrt_weight: np.ndarray
+    unit_weight: bool
+    #: each task's validated ``update(...)`` (its own arguments)
+    update: Callable[..., Any]
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: Any) -> None:
         if name in self._MATRIX_ATTRS and name in self.__dict__:
             self.update(**{name: value})  # validated, copied, counted in matrix_version
             return
@@ -246,7 +253,7 @@ class _Task:
         """Human-readable name used in messages."""
         return _label(self.kind, self.name)
 
-    def _set_weight(self, w: np.ndarray, given=None) -> None:
+    def _set_weight(self, w: np.ndarray, given: object = None) -> None:
         """Keep the validated weights ``w`` (``given``: what the caller passed, if known)."""
         _setattr(self, "weight", w)
         if (type(given) is float or type(given) is int) and given == 1:
@@ -447,8 +454,11 @@ class Bounds:
     """
 
     kind = "Bounds"
+    #: the validated arrays (absent while the bounds are scalars: ``n is None``)
+    lower: np.ndarray
+    upper: np.ndarray
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: Any) -> None:
         # bounds.lower = ... is update(lower=...): validated, counted in version (the
         # module's rebinding rule); the class's own writes go through _set
         if name == "lower" or name == "upper":

@@ -26,7 +26,11 @@ model (``robot.with_frame("elbow")``: several frames of one robot in one IK).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any, Literal
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.linalg import filtered_svd
 from ..core.native import resolve_engine
@@ -34,10 +38,15 @@ from ..core.native_weighted import resolve_weighted_engine
 from ..core.stack import METHODS, Solution, Stack
 from ..core.tasks import Bounds, Equality, Inequality
 from .native_step import IKStepSpec, NativeIKStep
+from .paths import Path
 from .robot import Robot
 from .tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
 
-__all__ = ["IK", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
+__all__ = ["IK", "IKTask", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
+
+#: What an IK level or constraint holds: kinematic tasks (refreshed every step) and constant
+#: rows on the velocity
+IKTask = KinematicTask | Equality | Inequality
 
 #: Default relative damping of the IK stacks: a singular value below ``1e-4 · s₀`` is
 #: damped, so no joint speed exceeds ``‖task error‖ / (1e-4 s₀)``.
@@ -57,11 +66,11 @@ def _default_limits(robot: Robot) -> list[Limit]:
     return limits
 
 
-def _same_robot(task_robot, robot: Robot) -> bool:
+def _same_robot(task_robot: object, robot: Robot) -> bool:
     return task_robot is robot or getattr(task_robot, "model", None) is robot.model
 
 
-def _other_robot(what: str, robot: Robot, task_robot) -> str:
+def _other_robot(what: str, robot: Robot, task_robot: object) -> str:
     other = getattr(task_robot, "name", type(task_robot).__name__)
     return (
         f"{what} belongs to another robot ({other!r}: another Pinocchio model than "
@@ -123,10 +132,10 @@ class IK:
     def __init__(
         self,
         robot: Robot,
-        levels,
+        levels: Sequence[IKTask | Sequence[IKTask]],
         dt: float,
-        limits="robot",
-        constraints=None,
+        limits: Literal["robot"] | Sequence[Limit] | None = "robot",
+        constraints: Sequence[IKTask] | None = None,
         method: str = "hierarchical",
         solver: str | None = None,
         damping: float = DEFAULT_IK_DAMPING,
@@ -223,9 +232,9 @@ class IK:
             weight_ratio=self.stack.weight_ratio,
         )
 
-    def _collect(self, level, where: str) -> list:
+    def _collect(self, level: IKTask | Sequence[IKTask], where: str) -> list[Equality | Inequality]:
         items = level if isinstance(level, (list, tuple)) else [level]
-        out = []
+        out: list[Equality | Inequality] = []
         nv = self.robot.nv
         for task in items:
             if isinstance(task, KinematicTask):
@@ -253,7 +262,7 @@ class IK:
                 )
         return out
 
-    def refresh(self, q: np.ndarray, t: float = 0.0, reference=None) -> None:
+    def refresh(self, q: np.ndarray, t: float = 0.0, reference: Path | None = None) -> None:
         """Update every task and the bounds for a validated configuration ``q`` (rad)
         (float array of shape (nq,)) at time ``t`` (s).
 
@@ -289,7 +298,11 @@ class IK:
             self.bounds._touch()
 
     def step(
-        self, q, t: float = 0.0, reference=None, warm_start=None
+        self,
+        q: ArrayLike,
+        t: float = 0.0,
+        reference: Path | None = None,
+        warm_start: Solution | ArrayLike | None = None,
     ) -> tuple[np.ndarray, Solution]:
         """Solve one control step.
 
@@ -334,7 +347,11 @@ class IK:
         return v, sol
 
     def step_integrate(
-        self, q, t: float = 0.0, reference=None, warm_start=None
+        self,
+        q: ArrayLike,
+        t: float = 0.0,
+        reference: Path | None = None,
+        warm_start: Solution | ArrayLike | None = None,
     ) -> tuple[np.ndarray, np.ndarray, Solution]:
         """One control step and the configuration it leads to: ``(q_next, v, solution)``.
 
@@ -365,11 +382,13 @@ class IK:
             self.v_prev[...] = v
             for lim in self._recorders:
                 lim.record(v)
-            return native.q_next_out, v, sol
+            q_next = native.q_next_out
+            assert q_next is not None  # written by an integrating step
+            return q_next, v, sol
         v, sol = self.step(q, t, reference, warm_start)
         return self.robot.integrate(q, v, self.dt), v, sol
 
-    def reset(self, v_prev=None) -> None:
+    def reset(self, v_prev: ArrayLike | None = None) -> None:
         """Forget the previous step: ``v_prev`` (and that of the acceleration limits) back to
         zero, or to the given velocity (nv,); no warm start for the next solve."""
         v = np.zeros(self.robot.nv) if v_prev is None else self.robot._check_velocity(v_prev)
@@ -378,13 +397,19 @@ class IK:
             lim.record(v)
         self.last = None
 
-    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+    def velocity(self, q: ArrayLike, t: float = 0.0, reference: Path | None = None) -> np.ndarray:
         """Velocity ``v`` (nv,) at ``(q, t)``: the scheme interface used by :func:`simulate`."""
         return self.step(q, t, reference)[0]
 
 
 def ik_step(
-    robot: Robot, q, levels, dt: float, solver: str | None = None, t: float = 0.0, **options
+    robot: Robot,
+    q: ArrayLike,
+    levels: Sequence[IKTask | Sequence[IKTask]],
+    dt: float,
+    solver: str | None = None,
+    t: float = 0.0,
+    **options: Any,
 ) -> tuple[np.ndarray, Solution]:
     """Build an :class:`IK` and solve one step (convenience; a control loop keeps the IK).
 
@@ -396,8 +421,8 @@ def ik_step(
 
 def inverse_kinematics(
     robot: Robot,
-    target,
-    q0,
+    target: ArrayLike,
+    q0: ArrayLike,
     tol: float = 1e-12,
     max_iter: int = 200,
     max_step: float = 0.5,
@@ -459,7 +484,7 @@ def inverse_kinematics(
         def advance(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
             return robot.integrate(q, dq, 1.0)
 
-    def step(q: np.ndarray, toward_q0: bool):
+    def step(q: np.ndarray, toward_q0: bool) -> tuple[float, float, np.ndarray]:
         y, J = robot._kinematics(q)
         e = y_target - y
         U, s_, Vt, rank, g, _tau = filtered_svd(J, 1e-6)

@@ -95,9 +95,9 @@ def native_kind(task: KinematicTask) -> int | None:
         return None
     if kind == 0 and task.robot.frame_id is None:
         return None  # no default frame: its _refresh raises the robot's message
-    if kind == 2 and task.error == "split":
+    if kind == 2 and isinstance(task, FrameTask) and task.error == "split":
         return 6
-    if kind == 5 and _posture_q_index(task) is None:
+    if kind == 5 and isinstance(task, PostureTask) and _posture_q_index(task) is None:
         return None
     return kind
 
@@ -109,12 +109,17 @@ def _posture_q_index(task: PostureTask) -> list[int] | None:
     if robot.euclidean:
         return [int(j) for j in task.joints]
     model = robot.model
-    by_v = {}
+    by_v: dict[int, int] = {}
     for joint in model.joints[1:]:
         if joint.nq == 1 and joint.nv == 1:
             by_v[int(joint.idx_v)] = int(joint.idx_q)
-    out = [by_v.get(int(j)) for j in task.joints]
-    return None if None in out else out
+    out: list[int] = []
+    for j in task.joints:
+        iq = by_v.get(int(j))
+        if iq is None:
+            return None
+        out.append(iq)
+    return out
 
 
 #: Joints whose configuration is a vector space (``q + v dt``), by Pinocchio short name.
@@ -165,11 +170,23 @@ def _selection(task: KinematicTask, kind: int) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
     if kind == 0:
         return [int(r) for r in task.robot.rows]
-    if kind == 5:
+    if isinstance(task, PostureTask):  # kind 5
         return [int(j) for j in task.joints]
     if kind in _BANDS:
-        return list(range(task.task.C.shape[0]))
+        return list(range(task.task.shape[0]))
+    assert isinstance(task, (FramePositionTask, FrameTask, OrientationTask, ComTask))
     return [int(r) for r in task.selected_rows]
+
+
+def _frame_id(task: KinematicTask, kind: int) -> int:
+    """The frame a kernel of ``kind`` reads for ``task`` (its own, or its robot's default)."""
+    fid: int | None
+    if isinstance(task, (FramePositionTask, FrameTask, OrientationTask)):
+        fid = task.frame_id
+    else:  # kind 0: a PositionTask, on a robot with a default frame (native_kind)
+        fid = task.robot.frame_id
+    assert fid is not None, kind
+    return int(fid)
 
 
 @dataclass(frozen=True)
@@ -284,7 +301,7 @@ class NativeIKStep(NativeHierarchy):
                 m = t.A.shape[0]
                 owner = owners.get(id(t))
                 kind = None if owner is None else native_kind(owner)
-                if kind is None:
+                if owner is None or kind is None:
                     self._eq_ops.append((t, P.Aeq[i : i + m], P.beq[i : i + m]))
                     if owner is not None and owner not in self._python_tasks:
                         self._python_tasks.append(owner)
@@ -294,34 +311,34 @@ class NativeIKStep(NativeHierarchy):
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     elif kind not in (4, 5):
-                        fid = owner.robot.frame_id if kind == 0 else owner.frame_id
+                        fid = _frame_id(owner, kind)
                         if fid not in frames:
                             frames[fid] = self._add_frame(solver, fid)
                         frame = frames[fid]
-                    qidx = _posture_q_index(owner) if kind == 5 else []
+                    qidx = _posture_q_index(owner) if isinstance(owner, PostureTask) else []
                     solver.add_task(kind, owner, t, frame, _selection(owner, kind), i, qidx)
                     self.kernel_tasks.append(owner)
                 i += m
-            for t in B.ineqs:
-                m = t.C.shape[0]
-                owner = owners.get(id(t))
+            for u in B.ineqs:
+                m = u.C.shape[0]
+                owner = owners.get(id(u))
                 kind = None if owner is None else native_kind(owner)
-                if kind in _BANDS:  # ComBand, SupportPolygon: C, clo, chi, csw natively
+                if owner is not None and kind in _BANDS:  # ComBand, SupportPolygon: natively
                     if not self.com:
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     slots = []
-                    if kind == 8:
+                    if isinstance(owner, SupportPolygon):  # kind 8
                         for fid in owner.frame_ids:
                             if fid not in frames:
                                 frames[fid] = self._add_frame(solver, fid)
                             slots.append(frames[fid])
-                    solver.add_task(kind, owner, t, -1, _selection(owner, kind), j, slots)
+                    solver.add_task(kind, owner, u, -1, _selection(owner, kind), j, slots)
                     self.kernel_tasks.append(owner)
                     j += m
                     continue
                 rows = slice(j, j + m)
-                self._in_ops.append((t, P.C[rows], P.clo[rows], P.chi[rows], P.csw[rows]))
+                self._in_ops.append((u, P.C[rows], P.clo[rows], P.chi[rows], P.csw[rows]))
                 if owner is not None and owner not in self._python_tasks:
                     self._python_tasks.append(owner)
                 j += m
@@ -389,10 +406,11 @@ class NativeIKStep(NativeHierarchy):
             cols,
         )
 
-    def _add_limit(self, solver: Any, lim: JointLimits | VelocityLimits) -> None:
+    def _add_limit(self, solver: Any, lim: Limit) -> None:
         if isinstance(lim, VelocityLimits):
             solver.add_velocity_limits(lim, lim.limit)
             return
+        assert isinstance(lim, JointLimits)  # the two kinds with a kernel
         qi = lim.q_index
         if qi is None:
             solver.add_joint_limits(lim, lim.lower, lim.upper, [], [])

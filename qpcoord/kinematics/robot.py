@@ -278,7 +278,7 @@ class Robot:
         self._qkey = b""  # its bytes (cheap equality test)
         self._state = 0  # 0 nothing, 1 placements+jacobians, 2 + hessian
         self._com_ready = False  # CoM and its Jacobian computed at the cached q
-        self._layout = None  # tensor layout of Pinocchio's kinematic Hessian binding
+        self._layout: str | None = None  # tensor layout of Pinocchio's kinematic Hessian binding
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -515,7 +515,7 @@ class Robot:
         """Names of every frame of the model (bodies, joints, fixed joints, sensors)."""
         return list(self._frame_names)
 
-    def frame_index(self, frame: str | int, what: str = "frame") -> int:
+    def frame_index(self, frame: str | int | np.integer, what: str = "frame") -> int:
         """Pinocchio index of ``frame`` (a name, or an index that is returned checked).
 
         When a joint and a link share the name (URDF allows it), the link's frame is meant.

@@ -300,10 +300,11 @@ class KinematicTask(ABC):
         """
         e, J = self._checked(self.compute_error(q), self.compute_jacobian(q))
         k = self.gain
-        if self.kind == "equality":
-            return self.task._assign(J, -k * e)
+        task = self.task
+        if isinstance(task, Equality):  # kind "equality"
+            return task._assign(J, -k * e)
         with np.errstate(invalid="ignore"):  # inf − e stays inf
-            return self.task._assign(k * (self.lower - e), k * (self.upper - e), C=J)
+            return task._assign(k * (self.lower - e), k * (self.upper - e), C=J)
 
     def _checked(self, e: Any, J: Any) -> tuple[np.ndarray, np.ndarray]:
         rows, nv = self.task.shape
@@ -357,11 +358,13 @@ class PositionTask(KinematicTask):
     name : str
     """
 
+    task: Equality
+
     def __init__(
         self, robot: Robot, target=None, gain: float = 10.0, weight=1.0, name: str = "position"
     ) -> None:
         super().__init__(_check_robot(robot, name), robot.m, gain=gain, weight=weight, name=name)
-        self.target = None
+        self.target: Path | np.ndarray | None = None
         if target is not None:
             self.set_target(target)
         self._zero = np.zeros(robot.m)
@@ -450,6 +453,8 @@ class PositionBand(KinematicTask):
         Faces of the wrong size, NaN, or ``lower > upper`` on a row; a bad gain.
     """
 
+    task: Inequality
+
     def __init__(
         self,
         robot: Robot,
@@ -509,6 +514,8 @@ class PostureTask(KinematicTask):
     name : str
     """
 
+    task: Equality
+
     def __init__(self, robot: Robot, q_ref, gain: float = 1.0, weight=1.0, name="posture"):
         robot = _check_robot(robot, name)
         q_ref = robot.check_configuration(q_ref, "q_ref").copy()
@@ -565,6 +572,8 @@ class PotentialTask(KinematicTask):
     name : str
     """
 
+    task: Equality
+
     def __init__(self, robot: Robot, gradient, gain: float = 1.0, weight=1.0, name="potential"):
         fn = getattr(gradient, "gradient", gradient)
         if not callable(fn):
@@ -600,6 +609,8 @@ class OneFormTask(KinematicTask):
     weight : float or array_like
     name : str
     """
+
+    task: Equality
 
     def __init__(self, robot: Robot, form, rate=0.0, weight=1.0, name: str = "one-form"):
         self.robot = robot = _check_robot(robot, name)
@@ -640,6 +651,8 @@ class Limit(KinematicTask):
     robot : Robot
     name : str
     """
+
+    task: Inequality
 
     def __init__(self, robot: Robot, name: str = "limit") -> None:
         self.robot = robot = _check_robot(robot, name)
