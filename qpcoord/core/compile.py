@@ -131,7 +131,8 @@ class CompiledLevel:
         if self.m_in and (not all_finite(self.C) or _bad_box(self.lo, self.hi)):
             bad = True
         if bad:
-            for t in (*self.eqs, *self.ineqs):
+            tasks: list[Equality | Inequality] = [*self.eqs, *self.ineqs]
+            for t in tasks:
                 problem = find_bad_value(t)
                 if problem is not None:
                     raise ValueError(f"{problem} (found at solve time)")

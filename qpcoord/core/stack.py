@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from functools import cached_property
 from math import isfinite
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .backends import DEFAULT_TIME_LIMIT, check_solver, check_time_limit, deadline, time_left
 from .compile import CompiledStack, compile_stack
@@ -21,10 +24,13 @@ from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .persistent import PersistentQP
 from .polish import KKT_TOL
 from .solution import Solution
-from .tasks import Bounds
+from .tasks import Bounds, Equality, Inequality
 from .tolerance import within
 
-__all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
+__all__ = ["Stack", "Solution", "solve_stack", "METHODS", "Level"]
+
+#: One priority level: a task, or a list of tasks whose squared residuals add up
+Level = Equality | Inequality | Sequence[Equality | Inequality]
 
 #: The solve methods a :class:`Stack` offers.
 METHODS = ("hierarchical", "nullspace", "weighted")
@@ -38,7 +44,9 @@ def _limit_error(limit: float, exc: SolverError) -> SolverError:
     )
 
 
-def _call_native(native, P, limit: float):
+def _call_native(
+    native: NativeHierarchy | NativeWeighted, P: CompiledStack, limit: float
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """``native.solve(P, time_left=...)`` (a :class:`~qpcoord.core.native.NativeHierarchy` or
     :class:`~qpcoord.core.native_weighted.NativeWeighted`) with the solve's time limit
     ``limit`` (s) or, if earlier, an enclosing solve's deadline; a native error raised once
@@ -96,11 +104,11 @@ class Stack:
 
     def __init__(
         self,
-        levels,
+        levels: Sequence[Level],
         bounds: Bounds | None = None,
         regularization: float = 1e-9,
         damping: float = 1e-7,
-        constraints=None,
+        constraints: Sequence[Equality | Inequality] | None = None,
         weight_ratio: float = 1e-3,
         fallback: bool = True,
     ) -> None:
@@ -123,7 +131,7 @@ class Stack:
         self.regularization = float(regularization)
         self.damping = float(damping)
         self.weight_ratio = float(weight_ratio)
-        self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
+        self._solvers: dict[str | None, str] = {}  # resolved solver names (resolving costs ~0.1 ms)
         self._fallback = fallback
         self._chain_missed = False
         self._native: NativeHierarchy | None = None  # built at the first native solve
@@ -152,7 +160,7 @@ class Stack:
         return len(self._compiled.levels)
 
     @property
-    def levels(self) -> list[list]:
+    def levels(self) -> list[list[Equality | Inequality]]:
         """The tasks of each level (equalities first, then inequalities)."""
         return [L.eqs + L.ineqs for L in self._compiled.levels]
 
@@ -160,12 +168,12 @@ class Stack:
         self,
         solver: str | None = None,
         method: str = "hierarchical",
-        warm_start=None,
+        warm_start: Solution | ArrayLike | None = None,
         strict: bool = False,
         *,
         time_limit: float | None = None,
         engine: str | None = None,
-    ):
+    ) -> Solution:
         """Solve the stack with the tasks' current numbers.
 
         Parameters
@@ -240,7 +248,14 @@ class Stack:
                     raise _limit_error(limit, exc) from exc
                 raise
 
-    def _solve_python(self, t0: float, solver, method: str, warm_start, strict: bool) -> Solution:
+    def _solve_python(
+        self,
+        t0: float,
+        solver: str | None,
+        method: str,
+        warm_start: Solution | ArrayLike | None,
+        strict: bool,
+    ) -> Solution:
         """:meth:`solve` with the Python engine (under the solve's deadline)."""
         P = self._compiled
         P.refresh()
@@ -304,7 +319,9 @@ class Stack:
             info=info,
         )
 
-    def _solve_native(self, t0: float, warm_start, strict: bool, limit: float) -> Solution:
+    def _solve_native(
+        self, t0: float, warm_start: Solution | ArrayLike | None, strict: bool, limit: float
+    ) -> Solution:
         """``method="hierarchical"`` with the native engine. The native call checks the data
         (finite), the returned ``x`` (bounds and hard rows, as :meth:`_check`) and computes
         the level values: no per-call Python pass over the levels here (the wrapper writes
@@ -336,7 +353,9 @@ class Stack:
             x, status, residuals, "native", time.perf_counter() - t0, "hierarchical", info
         )
 
-    def _solve_native_weighted(self, t0: float, warm_start, limit: float) -> Solution:
+    def _solve_native_weighted(
+        self, t0: float, warm_start: Solution | ArrayLike | None, limit: float
+    ) -> Solution:
         """``method="weighted"`` with the native engine (:mod:`qpcoord.core.native_weighted`):
         the same QP, checked in the native call (data finite; bounds and hard rows at ``x``)."""
         P = self._compiled
@@ -369,7 +388,7 @@ class Stack:
             self, weight_ratio=weight_ratio, regularization=regularization, engine=engine
         )
 
-    def _reset(self, solver: str):
+    def _reset(self, solver: str) -> Reduced:
         """The workspace for a solve with QPs, after checking that no NaN or wrong-sided
         infinity is in the data (``ValueError`` naming the task): nothing non-finite reaches
         a backend. The closed-form paths check their result instead (cheaper)."""
@@ -377,7 +396,7 @@ class Stack:
         P.check_finite()
         return self._work.reset(P.lb, P.ub, solver)
 
-    def _warm(self, warm_start) -> np.ndarray | None:
+    def _warm(self, warm_start: Solution | ArrayLike | None) -> np.ndarray | None:
         if warm_start is None:
             return None
         if isinstance(warm_start, Solution) and warm_start.x.shape == (self.n,):
@@ -395,7 +414,7 @@ class Stack:
             )
         return x
 
-    def _check(self, x: np.ndarray, R, solver: str) -> None:
+    def _check(self, x: np.ndarray, R: Reduced | None, solver: str) -> None:
         """Never return an unchecked x: finite, bounds, hard rows, inherited rows."""
         P = self._compiled
         if not all_finite(x):
@@ -436,13 +455,13 @@ class Stack:
 
 
 def solve_stack(
-    levels,
+    levels: Sequence[Level],
     bounds: Bounds | None = None,
     solver: str | None = None,
     method: str = "hierarchical",
     time_limit: float | None = None,
     engine: str | None = None,
-    **options,
+    **options: Any,
 ) -> Solution:
     """Build a :class:`Stack` and solve it once (function form of :meth:`Stack.solve`).
 
