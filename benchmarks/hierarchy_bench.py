@@ -192,7 +192,7 @@ def talos_unit(rng):
     from it, outside every timer. DAQP's box: the limits, ±1e30 where open."""
     base = talos(rng)
     ik_stack = base["stack"]
-    bounds = ik_stack._compiled.bounds
+    bounds = ik_stack.compiled.bounds
     levels, refresh = [], []
     for lev in ik_stack.levels:
         lev = lev if isinstance(lev, list) else [lev]
@@ -257,7 +257,7 @@ def _scenario(build, rng) -> dict:
 
 
 def _levels_residuals(stack: qc.Stack, x: np.ndarray) -> np.ndarray:
-    return np.array([L.residual(x) for L in stack._compiled.levels])
+    return np.array([L.residual(x) for L in stack.compiled.levels])
 
 
 #: DAQP's columns: ``daqp.solve`` alone on the step's arrays built before the timer (what
@@ -292,7 +292,7 @@ def run(name, build, steps, seed=0, python=True):
     sc = _scenario(build, rng)
     stack, move, dq = sc["stack"], sc["move"], sc["daqp"]
     n = stack.n
-    P = stack._compiled
+    P = stack.compiled
     cold = NativeHierarchy(P, stack.damping)
     bare = NativeHierarchy(P, stack.damping)
     run_bare = bare._solver.run
@@ -405,7 +405,7 @@ def wrapper(name, build, steps):
     around the native call costs."""
     sc = _scenario(build, np.random.default_rng(0))
     stack, move = sc["stack"], sc["move"]
-    P = stack._compiled
+    P = stack.compiled
     stack.solve(engine="native")
     nat = stack._native
     times = {k: [] for k in WRAPPER_PARTS}

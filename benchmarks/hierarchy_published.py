@@ -172,7 +172,7 @@ def resolve(
     :data:`RESOLVE_KEYS` and of a bare native solver per ``Hierarchy`` switch in ``off``
     (that switch False), interleaved; and DAQP's exit flags."""
     stack = qc.Stack(levels, bounds=bounds)
-    P = stack._compiled
+    P = stack.compiled
     cold = NativeHierarchy(P, stack.damping)
     bare = NativeHierarchy(P, stack.damping)
     run_bare = bare._solver.run
