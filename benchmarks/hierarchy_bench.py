@@ -77,6 +77,7 @@ from pathlib import Path
 
 import daqp
 import numpy as np
+from daqp_form import daqp_problem
 from threadpoolctl import threadpool_limits
 
 import qpcoord as qc
@@ -191,7 +192,7 @@ def talos_unit(rng):
     from it, outside every timer. DAQP's box: the limits, ±1e30 where open."""
     base = talos(rng)
     ik_stack = base["stack"]
-    bounds = ik_stack._compiled.bounds
+    bounds = ik_stack.compiled.bounds
     levels, refresh = [], []
     for lev in ik_stack.levels:
         lev = lev if isinstance(lev, list) else [lev]
@@ -255,35 +256,8 @@ def _scenario(build, rng) -> dict:
     }
 
 
-def daqp_problem(levels, bounds, n):
-    """DAQP's hierarchical form: bounds hard (first n simple bounds), one block per level."""
-    A, bu, bl, breaks = [], [bounds.upper * np.ones(n)], [bounds.lower * np.ones(n)], [n]
-    count = n
-    for lev in levels:
-        lev = lev if isinstance(lev, list) else [lev]
-        for t in lev:
-            if isinstance(t, qc.Equality):
-                A.append(t.A)
-                bu.append(t.b)
-                bl.append(t.b)
-                count += t.A.shape[0]
-            else:
-                A.append(t.C)
-                bu.append(np.minimum(t.upper, 1e30))
-                bl.append(np.maximum(t.lower, -1e30))
-                count += t.C.shape[0]
-        breaks.append(count)
-    return (
-        np.vstack(A),
-        np.concatenate(bu),
-        np.concatenate(bl),
-        np.zeros(count, dtype=np.int32),
-        np.array(breaks, dtype=np.int32),
-    )
-
-
 def _levels_residuals(stack: qc.Stack, x: np.ndarray) -> np.ndarray:
-    return np.array([L.residual(x) for L in stack._compiled.levels])
+    return np.array([L.residual(x) for L in stack.compiled.levels])
 
 
 #: DAQP's columns: ``daqp.solve`` alone on the step's arrays built before the timer (what
@@ -317,7 +291,7 @@ def run(name, build, steps, seed=0, python=True):
     sc = _scenario(build, rng)
     stack, move, dq = sc["stack"], sc["move"], sc["daqp"]
     n = stack.n
-    P = stack._compiled
+    P = stack.compiled
     cold = NativeHierarchy(P, stack.damping)
     bare = NativeHierarchy(P, stack.damping)
     run_bare = bare._solver.run
@@ -430,7 +404,7 @@ def wrapper(name, build, steps):
     around the native call costs."""
     sc = _scenario(build, np.random.default_rng(0))
     stack, move = sc["stack"], sc["move"]
-    P = stack._compiled
+    P = stack.compiled
     stack.solve(engine="native")
     nat = stack._native
     times = {k: [] for k in WRAPPER_PARTS}

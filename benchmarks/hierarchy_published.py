@@ -60,7 +60,7 @@ import math  # noqa: E402
 import daqp  # noqa: E402
 import numpy as np  # noqa: E402
 from campaign import level_scales  # noqa: E402
-from hierarchy_bench import daqp_problem  # noqa: E402
+from daqp_form import daqp_problem  # noqa: E402
 from hlsp import NAMES, load  # noqa: E402
 from oracle import lexicographic  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
@@ -172,7 +172,7 @@ def resolve(
     :data:`RESOLVE_KEYS` and of a bare native solver per ``Hierarchy`` switch in ``off``
     (that switch False), interleaved; and DAQP's exit flags."""
     stack = qc.Stack(levels, bounds=bounds)
-    P = stack._compiled
+    P = stack.compiled
     cold = NativeHierarchy(P, stack.damping)
     bare = NativeHierarchy(P, stack.damping)
     run_bare = bare._solver.run

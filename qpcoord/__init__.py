@@ -11,6 +11,9 @@ is posed as a stack of priority levels of linear tasks, solved once per control 
 from . import robots
 from ._version import __version__ as __version__
 from .coordination import geometry, potentials, schemes, task_manifold
+
+# ``qc.analysis`` (closure errors, Poincaré sections, periods) is the module
+# qpcoord.coordination.periodicity under its public name; there is no qpcoord/analysis.py.
 from .coordination import periodicity as analysis
 from .core.backends import available_solvers, default_solver, solver_versions
 from .core.errors import AlgorithmicSingularity, InfeasibleError, SolverError

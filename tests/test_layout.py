@@ -1,19 +1,19 @@
-"""The package layout: one-way layers, no import circle, the old module paths as aliases.
+"""The package layout: one-way layers, no import circle, the public names of ``qc``.
 
 The layers (``pyproject.toml``, ``[tool.importlinter]``) are checked with import-linter's
-``layers`` contract; circles with grimp's import graph (the one import-linter builds), run-time
-imports only: an import under ``if TYPE_CHECKING:`` is for annotations and is never executed.
+``layers`` contract. Circles are found on an import graph read from the source (``ast``):
+every ``import`` statement counts, at module level, inside a function (a lazy import runs
+too) and under ``if TYPE_CHECKING:`` (the annotation ties the two modules all the same), for
+the modules of ``qpcoord`` and for the benchmark scripts of ``benchmarks/``.
 """
 
 from __future__ import annotations
 
-import json
+import ast
 import subprocess
 import sys
 from pathlib import Path
 
-import grimp
-import pytest
 import tomllib
 from importlinter import api as importlinter_api  # noqa: F401  (the dependency is present)
 
@@ -21,43 +21,6 @@ import qpcoord
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = Path(qpcoord.__file__).resolve().parent
-
-#: Module paths of qpcoord 0.1 -> their home in the layered layout (kept as warning aliases).
-MOVED = {
-    "qpcoord.tasks": "qpcoord.core.tasks",
-    "qpcoord.problem": "qpcoord.core.compile",
-    "qpcoord.stack": "qpcoord.core.stack",
-    "qpcoord.hierarchical": "qpcoord.core.methods.hierarchical",
-    "qpcoord.nullspace": "qpcoord.core.methods.nullspace",
-    "qpcoord.weighted": "qpcoord.core.methods.weighted",
-    "qpcoord.reduced": "qpcoord.core.elimination",
-    "qpcoord.polish": "qpcoord.core.polish",
-    "qpcoord.backends": "qpcoord.core.backends",
-    "qpcoord.persistent": "qpcoord.core.persistent",
-    "qpcoord.linalg": "qpcoord.core.linalg",
-    "qpcoord.tolerance": "qpcoord.core.tolerance",
-    "qpcoord.errors": "qpcoord.core.errors",
-    "qpcoord.robot": "qpcoord.kinematics.robot",
-    "qpcoord.kinematic_tasks": "qpcoord.kinematics.tasks",
-    "qpcoord.ik": "qpcoord.kinematics.ik",
-    "qpcoord.paths": "qpcoord.kinematics.paths",
-    "qpcoord.simulate": "qpcoord.kinematics.simulation",
-    "qpcoord.geometry": "qpcoord.coordination.geometry",
-    "qpcoord.potentials": "qpcoord.coordination.potentials",
-    "qpcoord.extension": "qpcoord.coordination.extensions",
-    "qpcoord.curvature": "qpcoord.coordination.curvature",
-    "qpcoord.schemes": "qpcoord.coordination.schemes",
-    "qpcoord.task_manifold": "qpcoord.coordination.task_manifold",
-    "qpcoord.analysis": "qpcoord.coordination.periodicity",
-    "qpcoord.reproduce": "qpcoord.studies.reproduce",
-    "qpcoord.reproduce_report": "qpcoord.studies.render",
-    "qpcoord.report": "qpcoord.studies.claims",  # and qpcoord.studies.files
-    "qpcoord.figures": "qpcoord.studies.figures",
-    "qpcoord.sweep": "qpcoord.studies.sweep",
-    "qpcoord.bench": "qpcoord.studies.bench_stack",
-    "qpcoord.bench_ik": "qpcoord.studies.bench_ik",
-    "qpcoord.demo": "qpcoord.studies.demo",
-}
 
 #: ``qc.__all__`` of qpcoord 0.1: every name must stay.
 PUBLIC_0_1 = """AlgorithmicSingularity Bounds Equality IK InfeasibleError Inequality JointLimits
@@ -67,7 +30,62 @@ VelocityLimits available_solvers default_solver ik_step inverse_kinematics paths
 robots schemes simulate solve_stack solver_versions task_manifold""".split()
 
 
-def _cycles(graph: grimp.ImportGraph) -> list[list[str]]:
+def package_modules(package_dir: Path) -> dict[str, Path]:
+    """Module name -> file of every module of the package at ``package_dir`` (folders
+    without an ``__init__.py`` are not packages: skipped with everything below them)."""
+    out: dict[str, Path] = {}
+
+    def walk(folder: Path, prefix: str) -> None:
+        for path in sorted(folder.iterdir()):
+            if path.is_dir() and not path.is_symlink() and (path / "__init__.py").is_file():
+                walk(path, f"{prefix}.{path.name}")
+            elif path.suffix == ".py" and path.is_file():
+                out[prefix if path.name == "__init__.py" else f"{prefix}.{path.stem}"] = path
+
+    walk(package_dir, package_dir.name)
+    return out
+
+
+def script_modules(folder: Path) -> dict[str, Path]:
+    """Module name -> file of the scripts of a folder that import each other by name."""
+    return {path.stem: path for path in sorted(folder.glob("*.py"))}
+
+
+def import_graph(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """``importer -> {imported}`` among ``modules`` from every import statement of each file
+    (``ast.walk``: function bodies and ``if TYPE_CHECKING:`` blocks included). ``from p
+    import name`` imports the module ``p.name`` if there is one, else ``p``; ``import a.b.c``
+    the deepest module of ``a.b.c`` in ``modules``."""
+
+    def deepest(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, set[str]] = {name: set() for name in modules}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".") if package else []
+                    parts = parts[: len(parts) - (node.level - 1)]
+                    base = ".".join([*parts, base] if base else parts)
+                for alias in node.names:
+                    full = f"{base}.{alias.name}" if base else alias.name
+                    targets.append(full if full in modules else base)
+            for target in targets:
+                found = deepest(target)
+                if found is not None and found != name:
+                    graph[name].add(found)
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components of more than one module (Tarjan, iterative)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
@@ -75,10 +93,10 @@ def _cycles(graph: grimp.ImportGraph) -> list[list[str]]:
     stack: list[str] = []
     found: list[list[str]] = []
     counter = 0
-    for root in sorted(graph.modules):
+    for root in sorted(graph):
         if root in index:
             continue
-        work = [(root, iter(sorted(graph.find_modules_directly_imported_by(root))))]
+        work = [(root, iter(sorted(graph[root])))]
         index[root] = low[root] = counter
         counter += 1
         stack.append(root)
@@ -92,9 +110,7 @@ def _cycles(graph: grimp.ImportGraph) -> list[list[str]]:
                     counter += 1
                     stack.append(child)
                     on_stack.add(child)
-                    work.append(
-                        (child, iter(sorted(graph.find_modules_directly_imported_by(child))))
-                    )
+                    work.append((child, iter(sorted(graph.get(child, ())))))
                     advanced = True
                     break
                 if child in on_stack:
@@ -117,23 +133,50 @@ def _cycles(graph: grimp.ImportGraph) -> list[list[str]]:
     return found
 
 
-@pytest.fixture(scope="module")
-def graph() -> grimp.ImportGraph:
-    return grimp.build_graph("qpcoord", exclude_type_checking_imports=True, cache_dir=None)
+def test_no_import_circle_in_qpcoord():
+    """No two modules of qpcoord import each other, directly or through others, whatever the
+    kind of import (module level, lazy in a function, under ``TYPE_CHECKING``)."""
+    modules = package_modules(PACKAGE)
+    assert {"qpcoord", "qpcoord.core.stack", "qpcoord.kinematics.ik"} <= set(modules)
+    graph = import_graph(modules)
+    assert "qpcoord.core.persistent" in graph["qpcoord.core.stack"]  # the graph has edges
+    assert cycles(graph) == []
 
 
-def test_no_import_circle(graph):
-    """No two modules of qpcoord import each other, directly or through others (imports
-    inside functions count: they run too)."""
-    assert _cycles(graph) == []
+def test_no_import_circle_among_benchmarks():
+    """The benchmark scripts (which import each other by name) form no circle either."""
+    modules = script_modules(ROOT / "benchmarks")
+    graph = import_graph(modules)
+    assert any(graph.values())  # the scripts' imports of each other are seen
+    assert cycles(graph) == []
 
 
 def test_cycle_finder_finds_a_circle():
     """The check above can fail: a graph with a 3-module circle is reported."""
-    g = grimp.ImportGraph()
-    for a, b in [("p.a", "p.b"), ("p.b", "p.c"), ("p.c", "p.a"), ("p.c", "p.d")]:
-        g.add_import(importer=a, imported=b)
-    assert _cycles(g) == [["p.a", "p.b", "p.c"]]
+    g = {"p.a": {"p.b"}, "p.b": {"p.c"}, "p.c": {"p.a", "p.d"}, "p.d": set()}
+    assert cycles(g) == [["p.a", "p.b", "p.c"]]
+
+
+def test_import_graph_sees_lazy_and_type_checking_imports(tmp_path):
+    """A circle closed only by a function-level import and an ``if TYPE_CHECKING:`` import
+    (relative, ``from . import``, ``from .x import``, ``import p.x``) is found."""
+    pkg = tmp_path / "p"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .sub.b import B\n"
+    )
+    (pkg / "sub" / "b.py").write_text("def f():\n    from .. import c\n")
+    (pkg / "c.py").write_text("def g():\n    import p.a\n")
+    (pkg / "d.py").write_text("from .a import x\n")
+    modules = package_modules(pkg)
+    assert set(modules) == {"p", "p.a", "p.sub", "p.sub.b", "p.c", "p.d"}
+    graph = import_graph(modules)
+    assert graph["p.a"] == {"p.sub.b"}
+    assert graph["p.sub.b"] == {"p.c"}
+    assert graph["p.d"] == {"p.a"}
+    assert cycles(graph) == [["p.a", "p.c", "p.sub.b"]]
 
 
 def test_layers_contract_is_kept():
@@ -182,50 +225,13 @@ def test_public_names_of_0_1_are_kept():
         assert getattr(qc, name) is not None
 
 
-_ALIAS_PROBE = """
-import importlib, json, sys, warnings
-import qpcoord as qc
-out = {}
-for old, new in json.loads(sys.argv[1]).items():
-    with warnings.catch_warnings(record=True) as w:
-        warnings.simplefilter("always")
-        mod = importlib.import_module(old)
-    dep = [str(x.message) for x in w if issubclass(x.category, DeprecationWarning)]
-    target = importlib.import_module(new)
-    public = [n for n in getattr(target, "__all__", []) if not n.startswith("_")]
-    same = all(getattr(mod, n) is getattr(target, n) for n in public)
-    out[old] = {"warned": dep, "same": same, "n_public": len(public),
-                "simulate_callable": callable(qc.simulate)}
-print(json.dumps(out))
-"""
+def test_qc_analysis_is_the_periodicity_module():
+    """``qc.analysis`` (DESIGN.md's name: ``qc.analysis.closure_errors``, ...) is the module
+    :mod:`qpcoord.coordination.periodicity`; it has no module file of its own."""
+    import qpcoord as qc
+    from qpcoord.coordination import periodicity
 
-
-def test_old_module_paths_are_warning_aliases():
-    """Each module path of 0.1 still imports, warns once (DeprecationWarning naming the new
-    path) and gives the same objects as the new module. Run in a fresh interpreter, so the
-    first import of each alias really happens there."""
-    proc = subprocess.run(
-        [sys.executable, "-c", _ALIAS_PROBE, json.dumps(MOVED)],
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    result = json.loads(proc.stdout)
-    assert set(result) == set(MOVED)
-    for old, r in result.items():
-        assert len(r["warned"]) == 1, (old, r["warned"])
-        assert MOVED[old] in r["warned"][0], (old, r["warned"][0])
-        assert r["same"], old
-        assert r["n_public"] > 0, old
-        assert r["simulate_callable"], old  # qc.simulate(...) survives `import qpcoord.simulate`
-
-
-def test_new_paths_do_not_warn():
-    """Importing qpcoord and every new module raises no DeprecationWarning."""
-    modules = sorted(set(MOVED.values()) | {"qpcoord.studies.files", "qpcoord.musculo"})
-    code = (
-        "import importlib, warnings\n"
-        "warnings.simplefilter('error', DeprecationWarning)\n"
-        f"for m in {modules!r}: importlib.import_module(m)\n"
-    )
-    subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code], check=True)
+    assert qc.analysis is periodicity
+    for name in ("closure_errors", "poincare_section", "detect_period"):
+        assert callable(getattr(qc.analysis, name)), name
+    assert not (PACKAGE / "analysis.py").exists()

@@ -7,7 +7,7 @@ module             holds
 ``potentials``     potential functions and their gradients and Hessians (ch. 5)
 ``extensions``     rigid and soft extensions (Defs 5.2-5.4)
 ``curvature``      Hessian-direction and complementary-form schemes (§5.4-5.5)
-``schemes``        one scheme class per thesis method (:mod:`qpcoord.schemes`)
+``schemes``        one scheme class per thesis method (``qc.schemes``)
 ``task_manifold``  fibres of the task map, self-motion
 ``periodicity``    closure errors, Poincaré sections, periods (``qc.analysis``)
 =================  ==================================================================

@@ -89,7 +89,7 @@ class deadline:  # noqa: N801 (a context manager used like a function)
         if outer is not None and (at is None or outer < at):
             at = outer
         self._at = at
-        self._token = None
+        self._token: contextvars.Token[float | None] | None = None
 
     @property
     def at(self) -> float | None:
@@ -104,8 +104,9 @@ class deadline:  # noqa: N801 (a context manager used like a function)
         self._token = _DEADLINE.set(self._at)
         return self
 
-    def __exit__(self, *exc) -> None:
-        _DEADLINE.reset(self._token)
+    def __exit__(self, *exc: object) -> None:
+        if self._token is not None:
+            _DEADLINE.reset(self._token)
 
 
 def check_time_limit(time_limit) -> float:
@@ -359,7 +360,7 @@ def _prime_highs() -> None:
 #: tolerances; a stronger proximal term, then daqp's defaults, solve them. The stack
 #: refines every level QP's answer on its active set, so the looser tries cost no accuracy
 #: when they find the right active set.
-_DAQP_SETTINGS = (
+_DAQP_SETTINGS: tuple[dict[str, float], ...] = (
     dict(eps_prox=1e-6, eta_prox=1e-12, primal_tol=1e-10),
     dict(eps_prox=1e-4, eta_prox=1e-12, primal_tol=1e-10),
     dict(),

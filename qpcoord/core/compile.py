@@ -14,6 +14,7 @@ reads them without a copy.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import InitVar, dataclass, field
 
 import numpy as np
@@ -80,7 +81,7 @@ class CompiledLevel:
         A level made of one unit-weight equality reads that task's arrays directly; they
         are only read, never written, by the solve methods.
         """
-        eqs = self.eqs
+        eqs: Sequence[Equality] = self.eqs
         if len(eqs) == 1 and eqs[0].unit_weight:
             # one unit-weight task: read its arrays in place (no copy on the hot path)
             t = eqs[0]
@@ -108,14 +109,14 @@ class CompiledLevel:
                 np.multiply(t.b, sw, out=self.be[i : i + m])
             i += m
         i = 0
-        for t, shape in zip(self.ineqs, self._in_shapes, strict=True):
-            if t.C.shape != shape:
-                raise ValueError(f"{t.label}: C changed shape from {shape} to {t.C.shape}")
+        for u, shape in zip(self.ineqs, self._in_shapes, strict=True):
+            if u.C.shape != shape:
+                raise ValueError(f"{u.label}: C changed shape from {shape} to {u.C.shape}")
             m = shape[0]
-            self.C[i : i + m] = t.C
-            self.lo[i : i + m] = t.lower
-            self.hi[i : i + m] = t.upper
-            self.sw[i : i + m] = t.sqrt_weight
+            self.C[i : i + m] = u.C
+            self.lo[i : i + m] = u.lower
+            self.hi[i : i + m] = u.upper
+            self.sw[i : i + m] = u.sqrt_weight
             i += m
         if self.ineqs:
             self.low, self.hiw = widen(self.lo, self.hi, FEAS_TOL)
@@ -130,7 +131,8 @@ class CompiledLevel:
         if self.m_in and (not all_finite(self.C) or _bad_box(self.lo, self.hi)):
             bad = True
         if bad:
-            for t in (*self.eqs, *self.ineqs):
+            tasks: list[Equality | Inequality] = [*self.eqs, *self.ineqs]
+            for t in tasks:
                 problem = find_bad_value(t)
                 if problem is not None:
                     raise ValueError(f"{problem} (found at solve time)")
@@ -182,11 +184,15 @@ class CompiledStack:
         for L in self.levels:
             L.check_finite()
         self.hard.check_finite()
-        if self.lb is not None and _bad_box(self.lb, self.ub):
-            problem = find_bad_value(self.bounds)
-            raise ValueError(
-                f"{problem or self.bounds.label + ': bounds contain NaN'} (found at solve time)"
-            )
+        b = self.bounds
+        if (
+            b is not None
+            and self.lb is not None
+            and self.ub is not None
+            and _bad_box(self.lb, self.ub)
+        ):
+            problem = find_bad_value(b)
+            raise ValueError(f"{problem or b.label + ': bounds contain NaN'} (found at solve time)")
 
     def refresh(self) -> None:
         """Re-read every task's numbers (the per-step update of the Python engine: a level
@@ -248,9 +254,9 @@ class CompiledStack:
                 in_ops.append((B.ineqs[0], B._in_shapes[0], *ineq))
                 in_first.append(j)
             else:
-                for t, shape in zip(B.ineqs, B._in_shapes, strict=True):
+                for u, shape in zip(B.ineqs, B._in_shapes, strict=True):
                     m = j + shape[0]
-                    in_ops.append((t, shape, C[j:m], clo[j:m], chi[j:m], csw[j:m]))
+                    in_ops.append((u, shape, C[j:m], clo[j:m], chi[j:m], csw[j:m]))
                     in_first.append(j)
                     j = m
             i, j = i1, j1
@@ -362,7 +368,7 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
     # the constraints)
     n = None
     first = None
-    bad_task = [None, None]  # levels, constraints
+    bad_task: list[str | None] = [None, None]  # levels, constraints
     blocks = []
     for k, tasks in enumerate([hard_tasks, *norm_levels]):
         where = "constraints" if k == 0 else f"level {k - 1}"

@@ -13,6 +13,8 @@ inherited-row buffers are allocated once (the per-step hot path).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.linalg import solve_triangular
 
@@ -171,7 +173,7 @@ class Reduced:
         self.Z: np.ndarray | None = None
         self.k = 0
         self.lb, self.ub = lb, ub
-        if lb is not None:
+        if lb is not None and ub is not None:
             self.lbw, self.ubw = widen(lb, ub, FEAS_TOL)
         self.solver = solver
         self.relax = RELAX.get(solver, RELAX_DEFAULT)
@@ -185,7 +187,9 @@ class Reduced:
         self.certificates: list[float] = []  # KKT residual of each level that ran a QP
         self.uncertified: list[tuple[int, float]] = []  # (level, KKT residual)
         self.verified = True  # x̄ passed the feasibility test (no QP output since)
-        self._asm = None  # (kdim, D, k, Z, T, G): the last QP matrix built by _assemble
+        self._asm: tuple[Any, ...] | None = (
+            None  # (kdim, D, k, Z, T, G): the last QP matrix built by _assemble
+        )
         return self
 
     # -- inherited rows -----------------------------------------------------------------
@@ -248,7 +252,7 @@ class Reduced:
         """Set ``x̄``, snapped into the bounds: that removes a backend's ~1e-12 overshoot,
         which would make ``z = 0`` infeasible for the next level, and a closed form's
         ``FEAS_TOL`` one, so a returned ``x`` never leaves its box."""
-        if self.lb is not None:
+        if self.lb is not None and self.ub is not None:
             x = np.minimum(np.maximum(x, self.lb), self.ub)
         self.x = x
         self.verified = verified
@@ -265,7 +269,7 @@ class Reduced:
         return True
 
     # -- QP in z (plus optional slack block) -------------------------------------------
-    def _relax(self, bound: np.ndarray) -> np.ndarray:
+    def _relax(self, bound: np.ndarray) -> np.ndarray | float:
         """``RELAX·max(1, |bound|)``: opens the inherited rows by a hair so that a point
         pinned by more active rows than free directions is not a degenerate vertex (daqp
         declared such QPs infeasible). Bounds are snapped back after the solve."""
@@ -328,7 +332,7 @@ class Reduced:
             los.append(np.minimum(self._lo[:k] - cx, 0.0) - self._relax(self._lo[:k]))
             his.append(np.maximum(self._hi[:k] - cx, 0.0) + self._relax(self._hi[:k]))
         lb = ub = None
-        if self.lb is not None:
+        if self.lb is not None and self.ub is not None:
             if self.Z is None and T is None:
                 lb = np.full(kdim, -np.inf)
                 ub = np.full(kdim, np.inf)
@@ -408,9 +412,10 @@ class Reduced:
             if y is not None:
                 return y
             raise SolverError(f"{where}: backend {self.solver!r} failed: {res.message}")
-        if not all_finite(res.y):
+        y = res.y
+        if y is None or not all_finite(y):  # (an OK result carries its y)
             raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite solution")
-        miss = _miss(G, lo, hi, lb, ub, res.y)
+        miss = _miss(G, lo, hi, lb, ub, y)
         if miss > CHECK_TOL:
             # a point outside the QP's own rows is a failure of the backend: the next
             # backend gets the QP (a stretched Panda IK: daqp 4.9e-6 outside, every step)
@@ -422,13 +427,13 @@ class Reduced:
                 f"constraints by {miss:.3g} (relative)"
             )
         if res.exact:
-            return res.y
+            return y
         # polish against the unopened rows: the point lands exactly on the true bounds
         keep = self.relax
         self.relax = 0.0
         G, lo, hi, lb, ub = self._assemble(kdim, D, dlo, dhi, T)
         self.relax = keep
-        return polish(H, f, G, lo, hi, lb, ub, res.y, obj_slack=10.0 * opened)
+        return polish(H, f, G, lo, hi, lb, ub, y, obj_slack=10.0 * opened)
 
     def alternatives(self) -> list[str]:
         """Installed backends of :data:`FALLBACKS` other than the requested one (empty with
@@ -509,7 +514,7 @@ class Reduced:
         self.inherit(hard.C, hard.lo, hard.hi)
         if (self.lb is None and not self.k) or self.feasible(self.x):
             return
-        if self.lb is not None and self.Z is None and not self.k:
+        if self.lb is not None and self.ub is not None and self.Z is None and not self.k:
             self.x = np.minimum(np.maximum(self.x, self.lb), self.ub)
             return
         r = self.r
@@ -525,7 +530,7 @@ class Reduced:
             cx = self._C[: self.k] @ x
             lo[: self.k] = self._lo[: self.k] - cx
             hi[: self.k] = self._hi[: self.k] - cx
-        if self.lb is not None:
+        if self.lb is not None and self.ub is not None:
             if self.Z is None:
                 lb, ub = self.lb - x, self.ub - x
             else:
@@ -538,10 +543,11 @@ class Reduced:
             lp_t = self._lp_check(G, lo, hi, lb, ub, where, "")
         self.qp_calls += 1
         res = solve_dense_qp(self.solver, np.eye(r), self.project(x), G, lo, hi, lb, ub, None)
-        if res.code == OK and not np.all(np.isfinite(res.y)):
+        y = res.y if res.code == OK else None
+        if y is not None and not np.all(np.isfinite(y)):
             raise SolverError(f"{where}: backend {self.solver!r} returned a non-finite point")
-        if res.code == OK and self._hard_ok(x + self.lift(res.y)):
-            self.move_to(x + self.lift(res.y), verified=False)
+        if y is not None and self._hard_ok(x + self.lift(y)):
+            self.move_to(x + self.lift(y), verified=False)
             return
         # the backend failed, called the hard part infeasible or returned a point outside
         # it: an "infeasible" is only believed when an LP confirms it (proxqp, quadprog and
@@ -567,7 +573,7 @@ class Reduced:
         """Does ``xn`` meet the bounds and hard rows to :data:`CHECK_TOL`?"""
         return bool(
             all_finite(xn)
-            and (self.lb is None or within(xn, self.lb, self.ub, CHECK_TOL))
+            and (self.lb is None or self.ub is None or within(xn, self.lb, self.ub, CHECK_TOL))
             and within(self.Cin @ xn, self.lin, self.uin, CHECK_TOL)
         )
 

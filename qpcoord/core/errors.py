@@ -7,6 +7,11 @@ The two classes below are for problems that are well-formed but cannot be solved
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
+
 __all__ = ["InfeasibleError", "SolverError", "AlgorithmicSingularity"]
 
 
@@ -47,7 +52,13 @@ class AlgorithmicSingularity(ValueError):
     singular value relative to the largest, dimensionless).
     """
 
-    def __init__(self, message: str, q=None, t: float | None = None, sigma: float | None = None):
+    def __init__(
+        self,
+        message: str,
+        q: np.ndarray | None = None,
+        t: float | None = None,
+        sigma: float | None = None,
+    ) -> None:
         super().__init__(message)
         self.q = q
         self.t = t

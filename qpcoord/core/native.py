@@ -523,11 +523,12 @@ def raise_status(
     if code == mod.NON_FINITE:
         raise SolverError("native engine produced a non-finite solution")
     if code == mod.CHECK_FAILED:  # the messages of Stack._check
-        if d[3] == 1:
+        lb, ub = P.lb, P.ub
+        if d[3] == 1 and lb is not None and ub is not None:  # (only a stack with bounds)
             i = int(d[4])
             raise SolverError(
                 f"backend 'native' returned x[{i}] = {x[i]!r} outside the bounds "
-                f"[{P.lb[i]!r}, {P.ub[i]!r}]"
+                f"[{lb[i]!r}, {ub[i]!r}]"
             )
         if d[3] == 2:
             raise SolverError(

@@ -140,7 +140,7 @@ class NativeWeighted:
             float(weight_ratio),
         )
         own = arrays is None
-        if own:
+        if arrays is None:
             arrays = (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, P.lbs, P.ubs)
         self._solver.bind(*arrays, self.x, self.res, self.detail, self.active)
         # on P's own arrays, solve() refreshes them natively (src/native/refresh.hpp, as

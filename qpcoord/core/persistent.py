@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import time
 from operator import attrgetter
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.linalg import lapack
@@ -50,10 +50,7 @@ from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .solution import Solution
 from .tasks import Equality
 
-if TYPE_CHECKING:
-    from .stack import Stack
-
-__all__ = ["PersistentQP"]
+__all__ = ["PersistentQP", "WeightedStack"]
 
 _INF = 1e30  # daqp's infinity
 _MATRIX_VERSION = attrgetter("matrix_version")
@@ -122,6 +119,25 @@ def _whitening(W: list, s: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] 
     return T, np.ascontiguousarray(QtE[:n])
 
 
+class WeightedStack(Protocol):
+    """What a :class:`PersistentQP` reads of its :class:`~qpcoord.Stack`: the compiled rows,
+    the weighted method's parameters, and its general solve (the fallback)."""
+
+    weight_ratio: float
+    regularization: float
+
+    @property
+    def compiled(self) -> CompiledStack: ...
+
+    def solve(
+        self,
+        solver: str | None = None,
+        method: str = "hierarchical",
+        *,
+        engine: str | None = None,
+    ) -> Solution: ...
+
+
 class PersistentQP:
     """The weighted QP of a fixed-matrix :class:`~qpcoord.Stack` on a persistent workspace (native
     or daqp).
@@ -160,15 +176,20 @@ class PersistentQP:
     ε·cond(H).
     """
 
-    def __init__(self, stack: Stack, weight_ratio=None, regularization=None, engine=None) -> None:
+    def __init__(
+        self,
+        stack: WeightedStack,
+        weight_ratio: float | None = None,
+        regularization: float | None = None,
+        engine: str | None = None,
+    ) -> None:
         self.engine = resolve_weighted_engine(engine, None)
         if self.engine == "python":
             import daqp
         else:
             daqp = None
-        # duck-typed on the compiled data, so that this module needs no import of
-        # qpcoord.core.stack (which imports it: Stack.persistent)
-        if not isinstance(getattr(stack, "_compiled", None), CompiledStack):
+        # read through WeightedStack: qpcoord.core.stack imports this module (Stack.persistent)
+        if not isinstance(getattr(stack, "compiled", None), CompiledStack):
             raise ValueError(f"stack must be a qpcoord.Stack, got {type(stack).__name__}")
         self.stack = stack
         self.weight_ratio = stack.weight_ratio if weight_ratio is None else float(weight_ratio)
@@ -189,7 +210,7 @@ class PersistentQP:
         self.region_steps = 0
         self.qp_steps = 0
         self.last: Solution | None = None
-        P = stack._compiled
+        P = stack.compiled
         P.refresh()
         self._setup(P)
 
@@ -243,7 +264,10 @@ class PersistentQP:
         wh = None
         if self.engine == "python":
             wh = _whitening(W, np.concatenate(sw) if sw else np.zeros(0), n)
-        self._T, self._Fw = (None, None) if wh is None else wh
+        self._T: np.ndarray | None = None
+        self._Fw: np.ndarray | None = None
+        if wh is not None:
+            self._T, self._Fw = wh
         self._fw_fresh = False
         hard = P.hard
         # rows after the simple bounds: hard equalities, hard inequalities, soft rows C x − s
@@ -271,10 +295,13 @@ class PersistentQP:
         # rows and bounds -- exact, where daqp's LDL loses accuracy on ill-conditioned H
         self._chol = None
         self._try_unconstrained = True
-        self._pspec = None
-        self._pz = None
-        self._fused = None
-        self._p_version = None
+        #: parametrize()'s size of θ and, by task id, (task, [(c, M) per side])
+        self._pspec: tuple[int, dict[int, tuple[Any, list[tuple[Any, np.ndarray]]]]] | None = None
+        #: the unconstrained optimum affine in θ: (z0, Z, e0, E)
+        self._pz: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: the limit rows stacked: (Lb, lb0, [G; −G], scratch)
+        self._fused: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._p_version: list[int] | None = None
         if mi == 0:
             cho, info = lapack.dpotrf(H, lower=0, clean=1)
             if info == 0:
@@ -311,13 +338,14 @@ class PersistentQP:
         self._hard_slice = slice(h0, h0 + mh)
         # no slack and bounded: bounds then hard rows lead daqp's limit vectors, so one
         # stacked matrix [I; G_hard] checks them all with one matvec
-        self._G_check = None
+        self._G_check: np.ndarray | None = None
         if mi == 0 and self._bounded:
             self._G_check = np.vstack((np.eye(n), G[:mh, :n]))
             self._check_rows = slice(0, n + mh)
         # residual rows: the equality tasks stacked (same order as self._b), with the level
         # of each task, for a one-matvec residual; inequality tasks one by one
         self._nlevels = len(P.levels)
+        self._res_eq: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
         if eq_tasks:
             lev_of = {id(t): k for k, L in enumerate(P.levels) for t in L.eqs}
             sizes = [t.A.shape[0] for t in eq_tasks]
@@ -399,15 +427,17 @@ class PersistentQP:
     def _native_step(self, P) -> np.ndarray | None:
         """One native solve on the filled arrays; the checked ``x`` (a new array) or ``None``
         (then: fall back). Sets ``_lam`` (the active rows in daqp's order) and ``_iters``."""
+        nw = self._nw
+        assert nw is not None  # the native engine's workspace (_setup)
         try:
-            self._nw.run(P, warm=True, time_left=DEFAULT_TIME_LIMIT, refactor=False)
+            nw.run(P, warm=True, time_left=DEFAULT_TIME_LIMIT, refactor=False)
         except (InfeasibleError, SolverError, ValueError):
             self._lam = None
             return None
-        self._iters = int(self._nw.detail[2])
-        act = self._nw.active
+        self._iters = int(nw.detail[2])
+        act = nw.active
         self._lam = act if self._bounded else act[self._n :]
-        return self._nw.x.copy()
+        return nw.x.copy()
 
     def _fill_limits(self, P) -> None:
         bu, bl = self._bu, self._bl
@@ -484,7 +514,7 @@ class PersistentQP:
 
     def _solve_x(self) -> tuple[np.ndarray | None, int]:
         """Checked ``x`` from the persistent workspace, or ``None`` (then: fall back)."""
-        P = self.stack._compiled
+        P = self.stack.compiled
         if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
             P.refresh()
             self._setup(P)
@@ -508,6 +538,7 @@ class PersistentQP:
                 # whitened: f_u = T⁻ᵀ f = −Q₁ᵀ diag(s) b, not through the formed f (whose
                 # rounding, ε‖F‖‖b‖, T⁻ᵀ would amplify by cond(T)); f itself is not needed
                 fu = self._fw[:n]
+                assert self._Fw is not None  # whitened: the map of the Python engine
                 np.dot(self._Fw, b, out=fu)
                 np.negative(fu, out=fu)
                 self._fw_fresh = True
@@ -591,7 +622,7 @@ class PersistentQP:
         """
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
             raise ValueError(f"size must be an integer >= 1, got {size!r}")
-        P = self.stack._compiled
+        P = self.stack.compiled
         tasks = {id(t): t for t in self._all_tasks}
         spec = {}
         for t, m in maps.items():
@@ -616,6 +647,7 @@ class PersistentQP:
         self._build_parametric(P)
 
     def _build_parametric(self, P) -> None:
+        assert self._pspec is not None  # parametrize() set it
         size, spec = self._pspec
         b0 = np.zeros(self._F.shape[1])
         Bt = np.zeros((self._F.shape[1], size))
@@ -633,7 +665,8 @@ class PersistentQP:
         # whitened (the Python engine): f_u = T⁻ᵀ f is affine in θ too, taken from the
         # whitened map F_w = T⁻ᵀ F as the per-step refresh does (no triangular solve per
         # step, and no rounding of the formed f amplified by cond(T))
-        self._fw_affine = None if self._T is None else (-(self._Fw @ b0), -(self._Fw @ Bt))
+        Fw = self._Fw  # set with _T: the whitened map (Python engine)
+        self._fw_affine = None if Fw is None else (-(Fw @ b0), -(Fw @ Bt))
         self._fill_limits(P)
         k = self._bu.shape[0]
         self._lu0, self._ll0 = self._bu.copy(), self._bl.copy()
@@ -694,6 +727,7 @@ class PersistentQP:
     def _native_parametric(self, P, spec: dict) -> None:
         """The native arrays affine in θ: ``beq = q0 + Q θ``, ``lo = l0 + L θ``,
         ``hi = h0 + U θ`` (tasks not in ``spec`` keep their current numbers)."""
+        assert self._pspec is not None  # parametrize() set it
         size = self._pspec[0]
         self._native_fill(P)
         beq, clo, chi = self._nb[1], self._nb[3], self._nb[4]
@@ -731,6 +765,9 @@ class PersistentQP:
         if k > n:
             return None
         up = lam[act] > 0
+        # regions are learnt only with the limit rows stacked (_fused, _G_check, _eq_rows)
+        assert self._G_check is not None and self._fused is not None
+        assert self._eq_rows is not None
         GA = self._G_check[act]
         c = np.where(up, self._lu0[act], self._ll0[act])
         M = np.where(up[:, None], self._Lu[act], self._Ll[act])
@@ -810,12 +847,12 @@ class PersistentQP:
         """
         if self._pspec is None:
             raise ValueError("solve_theta: call parametrize() first")
-        P = self.stack._compiled
+        P = self.stack.compiled
         if self._versions(P) != self._version or (P.bounds is not None) != self._bounded:
             P.refresh()
             self._setup(P)
         if self._p_version != self._version or (
-            self._bounded and P.bounds.version != self._p_bounds
+            self._bounded and P.bounds is not None and P.bounds.version != self._p_bounds
         ):
             self._build_parametric(P)
         # θ real, finite, of the declared size (one dot product); else _theta names the
@@ -895,6 +932,7 @@ class PersistentQP:
 
     def _fused_check(self, x: np.ndarray) -> bool:
         """``[G; −G] x ≤ [u; −l]`` to ``CHECK_TOL`` absolute, else the relative rule."""
+        assert self._fused is not None  # called only when the rows are stacked
         _, _, GG, bb = self._fused
         return (GG @ x - bb).max() <= CHECK_TOL or self._feasible(x)
 
@@ -916,6 +954,8 @@ class PersistentQP:
     def _theta(self, theta, where: str) -> np.ndarray:
         """θ as a finite float vector of the declared size, else ``ValueError``/``TypeError``
         naming it (off the hot path: called once a step has left the cached regions)."""
+        if self._pspec is None:
+            raise ValueError(f"{where}: call parametrize() first")
         size = self._pspec[0]
         if np.iscomplexobj(theta):
             raise TypeError(f"{where}: theta is complex; it must be real")

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from functools import cached_property
 from math import isfinite
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .backends import DEFAULT_TIME_LIMIT, check_solver, check_time_limit, deadline, time_left
-from .compile import compile_stack
+from .compile import CompiledStack, compile_stack
 from .conflict import infeasible
 from .elimination import CHECK_TOL, FEAS_TOL, Reduced
 from .errors import InfeasibleError, SolverError
@@ -19,12 +22,16 @@ from .methods.nullspace import check_equality_only, solve_nullspace
 from .methods.weighted import solve_weighted
 from .native import NativeHierarchy, resolve_engine
 from .native_weighted import NativeWeighted, resolve_weighted_engine
+from .persistent import PersistentQP
 from .polish import KKT_TOL
 from .solution import Solution
-from .tasks import Bounds
+from .tasks import Bounds, Equality, Inequality
 from .tolerance import within
 
-__all__ = ["Stack", "Solution", "solve_stack", "METHODS"]
+__all__ = ["Stack", "Solution", "solve_stack", "METHODS", "Level"]
+
+#: One priority level: a task, or a list of tasks whose squared residuals add up
+Level = Equality | Inequality | Sequence[Equality | Inequality]
 
 #: The solve methods a :class:`Stack` offers.
 METHODS = ("hierarchical", "nullspace", "weighted")
@@ -38,7 +45,9 @@ def _limit_error(limit: float, exc: SolverError) -> SolverError:
     )
 
 
-def _call_native(native, P, limit: float):
+def _call_native(
+    native: NativeHierarchy | NativeWeighted, P: CompiledStack, limit: float
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """``native.solve(P, time_left=...)`` (a :class:`~qpcoord.core.native.NativeHierarchy` or
     :class:`~qpcoord.core.native_weighted.NativeWeighted`) with the solve's time limit
     ``limit`` (s) or, if earlier, an enclosing solve's deadline; a native error raised once
@@ -96,11 +105,11 @@ class Stack:
 
     def __init__(
         self,
-        levels,
+        levels: Sequence[Level],
         bounds: Bounds | None = None,
         regularization: float = 1e-9,
         damping: float = 1e-7,
-        constraints=None,
+        constraints: Sequence[Equality | Inequality] | None = None,
         weight_ratio: float = 1e-3,
         fallback: bool = True,
     ) -> None:
@@ -123,7 +132,7 @@ class Stack:
         self.regularization = float(regularization)
         self.damping = float(damping)
         self.weight_ratio = float(weight_ratio)
-        self._solvers: dict = {}  # resolved solver names (resolving costs ~0.1 ms)
+        self._solvers: dict[str | None, str] = {}  # resolved solver names (resolving costs ~0.1 ms)
         self._fallback = fallback
         self._chain_missed = False
         self._native: NativeHierarchy | None = None  # built at the first native solve
@@ -136,6 +145,12 @@ class Stack:
         return Reduced(self._compiled.n, self._compiled.capacity, self._fallback)
 
     @property
+    def compiled(self) -> CompiledStack:
+        """The stack's compiled form: its levels' stacked rows and the bounds, the arrays the
+        engines read (refreshed from the tasks at each solve; read-only use)."""
+        return self._compiled
+
+    @property
     def n(self) -> int:
         """Number of decision variables."""
         return self._compiled.n
@@ -146,7 +161,7 @@ class Stack:
         return len(self._compiled.levels)
 
     @property
-    def levels(self) -> list[list]:
+    def levels(self) -> list[list[Equality | Inequality]]:
         """The tasks of each level (equalities first, then inequalities)."""
         return [L.eqs + L.ineqs for L in self._compiled.levels]
 
@@ -154,12 +169,12 @@ class Stack:
         self,
         solver: str | None = None,
         method: str = "hierarchical",
-        warm_start=None,
+        warm_start: Solution | ArrayLike | None = None,
         strict: bool = False,
         *,
         time_limit: float | None = None,
         engine: str | None = None,
-    ):
+    ) -> Solution:
         """Solve the stack with the tasks' current numbers.
 
         Parameters
@@ -238,7 +253,14 @@ class Stack:
                     raise _limit_error(limit, exc) from exc
                 raise
 
-    def _solve_python(self, t0: float, solver, method: str, warm_start, strict: bool) -> Solution:
+    def _solve_python(
+        self,
+        t0: float,
+        solver: str | None,
+        method: str,
+        warm_start: Solution | ArrayLike | None,
+        strict: bool,
+    ) -> Solution:
         """:meth:`solve` with the Python engine (under the solve's deadline)."""
         P = self._compiled
         P.refresh()
@@ -249,16 +271,16 @@ class Stack:
             used = "none"
             R = None
         else:
-            used = self._solvers.get(solver)
-            if used is None:
-                used = self._solvers[solver] = check_solver(solver)
+            known = self._solvers.get(solver)
+            used = known if known is not None else check_solver(solver)
+            self._solvers[solver] = used
             R = None
             # equality levels only: try the closed-form chain first, unless it missed the
             # bounds at the previous step (consecutive control steps are alike; a miss
             # costs the chain's time on top of the general path's)
             if method == "hierarchical" and P.equalities_only and not self._chain_missed:
                 x, info = solve_equality_chain(P, self.damping)
-                if P.lb is not None:
+                if P.lb is not None and P.ub is not None:
                     if not within(x, P.lb, P.ub, FEAS_TOL):
                         R = self._reset(used)
                         self._chain_missed = True
@@ -303,7 +325,9 @@ class Stack:
             stack=self,
         )
 
-    def _solve_native(self, t0: float, warm_start, strict: bool, limit: float) -> Solution:
+    def _solve_native(
+        self, t0: float, warm_start: Solution | ArrayLike | None, strict: bool, limit: float
+    ) -> Solution:
         """``method="hierarchical"`` with the native engine. The native call checks the data
         (finite), the returned ``x`` (bounds and hard rows, as :meth:`_check`) and computes
         the level values: no per-call Python pass over the levels here (the wrapper writes
@@ -335,7 +359,9 @@ class Stack:
             x, status, residuals, "native", time.perf_counter() - t0, "hierarchical", info, self
         )
 
-    def _solve_native_weighted(self, t0: float, warm_start, limit: float) -> Solution:
+    def _solve_native_weighted(
+        self, t0: float, warm_start: Solution | ArrayLike | None, limit: float
+    ) -> Solution:
         """``method="weighted"`` with the native engine (:mod:`qpcoord.core.native_weighted`):
         the same QP, checked in the native call (data finite; bounds and hard rows at ``x``)."""
         P = self._compiled
@@ -360,18 +386,16 @@ class Stack:
         weight_ratio: float | None = None,
         regularization: float | None = None,
         engine: str | None = None,
-    ):
+    ) -> PersistentQP:
         """A :class:`~qpcoord.core.persistent.PersistentQP` on this stack: its weighted QP on one
         workspace kept across control steps (the native weighted QP where built, else daqp;
         ``engine="python"``: daqp; the tasks' matrices must stay fixed; a change is detected
         and rebuilds the workspace)."""
-        from .persistent import PersistentQP
-
         return PersistentQP(
             self, weight_ratio=weight_ratio, regularization=regularization, engine=engine
         )
 
-    def _reset(self, solver: str):
+    def _reset(self, solver: str) -> Reduced:
         """The workspace for a solve with QPs, after checking that no NaN or wrong-sided
         infinity is in the data (``ValueError`` naming the task): nothing non-finite reaches
         a backend. The closed-form paths check their result instead (cheaper)."""
@@ -379,7 +403,7 @@ class Stack:
         P.check_finite()
         return self._work.reset(P.lb, P.ub, solver)
 
-    def _warm(self, warm_start) -> np.ndarray | None:
+    def _warm(self, warm_start: Solution | ArrayLike | None) -> np.ndarray | None:
         if warm_start is None:
             return None
         if isinstance(warm_start, Solution) and warm_start.x.shape == (self.n,):
@@ -397,7 +421,7 @@ class Stack:
             )
         return x
 
-    def _check(self, x: np.ndarray, R, solver: str) -> None:
+    def _check(self, x: np.ndarray, R: Reduced | None, solver: str) -> None:
         """Never return an unchecked x: finite, bounds, hard rows, inherited rows."""
         P = self._compiled
         if not all_finite(x):
@@ -405,7 +429,8 @@ class Stack:
             raise SolverError(f"backend {solver!r} produced a non-finite solution")
         if R is not None and R.verified and not P.hard.m_eq:
             return  # x passed the (stricter) closed-form feasibility test after the last QP
-        if P.lb is not None and not within(x, P.lb, P.ub, CHECK_TOL):  # snapped: exact
+        # snapped into the bounds: met exactly
+        if P.lb is not None and P.ub is not None and not within(x, P.lb, P.ub, CHECK_TOL):
             i = int(np.argmax(np.maximum(P.lb - x, x - P.ub)))
             raise SolverError(
                 f"backend {solver!r} returned x[{i}] = {x[i]!r} outside the bounds "
@@ -437,13 +462,13 @@ class Stack:
 
 
 def solve_stack(
-    levels,
+    levels: Sequence[Level],
     bounds: Bounds | None = None,
     solver: str | None = None,
     method: str = "hierarchical",
     time_limit: float | None = None,
     engine: str | None = None,
-    **options,
+    **options: Any,
 ) -> Solution:
     """Build a :class:`Stack` and solve it once (function form of :meth:`Stack.solve`).
 

@@ -34,9 +34,11 @@ is read at every solve and checked there; per-step code uses it to write in plac
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .linalg import all_finite
 
@@ -100,7 +102,7 @@ def _w(view: np.ndarray) -> np.ndarray:
     return base
 
 
-def _numeric(value, what: str, label: str, noun: str = "numeric") -> np.ndarray:
+def _numeric(value: ArrayLike, what: str, label: str, noun: str = "numeric") -> np.ndarray:
     """``value`` as a new float array; complex input is a ``TypeError`` and non-numeric input
     a ``ValueError``, both naming ``what`` (numpy would drop an imaginary part)."""
     if type(value) is np.ndarray and value.dtype.kind in _REAL_KINDS:
@@ -118,7 +120,7 @@ def _numeric(value, what: str, label: str, noun: str = "numeric") -> np.ndarray:
         raise ValueError(f"{label}: {what} is not {noun} ({exc})") from None
 
 
-def _matrix(value, what: str, label: str) -> np.ndarray:
+def _matrix(value: ArrayLike, what: str, label: str) -> np.ndarray:
     arr = _numeric(value, what, label, "a numeric array")
     if arr.ndim != 2:
         if arr.ndim == 1:
@@ -155,7 +157,7 @@ def _matrix(value, what: str, label: str) -> np.ndarray:
     )
 
 
-def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.ndarray:
+def _vector(value: ArrayLike, rows: int, what: str, label: str, allow_inf: int = 0) -> np.ndarray:
     """Validate a length-``rows`` vector; scalars broadcast.
 
     ``allow_inf``: 0 forbids ±inf, +1 allows +inf only, -1 allows -inf only.
@@ -192,7 +194,7 @@ def _vector(value, rows: int, what: str, label: str, allow_inf: int = 0) -> np.n
     return _frozen(arr)
 
 
-def _weight(value, rows: int, label: str) -> np.ndarray:
+def _weight(value: ArrayLike, rows: int, label: str) -> np.ndarray:
     if (type(value) is float or type(value) is int) and 0 < value < math.inf:
         return _frozen(_full(rows, float(value)))  # a valid Python scalar (the default)
     w = _vector(value, rows, "weight", label)
@@ -233,9 +235,15 @@ class _Task:
     #: Attributes a cached factorisation depends on: set once at construction, then changed
     #: only by ``update`` (a rebinding, ``task.A = J``, is ``update(A=J)``: the module's
     #: rebinding rule)
-    _MATRIX_ATTRS: frozenset = frozenset()
+    _MATRIX_ATTRS: frozenset[str] = frozenset()
+    #: the validated row weights, their square roots and whether all are 1 (_set_weight)
+    weight: np.ndarray
+    sqrt_weight: np.ndarray
+    unit_weight: bool
+    #: each task's validated ``update(...)`` (its own arguments)
+    update: Callable[..., Any]
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: Any) -> None:
         if name in self._MATRIX_ATTRS and name in self.__dict__:
             self.update(**{name: value})  # validated, copied, counted in matrix_version
             return
@@ -246,7 +254,7 @@ class _Task:
         """Human-readable name used in messages."""
         return _label(self.kind, self.name)
 
-    def _set_weight(self, w: np.ndarray, given=None) -> None:
+    def _set_weight(self, w: np.ndarray, given: object = None) -> None:
         """Keep the validated weights ``w`` (``given``: what the caller passed, if known)."""
         _setattr(self, "weight", w)
         if (type(given) is float or type(given) is int) and given == 1:
@@ -277,7 +285,7 @@ class Equality(_Task):
     kind = "Equality"
     _MATRIX_ATTRS = frozenset(("A", "weight"))
 
-    def __init__(self, A, b, weight=1.0, name: str = "") -> None:
+    def __init__(self, A: ArrayLike, b: ArrayLike, weight: ArrayLike = 1.0, name: str = "") -> None:
         self.name = str(name)
         label = _label(self.kind, self.name)
         self.A = _matrix(A, "A", label)
@@ -290,7 +298,12 @@ class Equality(_Task):
         """(rows, variables)."""
         return self.A.shape
 
-    def update(self, A=None, b=None, weight=None) -> Equality:
+    def update(
+        self,
+        A: ArrayLike | None = None,
+        b: ArrayLike | None = None,
+        weight: ArrayLike | None = None,
+    ) -> Equality:
         """Replace numbers in place (same shape), validating them. Returns ``self``.
 
         All-or-nothing: if any argument is rejected, the task keeps its old numbers.
@@ -319,7 +332,7 @@ class Equality(_Task):
             _setattr(self, "matrix_version", self.matrix_version + 1)
         return self
 
-    def _assign(self, A=None, b=None) -> Equality:
+    def _assign(self, A: np.ndarray | None = None, b: np.ndarray | None = None) -> Equality:
         """Trusted per-step path for library-built tasks: same shapes, values copied in place.
 
         Only finiteness is checked (one reduction); shapes are the caller's contract.
@@ -363,7 +376,14 @@ class Inequality(_Task):
     kind = "Inequality"
     _MATRIX_ATTRS = frozenset(("C", "weight"))
 
-    def __init__(self, C, lower=None, upper=None, weight=1.0, name: str = "") -> None:
+    def __init__(
+        self,
+        C: ArrayLike,
+        lower: ArrayLike | None = None,
+        upper: ArrayLike | None = None,
+        weight: ArrayLike = 1.0,
+        name: str = "",
+    ) -> None:
         self.name = str(name)
         label = self.label
         if lower is None and upper is None:
@@ -380,7 +400,13 @@ class Inequality(_Task):
         """(rows, variables)."""
         return self.C.shape
 
-    def update(self, C=None, lower=None, upper=None, weight=None) -> Inequality:
+    def update(
+        self,
+        C: ArrayLike | None = None,
+        lower: ArrayLike | None = None,
+        upper: ArrayLike | None = None,
+        weight: ArrayLike | None = None,
+    ) -> Inequality:
         """Replace numbers in place (same shape), validating them. Returns ``self``.
 
         All-or-nothing: if any argument is rejected, the task keeps its old numbers.
@@ -409,7 +435,9 @@ class Inequality(_Task):
             _setattr(self, "matrix_version", self.matrix_version + 1)
         return self
 
-    def _assign(self, lower: np.ndarray, upper: np.ndarray, C=None) -> Inequality:
+    def _assign(
+        self, lower: ArrayLike, upper: ArrayLike, C: np.ndarray | None = None
+    ) -> Inequality:
         """Trusted per-step path: new bounds of the same length (NaN and order checked) and
         optionally a new ``C`` of the same shape (finiteness checked). Scalars broadcast."""
         lower, upper = np.asarray(lower), np.asarray(upper)
@@ -447,8 +475,11 @@ class Bounds:
     """
 
     kind = "Bounds"
+    #: the validated arrays (absent while the bounds are scalars: ``n is None``)
+    lower: np.ndarray
+    upper: np.ndarray
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: Any) -> None:
         # bounds.lower = ... is update(lower=...): validated, counted in version (the
         # module's rebinding rule); the class's own writes go through _set
         if name == "lower" or name == "upper":
@@ -456,12 +487,14 @@ class Bounds:
             return
         _setattr(self, name, value)
 
-    def __init__(self, lower=None, upper=None, name: str = "bounds") -> None:
+    def __init__(
+        self, lower: ArrayLike | None = None, upper: ArrayLike | None = None, name: str = "bounds"
+    ) -> None:
         self.name = str(name)
         self.version = 0  # incremented by update(): stacks re-read the bounds then
         self._set(-np.inf if lower is None else lower, np.inf if upper is None else upper)
 
-    def _set(self, lower, upper) -> None:
+    def _set(self, lower: ArrayLike, upper: ArrayLike) -> None:
         n = None
         for v in (lower, upper):
             if type(v) is np.ndarray:  # the common case, without np.ndim/np.size's wrappers
@@ -477,7 +510,9 @@ class Bounds:
             _setattr(self, "lower", lo)
             _setattr(self, "upper", hi)
 
-    def _validate(self, lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
+    def _validate(
+        self, lower: ArrayLike, upper: ArrayLike, n: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         label = self.label
         lo = _vector(lower, n, "lower", label, allow_inf=-1)
         hi = _vector(upper, n, "upper", label, allow_inf=+1)
@@ -502,7 +537,7 @@ class Bounds:
             return self.lower, self.upper
         return self._validate(self._lower_in, self._upper_in, n)
 
-    def update(self, lower=None, upper=None) -> Bounds:
+    def update(self, lower: ArrayLike | None = None, upper: ArrayLike | None = None) -> Bounds:
         """Replace the bounds, validating them (all-or-nothing). Returns ``self``.
 
         A ``Bounds`` built with arrays keeps its length; one built with scalars may take
@@ -550,7 +585,7 @@ def _first_bad(arr: np.ndarray, bad: np.ndarray, what: str, label: str) -> str |
     return f"{label}: {what} contains {float(arr[idx])!r} at {where}"
 
 
-def find_bad_value(task) -> str | None:
+def find_bad_value(task: Equality | Inequality | Bounds) -> str | None:
     """Message naming the first NaN, wrong-sided infinity or ``lower > upper`` in a task's or
     a :class:`Bounds`' arrays, or ``None`` if there is none (used by the solve-time check)."""
     label = task.label

@@ -20,30 +20,50 @@ The inverse (Eqs C.9–C.11) is :class:`qpcoord.hysteresis.inverse.PreisachCompe
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-if TYPE_CHECKING:  # the model runs its signals through a stage: no import back at run time
-    from .preisach import PreisachModel
-
-__all__ = ["PreisachStage"]
+__all__ = ["PreisachStage", "EverettModel"]
 
 
-#: What the memory reads of a :class:`~qpcoord.hysteresis.preisach.PreisachModel` (checked
-#: by attribute, so that this module needs no import of the model's, which imports it).
-_MODEL_ATTRIBUTES = ("_X", "_everett", "_check_range", "u_min", "u_max", "x_min", "x_max", "offset")
+@runtime_checkable
+class EverettModel(Protocol):
+    """What the memory reads of its model (a :class:`~qpcoord.hysteresis.PreisachModel`,
+    whose :meth:`~qpcoord.hysteresis.PreisachModel.evaluate` runs a stage of this module):
+    the identified range (V), the major loop's end points and offset (m), and the Everett
+    function ``X(α, β)`` (m) per pair and vectorised, unchecked."""
+
+    offset: float
+
+    @property
+    def u_min(self) -> float: ...
+
+    @property
+    def u_max(self) -> float: ...
+
+    @property
+    def x_min(self) -> float: ...
+
+    @property
+    def x_max(self) -> float: ...
+
+    def everett_scalar(self, a: float, b: float) -> float: ...
+
+    def everett_unchecked(self, a: np.ndarray, b: np.ndarray) -> np.ndarray: ...
+
+    def check_range(self, v: np.ndarray, name: str) -> None: ...
 
 
 class _Memory:
     """State machine (extrema stack) shared by :class:`PreisachStage` and the compensator."""
 
-    def __init__(self, model: PreisachModel, clip: bool = False) -> None:
-        if not all(hasattr(model, a) for a in _MODEL_ATTRIBUTES):
+    def __init__(self, model: EverettModel, clip: bool = False) -> None:
+        if not isinstance(model, EverettModel):
             raise ValueError(f"model must be a PreisachModel, got {type(model).__name__}")
         self.model = model
         self.clip = bool(clip)
-        self._X = model._X
+        self._X = model.everett_scalar
         self._lo = model.u_min
         self._hi = model.u_max
         self._xlo = model.x_min
@@ -139,7 +159,7 @@ class PreisachStage(_Memory):
     stochastic input; measured by ``examples/appC_preisach.py``, see ``docs/appC.md``).
     """
 
-    def __init__(self, model: PreisachModel, output: str = "metres", clip: bool = False):
+    def __init__(self, model: EverettModel, output: str = "metres", clip: bool = False) -> None:
         if output not in ("metres", "volts"):
             raise ValueError(f"output must be 'metres' or 'volts', got {output!r}")
         super().__init__(model, clip)
@@ -184,7 +204,7 @@ class PreisachStage(_Memory):
                 raise _bad("u", float(u[np.isnan(u)][0]), "V", self._lo, self._hi)
             u = np.clip(u, self._lo, self._hi)
         else:
-            self.model._check_range(u, "u")
+            self.model.check_range(u, "u")
         N = u.size
         if N == 0:
             return u.copy()
@@ -244,7 +264,7 @@ class PreisachStage(_Memory):
         sg = np.repeat(np.asarray(signs), lengths)
         alpha = np.where(sg < 0, anc, u)
         beta = np.where(sg > 0, anc, u)
-        x = base + sg * self.model._everett(alpha, beta)
+        x = base + sg * self.model.everett_unchecked(alpha, beta)
         self._u = float(u[-1])
         self._x = float(x[-1])
         if self.output == "volts":

@@ -7,9 +7,9 @@ plus an output offset (m). Between nodes ``X`` is the bilinear spline of Eq. C.8
 (triangular) cells of Fig. C.5 it is the linear interpolant ``c (α − β)``, still of the
 form C.8 with ``a00 = a11 = 0``, which vanishes on ``α = β`` as ``X`` must.
 
-This module holds the parameters and the Everett function only; the memory of extrema
-(Eqs C.6–C.7, wipe-out) and the inverse (Eqs C.9–C.11) are in
-:mod:`qpcoord.hysteresis.memory`.
+This module holds the parameters and the Everett function; the memory of extrema (Eqs
+C.6–C.7, wipe-out) is :mod:`qpcoord.hysteresis.memory` (:meth:`PreisachModel.evaluate` runs
+a fresh stage of it) and the inverse (Eqs C.9–C.11) :mod:`qpcoord.hysteresis.inverse`.
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ from __future__ import annotations
 from bisect import bisect_right
 
 import numpy as np
+
+from .memory import PreisachStage
 
 __all__ = ["PreisachModel"]
 
@@ -216,8 +218,9 @@ class PreisachModel:
         n = self._n
         return n - 1 if i >= n else (0 if i < 0 else i)
 
-    def _X(self, a: float, b: float) -> float:
-        """Scalar Everett function X(a, b) (m), a ≥ b, no checks (per-sample path)."""
+    def everett_scalar(self, a: float, b: float) -> float:
+        """Everett function ``X(a, b)`` (m) of one pair of voltages (V), ``a ≥ b`` in the
+        identified range, without checks: the per-sample path of the memory."""
         k = self._cell(a) * self._n + self._cell(b)
         return self._t00[k] + self._t10[k] * a + (self._t01[k] + self._t11[k] * a) * b
 
@@ -232,15 +235,17 @@ class PreisachModel:
         """
         a, b = np.broadcast_arrays(np.asarray(alpha, float), np.asarray(beta, float))
         for name, v in (("alpha", a), ("beta", b)):
-            self._check_range(v, name)
+            self.check_range(v, name)
         if np.any(a < b):
             k = np.argwhere(a < b)[0]
             raise ValueError(
                 f"alpha = {a[tuple(k)]!r} V < beta = {b[tuple(k)]!r} V: outside the triangle"
             )
-        return self._everett(a, b)
+        return self.everett_unchecked(a, b)
 
-    def _everett(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    def everett_unchecked(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """:meth:`everett_at` without its checks (``a``, ``b``: float arrays (V) of one shape,
+        ``a ≥ b`` in the identified range): the memory's vectorised path."""
         n = self._n
         i = np.clip(np.searchsorted(self.levels, a, side="right") - 1, 0, n - 1)
         j = np.clip(np.searchsorted(self.levels, b, side="right") - 1, 0, n - 1)
@@ -248,7 +253,9 @@ class PreisachModel:
         t = self._a.reshape(4, -1)
         return t[0, k] + t[1, k] * a + (t[2, k] + t[3, k] * a) * b
 
-    def _check_range(self, v: np.ndarray, name: str) -> None:
+    def check_range(self, v: np.ndarray, name: str) -> None:
+        """Raise ``ValueError`` naming ``name``, the index and the value if an entry of ``v``
+        (V) is NaN or outside ``[u_min, u_max]``."""
         bad = ~((v >= self.levels[0]) & (v <= self.levels[-1]))  # NaN is bad too
         if np.any(bad):
             k = np.argwhere(bad)[0]
@@ -272,8 +279,8 @@ class PreisachModel:
             descending branch from positive saturation.
         """
         u = np.linspace(self.u_min, self.u_max, int(num))
-        up = self.offset + self._everett(u, np.full_like(u, self.u_min))
-        down = self.x_max - self._everett(np.full_like(u, self.u_max), u)
+        up = self.offset + self.everett_unchecked(u, np.full_like(u, self.u_min))
+        down = self.x_max - self.everett_unchecked(np.full_like(u, self.u_max), u)
         return u, up, down
 
     def linear_command(self, x) -> np.ndarray:
@@ -302,8 +309,6 @@ class PreisachModel:
         ValueError
             If ``u`` holds NaN or leaves ``[u_min, u_max]`` (the value is named).
         """
-        from .memory import PreisachStage  # the stage that runs a model's signals
-
         return PreisachStage(self).run(u)
 
     def __repr__(self) -> str:

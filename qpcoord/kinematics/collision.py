@@ -370,6 +370,8 @@ class CollisionAvoidance(KinematicTask):
         ``frames`` or ``ignore_pairs``, a bad obstacle, no pair to watch, no geometry.
     """
 
+    task: Inequality
+
     def __init__(
         self,
         robot: Robot,

@@ -369,6 +369,8 @@ def _jacobian(robot: Robot, fid: int, ref: Any) -> np.ndarray:
 class _ErrorTask(KinematicTask):
     """Shared machinery: ``_evaluate(q) -> (e, J, ff)`` over all rows, a row selection."""
 
+    task: Equality
+
     robot: Robot
     gain: float
     _sel: np.ndarray  # indices of the kept rows
@@ -380,6 +382,11 @@ class _ErrorTask(KinematicTask):
         self.task = Equality(
             np.zeros((self._sel.size, robot.nv)), np.zeros(self._sel.size), w, name
         )
+
+    @property
+    def selected_rows(self) -> np.ndarray:
+        """The indices of the full error's rows this task keeps (its ``mask``), in order."""
+        return self._sel
 
     @abstractmethod
     def _evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -519,7 +526,9 @@ class FrameTask(_ErrorTask):
     def _target_inv(self) -> pin.SE3 | None:
         """``target.inverse()`` (``None`` without a target), built on first read."""
         if self._target_inv_se3 is None and self._target_T is not None:
-            self._target_inv_se3 = self.target.inverse()
+            target = self.target
+            assert target is not None  # built from _target_T
+            self._target_inv_se3 = target.inverse()
         return self._target_inv_se3
 
     def set_target(self, target: Any, velocity: Any = None) -> None:
@@ -908,6 +917,8 @@ class _BandTask(KinematicTask):
         """``(y, J)`` for a validated ``q``: the banded quantity (task units) and its
         Jacobian against ``v``."""
 
+    task: Inequality
+
     def compute_error(self, q: Any) -> np.ndarray:
         """The measured quantity ``e(q)`` of every row (m)."""
         return self._evaluate(self.robot.check_configuration(q))[0].copy()
@@ -1084,19 +1095,21 @@ class SupportPolygon(_BandTask):
         self.margin = _number(margin, "margin", "m")
         self.gain = _gain(gain)
         w = _number(weight, "weight", "1/m²", positive=True)
+        pts: np.ndarray
         if contact_points is None:
             pts = np.zeros((1, 3))
         else:
+            bad_points = ValueError(
+                f"contact_points must be a (k, 3) array of points (m), got {contact_points!r}"
+            )
             try:
                 pts = np.array(contact_points, dtype=float)
             except (TypeError, ValueError):
-                pts = None
-            if pts is not None and pts.ndim == 1 and pts.size == 3:
+                raise bad_points from None
+            if pts.ndim == 1 and pts.size == 3:
                 pts = pts.reshape(1, 3)
-            if pts is None or pts.ndim != 2 or pts.shape[1] != 3 or not len(pts):
-                raise ValueError(
-                    f"contact_points must be a (k, 3) array of points (m), got {contact_points!r}"
-                )
+            if pts.ndim != 2 or pts.shape[1] != 3 or not len(pts):
+                raise bad_points
             if not np.all(np.isfinite(pts)):
                 raise ValueError(f"contact_points must be finite (m), got {pts.tolist()}")
         self.contact_points = pts
@@ -1133,7 +1146,7 @@ class SupportPolygon(_BandTask):
             R, o = oMf.rotation, self.contact_points
             offsets = (o[:, 0:1] * R[:, 0] + o[:, 1:2] * R[:, 1]) + o[:, 2:3] * R[:, 2]
             P[f * k : (f + 1) * k] = oMf.translation + offsets
-            if jacobians:
+            if Js is not None:  # jacobians
                 J = _jacobian(robot, fid, pin.LOCAL_WORLD_ALIGNED)
                 Jv, Jw = J[:3], J[3:]
                 rx, ry, rz = offsets[:, 0:1], offsets[:, 1:2], offsets[:, 2:3]

@@ -26,9 +26,12 @@ model (``robot.with_frame("elbow")``: several frames of one robot in one IK).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..core.conflict import renamed
 from ..core.errors import InfeasibleError
@@ -37,10 +40,16 @@ from ..core.native import resolve_engine
 from ..core.native_weighted import resolve_weighted_engine
 from ..core.stack import METHODS, Solution, Stack
 from ..core.tasks import Bounds, Equality, Inequality
+from .native_step import IKStepSpec, NativeIKStep
+from .paths import Path
 from .robot import Robot
 from .tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
 
-__all__ = ["IK", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
+__all__ = ["IK", "IKTask", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
+
+#: What an IK level or constraint holds: kinematic tasks (refreshed every step) and constant
+#: rows on the velocity
+IKTask = KinematicTask | Equality | Inequality
 
 #: Default relative damping of the IK stacks: a singular value below ``1e-4 · s₀`` is
 #: damped, so no joint speed exceeds ``‖task error‖ / (1e-4 s₀)``.
@@ -60,7 +69,7 @@ def _default_limits(robot: Robot) -> list[Limit]:
     return limits
 
 
-def _joint_of_velocity(model, i: int) -> str:
+def _joint_of_velocity(model: Any, i: int) -> str:
     """The name of the joint whose velocity ``v[i]`` is (``"name[k]"``: its ``k``-th of
     several)."""
     for j in range(1, model.njoints):
@@ -70,11 +79,11 @@ def _joint_of_velocity(model, i: int) -> str:
     return ""
 
 
-def _same_robot(task_robot, robot: Robot) -> bool:
+def _same_robot(task_robot: object, robot: Robot) -> bool:
     return task_robot is robot or getattr(task_robot, "model", None) is robot.model
 
 
-def _other_robot(what: str, robot: Robot, task_robot) -> str:
+def _other_robot(what: str, robot: Robot, task_robot: object) -> str:
     other = getattr(task_robot, "name", type(task_robot).__name__)
     return (
         f"{what} belongs to another robot ({other!r}: another Pinocchio model than "
@@ -136,10 +145,10 @@ class IK:
     def __init__(
         self,
         robot: Robot,
-        levels,
+        levels: Sequence[IKTask | Sequence[IKTask]],
         dt: float,
-        limits="robot",
-        constraints=None,
+        limits: Literal["robot"] | Sequence[Limit] | None = "robot",
+        constraints: Sequence[IKTask] | None = None,
         method: str = "hierarchical",
         solver: str | None = None,
         damping: float = DEFAULT_IK_DAMPING,
@@ -204,11 +213,9 @@ class IK:
         else:
             self.engine = resolve_engine(engine, method, solver)
         self._engine_arg = engine
-        self._native = None
+        self._native: NativeIKStep | None = None
         if self.engine == "native":
-            from .native_step import NativeIKStep  # the extension is loaded and built
-
-            self._native = NativeIKStep(self)
+            self._native = NativeIKStep(self._native_spec())
 
     def __getstate__(self) -> dict:
         """Pickling (e.g. a sweep's worker): the native step holds views of the robot's
@@ -220,13 +227,27 @@ class IK:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         if self.engine == "native":
-            from .native_step import NativeIKStep
+            self._native = NativeIKStep(self._native_spec())
 
-            self._native = NativeIKStep(self)
+    def _native_spec(self) -> IKStepSpec:
+        """What the native step reads of this IK (its stack's arrays are bound once)."""
+        return IKStepSpec(
+            robot=self.robot,
+            stack=self.stack.compiled,
+            box=self.bounds._writable() if self.limits else None,
+            tasks=tuple(self._dynamic),
+            limits=tuple(self.limits),
+            refresh_limits=self._refresh_limits,
+            dt=self.dt,
+            damping=self.stack.damping,
+            weighted=self.method == "weighted",
+            regularization=self.stack.regularization,
+            weight_ratio=self.stack.weight_ratio,
+        )
 
-    def _collect(self, level, where: str) -> list:
+    def _collect(self, level: IKTask | Sequence[IKTask], where: str) -> list[Equality | Inequality]:
         items = level if isinstance(level, (list, tuple)) else [level]
-        out = []
+        out: list[Equality | Inequality] = []
         nv = self.robot.nv
         for task in items:
             if isinstance(task, KinematicTask):
@@ -254,7 +275,7 @@ class IK:
                 )
         return out
 
-    def refresh(self, q: np.ndarray, t: float = 0.0, reference=None) -> None:
+    def refresh(self, q: np.ndarray, t: float = 0.0, reference: Path | None = None) -> None:
         """Update every task and the bounds for a validated configuration ``q`` (rad)
         (float array of shape (nq,)) at time ``t`` (s).
 
@@ -290,7 +311,11 @@ class IK:
             self.bounds._touch()
 
     def step(
-        self, q, t: float = 0.0, reference=None, warm_start=None
+        self,
+        q: ArrayLike,
+        t: float = 0.0,
+        reference: Path | None = None,
+        warm_start: Solution | ArrayLike | None = None,
     ) -> tuple[np.ndarray, Solution]:
         """Solve one control step.
 
@@ -340,7 +365,11 @@ class IK:
         return v, sol
 
     def step_integrate(
-        self, q, t: float = 0.0, reference=None, warm_start=None
+        self,
+        q: ArrayLike,
+        t: float = 0.0,
+        reference: Path | None = None,
+        warm_start: Solution | ArrayLike | None = None,
     ) -> tuple[np.ndarray, np.ndarray, Solution]:
         """One control step and the configuration it leads to: ``(q_next, v, solution)``.
 
@@ -375,11 +404,13 @@ class IK:
             self.v_prev[...] = v
             for lim in self._recorders:
                 lim.record(v)
-            return native.q_next_out, v, sol
+            q_next = native.q_next_out
+            assert q_next is not None  # written by an integrating step
+            return q_next, v, sol
         v, sol = self.step(q, t, reference, warm_start)
         return self.robot.integrate(q, v, self.dt), v, sol
 
-    def _named(self, exc: InfeasibleError, q) -> InfeasibleError:
+    def _named(self, exc: InfeasibleError, q: ArrayLike) -> InfeasibleError:
         """``exc`` with each bound of its conflict named by the limit that sets that side of
         the box at ``q`` (the nearest side value; the other side where the IK kept the end
         nearer to 0, see :meth:`refresh`) and by the joint of that velocity. The IK's hard
@@ -398,7 +429,7 @@ class IK:
             rows.append(r)
         return renamed(exc, tuple(rows))
 
-    def reset(self, v_prev=None) -> None:
+    def reset(self, v_prev: ArrayLike | None = None) -> None:
         """Forget the previous step: ``v_prev`` (and that of the acceleration limits) back to
         zero, or to the given velocity (nv,); no warm start for the next solve."""
         v = np.zeros(self.robot.nv) if v_prev is None else self.robot._check_velocity(v_prev)
@@ -407,13 +438,19 @@ class IK:
             lim.record(v)
         self.last = None
 
-    def velocity(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+    def velocity(self, q: ArrayLike, t: float = 0.0, reference: Path | None = None) -> np.ndarray:
         """Velocity ``v`` (nv,) at ``(q, t)``: the scheme interface used by :func:`simulate`."""
         return self.step(q, t, reference)[0]
 
 
 def ik_step(
-    robot: Robot, q, levels, dt: float, solver: str | None = None, t: float = 0.0, **options
+    robot: Robot,
+    q: ArrayLike,
+    levels: Sequence[IKTask | Sequence[IKTask]],
+    dt: float,
+    solver: str | None = None,
+    t: float = 0.0,
+    **options: Any,
 ) -> tuple[np.ndarray, Solution]:
     """Build an :class:`IK` and solve one step (convenience; a control loop keeps the IK).
 
@@ -425,8 +462,8 @@ def ik_step(
 
 def inverse_kinematics(
     robot: Robot,
-    target,
-    q0,
+    target: ArrayLike,
+    q0: ArrayLike,
     tol: float = 1e-12,
     max_iter: int = 200,
     max_step: float = 0.5,
@@ -488,7 +525,7 @@ def inverse_kinematics(
         def advance(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
             return robot.integrate(q, dq, 1.0)
 
-    def step(q: np.ndarray, toward_q0: bool):
+    def step(q: np.ndarray, toward_q0: bool) -> tuple[float, float, np.ndarray]:
         y, J = robot._kinematics(q)
         e = y_target - y
         U, s_, Vt, rank, g, _tau = filtered_svd(J, 1e-6)

@@ -38,12 +38,15 @@ writes ``q_next`` (:func:`integration_plan`).
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from ..core.backends import DEFAULT_TIME_LIMIT
+from ..core.compile import CompiledStack
 from ..core.errors import SolverError
 from ..core.native import NativeHierarchy, load, raise_status
 from ..core.native_weighted import weighted_info
@@ -57,12 +60,10 @@ from .frame_tasks import (
     OrientationTask,
     SupportPolygon,
 )
-from .tasks import JointLimits, KinematicTask, PositionTask, PostureTask, VelocityLimits
+from .robot import Robot
+from .tasks import JointLimits, KinematicTask, Limit, PositionTask, PostureTask, VelocityLimits
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .ik import IK
-
-__all__ = ["NativeIKStep", "KERNELS", "native_kind", "integration_plan"]
+__all__ = ["NativeIKStep", "IKStepSpec", "KERNELS", "native_kind", "integration_plan"]
 
 #: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class (6:
 #: ``FrameTask(error="split")``; 7 and 8 are inequalities: ``src/native/support_kernels.hpp``).
@@ -94,9 +95,9 @@ def native_kind(task: KinematicTask) -> int | None:
         return None
     if kind == 0 and task.robot.frame_id is None:
         return None  # no default frame: its _refresh raises the robot's message
-    if kind == 2 and task.error == "split":
+    if kind == 2 and isinstance(task, FrameTask) and task.error == "split":
         return 6
-    if kind == 5 and _posture_q_index(task) is None:
+    if kind == 5 and isinstance(task, PostureTask) and _posture_q_index(task) is None:
         return None
     return kind
 
@@ -108,12 +109,17 @@ def _posture_q_index(task: PostureTask) -> list[int] | None:
     if robot.euclidean:
         return [int(j) for j in task.joints]
     model = robot.model
-    by_v = {}
+    by_v: dict[int, int] = {}
     for joint in model.joints[1:]:
         if joint.nq == 1 and joint.nv == 1:
             by_v[int(joint.idx_v)] = int(joint.idx_q)
-    out = [by_v.get(int(j)) for j in task.joints]
-    return None if None in out else out
+    out: list[int] = []
+    for j in task.joints:
+        iq = by_v.get(int(j))
+        if iq is None:
+            return None
+        out.append(iq)
+    return out
 
 
 #: Joints whose configuration is a vector space (``q + v dt``), by Pinocchio short name.
@@ -164,11 +170,66 @@ def _selection(task: KinematicTask, kind: int) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
     if kind == 0:
         return [int(r) for r in task.robot.rows]
-    if kind == 5:
+    if isinstance(task, PostureTask):  # kind 5
         return [int(j) for j in task.joints]
     if kind in _BANDS:
-        return list(range(task.task.C.shape[0]))
-    return [int(r) for r in task._sel]
+        return list(range(task.task.shape[0]))
+    assert isinstance(task, (FramePositionTask, FrameTask, OrientationTask, ComTask))
+    return [int(r) for r in task.selected_rows]
+
+
+def _frame_id(task: KinematicTask, kind: int) -> int:
+    """The frame a kernel of ``kind`` reads for ``task`` (its own, or its robot's default)."""
+    fid: int | None
+    if isinstance(task, (FramePositionTask, FrameTask, OrientationTask)):
+        fid = task.frame_id
+    else:  # kind 0: a PositionTask, on a robot with a default frame (native_kind)
+        fid = task.robot.frame_id
+    assert fid is not None, kind
+    return int(fid)
+
+
+@dataclass(frozen=True)
+class IKStepSpec:
+    """Everything the native step reads of an :class:`~qpcoord.IK` (the IK builds it).
+
+    Attributes
+    ----------
+    robot : Robot
+        The IK's robot: its model and data are bound once.
+    stack : CompiledStack
+        The compiled form of the IK's stack, whose stacked arrays the native call writes.
+    box : tuple of numpy.ndarray or None
+        The writable ``(lower, upper)`` arrays (nv,) behind the stack's bounds (``None``: no
+        limits): the native call writes the limits' box there.
+    tasks : sequence of KinematicTask
+        The IK's kinematic tasks (levels and constraints), each owning one task of ``stack``.
+    limits : sequence of Limit
+        The IK's limits, intersected into ``box``.
+    refresh_limits : callable
+        ``refresh_limits(q)`` writes the limits' intersected box into ``box`` for a
+        validated ``q`` (the IK's rule): used when a limit has no native kernel.
+    dt : float
+        Control period (s).
+    damping : float
+        The stack's relative damping.
+    weighted : bool
+        The weighted QP solves (``IK(..., method="weighted")``) instead of the hierarchy.
+    regularization, weight_ratio : float
+        The stack's weighted-QP parameters.
+    """
+
+    robot: Robot
+    stack: CompiledStack
+    box: tuple[np.ndarray, np.ndarray] | None
+    tasks: Sequence[KinematicTask]
+    limits: Sequence[Limit]
+    refresh_limits: Callable[[np.ndarray], None]
+    dt: float
+    damping: float
+    weighted: bool
+    regularization: float
+    weight_ratio: float
 
 
 class NativeIKStep(NativeHierarchy):
@@ -179,18 +240,19 @@ class NativeIKStep(NativeHierarchy):
 
     Parameters
     ----------
-    ik : IK
-        An IK with ``method="hierarchical"`` or ``"weighted"`` and no explicit ``solver``.
-        ``"weighted"``: the native weighted QP solves (the stack's ``regularization`` and
-        ``weight_ratio``), its rows written by the same kernels; the solution's ``info`` is
-        that of :meth:`NativeWeighted.solve <qpcoord.core.native_weighted.NativeWeighted.solve>`.
+    spec : IKStepSpec
+        What it reads of an IK with ``method="hierarchical"`` or ``"weighted"`` and no
+        explicit ``solver``. ``"weighted"``: the native weighted QP solves (the stack's
+        ``regularization`` and ``weight_ratio``), its rows written by the same kernels; the
+        solution's ``info`` is that of
+        :meth:`NativeWeighted.solve <qpcoord.core.native_weighted.NativeWeighted.solve>`.
     """
 
-    def __init__(self, ik: IK) -> None:  # noqa: D107 - no NativeHierarchy.__init__: own solver
+    def __init__(self, spec: IKStepSpec) -> None:  # noqa: D107 - own solver, no super().__init__
         mod = load()
-        robot = ik.robot
-        P = ik.stack._compiled
-        self.ik = ik
+        robot = spec.robot
+        P = spec.stack
+        self.spec = spec
         self.robot = robot
         self.P = P
         self.n = P.n
@@ -204,19 +266,19 @@ class NativeIKStep(NativeHierarchy):
         self._qshape = (robot.nq,)
         self._M = robot.coordinate_map
         blocks = [P.hard, *P.levels]
-        unit = [v for start, stop, _, _ in robot._unit_blocks for v in (start, stop - start)]
+        unit = [v for start, stop, _, _ in robot.unit_blocks for v in (start, stop - start)]
         solver = mod.IKStep(
             robot.nq,
             robot.nv,
             [B.m_eq for B in blocks],
             [B.m_in for B in blocks],
             P.bounds is not None,
-            float(ik.stack.damping),
-            float(ik.dt),
+            float(spec.damping),
+            float(spec.dt),
             unit,
         )
-        if P.bounds is not None:
-            box_lo, box_hi = ik.bounds._writable()
+        if P.bounds is not None and spec.box is not None:
+            box_lo, box_hi = spec.box
         else:
             box_lo, box_hi = np.full(P.n, -np.inf), np.full(P.n, np.inf)
         solver.bind(
@@ -226,7 +288,7 @@ class NativeIKStep(NativeHierarchy):
         solver.set_jacobian(self._data.J)
         if self._M is not None:
             solver.set_coordinate_map(np.ascontiguousarray(self._M, dtype=float))
-        owners = {id(t.task): t for t in ik._dynamic}
+        owners = {id(t.task): t for t in spec.tasks}
         self.kernel_tasks: list[KinematicTask] = []
         self._python_tasks: list[KinematicTask] = []
         self._eq_ops: list[tuple] = []  # (task, A rows, b rows): copied every step
@@ -239,7 +301,7 @@ class NativeIKStep(NativeHierarchy):
                 m = t.A.shape[0]
                 owner = owners.get(id(t))
                 kind = None if owner is None else native_kind(owner)
-                if kind is None:
+                if owner is None or kind is None:
                     self._eq_ops.append((t, P.Aeq[i : i + m], P.beq[i : i + m]))
                     if owner is not None and owner not in self._python_tasks:
                         self._python_tasks.append(owner)
@@ -249,42 +311,42 @@ class NativeIKStep(NativeHierarchy):
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     elif kind not in (4, 5):
-                        fid = owner.robot.frame_id if kind == 0 else owner.frame_id
+                        fid = _frame_id(owner, kind)
                         if fid not in frames:
                             frames[fid] = self._add_frame(solver, fid)
                         frame = frames[fid]
-                    qidx = _posture_q_index(owner) if kind == 5 else []
+                    qidx = _posture_q_index(owner) if isinstance(owner, PostureTask) else []
                     solver.add_task(kind, owner, t, frame, _selection(owner, kind), i, qidx)
                     self.kernel_tasks.append(owner)
                 i += m
-            for t in B.ineqs:
-                m = t.C.shape[0]
-                owner = owners.get(id(t))
+            for u in B.ineqs:
+                m = u.C.shape[0]
+                owner = owners.get(id(u))
                 kind = None if owner is None else native_kind(owner)
-                if kind in _BANDS:  # ComBand, SupportPolygon: C, clo, chi, csw natively
+                if owner is not None and kind in _BANDS:  # ComBand, SupportPolygon: natively
                     if not self.com:
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     slots = []
-                    if kind == 8:
+                    if isinstance(owner, SupportPolygon):  # kind 8
                         for fid in owner.frame_ids:
                             if fid not in frames:
                                 frames[fid] = self._add_frame(solver, fid)
                             slots.append(frames[fid])
-                    solver.add_task(kind, owner, t, -1, _selection(owner, kind), j, slots)
+                    solver.add_task(kind, owner, u, -1, _selection(owner, kind), j, slots)
                     self.kernel_tasks.append(owner)
                     j += m
                     continue
                 rows = slice(j, j + m)
-                self._in_ops.append((t, P.C[rows], P.clo[rows], P.chi[rows], P.csw[rows]))
+                self._in_ops.append((u, P.C[rows], P.clo[rows], P.chi[rows], P.csw[rows]))
                 if owner is not None and owner not in self._python_tasks:
                     self._python_tasks.append(owner)
                 j += m
         # limits: natively when all are JointLimits / VelocityLimits, else Python's box
         self._python_limits = False
-        if ik.limits:
-            if all(type(lim) in (JointLimits, VelocityLimits) for lim in ik.limits):
-                for lim in ik.limits:
+        if spec.limits:
+            if all(type(lim) in (JointLimits, VelocityLimits) for lim in spec.limits):
+                for lim in spec.limits:
                     self._add_limit(solver, lim)
                 solver.limits_mode = 1
             else:
@@ -298,15 +360,13 @@ class NativeIKStep(NativeHierarchy):
         self.integrates = plan is not None
         if plan is not None:
             solver.set_integrator(plan, self.q_next)
-        #: the weighted QP solves (``ik.method == "weighted"``) instead of the strict hierarchy
-        self.weighted = ik.method == "weighted"
+        #: the weighted QP solves (``IK(..., method="weighted")``) instead of the hierarchy
+        self.weighted = spec.weighted
         if self.weighted:
             ms = sum(L.m_in for L in P.levels)
             #: per row after a weighted step (as ``NativeWeighted.active``)
             self.active = np.zeros(P.n + P.hard.m_eq + P.hard.m_in + ms)
-            solver.set_weighted(
-                float(ik.stack.regularization), float(ik.stack.weight_ratio), self.active
-            )
+            solver.set_weighted(float(spec.regularization), float(spec.weight_ratio), self.active)
             # a kernel that writes a task's A (all but a posture's) refactors at every step;
             # without one, the tasks' matrix_version decides (as NativeWeighted.run)
             writes_a = any(native_kind(t) != 5 for t in self.kernel_tasks)
@@ -346,14 +406,17 @@ class NativeIKStep(NativeHierarchy):
             cols,
         )
 
-    def _add_limit(self, solver: Any, lim: Any) -> None:
-        if type(lim) is VelocityLimits:
+    def _add_limit(self, solver: Any, lim: Limit) -> None:
+        if isinstance(lim, VelocityLimits):
             solver.add_velocity_limits(lim, lim.limit)
-        elif lim._q_index is None:
+            return
+        assert isinstance(lim, JointLimits)  # the two kinds with a kernel
+        qi = lim.q_index
+        if qi is None:
             solver.add_joint_limits(lim, lim.lower, lim.upper, [], [])
-        else:
+        else:  # lim.joints: the v index of each limited joint
             solver.add_joint_limits(
-                lim, lim._lower_q, lim._upper_q, lim._q_index.tolist(), lim._v_index.tolist()
+                lim, lim.lower[qi], lim.upper[qi], qi.tolist(), lim.joints.tolist()
             )
 
     # ------------------------------------------------------------------ per step
@@ -369,7 +432,7 @@ class NativeIKStep(NativeHierarchy):
         if self._plain and type(q) is np.ndarray and q.dtype == _F64 and q.shape == self._qshape:
             # the common case in a few lines (0.2 µs of attribute reads and branches less)
             _jacobians(self._model, self._data, q)
-            self.robot._state = 0
+            self.robot.data_changed()
             out = self._solver.solve_step(
                 q, float(t), reference, self._solved, DEFAULT_TIME_LIMIT, integrate, KKT_TOL
             )
@@ -385,14 +448,14 @@ class NativeIKStep(NativeHierarchy):
         if self._hybrid:  # first: a Python task may evaluate the robot elsewhere (its data)
             self._python_rows(q, t, reference)
         if self._python_limits:
-            self.ik._refresh_limits(q)
+            self.spec.refresh_limits(q)
         if self._M is None:
             pin.computeJointJacobians(self._model, self._data, q)
         else:
             pin.computeJointJacobians(self._model, self._data, self._M @ q)
         if self.com:
             pin.jacobianCenterOfMass(self._model, self._data, False)
-        robot._state = 0  # the robot's cached kinematics no longer match its data
+        robot.data_changed()  # the robot's cached kinematics no longer match its data
         if self.weighted:
             return self._step_weighted(q, t, reference, integrate, t0)
         # one call: the step, then (x copy, res copy, info, q_next copy or None) built in C++
@@ -450,7 +513,7 @@ class NativeIKStep(NativeHierarchy):
     def _python_rows(self, q: np.ndarray, t: float, reference: Any) -> None:
         """The hybrid part: the Python tasks' ``_refresh`` and every non-native row copied
         into the stacked arrays (as ``CompiledStack.refresh_stacked``)."""
-        dt = self.ik.dt
+        dt = self.spec.dt
         for task in self._python_tasks:
             task._refresh(q, t, dt, reference)
         for task, A, b in self._eq_ops:
@@ -469,7 +532,7 @@ class NativeIKStep(NativeHierarchy):
             raise ValueError(f"q: the native IK step rejected the configuration {q!r}")
         if code >= mod.IK_TASK_DATA:
             task = self.kernel_tasks[code - mod.IK_TASK_DATA]
-            task._refresh(q, t, self.ik.dt, reference)  # raises the task's own message
+            task._refresh(q, t, self.spec.dt, reference)  # raises the task's own message
             raise ValueError(
                 f"{task.task.label}: its data cannot be read by the native IK step (a target "
                 "or weight of an unexpected type); use IK(..., engine='python')"

@@ -13,8 +13,10 @@ Every path gives ``position(t)`` (m), ``velocity(t)`` (m/s) and ``acceleration(t
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "Path",
@@ -45,7 +47,7 @@ def rotation_z(c_: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _finite(value, what: str, positive: bool = False) -> float:
+def _finite(value: Any, what: str, positive: bool = False) -> float:
     if isinstance(value, bool):
         raise ValueError(f"{what} must be a number, got {value!r}")
     try:
@@ -57,7 +59,7 @@ def _finite(value, what: str, positive: bool = False) -> float:
     return v
 
 
-def _times(t) -> tuple[np.ndarray, bool]:
+def _times(t: ArrayLike) -> tuple[np.ndarray, bool]:
     arr = np.asarray(t, dtype=float)
     if arr.ndim > 1:
         raise ValueError(f"t must be a scalar or a 1-D array of seconds, got shape {arr.shape}")
@@ -73,19 +75,19 @@ class Path(ABC):
     dim: int = 3
 
     @abstractmethod
-    def _eval(self, t: np.ndarray):
+    def _eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity, acceleration (each ``(len(t), dim)``) at the times ``t`` (s)."""
 
-    def _pick(self, t, k: int) -> np.ndarray:
+    def _pick(self, t: ArrayLike, k: int) -> np.ndarray:
         ts, scalar = _times(t)
         out = self._eval(ts)[k]
         return out[0] if scalar else out
 
-    def position(self, t) -> np.ndarray:
+    def position(self, t: ArrayLike) -> np.ndarray:
         """Position (m) at time ``t`` (s): shape (dim,) or (len(t), dim)."""
         return self._pick(t, 0)
 
-    def velocity(self, t) -> np.ndarray:
+    def velocity(self, t: ArrayLike) -> np.ndarray:
         """Velocity (m/s) at time ``t`` (s)."""
         return self._pick(t, 1)
 
@@ -94,7 +96,7 @@ class Path(ABC):
         p, v, _ = self._eval(np.array([float(t)]))
         return p[0], v[0]
 
-    def acceleration(self, t) -> np.ndarray:
+    def acceleration(self, t: ArrayLike) -> np.ndarray:
         """Acceleration (m/s²) at time ``t`` (s)."""
         return self._pick(t, 2)
 
@@ -132,11 +134,11 @@ class LissajousSphere(Path):
     def __init__(
         self,
         radius: float = 1.5,
-        center=(0.0, -0.5, 0.2),
+        center: ArrayLike = (0.0, -0.5, 0.2),
         omega: float = 0.4,
         amplitude: float = 0.6,
         phase: float = np.pi / 2,
-        angles=(np.pi / 4, np.pi / 4, 0.0),
+        angles: ArrayLike = (np.pi / 4, np.pi / 4, 0.0),
     ) -> None:
         self.radius = _finite(radius, "radius", positive=True)
         self.omega = _finite(omega, "omega", positive=True)
@@ -153,7 +155,7 @@ class LissajousSphere(Path):
         self.rotation = rotation_x(a) @ rotation_y(b) @ rotation_z(c)
         self.period = 2 * np.pi / self.omega
 
-    def _eval(self, t: np.ndarray):
+    def _eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         A, w, ph, r = self.amplitude, self.omega, self.phase, self.radius
         xp = A * np.cos(w * t + ph)
         yp = A * np.cos(2 * w * t + ph)
@@ -203,7 +205,11 @@ class Circle(Path):
     dim = 2
 
     def __init__(
-        self, center=(1.5, 0.0), radius: float = 0.5, period: float = np.pi, phase: float = 0.0
+        self,
+        center: ArrayLike = (1.5, 0.0),
+        radius: float = 0.5,
+        period: float = np.pi,
+        phase: float = 0.0,
     ) -> None:
         self.center = np.array(center, dtype=float).reshape(-1)
         if self.center.shape != (2,) or not np.all(np.isfinite(self.center)):
@@ -216,7 +222,7 @@ class Circle(Path):
         self.period = _finite(period, "period", positive=True)
         self.phase = _finite(phase, "phase")
 
-    def _eval(self, t: np.ndarray):
+    def _eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         w = 2 * np.pi / self.period
         ang = w * t + self.phase
         u = np.stack([np.cos(ang), np.sin(ang)], axis=1)
@@ -243,7 +249,7 @@ class HorizontalCircle(Path):
 
     dim = 3
 
-    def __init__(self, start, radius: float, period: float) -> None:
+    def __init__(self, start: ArrayLike, radius: float, period: float) -> None:
         self.start = np.array(start, dtype=float).reshape(-1)
         if self.start.shape != (3,) or not np.all(np.isfinite(self.start)):
             raise ValueError(f"start must be 3 finite numbers (m), got {start!r}")
@@ -251,7 +257,7 @@ class HorizontalCircle(Path):
         self.period = _finite(period, "period", positive=True)
         self.center = self.start - np.array([self.radius, 0.0, 0.0])
 
-    def _eval(self, t: np.ndarray):
+    def _eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         w = 2 * np.pi / self.period
         c, s, z = np.cos(w * t), np.sin(w * t), np.zeros_like(t)
         r = self.radius

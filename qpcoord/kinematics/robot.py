@@ -278,7 +278,7 @@ class Robot:
         self._qkey = b""  # its bytes (cheap equality test)
         self._state = 0  # 0 nothing, 1 placements+jacobians, 2 + hessian
         self._com_ready = False  # CoM and its Jacobian computed at the cached q
-        self._layout = None  # tensor layout of Pinocchio's kinematic Hessian binding
+        self._layout: str | None = None  # tensor layout of Pinocchio's kinematic Hessian binding
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -515,7 +515,7 @@ class Robot:
         """Names of every frame of the model (bodies, joints, fixed joints, sensors)."""
         return list(self._frame_names)
 
-    def frame_index(self, frame: str | int, what: str = "frame") -> int:
+    def frame_index(self, frame: str | int | np.integer, what: str = "frame") -> int:
         """Pinocchio index of ``frame`` (a name, or an index that is returned checked).
 
         When a joint and a link share the name (URDF allows it), the link's frame is meant.
@@ -565,6 +565,18 @@ class Robot:
                 "robot.with_frame(name), or ask frame_pose / frame_jacobian for a frame"
             )
         return self.frame_id
+
+    @property
+    def unit_blocks(self) -> tuple[tuple[int, int, str, str], ...]:
+        """The configuration's blocks that are not a vector space: ``(start, stop, joint,
+        kind)`` per joint, ``q[start:stop]`` a unit quaternion (``kind="quaternion"``) or a
+        unit ``(cos, sin)`` pair (``kind="(cos, sin) pair"``) of joint ``joint``."""
+        return tuple(self._unit_blocks)
+
+    def data_changed(self) -> None:
+        """Declare that code outside the robot (a native IK step) computed the kinematics of
+        another configuration in :attr:`data`: the next query recomputes its own."""
+        self._state = 0
 
     # ------------------------------------------------------------------ configurations
     def check_configuration(self, q: Any, what: str = "q") -> np.ndarray:

@@ -24,8 +24,10 @@ control loop).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .ik import IK, inverse_kinematics
 from .paths import Path
@@ -78,9 +80,9 @@ class Trajectory:
 
 def simulate(
     robot: Robot,
-    scheme,
+    scheme: Any,
     target: Path,
-    q0,
+    q0: ArrayLike,
     duration: float,
     dt: float,
     integrator: str = "rk4",

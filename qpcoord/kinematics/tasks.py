@@ -31,14 +31,18 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from ..core.tasks import Equality, Inequality
 from .paths import Path
 from .robot import Robot
+
+if TYPE_CHECKING:
+    from typing_extensions import Self  # typing.Self from Python 3.11
 
 __all__ = [
     "KinematicTask",
@@ -66,7 +70,7 @@ _HUGE = 1e300
 _FLOATING_ROOTS = ("JointModelFreeFlyer", "JointModelPlanar")
 
 
-def _gain(value, what: str = "gain") -> float:
+def _gain(value: object, what: str = "gain") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{what} must be a number (1/s), got {value!r}")
     if not np.isfinite(value) or value < 0:
@@ -74,7 +78,7 @@ def _gain(value, what: str = "gain") -> float:
     return float(value)
 
 
-def _check_dt(dt) -> float:
+def _check_dt(dt: object) -> float:
     if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
         raise ValueError(f"dt must be a number of seconds, got {dt!r}")
     if not np.isfinite(dt) or dt <= 0:
@@ -202,7 +206,7 @@ class KinematicTask(ABC):
     gain: float = 1.0
     kind: str = "equality"
 
-    def __new__(cls, *args: Any, **kwargs: Any):
+    def __new__(cls, *args: Any, **kwargs: Any) -> Self:
         base = KinematicTask
         if cls._refresh is base._refresh and (
             cls.compute_error is base.compute_error or cls.compute_jacobian is base.compute_jacobian
@@ -220,9 +224,9 @@ class KinematicTask(ABC):
         *,
         kind: str = "equality",
         gain: float = 1.0,
-        weight=1.0,
-        lower=-np.inf,
-        upper=np.inf,
+        weight: ArrayLike = 1.0,
+        lower: ArrayLike = -np.inf,
+        upper: ArrayLike = np.inf,
         name: str | None = None,
     ) -> None:
         who = name or type(self).__name__
@@ -266,7 +270,7 @@ class KinematicTask(ABC):
         )
 
     # -- public per-step API -----------------------------------------------------------
-    def set_band(self, lower=None, upper=None) -> None:
+    def set_band(self, lower: ArrayLike | None = None, upper: ArrayLike | None = None) -> None:
         """Replace the band faces (task units; ``None`` keeps a side). Only for bands."""
         if self.kind != "band":
             raise ValueError(f"{self.name}: set_band is for kind='band' tasks")
@@ -277,7 +281,9 @@ class KinematicTask(ABC):
             self.name,
         )
 
-    def update(self, q, t: float = 0.0, dt: float = 1e-3, reference=None):
+    def update(
+        self, q: ArrayLike, t: float = 0.0, dt: float = 1e-3, reference: Path | None = None
+    ) -> Equality | Inequality:
         """Refresh ``self.task`` for configuration ``q`` (nq,) at time ``t`` (s); return it.
 
         ``dt`` is the control period (s); ``reference`` is the run's end-effector path
@@ -292,7 +298,9 @@ class KinematicTask(ABC):
         q = self.robot.check_configuration(q)
         return self._refresh(q, float(t), _check_dt(dt), reference)
 
-    def _refresh(self, q: np.ndarray, t: float, dt: float, reference):
+    def _refresh(
+        self, q: np.ndarray, t: float, dt: float, reference: Path | None
+    ) -> Equality | Inequality:
         """:meth:`update` for an already validated ``q`` (the per-step path of IK).
 
         Default: ``J v = −K e`` or ``K (lower − e) ≤ J v ≤ K (upper − e)`` from
@@ -300,10 +308,11 @@ class KinematicTask(ABC):
         """
         e, J = self._checked(self.compute_error(q), self.compute_jacobian(q))
         k = self.gain
-        if self.kind == "equality":
-            return self.task._assign(J, -k * e)
+        task = self.task
+        if isinstance(task, Equality):  # kind "equality"
+            return task._assign(J, -k * e)
         with np.errstate(invalid="ignore"):  # inf − e stays inf
-            return self.task._assign(k * (self.lower - e), k * (self.upper - e), C=J)
+            return task._assign(k * (self.lower - e), k * (self.upper - e), C=J)
 
     def _checked(self, e: Any, J: Any) -> tuple[np.ndarray, np.ndarray]:
         rows, nv = self.task.shape
@@ -357,16 +366,23 @@ class PositionTask(KinematicTask):
     name : str
     """
 
+    task: Equality
+
     def __init__(
-        self, robot: Robot, target=None, gain: float = 10.0, weight=1.0, name: str = "position"
+        self,
+        robot: Robot,
+        target: ArrayLike | Path | None = None,
+        gain: float = 10.0,
+        weight: ArrayLike = 1.0,
+        name: str = "position",
     ) -> None:
         super().__init__(_check_robot(robot, name), robot.m, gain=gain, weight=weight, name=name)
-        self.target = None
+        self.target: Path | np.ndarray | None = None
         if target is not None:
             self.set_target(target)
         self._zero = np.zeros(robot.m)
 
-    def set_target(self, target) -> None:
+    def set_target(self, target: ArrayLike | Path) -> None:
         """Set a fixed point (m) or a :class:`~qpcoord.kinematics.paths.Path`."""
         if isinstance(target, Path):
             if target.dim != self.robot.m:
@@ -383,7 +399,9 @@ class PositionTask(KinematicTask):
             )
         self.target = y
 
-    def reference_at(self, t: float, reference=None) -> tuple[np.ndarray, np.ndarray]:
+    def reference_at(
+        self, t: float, reference: Path | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """``(y_ref, ẏ_ref)`` (m, m/s) at time ``t`` (s)."""
         target = self.target if self.target is not None else reference
         if target is None:
@@ -407,17 +425,19 @@ class PositionTask(KinematicTask):
             target = arr
         return target, self._zero
 
-    def compute_error(self, q, t: float = 0.0, reference=None) -> np.ndarray:
+    def compute_error(
+        self, q: ArrayLike, t: float = 0.0, reference: Path | None = None
+    ) -> np.ndarray:
         """``e = y(q) − y_ref(t)`` (m), shape (rows,)."""
         q = self.robot.check_configuration(q)
         y_ref, _ = self.reference_at(float(t), reference)
         return self.robot.position(q) - y_ref
 
-    def compute_jacobian(self, q) -> np.ndarray:
+    def compute_jacobian(self, q: ArrayLike) -> np.ndarray:
         """``J = ∂y/∂q`` (m per unit of ``v``), shape (rows, nv)."""
         return self.robot.jacobian(q)
 
-    def _refresh(self, q, t, dt, reference) -> Equality:
+    def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
         y_ref, v_ref = self.reference_at(t, reference)
         y, J = self.robot._kinematics(q)
         return self.task._assign(J, v_ref + self.gain * (y_ref - y))
@@ -450,13 +470,15 @@ class PositionBand(KinematicTask):
         Faces of the wrong size, NaN, or ``lower > upper`` on a row; a bad gain.
     """
 
+    task: Inequality
+
     def __init__(
         self,
         robot: Robot,
-        lower=-np.inf,
-        upper=np.inf,
+        lower: ArrayLike = -np.inf,
+        upper: ArrayLike = np.inf,
         gain: float = 10.0,
-        weight=1.0,
+        weight: ArrayLike = 1.0,
         name: str = "position band",
     ) -> None:
         robot = _check_robot(robot, name)
@@ -472,15 +494,15 @@ class PositionBand(KinematicTask):
             name=name,
         )
 
-    def compute_error(self, q) -> np.ndarray:
+    def compute_error(self, q: ArrayLike) -> np.ndarray:
         """``e = y(q)`` (m), shape (rows,)."""
         return self.robot.position(q)
 
-    def compute_jacobian(self, q) -> np.ndarray:
+    def compute_jacobian(self, q: ArrayLike) -> np.ndarray:
         """``J = ∂y/∂q``, shape (rows, nv)."""
         return self.robot.jacobian(q)
 
-    def _refresh(self, q, t, dt, reference) -> Inequality:
+    def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Inequality:
         y, J = self.robot._kinematics(q)
         k = self.gain
         with np.errstate(invalid="ignore"):  # inf − y stays inf
@@ -509,7 +531,16 @@ class PostureTask(KinematicTask):
     name : str
     """
 
-    def __init__(self, robot: Robot, q_ref, gain: float = 1.0, weight=1.0, name="posture"):
+    task: Equality
+
+    def __init__(
+        self,
+        robot: Robot,
+        q_ref: ArrayLike,
+        gain: float = 1.0,
+        weight: ArrayLike = 1.0,
+        name: str = "posture",
+    ) -> None:
         robot = _check_robot(robot, name)
         q_ref = robot.check_configuration(q_ref, "q_ref").copy()
         self.joints = actuated_velocity_indices(robot)
@@ -522,21 +553,21 @@ class PostureTask(KinematicTask):
         S = np.eye(robot.nv) if self._full else np.eye(robot.nv)[self.joints]
         self.task = Equality(S, np.zeros(rows), weight, name)
 
-    def set_target(self, q_ref) -> None:
+    def set_target(self, q_ref: ArrayLike) -> None:
         """Replace the preferred configuration ``q_ref`` (nq,)."""
         self.q_ref = self.robot.check_configuration(q_ref, "q_ref").copy()
 
-    def compute_error(self, q) -> np.ndarray:
+    def compute_error(self, q: ArrayLike) -> np.ndarray:
         """``e = (q ⊖ q_ref)_a`` (rad, m), shape (rows,)."""
         d = self.robot.difference(self.q_ref, q)
         return d if self._full else d[self.joints]
 
-    def compute_jacobian(self, q) -> np.ndarray:
+    def compute_jacobian(self, q: ArrayLike) -> np.ndarray:
         """The selection of the actuated rows of the identity, shape (rows, nv)."""
         self.robot.check_configuration(q)
         return self.task.A.copy()
 
-    def _refresh(self, q, t, dt, reference) -> Equality:
+    def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
         robot = self.robot
         if robot.euclidean:
             d = self.q_ref - q
@@ -565,7 +596,16 @@ class PotentialTask(KinematicTask):
     name : str
     """
 
-    def __init__(self, robot: Robot, gradient, gain: float = 1.0, weight=1.0, name="potential"):
+    task: Equality
+
+    def __init__(
+        self,
+        robot: Robot,
+        gradient: Any,  # q -> ∇p(q), or an object with such a .gradient
+        gain: float = 1.0,
+        weight: ArrayLike = 1.0,
+        name: str = "potential",
+    ) -> None:
         fn = getattr(gradient, "gradient", gradient)
         if not callable(fn):
             raise ValueError(f"gradient must be callable (q -> ∇p(q)), got {gradient!r}")
@@ -574,7 +614,7 @@ class PotentialTask(KinematicTask):
         self.gradient = fn
         self.task = Equality(np.eye(robot.nv), np.zeros(robot.nv), weight, name)
 
-    def _refresh(self, q, t, dt, reference) -> Equality:
+    def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
         g = np.asarray(self.gradient(q), dtype=float).reshape(-1)
         if g.shape != (self.robot.nv,):
             raise ValueError(
@@ -601,7 +641,16 @@ class OneFormTask(KinematicTask):
     name : str
     """
 
-    def __init__(self, robot: Robot, form, rate=0.0, weight=1.0, name: str = "one-form"):
+    task: Equality
+
+    def __init__(
+        self,
+        robot: Robot,
+        form: ArrayLike | Callable[[np.ndarray], ArrayLike],
+        rate: ArrayLike = 0.0,
+        weight: ArrayLike = 1.0,
+        name: str = "one-form",
+    ) -> None:
         self.robot = robot = _check_robot(robot, name)
         if callable(form):
             self.form: Callable | None = form
@@ -619,7 +668,7 @@ class OneFormTask(KinematicTask):
         self.task = Equality(W, rate, weight, name)
         self.rate = self.task.b.copy()
 
-    def _refresh(self, q, t, dt, reference) -> Equality:
+    def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
         if self.form is None:
             return self.task
         return self.task.update(A=self.form(q))  # validated: user code computes it
@@ -641,6 +690,8 @@ class Limit(KinematicTask):
     name : str
     """
 
+    task: Inequality
+
     def __init__(self, robot: Robot, name: str = "limit") -> None:
         self.robot = robot = _check_robot(robot, name)
         self.kind = "band"
@@ -655,7 +706,7 @@ class Limit(KinematicTask):
         """Called by :class:`~qpcoord.IK` after each step with the velocity it returned
         (nv,). Stateless limits ignore it."""
 
-    def _refresh(self, q, t, dt, reference) -> Inequality:
+    def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Inequality:
         lo, hi = self.box(q, dt)
         return self.task._assign(lo, hi)
 
@@ -685,7 +736,13 @@ class JointLimits(Limit):
         Velocity indices of the limited joints.
     """
 
-    def __init__(self, robot: Robot, gain: float = 1.0, lower=None, upper=None):
+    def __init__(
+        self,
+        robot: Robot,
+        gain: float = 1.0,
+        lower: ArrayLike | None = None,
+        upper: ArrayLike | None = None,
+    ) -> None:
         super().__init__(robot, "joint limits")
         self.gain = _gain(gain)
         if not 0 < self.gain <= 1:
@@ -712,7 +769,14 @@ class JointLimits(Limit):
             self._lower_q = self.lower[self._q_index]
             self._upper_q = self.upper[self._q_index]
 
-    def box(self, q, dt):
+    @property
+    def q_index(self) -> np.ndarray | None:
+        """The ``q`` index of each limited joint (its ``v`` index in :attr:`joints`), or
+        ``None`` on a robot whose ``q`` and ``v`` share one layout (every joint of
+        :attr:`joints` is then limited at that index)."""
+        return self._q_index
+
+    def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         k = self.gain / dt
         if self._q_index is None:
             # lower ≤ upper, so lo ≤ hi; outside a limit both have the sign that moves back
@@ -736,7 +800,7 @@ class VelocityLimits(Limit):
         ``±1.8e308`` entries read as unlimited).
     """
 
-    def __init__(self, robot: Robot, limit=None):
+    def __init__(self, robot: Robot, limit: ArrayLike | None = None) -> None:
         super().__init__(robot, "velocity limits")
         v = (
             robot.velocity_limit
@@ -748,7 +812,7 @@ class VelocityLimits(Limit):
         self.limit = _unlimited(v)
         self.task = Inequality(np.eye(robot.nv), -self.limit, self.limit, name="velocity limits")
 
-    def box(self, q, dt):
+    def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         return -self.limit, self.limit
 
 
@@ -772,7 +836,7 @@ class AccelerationLimits(Limit):
         six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``).
     """
 
-    def __init__(self, robot: Robot, limit):
+    def __init__(self, robot: Robot, limit: ArrayLike) -> None:
         super().__init__(robot, "acceleration limits")
         a = robot._limit(limit, None, "limit", 1, size=robot.nv)
         if np.any(a <= 0):
@@ -780,7 +844,7 @@ class AccelerationLimits(Limit):
         self.limit = _unlimited(a)
         self.v_prev = np.zeros(robot.nv)
 
-    def box(self, q, dt):
+    def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         step = self.limit * dt
         return self.v_prev - step, self.v_prev + step
 
@@ -788,7 +852,7 @@ class AccelerationLimits(Limit):
         """Keep ``v`` (nv,) as the previous step's velocity."""
         self.v_prev[...] = v
 
-    def reset(self, v_prev=None) -> None:
+    def reset(self, v_prev: ArrayLike | None = None) -> None:
         """Start again from rest (``v_prev = 0``) or from the given velocity (nv,)."""
         if v_prev is None:
             self.v_prev[...] = 0.0

@@ -361,7 +361,7 @@ def _obstacles(obstacles: Any) -> list[tuple[str, Any, np.ndarray]]:
         return []
     if isinstance(obstacles, Mapping) or hasattr(obstacles, "centre"):
         obstacles = [obstacles]
-    out = []
+    out: list[tuple[str, Any, np.ndarray]] = []
     for k, obs in enumerate(obstacles):
         what = f"obstacles[{k}]"
         centre = _field(obs, ("centre", "center"))

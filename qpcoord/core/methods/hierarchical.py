@@ -50,6 +50,8 @@ __all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
 
 #: Relative slack (to the row's scale) above which an inequality row is frozen as violated.
 VIOLATION_TOL = 1e-6
+#: The equality-row factors of a level without equality rows (rank 0: never read)
+_NO_ROWS: np.ndarray = np.zeros((0, 0))
 #: Relative distances to a bound under which the refinement takes a row as active: the
 #: first guess, then a looser one for backends that stop ~1e-6 short (SCS).
 ACTIVE_TOL = (1e-7, 1e-5)
@@ -168,7 +170,7 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
             act = a_lo | a_hi
             E.append(R.reduce(Cin[act]))
             t.append(np.where(a_lo, R.lin, R.uin)[act] - Cin[act] @ x)
-    if R.lb is not None:
+    if R.lb is not None and R.ub is not None:
         a_lo, a_hi = at_bounds(xn0, R.lb, R.ub, tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
@@ -547,7 +549,8 @@ def solve_hierarchical(
             continue
         # ---- closed form for the equality rows --------------------------------------
         rank = 0
-        M = e = s = Vt = None
+        # a level without equality rows keeps rank 0: M, e, s and Vt are then never read
+        M = e = s = Vt = _NO_ROWS
         tau = 0.0
         if L.m_eq:
             M = R.reduce(L.Ae)
@@ -580,6 +583,8 @@ def solve_hierarchical(
             d = np.maximum(s[:rank] ** 2, tau * tau)
             curv.append(d)
         mv = 0
+        dlo: np.ndarray | None
+        dhi: np.ndarray | None
         if L.m_in:
             D = R.reduce(L.C)
             dn = np.sqrt(np.einsum("ij,ij->i", D, D))
@@ -611,11 +616,12 @@ def solve_hierarchical(
             f[:r] = -(M.T @ e) / cmax
         else:
             H[:r, :r] = eps * np.eye(r)
+        Dy: np.ndarray | None = None
         if mv:
             H[r:, r:] = np.diag(wcurv / cmax)
             Dy = np.hstack((Dm, -np.eye(mv)))
         else:
-            Dy = dlo = dhi = None
+            dlo = dhi = None
         y0 = None
         if x_warm is not None:
             y0 = np.zeros(kdim)

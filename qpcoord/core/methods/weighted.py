@@ -51,7 +51,7 @@ def _lstsq(qr: np.ndarray, tau: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray
     return z, qtc[:r], info
 
 
-def _singular(W: np.ndarray, r: int) -> tuple[bool, tuple | None]:
+def _singular(W: np.ndarray, r: int) -> tuple[bool, tuple[np.ndarray, np.ndarray] | None]:
     """The decision of :data:`_SINGULAR` on the stacked weighted rows ``W`` (m × r), with
     :func:`_qr`'s factors of ``W`` (``None`` when it has fewer rows than columns)."""
     if W.shape[0] < r:
@@ -119,6 +119,7 @@ def solve_weighted(
         se = np.sqrt(eps)
         fac = _qr(np.vstack((Wm, se * np.eye(r))))
         cm = np.concatenate((cm, -se * zc))
+    assert fac is not None  # _singular's factors, or those of the regularised rows
     z, g, info = _lstsq(*fac, cm)
     if info == 0:
         xc = x + R.lift(z)

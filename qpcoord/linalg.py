@@ -1,5 +1,0 @@
-"""Deprecated alias of :mod:`qpcoord.core.linalg` (removed in the next release)."""
-
-from ._deprecated import moved
-
-moved(__name__, "qpcoord.core.linalg")
