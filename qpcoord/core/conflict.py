@@ -39,6 +39,7 @@ outside the filter (at most four) run to their end.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -120,7 +121,13 @@ def _candidates(P: CompiledStack, lb: np.ndarray | None, ub: np.ndarray | None):
     two infinite sides left out). Task rows are read from the tasks (both engines keep them
     current); ``lb``/``ub`` (``None``: no box) is the box the engine solved with."""
     n = P.n
-    mats, los, his, kinds, tasks, rows = [], [], [], [], [], []
+    mats: list[np.ndarray] = []
+    los: list[np.ndarray] = []
+    his: list[np.ndarray] = []
+    kinds: list[int] = []
+    tasks: list[str] = []
+    rows: list[int] = []
+    hard: list[tuple[int, Any, np.ndarray, np.ndarray, np.ndarray]]
     hard = [(_EQ, t, t.A, t.b, t.b) for t in P.hard.eqs]
     hard += [(_IN, t, t.C, t.lower, t.upper) for t in P.hard.ineqs]
     for kind, t, A, low, high in hard:

@@ -35,7 +35,7 @@ class InfeasibleError(RuntimeError):
         super().__init__(message)
         self.conflict = tuple(conflict)
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[type, tuple[str, tuple]]:
         return (type(self), (str(self), self.conflict))
 
 
