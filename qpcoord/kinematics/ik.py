@@ -227,6 +227,9 @@ class IK:
                     )
                 self._dynamic.append(task)
                 out.append(task.task)
+                if task.lm_rows is not None:  # refreshed after its task, in its level
+                    self._dynamic.append(task.lm_rows)
+                    out.append(task.lm_rows.task)
             elif isinstance(task, (Equality, Inequality)):
                 if task.shape[1] != nv:
                     raise ValueError(

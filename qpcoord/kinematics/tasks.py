@@ -47,6 +47,7 @@ __all__ = [
     "PostureTask",
     "PotentialTask",
     "OneFormTask",
+    "LMDamping",
     "Limit",
     "JointLimits",
     "VelocityLimits",
@@ -71,6 +72,17 @@ def _gain(value, what: str = "gain") -> float:
         raise ValueError(f"{what} must be a number (1/s), got {value!r}")
     if not np.isfinite(value) or value < 0:
         raise ValueError(f"{what} must be finite and >= 0 (1/s), got {value!r}")
+    return float(value)
+
+
+def _lm_damping(value, who: str) -> float:
+    """A validated ``lm_damping`` (dimensionless, finite, >= 0)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{who}: lm_damping must be a number (dimensionless), got {value!r}")
+    if not np.isfinite(value) or value < 0:
+        raise ValueError(
+            f"{who}: lm_damping must be finite and >= 0 (dimensionless), got {value!r}"
+        )
     return float(value)
 
 
@@ -173,13 +185,20 @@ class KinematicTask(ABC):
         ``kind="band"``.
     name : str, optional
         Used in messages and reports (default: the class name).
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the task's level also
+        minimises ``μ ‖v‖²`` with ``μ = lm_damping · Σ wᵢ eᵢ²`` (row weights ``w``; for a band,
+        ``e`` is its distance outside ``[lower, upper]``), zero once the task is met. Far from
+        an unreachable target it slows the motion to a stop instead of chattering at the
+        speed limits. The damping rows are :attr:`lm_rows` (``nv`` rows beside the task in
+        its level); the task's rows are then built by its Python refresh.
 
     Raises
     ------
     TypeError
         A subclass that implements neither both methods nor ``_refresh`` is instantiated.
     ValueError
-        Bad rows, kind, gain, weight or faces.
+        Bad rows, kind, gain, weight, faces or lm_damping.
 
     Examples
     --------
@@ -201,6 +220,12 @@ class KinematicTask(ABC):
     robot: Robot
     gain: float = 1.0
     kind: str = "equality"
+    #: Levenberg–Marquardt damping (dimensionless): see the class docstring
+    lm_damping: float = 0.0
+    #: The damping rows ``√μ · I`` (an :class:`LMDamping`), ``None`` without damping
+    lm_rows: LMDamping | None = None
+    #: The error of the last refresh (kept rows, task units), recorded only with lm_rows
+    _lm_e: np.ndarray | None = None
 
     def __new__(cls, *args: Any, **kwargs: Any):
         base = KinematicTask
@@ -224,6 +249,7 @@ class KinematicTask(ABC):
         lower=-np.inf,
         upper=np.inf,
         name: str | None = None,
+        lm_damping: float = 0.0,
     ) -> None:
         who = name or type(self).__name__
         self.robot = _check_robot(robot, who)
@@ -244,6 +270,24 @@ class KinematicTask(ABC):
                 raise ValueError(f"{who}: a band needs gain > 0 (1/s), got {gain!r}")
             self.lower, self.upper = _faces(lower, upper, rows, who)
             self.task = Inequality(zeros, -np.inf, np.inf, weight, who)
+        self._init_lm(lm_damping)
+
+    def _init_lm(self, lm_damping) -> None:
+        """Validate ``lm_damping`` and build the damping rows (call once ``task`` exists)."""
+        self.lm_damping = _lm_damping(lm_damping, self.task.name)
+        self.lm_rows = LMDamping(self) if self.lm_damping > 0 else None
+
+    def _lm_error_sq(self) -> float:
+        """``Σ wᵢ eᵢ²`` of the last refresh (task units²): the error of an equality task, the
+        distance outside the band of a band (read from its rows ``K (lower − e)``,
+        ``K (upper − e)``)."""
+        task = self.task
+        if isinstance(task, Inequality):
+            k = self.gain
+            out = np.maximum(task.lower, 0.0) - np.minimum(task.upper, 0.0)
+            return float(task.weight @ (out * out)) / (k * k)
+        e = self._lm_e
+        return 0.0 if e is None else float(task.weight @ (e * e))
 
     # -- the two methods of a user task ------------------------------------------------
     def compute_error(self, q: np.ndarray) -> np.ndarray:
@@ -301,6 +345,8 @@ class KinematicTask(ABC):
         e, J = self._checked(self.compute_error(q), self.compute_jacobian(q))
         k = self.gain
         if self.kind == "equality":
+            if self.lm_rows is not None:
+                self._lm_e = e
             return self.task._assign(J, -k * e)
         with np.errstate(invalid="ignore"):  # inf − e stays inf
             return self.task._assign(k * (self.lower - e), k * (self.upper - e), C=J)
@@ -355,12 +401,27 @@ class PositionTask(KinematicTask):
     weight : float or array_like
         Row weights inside the level.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`).
     """
 
     def __init__(
-        self, robot: Robot, target=None, gain: float = 10.0, weight=1.0, name: str = "position"
+        self,
+        robot: Robot,
+        target=None,
+        gain: float = 10.0,
+        weight=1.0,
+        name: str = "position",
+        lm_damping: float = 0.0,
     ) -> None:
-        super().__init__(_check_robot(robot, name), robot.m, gain=gain, weight=weight, name=name)
+        super().__init__(
+            _check_robot(robot, name),
+            robot.m,
+            gain=gain,
+            weight=weight,
+            name=name,
+            lm_damping=lm_damping,
+        )
         self.target = None
         if target is not None:
             self.set_target(target)
@@ -420,6 +481,8 @@ class PositionTask(KinematicTask):
     def _refresh(self, q, t, dt, reference) -> Equality:
         y_ref, v_ref = self.reference_at(t, reference)
         y, J = self.robot._kinematics(q)
+        if self.lm_rows is not None:
+            self._lm_e = y - y_ref
         return self.task._assign(J, v_ref + self.gain * (y_ref - y))
 
 
@@ -443,11 +506,14 @@ class PositionBand(KinematicTask):
     weight : float or array_like
         Row weights inside the level.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`).
 
     Raises
     ------
     ValueError
-        Faces of the wrong size, NaN, or ``lower > upper`` on a row; a bad gain.
+        Faces of the wrong size, NaN, or ``lower > upper`` on a row; a bad gain or
+        lm_damping.
     """
 
     def __init__(
@@ -458,6 +524,7 @@ class PositionBand(KinematicTask):
         gain: float = 10.0,
         weight=1.0,
         name: str = "position band",
+        lm_damping: float = 0.0,
     ) -> None:
         robot = _check_robot(robot, name)
         lower, upper = _faces(lower, upper, robot.m, "PositionBand")
@@ -470,6 +537,7 @@ class PositionBand(KinematicTask):
             lower=lower,
             upper=upper,
             name=name,
+            lm_damping=lm_damping,
         )
 
     def compute_error(self, q) -> np.ndarray:
@@ -507,9 +575,19 @@ class PostureTask(KinematicTask):
     weight : float or array_like, shape (rows,)
         Per-joint weights (``nv`` on a fixed base, ``nv − 6`` under a free-flyer).
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`).
     """
 
-    def __init__(self, robot: Robot, q_ref, gain: float = 1.0, weight=1.0, name="posture"):
+    def __init__(
+        self,
+        robot: Robot,
+        q_ref,
+        gain: float = 1.0,
+        weight=1.0,
+        name="posture",
+        lm_damping: float = 0.0,
+    ):
         robot = _check_robot(robot, name)
         q_ref = robot.check_configuration(q_ref, "q_ref").copy()
         self.joints = actuated_velocity_indices(robot)
@@ -521,6 +599,7 @@ class PostureTask(KinematicTask):
         self._full = rows == robot.nv
         S = np.eye(robot.nv) if self._full else np.eye(robot.nv)[self.joints]
         self.task = Equality(S, np.zeros(rows), weight, name)
+        self._init_lm(lm_damping)
 
     def set_target(self, q_ref) -> None:
         """Replace the preferred configuration ``q_ref`` (nq,)."""
@@ -544,6 +623,8 @@ class PostureTask(KinematicTask):
             d = pin.difference(robot.model, q, self.q_ref)
         if not self._full:
             d = d[self.joints]
+        if self.lm_rows is not None:
+            self._lm_e = -d
         return self.task._assign(b=self.gain * d)
 
 
@@ -563,9 +644,20 @@ class PotentialTask(KinematicTask):
         ``K`` (rad²/(s · potential unit)), default 1.
     weight : float or array_like
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`);
+        the task's "error" is the gradient ``∇p(q)``, zero at a minimum of ``p``.
     """
 
-    def __init__(self, robot: Robot, gradient, gain: float = 1.0, weight=1.0, name="potential"):
+    def __init__(
+        self,
+        robot: Robot,
+        gradient,
+        gain: float = 1.0,
+        weight=1.0,
+        name="potential",
+        lm_damping: float = 0.0,
+    ):
         fn = getattr(gradient, "gradient", gradient)
         if not callable(fn):
             raise ValueError(f"gradient must be callable (q -> ∇p(q)), got {gradient!r}")
@@ -573,6 +665,7 @@ class PotentialTask(KinematicTask):
         super().__init__(robot, robot.nv, gain=gain, weight=weight, name=name)
         self.gradient = fn
         self.task = Equality(np.eye(robot.nv), np.zeros(robot.nv), weight, name)
+        self._init_lm(lm_damping)
 
     def _refresh(self, q, t, dt, reference) -> Equality:
         g = np.asarray(self.gradient(q), dtype=float).reshape(-1)
@@ -581,6 +674,8 @@ class PotentialTask(KinematicTask):
                 f"{self.task.label}: gradient(q) must return {self.robot.nv} values, "
                 f"got shape {g.shape}"
             )
+        if self.lm_rows is not None:
+            self._lm_e = g
         return self.task._assign(b=-self.gain * g)
 
 
@@ -623,6 +718,39 @@ class OneFormTask(KinematicTask):
         if self.form is None:
             return self.task
         return self.task.update(A=self.form(q))  # validated: user code computes it
+
+
+class LMDamping(KinematicTask):
+    """The Levenberg–Marquardt damping rows of a task: ``√μ · v = 0`` on all ``nv`` rows,
+    ``μ = lm_damping · Σ wᵢ eᵢ²`` from the owner's error at its last refresh.
+
+    Built by a task constructed with ``lm_damping > 0`` (its :attr:`KinematicTask.lm_rows`);
+    :class:`~qpcoord.IK` places it in the owner's level, right after it, and refreshes it
+    after the owner. All rows are zero once the owner's error is (the task is met).
+
+    Parameters
+    ----------
+    owner : KinematicTask
+    """
+
+    def __init__(self, owner: KinematicTask) -> None:
+        self.robot = robot = owner.robot
+        self.owner = owner
+        self.kind = "equality"
+        self.gain = 0.0
+        nv = robot.nv
+        self._eye = np.eye(nv)
+        self._A = np.zeros((nv, nv))
+        self.task = Equality(self._A, np.zeros(nv), 1.0, f"{owner.task.name} lm damping")
+
+    @property
+    def mu(self) -> float:
+        """``μ = lm_damping · Σ wᵢ eᵢ²`` of the owner's last refresh ((task units)²)."""
+        return self.owner.lm_damping * self.owner._lm_error_sq()
+
+    def _refresh(self, q, t, dt, reference) -> Equality:
+        np.multiply(self._eye, np.sqrt(self.mu), out=self._A)
+        return self.task._assign(self._A)
 
 
 class Limit(KinematicTask):
