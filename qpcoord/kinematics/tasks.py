@@ -37,6 +37,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..core.tasks import Equality, Inequality
+from .braking import braking_speed
 from .paths import Path
 from .robot import Robot
 
@@ -840,6 +841,16 @@ class JointLimits(Limit):
             self._lower_q = self.lower[self._q_index]
             self._upper_q = self.upper[self._q_index]
 
+    def distances(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q_max − q, q − q_min)`` of the limited joints (rad, m; order of
+        :attr:`joints`, ``inf`` for a free side), at a validated ``q`` (nq,); negative
+        outside a limit."""
+        if self._q_index is None:
+            j = self.joints
+            return self.upper[j] - q[j], q[j] - self.lower[j]
+        qq = q[self._q_index]
+        return self._upper_q - qq, qq - self._lower_q
+
     def box(self, q, dt):
         k = self.gain / dt
         if self._q_index is None:
@@ -881,7 +892,8 @@ class VelocityLimits(Limit):
 
 
 class AccelerationLimits(Limit):
-    """Joint acceleration limits ``v_prev − a_max dt ≤ v ≤ v_prev + a_max dt``.
+    """Joint acceleration limits ``v_prev − a_max dt ≤ v ≤ v_prev + a_max dt``, braking
+    before the joint position limits.
 
     ``v_prev`` is the velocity of the previous control step: the :class:`~qpcoord.IK` that
     holds this limit records the ``v`` it returns after every :meth:`~qpcoord.IK.step`
@@ -889,8 +901,14 @@ class AccelerationLimits(Limit):
     :meth:`reset`. Meant for one ``step`` per control period (a real loop, or
     :func:`~qpcoord.simulate` with ``integrator="euler"``: RK4 calls the IK four times a step).
 
-    If a joint position limit needs a harder brake than ``a_max`` allows, the two boxes do
-    not meet: the IK then keeps the position limit (see :meth:`~qpcoord.IK.refresh`).
+    **Braking.** A joint with a position limit also gets ``v ≤ braking_speed(q_max − q)``
+    and ``v ≥ −braking_speed(q − q_min)`` (:func:`~qpcoord.kinematics.braking.braking_speed`
+    with ``a_max``: the step-by-step form of ``|v| ≤ √(2 a_max d)``), so it slows down in
+    time and reaches its limit without a deceleration above ``a_max``: the acceleration
+    limit holds at every step, at the position limits too. Where the two cannot both hold
+    (a joint already moving faster than it can brake, or outside its limit), the end of the
+    box nearer to 0 is kept, as :meth:`~qpcoord.IK.refresh` does: outside a limit the joint
+    moves back with the acceleration limit.
 
     Parameters
     ----------
@@ -898,19 +916,54 @@ class AccelerationLimits(Limit):
     limit : float or array_like, shape (nv,)
         ``a_max`` (rad/s², m/s²), > 0; ``inf`` for an unlimited entry (e.g. a floating base's
         six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``).
+    position_limits : "robot", JointLimits or None
+        The position limits braked before (default ``"robot"``: the robot's finite limits
+        of its 1-DoF joints, as :class:`JointLimits`); give the IK's own
+        :class:`JointLimits` if it has other bounds; ``None``: no braking.
+
+    Raises
+    ------
+    ValueError
+        ``limit`` not positive, ``position_limits`` of another kind or robot.
     """
 
-    def __init__(self, robot: Robot, limit):
+    def __init__(self, robot: Robot, limit, position_limits: Any = "robot"):
         super().__init__(robot, "acceleration limits")
         a = robot._limit(limit, None, "limit", 1, size=robot.nv)
         if np.any(a <= 0):
             raise ValueError(f"AccelerationLimits: limit must be > 0 (rad/s²), got {a}")
         self.limit = _unlimited(a)
         self.v_prev = np.zeros(robot.nv)
+        if isinstance(position_limits, str) and position_limits == "robot":
+            position_limits = JointLimits(robot)
+        elif position_limits is not None and not (
+            isinstance(position_limits, JointLimits) and position_limits.robot.model is robot.model
+        ):
+            raise ValueError(
+                "AccelerationLimits: position_limits must be 'robot', a JointLimits of this "
+                f"robot or None, got {position_limits!r}"
+            )
+        #: The :class:`JointLimits` braked before (``None``: no braking)
+        self.position_limits: JointLimits | None = (
+            position_limits if position_limits is not None and position_limits.joints.size else None
+        )
+        if self.position_limits is not None:
+            self._brake_a = self.limit[self.position_limits.joints]
 
     def box(self, q, dt):
         step = self.limit * dt
-        return self.v_prev - step, self.v_prev + step
+        lo, hi = self.v_prev - step, self.v_prev + step
+        P = self.position_limits
+        if P is not None:
+            j = P.joints
+            up, down = P.distances(q)
+            hi[j] = np.minimum(hi[j], braking_speed(up, self._brake_a, dt))
+            lo[j] = np.maximum(lo[j], -braking_speed(down, self._brake_a, dt))
+            bad = lo > hi
+            if bad.any():  # cannot brake in time, or outside the limit: the end nearer to 0
+                back = np.where(np.abs(lo) < np.abs(hi), lo, hi)
+                lo[bad] = hi[bad] = back[bad]
+        return lo, hi
 
     def record(self, v: np.ndarray) -> None:
         """Keep ``v`` (nv,) as the previous step's velocity."""
