@@ -33,6 +33,7 @@ from .kinematics.frame_tasks import (
 from .kinematics.ik import IK, ik_step, inverse_kinematics
 from .kinematics.robot import Robot
 from .kinematics.simulation import Trajectory, simulate
+from .kinematics.startup import OutsideLimitsError
 from .kinematics.tasks import (
     AccelerationLimits,
     JointLimits,
@@ -70,6 +71,7 @@ __all__ = [
     "Equality",
     "IK",
     "InfeasibleError",
+    "OutsideLimitsError",
     "Inequality",
     "JointLimits",
     "METHODS",
