@@ -10,6 +10,12 @@ Scenarios:
   (qpcoord: on the task, Pink: the same parameter of its ``FrameTask``).
 - ``reachable``: the same with a target 0.24 m from the start pose: steps until the pose
   error is below 1e-6 (does the damping slow a reachable target?).
+- ``elbow``: UR10 ``tool0`` position target near its base (reachable with the elbow at
+  2.60 rad), deadbeat task over a posture, dt = 10 ms: with the one-step joint-limit box the
+  elbow lands on its limit at π, where the folded arm is singular; rows: that box
+  (``JointLimits`` gain 1, the IK's default), its damper form (gain 0.5, Pink's default),
+  and with ``AccelerationLimits(50)``; Pink with its default limits, and with its
+  ``AccelerationLimit(50)``.
 - ``limit``: Panda joint 1 pulled 1 rad past its upper limit by a posture (gain 20/s; Pink
   gain 0.02 per step), dt = 1 ms, 2 000 steps, acceleration limit 50 rad/s² (qpcoord:
   ``AccelerationLimits(robot, 50)`` with and without its braking rows; Pink:
@@ -182,6 +188,53 @@ def limit(steps: int, dt: float = 1e-3, a_max: float = 50.0) -> list[tuple[str, 
     return rows
 
 
+ELBOW_TARGET = np.array([-0.118, 0.193, 0.303])  # tool0, m: reached with the elbow at 2.60 rad
+
+
+def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> list[tuple[str, dict]]:
+    """UR10 ``tool0`` position target near the base: a deadbeat task drives the elbow onto
+    its limit at π, where the arm is folded (the Jacobian's smallest singular value 0.002)."""
+    from pink.limits import AccelerationLimit, ConfigurationLimit, VelocityLimit
+    from pink.tasks import FrameTask, PostureTask
+
+    ur10 = qc.robots.load("ur10")
+    q0 = np.array([0.0, -1.2, 2.6, -1.9, -1.57, 0.0])
+
+    def error(q):
+        return float(np.linalg.norm(ur10.frame_pose(q, FRAME)[:3, 3] - ELBOW_TARGET))
+
+    rows = []
+    variants = (
+        ("qpcoord JointLimits (gain 1)", [qc.JointLimits(ur10), qc.VelocityLimits(ur10)]),
+        ("qpcoord JointLimits(gain=0.5)", [qc.JointLimits(ur10, 0.5), qc.VelocityLimits(ur10)]),
+        (
+            f"qpcoord + AccelerationLimits({a_max:g})",
+            [qc.JointLimits(ur10), qc.VelocityLimits(ur10), AccelerationLimits(ur10, a_max)],
+        ),
+    )
+    for label, limits in variants:
+        task = qc.FramePositionTask(ur10, FRAME, ELBOW_TARGET, gain=1 / dt)
+        ik = qc.IK(ur10, [task, qc.PostureTask(ur10, q0)], dt=dt, limits=limits)
+        vs, qs = _qc_loop(ur10, q0, ik, steps)
+        rows.append((label, metrics(vs, dt, ur10, qs, error(qs[-1]))))
+        rows[-1][1]["QP failed at step"] = None
+    model = ur10.model
+    for label, accel in (("pink", None), (f"pink + AccelerationLimit({a_max:g})", a_max)):
+        hand = FrameTask(FRAME, position_cost=1.0, orientation_cost=0.0, gain=1.0)
+        hand.set_target(pin.SE3(np.eye(3), ELBOW_TARGET))
+        posture = PostureTask(cost=1e-3)
+        posture.set_target(q0.copy())
+        limits = [ConfigurationLimit(model), VelocityLimit(model)]
+        acc = None
+        if accel is not None:
+            acc = AccelerationLimit(model, np.full(model.nv, accel))
+            limits.append(acc)
+        vs, qs, failed = _pink_loop(ur10, q0, [hand, posture], dt, steps, limits=limits, accel=acc)
+        rows.append((label, metrics(vs, dt, ur10, qs, error(qs[-1]))))
+        rows[-1][1]["QP failed at step"] = failed
+    return rows
+
+
 COLUMNS = ["reversals/s", "max jump", "max |a|", "violation", "settle (s)", "|v| end", "error",
            "steps to 1e-6", "QP failed at step"]  # fmt: skip
 
@@ -209,6 +262,9 @@ def main(argv=None) -> int:
     print()
     print(table("UR10, reachable target 0.24 m away (300 steps, dt 10 ms)",
                 reach([0.2, -0.1, 0.1], 300)))  # fmt: skip
+    print()
+    print(table(f"UR10, elbow onto its limit at π, folded ({args.steps} steps, dt 10 ms)",
+                elbow(args.steps)))  # fmt: skip
     print()
     print(table(f"Panda joint 1 into its limit, a_max 50 rad/s² ({args.steps} steps, dt 1 ms)",
                 limit(args.steps)))  # fmt: skip

@@ -143,3 +143,46 @@ def test_joint_limit_gain_is_a_velocity_damper(panda):
         panda, q0, 0, 1.0, lambda r: [qc.JointLimits(r), qc.VelocityLimits(r)], "python", 2500
     )
     assert -(np.diff(vs1[:, 0]) / DT).min() > 0.9 * panda.velocity_limit[0] / DT
+
+
+# UR10 tool0 target near its base, reachable with the elbow at 2.60 rad: a deadbeat task
+# (gain 1/dt) with the one-step joint-limit box (gain 1) lands the elbow on its limit at π,
+# where the folded arm is singular, and the arm then alternates between two configurations
+# at its speed limits (~500 reversals/s, 6.4 rad/s jumps: benchmarks/edges.py)
+ELBOW_TARGET = np.array([-0.118, 0.193, 0.303])
+ELBOW_Q0 = np.array([0.0, -1.2, 2.6, -1.9, -1.57, 0.0])
+
+
+def _elbow_run(limits_of, engine=None, steps=1200, dt=0.01):
+    ur10 = qc.robots.load("ur10")
+    task = qc.FramePositionTask(ur10, "tool0", ELBOW_TARGET, gain=1 / dt)
+    levels = [task, qc.PostureTask(ur10, ELBOW_Q0)]
+    ik = qc.IK(ur10, levels, dt=dt, limits=limits_of(ur10), engine=engine)
+    q, vs = ELBOW_Q0.copy(), [np.zeros(ur10.nv)]
+    for _ in range(steps):
+        q, v, _ = ik.step_integrate(q)
+        vs.append(v)
+    return np.array(vs), np.linalg.norm(task.compute_error(q))
+
+
+def _reversals(vs, floor=1e-6):
+    big = np.abs(vs) > floor
+    return int(np.sum((np.sign(vs[1:]) * np.sign(vs[:-1]) < 0) & big[1:] & big[:-1]))
+
+
+@pytest.mark.parametrize("engine", ["native", "python"])
+def test_elbow_at_its_limit_at_a_singularity_does_not_chatter(engine):
+    # with acceleration limits the joint brakes before π: no jump above a_max dt, and the
+    # arm reaches the target without chattering
+    dt, a_max = 0.01, 50.0
+    vs, err = _elbow_run(
+        lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
+        engine,
+    )
+    assert np.abs(np.diff(vs, axis=0)).max() <= a_max * dt * (1 + 1e-9)
+    assert _reversals(vs[-500:]) == 0
+    assert err < 1e-6
+    # the damper form of the position limits does the same without acceleration limits
+    vs, err = _elbow_run(lambda r: [qc.JointLimits(r, gain=0.5), qc.VelocityLimits(r)], engine)
+    assert _reversals(vs[-500:]) == 0
+    assert err < 1e-6
