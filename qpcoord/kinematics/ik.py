@@ -236,6 +236,12 @@ class IK:
                         f"{where}: task {task.name!r} has {task.task.shape[1]} columns, the "
                         f"robot {nv} velocity variables (nv)"
                     )
+                if task.lm_rows is not None and where == "constraints":
+                    raise ValueError(
+                        f"{where}: task {task.name!r} has lm_damping={task.lm_damping:g}; a "
+                        "hard constraint is not damped (damping rows there would hold v = 0): "
+                        "build it with lm_damping=0 or put it at a level"
+                    )
                 self._dynamic.append(task)
                 out.append(task.task)
                 if task.lm_rows is not None:  # refreshed after its task, in its level
