@@ -750,7 +750,23 @@ class LMDamping(KinematicTask):
         return self.owner.lm_damping * self.owner._lm_error_sq()
 
     def _refresh(self, q, t, dt, reference) -> Equality:
-        np.multiply(self._eye, np.sqrt(self.mu), out=self._A)
+        owner = self.owner
+        if owner.kind == "equality" and owner._lm_e is None:
+            # a task whose own _refresh does not record its error: its compute_error
+            # (validated), or a message rather than a silent zero damping
+            try:
+                e = owner.compute_error(q)
+            except NotImplementedError:
+                raise ValueError(
+                    f"{owner.task.label}: lm_damping needs the task's error; define "
+                    "compute_error(q) (its _refresh does not record one)"
+                ) from None
+            owner._lm_e, _ = owner._checked(e, np.zeros(owner.task.shape))
+            mu = self.mu
+            owner._lm_e = None
+        else:
+            mu = self.mu
+        np.multiply(self._eye, np.sqrt(mu), out=self._A)
         return self.task._assign(self._A)
 
 

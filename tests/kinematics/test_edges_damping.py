@@ -165,3 +165,38 @@ def test_damped_hard_constraint_is_refused(ur10):
     task = qc.FrameTask(ur10, "tool0", ur10.frame_pose(Q0, "tool0"), lm_damping=1.0)
     with pytest.raises(ValueError, match="lm_damping"):
         qc.IK(ur10, [qc.PostureTask(ur10, Q0)], dt=DT, constraints=[task])
+
+
+class _Height(qc.KinematicTask):
+    """A user task writing its rows in _refresh (no error recorded), with compute_error."""
+
+    def __init__(self, robot, z, lm_damping=0.0):
+        super().__init__(robot, 1, gain=10.0, name="height", lm_damping=lm_damping)
+        self.z = z
+
+    def compute_error(self, q):
+        return self.robot.frame_pose(q, "tool0")[2:3, 3] - self.z
+
+    def _refresh(self, q, t, dt, reference):
+        J = self.robot.frame_jacobian(q, "tool0")[2:3]
+        return self.task._assign(J, -self.gain * self.compute_error(q))
+
+
+class _RowsOnly(_Height):
+    compute_error = qc.KinematicTask.compute_error
+
+    def _refresh(self, q, t, dt, reference):
+        J = self.robot.frame_jacobian(q, "tool0")[2:3]
+        return self.task._assign(J, np.zeros(1))
+
+
+def test_user_task_damping_reads_its_error(ur10):
+    z = ur10.frame_pose(Q0, "tool0")[2, 3]
+    task = _Height(ur10, z - 0.2, lm_damping=2.0)
+    ik = qc.IK(ur10, [task], dt=DT, engine="python")
+    ik.step(Q0)
+    assert task.lm_rows.task.A[0, 0] == pytest.approx(np.sqrt(2.0 * 0.2**2), rel=1e-9)
+    rows_only = _RowsOnly(ur10, z, lm_damping=1.0)
+    ik = qc.IK(ur10, [rows_only], dt=DT, engine="python")
+    with pytest.raises(ValueError, match="lm_damping needs the task's error"):
+        ik.step(Q0)
