@@ -926,6 +926,11 @@ class AccelerationLimits(Limit):
     box nearer to 0 is kept, as :meth:`~qpcoord.IK.refresh` does: outside a limit the joint
     moves back with the acceleration limit.
 
+    Keep the IK's :class:`JointLimits` at ``gain=1`` beside it: the braking rows do the
+    slowing down, and a damper gain ``K < 1`` would decelerate the joint at up to
+    ``(K/dt) · v`` in its last steps before the limit (e.g. 60 rad/s² for ``a_max = 50``,
+    ``K = 0.5``, dt = 1 ms), above ``a_max``.
+
     Parameters
     ----------
     robot : Robot
