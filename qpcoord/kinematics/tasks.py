@@ -926,10 +926,11 @@ class AccelerationLimits(Limit):
     box nearer to 0 is kept, as :meth:`~qpcoord.IK.refresh` does: outside a limit the joint
     moves back with the acceleration limit.
 
-    Keep the IK's :class:`JointLimits` at ``gain=1`` beside it: the braking rows do the
-    slowing down, and a damper gain ``K < 1`` would decelerate the joint at up to
-    ``(K/dt) · v`` in its last steps before the limit (e.g. 60 rad/s² for ``a_max = 50``,
-    ``K = 0.5``, dt = 1 ms), above ``a_max``.
+    The braking rows are computed for the gain of ``position_limits``: give the IK's own
+    :class:`JointLimits` when it has another gain (a damper ``K < 1``) or other bounds, so
+    that the joint also slows down for that box (with the robot's limits at gain 1 instead,
+    a damper ``K = 0.5`` beside it decelerates at up to 60 rad/s² for ``a_max = 50``,
+    dt = 1 ms).
 
     Parameters
     ----------
@@ -938,9 +939,10 @@ class AccelerationLimits(Limit):
         ``a_max`` (rad/s², m/s²), > 0; ``inf`` for an unlimited entry (e.g. a floating base's
         six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``).
     position_limits : "robot", JointLimits or None
-        The position limits braked before (default ``"robot"``: the robot's finite limits
-        of its 1-DoF joints, as :class:`JointLimits`); give the IK's own
-        :class:`JointLimits` if it has other bounds; ``None``: no braking.
+        The position limits braked before, and their gain (default ``"robot"``: the
+        robot's finite limits of its 1-DoF joints, as ``JointLimits(robot)``, gain 1); give
+        the IK's own :class:`JointLimits` if it has another gain or other bounds; ``None``:
+        no braking.
 
     Raises
     ------
@@ -978,8 +980,8 @@ class AccelerationLimits(Limit):
         if P is not None:
             j = P.joints
             up, down = P.distances(q)
-            hi[j] = np.minimum(hi[j], braking_speed(up, self._brake_a, dt))
-            lo[j] = np.maximum(lo[j], -braking_speed(down, self._brake_a, dt))
+            hi[j] = np.minimum(hi[j], braking_speed(up, self._brake_a, dt, P.gain))
+            lo[j] = np.maximum(lo[j], -braking_speed(down, self._brake_a, dt, P.gain))
             bad = lo > hi
             if bad.any():  # cannot brake in time, or outside the limit: the end nearer to 0
                 back = np.where(np.abs(lo) < np.abs(hi), lo, hi)

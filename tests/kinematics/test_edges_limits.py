@@ -186,3 +186,42 @@ def test_elbow_at_its_limit_at_a_singularity_does_not_chatter(engine):
     vs, err = _elbow_run(lambda r: [qc.JointLimits(r, gain=0.5), qc.VelocityLimits(r)], engine)
     assert _reversals(vs[-500:]) == 0
     assert err < 1e-6
+
+
+def _brakes_in_time(D, v, a, dt, K, rel):
+    """The fastest braking from (D, v) keeps v_j dt ≤ K D_j at every step, to ``rel`` of the
+    start distance (the rounding of the D_j subtractions)."""
+    slack = rel * D
+    while v > 0:
+        if v * dt > K * D + slack:
+            return False
+        D, v = D - v * dt, v - a * dt
+    return True
+
+
+@pytest.mark.parametrize("K", [1.0, 0.5, 0.05])
+def test_braking_speed_keeps_a_damper_box(K):
+    a, dt = 50.0, 1e-3
+    D = np.random.default_rng(3).uniform(0.0, 1.0, 200)
+    v = braking_speed(D, a, dt, K)
+    # feasible to rounding (~100 subtractions of D: 1e-12 of it), and tight: 0.1 % faster
+    # is not
+    for d, vv in zip(D, v, strict=True):
+        assert _brakes_in_time(d, vv, a, dt, K, 1e-12)
+        assert not _brakes_in_time(d, vv * 1.001, a, dt, K, 1e-12)
+
+
+def test_braking_with_a_damper_joint_limit_keeps_the_acceleration_bound(panda):
+    # JointLimits(gain=0.2) (a damper) beside the acceleration limits: given as their
+    # position_limits, the braking rows slow the joint for the damper's box too
+    q0 = _panda_start(panda)
+
+    def limits(robot):
+        joint_limits = qc.JointLimits(robot, gain=0.2)
+        acc = AccelerationLimits(robot, A_MAX, position_limits=joint_limits)
+        return [joint_limits, qc.VelocityLimits(robot), acc]
+
+    vs, qs = _drive_into_limit(panda, q0, 0, 1.0, limits, "python", 2000)
+    assert (np.abs(np.diff(vs, axis=0)) / DT).max() <= A_MAX * (1 + 1e-9)
+    assert qs[:, 0].max() <= panda.upper[0]
+    assert panda.upper[0] - qs[-1, 0] < 1e-6
