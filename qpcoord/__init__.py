@@ -36,6 +36,7 @@ from .kinematics.frame_tasks import (
 from .kinematics.ik import IK, ik_step, inverse_kinematics
 from .kinematics.robot import Robot
 from .kinematics.simulation import Trajectory, simulate
+from .kinematics.startup import OutsideLimitsError
 from .kinematics.tasks import (
     AccelerationLimits,
     JointLimits,
@@ -77,6 +78,7 @@ __all__ = [
     "JointLimits",
     "METHODS",
     "OneFormTask",
+    "OutsideLimitsError",
     "PositionBand",
     "PositionTask",
     "PostureTask",

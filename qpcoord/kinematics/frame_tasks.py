@@ -411,6 +411,8 @@ class _ErrorTask(KinematicTask):
 
     def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Any) -> Equality:
         e, J, ff = self._evaluate(q)
+        if self.lm_rows is not None:
+            self._lm_e = e.copy() if self._all else e[self._sel]
         b = -self.gain * e
         if ff is not None:
             b += ff
@@ -453,6 +455,9 @@ class FrameTask(_ErrorTask):
         so ``mask="z"`` under ``"se3"`` does not hold the frame's height while it turns.
     name : str, optional
         Default ``"frame <frame>"``.
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -473,6 +478,7 @@ class FrameTask(_ErrorTask):
         mask: Any = None,
         name: str | None = None,
         error: str = "se3",
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = _check_robot(robot)
         self.frame = frame
@@ -493,6 +499,7 @@ class FrameTask(_ErrorTask):
             )
         self.mask = sel.copy()
         self._init_equality(robot, 6, sel, weights, name or f"frame {frame}")
+        self._init_lm(lm_damping)
         #: the validated target pose as a 4×4 (rotation, m), written in place by set_target;
         #: ``_target_T`` is this array once a target is set (the native kernel reads it)
         self._pose = np.eye(4)
@@ -621,6 +628,9 @@ class FramePositionTask(_ErrorTask):
         World axes kept (``"z"``, ``"xy"``, …); default all.
     name : str, optional
         Default ``"position <frame>"``.
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -637,6 +647,7 @@ class FramePositionTask(_ErrorTask):
         mask: Any = None,
         weight: float = 1.0,
         name: str | None = None,
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = _check_robot(robot)
         self.frame = frame
@@ -645,6 +656,7 @@ class FramePositionTask(_ErrorTask):
         w = _number(weight, "weight", "1/m²", positive=True)
         self.mask = _parse_mask(mask, _POSITION_AXES)
         self._init_equality(robot, 3, self.mask, w, name or f"position {frame}")
+        self._init_lm(lm_damping)
         self.target: np.ndarray | None = None
         self.target_velocity: np.ndarray | None = None
         if target is not None:
@@ -691,6 +703,9 @@ class OrientationTask(_ErrorTask):
         Row weight inside the level (1/rad²), default 1.
     name : str, optional
         Default ``"orientation <frame>"``.
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -708,6 +723,7 @@ class OrientationTask(_ErrorTask):
         mask: Any = None,
         weight: float = 1.0,
         name: str | None = None,
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = _check_robot(robot)
         self.frame = frame
@@ -716,6 +732,7 @@ class OrientationTask(_ErrorTask):
         w = _number(weight, "weight", "1/rad²", positive=True)
         self.mask = _parse_mask(mask, _ROTATION_AXES)
         self._init_equality(robot, 3, self.mask, w, name or f"orientation {frame}")
+        self._init_lm(lm_damping)
         self.target: np.ndarray | None = None
         self._target_t: np.ndarray | None = None
         self.target_velocity: np.ndarray | None = None
@@ -768,6 +785,9 @@ class RelativeFrameTask(_ErrorTask):
     mask : str or array_like of 6 bool, optional
         Rows kept among ``x y z rx ry rz`` (axes of ``frame``).
     name : str, optional
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -787,6 +807,7 @@ class RelativeFrameTask(_ErrorTask):
         orientation_weight: float = 1.0,
         mask: Any = None,
         name: str | None = None,
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = _check_robot(robot)
         self.frame, self.reference_frame = frame, reference_frame
@@ -807,6 +828,7 @@ class RelativeFrameTask(_ErrorTask):
             )
         self.mask = sel.copy()
         self._init_equality(robot, 6, sel, weights, name or f"{frame} in {reference_frame}")
+        self._init_lm(lm_damping)
         self.target: pin.SE3 | None = None
         self._target_inv: pin.SE3 | None = None
         if target is not None:
@@ -857,6 +879,9 @@ class ComTask(_ErrorTask):
     weight : float
         Row weight inside the level (1/m²), default 1.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -872,6 +897,7 @@ class ComTask(_ErrorTask):
         mask: Any = None,
         weight: float = 1.0,
         name: str = "com",
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = _check_robot(robot)
         if robot.mass <= 0:
@@ -880,6 +906,7 @@ class ComTask(_ErrorTask):
         w = _number(weight, "weight", "1/m²", positive=True)
         self.mask = _parse_mask(mask, _POSITION_AXES)
         self._init_equality(robot, 3, self.mask, w, name)
+        self._init_lm(lm_damping)
         self.target: np.ndarray | None = None
         self.target_velocity: np.ndarray | None = None
         if target is not None:
@@ -946,6 +973,9 @@ class ComBand(_BandTask):
     weight : float
         Weight of the squared violation at a soft level (1/m²), default 1.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -962,6 +992,7 @@ class ComBand(_BandTask):
         gain: float = 10.0,
         weight: float = 1.0,
         name: str = "com band",
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = _check_robot(robot)
         if robot.mass <= 0:
@@ -970,6 +1001,7 @@ class ComBand(_BandTask):
         w = _number(weight, "weight", "1/m²", positive=True)
         self.set_box(lower, upper)
         self.task = Inequality(np.zeros((3, robot.nv)), -np.inf, np.inf, w, name)
+        self._init_lm(lm_damping)
 
     def set_box(self, lower: Any = -np.inf, upper: Any = np.inf) -> None:
         """Replace the box faces (m, world; ±inf allowed)."""
@@ -1060,6 +1092,9 @@ class SupportPolygon(_BandTask):
     weight : float
         Weight of the squared violation at a soft level (1/m²), default 1.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -1078,6 +1113,7 @@ class SupportPolygon(_BandTask):
         contact_points: Any = None,
         weight: float = 1.0,
         name: str = "support polygon",
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = _check_robot(robot)
         if robot.mass <= 0:
@@ -1120,6 +1156,7 @@ class SupportPolygon(_BandTask):
                 "(more frames, or contact_points=... e.g. the corners of each sole)"
             )
         self.task = Inequality(np.zeros((self.rows, robot.nv)), -np.inf, np.inf, w, name)
+        self._init_lm(lm_damping)
         self._e = np.zeros(self.rows)
         self._J = np.zeros((self.rows, robot.nv))
         self._lower = np.full(self.rows, -np.inf)
@@ -1227,6 +1264,9 @@ class JointCouplingTask(_ErrorTask):
     weight : float
         Row weight inside the level, default 1.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the level also minimises
+        ``lm_damping · Σ wᵢ eᵢ² · ‖v‖²`` (see :class:`~qpcoord.KinematicTask`).
 
     Raises
     ------
@@ -1245,6 +1285,7 @@ class JointCouplingTask(_ErrorTask):
         offset: float = 0.0,
         weight: float = 1.0,
         name: str = "joint coupling",
+        lm_damping: float = 0.0,
     ) -> None:
         import difflib
 
@@ -1282,6 +1323,7 @@ class JointCouplingTask(_ErrorTask):
         self.offset = self._offset(offset)
         w = _number(weight, "weight", "per (rad or m)²", positive=True)
         self._init_equality(robot, 1, np.ones(1, dtype=bool), w, name)
+        self._init_lm(lm_damping)
         J = np.zeros((1, robot.nv))
         J[0, iv] = self.ratios
         self._J = J

@@ -43,6 +43,7 @@ from ..core.tasks import Bounds, Equality, Inequality
 from .native_step import IKStepSpec, NativeIKStep
 from .paths import Path
 from .robot import Robot
+from .startup import StartCheck
 from .tasks import JointLimits, KinematicTask, Limit, VelocityLimits, _check_dt
 
 __all__ = ["IK", "IKTask", "ik_step", "inverse_kinematics", "DEFAULT_IK_DAMPING"]
@@ -134,6 +135,13 @@ class IK:
         :meth:`Stack.solve`'s rule -- native where it is built and applies
         (``method="hierarchical"`` or ``"weighted"``, no ``solver``), else Python (one
         warning per process if it is not built).
+    outside_limits : {"recover", "raise"}
+        A first step (or a step after :meth:`reset`) whose ``q`` is outside a position limit
+        (more than :data:`~qpcoord.kinematics.startup.OUTSIDE_TOLERANCE`, rad or m):
+        ``"recover"`` (default) lets the limits bring the joints back (within the speed and
+        acceleration limits) and reports ``Solution.info["outside_limits"]`` (joint name ->
+        signed excess, rad or m) at each step until they are back;
+        ``"raise"``: :class:`~qpcoord.kinematics.startup.OutsideLimitsError` naming them.
 
     Attributes
     ----------
@@ -156,6 +164,7 @@ class IK:
         weight_ratio: float = 1e-3,
         fallback: bool = True,
         engine: str | None = None,
+        outside_limits: str = "recover",
     ) -> None:
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
@@ -186,6 +195,8 @@ class IK:
                 "limits are used by default)"
             )
         self.limits = limits
+        #: the start-up check of the position limits (``outside_limits``)
+        self.start_check = StartCheck(robot, limits, outside_limits)
         self._dynamic: list[KinematicTask] = []
         stack_levels = [self._collect(level, f"levels[{i}]") for i, level in enumerate(levels)]
         stack_constraints = self._collect(list(constraints or []), "constraints")
@@ -260,8 +271,17 @@ class IK:
                         f"{where}: task {task.name!r} has {task.task.shape[1]} columns, the "
                         f"robot {nv} velocity variables (nv)"
                     )
+                if task.lm_rows is not None and where == "constraints":
+                    raise ValueError(
+                        f"{where}: task {task.name!r} has lm_damping={task.lm_damping:g}; a "
+                        "hard constraint is not damped (damping rows there would hold v = 0): "
+                        "build it with lm_damping=0 or put it at a level"
+                    )
                 self._dynamic.append(task)
                 out.append(task.task)
+                if task.lm_rows is not None:  # refreshed after its task, in its level
+                    self._dynamic.append(task.lm_rows)
+                    out.append(task.lm_rows.task)
             elif isinstance(task, (Equality, Inequality)):
                 if task.shape[1] != nv:
                     raise ValueError(
@@ -340,6 +360,7 @@ class IK:
             ``engine="python"``, ``info["level_ranks"]`` shows a rank loss near a
             singularity).
         """
+        outside = self.start_check.check(q) if self.start_check.pending else None
         try:
             if self._native is not None:
                 if warm_start is not None:
@@ -357,6 +378,8 @@ class IK:
         except InfeasibleError as exc:
             raise self._named(exc, q) from None
         sol.stack = self.stack  # the native step's Solution: for sol.explain()
+        if outside:
+            sol.info["outside_limits"] = outside
         self.last = sol
         v = sol.x
         self.v_prev[...] = v
@@ -391,7 +414,7 @@ class IK:
         solution : Solution
         """
         native = self._native
-        if native is not None and native.integrates:
+        if native is not None and native.integrates and not self.start_check.pending:
             if warm_start is not None:
                 self.stack._warm(warm_start)
             try:
@@ -431,12 +454,14 @@ class IK:
 
     def reset(self, v_prev: ArrayLike | None = None) -> None:
         """Forget the previous step: ``v_prev`` (and that of the acceleration limits) back to
-        zero, or to the given velocity (nv,); no warm start for the next solve."""
+        zero, or to the given velocity (nv,); no warm start for the next solve; the next
+        steps check ``q`` against the position limits again (``outside_limits``)."""
         v = np.zeros(self.robot.nv) if v_prev is None else self.robot._check_velocity(v_prev)
         self.v_prev[...] = v
         for lim in self._recorders:
             lim.record(v)
         self.last = None
+        self.start_check.reset()
 
     def velocity(self, q: ArrayLike, t: float = 0.0, reference: Path | None = None) -> np.ndarray:
         """Velocity ``v`` (nv,) at ``(q, t)``: the scheme interface used by :func:`simulate`."""

@@ -88,6 +88,8 @@ _jacobians = pin.computeJointJacobians
 def native_kind(task: KinematicTask) -> int | None:
     """The native kernel of ``task`` (a code of :data:`KERNELS`), or ``None`` if its rows are
     built by its Python ``_refresh`` (exact classes only: a subclass may change them)."""
+    if task.lm_rows is not None:
+        return None  # its damping rows read the error its Python refresh records
     kind = KERNELS.get(type(task))
     if kind in _BANDS:
         return kind

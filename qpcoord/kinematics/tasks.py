@@ -38,6 +38,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from ..core.tasks import Equality, Inequality
+from .braking import braking_speed
 from .paths import Path
 from .robot import Robot
 
@@ -51,6 +52,7 @@ __all__ = [
     "PostureTask",
     "PotentialTask",
     "OneFormTask",
+    "LMDamping",
     "Limit",
     "JointLimits",
     "VelocityLimits",
@@ -75,6 +77,17 @@ def _gain(value: object, what: str = "gain") -> float:
         raise ValueError(f"{what} must be a number (1/s), got {value!r}")
     if not np.isfinite(value) or value < 0:
         raise ValueError(f"{what} must be finite and >= 0 (1/s), got {value!r}")
+    return float(value)
+
+
+def _lm_damping(value: object, who: str) -> float:
+    """A validated ``lm_damping`` (dimensionless, finite, >= 0)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{who}: lm_damping must be a number (dimensionless), got {value!r}")
+    if not np.isfinite(value) or value < 0:
+        raise ValueError(
+            f"{who}: lm_damping must be finite and >= 0 (dimensionless), got {value!r}"
+        )
     return float(value)
 
 
@@ -177,13 +190,20 @@ class KinematicTask(ABC):
         ``kind="band"``.
     name : str, optional
         Used in messages and reports (default: the class name).
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0): the task's level also
+        minimises ``μ ‖v‖²`` with ``μ = lm_damping · Σ wᵢ eᵢ²`` (row weights ``w``; for a band,
+        ``e`` is its distance outside ``[lower, upper]``), zero once the task is met. Far from
+        an unreachable target it slows the motion to a stop instead of chattering at the
+        speed limits. The damping rows are :attr:`lm_rows` (``nv`` rows beside the task in
+        its level); the task's rows are then built by its Python refresh.
 
     Raises
     ------
     TypeError
         A subclass that implements neither both methods nor ``_refresh`` is instantiated.
     ValueError
-        Bad rows, kind, gain, weight or faces.
+        Bad rows, kind, gain, weight, faces or lm_damping.
 
     Examples
     --------
@@ -205,6 +225,12 @@ class KinematicTask(ABC):
     robot: Robot
     gain: float = 1.0
     kind: str = "equality"
+    #: Levenberg–Marquardt damping (dimensionless): see the class docstring
+    lm_damping: float = 0.0
+    #: The damping rows ``√μ · I`` (an :class:`LMDamping`), ``None`` without damping
+    lm_rows: LMDamping | None = None
+    #: The error of the last refresh (kept rows, task units), recorded only with lm_rows
+    _lm_e: np.ndarray | None = None
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Self:
         base = KinematicTask
@@ -228,6 +254,7 @@ class KinematicTask(ABC):
         lower: ArrayLike = -np.inf,
         upper: ArrayLike = np.inf,
         name: str | None = None,
+        lm_damping: float = 0.0,
     ) -> None:
         who = name or type(self).__name__
         self.robot = _check_robot(robot, who)
@@ -248,6 +275,24 @@ class KinematicTask(ABC):
                 raise ValueError(f"{who}: a band needs gain > 0 (1/s), got {gain!r}")
             self.lower, self.upper = _faces(lower, upper, rows, who)
             self.task = Inequality(zeros, -np.inf, np.inf, weight, who)
+        self._init_lm(lm_damping)
+
+    def _init_lm(self, lm_damping: float) -> None:
+        """Validate ``lm_damping`` and build the damping rows (call once ``task`` exists)."""
+        self.lm_damping = _lm_damping(lm_damping, self.task.name)
+        self.lm_rows = LMDamping(self) if self.lm_damping > 0 else None
+
+    def _lm_error_sq(self) -> float:
+        """``Σ wᵢ eᵢ²`` of the last refresh (task units²): the error of an equality task, the
+        distance outside the band of a band (read from its rows ``K (lower − e)``,
+        ``K (upper − e)``)."""
+        task = self.task
+        if isinstance(task, Inequality):
+            k = self.gain
+            out = np.maximum(task.lower, 0.0) - np.minimum(task.upper, 0.0)
+            return float(task.weight @ (out * out)) / (k * k)
+        e = self._lm_e
+        return 0.0 if e is None else float(task.weight @ (e * e))
 
     # -- the two methods of a user task ------------------------------------------------
     def compute_error(self, q: np.ndarray) -> np.ndarray:
@@ -310,6 +355,8 @@ class KinematicTask(ABC):
         k = self.gain
         task = self.task
         if isinstance(task, Equality):  # kind "equality"
+            if self.lm_rows is not None:
+                self._lm_e = e
             return task._assign(J, -k * e)
         with np.errstate(invalid="ignore"):  # inf − e stays inf
             return task._assign(k * (self.lower - e), k * (self.upper - e), C=J)
@@ -364,6 +411,8 @@ class PositionTask(KinematicTask):
     weight : float or array_like
         Row weights inside the level.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`).
     """
 
     task: Equality
@@ -375,8 +424,16 @@ class PositionTask(KinematicTask):
         gain: float = 10.0,
         weight: ArrayLike = 1.0,
         name: str = "position",
+        lm_damping: float = 0.0,
     ) -> None:
-        super().__init__(_check_robot(robot, name), robot.m, gain=gain, weight=weight, name=name)
+        super().__init__(
+            _check_robot(robot, name),
+            robot.m,
+            gain=gain,
+            weight=weight,
+            name=name,
+            lm_damping=lm_damping,
+        )
         self.target: Path | np.ndarray | None = None
         if target is not None:
             self.set_target(target)
@@ -440,6 +497,8 @@ class PositionTask(KinematicTask):
     def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
         y_ref, v_ref = self.reference_at(t, reference)
         y, J = self.robot._kinematics(q)
+        if self.lm_rows is not None:
+            self._lm_e = y - y_ref
         return self.task._assign(J, v_ref + self.gain * (y_ref - y))
 
 
@@ -463,11 +522,14 @@ class PositionBand(KinematicTask):
     weight : float or array_like
         Row weights inside the level.
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`).
 
     Raises
     ------
     ValueError
-        Faces of the wrong size, NaN, or ``lower > upper`` on a row; a bad gain.
+        Faces of the wrong size, NaN, or ``lower > upper`` on a row; a bad gain or
+        lm_damping.
     """
 
     task: Inequality
@@ -480,6 +542,7 @@ class PositionBand(KinematicTask):
         gain: float = 10.0,
         weight: ArrayLike = 1.0,
         name: str = "position band",
+        lm_damping: float = 0.0,
     ) -> None:
         robot = _check_robot(robot, name)
         lower, upper = _faces(lower, upper, robot.m, "PositionBand")
@@ -492,6 +555,7 @@ class PositionBand(KinematicTask):
             lower=lower,
             upper=upper,
             name=name,
+            lm_damping=lm_damping,
         )
 
     def compute_error(self, q: ArrayLike) -> np.ndarray:
@@ -529,6 +593,8 @@ class PostureTask(KinematicTask):
     weight : float or array_like, shape (rows,)
         Per-joint weights (``nv`` on a fixed base, ``nv − 6`` under a free-flyer).
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`).
     """
 
     task: Equality
@@ -540,6 +606,7 @@ class PostureTask(KinematicTask):
         gain: float = 1.0,
         weight: ArrayLike = 1.0,
         name: str = "posture",
+        lm_damping: float = 0.0,
     ) -> None:
         robot = _check_robot(robot, name)
         q_ref = robot.check_configuration(q_ref, "q_ref").copy()
@@ -552,6 +619,7 @@ class PostureTask(KinematicTask):
         self._full = rows == robot.nv
         S = np.eye(robot.nv) if self._full else np.eye(robot.nv)[self.joints]
         self.task = Equality(S, np.zeros(rows), weight, name)
+        self._init_lm(lm_damping)
 
     def set_target(self, q_ref: ArrayLike) -> None:
         """Replace the preferred configuration ``q_ref`` (nq,)."""
@@ -575,6 +643,8 @@ class PostureTask(KinematicTask):
             d = pin.difference(robot.model, q, self.q_ref)
         if not self._full:
             d = d[self.joints]
+        if self.lm_rows is not None:
+            self._lm_e = -d
         return self.task._assign(b=self.gain * d)
 
 
@@ -594,6 +664,9 @@ class PotentialTask(KinematicTask):
         ``K`` (rad²/(s · potential unit)), default 1.
     weight : float or array_like
     name : str
+    lm_damping : float
+        Levenberg–Marquardt damping (dimensionless, default 0; see :class:`KinematicTask`);
+        the task's "error" is the gradient ``∇p(q)``, zero at a minimum of ``p``.
     """
 
     task: Equality
@@ -605,6 +678,7 @@ class PotentialTask(KinematicTask):
         gain: float = 1.0,
         weight: ArrayLike = 1.0,
         name: str = "potential",
+        lm_damping: float = 0.0,
     ) -> None:
         fn = getattr(gradient, "gradient", gradient)
         if not callable(fn):
@@ -613,6 +687,7 @@ class PotentialTask(KinematicTask):
         super().__init__(robot, robot.nv, gain=gain, weight=weight, name=name)
         self.gradient = fn
         self.task = Equality(np.eye(robot.nv), np.zeros(robot.nv), weight, name)
+        self._init_lm(lm_damping)
 
     def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
         g = np.asarray(self.gradient(q), dtype=float).reshape(-1)
@@ -621,6 +696,8 @@ class PotentialTask(KinematicTask):
                 f"{self.task.label}: gradient(q) must return {self.robot.nv} values, "
                 f"got shape {g.shape}"
             )
+        if self.lm_rows is not None:
+            self._lm_e = g
         return self.task._assign(b=-self.gain * g)
 
 
@@ -672,6 +749,57 @@ class OneFormTask(KinematicTask):
         if self.form is None:
             return self.task
         return self.task.update(A=self.form(q))  # validated: user code computes it
+
+
+class LMDamping(KinematicTask):
+    """The Levenberg–Marquardt damping rows of a task: ``√μ · v = 0`` on all ``nv`` rows,
+    ``μ = lm_damping · Σ wᵢ eᵢ²`` from the owner's error at its last refresh.
+
+    Built by a task constructed with ``lm_damping > 0`` (its :attr:`KinematicTask.lm_rows`);
+    :class:`~qpcoord.IK` places it in the owner's level, right after it, and refreshes it
+    after the owner. All rows are zero once the owner's error is (the task is met).
+
+    Parameters
+    ----------
+    owner : KinematicTask
+    """
+
+    task: Equality
+
+    def __init__(self, owner: KinematicTask) -> None:
+        self.robot = robot = owner.robot
+        self.owner = owner
+        self.kind = "equality"
+        self.gain = 0.0
+        nv = robot.nv
+        self._eye = np.eye(nv)
+        self._A = np.zeros((nv, nv))
+        self.task = Equality(self._A, np.zeros(nv), 1.0, f"{owner.task.name} lm damping")
+
+    @property
+    def mu(self) -> float:
+        """``μ = lm_damping · Σ wᵢ eᵢ²`` of the owner's last refresh ((task units)²)."""
+        return self.owner.lm_damping * self.owner._lm_error_sq()
+
+    def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
+        owner = self.owner
+        if owner.kind == "equality" and owner._lm_e is None:
+            # a task whose own _refresh does not record its error: its compute_error
+            # (validated), or a message rather than a silent zero damping
+            try:
+                e = owner.compute_error(q)
+            except NotImplementedError:
+                raise ValueError(
+                    f"{owner.task.label}: lm_damping needs the task's error; define "
+                    "compute_error(q) (its _refresh does not record one)"
+                ) from None
+            owner._lm_e, _ = owner._checked(e, np.zeros(owner.task.shape))
+            mu = self.mu
+            owner._lm_e = None
+        else:
+            mu = self.mu
+        np.multiply(self._eye, np.sqrt(mu), out=self._A)
+        return self.task._assign(self._A)
 
 
 class Limit(KinematicTask):
@@ -776,6 +904,16 @@ class JointLimits(Limit):
         :attr:`joints` is then limited at that index)."""
         return self._q_index
 
+    def distances(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q_max − q, q − q_min)`` of the limited joints (rad, m; order of
+        :attr:`joints`, ``inf`` for a free side), at a validated ``q`` (nq,); negative
+        outside a limit."""
+        if self._q_index is None:
+            j = self.joints
+            return self.upper[j] - q[j], q[j] - self.lower[j]
+        qq = q[self._q_index]
+        return self._upper_q - qq, qq - self._lower_q
+
     def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         k = self.gain / dt
         if self._q_index is None:
@@ -817,7 +955,8 @@ class VelocityLimits(Limit):
 
 
 class AccelerationLimits(Limit):
-    """Joint acceleration limits ``v_prev − a_max dt ≤ v ≤ v_prev + a_max dt``.
+    """Joint acceleration limits ``v_prev − a_max dt ≤ v ≤ v_prev + a_max dt``, braking
+    before the joint position limits.
 
     ``v_prev`` is the velocity of the previous control step: the :class:`~qpcoord.IK` that
     holds this limit records the ``v`` it returns after every :meth:`~qpcoord.IK.step`
@@ -825,8 +964,20 @@ class AccelerationLimits(Limit):
     :meth:`reset`. Meant for one ``step`` per control period (a real loop, or
     :func:`~qpcoord.simulate` with ``integrator="euler"``: RK4 calls the IK four times a step).
 
-    If a joint position limit needs a harder brake than ``a_max`` allows, the two boxes do
-    not meet: the IK then keeps the position limit (see :meth:`~qpcoord.IK.refresh`).
+    **Braking.** A joint with a position limit also gets ``v ≤ braking_speed(q_max − q)``
+    and ``v ≥ −braking_speed(q − q_min)`` (:func:`~qpcoord.kinematics.braking.braking_speed`
+    with ``a_max``: the step-by-step form of ``|v| ≤ √(2 a_max d)``), so it slows down in
+    time and reaches its limit without a deceleration above ``a_max``: the acceleration
+    limit holds at every step, at the position limits too. Where the two cannot both hold
+    (a joint already moving faster than it can brake, or outside its limit), the end of the
+    box nearer to 0 is kept, as :meth:`~qpcoord.IK.refresh` does: outside a limit the joint
+    moves back with the acceleration limit.
+
+    The braking rows are computed for the gain of ``position_limits``: give the IK's own
+    :class:`JointLimits` when it has another gain (a damper ``K < 1``) or other bounds, so
+    that the joint also slows down for that box (with the robot's limits at gain 1 instead,
+    a damper ``K = 0.5`` beside it decelerates at up to 60 rad/s² for ``a_max = 50``,
+    dt = 1 ms).
 
     Parameters
     ----------
@@ -834,19 +985,55 @@ class AccelerationLimits(Limit):
     limit : float or array_like, shape (nv,)
         ``a_max`` (rad/s², m/s²), > 0; ``inf`` for an unlimited entry (e.g. a floating base's
         six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``).
+    position_limits : "robot", JointLimits or None
+        The position limits braked before, and their gain (default ``"robot"``: the
+        robot's finite limits of its 1-DoF joints, as ``JointLimits(robot)``, gain 1); give
+        the IK's own :class:`JointLimits` if it has another gain or other bounds; ``None``:
+        no braking.
+
+    Raises
+    ------
+    ValueError
+        ``limit`` not positive, ``position_limits`` of another kind or robot.
     """
 
-    def __init__(self, robot: Robot, limit: ArrayLike) -> None:
+    def __init__(self, robot: Robot, limit: ArrayLike, position_limits: Any = "robot") -> None:
         super().__init__(robot, "acceleration limits")
         a = robot._limit(limit, None, "limit", 1, size=robot.nv)
         if np.any(a <= 0):
             raise ValueError(f"AccelerationLimits: limit must be > 0 (rad/s²), got {a}")
         self.limit = _unlimited(a)
         self.v_prev = np.zeros(robot.nv)
+        if isinstance(position_limits, str) and position_limits == "robot":
+            position_limits = JointLimits(robot)
+        elif position_limits is not None and not (
+            isinstance(position_limits, JointLimits) and position_limits.robot.model is robot.model
+        ):
+            raise ValueError(
+                "AccelerationLimits: position_limits must be 'robot', a JointLimits of this "
+                f"robot or None, got {position_limits!r}"
+            )
+        #: The :class:`JointLimits` braked before (``None``: no braking)
+        self.position_limits: JointLimits | None = (
+            position_limits if position_limits is not None and position_limits.joints.size else None
+        )
+        if self.position_limits is not None:
+            self._brake_a = self.limit[self.position_limits.joints]
 
     def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         step = self.limit * dt
-        return self.v_prev - step, self.v_prev + step
+        lo, hi = self.v_prev - step, self.v_prev + step
+        P = self.position_limits
+        if P is not None:
+            j = P.joints
+            up, down = P.distances(q)
+            hi[j] = np.minimum(hi[j], braking_speed(up, self._brake_a, dt, P.gain))
+            lo[j] = np.maximum(lo[j], -braking_speed(down, self._brake_a, dt, P.gain))
+            bad = lo > hi
+            if bad.any():  # cannot brake in time, or outside the limit: the end nearer to 0
+                back = np.where(np.abs(lo) < np.abs(hi), lo, hi)
+                lo[bad] = hi[bad] = back[bad]
+        return lo, hi
 
     def record(self, v: np.ndarray) -> None:
         """Keep ``v`` (nv,) as the previous step's velocity."""

@@ -1,0 +1,227 @@
+"""Position limits that brake: with acceleration limits a joint reaches its position limit
+without a deceleration above the bound, on fixed and floating bases, on both engines."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import qpcoord as qc
+from qpcoord.kinematics.braking import braking_speed
+from qpcoord.kinematics.tasks import AccelerationLimits
+
+DT = 1e-3
+A_MAX = 50.0
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return qc.robots.load("panda")
+
+
+def _drive_into_limit(robot, q0, joint, past, limits_of, engine, steps):
+    """A stiff posture pulling ``joint`` ``past`` rad beyond its upper limit: the velocities
+    of every step (the first row is the rest before the start) and the configurations."""
+    post = qc.PostureTask(robot, q0, gain=20.0)
+    post.q_ref = q0.copy()
+    post.q_ref[joint] = robot.upper[joint] + past
+    ik = qc.IK(robot, [post], dt=DT, limits=limits_of(robot), engine=engine)
+    q, vs, qs = q0.copy(), [np.zeros(robot.nv)], []
+    for _ in range(steps):
+        q, v, _ = ik.step_integrate(q)
+        vs.append(v)
+        qs.append(q)
+    return np.array(vs), np.array(qs)
+
+
+def _limits(a_max, brake=True):
+    def make(robot):
+        acc = AccelerationLimits(robot, a_max, position_limits="robot" if brake else None)
+        return [qc.JointLimits(robot), qc.VelocityLimits(robot), acc]
+
+    return make
+
+
+def _panda_start(panda):
+    return np.clip(np.zeros(panda.nq), panda.lower + 0.1, panda.upper - 0.1)
+
+
+@pytest.mark.parametrize("engine", ["native", "python"])
+def test_joint_brakes_into_its_limit_within_the_acceleration_bound(panda, engine):
+    q0 = _panda_start(panda)
+    vs, qs = _drive_into_limit(panda, q0, 0, 1.0, _limits(A_MAX), engine, 2000)
+    acc = np.abs(np.diff(vs, axis=0)) / DT
+    # the bound holds at every step, to rounding of v (~2 rad/s · 1e-15) over dt
+    assert acc.max() <= A_MAX * (1 + 1e-9)
+    assert qs[:, 0].max() <= panda.upper[0] + 1e-12
+    # it does get there: at rest on the limit at the end
+    assert panda.upper[0] - qs[-1, 0] < 1e-6
+    assert abs(vs[-1, 0]) < 1e-3
+    assert np.abs(vs[:, 0]).max() == pytest.approx(panda.velocity_limit[0], rel=1e-9)
+
+
+def test_without_braking_the_limit_stops_the_joint_in_one_step(panda):
+    # the failure the braking term removes: the position limit's box wins over the
+    # acceleration box and the joint stops from its speed limit in one step (~2 000 rad/s²)
+    q0 = _panda_start(panda)
+    vs, _ = _drive_into_limit(panda, q0, 0, 1.0, _limits(A_MAX, brake=False), "python", 2000)
+    assert (np.abs(np.diff(vs, axis=0)) / DT).max() > 20 * A_MAX
+
+
+def test_engines_agree_when_braking(panda):
+    q0 = _panda_start(panda)
+    vn, _ = _drive_into_limit(panda, q0, 0, 1.0, _limits(A_MAX), "native", 1500)
+    vp, _ = _drive_into_limit(panda, q0, 0, 1.0, _limits(A_MAX), "python", 1500)
+    # one box, two engines: the same v to their tolerance on ~2 rad/s
+    np.testing.assert_allclose(vn, vp, atol=1e-7)
+
+
+def test_floating_base_acceleration_limits_hold_everywhere():
+    go1 = qc.robots.load("go1")
+    q0 = go1.neutral()
+    q0[7:] = np.clip(q0[7:], go1.lower[7:] + 0.05, go1.upper[7:] - 0.05)
+    base = go1.model.frames[2].name  # the root body's frame
+    push = qc.FramePositionTask(go1, base, go1.frame_pose(q0, base)[:3, 3] + [1.0, 0.0, 0.0])
+    post = qc.PostureTask(go1, q0, gain=20.0)
+    post.q_ref = q0.copy()
+    post.q_ref[7] = go1.upper[7] + 1.0  # the first hip abduction into its limit
+    a_max = np.full(go1.nv, A_MAX)  # the base's six rows too
+    limits = [qc.JointLimits(go1), qc.VelocityLimits(go1), AccelerationLimits(go1, a_max)]
+    ik = qc.IK(go1, [push, post], dt=DT, limits=limits)
+    q, vs = q0.copy(), [np.zeros(go1.nv)]
+    for _ in range(800):
+        q, v, _ = ik.step_integrate(q)
+        vs.append(v)
+    vs = np.array(vs)
+    assert (np.abs(np.diff(vs, axis=0)) / DT).max() <= A_MAX * (1 + 1e-9)
+    assert q[7] <= go1.upper[7] + 1e-12
+    assert q[0] - q0[0] > 0.1  # the base did move toward its target (1 m at gain 1/s)
+
+
+def test_braking_speed_is_the_discrete_braking_curve():
+    a, dt = 50.0, 1e-3
+    D = np.array([0.0, 1e-6, 5e-5, 1e-3, 0.1, 1.0])
+    v = braking_speed(D, a, dt)
+    # the distance covered from v (one step, then a·dt less per step) is D, to rounding
+    n = np.floor(v / (a * dt) + 1e-9)
+    covered = dt * ((n + 1) * v - a * dt * n * (n + 1) / 2)
+    np.testing.assert_allclose(covered, D, rtol=1e-9, atol=1e-18)
+    # below the continuous bound sqrt(2 a D), within one step of deceleration of it
+    assert np.all(v <= np.sqrt(2 * a * D) + 1e-12)
+    assert np.all(np.sqrt(2 * a * D) - v <= a * dt)
+    # outside a limit, without a deceleration bound, or without a limit
+    np.testing.assert_allclose(braking_speed(np.array([-0.01]), a, dt), [-10.0])
+    np.testing.assert_allclose(braking_speed(np.array([0.1]), np.inf, dt), [100.0])
+    assert braking_speed(np.array([np.inf]), a, dt)[0] == np.inf
+
+
+def test_bad_position_limits_is_named(panda):
+    with pytest.raises(ValueError, match="position_limits"):
+        AccelerationLimits(panda, 50.0, position_limits="yes")
+    ur5 = qc.robots.load("ur5")
+    with pytest.raises(ValueError, match="position_limits"):
+        AccelerationLimits(panda, 50.0, position_limits=qc.JointLimits(ur5))
+
+
+def test_joint_limit_gain_is_a_velocity_damper(panda):
+    # without acceleration limits, JointLimits(gain=K < 1) is a velocity damper: the box
+    # v ≤ (K/dt)(q_max − q) makes the approach exponential at rate K/dt, so the joint never
+    # hits its limit and decelerates at most (K/dt)·v_max (here 50/s · 2.175 rad/s)
+    q0 = _panda_start(panda)
+    K = 0.05
+
+    def limits(robot):
+        return [qc.JointLimits(robot, gain=K), qc.VelocityLimits(robot)]
+
+    vs, qs = _drive_into_limit(panda, q0, 0, 1.0, limits, "python", 2500)
+    acc = np.diff(vs[:, 0]) / DT
+    assert -acc.min() <= K / DT * panda.velocity_limit[0] * (1 + 1e-9)
+    assert qs[:, 0].max() < panda.upper[0]
+    assert panda.upper[0] - qs[-1, 0] < 1e-6
+    # the plain one-step box (K = 1) stops the joint from its speed limit in one step
+    vs1, _ = _drive_into_limit(
+        panda, q0, 0, 1.0, lambda r: [qc.JointLimits(r), qc.VelocityLimits(r)], "python", 2500
+    )
+    assert -(np.diff(vs1[:, 0]) / DT).min() > 0.9 * panda.velocity_limit[0] / DT
+
+
+# UR10 tool0 target near its base, reachable with the elbow at 2.60 rad: a deadbeat task
+# (gain 1/dt) with the one-step joint-limit box (gain 1) lands the elbow on its limit at π,
+# where the folded arm is singular, and the arm then alternates between two configurations
+# at its speed limits (~500 reversals/s, 6.4 rad/s jumps: benchmarks/edges.py)
+ELBOW_TARGET = np.array([-0.118, 0.193, 0.303])
+ELBOW_Q0 = np.array([0.0, -1.2, 2.6, -1.9, -1.57, 0.0])
+
+
+def _elbow_run(limits_of, engine=None, steps=1200, dt=0.01):
+    ur10 = qc.robots.load("ur10")
+    task = qc.FramePositionTask(ur10, "tool0", ELBOW_TARGET, gain=1 / dt)
+    levels = [task, qc.PostureTask(ur10, ELBOW_Q0)]
+    ik = qc.IK(ur10, levels, dt=dt, limits=limits_of(ur10), engine=engine)
+    q, vs = ELBOW_Q0.copy(), [np.zeros(ur10.nv)]
+    for _ in range(steps):
+        q, v, _ = ik.step_integrate(q)
+        vs.append(v)
+    return np.array(vs), np.linalg.norm(task.compute_error(q))
+
+
+def _reversals(vs, floor=1e-6):
+    big = np.abs(vs) > floor
+    return int(np.sum((np.sign(vs[1:]) * np.sign(vs[:-1]) < 0) & big[1:] & big[:-1]))
+
+
+@pytest.mark.parametrize("engine", ["native", "python"])
+def test_elbow_at_its_limit_at_a_singularity_does_not_chatter(engine):
+    # with acceleration limits the joint brakes before π: no jump above a_max dt, and the
+    # arm reaches the target without chattering
+    dt, a_max = 0.01, 50.0
+    vs, err = _elbow_run(
+        lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
+        engine,
+    )
+    assert np.abs(np.diff(vs, axis=0)).max() <= a_max * dt * (1 + 1e-9)
+    assert _reversals(vs[-500:]) == 0
+    assert err < 1e-6
+    # the damper form of the position limits does the same without acceleration limits
+    vs, err = _elbow_run(lambda r: [qc.JointLimits(r, gain=0.5), qc.VelocityLimits(r)], engine)
+    assert _reversals(vs[-500:]) == 0
+    assert err < 1e-6
+
+
+def _brakes_in_time(D, v, a, dt, K, rel):
+    """The fastest braking from (D, v) keeps v_j dt ≤ K D_j at every step, to ``rel`` of the
+    start distance (the rounding of the D_j subtractions)."""
+    slack = rel * D
+    while v > 0:
+        if v * dt > K * D + slack:
+            return False
+        D, v = D - v * dt, v - a * dt
+    return True
+
+
+@pytest.mark.parametrize("K", [1.0, 0.5, 0.05])
+def test_braking_speed_keeps_a_damper_box(K):
+    a, dt = 50.0, 1e-3
+    D = np.random.default_rng(3).uniform(0.0, 1.0, 200)
+    v = braking_speed(D, a, dt, K)
+    # feasible to rounding (~100 subtractions of D: 1e-12 of it), and tight: 0.1 % faster
+    # is not
+    for d, vv in zip(D, v, strict=True):
+        assert _brakes_in_time(d, vv, a, dt, K, 1e-12)
+        assert not _brakes_in_time(d, vv * 1.001, a, dt, K, 1e-12)
+
+
+def test_braking_with_a_damper_joint_limit_keeps_the_acceleration_bound(panda):
+    # JointLimits(gain=0.2) (a damper) beside the acceleration limits: given as their
+    # position_limits, the braking rows slow the joint for the damper's box too
+    q0 = _panda_start(panda)
+
+    def limits(robot):
+        joint_limits = qc.JointLimits(robot, gain=0.2)
+        acc = AccelerationLimits(robot, A_MAX, position_limits=joint_limits)
+        return [joint_limits, qc.VelocityLimits(robot), acc]
+
+    vs, qs = _drive_into_limit(panda, q0, 0, 1.0, limits, "python", 2000)
+    assert (np.abs(np.diff(vs, axis=0)) / DT).max() <= A_MAX * (1 + 1e-9)
+    assert qs[:, 0].max() <= panda.upper[0]
+    assert panda.upper[0] - qs[-1, 0] < 1e-6
