@@ -31,6 +31,7 @@ import argparse
 import warnings
 
 import numpy as np
+from _table import markdown, preamble
 
 import qpcoord as qc
 
@@ -106,10 +107,10 @@ def main() -> None:
         res = compare(seed)
         if res is not None:
             found.setdefault(res[0], []).append(res[1])
-    print(f"# engine_agreement: seeds {args.first}-{args.first + args.seeds - 1}\n")
-    print("| category | disagreements |\n|---|---:|")
-    for cat in ("flagged", "scale", "silent", "other", "error"):
-        print(f"| {cat} | {len(found.get(cat, []))} |")
+    print(preamble())
+    print(f"\nSeeds {args.first}-{args.first + args.seeds - 1}:\n")
+    cats = ("flagged", "scale", "silent", "other", "error")
+    print(markdown(("category", "disagreements"), [(c, len(found.get(c, []))) for c in cats], "lr"))
     for cat in sorted(show):
         if found.get(cat):
             print(f"\n{cat}:\n")

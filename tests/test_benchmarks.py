@@ -143,7 +143,7 @@ def test_engine_agreement_table():
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = proc.stdout
-    assert "# engine_agreement: seeds 232-234" in out
+    assert "Seeds 232-234:" in out
     for cat in ("flagged", "scale", "silent", "other", "error"):
         assert f"| {cat} |" in out
     count = int(next(ln for ln in out.splitlines() if ln.startswith("| silent |")).split("|")[2])
