@@ -8,13 +8,14 @@ README's block for a benchmark is exactly what its command prints (``python -m b
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import re
 import shlex
 import subprocess
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,11 +41,22 @@ def markdown(header: Sequence[str], rows: Iterable[Sequence[object]], align: str
     return "\n".join("| " + " | ".join(line) + " |" for line in lines)
 
 
-def span(values: Sequence[float], fmt: str = "{:.1f}") -> str:
-    """``min–max`` of the values of several runs in ``fmt`` (one value if they print alike)."""
+def sig3(v: float) -> str:
+    """``v`` with three significant digits and no exponent (``1234.4`` → ``1234``, ``12.34`` →
+    ``12.3``, ``0.1234`` → ``0.123``)."""
+    if v != v or v in (math.inf, -math.inf):
+        return str(v)
+    digits = 0 if v == 0 else max(0, 2 - math.floor(math.log10(abs(v))))
+    return f"{v:.{digits}f}"
+
+
+def span(values: Sequence[float], fmt: str | Callable[[float], str] = "{:.1f}") -> str:
+    """``min–max`` of the values of several runs, each through ``fmt`` (a format string or a
+    function such as :func:`sig3`); one value if both ends print alike."""
     if len(values) == 0:
         return "–"
-    lo, hi = fmt.format(min(values)), fmt.format(max(values))
+    show = fmt.format if isinstance(fmt, str) else fmt
+    lo, hi = show(min(values)), show(max(values))
     return lo if lo == hi else f"{lo}–{hi}"
 
 
@@ -70,7 +82,7 @@ def _blas() -> str:
             name = f"{info.get('internal_api', 'blas')} {info.get('version', '')}".strip()
             if f"{name} {kernel} kernel" not in found:
                 found.append(f"{name} {kernel} kernel")
-    return ", ".join(found) or "BLAS not loaded"
+    return ", ".join(sorted(found)) or "BLAS not loaded"
 
 
 def _commit() -> str:
