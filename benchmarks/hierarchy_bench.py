@@ -76,7 +76,7 @@ from pathlib import Path
 
 import daqp
 import numpy as np
-from _table import markdown, preamble, span
+from _table import markdown, preamble, sig3, span
 from daqp_form import daqp_problem
 from threadpoolctl import threadpool_limits
 
@@ -492,7 +492,7 @@ def summary(results: dict[str, list[list[tuple]]]) -> str:
     for name, runs in results.items():
         med = [{r[1]: r[2] for r in rows} for rows in runs]
         diff = [{r[1]: r[5] for r in rows} for rows in runs]
-        cells = [span([m[k] for m in med], "{:.3g}") if k in med[0] else "–" for k in keys]
+        cells = [span([m[k] for m in med], sig3) if k in med[0] else "–" for k in keys]
         if DAQP in med[0]:
             ratio = span([m["native warm"] / min(m[DAQP], m[DAQP_MODEL]) for m in med], "{:.2f}")
             ratio += "×"

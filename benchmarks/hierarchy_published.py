@@ -400,8 +400,8 @@ def main(argv=None) -> int:
     print(preamble())
     print(
         f"\nMedian of {args.repeats} re-solves of a built Stack (default options, "
-        "`solver=` the column), BLAS 1 thread; '*': status not optimal; max gap: the largest level gap to the "
-        "exact reference, relative to the level value (floor 1e-3 of its scale):\n"
+        "`solver=` the column), BLAS 1 thread; '*': status not optimal; max gap: the largest "
+        "level gap to the exact reference, relative to the level value (floor 1e-3 of its scale):\n"
     )
     body = []
     failed = False
