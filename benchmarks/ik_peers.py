@@ -78,6 +78,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from _table import markdown, preamble  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
 
@@ -605,13 +606,10 @@ def format_rows(rows: list[dict]) -> str:
     """A markdown table of :func:`run` / :func:`run_back_to_back` rows (notes as lines under
     it); the ratios are to PlaCo's row of the same scenario in the same rows (``–`` without
     PlaCo)."""
-    head = (
-        "| scenario | solver | median µs | p90 µs | p99 µs | median / PlaCo | p99 / PlaCo "
-        "| hand error (m) | orient. (rad) | joint-limit viol. (rad) | speed viol. (rad/s) "
-        "| feet drift (m) | CoM beyond soles (m) |"
-    )
-    lines = [head, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    notes = []
+    head = ("scenario", "solver", "median µs", "p90 µs", "p99 µs", "median / PlaCo")
+    head += ("p99 / PlaCo", "hand error (m)", "orient. (rad)", "joint-limit viol. (rad)")
+    head += ("speed viol. (rad/s)", "feet drift (m)", "CoM beyond soles (m)")
+    body, notes = [], []
     placo = {r["scenario"]: r for r in rows if r.get("solver") == "placo"}
 
     def f(r, key):
@@ -625,14 +623,16 @@ def format_rows(rows: list[dict]) -> str:
         if "note" in r:
             notes.append(r["note"])
             continue
-        lines.append(
-            f"| {r['scenario']} | {r['solver']} | {r['median_us']:.1f} | {r['p90_us']:.1f} "
-            f"| {r['p99_us']:.1f} | {ratio(r, 'median_us')} | {ratio(r, 'p99_us')} "
-            f"| {f(r, 'position_error_m')} | {f(r, 'orientation_error_rad')} "
-            f"| {f(r, 'joint_limit_violation_rad')} | {f(r, 'speed_limit_violation_rad_s')} "
-            f"| {f(r, 'feet_drift_m')} | {f(r, 'com_beyond_sole_polygon_m')} |"
-        )
-    return "\n".join(lines + notes)
+        body.append(
+            (
+                r["scenario"], r["solver"], f"{r['median_us']:.1f}", f"{r['p90_us']:.1f}",
+                f"{r['p99_us']:.1f}", ratio(r, "median_us"), ratio(r, "p99_us"),
+                f(r, "position_error_m"), f(r, "orientation_error_rad"),
+                f(r, "joint_limit_violation_rad"), f(r, "speed_limit_violation_rad_s"),
+                f(r, "feet_drift_m"), f(r, "com_beyond_sole_polygon_m"),
+            )
+        )  # fmt: skip
+    return "\n".join([markdown(head, body, "ll" + "r" * 11), *notes])
 
 
 def profile(steps: int) -> str:
@@ -682,6 +682,7 @@ def main(argv=None) -> int:
     if args.make_placo_venv:
         print(f"PlaCo interpreter: {make_placo_venv()}")
         return 0
+    print(preamble() + "\n")
     placo = None if args.no_placo else placo_python(args.placo_python)
     if placo is None and not args.no_placo:
         print(
