@@ -53,7 +53,7 @@ def test_quick_without_placo(tmp_path):
             for mode in ("lockstep", "back to back"):
                 assert (scenario, s, mode) in solvers
     assert not any(r["solver"] == "placo" for r in rows if "solver" in r)
-    assert "Back to back (each solver's whole trajectory alone" in stdout
+    assert "alone: each solver's whole trajectory alone" in stdout
     for r in rows:
         assert r["steps"] == 60
         # hard limits hold on every step; the deadbeat hand task tracks the circle
@@ -83,7 +83,7 @@ def test_lockstep_only(tmp_path):
     if any("skipped" in r.get("note", "") for r in rows):  # example-robot-data missing
         pytest.skip(rows[0]["note"])
     assert {r["mode"] for r in rows} == {"lockstep"}
-    assert "Back to back" not in stdout
+    assert "one after the other (not run)" in stdout
 
 
 def test_rejects_too_few_steps(tmp_path):
