@@ -183,3 +183,91 @@ def test_hierarchy_bench_talos_unit_rows_is_daqp_s_problem():
             M = t.A if hasattr(t, "A") else t.C
             norms = np.linalg.norm(M, axis=1)  # (a zero row of the IK stack stays zero)
             assert np.all((np.abs(norms - 1.0) <= 1e-12) | (norms == 0.0)), norms
+
+
+README = """# Benchmarks
+
+Prose before.
+
+<!-- table: engine_agreement -->
+old numbers
+<!-- /table -->
+
+Prose between.
+
+<!-- table: other -->
+other old numbers
+<!-- /table -->
+
+Prose after.
+"""
+
+
+def _writer():
+    import importlib
+
+    sys.path.insert(0, str(ROOT))
+    try:
+        return importlib.import_module("benchmarks.__main__")
+    finally:
+        sys.path.remove(str(ROOT))
+
+
+def test_write_splices_the_table_between_its_markers(tmp_path):
+    """``python -m benchmarks NAME --quick --write``: the table's block becomes what its
+    command printed (machine line, command, table); the markers, the other table and the
+    prose stay as they were."""
+    from qpcoord.core import native
+
+    if not native.available():
+        pytest.skip("the native engine is not built")
+    readme = tmp_path / "README.md"
+    readme.write_text(README)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "benchmarks", "engine_agreement", "--quick", "--write",
+         "--readme", str(readme)],
+        cwd=ROOT, capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    text = readme.read_text()
+    before, rest = text.split("<!-- table: engine_agreement -->\n")
+    block, after = rest.split("<!-- /table -->\n", 1)
+    assert before == README.split("<!-- table: engine_agreement -->\n")[0]
+    assert after == README.split("old numbers\n<!-- /table -->\n", 1)[1]
+    lines = block.splitlines()
+    assert lines[0].startswith("Machine: ") and " cores" in lines[0] and "qpcoord" in lines[0]
+    assert lines[1] == "Command: `python benchmarks/engine_agreement.py --seeds 4`"
+    assert "| category | disagreements |" in block and "old numbers" not in block
+    assert block.strip() in proc.stdout  # the README holds what the command printed
+
+
+def test_failed_run_or_missing_marker_leaves_the_readme_unchanged(tmp_path):
+    """If one run fails, no table is written (not even the ones that succeeded); a table
+    without markers is refused before anything runs."""
+    writer = _writer()
+    good, bad = tmp_path / "good.py", tmp_path / "bad.py"
+    good.write_text("print('| a |\\n| --- |\\n| 1 |')\n")
+    bad.write_text("import sys\nprint('half a table')\nsys.exit('broken')\n")
+    readme = tmp_path / "README.md"
+    readme.write_text(README)
+    tables = {
+        "engine_agreement": writer.Table(str(good), (), ()),
+        "other": writer.Table(str(bad), (), ()),
+    }
+    orig = writer.TABLES
+    writer.TABLES = tables
+    try:
+        assert writer.main(["--write", "--readme", str(readme)]) == 1
+        assert readme.read_text() == README
+        assert not list(tmp_path.glob(".README.md*"))  # no temporary file left
+        writer.TABLES = {**tables, "missing": writer.Table(str(good), (), ())}
+        with pytest.raises(ValueError, match="table 'missing': 0 marker pairs"):
+            writer.main(["missing", "--write", "--readme", str(readme)])
+        assert readme.read_text() == README
+        assert writer.main(["engine_agreement", "--write", "--readme", str(readme)]) == 0
+    finally:
+        writer.TABLES = orig
+    text = readme.read_text()
+    assert "<!-- table: engine_agreement -->\n| a |\n| --- |\n| 1 |\n<!-- /table -->" in text
+    assert "other old numbers" in text and text.endswith("Prose after.\n")
