@@ -62,7 +62,8 @@ TABLES: dict[str, Table] = {
             a
             for s in ("daqp", "quadprog", "proxqp", "piqp", "clarabel", "highs", "osqp")
             for a in ("--solver", s)
-        ),
+        )
+        + ("--problem", "lexls_test01_humanoid", "--problem", "soth_sot"),
         ("--solver", "daqp", "--problem", "soth_sot", "--repeats", "2"),
     ),
     "ik_peers": Table(

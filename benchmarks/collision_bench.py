@@ -215,7 +215,7 @@ def main(argv=None):
     p = robot.frame_pose(q0, HAND)[:3, 3]
 
     print(preamble())
-    print("\n`CollisionAvoidance.update` alone (FK + broad phase + coal + rows), Panda:\n")
+    print("`CollisionAvoidance.update` alone (FK + broad phase + coal + rows), Panda:\n")
     cases = {
         "self only": [],
         "self + 1 sphere": [Sphere(c, r)],
@@ -246,7 +246,11 @@ def main(argv=None):
     rows.append(("mink solve_ik + CollisionAvoidanceLimit", mink_res, why))
 
     base = _stats(res[0])[0]
-    print(f"\nPer control step, self-collision + 1 sphere ({args.steps} steps × {args.repeats}):\n")
+    print(
+        f"\nPer control step, self-collision + 1 sphere ({args.steps} steps × {args.repeats}); "
+        "ratio: median over qpcoord's; min d: the smallest pair distance over the run on "
+        "qpcoord's hulls ('–' for mink: MuJoCo's distances are not comparable):\n"
+    )
     table, skipped = [], []
     for label, out, why in rows:
         if out is None:
@@ -258,10 +262,6 @@ def main(argv=None):
         table.append((label, pairs, f"{med:.1f}", f"{p99:.1f}", f"{med / base:.2f}", dm))
     head = ("library", "pairs", "median µs", "p99 µs", "ratio", "min d (m)")
     print(markdown(head, table, "lrrrrr"))
-    print(
-        "\nratio: median / qpcoord's median; min d: smallest pair distance over the run "
-        "(qpcoord's hull geometry; mink's MuJoCo distances are not comparable: '–')."
-    )
     for line in skipped:
         print(line)
 

@@ -566,7 +566,7 @@ def main(argv=None) -> int:
     print(preamble())
     with threadpool_limits(1):
         if args.wrapper:
-            print(f"\nMedian µs of the parts of a warm `Stack.solve`, {steps} steps:\n")
+            print(f"Median µs of the parts of a warm `Stack.solve`, {steps} steps:\n")
             body, notes = [], []
             for key in chosen:
                 try:
@@ -593,7 +593,7 @@ def main(argv=None) -> int:
                     notes.append(f"{name}: daqp exit flags {sorted(flags)}.")
         oracle = "the oracle of every 10th step" if args.no_python else "timed, every step"
         print(
-            f"\nMedian µs per step, {steps} steps per scenario (random50, talos: a third), "
+            f"Median µs per step, {steps} steps per scenario (random50, talos: a third), "
             f"the range over {args.runs} run(s); Python engine {oracle}; level diff: "
             "max |Δr| / max(1, r) to the Python engine's level values:\n"
         )

@@ -382,7 +382,7 @@ def main(argv=None) -> int:
             ap.error(f"--runs must be at least 1, got {args.runs}")
         print(preamble())
         version = qc.solver_versions().get("daqp", "?")
-        print(f"DAQP {version}, hierarchical mode with H = I.\n")
+        print(f"DAQP {version}, hierarchical mode with H = I.", end=" ")
         with threadpool_limits(limits=1):
             print(
                 resolve_table(
@@ -399,7 +399,7 @@ def main(argv=None) -> int:
     problems = args.problem or NAMES
     print(preamble())
     print(
-        f"\nMedian of {args.repeats} re-solves of a built Stack (default options, "
+        f"Median of {args.repeats} re-solves of a built Stack (default options, "
         "`solver=` the column), BLAS 1 thread; '*': status not optimal; max gap: the largest "
         "level gap to the exact reference, relative to the level value (floor 1e-3 of its scale):\n"
     )

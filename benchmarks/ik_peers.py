@@ -692,7 +692,7 @@ def main(argv=None) -> int:
     if args.make_placo_venv:
         print(f"PlaCo interpreter: {make_placo_venv()}")
         return 0
-    print(preamble() + "\n")
+    print(preamble())
     placo = None if args.no_placo else placo_python(args.placo_python)
     if placo is None and not args.no_placo:
         print(

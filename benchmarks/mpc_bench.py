@@ -131,7 +131,7 @@ def main(argv=None) -> int:
                 n = steps if method == "weighted" else max(steps // 10, 500)
                 rows.append(run_case(method, case, n))
     print(preamble())
-    print("\n`MPC.step` at 8 kHz in closed loop (goal: p99 ≤ 125 µs, one period):\n")
+    print("`MPC.step` at 8 kHz in closed loop (goal: p99 ≤ 125 µs, one period):\n")
     head = ("method", "case", "steps", "median µs", "p99 µs", "max µs", "> 125 µs", "RMSE nm")
     head += ("saturated", "fallback", "region", "QP")
     body = [

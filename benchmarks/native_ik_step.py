@@ -134,7 +134,7 @@ def main() -> None:
     robot = qc.robots.load("panda")
     print(preamble())
     print(
-        f"\n{args.steps} steps per run, lockstep; each cell the range over {args.runs} run(s) "
+        f"{args.steps} steps per run, lockstep; each cell the range over {args.runs} run(s) "
         "(µs); |Δv|: the largest velocity difference to the native step over all runs:\n"
     )
     table, binding = [], {}

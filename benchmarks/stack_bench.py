@@ -36,7 +36,6 @@ import qpcoord as qc
 from qpcoord.studies.bench_stack import (
     ChainScenario,
     format_table,
-    hierarchical_weighted_ratios,
     run_loops,
     run_stack_bench,
 )
@@ -142,8 +141,7 @@ def one_shot(sizes, steps: int, seed: int = 0) -> list[dict]:
 
 
 def format_loops(rows: list[dict]) -> str:
-    """Markdown table of :func:`run_stack_bench` rows, then the hierarchical / weighted ratio
-    of medians per size and backend."""
+    """Markdown table of :func:`run_stack_bench` rows."""
 
     def us(v: float, digits: int = 0) -> str:
         return "–" if v != v else f"{v:.{digits}f}"  # nan: no such step
@@ -162,15 +160,7 @@ def format_loops(rows: list[dict]) -> str:
         )
         for r in rows
     ]  # fmt: skip
-    lines = [markdown(head, body, "rllrrrrrrrrrrl")]
-    ratios = hierarchical_weighted_ratios(rows)
-    if ratios:
-        lines.append(
-            "\nHierarchical median / weighted median, same backend: "
-            + "; ".join(f"n = {n} {s} {q:.2f}" for n, s, q, _k in ratios)
-            + "."
-        )
-    return "\n".join(lines)
+    return markdown(head, body, "rllrrrrrrrrrrl")
 
 
 def format_one_shot(rows: list[dict]) -> str:
@@ -250,7 +240,7 @@ def main(argv=None) -> int:
     )
     wall = time.perf_counter() - t0
     versions = ", ".join(f"{k} {v}" for k, v in qc.solver_versions().items())
-    print(f"Backends: {versions}.\n")
+    print(f"Backends: {versions}.")
     print(f"The closed loop (wall time {wall:.0f} s):\n")
     print(format_loops(rows))
     shots = []

@@ -188,7 +188,7 @@ def main(argv=None) -> int:
             results.setdefault(f"DDL MPC {case}", []).append(mpc_run(mpc_steps, case))
     print(preamble())
     print(
-        f"\n{runs} run(s), {steps} steps per loop, {mpc_steps} MPC steps, one BLAS thread; "
+        f"{runs} run(s), {steps} steps per loop, {mpc_steps} MPC steps, one BLAS thread; "
         "cells: the median over the runs (min–max):\n"
     )
     print(table(results))

@@ -138,7 +138,7 @@ def test_engine_agreement_table():
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "engine_agreement.py"), "--seeds", "3",
-         "--first", "232"],
+         "--first", "232", "--show", "silent"],
         capture_output=True, text=True, env=env, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -146,10 +146,14 @@ def test_engine_agreement_table():
     assert "Seeds 232-234:" in out
     for cat in ("flagged", "scale", "silent", "other", "error"):
         assert f"| {cat} |" in out
-    count = int(next(ln for ln in out.splitlines() if ln.startswith("| silent |")).split("|")[2])
+    silent = next(ln for ln in out.splitlines() if ln.startswith("| silent |")).split("|")
+    count = int(silent[2])
     tail = out.split("silent:")[-1].splitlines() if count else []
     rows = [ln for ln in tail if ln.startswith("| ") and ln[2].isdigit()]
     assert len(rows) == count
+    assert [r.split("|")[1].strip() for r in rows] == (
+        silent[3].strip().split(", ") if count else []
+    )
     for row in rows:
         cells = [c.strip() for c in row.split("|")]
         assert cells[6] == cells[7] == "optimal" and float(cells[8]) > 1e-6, row
