@@ -33,11 +33,10 @@ step, the stacked arrays already refreshed; warm and bare in alternating order, 
 that bare does not always run right after warm and find the stacked arrays in cache) and
 ``daqp.solve(..., break_points=...)`` with
 ``H = I`` (minimum-norm completion; a positive-definite H avoids its −8 "unsupported" flag).
-DAQP's solve is timed on its arrays built before the timer ("daqp hierarchical (solve on built
-arrays)", as ``hierarchy_published.py --resolve`` times it) and also with the
-building of its arrays from the tasks ("daqp hierarchical + building its arrays", the one
-column before): the native engine's times include copying the tasks' numbers into its arrays.
-Also DAQP's own warm start, "daqp Model warm (update + solve)":
+DAQP's solve is timed on its arrays built before the timer ("daqp.solve", as
+``hierarchy_published.py --resolve`` times it) and also with the building of its arrays from
+the tasks ("daqp.solve + arrays"): the native engine's times include copying the tasks'
+numbers into its arrays. Also DAQP's own warm start, "daqp Model warm" (update + solve):
 one ``daqp.Model`` kept across the steps, given the new right-hand sides (and ``A`` on a step
 where it changed) by ``update`` and solved from its last working set, as
 ``hierarchy_published.py``'s "daqp Model warm"; the faster of DAQP's two paths is its best.
@@ -54,6 +53,11 @@ goal: within 4×).
     python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds
     python benchmarks/hierarchy_bench.py --scenario panda9 --scenario random50 --steps 300
+    python benchmarks/hierarchy_bench.py --steps 300 --no-python --no-one-shot --runs 4
+
+Printed: each engine's median µs per scenario, with ``--runs N`` the range over N runs (the
+scenarios in turn within a run), the native warm solve over DAQP's faster path and the largest
+level differences; ``--percentiles`` adds median / p90 / p99 per engine.
 
 ``--wrapper``: instead, the parts of one warm ``Stack.solve(engine="native")`` — engine and
 time-limit resolution, the one native call ``Hierarchy.step`` (the tasks' numbers copied into

@@ -34,6 +34,12 @@ warm solve always right after the Python engine)::
 
     python benchmarks/hierarchy_published.py --resolve                 # ~1 min
     python benchmarks/hierarchy_published.py --resolve --steps 300 --problem soth_sot
+    python benchmarks/hierarchy_published.py --resolve --steps 60 \
+        --problem lexls_test01_humanoid --runs 2
+
+Printed: per problem, variant and kind of step, each solver's median µs (with ``--runs N`` the
+range over N runs, the problems in turn within a run), the native warm solve over DAQP's
+faster path and the largest level gaps; ``--percentiles`` adds median / p90 / p99.
 
 ``--off SWITCH`` (with ``--resolve``, repeatable): one more row, ``native bare (SWITCH
 off)``: a second bare native solver with that ``Hierarchy`` switch (e.g. ``slack_ls``) set

@@ -52,14 +52,15 @@ Run::
     python benchmarks/ik_peers.py --scenario panda-position --steps 4000
     python benchmarks/ik_peers.py --make-placo-venv   # create benchmarks/.placo-venv first
     python benchmarks/ik_peers.py --profile           # cProfile of the native Panda IK step
-    python benchmarks/ik_peers.py --no-back-to-back   # the lockstep table only
+    python benchmarks/ik_peers.py --no-back-to-back   # the lockstep columns only
 
-Two tables. **Lockstep**: the solvers stepped in turn as above (the order rotating every
-step), so load falls on all alike, but each solver's caches are cold at its step and PlaCo's
-subprocess wakes from a pipe wait at every step. **Back to back**: then each solver runs the
-whole trajectory alone, one after the other (fresh solver, same scenario, same per-step timer,
-same meters; PlaCo gets all its step requests at once). Both give median / p90 / p99 and the
-ratios to PlaCo's median and p99 in the same table.
+One table, two kinds of run. **Lockstep**: the solvers stepped in turn as above (the order
+rotating every step), so load falls on all alike, but each solver's caches are cold at its
+step and PlaCo's subprocess wakes from a pipe wait at every step. **Alone** (back to back):
+then each solver runs the whole trajectory alone, one after the other (fresh solver, same
+scenario, same per-step timer, same meters; PlaCo gets all its step requests at once). Median
+and p99 of each, the alone median over PlaCo's, and the errors and violations (the worse of
+the two runs, which follow the same trajectory); ``--json`` keeps every row with its p90.
 """
 
 from __future__ import annotations
