@@ -127,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         "--readme", type=Path, default=HERE / "README.md", help="the file --write edits"
     )
     args = ap.parse_args(argv)
+    if args.quick and args.write and args.readme.resolve() == (HERE / "README.md").resolve():
+        ap.error("--quick --write would put smoke-run numbers into the README; give --readme")
     names = _select(args.names)
     if args.write:  # every marker pair present before anything runs
         text = args.readme.read_text()
