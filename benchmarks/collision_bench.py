@@ -36,6 +36,7 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
+from _table import markdown, preamble  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
 from qpcoord.kinematics.collision import Box, Capsule, CollisionAvoidance, Sphere  # noqa: E402
@@ -213,8 +214,8 @@ def main(argv=None):
     q0, _, (c, r) = scenario(robot, args.steps)
     p = robot.frame_pose(q0, HAND)[:3, 3]
 
-    print("CollisionAvoidance.update alone (FK + broad phase + coal + rows), Panda, dt = 0.01 s")
-    print(f"{'obstacles':<34}{'pairs':>6}{'active':>8}{'median µs':>11}{'p99 µs':>9}")
+    print(preamble())
+    print("`CollisionAvoidance.update` alone (FK + broad phase + coal + rows), Panda:\n")
     cases = {
         "self only": [],
         "self + 1 sphere": [Sphere(c, r)],
@@ -224,10 +225,13 @@ def main(argv=None):
             Capsule(p + [-0.1, 0.25, -0.3], p + [-0.1, 0.25, 0.1], 0.03),
         ],
     }
+    alone = []
     for label, obstacles in cases.items():
         times, pairs, active = bench_refresh(robot, args.steps, obstacles)
         med, p99 = _stats(times)
-        print(f"{label:<34}{pairs:>6}{active:>8.1f}{med:>11.1f}{p99:>9.1f}")
+        alone.append((label, pairs, f"{active:.1f}", f"{med:.1f}", f"{p99:.1f}"))
+    head = ("obstacles", "pairs", "active", "median µs", "p99 µs")
+    print(markdown(head, alone, "lrrrr"))
 
     rows = []
     res = bench_qpcoord(robot, args.steps, args.repeats)
@@ -242,19 +246,24 @@ def main(argv=None):
     rows.append(("mink solve_ik + CollisionAvoidanceLimit", mink_res, why))
 
     base = _stats(res[0])[0]
-    print()
-    print(f"Per control step, self-collision + 1 sphere ({args.steps} steps × {args.repeats})")
-    print(f"{'library':<42}{'pairs':>6}{'median µs':>11}{'p99 µs':>9}{'ratio':>7}{'min d (m)':>11}")
+    print(
+        f"\nPer control step, self-collision + 1 sphere ({args.steps} steps × {args.repeats}); "
+        "ratio: median over qpcoord's; min d: the smallest pair distance over the run on "
+        "qpcoord's hulls ('–' for mink: MuJoCo's distances are not comparable):\n"
+    )
+    table, skipped = [], []
     for label, out, why in rows:
         if out is None:
-            print(f"{label:<42}  skipped: {why}")
+            skipped.append(f"{label} skipped: {why}.")
             continue
         times, d_min, pairs = out
         med, p99 = _stats(times)
-        dm = "-" if d_min is None else f"{d_min:.4f}"
-        print(f"{label:<42}{pairs:>6}{med:>11.1f}{p99:>9.1f}{med / base:>7.2f}{dm:>11}")
-    print("ratio: median / qpcoord's median; min d: smallest pair distance over the run")
-    print("(qpcoord's hull geometry; mink's MuJoCo distances are not comparable: '-').")
+        dm = "–" if d_min is None else f"{d_min:.4f}"
+        table.append((label, pairs, f"{med:.1f}", f"{p99:.1f}", f"{med / base:.2f}", dm))
+    head = ("library", "pairs", "median µs", "p99 µs", "ratio", "min d (m)")
+    print(markdown(head, table, "lrrrrr"))
+    for line in skipped:
+        print(line)
 
 
 if __name__ == "__main__":

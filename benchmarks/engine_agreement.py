@@ -31,6 +31,7 @@ import argparse
 import warnings
 
 import numpy as np
+from _table import markdown, preamble
 
 import qpcoord as qc
 
@@ -96,20 +97,25 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=400)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument(
-        "--show", action="append", default=None, help="categories to list (default: silent, error)"
+        "--show", action="append", default=[], help="categories to list row by row (repeatable)"
     )
     args = ap.parse_args()
-    show = set(args.show or ["silent", "error"])
+    show = set(args.show)
     warnings.simplefilter("ignore")
     found: dict[str, list[str]] = {}
     for seed in range(args.first, args.first + args.seeds):
         res = compare(seed)
         if res is not None:
             found.setdefault(res[0], []).append(res[1])
-    print(f"# engine_agreement: seeds {args.first}-{args.first + args.seeds - 1}\n")
-    print("| category | disagreements |\n|---|---:|")
-    for cat in ("flagged", "scale", "silent", "other", "error"):
-        print(f"| {cat} | {len(found.get(cat, []))} |")
+    print(preamble())
+    print(f"Seeds {args.first}-{args.first + args.seeds - 1}:\n")
+    cats = ("flagged", "scale", "silent", "other", "error")
+    body = []
+    for c in cats:
+        rows = found.get(c, [])
+        seeds = [r.split("|")[1].strip() for r in rows]  # each row opens with its seed
+        body.append((c, len(rows), ", ".join(seeds) if 0 < len(seeds) <= 10 else "–"))
+    print(markdown(("category", "disagreements", "seeds"), body, "lrl"))
     for cat in sorted(show):
         if found.get(cat):
             print(f"\n{cat}:\n")

@@ -33,11 +33,10 @@ step, the stacked arrays already refreshed; warm and bare in alternating order, 
 that bare does not always run right after warm and find the stacked arrays in cache) and
 ``daqp.solve(..., break_points=...)`` with
 ``H = I`` (minimum-norm completion; a positive-definite H avoids its −8 "unsupported" flag).
-DAQP's solve is timed on its arrays built before the timer ("daqp hierarchical (solve on built
-arrays)", as ``hierarchy_published.py --resolve`` times it) and also with the
-building of its arrays from the tasks ("daqp hierarchical + building its arrays", the one
-column before): the native engine's times include copying the tasks' numbers into its arrays.
-Also DAQP's own warm start, "daqp Model warm (update + solve)":
+DAQP's solve is timed on its arrays built before the timer ("daqp.solve", as
+``hierarchy_published.py --resolve`` times it) and also with the building of its arrays from
+the tasks ("daqp.solve + arrays"): the native engine's times include copying the tasks'
+numbers into its arrays. Also DAQP's own warm start, "daqp Model warm" (update + solve):
 one ``daqp.Model`` kept across the steps, given the new right-hand sides (and ``A`` on a step
 where it changed) by ``update`` and solved from its last working set, as
 ``hierarchy_published.py``'s "daqp Model warm"; the faster of DAQP's two paths is its best.
@@ -54,6 +53,11 @@ goal: within 4×).
     python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds
     python benchmarks/hierarchy_bench.py --scenario panda9 --scenario random50 --steps 300
+    python benchmarks/hierarchy_bench.py --steps 300 --no-python --no-one-shot --runs 4
+
+Printed: each engine's median µs per scenario, with ``--runs N`` the range over N runs (the
+scenarios in turn within a run), the native warm solve over DAQP's faster path and the largest
+level differences; ``--percentiles`` adds median / p90 / p99 per engine.
 
 ``--wrapper``: instead, the parts of one warm ``Stack.solve(engine="native")`` — engine and
 time-limit resolution, the one native call ``Hierarchy.step`` (the tasks' numbers copied into
@@ -70,13 +74,13 @@ from __future__ import annotations
 
 import argparse
 import math
-import platform
 import sys
 import time
 from pathlib import Path
 
 import daqp
 import numpy as np
+from _table import markdown, preamble, sig3, span
 from daqp_form import daqp_problem
 from threadpoolctl import threadpool_limits
 
@@ -474,6 +478,55 @@ def one_shot(steps):
     return [(k, *np.percentile(np.array(v[2:]) * 1e6, [50, 90, 99])) for k, v in times.items()]
 
 
+#: Short column names of :func:`run`'s keys in the summary table.
+SHORT = {DAQP: "daqp.solve", DAQP_BUILD: "daqp.solve + arrays", DAQP_MODEL: "daqp Model warm"}
+
+
+def summary(results: dict[str, list[list[tuple]]]) -> str:
+    """Markdown table of the median µs of each engine per scenario, each cell the range over
+    the runs (``results``: scenario -> one list of :func:`run` rows per run); then the native
+    warm solve over DAQP's faster path (solve on built arrays or warm Model) per run, and the
+    largest level difference to the Python engine over the runs (native, DAQP)."""
+    keys: list[str] = []
+    for runs in results.values():
+        keys += [r[1] for r in runs[0] if r[1] not in keys]
+    head = ("scenario", *(SHORT.get(k, k) for k in keys), "warm / best DAQP")
+    head += ("level diff native", "level diff DAQP")
+    body = []
+    for name, runs in results.items():
+        med = [{r[1]: r[2] for r in rows} for rows in runs]
+        diff = [{r[1]: r[5] for r in rows} for rows in runs]
+        cells = [span([m[k] for m in med], sig3) if k in med[0] else "–" for k in keys]
+        if DAQP in med[0]:
+            ratio = span([m["native warm"] / min(m[DAQP], m[DAQP_MODEL]) for m in med], "{:.2f}")
+            ratio += "×"
+        else:
+            ratio = "–"
+
+        def worst(which, diff=diff) -> str:
+            v = [d[k] for d in diff for k in d if which(k)]
+            return f"{max(v):.1e}" if v else "–"
+
+        body.append(
+            (name, *cells, ratio, worst(lambda k: k.startswith("native")),
+             worst(lambda k: k.startswith("daqp")))
+        )  # fmt: skip
+    return markdown(head, body, "l" + "r" * (len(head) - 1))
+
+
+def percentiles(results: dict[str, list[list[tuple]]]) -> str:
+    """Markdown table of median / p90 / p99 µs per scenario and engine, each cell the range
+    over the runs, and the largest level difference to the Python engine over the runs."""
+    body = []
+    for name, runs in results.items():
+        for i, r in enumerate(runs[0]):
+            per = [rows[i] for rows in runs]
+            cells = (span([p[j] for p in per]) for j in (2, 3, 4))
+            body.append((name, r[1], *cells, f"{max(p[5] for p in per):.1e}"))
+    head = ("scenario", "engine", "median µs", "p90 µs", "p99 µs", "max level diff vs python")
+    return markdown(head, body, "llrrrr")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="few steps (smoke run)")
@@ -483,6 +536,17 @@ def main(argv=None) -> int:
         action="append",
         choices=sorted(SCENARIOS),
         help="run only these scenarios (repeatable; default: all)",
+    )
+    ap.add_argument(
+        "--runs",
+        type=int,
+        default=1,
+        help="run every scenario this many times (scenarios in turn); cells: the range over them",
+    )
+    ap.add_argument(
+        "--percentiles",
+        action="store_true",
+        help="also the table of median / p90 / p99 per scenario and engine",
     )
     ap.add_argument("--no-one-shot", action="store_true", help="skip the one-shot table")
     ap.add_argument(
@@ -500,47 +564,59 @@ def main(argv=None) -> int:
     steps = args.steps or (20 if args.quick else 300)
     if steps < 5:
         ap.error(f"--steps must be at least 5, got {steps}")
+    if args.runs < 1:
+        ap.error(f"--runs must be at least 1, got {args.runs}")
     chosen = args.scenario or list(SCENARIOS)
-    print(f"# hierarchy_bench: {steps} steps per scenario, interleaved, 1 BLAS thread")
-    print(f"# {platform.python_version()}, numpy {np.__version__}, {platform.machine()}")
+    print(preamble())
     with threadpool_limits(1):
         if args.wrapper:
-            print("\n| scenario | part of a warm Stack.solve | median µs |")
-            print("|---|---|---:|")
+            print(f"Median µs of the parts of a warm `Stack.solve`, {steps} steps:\n")
+            body, notes = [], []
             for key in chosen:
                 try:
-                    rows = wrapper(*SCENARIOS[key], max(steps, 10))
+                    body += wrapper(*SCENARIOS[key], max(steps, 10))
                 except FileNotFoundError as exc:  # example-robot-data missing
-                    print(f"<!-- {key}: skipped ({exc}) -->")
-                    continue
-                for r in rows:
-                    print(f"| {r[0]} | {r[1]} | {r[2]:.2f} |")
+                    notes.append(f"{key} skipped: {exc}.")
+            head = ("scenario", "part of a warm Stack.solve", "median µs")
+            print(markdown(head, [(r[0], r[1], f"{r[2]:.2f}") for r in body], "llr"))
+            print("\n".join(["", *notes]) if notes else "", end="")
             return 0
-        print("\n| scenario | engine | median µs | p90 µs | p99 µs | max level diff vs python |")
-        print("|---|---|---|---|---|---|")
-        for key in chosen:
-            name, build = SCENARIOS[key]
-            k = steps if key not in ("random50", "talos") else max(steps // 3, 5)
-            try:
-                rows, flags = run(name, build, k, python=not args.no_python)
-            except FileNotFoundError as exc:  # example-robot-data missing
-                print(f"<!-- {name}: skipped ({exc}) -->")
-                continue
-            for r in rows:
-                print(f"| {r[0]} | {r[1]} | {r[2]:.1f} | {r[3]:.1f} | {r[4]:.1f} | {r[5]:.1e} |")
-            if flags:
-                print(f"<!-- {name}: daqp exit flags {sorted(flags)} -->")
+        results: dict[str, list[list[tuple]]] = {}
+        notes = []
+        for _ in range(args.runs):
+            for key in chosen:
+                name, build = SCENARIOS[key]
+                k = steps if key not in ("random50", "talos") else max(steps // 3, 5)
+                try:
+                    rows, flags = run(name, build, k, python=not args.no_python)
+                except FileNotFoundError as exc:  # example-robot-data missing
+                    notes.append(f"{name} skipped: {exc}.")
+                    continue
+                results.setdefault(name, []).append(rows)
+                if flags - {1, 2}:
+                    notes.append(f"{name}: daqp exit flags {sorted(flags)}.")
+        oracle = "the oracle of every 10th step" if args.no_python else "timed, every step"
+        print(
+            f"Median µs per step, {steps} steps per scenario (random50, talos: a third), "
+            f"the range over {args.runs} run(s); Python engine {oracle}; level diff: "
+            "max |Δr| / max(1, r) to the Python engine's level values:\n"
+        )
+        print(summary(results))
+        if args.percentiles:
+            print("\n" + percentiles(results))
+        for line in dict.fromkeys(notes):
+            print(line)
         if args.no_one_shot:
             return 0
         print(
-            "\n| one-shot, 7 variables, 3 levels | median µs | p90 µs | p99 µs "
-            "| median / one direct daqp.solve |"
+            "\nOne-shot: `qc.solve_stack` of a 7-variable, 3-level stack against one direct "
+            "`daqp.solve` of the weighted QP:\n"
         )
-        print("|---|---|---|---|---|")
         shots = one_shot(steps)
         floor = shots[-1][1]  # the direct daqp.solve of the weighted QP
-        for r in shots:
-            print(f"| {r[0]} | {r[1]:.1f} | {r[2]:.1f} | {r[3]:.1f} | {r[1] / floor:.1f}× |")
+        head = ("call", "median µs", "p90 µs", "p99 µs", "median / direct daqp.solve")
+        body = [(r[0], *(f"{v:.1f}" for v in r[1:]), f"{r[1] / floor:.1f}×") for r in shots]
+        print(markdown(head, body, "lrrrr"))
     return 0
 
 

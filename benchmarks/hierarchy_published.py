@@ -34,6 +34,12 @@ warm solve always right after the Python engine)::
 
     python benchmarks/hierarchy_published.py --resolve                 # ~1 min
     python benchmarks/hierarchy_published.py --resolve --steps 300 --problem soth_sot
+    python benchmarks/hierarchy_published.py --resolve --steps 60 \
+        --problem lexls_test01_humanoid --runs 2
+
+Printed: per problem, variant and kind of step, each solver's median µs (with ``--runs N`` the
+range over N runs, the problems in turn within a run), the native warm solve over DAQP's
+faster path and the largest level gaps; ``--percentiles`` adds median / p90 / p99.
 
 ``--off SWITCH`` (with ``--resolve``, repeatable): one more row, ``native bare (SWITCH
 off)``: a second bare native solver with that ``Hierarchy`` switch (e.g. ``slack_ls``) set
@@ -59,6 +65,7 @@ import math  # noqa: E402
 
 import daqp  # noqa: E402
 import numpy as np  # noqa: E402
+from _table import markdown, preamble, sig3, span  # noqa: E402
 from campaign import level_scales  # noqa: E402
 from daqp_form import daqp_problem  # noqa: E402
 from hlsp import NAMES, load  # noqa: E402
@@ -261,35 +268,85 @@ def resolve(
     return times, worst, flags
 
 
-def resolve_table(problems, steps: int, off: tuple[str, ...] = (), order: str = "shuffle") -> None:
-    """Print the re-solve table (see the module's docstring); ``off``, ``order``: see
+def resolve_table(
+    problems,
+    steps: int,
+    off: tuple[str, ...] = (),
+    order: str = "shuffle",
+    runs: int = 1,
+    detail: bool = False,
+) -> str:
+    """The re-solve table (see the module's docstring): per problem, variant and kind of
+    step, each solver's median µs, the range over ``runs`` runs (all problems in turn per
+    run); ``detail``: also median / p90 / p99 per solver. ``off``, ``order``: see
     :func:`resolve`."""
     how = (
         "solvers in a new random order every step"
         if order == "shuffle"
         else "fixed order python, native warm, cold, bare, daqp.solve, daqp Model"
     )
-    print(f"{steps} steps per problem and kind (first 2 dropped), {how}, BLAS 1 thread")
-    print("| problem | n | step | solver | median µs | p90 µs | p99 µs | max level gap vs python |")
-    print("|---|---:|---|---|---:|---:|---:|---:|")
+    variants = []
     for name in problems:
-        variants = [(name, load(name))]
+        P = load(name)
+        variants.append((name, P))
         if name == "lexls_test01_humanoid":
             variants.append((name + " (box)", load(name, simple_as_bounds=True)))
-        for label, P in variants:
-            for unit in (False, True):
-                levels = unit_rows(P.levels) if unit else P.levels
-                lab = label + (" (unit rows)" if unit else "")
-                for moved in (False, True):
-                    kind = "moved" if moved else "same"
-                    times, worst, flags = resolve(levels, P.bounds, P.n, steps, moved, off, order)
-                    for key in times:
-                        us = np.percentile(np.array(times[key][2:]) * 1e6, [50, 90, 99])
-                        print(
-                            f"| {lab} | {P.n} | {kind} | {key} | {us[0]:.1f} | {us[1]:.1f} "
-                            f"| {us[2]:.1f} | {worst[key]:.1e} |"
-                        )
-                    print(f"<!-- {lab} {kind}: daqp exit flags {sorted(flags)} -->")
+    cases = [
+        (label + (" (unit rows)" if unit else ""), P, unit, moved)
+        for label, P in variants
+        for unit in (False, True)
+        for moved in (False, True)
+    ]
+    stats: dict[tuple[str, str], list[dict]] = {}
+    worst: dict[tuple[str, str], dict] = {}
+    flags: dict[tuple[str, str], set] = {}
+    for _ in range(runs):
+        for lab, P, unit, moved in cases:
+            levels = unit_rows(P.levels) if unit else P.levels
+            case = (lab, "moved" if moved else "same")
+            times, gaps, fl = resolve(levels, P.bounds, P.n, steps, moved, off, order)
+            us = {k: np.percentile(np.array(t[2:]) * 1e6, [50, 90, 99]) for k, t in times.items()}
+            stats.setdefault(case, []).append(us)
+            w = worst.setdefault(case, dict.fromkeys(gaps, 0.0))
+            for k, g in gaps.items():
+                w[k] = max(w[k], g)
+            flags.setdefault(case, set()).update(fl)
+    n_of = {lab: P.n for lab, P, _u, _m in cases}
+    keys = list(next(iter(stats.values()))[0])
+    head = ("problem", "n", "step", *keys, "warm / best DAQP", "gap native", "gap DAQP")
+    body = []
+    for (lab, kind), per in stats.items():
+        w = worst[(lab, kind)]
+        best = [u["native warm"][0] / min(u["daqp.solve"][0], u["daqp Model warm"][0]) for u in per]
+        body.append(
+            (
+                lab,
+                n_of[lab],
+                kind,
+                *(span([u[k][0] for u in per], sig3) for k in keys),
+                span(best, "{:.2f}") + "×",
+                f"{max(v for k, v in w.items() if k.startswith('native')):.1e}",
+                f"{max(v for k, v in w.items() if k.startswith('daqp')):.1e}",
+            )
+        )
+    out = [
+        f"{steps} steps per problem and kind (first 2 dropped), {how}, BLAS 1 thread; median "
+        f"µs, the range over {runs} run(s); gap: max |Δr| / max(1, r) to the Python engine's "
+        "level values:",
+        "",
+        markdown(head, body, "lrl" + "r" * (len(head) - 3)),
+    ]
+    if detail:
+        rows = [
+            (lab, kind, k, *(span([u[k][i] for u in per]) for i in range(3)))
+            for (lab, kind), per in stats.items()
+            for k in keys
+        ]
+        head = ("problem", "step", "solver", "median µs", "p90 µs", "p99 µs")
+        out += ["", markdown(head, rows, "lllrrr")]
+    bad = {c: sorted(f) for c, f in flags.items() if f - {1, 2}}
+    out += [f"{lab} {kind}: daqp exit flags {f}." for (lab, kind), f in bad.items()]
+    return "\n".join(out)
 
 
 def main(argv=None) -> int:
@@ -312,23 +369,47 @@ def main(argv=None) -> int:
         help="--resolve: the solvers' order per step: a new random one each step (default) or "
         "fixed (the native engine right after the Python engine)",
     )
+    ap.add_argument(
+        "--runs",
+        type=int,
+        default=1,
+        help="--resolve: run every problem this many times (in turn); cells: the range",
+    )
+    ap.add_argument(
+        "--percentiles",
+        action="store_true",
+        help="--resolve: also the table of median / p90 / p99 per solver",
+    )
     args = ap.parse_args(argv)
     if args.resolve:
         if args.steps < 5:
             ap.error(f"--steps must be at least 5, got {args.steps}")
-        print(f"python {sys.version.split()[0]}, numpy {np.__version__}, daqp 0.11 (H = I)")
+        if args.runs < 1:
+            ap.error(f"--runs must be at least 1, got {args.runs}")
+        print(preamble())
+        version = qc.solver_versions().get("daqp", "?")
+        print(f"DAQP {version}, hierarchical mode with H = I.", end=" ")
         with threadpool_limits(limits=1):
-            resolve_table(args.problem or RESOLVE_DEFAULT, args.steps, tuple(args.off), args.order)
+            print(
+                resolve_table(
+                    args.problem or RESOLVE_DEFAULT,
+                    args.steps,
+                    tuple(args.off),
+                    args.order,
+                    args.runs,
+                    args.percentiles,
+                )
+            )
         return 0
     solvers = args.solver or qc.available_solvers()
     problems = args.problem or NAMES
-    print(f"python {sys.version.split()[0]}, numpy {np.__version__}, qpcoord {qc.__version__}")
-    print(f"median of {args.repeats} re-solves of a built Stack (default options), BLAS 1 thread")
-    print("cell: time per solve; '*' after it: status not optimal; gap = max level gap to the")
-    print("exact reference, relative to the level value (floor 1e-3 of its scale ⇒ ≤ 1e-9 abs.)")
-    header = "| problem | n | levels | " + " | ".join(solvers) + " | max gap |"
-    print(header)
-    print("|---|---:|---:|" + "---:|" * len(solvers) + "---:|")
+    print(preamble())
+    print(
+        f"Median of {args.repeats} re-solves of a built Stack (default options, "
+        "`solver=` the column), BLAS 1 thread; '*': status not optimal; max gap: the largest "
+        "level gap to the exact reference, relative to the level value (floor 1e-3 of its scale):\n"
+    )
+    body = []
     failed = False
     with threadpool_limits(limits=1):
         for label, P in cases(problems):
@@ -345,7 +426,9 @@ def main(argv=None) -> int:
                 cells.append(cell + ("" if m["status"] == "optimal" else " *"))
                 gaps.append(m["gap"])
             gap = f"{max(gaps):.1e}" if gaps else "-"
-            print(f"| {label} | {P.n} | {len(P.levels)} | " + " | ".join(cells) + f" | {gap} |")
+            body.append((label, P.n, len(P.levels), *cells, gap))
+    head = ("problem", "n", "levels", *solvers, "max gap")
+    print(markdown(head, body, "l" + "r" * (len(head) - 1)))
     return 1 if failed else 0
 
 

@@ -52,14 +52,15 @@ Run::
     python benchmarks/ik_peers.py --scenario panda-position --steps 4000
     python benchmarks/ik_peers.py --make-placo-venv   # create benchmarks/.placo-venv first
     python benchmarks/ik_peers.py --profile           # cProfile of the native Panda IK step
-    python benchmarks/ik_peers.py --no-back-to-back   # the lockstep table only
+    python benchmarks/ik_peers.py --no-back-to-back   # the lockstep columns only
 
-Two tables. **Lockstep**: the solvers stepped in turn as above (the order rotating every
-step), so load falls on all alike, but each solver's caches are cold at its step and PlaCo's
-subprocess wakes from a pipe wait at every step. **Back to back**: then each solver runs the
-whole trajectory alone, one after the other (fresh solver, same scenario, same per-step timer,
-same meters; PlaCo gets all its step requests at once). Both give median / p90 / p99 and the
-ratios to PlaCo's median and p99 in the same table.
+One table, two kinds of run. **Lockstep**: the solvers stepped in turn as above (the order
+rotating every step), so load falls on all alike, but each solver's caches are cold at its
+step and PlaCo's subprocess wakes from a pipe wait at every step. **Alone** (back to back):
+then each solver runs the whole trajectory alone, one after the other (fresh solver, same
+scenario, same per-step timer, same meters; PlaCo gets all its step requests at once). Median
+and p99 of each, the alone median over PlaCo's, and the errors and violations (the worse of
+the two runs, which follow the same trajectory); ``--json`` keeps every row with its p90.
 """
 
 from __future__ import annotations
@@ -78,6 +79,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from _table import markdown, preamble  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
 
@@ -601,38 +603,47 @@ class _nothing:
         return False
 
 
+#: The error and limit columns of :func:`format_rows`: (row key, header).
+ERRORS = (
+    ("position_error_m", "hand error (m)"),
+    ("orientation_error_rad", "orient. (rad)"),
+    ("joint_limit_violation_rad", "joint-limit viol. (rad)"),
+    ("speed_limit_violation_rad_s", "speed viol. (rad/s)"),
+    ("feet_drift_m", "feet drift (m)"),
+    ("com_beyond_sole_polygon_m", "CoM beyond soles (m)"),
+)
+
+
 def format_rows(rows: list[dict]) -> str:
-    """A markdown table of :func:`run` / :func:`run_back_to_back` rows (notes as lines under
-    it); the ratios are to PlaCo's row of the same scenario in the same rows (``–`` without
-    PlaCo)."""
-    head = (
-        "| scenario | solver | median µs | p90 µs | p99 µs | median / PlaCo | p99 / PlaCo "
-        "| hand error (m) | orient. (rad) | joint-limit viol. (rad) | speed viol. (rad/s) "
-        "| feet drift (m) | CoM beyond soles (m) |"
-    )
-    lines = [head, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    notes = []
-    placo = {r["scenario"]: r for r in rows if r.get("solver") == "placo"}
-
-    def f(r, key):
-        return f"{r[key]:.2e}" if key in r else "–"
-
-    def ratio(r, key):
-        ref = placo.get(r["scenario"])
-        return f"{r[key] / ref[key]:.1f}" if ref else "–"
-
+    """One markdown table of :func:`run` and :func:`run_back_to_back` rows: per scenario and
+    solver, the lockstep and the back-to-back times, the back-to-back median over PlaCo's
+    (``–`` without PlaCo), and the errors and violations, the worse of the two modes (both
+    follow the same trajectory); notes as lines under it."""
+    by: dict[tuple[str, str], dict[str, dict]] = {}
     for r in rows:
-        if "note" in r:
-            notes.append(r["note"])
-            continue
-        lines.append(
-            f"| {r['scenario']} | {r['solver']} | {r['median_us']:.1f} | {r['p90_us']:.1f} "
-            f"| {r['p99_us']:.1f} | {ratio(r, 'median_us')} | {ratio(r, 'p99_us')} "
-            f"| {f(r, 'position_error_m')} | {f(r, 'orientation_error_rad')} "
-            f"| {f(r, 'joint_limit_violation_rad')} | {f(r, 'speed_limit_violation_rad_s')} "
-            f"| {f(r, 'feet_drift_m')} | {f(r, 'com_beyond_sole_polygon_m')} |"
-        )
-    return "\n".join(lines + notes)
+        if "solver" in r:
+            by.setdefault((r["scenario"], r["solver"]), {})[r["mode"]] = r
+    placo = {sc: m.get("back to back") for (sc, s), m in by.items() if s == "placo"}
+
+    def us(m: dict, mode: str, key: str) -> str:
+        return f"{m[mode][key]:.1f}" if mode in m else "–"
+
+    body = []
+    for (sc, solver), m in by.items():
+        alone, ref = m.get("back to back"), placo.get(sc)
+        ratio = f"{alone['median_us'] / ref['median_us']:.1f}" if alone and ref else "–"
+        errors = [
+            f"{max(r[key] for r in m.values()):.2e}" if key in next(iter(m.values())) else "–"
+            for key, _ in ERRORS
+        ]
+        body.append(
+            (sc, solver, us(m, "lockstep", "median_us"), us(m, "lockstep", "p99_us"),
+             us(m, "back to back", "median_us"), us(m, "back to back", "p99_us"), ratio, *errors)
+        )  # fmt: skip
+    head = ("scenario", "solver", "lockstep median µs", "lockstep p99 µs", "alone median µs")
+    head += ("alone p99 µs", "alone median / PlaCo", *(h for _, h in ERRORS))
+    notes = [r["note"] for r in rows if "note" in r]
+    return "\n".join([markdown(head, body, "ll" + "r" * (len(head) - 2)), *notes])
 
 
 def profile(steps: int) -> str:
@@ -682,6 +693,7 @@ def main(argv=None) -> int:
     if args.make_placo_venv:
         print(f"PlaCo interpreter: {make_placo_venv()}")
         return 0
+    print(preamble())
     placo = None if args.no_placo else placo_python(args.placo_python)
     if placo is None and not args.no_placo:
         print(
@@ -706,12 +718,13 @@ def main(argv=None) -> int:
                 rows += run_back_to_back(name, steps, args.speed, placo, pink)
         except ValueError as exc:  # example-robot-data missing
             rows.append({"scenario": name, "note": f"{name} skipped: {exc}"})
-    lockstep = [r for r in rows if r.get("mode", "lockstep") == "lockstep"]
-    print("Lockstep (one step of each solver in turn, the order rotating every step):\n")
-    print(format_rows(lockstep))
-    if not args.no_back_to_back:
-        print("\nBack to back (each solver's whole trajectory alone, one after the other):\n")
-        print(format_rows([r for r in rows if r.get("mode") == "back to back"]))
+    print(
+        "Lockstep: one step of each solver in turn, the order rotating every step; alone: "
+        "each solver's whole trajectory alone, one after the other"
+        + (" (not run)" if args.no_back_to_back else "")
+        + ":\n"
+    )
+    print(format_rows(rows))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

@@ -21,10 +21,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
-import sys
 
 import numpy as np
+from _table import markdown, preamble
 from threadpoolctl import threadpool_limits
 
 import qpcoord.ddl as ddl
@@ -131,31 +130,29 @@ def main(argv=None) -> int:
             for case in ("kolmogorov", "step 5 mm"):
                 n = steps if method == "weighted" else max(steps // 10, 500)
                 rows.append(run_case(method, case, n))
-    print(f"python {platform.python_version()} on {platform.machine()}, {sys.platform}")
-    head = (
-        f"{'method':<13} {'case':<11} {'steps':>6} {'median µs':>10} {'p99 µs':>8} "
-        f"{'max µs':>8} {'>125µs':>7} {'RMSE nm':>9} {'sat':>4} {'fallb':>5} "
-        f"{'region':>6} {'QP':>6}"
-    )
-    print(head)
-    print("-" * len(head))
-    for r in rows:
-        print(
-            f"{r['method']:<13} {r['case']:<11} {r['steps']:>6} {r['median_us']:>10.1f} "
-            f"{r['p99_us']:>8.1f} {r['max_us']:>8.0f} {100 * r['over_budget']:>6.2f}% "
-            f"{r['rmse_nm']:>9.1f} {r['saturated_steps']:>4} {r['fallback_steps']:>5} "
-            f"{r['region_steps']:>6} {r['qp_steps']:>6}"
+    print(preamble())
+    print("`MPC.step` at 8 kHz in closed loop (goal: p99 ≤ 125 µs, one period):\n")
+    head = ("method", "case", "steps", "median µs", "p99 µs", "max µs", "> 125 µs", "RMSE nm")
+    head += ("saturated", "fallback", "region", "QP")
+    body = [
+        (
+            r["method"], r["case"], r["steps"], f"{r['median_us']:.1f}", f"{r['p99_us']:.1f}",
+            f"{r['max_us']:.0f}", f"{100 * r['over_budget']:.2f}%", f"{r['rmse_nm']:.1f}",
+            r["saturated_steps"], r["fallback_steps"], r["region_steps"], r["qp_steps"],
         )
+        for r in rows
+    ]  # fmt: skip
+    print(markdown(head, body, "llrrrrrrrrrr"))
     with threadpool_limits(limits=1):
         brows = backend_rows(steps // 5)
-    print()
-    print("the MPC's QPs through Stack.solve(method='weighted') with every backend")
-    print(f"{'solver':<10} {'QPs':>5} {'fail':>5} {'median µs':>10} {'p99 µs':>9} {'cost dev':>9}")
-    for b in brows:
-        print(
-            f"{b['solver']:<10} {b['qps']:>5} {b['failures']:>5} {b['median_us']:>10.0f} "
-            f"{b['p99_us']:>9.0f} {b['max_cost_dev']:>9.1e}"
-        )
+    print("\nThe MPC's QPs through `Stack.solve(method='weighted')` with every backend:\n")
+    head = ("solver", "QPs", "failures", "median µs", "p99 µs", "max cost dev.")
+    body = [
+        (b["solver"], b["qps"], b["failures"], f"{b['median_us']:.0f}", f"{b['p99_us']:.0f}",
+         f"{b['max_cost_dev']:.1e}")
+        for b in brows
+    ]  # fmt: skip
+    print(markdown(head, body, "lrrrrr"))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"mpc": rows, "backends": brows}, fh, indent=2)

@@ -20,9 +20,9 @@ from the same start with its own IK and tasks:
 
 A timed step is what a control loop does: ``set_target`` + the step + ``robot.integrate``
 (``set_target`` + ``step_integrate`` for that path).
-One BLAS thread. Printed per run: median / p90 / p99 (µs), and the largest velocity
-difference to the native step over the run (the three paths see the same configurations:
-each steps from the native step's ``q``).
+One BLAS thread. Printed: median / p90 / p99 (µs), each the range over the runs, and the
+largest velocity difference to the native step over the runs (the three paths see the same
+configurations: each steps from the native step's ``q``).
 
 Run::
 
@@ -40,6 +40,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from _table import markdown, preamble, span  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
@@ -131,28 +132,27 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     args = parser.parse_args()
     robot = qc.robots.load("panda")
+    print(preamble())
+    print(
+        f"{args.steps} steps per run, lockstep; each cell the range over {args.runs} run(s) "
+        "(µs); |Δv|: the largest velocity difference to the native step over all runs:\n"
+    )
+    table, binding = [], {}
     with threadpool_limits(1):
         for name, pose in (("panda-position", False), ("panda-pose", True)):
-            print(f"\n{name}: {args.steps} steps, {args.runs} runs (µs: median / p90 / p99)")
-            print(
-                f"{'path':32s} "
-                + "  ".join(f"{'run ' + str(r + 1):>20s}" for r in range(args.runs))
-            )
-            rows = {p: [] for p in PATHS}
-            extra = []
-            for _ in range(args.runs):
-                out = run(robot, pose, args.steps)
-                extra.append(out)
-                for p in PATHS:
-                    t = out["times"][p] * 1e6
-                    rows[p].append(np.percentile(t, [50, 90, 99]))
+            runs = [run(robot, pose, args.steps) for _ in range(args.runs)]
+            binding[name] = [e["binding"] for e in runs]
             for p in PATHS:
-                cells = "  ".join(f"{m:6.1f} /{a:6.1f} /{b:6.1f}" for m, a, b in rows[p])
-                print(f"{p:32s} {cells}")
-            for p in PATHS[1:]:
-                worst = max(e["dv"][p] for e in extra)
-                print(f"max |v - v_native| {p}: {worst:.2e}")
-            print(f"steps with a speed limit binding: {[e['binding'] for e in extra]}")
+                stats = np.array([np.percentile(e["times"][p] * 1e6, [50, 90, 99]) for e in runs])
+                worst = max(e["dv"][p] for e in runs)
+                dv = "–" if p == PATHS[0] else f"{worst:.1e}"
+                table.append((name, p, *(span(stats[:, i]) for i in range(3)), dv))
+    head = ("scenario", "path", "median µs", "p90 µs", "p99 µs", "max |Δv| (rad/s)")
+    print(markdown(head, table, "llrrrr"))
+    print(
+        "\nSteps with a speed limit binding, per run: "
+        + "; ".join(f"{name} {', '.join(map(str, b))}" for name, b in binding.items())
+    )
 
 
 if __name__ == "__main__":

@@ -24,16 +24,21 @@ import argparse
 import cProfile
 import io
 import json
-import platform
 import pstats
 import sys
 import time
 
 import numpy as np
+from _table import markdown, preamble
 from threadpoolctl import threadpool_limits
 
 import qpcoord as qc
-from qpcoord.studies.bench_stack import ChainScenario, format_table, run_loops, run_stack_bench
+from qpcoord.studies.bench_stack import (
+    ChainScenario,
+    format_table,
+    run_loops,
+    run_stack_bench,
+)
 
 #: the weighted method's default ratio between consecutive levels
 WEIGHT_RATIO = 1e-3
@@ -135,17 +140,38 @@ def one_shot(sizes, steps: int, seed: int = 0) -> list[dict]:
     return rows
 
 
+def format_loops(rows: list[dict]) -> str:
+    """Markdown table of :func:`run_stack_bench` rows."""
+
+    def us(v: float, digits: int = 0) -> str:
+        return "–" if v != v else f"{v:.{digits}f}"  # nan: no such step
+
+    def share(v: float) -> str:
+        return "–" if v != v else f"{100 * v:.0f}%"
+
+    head = ("n", "method", "solver", "steps", "median µs", "p90 µs", "p99 µs", "QP-step med.")
+    head += ("QP/step", "QP max", "bounds act.", "limits act.", "fails", "note")
+    body = [
+        (
+            r["n"], r["method"], r["solver"], r["steps"], us(r["median_us"]), us(r["p90_us"]),
+            us(r["p99_us"]), us(r.get("qp_step_median_us", float("nan"))),
+            us(r["qp_calls_mean"], 2), r["qp_calls_max"], share(r["bounds_active"]),
+            share(r["limits_active"]), r["failures"], r.get("note", ""),
+        )
+        for r in rows
+    ]  # fmt: skip
+    return markdown(head, body, "rllrrrrrrrrrrl")
+
+
 def format_one_shot(rows: list[dict]) -> str:
     """Markdown table of :func:`one_shot` rows."""
-    lines = [
-        "| n | one-shot call | steps | median µs | p90 µs | p99 µs | median / daqp floor |",
-        "|---|---|---:|---:|---:|---:|---:|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r['n']} | {r['call']} | {r['steps']} | {r['median_us']:.1f} "
-            f"| {r['p90_us']:.1f} | {r['p99_us']:.1f} | {r['ratio_to_floor']:.2f}× |"
-        )
+    head = ("n", "one-shot call", "steps", "median µs", "p90 µs", "p99 µs", "median / daqp floor")
+    body = [
+        (r["n"], r["call"], r["steps"], f"{r['median_us']:.1f}", f"{r['p90_us']:.1f}",
+         f"{r['p99_us']:.1f}", f"{r['ratio_to_floor']:.2f}×")
+        for r in rows
+    ]  # fmt: skip
+    lines = [markdown(head, body, "rlrrrrr")]
     checks = {r["n"]: (r["floor_vs_weighted_max_dx"], r["daqp_flags"]) for r in rows}
     for n, (dx, fl) in checks.items():
         lines.append(
@@ -196,7 +222,9 @@ def main(argv=None) -> int:
     shot_steps = args.one_shot_steps
     if shot_steps is None:
         shot_steps = 25 if args.quick else 300
+    print(preamble())
     if args.one_shot_only:
+        print()
         with threadpool_limits(1):
             print(format_one_shot(one_shot(args.sizes, max(shot_steps, 10), args.seed)))
         return 0
@@ -212,17 +240,14 @@ def main(argv=None) -> int:
     )
     wall = time.perf_counter() - t0
     versions = ", ".join(f"{k} {v}" for k, v in qc.solver_versions().items())
-    print(
-        f"qpcoord {qc.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
-        f"{platform.machine()}; backends: {versions}"
-    )
-    print(format_table(rows))
-    print(f"\nwall time {wall:.1f} s")
+    print(f"Backends: {versions}.")
+    print(f"The closed loop (wall time {wall:.0f} s):\n")
+    print(format_loops(rows))
     shots = []
     if shot_steps > 0:
         with threadpool_limits(1):
             shots = one_shot(args.sizes, max(shot_steps, 10), args.seed)
-        print("\nOne-shot (a new stack per step, solved once) vs one direct daqp call:\n")
+        print("\nOne-shot (a new stack per step, solved once) vs one direct `daqp.solve`:\n")
         print(format_one_shot(shots))
     if args.json:
         with open(args.json, "w") as fh:

@@ -31,11 +31,11 @@ import contextlib
 import gc
 import io
 import json
-import platform
 import sys
 import time
 
 import numpy as np
+from _table import preamble
 from threadpoolctl import threadpool_limits
 
 import qpcoord as qc
@@ -186,9 +186,10 @@ def main(argv=None) -> int:
             results.setdefault(f"persistent n={n}", []).append(persistent_run(n, steps))
         for case in ("kolmogorov", "step"):
             results.setdefault(f"DDL MPC {case}", []).append(mpc_run(mpc_steps, case))
+    print(preamble())
     print(
-        f"weighted_bench: {runs} runs, {steps} steps per loop, {mpc_steps} MPC steps; "
-        f"python {platform.python_version()}, {platform.machine()}, one BLAS thread"
+        f"{runs} run(s), {steps} steps per loop, {mpc_steps} MPC steps, one BLAS thread; "
+        "cells: the median over the runs (min–max):\n"
     )
     print(table(results))
     if args.json:

@@ -53,7 +53,7 @@ def test_quick_without_placo(tmp_path):
             for mode in ("lockstep", "back to back"):
                 assert (scenario, s, mode) in solvers
     assert not any(r["solver"] == "placo" for r in rows if "solver" in r)
-    assert "Back to back (each solver's whole trajectory alone" in stdout
+    assert "alone: each solver's whole trajectory alone" in stdout
     for r in rows:
         assert r["steps"] == 60
         # hard limits hold on every step; the deadbeat hand task tracks the circle
@@ -83,7 +83,7 @@ def test_lockstep_only(tmp_path):
     if any("skipped" in r.get("note", "") for r in rows):  # example-robot-data missing
         pytest.skip(rows[0]["note"])
     assert {r["mode"] for r in rows} == {"lockstep"}
-    assert "Back to back" not in stdout
+    assert "one after the other (not run)" in stdout
 
 
 def test_rejects_too_few_steps(tmp_path):
@@ -138,18 +138,22 @@ def test_engine_agreement_table():
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "engine_agreement.py"), "--seeds", "3",
-         "--first", "232"],
+         "--first", "232", "--show", "silent"],
         capture_output=True, text=True, env=env, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = proc.stdout
-    assert "# engine_agreement: seeds 232-234" in out
+    assert "Seeds 232-234:" in out
     for cat in ("flagged", "scale", "silent", "other", "error"):
         assert f"| {cat} |" in out
-    count = int(next(ln for ln in out.splitlines() if ln.startswith("| silent |")).split("|")[2])
+    silent = next(ln for ln in out.splitlines() if ln.startswith("| silent |")).split("|")
+    count = int(silent[2])
     tail = out.split("silent:")[-1].splitlines() if count else []
     rows = [ln for ln in tail if ln.startswith("| ") and ln[2].isdigit()]
     assert len(rows) == count
+    assert [r.split("|")[1].strip() for r in rows] == (
+        silent[3].strip().split(", ") if count else []
+    )
     for row in rows:
         cells = [c.strip() for c in row.split("|")]
         assert cells[6] == cells[7] == "optimal" and float(cells[8]) > 1e-6, row
@@ -183,3 +187,91 @@ def test_hierarchy_bench_talos_unit_rows_is_daqp_s_problem():
             M = t.A if hasattr(t, "A") else t.C
             norms = np.linalg.norm(M, axis=1)  # (a zero row of the IK stack stays zero)
             assert np.all((np.abs(norms - 1.0) <= 1e-12) | (norms == 0.0)), norms
+
+
+README = """# Benchmarks
+
+Prose before.
+
+<!-- table: engine_agreement -->
+old numbers
+<!-- /table -->
+
+Prose between.
+
+<!-- table: other -->
+other old numbers
+<!-- /table -->
+
+Prose after.
+"""
+
+
+def _writer():
+    import importlib
+
+    sys.path.insert(0, str(ROOT))
+    try:
+        return importlib.import_module("benchmarks.__main__")
+    finally:
+        sys.path.remove(str(ROOT))
+
+
+def test_write_splices_the_table_between_its_markers(tmp_path):
+    """``python -m benchmarks NAME --quick --write``: the table's block becomes what its
+    command printed (machine line, command, table); the markers, the other table and the
+    prose stay as they were."""
+    from qpcoord.core import native
+
+    if not native.available():
+        pytest.skip("the native engine is not built")
+    readme = tmp_path / "README.md"
+    readme.write_text(README)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "benchmarks", "engine_agreement", "--quick", "--write",
+         "--readme", str(readme)],
+        cwd=ROOT, capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    text = readme.read_text()
+    before, rest = text.split("<!-- table: engine_agreement -->\n")
+    block, after = rest.split("<!-- /table -->\n", 1)
+    assert before == README.split("<!-- table: engine_agreement -->\n")[0]
+    assert after == README.split("old numbers\n<!-- /table -->\n", 1)[1]
+    lines = block.splitlines()
+    assert lines[0].startswith("Machine: ") and " cores" in lines[0] and "qpcoord" in lines[0]
+    assert lines[1] == "Command: `python benchmarks/engine_agreement.py --seeds 4`"
+    assert "| category | disagreements |" in block and "old numbers" not in block
+    assert block.strip() in proc.stdout  # the README holds what the command printed
+
+
+def test_failed_run_or_missing_marker_leaves_the_readme_unchanged(tmp_path):
+    """If one run fails, no table is written (not even the ones that succeeded); a table
+    without markers is refused before anything runs."""
+    writer = _writer()
+    good, bad = tmp_path / "good.py", tmp_path / "bad.py"
+    good.write_text("print('| a |\\n| --- |\\n| 1 |')\n")
+    bad.write_text("import sys\nprint('half a table')\nsys.exit('broken')\n")
+    readme = tmp_path / "README.md"
+    readme.write_text(README)
+    tables = {
+        "engine_agreement": writer.Table(str(good), (), ()),
+        "other": writer.Table(str(bad), (), ()),
+    }
+    orig = writer.TABLES
+    writer.TABLES = tables
+    try:
+        assert writer.main(["--write", "--readme", str(readme)]) == 1
+        assert readme.read_text() == README
+        assert not list(tmp_path.glob(".README.md*"))  # no temporary file left
+        writer.TABLES = {**tables, "missing": writer.Table(str(good), (), ())}
+        with pytest.raises(ValueError, match="table 'missing': 0 marker pairs"):
+            writer.main(["missing", "--write", "--readme", str(readme)])
+        assert readme.read_text() == README
+        assert writer.main(["engine_agreement", "--write", "--readme", str(readme)]) == 0
+    finally:
+        writer.TABLES = orig
+    text = readme.read_text()
+    assert "<!-- table: engine_agreement -->\n| a |\n| --- |\n| 1 |\n<!-- /table -->" in text
+    assert "other old numbers" in text and text.endswith("Prose after.\n")

@@ -11,8 +11,12 @@ largest bound and hard-row violation of each, and the largest ``|Δx|``.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the benchmarks' table writer
+from _table import markdown, preamble  # noqa: E402
 
 
 def read(path: str):
@@ -69,8 +73,10 @@ def main() -> int:
         gaps = np.maximum(gaps, np.abs(va - vb) / np.maximum(1.0, np.maximum(va, vb)))
         box_a, box_b = max(box_a, ba), max(box_b, bb)
         dx = max(dx, float(np.abs(a - b).max()))
-    print("level gaps (block 0 = hard):", " ".join(f"{g:.2g}" for g in gaps))
-    print(f"bound violation: first {box_a:.2g}, second {box_b:.2g}; max |dx| {dx:.3g}")
+    print(preamble() + "\n")
+    head = ("level (0 = hard)", "largest gap, relative to max(1, value)")
+    print(markdown(head, [(i, f"{g:.2g}") for i, g in enumerate(gaps)], "rr"))
+    print(f"\nBound violation: first {box_a:.2g}, second {box_b:.2g}; largest |Δx| {dx:.3g}.")
     return 0
 
 
