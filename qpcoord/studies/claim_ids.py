@@ -6,8 +6,11 @@ the ID given here. A row of a script is keyed by ``(script stem, row id)``.
 
 An entry also says whether the claim is *calibrated* -- an input taken from the thesis (the
 piezo's 300 Hz, the coarse stage's 120 Hz, the 2.25 W of the field current, the ±150 N of the
-flexure), shown in the report but never counted as reproduced -- and the *cause class* of a
-``"differs"`` verdict when the row itself does not give one (:data:`CAUSES`).
+flexure), shown in the report but never counted as reproduced -- or an *identity* -- a
+statement that holds by construction in qpcoord (an identity of the scheme, our own solver's
+residual or hard constraint), checked and shown but never counted as reproduced -- and the
+*cause class* of a ``"differs"`` verdict when the row itself does not give one
+(:data:`CAUSES`).
 
 Rows with status ``"own check"`` (``"not in thesis"``) are qpcoord's own checks; they need no
 entry and are counted by row, under the ID ``"own:<script>:<row>"``.
@@ -28,19 +31,28 @@ CAUSES = ("thesis error", "hardware data", "our model")
 
 @dataclass(frozen=True)
 class ThesisClaim:
-    """A thesis claim's ID, whether it is a calibrated input, and its default cause class."""
+    """A thesis claim's ID, whether it is a calibrated input or an identity (holds by
+    construction), and its default cause class."""
 
     id: str
     calibrated: bool = False
     cause: str = ""
+    identity: bool = False
 
     def __post_init__(self) -> None:
         if self.cause and self.cause not in CAUSES:
             raise ValueError(f"cause must be one of {CAUSES} or empty, got {self.cause!r}")
+        if self.calibrated and self.identity:
+            raise ValueError(f"{self.id}: a claim is calibrated or an identity, not both")
 
 
-def _c(cid: str, cause: str = "", calibrated: bool = False) -> ThesisClaim:
-    return ThesisClaim(cid, calibrated, cause)
+def _c(cid: str, cause: str = "", calibrated: bool = False, identity: bool = False) -> ThesisClaim:
+    return ThesisClaim(cid, calibrated, cause, identity)
+
+
+def _i(cid: str) -> ThesisClaim:
+    """An identity: holds by construction (its rows check it; a failure is a bug, differs)."""
+    return ThesisClaim(cid, identity=True)
 
 
 #: ``(script stem, row id) → ThesisClaim``. The first row listed for an ID is its home (the
@@ -60,7 +72,7 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
         "Sec4.3.3-pinv-basis-not-involutive"
     ),
     ("ch4_leaves", "lemma4.2-leaf-changes"): _c("Lem4.2-leaf-changes"),
-    ("ch4_leaves", "ex4.4-stays-on-leaf"): _c("Ex4.4-stays-on-leaf"),
+    ("ch4_leaves", "ex4.4-stays-on-leaf"): _i("Ex4.4-stays-on-leaf"),
     ("ch4_leaves", "lemma4.2-each-leaf-periodic"): _c("Lem4.2-each-leaf-periodic"),
     ("ch4_long_runs", "rem4.4-fig4.7-5r-closes"): _c("Rem4.4-Fig4.7-5r-closes", "our model"),
     ("ch4_long_runs", "conj4.1-delta1"): _c("Conj4.1-delta1", "thesis error"),
@@ -76,21 +88,21 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch5_limit_cycle", "thm5.1-alpha10"): _c("Thm5.1-limit-cycle"),
     ("ch5_task_manifold", "fig5.3-limit-cycle"): _c("Thm5.1-limit-cycle"),
     ("ch5_limit_cycle", "eq5.13-band"): _c("Eq5.13-band", "thesis error"),
-    ("ch5_fixed_point", "prop5.1-lyapunov"): _c("Prop5.1-lyapunov"),
+    ("ch5_fixed_point", "prop5.1-lyapunov"): _i("Prop5.1-lyapunov"),
     ("ch5_fixed_point", "prop5.1-fixed-point"): _c("Prop5.1-fixed-point"),
     ("ch5_5r_potentials", "fig5.4-two-potentials"): _c("Fig5.4-two-potentials", "our model"),
     ("ch5_5r_potentials", "conj5.1-one-potential"): _c("Conj5.1-one-potential", "thesis error"),
-    ("ch5_hierarchy", "def5.4-level1-kept"): _c("Def5.4-decoupling"),
-    ("ch5_hierarchy", "def5.4-level2-kept"): _c("Def5.4-decoupling"),
-    ("core_priorities", "def5.4-strict-keeps-main"): _c("Def5.4-decoupling"),
-    ("panda_circle_ik", "def5.4-ee-level-kept"): _c("Def5.4-decoupling"),
-    ("panda_pose", "def5.4-table-kept"): _c("Def5.4-decoupling"),
-    ("solo12_body", "def5.4-feet-kept"): _c("Def5.4-decoupling"),
+    ("ch5_hierarchy", "def5.4-level1-kept"): _i("Def5.4-decoupling"),
+    ("ch5_hierarchy", "def5.4-level2-kept"): _i("Def5.4-decoupling"),
+    ("core_priorities", "def5.4-strict-keeps-main"): _i("Def5.4-decoupling"),
+    ("panda_circle_ik", "def5.4-ee-level-kept"): _i("Def5.4-decoupling"),
+    ("panda_pose", "def5.4-table-kept"): _i("Def5.4-decoupling"),
+    ("solo12_body", "def5.4-feet-kept"): _i("Def5.4-decoupling"),
     ("ch5_hierarchy", "sec5.3.5-limits-level"): _c("Sec5.3.5-limits-level"),
     ("ch5_hessian", "sec5.4-limit-cycle"): _c("Sec5.4-limit-cycle", "our model"),
     ("ch5_hessian", "sec5.4-no-singularity"): _c("Sec5.4-no-singularity", "our model"),
     ("ch5_compliant", "fig5.9-periodic"): _c("Fig5.9-periodic", "our model"),
-    ("ch5_compliant", "eq5.20-plane"): _c("Eq5.20-plane"),
+    ("ch5_compliant", "eq5.20-plane"): _i("Eq5.20-plane"),
     ("ch5_compliant", "fig5.8a-cycle-per-qbar"): _c("Fig5.8a-cycle-per-qbar"),
     ("ch5_compliant", "fig5.8b-pinv-drifts"): _c("Fig5.8b-pinv-drifts"),
     # chapter 6
@@ -126,10 +138,10 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch6_two_ddl", "fig6.14b-step-faster"): _c("Fig6.14b-step-faster"),
     ("ch6_two_ddl", "fig6.14b-predictor-overshoot"): _c("Fig6.14b-predictor-overshoot"),
     # appendices
-    ("appA_shoulder", "A.19-generalised-forces"): _c("EqA.19-generalised-forces"),
-    ("appA_shoulder", "A.24-force-bounds"): _c("EqA.24-force-bounds"),
+    ("appA_shoulder", "A.19-generalised-forces"): _i("EqA.19-generalised-forces"),
+    ("appA_shoulder", "A.24-force-bounds"): _i("EqA.24-force-bounds"),
     ("appA_shoulder", "A.22-pseudo-inverse-pushes"): _c("SecA.3.2-pinv-pushes"),
-    ("appA_shoulder", "A.28-stress-optimal"): _c("EqA.28-stress-optimal"),
+    ("appA_shoulder", "A.28-stress-optimal"): _i("EqA.28-stress-optimal"),
     ("appA_shoulder", "A.3-forward-tracking"): _c("FigA.3-forward-tracking", "our model"),
     ("ch6_flexure", "appB-flexure-load"): _c("AppB-flexure-150N", calibrated=True),
     ("ch6_flexure", "figB.2-shape"): _c("FigB.2-shape"),

@@ -26,10 +26,12 @@ __all__ = [
 #: What a claim row can say about the thesis: its number or behaviour was reproduced; we
 #: measured something different (``note`` says why, ``cause`` classes it, :data:`CAUSES`); it
 #: cannot be decided -- the run was too short (e.g. ``--quick``) or the thesis gives too little
-#: to compare with (``note`` says what would decide it); the number is an input taken from the
-#: thesis (``calibrated``: shown, never counted as reproduced); or the row is our own check
-#: with no thesis number (``own check``; the older spelling ``"not in thesis"`` is accepted).
-CLAIM_STATUSES = ("reproduced", "differs", "inconclusive", "calibrated", "own check")
+#: to compare with (``note`` says what would decide it); the statement holds by construction
+#: (``identity``: an identity, or our own solver's residual or constraint -- checked, shown,
+#: never counted as reproduced); the number is an input taken from the thesis
+#: (``calibrated``: shown, never counted as reproduced); or the row is our own check with no
+#: thesis number (``own check``; the older spelling ``"not in thesis"`` is accepted).
+CLAIM_STATUSES = ("reproduced", "differs", "inconclusive", "identity", "calibrated", "own check")
 
 _ALIASES = {"not in thesis": "own check"}
 
@@ -63,8 +65,8 @@ def claim(
         One of :data:`CLAIM_STATUSES` (``"not in thesis"`` is read as ``"own check"``).
     note : str, optional
         Why a ``"differs"`` row differs, what an ``"inconclusive"`` row would need, where a
-        ``"calibrated"`` input comes from, or how the number was measured. Required for those
-        three statuses.
+        ``"calibrated"`` input comes from, why an ``"identity"`` holds by construction, or how
+        the number was measured. Required for those four statuses.
     cause : str, optional
         For a ``"differs"`` row: one of :data:`CAUSES` (else the register's default applies).
 
@@ -77,7 +79,8 @@ def claim(
     ------
     ValueError
         If ``status`` is not one of :data:`CLAIM_STATUSES`, a text field is empty, a
-        ``"differs"``, ``"inconclusive"`` or ``"calibrated"`` row has no ``note``, or ``cause``
+        ``"differs"``, ``"inconclusive"``, ``"identity"`` or ``"calibrated"`` row has no
+        ``note``, or ``cause``
         is not one of :data:`CAUSES` (or is given for a row that does not differ).
     """
     fields = {"id": id, "claim": claim, "thesis": thesis, "measured": measured}
@@ -87,7 +90,7 @@ def claim(
     status = _ALIASES.get(status, status)
     if status not in CLAIM_STATUSES:
         raise ValueError(f"claim status must be one of {CLAIM_STATUSES}, got {status!r}")
-    if status in ("differs", "inconclusive", "calibrated") and not str(note).strip():
+    if status in ("differs", "inconclusive", "identity", "calibrated") and not str(note).strip():
         raise ValueError(f"claim {id!r} has status {status!r} but no note saying why")
     if cause and cause not in CAUSES:
         raise ValueError(f"claim cause must be one of {CAUSES} or empty, got {cause!r}")
@@ -110,12 +113,13 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
         ``ID → {"id", "chapter", "status", "cause", "rows"}``, where ``rows`` lists
         ``{"script", "id", "status"}`` of the rows checking it. The status of a claim: an
         own check's own; ``"calibrated"`` for an input taken from the thesis; otherwise
-        ``"differs"`` if any row differs; else ``"reproduced"`` if every row of the claim's
-        *home* script (the script of its first registered row, where the claim is judged in
-        full, e.g. with a sensitivity sweep) reproduced it -- or, the home script not run,
-        if any row did; else ``"inconclusive"``. The chapter is the home row's, else the
-        first row's. ``cause`` (for ``"differs"``) is the first differing row's, else the
-        register's, else ``"unclassified"``.
+        ``"differs"`` if any row differs; else ``"identity"`` for a claim that holds by
+        construction (the register's ``identity``, or a row saying so); else ``"reproduced"``
+        if every row of the claim's *home* script (the script of its first registered row,
+        where the claim is judged in full, e.g. with a sensitivity sweep) reproduced it --
+        or, the home script not run, if any row did; else ``"inconclusive"``. The chapter is
+        the home row's, else the first row's. ``cause`` (for ``"differs"``) is the first
+        differing row's, else the register's, else ``"unclassified"``.
     """
     home = {}
     for (script, _), entry in REGISTER.items():
@@ -140,6 +144,8 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
             status = "calibrated"
         elif "differs" in statuses:
             status = "differs"
+        elif (entry is not None and entry.identity) or "identity" in statuses:
+            status = "identity"
         elif all(s == "reproduced" for s in at_home) if at_home else "reproduced" in statuses:
             status = "reproduced"
         elif all(s in CLAIM_STATUSES for s in statuses):

@@ -11,6 +11,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 __all__ = [
+    "across_assumptions",
     "coordination_spec",
     "fine_never_saturates",
     "needs_both_stages",
@@ -111,3 +112,35 @@ def fine_never_saturates(runs: Sequence[Mapping], frozen: Sequence[Mapping]) -> 
             f"reference(s) {alone}: they do not need coordination"
         )
     return "reproduced", "no saturation on any reference; the frozen-coarse control saturates"
+
+
+def across_assumptions(values: Mapping[str, float], target: float, rel: float) -> tuple[str, str]:
+    """A thesis number judged over a range of assumptions it depends on.
+
+    Parameters
+    ----------
+    values : mapping
+        The measured value under each plausible assumption (e.g. the test signal's vibration
+        lines absent, as shipped, doubled).
+    target, rel : float
+        The thesis's number and the relative tolerance (:func:`within`).
+
+    Returns
+    -------
+    (status, reason)
+        ``"reproduced"`` if every value is within the tolerance, ``"differs"`` if none is,
+        else ``"inconclusive"``: the number depends on the assumption the thesis does not fix.
+    """
+    if not values:
+        raise ValueError(f"values must name at least one assumption, got {values!r}")
+    inside = {k: within(v, target, rel) for k, v in values.items()}
+    if all(inside.values()):
+        return "reproduced", f"within ±{100 * rel:g} % under every assumption"
+    if not any(inside.values()):
+        return "differs", f"outside ±{100 * rel:g} % under every assumption"
+    yes = ", ".join(k for k, v in inside.items() if v)
+    no = ", ".join(k for k, v in inside.items() if not v)
+    return "inconclusive", (
+        f"inside ±{100 * rel:g} % for {yes}, outside for {no}: the value depends on an "
+        "assumption the thesis does not fix"
+    )

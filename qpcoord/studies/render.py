@@ -41,8 +41,10 @@ _STATUS_TEXT = (
     "Statuses: reproduced (the thesis number or behaviour is met; the note gives the "
     "criterion); differs (we measured something else; the note says why, and the cause class "
     "says whose: thesis error, hardware data, our model); inconclusive (this run cannot "
-    "decide: see the note); calibrated (an input taken from the thesis: shown, not counted as "
-    "reproduced); own check (no thesis number). docs/reproduce.md explains the classes."
+    "decide: see the note); identity (holds by construction -- an identity, our own "
+    "solver's residual or constraint: checked, not counted as reproduced); calibrated (an "
+    "input taken from the thesis: shown, not counted as reproduced); own check (no thesis "
+    "number). docs/reproduce.md explains the classes."
 )
 
 
@@ -140,7 +142,7 @@ def summary_rows(report) -> list[tuple[str, dict[str, int]]]:
 
 def _row_cells(r, row: dict) -> list[str]:
     """A script's claim row for the tables: its thesis-claim ID first, the cause with
-    ``differs``, and ``calibrated`` for an input the register marks so."""
+    ``differs``, and ``calibrated`` / ``identity`` for a claim the register marks so."""
     from .claim_ids import claim_id
 
     entry = lookup(r.name, row["id"])
@@ -148,6 +150,8 @@ def _row_cells(r, row: dict) -> list[str]:
     status = row["status"]
     if entry is not None and entry.calibrated and status != "calibrated":
         status = f"calibrated (row: {status})"
+    elif entry is not None and entry.identity and status not in ("identity", "differs"):
+        status = f"identity (row: {status})"
     elif status == "differs":
         cause = row.get("cause") or (entry.cause if entry else "") or "unclassified"
         status = f"differs ({cause})"
@@ -431,7 +435,7 @@ table{border-collapse:collapse;margin:.6em 0;font-size:.9em}
 th,td{border:1px solid #ccc;padding:.25em .5em;vertical-align:top;text-align:left}
 th{background:#f0f0f0}td.num{text-align:right}
 .reproduced{background:#e3f5e1}.differs{background:#fde2e1}.inconclusive{background:#fff5d6}
-.own-check{background:#e8eef9}.calibrated{background:#eeeeee}.ok{color:#1a7f37;font-weight:600}
+.own-check{background:#e8eef9}.calibrated{background:#eeeeee}.identity{background:#eeeeee}.ok{color:#1a7f37;font-weight:600}
 .failed,.timed-out{color:#c62828;font-weight:600}
 img{max-width:100%;border:1px solid #ddd;margin:.4em 0}figure{margin:.8em 0}
 figcaption{font-size:.85em;color:#555}.muted{color:#666}

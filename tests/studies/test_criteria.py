@@ -67,3 +67,15 @@ def test_a_frozen_coarse_stage_fails_chapter_6_on_a_reference_that_needs_both():
     assert fine_never_saturates([coordinated], [frozen])[0] == "reproduced"
     assert coordination_spec([frozen], [frozen])[0] == "differs"
     assert fine_never_saturates([frozen], [frozen])[0] == "differs"
+
+
+def test_across_assumptions_fails_and_refuses():
+    from qpcoord.studies.criteria import across_assumptions
+
+    assert across_assumptions({"none": 20.0, "doubled": 24.0}, 22.0, 0.3)[0] == "reproduced"
+    assert across_assumptions({"none": 40.0, "doubled": 50.0}, 22.0, 0.3)[0] == "differs"
+    # the mean |e| of ch6_tracking: 13.4 / 17.7 / 26.8 nm against 19.6 nm ± 30 %
+    status, why = across_assumptions({"none": 13.4, "as shipped": 17.7, "doubled": 26.8}, 19.6, 0.3)
+    assert status == "inconclusive" and "outside for none, doubled" in why
+    with pytest.raises(ValueError, match="values"):
+        across_assumptions({}, 1.0, 0.1)

@@ -27,6 +27,10 @@ def test_verdict_file_matches_the_register():
             assert v["quick"] == v["full"] == "calibrated", entry.id
         else:
             assert "calibrated" not in (v["quick"], v["full"]), entry.id
+        if entry.identity:  # holds by construction: never "reproduced"
+            assert v["quick"] == v["full"] == "identity", entry.id
+        else:
+            assert "identity" not in (v["quick"], v["full"]), entry.id
 
 
 def test_a_changed_verdict_is_reported(tmp_path):
@@ -65,3 +69,19 @@ def test_full_verdicts(tmp_path):
     assert report.ok, [(r.name, r.error) for r in report.failed]
     problems = verdict_mismatches(report.claims, load_verdicts(VERDICTS), "full")
     assert not problems, "\n".join(problems)
+
+
+def test_an_identity_is_never_counted_as_reproduced():
+    from qpcoord.studies.claims import count_claims
+
+    held = claim("def5.4-level1-kept", "c", "Def 5.4", "1e-15", "identity", "by construction")
+    old = claim("def5.4-strict-keeps-main", "c", "Def 5.4", "1e-15", "reproduced")
+    broken = claim("def5.4-level2-kept", "c", "Def 5.4", "0.1", "differs", "a solver bug")
+    claims = thesis_claims([("5", "ch5_hierarchy", held), ("core", "core_priorities", old)])
+    assert claims["Def5.4-decoupling"]["status"] == "identity"
+    assert count_claims(claims.values())["reproduced"] == 0
+    # an identity that fails is a bug: it differs
+    claims = thesis_claims([("5", "ch5_hierarchy", held), ("5", "ch5_hierarchy", broken)])
+    assert claims["Def5.4-decoupling"]["status"] == "differs"
+    with pytest.raises(ValueError, match="no note"):
+        claim("x", "c", "t", "m", "identity")
