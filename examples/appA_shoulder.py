@@ -10,8 +10,8 @@ thesis's two-step method (pseudo-inverse A.22 + null-space QP A.28). Then a weig
 hand at 90° abduction is increased until Q is beyond what the muscles can produce: the top
 level becomes best effort and the result says so (``feasible`` false, residual in N·m).
 
-Muscle lines: each muscle acts along its DAS3 elements (``--lines elements``, default;
-issue 18 finding 8) or along one lumped line (``--lines lumped``, the model before). The
+Muscle lines: each muscle acts along its DAS3 elements (``--lines elements``, default) or
+along one lumped line (``--lines lumped``). The
 script also measures how much moment arm the lumped lines lose against the elements
 (``lumping_loss``, rule in its docstring; nine of eleven muscles lose > 20 % somewhere).
 
@@ -230,7 +230,7 @@ def moment_arm_table(model) -> dict:
     }
 
 
-#: Lumping-loss measurement (issue 18, finding 8), rule fixed before the measurement: the
+#: Lumping-loss measurement, rule fixed before the measurement: the
 #: postures (a 5 × 4 × 3 grid of the model range, degrees), the smallest element moment arm
 #: counted (rows below it are not compared) and the loss beyond which a lumped line is
 #: replaced by its elements.

@@ -20,7 +20,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["CAUSES", "REGISTER", "ThesisClaim", "claim_id", "lookup"]
+__all__ = [
+    "CAUSES",
+    "CONTRADICTIONS",
+    "REGISTER",
+    "Contradiction",
+    "ThesisClaim",
+    "claim_id",
+    "lookup",
+]
 
 #: Why a ``"differs"`` verdict differs: the thesis is wrong (a printed formula, a conjecture a
 #: counterexample refutes); the thesis's number comes from hardware we simulate (noise sources,
@@ -107,16 +115,16 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch5_compliant", "fig5.8b-pinv-drifts"): _c("Fig5.8b-pinv-drifts"),
     # chapter 6
     ("ch6_tracking", "spec-rmse-70nm"): _c("Spec6.1.2-rmse-70nm", "our model"),
-    ("ch6_tracking", "table6.1-rmse"): _c("T6.1-direct-coil-rmse", "hardware data"),
-    ("ch6_compare", "table6.1-coordinator"): _c("T6.1-direct-coil-rmse", "hardware data"),
-    ("sweep_ddl_seeds", "table6.1-rmse-nominal"): _c("T6.1-direct-coil-rmse", "hardware data"),
-    ("ch6_tracking", "table6.1-max"): _c("T6.1-direct-coil-max", "hardware data"),
-    ("ch6_tracking", "table6.1-mean"): _c("T6.1-direct-coil-mean", "hardware data"),
+    ("ch6_tracking", "table6.1-rmse"): _c("T6.1-direct-coil-rmse", "our model"),
+    ("ch6_compare", "table6.1-coordinator"): _c("T6.1-direct-coil-rmse", "our model"),
+    ("sweep_ddl_seeds", "table6.1-rmse-nominal"): _c("T6.1-direct-coil-rmse", "our model"),
+    ("ch6_tracking", "table6.1-max"): _c("T6.1-direct-coil-max", "our model"),
+    ("ch6_tracking", "table6.1-mean"): _c("T6.1-direct-coil-mean", "our model"),
     ("ch6_tracking", "table6.1-power"): _c("T6.1-direct-coil-power-2.25W", calibrated=True),
     ("ch6_tracking", "fig6.7-coarse-resonance"): _c("Fig6.7-coarse-120Hz", calibrated=True),
     ("ch6_tracking", "fig6.6-piezo-bandwidth"): _c("Fig6.6-piezo-300Hz", calibrated=True),
     ("ch6_tracking", "fig6.16-fine-never-saturates"): _c("Fig6.16-fine-never-saturates"),
-    ("ch6_tracking", "fig6.17-best-run"): _c("Fig6.17-best-run", "hardware data"),
+    ("ch6_tracking", "fig6.17-best-run"): _c("Fig6.17-best-run", "our model"),
     ("ch6_compare", "table6.1-FlatnessBased"): _c("T6.1-flatness-rmse", "our model"),
     ("ch6_compare", "table6.1-PILinearised"): _c("T6.1-pi-linearised-rmse", "our model"),
     ("ch6_compare", "table6.1-PQCurrent"): _c("T6.1-pq-rmse", "our model"),
@@ -169,3 +177,42 @@ def claim_id(script: str, row_id: str, status: str) -> str:
     if status in ("own check", "not in thesis"):
         return f"own:{script}:{row_id}"
     return f"unregistered:{script}:{row_id}"
+
+
+@dataclass(frozen=True)
+class Contradiction:
+    """Two or more places of the thesis that state incompatible things about one quantity.
+
+    ``says`` pairs each place (section, table, figure) with what it states; ``claims`` are the
+    thesis-claim IDs whose verdict it bears on (their notes repeat it).
+    """
+
+    id: str
+    about: str
+    says: tuple[tuple[str, str], ...]
+    claims: tuple[str, ...]
+
+
+#: The thesis's internal contradictions, listed as such in the report (not counted as
+#: claims: no run can decide which place is right).
+CONTRADICTIONS: tuple[Contradiction, ...] = (
+    Contradiction(
+        "T6.1-vs-Sec6.4.2-Fig6.17",
+        "Kolmogorov tracking error of the direct-coil coordinator (the same controller, the "
+        "same kind of reference, on the same prototype)",
+        (
+            ("Table 6.1, Direct Coil", "25 nm RMS, 308 nm max, 19.6 nm mean"),
+            (
+                "§6.4.2, 'Final decoupled parallel SISO control scheme'",
+                "'the rms residual tracking error is as low as the measurement noise "
+                "(E < 8 nm rms)'",
+            ),
+            (
+                "Fig 6.17 caption",
+                "'a residual rms error less than 8 nm rms and a maximum instantaneous error "
+                "of 30 nm' (content up to 200 Hz)",
+            ),
+        ),
+        ("T6.1-direct-coil-rmse", "T6.1-direct-coil-max", "Fig6.17-best-run"),
+    ),
+)

@@ -16,7 +16,7 @@ import re
 from pathlib import Path
 
 from .chapters import CHAPTERS
-from .claim_ids import lookup
+from .claim_ids import CONTRADICTIONS, lookup
 from .claims import CAUSES, CLAIM_STATUSES, count_claims
 from .timing import step_timing
 
@@ -167,6 +167,23 @@ def _id_rows(report) -> list[list[str]]:
         rows = "; ".join(f"{x['script']}: {x['id']} → {x['status']}" for x in c["rows"])
         out.append([c["id"], c["status"], c["cause"], rows])
     return out
+
+
+_CONTRA_HEAD = ("contradiction", "about", "the thesis says", "claims it bears on")
+
+_CONTRA_TEXT = (
+    "Places where the thesis states incompatible things about one quantity. No run can "
+    "decide which place is right; the claims they bear on say so in their notes."
+)
+
+
+def _contradiction_rows(report) -> list[list[str]]:
+    """The register's contradictions that bear on a claim of this run."""
+    return [
+        [c.id, c.about, "; ".join(f"{w}: {t}" for w, t in c.says), ", ".join(c.claims)]
+        for c in CONTRADICTIONS
+        if any(cid in report.claims for cid in c.claims)
+    ]
 
 
 def _header_items(report) -> list[tuple[str, str]]:
@@ -345,6 +362,10 @@ def render_markdown(report) -> str:
     L += _md_table(["chapter", *SUMMARY_COLUMNS], body)
     L += ["", "## Thesis claims by ID", ""]
     L += _md_table(_ID_HEAD, _id_rows(report))
+    contra = _contradiction_rows(report)
+    if contra:
+        L += ["", "## Thesis contradictions", "", _CONTRA_TEXT, ""]
+        L += _md_table(_CONTRA_HEAD, contra)
     if report.unmapped:
         L += [
             "",
@@ -505,6 +526,10 @@ def render_html(report) -> str:
     H += ['<h2 id="claim-ids">Thesis claims by ID</h2>']
     ids = _id_rows(report)
     H += _h_table(_ID_HEAD, ids, row_classes=[_css_class(x[1]) for x in ids])
+    contra = _contradiction_rows(report)
+    if contra:
+        H += ['<h2 id="contradictions">Thesis contradictions</h2>', f"<p>{_e(_CONTRA_TEXT)}</p>"]
+        H += _h_table(_CONTRA_HEAD, contra)
     if report.unmapped:
         H += [
             "<p>Not run (no chapter for their name in <code>SCRIPT_CHAPTERS</code>): "
