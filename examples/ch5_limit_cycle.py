@@ -9,7 +9,9 @@ periods, closed loop (gain 10/s) and open loop (gain 0, the thesis's map); α = 
 ``T/800`` and α = 10 also at ``T/2000`` (6 periods). For each run it measures the closure
 error per period ``‖q(kT) − q((k−1)T)‖`` and the period from which it stays below 1e-6 rad,
 and compares the band ``max|q₁ − π/2|`` of the final cycle with Eq. 5.13's bound
-``∛(λ/(2α²‖N‖²))`` (``λ = max‖J⁺Ẏ_ref‖`` along the run, ``‖N‖ = 1``). ``J⁺`` alone
+``∛(λ/(2α²‖N‖²))`` with the thesis's λ (Eq 5.10: ``‖J⁺‖‖dx‖ ≤ λ`` on κ, taken as the largest
+``‖J⁺(q)‖‖Ẏ‖`` over the task manifold inside the measured band, :func:`lambda_over_kappa`;
+``‖N‖ = 1``). ``J⁺`` alone
 (``qc.schemes.PseudoInverse``) is run for contrast (Remark 5.2).
 
 About Eq. 5.13: with ``n₁`` the q₁-component of the unit self-motion direction, the
@@ -40,8 +42,10 @@ J⁺     10    T/200   never: 3.9e-7 in period 6, then 3.92 rad in period 7 (and
   7.8e-16, 2.5e-16 rad; open loop: 4.0e-9 and 6.4e-9 rad, the floor set by the end
   effector's drift); ``J⁺`` alone never closes (Remark 5.2): it creeps along the fibre,
   nearly stops (3.9e-7 rad in period 6), then jumps 3.92 rad.
-- Eq. 5.13 holds for α = 1 but not for α = 3 (0.441 > 0.422) nor α = 10 (0.497 > 0.187):
-  at the extremum of the band ``n₁² = 0.39`` and ``0.047``, not ``‖N‖² = 1``, and the
+- Eq. 5.13 with the thesis's λ holds for α = 0.3, 1 and 3 (α = 3: 0.441 ≤ 0.524, λ = 2.58)
+  but not for α = 10 (0.497 > 0.241, λ = 2.79); with the smaller λ = max ‖J⁺Ẏ‖ along the
+  run α = 3 would fail too (0.441 > 0.422), a bound tighter than the thesis's. At the
+  extremum of the band ``n₁² = 0.39`` and ``0.047``, not ``‖N‖² = 1``, and the
   exact relation there, ``∛(|(J⁺Ẏ)₁|/(2α²n₁²))``, gives 0.8653, 0.4404, 0.5033 rad against
   the measured 0.8651, 0.4414, 0.4970 (sampling). The band even grows from α = 3 to 10.
 - α = 0.3 is below Eq 5.13 only because the band is set by the geometry: its extremum is
@@ -54,9 +58,10 @@ J⁺     10    T/200   never: 3.9e-7 in period 6, then 3.92 rad in period 7 (and
 
 Claims (``summary["claims"]``, computed from the run): Thm 5.1 / Fig 5.2 per α (every
 run of that α that did not blow up closes for ≥ 3 periods; mixed outcomes are
-inconclusive), Eq 5.13's band on the closed runs (differs: fails at α = 3 and 10), Remark
-5.2 (J⁺ alone never closes in ≥ 25 periods). ``--quick`` (α = 3, 10 periods at T/200) decides
-Thm 5.1 for α = 3 and Eq 5.13 on that run; Remark 5.2 needs the full run.
+inconclusive), Eq 5.13's band on the closed runs (differs: fails at α = 10), Remark 5.2 (J⁺
+alone never closes in ≥ 25 periods). ``--quick`` runs α = 3 (10 periods at T/200) and the full
+run's α = 10 case (6 periods at T/2000): Eq 5.13 differs there as in the full run; Thm 5.1
+(for any α) and Remark 5.2 are ``inconclusive (quick)``.
 
 Run: ``python examples/ch5_limit_cycle.py [--quick] [--out DIR]``.
 """

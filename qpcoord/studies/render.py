@@ -455,7 +455,7 @@ pre{background:#f6f6f6;padding:.6em;overflow-x:auto;border:1px solid #ddd}
 table{border-collapse:collapse;margin:.6em 0;font-size:.9em}
 th,td{border:1px solid #ccc;padding:.25em .5em;vertical-align:top;text-align:left}
 th{background:#f0f0f0}td.num{text-align:right}
-.reproduced{background:#e3f5e1}.differs{background:#fde2e1}.inconclusive{background:#fff5d6}
+.reproduced{background:#e3f5e1}.differs{background:#fde2e1}.inconclusive{background:#fff5d6}.inconclusive-quick{background:#fff5d6}
 .own-check{background:#e8eef9}.calibrated{background:#eeeeee}.identity{background:#eeeeee}.ok{color:#1a7f37;font-weight:600}
 .failed,.timed-out{color:#c62828;font-weight:600}
 img{max-width:100%;border:1px solid #ddd;margin:.4em 0}figure{margin:.8em 0}
