@@ -190,6 +190,7 @@ def compare_claims(rows: list[dict], full: bool, size: str) -> list[dict]:
                 "Criterion: RMSE within ±30 % of the thesis and the carriage carrying the "
                 f"low-frequency reference (travel ≥ {MIN_TRAVEL:g}; max, mean and power shown, "
                 "not judged here)." + (why if st == "differs" and not extra else "") + extra,
+                cause="our model" if st == "differs" else "",
             )
         )
     siso = ("coordinator", "PILinearised", "FlatnessBased")
