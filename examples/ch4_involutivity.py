@@ -18,7 +18,7 @@ Measured (full run, 25 × 25 grids, 20 points of one period of the 5R path):
   The printed fields ``(1 + q₃², q₃, q₁q₃)``, … are not ``J⁺eᵢ``; they give ``+(1 + q₁²)²``,
   the printed ``−(1 + q₁²)²`` up to the sign convention (our bracket is
   ``[f, g] = (∂g/∂q)f − (∂f/∂q)g``, the thesis uses the opposite): the printed formula is a
-  thesis error (issue 18, finding 7).
+  thesis error.
 - Ex. 4.3 (3R): ``|det|`` between 0.052 and 28.8 on the 550 grid points whose link
   angles are distinct; it vanishes (≤ 3.4e-15) exactly where two links are parallel
   (``qᵢ = qⱼ``, 66 points): a set of measure zero, not involutivity.

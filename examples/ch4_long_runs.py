@@ -83,8 +83,8 @@ periods and depends sensitively on the step (dt and dt/2 apart after 35 periods)
 closing "over a very high multiple" of Fig. 4.7 is not reproduced with this 5R model (whose
 axes are qpcoord's choice, not the thesis's).
 
-Conjecture 4.1 is judged on many starts, not one (issue 18, finding 4: a random 4R start,
-q0 = (0.312, −2.968, 1.593, 0.240), closes on a 36·T cycle): 10 seeded random starts per δ
+Conjecture 4.1 is judged on many starts, not one (one start decides nothing: a random 4R
+start, q0 = (0.312, −2.968, 1.593, 0.240), closes on a 36·T cycle): 10 seeded random starts per δ
 (uniform in (−π, π]ⁿ, seed n, moved onto the circle's start point by the start IK), 300
 periods at T/200 and again at T/400, integrated for all starts at once
 (:func:`batch_pinv_sections`, the same scheme and RK4 as ``qc.simulate``, agreeing with it to
@@ -125,7 +125,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcoord as qc
-from qpcoord.studies.claims import claim
+from qpcoord.studies.claims import QUICK, claim
 from qpcoord.studies.figures import closure_plot, joint_plot
 from qpcoord.studies.files import TextLog, write_json
 
@@ -285,7 +285,7 @@ def cycle_outcome(r: dict) -> tuple[str, str]:
     return ("none" if r["periods"] >= DECIDE else "short", text)
 
 
-CONJ_STARTS = 10  # seeded random starts per δ (issue 18, finding 4)
+CONJ_STARTS = 10  # seeded random starts per δ
 CONJ_MAX_MULTIPLE = 60  # cycles up to 60·T are looked for (a 4R start closes on 36·T)
 CONJ_FLOOR = 1e-9  # rad: a gap this small has reached the round-off floor
 CONJ_DECADES = 2.0  # decades of geometric decay over the last half of the run
@@ -339,7 +339,7 @@ def geometric_convergence(sections: np.ndarray, max_multiple: int) -> dict:
     ``m·T`` cycle if ``g_m`` ends at the round-off floor (≤ CONJ_FLOOR), or if a least-squares
     line through ``log10 g_m`` over the last half of the run falls by ≥ CONJ_DECADES decades
     and ``g_m`` ends ≤ CONJ_BELOW (geometric decay under way). The smallest such ``m`` is
-    the period. Criteria set before the runs (issue 18, finding 4).
+    the period. Criteria set before the runs.
     """
     K = len(sections) - 1
     best = None
@@ -420,7 +420,7 @@ def conjecture_claims(study: list[dict]) -> list[dict]:
         decided = "T/400" in fr and row["periods"] >= DECIDE
         vals = list(fr.values())
         if not decided:
-            st = "inconclusive"
+            st = QUICK
         elif want:
             st = (
                 "reproduced"
@@ -479,7 +479,7 @@ def conjecture_claims(study: list[dict]) -> list[dict]:
     return out
 
 
-#: Geometry search for the thesis's 5R (issue 18, finding 5): seeded starts and the threshold
+#: Geometry search for the thesis's 5R: seeded starts and the threshold
 #: on σ_min([J; ω₄; ω₅]) along the Thm 4.2 motion (qpcoord's arm keeps 0.18), fixed before
 #: the first search run.
 GEOMETRY_STARTS = 100
@@ -512,7 +512,7 @@ def geometry_search(starts: int) -> dict:
     }
 
 
-#: Long J⁺ runs on the found arms (issue 18, finding 5): periods, steps per period (the two
+#: Long J⁺ runs on the found arms: periods, steps per period (the two
 #: steps of the step check) and the tracking error beyond which a run has lost the path.
 FOUND_PERIODS = 300
 FOUND_STEPS = (200, 400)
@@ -521,7 +521,7 @@ FOUND_LOST_M = 1e-2
 
 def found_arm_outcome(per: dict[int, dict], max_err_m: float) -> str:
     """One found arm's outcome from :func:`geometric_convergence` at each step of
-    :data:`FOUND_STEPS` (rule fixed before the first run, issue 18 finding 5):
+    :data:`FOUND_STEPS` (rule fixed before the first run):
 
     ``"path lost"`` if the tracking error exceeds :data:`FOUND_LOST_M` at either step;
     ``"closes mT"`` (m ≥ 2, the thesis's behaviour) if the sections converge to a cycle at
@@ -582,7 +582,7 @@ def found_arms_study(geometry: dict, periods: int = FOUND_PERIODS) -> dict:
 
 def found_arms_status(study: dict | None) -> tuple[str, str]:
     """``(status, text)`` of Fig 4.7 / Remark 4.4 on the found arms. Rule fixed before the
-    first run (issue 18 finding 5): reproduced if every arm whose run keeps the path
+    first run: reproduced if every arm whose run keeps the path
     "closes mT" (m ≥ 2); differs if none of them closes with m ≥ 2 at either step (all
     "no cycle" or "closes 1T"); inconclusive otherwise (the outcome depends on the arm or
     on the step), or with fewer than two arms that keep the path, runs shorter than
@@ -645,13 +645,13 @@ def claims(rows: list[dict], geometry: dict | None = None, found: dict | None = 
         f"{CONJ_MAX_MULTIPLE}·T cannot be seen in this run"
     )
     if geometry is None:
-        st, measured = "inconclusive", "qpcoord's arm: " + ours
+        st, measured = QUICK, "qpcoord's arm: " + ours
         note = rule + "; no geometry search in this run (--quick): the full run decides"
     elif geometry["passing"] == 0:
         st, measured = "inconclusive", "qpcoord's arm: " + ours
         note = (
             rule + "; no 5R geometry in the search has the thesis's q0 on the path with Thm "
-            "4.2's hypothesis, so the thesis's arm is unknown (issue 18 finding 5)"
+            "4.2's hypothesis, so the thesis's arm is unknown"
         )
     else:
         st, text = found_arms_status(found)

@@ -55,7 +55,7 @@ import qpcoord as qc
 from qpcoord.coordination.extensions import SoftExtension
 from qpcoord.coordination.periodicity import closure_errors, periods_to_closure
 from qpcoord.coordination.potentials import JointCentring
-from qpcoord.studies.claims import claim
+from qpcoord.studies.claims import QUICK, claim
 from qpcoord.studies.files import TextLog, write_json
 
 GAIN = 10.0  # 1/s, closed-loop correction of the main task
@@ -164,7 +164,7 @@ def claims(result: dict) -> list[dict]:
     if all(closed(r) for r in pairs5):
         status = "reproduced"
     elif short:
-        status = "inconclusive"
+        status = QUICK
     else:
         status = "differs"
     out = [
@@ -179,7 +179,7 @@ def claims(result: dict) -> list[dict]:
             f"{CLOSED_PERIODS} periods)"
             + (
                 f"; {short[0]['periods']} periods: the full run ({FULL_PERIODS}) decides"
-                if status == "inconclusive"
+                if status == QUICK
                 else ""
             )
             + "".join(
@@ -202,7 +202,7 @@ def claims(result: dict) -> list[dict]:
         )
     else:
         measured = f"not run ({len(result['rows'])} schemes in --quick)"
-        status = "inconclusive"
+        status = QUICK
         note = f"the full run has the single-potential case ({4 * FULL_PERIODS} periods)"
     out.append(
         claim(

@@ -43,7 +43,7 @@ import numpy as np
 import qpcoord as qc
 from qpcoord.coordination.periodicity import closure_errors, joint_path_lengths, periods_to_closure
 from qpcoord.coordination.task_manifold import fibre, fibre_point, wrap_angles
-from qpcoord.studies.claims import claim
+from qpcoord.studies.claims import QUICK, claim
 from qpcoord.studies.figures import _pyplot, save
 from qpcoord.studies.files import TextLog, write_json
 
@@ -71,7 +71,7 @@ def claims(hess: dict, compliant: list[dict], periods: int) -> list[dict]:
     elif fail or periods >= FULL_PERIODS:
         status = "differs"
     else:
-        status = "inconclusive"
+        status = QUICK
     measured = (
         f"{stop}; closure {c[0]:.3g} → {c[-1]:.3g} rad over {len(c)} periods; path length "
         f"{hess['path_length_first']:.3f} → {length:.3f} rad per period"
@@ -98,7 +98,7 @@ def claims(hess: dict, compliant: list[dict], periods: int) -> list[dict]:
             )
             + (
                 f"; {periods} periods without closing: the full run ({FULL_PERIODS}) decides"
-                if status == "inconclusive"
+                if status == QUICK
                 else ""
             ),
         ),
@@ -113,7 +113,7 @@ def claims(hess: dict, compliant: list[dict], periods: int) -> list[dict]:
             + (f" and the step that stopped period {fail['period']}" if fail else ""),
             "differs"
             if ratio < SPEED_TOL
-            else ("reproduced" if periods >= FULL_PERIODS else "inconclusive"),
+            else ("reproduced" if periods >= FULL_PERIODS else QUICK),
             f"criterion: ‖J f₁‖/‖J‖ ≥ {SPEED_TOL:g} (below it the scheme would command over "
             "100× the nominal joint speed) over the whole run"
             + (

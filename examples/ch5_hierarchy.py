@@ -109,8 +109,12 @@ def claims(r5: dict, rows: list[dict]) -> list[dict]:
             "Def 5.4, §5.3.5: reduced null spaces, N₂ ⊂ null([J; ∇g₁])",
             f"max ‖J q̇ − Ẏ‖ {res:.1e} m/s over {r5['samples_compared']} samples of the 5R "
             f"run (formula and QP); {change}",
-            ("reproduced" if res < RES_TOL else "differs") if active else "inconclusive",
-            f"criterion: < {RES_TOL:g} m/s with level 3 changing q̇ by > {ACTIVE:g} rad/s" + idle,
+            ("identity" if res < RES_TOL else "differs") if active else "inconclusive",
+            f"criterion: < {RES_TOL:g} m/s with level 3 changing q̇ by > {ACTIVE:g} rad/s"
+            + idle
+            + ". Holds by construction of our solver (the reduced null-space projection and "
+            "the lexicographic QP keep level 1 exactly): an identity, never counted as "
+            "reproduced.",
         ),
         claim(
             "def5.4-level2-kept",
@@ -118,8 +122,11 @@ def claims(r5: dict, rows: list[dict]) -> list[dict]:
             "Def 5.4: the reduced null space of a task has no impact on any higher task",
             f"max |ġ₁(3 levels) − ġ₁(2 levels)| {rate:.1e}/s (|ġ₁| up to "
             f"{r5['max_abs_g1dot']:.2g}/s); {change}",
-            ("reproduced" if rate < RATE_TOL else "differs") if active else "inconclusive",
-            f"criterion: < {RATE_TOL:g}/s with level 3 changing q̇ by > {ACTIVE:g} rad/s" + idle,
+            ("identity" if rate < RATE_TOL else "differs") if active else "inconclusive",
+            f"criterion: < {RATE_TOL:g}/s with level 3 changing q̇ by > {ACTIVE:g} rad/s"
+            + idle
+            + ". Holds by construction of our solver (level 3 moves in the null space of "
+            "levels 1 and 2): an identity, never counted as reproduced.",
         ),
         claim(
             "formula-equals-qp",

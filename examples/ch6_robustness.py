@@ -1,6 +1,6 @@
 """Chapter 6, beyond the thesis: robustness of the designed coordinator, the LQR and the MPC.
 
-Issue 17's robustness study. Three controllers, all designed on (and initialised from) the
+A robustness study. Three controllers, all designed on (and initialised from) the
 *nominal* PRIMA plant (``qpcoord.ddl.compare.DesignedOn``):
 
 * the coordinator **designed** for the sky by ``qpcoord.ddl.design_coordinator`` from one 2-s
@@ -248,7 +248,7 @@ def make_claims(tables, results, nseeds, duration, design_report) -> list[dict]:
             "robustness-no-nan-propagated",
             "No controller propagates a bad metrology sample: a NaN or a 1 mm spike is "
             "rejected and counted in the run's metrics, and every command stays finite.",
-            "Not in the thesis: issue 17's robustness study",
+            "Not in the thesis: qpcoord's robustness study",
             f"{nonfinite} runs with a non-finite command of "
             f"{sum(len(res) for res in results)}; rejected samples per controller "
             f"(designed coordinator, LQR, MPC): NaN {rej['NaN']}, spike {rej['spike 1 mm']}, "
@@ -274,7 +274,7 @@ def make_claims(tables, results, nseeds, duration, design_report) -> list[dict]:
             "The coordinator designed for the sky on the nominal plant keeps RMSE < 70 nm, "
             "no saturated step and synchronism with any one of piezo gain, carriage mass, "
             "flexure stiffness or stepper torque 20 % off.",
-            "Not in the thesis: issue 17's robustness study (spec §6.1.2: < 70 nm)",
+            "Not in the thesis: qpcoord's robustness study (spec §6.1.2: < 70 nm)",
             f"worst RMSE {worst['rmse_max_nm']:.1f} nm ({worst['case']}); {sat} saturated "
             f"steps, {lost} runs with lost sync over {sum(x['runs'] for x in d)} fault-free "
             f"runs ({nseeds} seeds × {duration:g} s); designed tuning: coarse "
@@ -306,7 +306,7 @@ def make_claims(tables, results, nseeds, duration, design_report) -> list[dict]:
         claim(
             "robustness-fault-recovery",
             "After one metrology fault the error returns to its fault-free level.",
-            "Not in the thesis: issue 17's robustness study",
+            "Not in the thesis: qpcoord's robustness study",
             "runs recovered within 25 ms of the fault, over plants × seeds — " + "; ".join(rec),
             "not in thesis",
             "Our own measurement (protocol of docs/ch6.md, 'Measurement faults': every "

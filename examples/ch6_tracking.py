@@ -11,7 +11,11 @@ the piezo bandwidth (Fig 6.6; thesis ≈ 300 Hz), and the PSD slopes of the refe
 three atmospheric regimes. Table 6.1's RMSE is judged over the preset's vibration lines absent,
 as shipped and doubled (10 seeds; ``--quick`` 3): the lines are an assumption, not the thesis's.
 
-Spec (§6.1.2): RMSE < 70 nm, power < 5 W, fine stage never saturates. Thesis Table 6.1
+Spec (§6.1.2): RMSE < 70 nm, power < 5 W, fine stage never saturates. The spec and Fig 6.16
+are judged on references that need both stages: the first five ``paranal_250hz_lf10``
+realisations whose peak-to-peak excursion exceeds the 30 µm fine stroke (the same in quick
+and full runs), each also run with the coarse stage frozen as a control that must fail.
+Thesis Table 6.1
 (hardware, direct coil): 25 nm RMSE, 308 nm max, 19.6 nm mean, 2.25 W.
 
 Run: ``python examples/ch6_tracking.py [--quick] [--out DIR]``.
@@ -20,7 +24,6 @@ Run: ``python examples/ch6_tracking.py [--quick] [--out DIR]``.
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 
@@ -29,7 +32,14 @@ from scipy import signal
 
 import qpcoord.ddl as ddl
 from qpcoord.ddl.identify import coarse_frf, fine_frf, peak_frequency
-from qpcoord.studies.claims import claim
+from qpcoord.studies.claims import QUICK, claim
+from qpcoord.studies.criteria import (
+    across_assumptions,
+    coordination_spec,
+    fine_never_saturates,
+    needs_both_stages,
+    within,
+)
 from qpcoord.studies.files import TextLog, write_json
 
 FS = 8000.0
@@ -54,50 +64,118 @@ def psd_slopes(seed: int) -> dict:
     }
 
 
-def lines_sweep(duration: float, seeds: list[int], shipped: list[float]) -> dict:
-    """Direct-coil RMSE (nm) per seed with the ``paranal_250hz`` vibration lines scaled by
-    0 (none), 1 (as shipped: ``shipped``, the main run's values) and 2 (doubled).
+def lines_sweep(duration: float, seeds: list[int], shipped: list[dict]) -> dict:
+    """Direct-coil RMSE and mean |e| (nm) per seed with the ``paranal_250hz`` vibration lines
+    scaled by 0 (none), 1 (as shipped: ``shipped``, the main run's metrics of these seeds) and
+    2 (doubled): ``{"rmse": {case: [...]}, "mean_abs": {case: [...]}}``.
 
     The lines are an assumption of the preset (the thesis's test signal is not given), so
-    Table 6.1's RMSE is judged over this plausible range of them (issue 18, finding 4).
+    Table 6.1's RMSE and mean error are judged over this plausible range of them.
     """
     from dataclasses import replace
 
     base = ddl.PRESETS["paranal_250hz"]["lines"]
-    out = {"as shipped": list(shipped)}
+    keys = ("rmse", "mean_abs")
+    runs = {"as shipped": list(shipped)}
     for name, scale in (("none", 0.0), ("doubled", 2.0)):
         lines = tuple(replace(v, rms=scale * v.rms) for v in base) if scale else ()
-        vals = []
+        runs[name] = []
         for seed in seeds:
             r = ddl.kolmogorov_opd(duration, FS, seed=seed, preset="paranal_250hz", lines=lines)
             run = ddl.simulate(ddl.DualStage(), ddl.SisoCoordinator(), r, FS, seed=seed)
-            vals.append(run.metrics["rmse"] * 1e9)
-        out[name] = vals
-    return {k: out[k] for k in ("none", "as shipped", "doubled")}
+            runs[name].append(run.metrics)
+    cases = ("none", "as shipped", "doubled")
+    return {k: {c: [m[k] * 1e9 for m in runs[c]] for c in cases} for k in keys}
+
+
+#: Seeds of the full run's Table 6.1 runs, and of its vibration-line sweep.
+FULL_SEEDS = 20
+SWEEP_SEEDS = 10
+#: Preset of the references that need both stages: the shipped preset with 10x the turbulence
+#: power below 2 Hz (its excursion over 10 s is 24-45 µm; the shipped preset's 10-14 µm fits
+#: in the 30 µm fine stroke).
+COORD_PRESET = "paranal_250hz_lf10"
+#: References judged for the spec and Fig 6.16, the same in quick and full runs.
+N_COORD = 5
+#: The control: the coarse reference filtered at 0.01 Hz keeps the carriage within 1 % of the
+#: reference's travel over 10 s -- the coarse stage frozen.
+FROZEN_CUTOFF_HZ = 0.01
+
+
+def fig617_condition_run(duration: float, seed: int) -> dict:
+    """The coordinator on ``paranal_250hz`` band-limited at 200 Hz without vibration lines
+    (Fig 6.17's only stated condition: 'a frequency content of up to 200 Hz')."""
+    r = ddl.kolmogorov_opd(duration, FS, seed=seed, preset="paranal_250hz", lines=(), f_max=200.0)
+    run = ddl.simulate(ddl.DualStage(), ddl.SisoCoordinator(), r, FS, seed=seed)
+    return {"seed": seed, **run.metrics}
+
+
+def reference_stats(seed: int, r: np.ndarray) -> dict:
+    """Peak to peak and rms (µm), and the content above 50 Hz (nm: rms and max of a 4th-order
+    zero-phase high-pass), of a reference ``r`` (m) sampled at :data:`FS`."""
+    b, a = signal.butter(4, 50.0, "high", fs=FS)
+    hf = signal.filtfilt(b, a, r)
+    return {
+        "seed": seed,
+        "ptp_um": float(np.ptp(r) * 1e6),
+        "rms_um": float(np.std(r) * 1e6),
+        "above_50hz_rms_nm": float(np.std(hf) * 1e9),
+        "above_50hz_max_nm": float(np.max(np.abs(hf)) * 1e9),
+    }
+
+
+def coordination_runs(duration: float, n: int = N_COORD) -> dict:
+    """The coordinator and the frozen-coarse control on the first ``n`` seeds of
+    :data:`COORD_PRESET` whose peak-to-peak excursion exceeds the fine stroke."""
+    plant = ddl.DualStage()
+    stroke = plant.fine.stroke_max - plant.fine.stroke_min
+    refs, runs, frozen = [], [], []
+    seed = 0
+    while len(refs) < n:
+        r = ddl.kolmogorov_opd(duration, FS, seed=seed, preset=COORD_PRESET)
+        if needs_both_stages(float(np.ptp(r)), stroke):
+            refs.append(reference_stats(seed, r))
+            for out, ctl in (
+                (runs, ddl.SisoCoordinator()),
+                (frozen, ddl.SisoCoordinator(coarse_cutoff=FROZEN_CUTOFF_HZ)),
+            ):
+                run = ddl.simulate(ddl.DualStage(), ctl, r, FS, seed=seed)
+                out.append({**run.metrics, "travel": float(np.ptp(run.y_c) / np.ptp(r))})
+        seed += 1
+        if seed > 50 * n:
+            raise RuntimeError(f"fewer than {n} {COORD_PRESET} references exceed the stroke")
+    return {
+        "preset": COORD_PRESET,
+        "fine_stroke_um": stroke * 1e6,
+        "references": refs,
+        "runs": runs,
+        "frozen": frozen,
+    }
 
 
 def tracking_claims(
-    rows, spread, f_res, bw_fine, slopes, duration, nseeds, sweep=None
+    rows, spread, f_res, bw_fine, slopes, duration, nseeds, coord, fig617, sweep=None
 ) -> list[dict]:
     """Claim rows (``qpcoord.studies.claims.claim``): each thesis number beside this run's value.
 
-    Rows on the Kolmogorov runs are decided only by a run as long as the thesis's (10 s)
-    with at least 3 seeds; shorter runs give ``"inconclusive"``. ``sweep`` (from
-    :func:`lines_sweep`): the RMSE row is reproduced only if the median RMSE is within ±30 %
-    of 25 nm with the preset's vibration lines absent, as shipped and doubled; it differs if
-    it is outside in all three; otherwise the result depends on the unknown test signal and
-    the row is inconclusive (criterion set before the sweep was run, issue 18).
+    Table 6.1's and Fig 6.17's rows on the ``paranal_250hz`` runs are decided only by the
+    full run's 10 s × :data:`FULL_SEEDS` seeds; a smaller run gives
+    :data:`~qpcoord.studies.claims.QUICK`. The spec and Fig 6.16 rows (``coord``,
+    :func:`coordination_runs`) use the same references in every run. ``sweep`` (from
+    :func:`lines_sweep`): the RMSE and mean-error rows are reproduced only if the median is
+    within ±30 % of the thesis's number with the preset's vibration lines absent, as shipped
+    and doubled; they differ if outside in all three; otherwise the result depends on the
+    unknown test signal and the row is inconclusive.
     """
-    full = duration >= 10.0 and nseeds >= 3
+    full = duration >= 10.0 and nseeds >= FULL_SEEDS
     short = (
-        f" This run ({duration:g} s × {nseeds} seeds) is shorter than the thesis's 10 s "
-        "Kolmogorov runs: the full run (10 s × 20 seeds) decides this row."
+        f" This run ({duration:g} s × {nseeds} seeds) is smaller than the full run's "
+        f"(10 s × {FULL_SEEDS} seeds, the vibration-line sweep on {SWEEP_SEEDS}): a median "
+        "or a best seed over fewer seeds is another rule, so the full run decides this row."
     )
 
     rmse, mx, mean = spread["rmse_nm"], spread["max_abs_nm"], spread["mean_abs_nm"]
-    power, margin = spread["power_w"], spread["fine_margin_min_um"]
-    sat = sum(row["saturated_steps"] for row in rows)
-    lost = sum(bool(row["lost_sync"]) for row in rows)
+    power = spread["power_w"]
     best = min(rows, key=lambda row: row["rmse"])
     out = []
     ok = abs(f_res - 120.0) <= 0.05 * 120.0
@@ -133,27 +211,53 @@ def tracking_claims(
             cause="our model" if st == "differs" else "",
         )
     )
-    ok = all(row["rmse"] < 70e-9 for row in rows)
-    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    refs = coord["references"]
+    ptp = [x["ptp_um"] for x in refs]
+    hf = [x["above_50hz_max_nm"] for x in refs]
+    ref_stats = (
+        f"{len(refs)} references of {duration:g} s ({coord['preset']}, seeds "
+        f"{', '.join(str(x['seed']) for x in refs)}): peak to peak {min(ptp):.1f}–"
+        f"{max(ptp):.1f} µm against the {coord['fine_stroke_um']:g} µm fine stroke, "
+        f"above 50 Hz at most {max(hf):.0f} nm"
+    )
+    thesis_ref = (
+        "; reference (§6.1.2, §6.4.2): Kolmogorov, content to 250 Hz, < 1 µm above 50 Hz, "
+        "10 s runs; its excursion is not given"
+    )
+    crmse = [m["rmse"] * 1e9 for m in coord["runs"]]
+    frmse = [m["rmse"] * 1e9 for m in coord["frozen"]]
+    fsat = [m["saturated_steps"] for m in coord["frozen"]]
+    st, why_st = coordination_spec(coord["runs"], coord["frozen"])
     out.append(
         claim(
             "spec-rmse-70nm",
             "The coordinator tracks the Kolmogorov OPD with less than 70 nm RMS residual.",
-            "§6.1.2 and §6.4.2: residual < 70 nm RMS with content up to 250 Hz",
-            f"worst RMSE {rmse['max']:.1f} nm over {nseeds} seeds ({duration:g} s each)",
+            "§6.1.2 and §6.4.2: residual < 70 nm RMS with content up to 250 Hz" + thesis_ref,
+            f"worst RMSE {max(crmse):.1f} nm; coarse stage frozen: {min(frmse):.0f}–"
+            f"{max(frmse):.0f} nm. {ref_stats}",
             st,
-            "Criterion: RMSE < 70 nm on every seed (paranal_250hz preset, an assumption: the "
-            "thesis's test signal is not specified)."
-            + (" Above 70 nm on some seed." if st == "differs" else "")
-            + (short if st == "inconclusive" else ""),
+            "Criterion (criteria.coordination_spec): RMSE < 70 nm on every reference whose "
+            "peak-to-peak excursion exceeds the fine stroke, and the control run with the "
+            "coarse stage frozen (coarse cut-off 0.01 Hz) fails the spec on each -- otherwise "
+            "the reference does not test coordination. The same references and run length "
+            "in quick and full runs. The shipped paranal_250hz preset spans about 10–14 µm and "
+            "is tracked within spec by the fine stage alone, so it no longer decides this "
+            f"row. {why_st[0].upper()}{why_st[1:]}.",
         )
+    )
+    contradiction = (
+        " The thesis contradicts itself here (listed as a contradiction in the report): for "
+        "the same direct-coil controller on Kolmogorov tracking it gives < 8 nm rms (§6.4.2, "
+        "'as low as the measurement noise') and < 8 nm rms, 30 nm max (Fig 6.17's caption) "
+        "beside Table 6.1's 25 nm rms, 308 nm max."
     )
     why = {
         "rmse": " Simulation on the paranal_250hz preset, whose vibration lines (an "
         "assumption, not tuned on results) set most of the error.",
-        "max_abs": " The simulated plant has no hardware noise sources, unmodelled modes or "
-        "amplifier hysteresis; its error peaks come from the preset's vibration lines only "
-        "(docs/ch6.md: the hardware's larger max error is not reproduced).",
+        "max_abs": " Not shown to be the hardware's: no run of ours reproduces the hardware's "
+        "conditions (its noise sources, unmodelled modes and test signal are not given), so "
+        "the cause is our model -- a plant without those effects and an assumed test "
+        "signal, whose error peaks come from the preset's vibration lines only.",
         "mean_abs": "",
     }
     for key, label, value, sp in (
@@ -161,40 +265,37 @@ def tracking_claims(
         ("max_abs", "maximum |e|", 308.0, mx),
         ("mean_abs", "mean |e|", 19.6, mean),
     ):
-        ok = abs(sp["median"] - value) <= 0.3 * value
-        st = ("reproduced" if ok else "differs") if full else "inconclusive"
+        ok = within(sp["median"], value, 0.3)
+        st = ("reproduced" if ok else "differs") if full else QUICK
         measured = (
             f"{sp['median']:.1f} nm median ({sp['min']:.1f}–{sp['max']:.1f} nm) over {nseeds} seeds"
         )
         note = f"Criterion: median within ±30 % of {value:g} nm."
-        if key == "rmse" and sweep is not None:
-            med = {k: float(np.median(v)) for k, v in sweep.items()}
-            inside = {k: abs(m - value) <= 0.3 * value for k, m in med.items()}
+        if key in (sweep or {}):
+            med = {k: float(np.median(v)) for k, v in sweep[key].items()}
             measured += "; vibration lines of the preset " + ", ".join(
                 f"{k}: {m:.1f} nm" for k, m in med.items()
             )
-            measured += f" (median over {len(next(iter(sweep.values())))} seeds)"
+            measured += f" (median over {len(next(iter(sweep[key].values())))} seeds)"
             note = (
-                f"Criterion: median within ±30 % of {value:g} nm with the preset's vibration "
-                "lines absent, as shipped and doubled (the lines are our assumption, the "
-                "thesis's test signal is not given): reproduced if inside for all three, "
-                "differs if outside for all three, else inconclusive."
+                f"Criterion (criteria.across_assumptions): median within ±30 % of {value:g} nm "
+                "with the preset's vibration lines absent, as shipped and doubled (the lines "
+                "are our assumption, the thesis's test signal is not given): reproduced if "
+                "inside for all three, differs if outside for all three, else inconclusive."
             )
             if full:
-                if all(inside.values()):
-                    st = "reproduced"
-                elif not any(inside.values()):
-                    st = "differs"
-                else:
-                    st = "inconclusive"
+                st, why_st = across_assumptions(med, value, 0.3)
+                if st == "inconclusive":
                     note += (
-                        " Inside for "
-                        + ", ".join(k for k, v in inside.items() if v)
-                        + ", outside for "
-                        + ", ".join(k for k, v in inside.items() if not v)
-                        + ": the RMSE is set by the unknown test signal's vibration content, "
-                        "so Table 6.1's 25 nm can be neither confirmed nor refuted."
+                        f" {why_st[0].upper()}{why_st[1:]} (the vibration content of the "
+                        f"unknown test signal), so Table 6.1's {value:g} nm can be neither "
+                        "confirmed nor refuted."
                     )
+            if key == "mean_abs":
+                note += (
+                    " The same rule as the RMSE row: the mean error depends on the lines as "
+                    "the RMSE does (the median as shipped alone was within ±30 %)."
+                )
         out.append(
             claim(
                 f"table6.1-{key.split('_')[0]}",
@@ -204,8 +305,9 @@ def tracking_claims(
                 st,
                 note
                 + (f" Outside ±30 %.{why[key]}" if st == "differs" else "")
-                + (short if st == "inconclusive" and not full else ""),
-                cause="hardware data" if st == "differs" else "",
+                + (short if st == QUICK else "")
+                + (contradiction if key in ("rmse", "max_abs") else ""),
+                cause="our model" if st == "differs" else "",
             )
         )
     ok = power["max"] < 5.0 and abs(power["median"] - 2.25) <= 0.01 * 2.25
@@ -224,50 +326,52 @@ def tracking_claims(
             cause="our model" if st == "differs" else "",
         )
     )
-    travel = min(row.get("travel", math.nan) for row in rows)
-    ok = sat == 0 and lost == 0 and travel >= 0.5
-    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    csat = sum(m["saturated_steps"] for m in coord["runs"])
+    clost = sum(bool(m["lost_sync"]) for m in coord["runs"])
+    cmargin = min(m["fine_margin_min"] for m in coord["runs"]) * 1e6
+    ctravel = min(m["travel"] for m in coord["runs"])
+    st, why_st = fine_never_saturates(coord["runs"], coord["frozen"])
     out.append(
         claim(
             "fig6.16-fine-never-saturates",
             "During Kolmogorov tracking the piezo never reaches its saturation limits.",
-            "Fig 6.16 and §6.4.2: the piezo output never reaches its saturation limits",
-            f"{sat} saturated steps, {lost} lost-sync runs over {nseeds} seeds; closest "
-            f"approach to a stop {margin['min']:.2f} µm; carriage travel / reference travel "
-            f"≥ {travel:.2f}",
+            "Fig 6.16 and §6.4.2: the piezo output never reaches its saturation limits"
+            + thesis_ref,
+            f"{csat} saturated steps, {clost} lost-sync runs; closest approach to a stop "
+            f"{cmargin:.2f} µm; carriage travel / reference travel ≥ {ctravel:.2f}; coarse "
+            f"stage frozen: {min(fsat)}–{max(fsat)} saturated steps. {ref_stats}",
             st,
-            "Criterion: zero saturated steps and no lost synchronism on every seed, with the "
-            "carriage carrying the low-frequency reference (travel ≥ 0.5 on every seed: "
-            "otherwise the fine stage stays inside its stroke only because the OPD's "
-            "excursion is small, issue 18)."
-            + (
-                " The fine stage saturated, the stepper slipped or the carriage stuck."
-                if st == "differs"
-                else ""
-            )
-            + (short if st == "inconclusive" else ""),
+            "Criterion (criteria.fine_never_saturates): no saturated step and no lost "
+            "synchronism on every reference whose excursion exceeds the fine stroke, and the "
+            "frozen-coarse control saturates on each (it replaces the carriage-travel guard, "
+            "which showed the carriage moves, not that it is needed). The same references in "
+            f"quick and full runs. {why_st[0].upper()}{why_st[1:]}.",
         )
     )
     ok = best["rmse"] <= 8e-9 and best["max_abs"] <= 30e-9
-    st = ("reproduced" if ok else "differs") if full else "inconclusive"
+    st = ("reproduced" if ok else "differs") if full else QUICK
     out.append(
         claim(
             "fig6.17-best-run",
             "The best direct-coil run tracks with less than 8 nm RMS and 30 nm maximum error.",
             "Fig 6.17 caption: < 8 nm rms, 30 nm max (Kolmogorov up to 200 Hz)",
             f"best seed {best['seed']}: {best['rmse'] * 1e9:.1f} nm RMS, "
-            f"{best['max_abs'] * 1e9:.1f} nm max",
+            f"{best['max_abs'] * 1e9:.1f} nm max; the figure's stated condition (content "
+            f"to 200 Hz, no vibration lines) on that seed: {fig617['rmse'] * 1e9:.1f} nm RMS, "
+            f"{fig617['max_abs'] * 1e9:.1f} nm max",
             st,
             "Criterion: the best seed ≤ 8 nm RMS and ≤ 30 nm max."
             + (
-                " Fig 6.17's realisation (content up to 200 Hz) is not specified; our preset "
-                "has ≈ 22 nm rms of vibration lines between 50 and 250 Hz (an assumption), "
-                "which the 234 Hz fine loop rejects by only 0–8 dB (docs/ch6.md): no seed "
-                f"goes below {best['rmse'] * 1e9:.1f} nm."
+                " The simulation does worse than the hardware, even under the figure's only "
+                "stated condition (content up to 200 Hz, here without the preset's vibration "
+                "lines): the floor is our model's -- the 234 Hz fine loop on our plant and "
+                "preset -- not shown to be a property of the hardware data."
                 if st == "differs"
                 else ""
             )
-            + (short if st == "inconclusive" else ""),
+            + (short if st == QUICK else "")
+            + contradiction,
+            cause="our model" if st == "differs" else "",
         )
     )
     th = slopes["theory"]
@@ -298,7 +402,7 @@ def main(argv=None) -> int:
     log = TextLog()
     say = log.say
     duration = 10.0  # the thesis's run length; one 10 s run takes about 0.5 s
-    nseeds = args.seeds or (3 if args.quick else 20)
+    nseeds = args.seeds or (3 if args.quick else FULL_SEEDS)
 
     plant = ddl.DualStage()
     f, h, _ = coarse_frf(plant, fs=FS, y_c=0.0)
@@ -363,14 +467,32 @@ def main(argv=None) -> int:
     )
     say("thesis Table 6.1 (hardware, direct coil): 25 nm, 308 nm, 19.6 nm, 2.25 W")
 
-    sweep_seeds = list(range(min(nseeds, 3 if args.quick else 10)))
-    sweep = lines_sweep(duration, sweep_seeds, [rows[i]["rmse"] * 1e9 for i in sweep_seeds])
+    sweep_seeds = list(range(min(nseeds, 3 if args.quick else SWEEP_SEEDS)))
+    sweep = lines_sweep(duration, sweep_seeds, [rows[i] for i in sweep_seeds])
     say(
         "RMSE vs the preset's vibration lines (median nm over seeds "
         f"{sweep_seeds[0]}–{sweep_seeds[-1]}): "
-        + ", ".join(f"{k} {np.median(v):.1f}" for k, v in sweep.items())
+        + ", ".join(f"{k} {np.median(v):.1f}" for k, v in sweep["rmse"].items())
     )
-    claims = tracking_claims(rows, summary_spread, f_res, bw_fine, slopes, duration, nseeds, sweep)
+    coord = coordination_runs(duration)
+    say(
+        f"\nreferences that need both stages ({COORD_PRESET}, peak to peak > "
+        f"{coord['fine_stroke_um']:g} µm): coordinator / coarse frozen"
+    )
+    for ref, m, fz in zip(coord["references"], coord["runs"], coord["frozen"], strict=True):
+        say(
+            f"  seed {ref['seed']:2d} ptp {ref['ptp_um']:5.1f} µm: RMSE {m['rmse'] * 1e9:6.1f} / "
+            f"{fz['rmse'] * 1e9:7.1f} nm, saturated steps {m['saturated_steps']} / "
+            f"{fz['saturated_steps']}, travel {m['travel']:.2f} / {fz['travel']:.3f}"
+        )
+    fig617 = fig617_condition_run(duration, min(rows, key=lambda row: row["rmse"])["seed"])
+    say(
+        f"Fig 6.17's condition (content to 200 Hz, no vibration lines), seed {fig617['seed']}: "
+        f"{fig617['rmse'] * 1e9:.1f} nm RMS, {fig617['max_abs'] * 1e9:.1f} nm max"
+    )
+    claims = tracking_claims(
+        rows, summary_spread, f_res, bw_fine, slopes, duration, nseeds, coord, fig617, sweep
+    )
     say("\nclaims (id: measured → status):")
     for c in claims:
         say(f"  {c['id']}: {c['measured']} → {c['status']}")
@@ -423,7 +545,9 @@ def main(argv=None) -> int:
             "opd_psd_slopes": slopes,
             "spread": summary_spread,
             "spec_met_all_seeds": ok,
-            "rmse_nm_vs_vibration_lines": sweep,
+            "nm_vs_vibration_lines": sweep,
+            "coordination": coord,
+            "fig6_17_condition_run": fig617,
             "runs": rows,
             "claims": claims,
             "thesis_table_6_1_direct_coil": {

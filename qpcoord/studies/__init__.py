@@ -8,6 +8,7 @@ module              holds
 ``chapters``        the report's chapters and which scripts belong to each
 ``timing``          per-step timing tables of a run
 ``claims``          :func:`~qpcoord.studies.claims.claim`: one claims-table row
+``criteria``        decision rules shared by scripts and tests (each can fail)
 ``files``           atomic JSON/text writers, the examples' text log
 ``figures``         matplotlib figures of the examples (written to files)
 ``sweep``           :func:`qpcoord.sweep`: one function over a grid, in parallel

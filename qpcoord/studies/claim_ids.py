@@ -6,8 +6,11 @@ the ID given here. A row of a script is keyed by ``(script stem, row id)``.
 
 An entry also says whether the claim is *calibrated* -- an input taken from the thesis (the
 piezo's 300 Hz, the coarse stage's 120 Hz, the 2.25 W of the field current, the ±150 N of the
-flexure), shown in the report but never counted as reproduced -- and the *cause class* of a
-``"differs"`` verdict when the row itself does not give one (:data:`CAUSES`).
+flexure), shown in the report but never counted as reproduced -- or an *identity* -- a
+statement that holds by construction in qpcoord (an identity of the scheme, our own solver's
+residual or hard constraint), checked and shown but never counted as reproduced -- and the
+*cause class* of a ``"differs"`` verdict when the row itself does not give one
+(:data:`CAUSES`).
 
 Rows with status ``"own check"`` (``"not in thesis"``) are qpcoord's own checks; they need no
 entry and are counted by row, under the ID ``"own:<script>:<row>"``.
@@ -17,7 +20,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["CAUSES", "REGISTER", "ThesisClaim", "claim_id", "lookup"]
+__all__ = [
+    "CAUSES",
+    "CONTRADICTIONS",
+    "REGISTER",
+    "Contradiction",
+    "ThesisClaim",
+    "claim_id",
+    "lookup",
+]
 
 #: Why a ``"differs"`` verdict differs: the thesis is wrong (a printed formula, a conjecture a
 #: counterexample refutes); the thesis's number comes from hardware we simulate (noise sources,
@@ -28,19 +39,28 @@ CAUSES = ("thesis error", "hardware data", "our model")
 
 @dataclass(frozen=True)
 class ThesisClaim:
-    """A thesis claim's ID, whether it is a calibrated input, and its default cause class."""
+    """A thesis claim's ID, whether it is a calibrated input or an identity (holds by
+    construction), and its default cause class."""
 
     id: str
     calibrated: bool = False
     cause: str = ""
+    identity: bool = False
 
     def __post_init__(self) -> None:
         if self.cause and self.cause not in CAUSES:
             raise ValueError(f"cause must be one of {CAUSES} or empty, got {self.cause!r}")
+        if self.calibrated and self.identity:
+            raise ValueError(f"{self.id}: a claim is calibrated or an identity, not both")
 
 
-def _c(cid: str, cause: str = "", calibrated: bool = False) -> ThesisClaim:
-    return ThesisClaim(cid, calibrated, cause)
+def _c(cid: str, cause: str = "", calibrated: bool = False, identity: bool = False) -> ThesisClaim:
+    return ThesisClaim(cid, calibrated, cause, identity)
+
+
+def _i(cid: str) -> ThesisClaim:
+    """An identity: holds by construction (its rows check it; a failure is a bug, differs)."""
+    return ThesisClaim(cid, identity=True)
 
 
 #: ``(script stem, row id) → ThesisClaim``. The first row listed for an ID is its home (the
@@ -60,7 +80,7 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
         "Sec4.3.3-pinv-basis-not-involutive"
     ),
     ("ch4_leaves", "lemma4.2-leaf-changes"): _c("Lem4.2-leaf-changes"),
-    ("ch4_leaves", "ex4.4-stays-on-leaf"): _c("Ex4.4-stays-on-leaf"),
+    ("ch4_leaves", "ex4.4-stays-on-leaf"): _i("Ex4.4-stays-on-leaf"),
     ("ch4_leaves", "lemma4.2-each-leaf-periodic"): _c("Lem4.2-each-leaf-periodic"),
     ("ch4_long_runs", "rem4.4-fig4.7-5r-closes"): _c("Rem4.4-Fig4.7-5r-closes", "our model"),
     ("ch4_long_runs", "conj4.1-delta1"): _c("Conj4.1-delta1", "thesis error"),
@@ -76,21 +96,21 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch5_limit_cycle", "thm5.1-alpha10"): _c("Thm5.1-limit-cycle"),
     ("ch5_task_manifold", "fig5.3-limit-cycle"): _c("Thm5.1-limit-cycle"),
     ("ch5_limit_cycle", "eq5.13-band"): _c("Eq5.13-band", "thesis error"),
-    ("ch5_fixed_point", "prop5.1-lyapunov"): _c("Prop5.1-lyapunov"),
+    ("ch5_fixed_point", "prop5.1-lyapunov"): _i("Prop5.1-lyapunov"),
     ("ch5_fixed_point", "prop5.1-fixed-point"): _c("Prop5.1-fixed-point"),
     ("ch5_5r_potentials", "fig5.4-two-potentials"): _c("Fig5.4-two-potentials", "our model"),
     ("ch5_5r_potentials", "conj5.1-one-potential"): _c("Conj5.1-one-potential", "thesis error"),
-    ("ch5_hierarchy", "def5.4-level1-kept"): _c("Def5.4-decoupling"),
-    ("ch5_hierarchy", "def5.4-level2-kept"): _c("Def5.4-decoupling"),
-    ("core_priorities", "def5.4-strict-keeps-main"): _c("Def5.4-decoupling"),
-    ("panda_circle_ik", "def5.4-ee-level-kept"): _c("Def5.4-decoupling"),
-    ("panda_pose", "def5.4-table-kept"): _c("Def5.4-decoupling"),
-    ("solo12_body", "def5.4-feet-kept"): _c("Def5.4-decoupling"),
+    ("ch5_hierarchy", "def5.4-level1-kept"): _i("Def5.4-decoupling"),
+    ("ch5_hierarchy", "def5.4-level2-kept"): _i("Def5.4-decoupling"),
+    ("core_priorities", "def5.4-strict-keeps-main"): _i("Def5.4-decoupling"),
+    ("panda_circle_ik", "def5.4-ee-level-kept"): _i("Def5.4-decoupling"),
+    ("panda_pose", "def5.4-table-kept"): _i("Def5.4-decoupling"),
+    ("solo12_body", "def5.4-feet-kept"): _i("Def5.4-decoupling"),
     ("ch5_hierarchy", "sec5.3.5-limits-level"): _c("Sec5.3.5-limits-level"),
     ("ch5_hessian", "sec5.4-limit-cycle"): _c("Sec5.4-limit-cycle", "our model"),
     ("ch5_hessian", "sec5.4-no-singularity"): _c("Sec5.4-no-singularity", "our model"),
     ("ch5_compliant", "fig5.9-periodic"): _c("Fig5.9-periodic", "our model"),
-    ("ch5_compliant", "eq5.20-plane"): _c("Eq5.20-plane"),
+    ("ch5_compliant", "eq5.20-plane"): _i("Eq5.20-plane"),
     ("ch5_compliant", "fig5.8a-cycle-per-qbar"): _c("Fig5.8a-cycle-per-qbar"),
     ("ch5_compliant", "fig5.8b-pinv-drifts"): _c("Fig5.8b-pinv-drifts"),
     # chapter 6
@@ -98,13 +118,13 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch6_tracking", "table6.1-rmse"): _c("T6.1-direct-coil-rmse", "hardware data"),
     ("ch6_compare", "table6.1-coordinator"): _c("T6.1-direct-coil-rmse", "hardware data"),
     ("sweep_ddl_seeds", "table6.1-rmse-nominal"): _c("T6.1-direct-coil-rmse", "hardware data"),
-    ("ch6_tracking", "table6.1-max"): _c("T6.1-direct-coil-max", "hardware data"),
-    ("ch6_tracking", "table6.1-mean"): _c("T6.1-direct-coil-mean", "hardware data"),
+    ("ch6_tracking", "table6.1-max"): _c("T6.1-direct-coil-max", "our model"),
+    ("ch6_tracking", "table6.1-mean"): _c("T6.1-direct-coil-mean", "our model"),
     ("ch6_tracking", "table6.1-power"): _c("T6.1-direct-coil-power-2.25W", calibrated=True),
     ("ch6_tracking", "fig6.7-coarse-resonance"): _c("Fig6.7-coarse-120Hz", calibrated=True),
     ("ch6_tracking", "fig6.6-piezo-bandwidth"): _c("Fig6.6-piezo-300Hz", calibrated=True),
     ("ch6_tracking", "fig6.16-fine-never-saturates"): _c("Fig6.16-fine-never-saturates"),
-    ("ch6_tracking", "fig6.17-best-run"): _c("Fig6.17-best-run", "hardware data"),
+    ("ch6_tracking", "fig6.17-best-run"): _c("Fig6.17-best-run", "our model"),
     ("ch6_compare", "table6.1-FlatnessBased"): _c("T6.1-flatness-rmse", "our model"),
     ("ch6_compare", "table6.1-PILinearised"): _c("T6.1-pi-linearised-rmse", "our model"),
     ("ch6_compare", "table6.1-PQCurrent"): _c("T6.1-pq-rmse", "our model"),
@@ -126,10 +146,10 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch6_two_ddl", "fig6.14b-step-faster"): _c("Fig6.14b-step-faster"),
     ("ch6_two_ddl", "fig6.14b-predictor-overshoot"): _c("Fig6.14b-predictor-overshoot"),
     # appendices
-    ("appA_shoulder", "A.19-generalised-forces"): _c("EqA.19-generalised-forces"),
-    ("appA_shoulder", "A.24-force-bounds"): _c("EqA.24-force-bounds"),
+    ("appA_shoulder", "A.19-generalised-forces"): _i("EqA.19-generalised-forces"),
+    ("appA_shoulder", "A.24-force-bounds"): _i("EqA.24-force-bounds"),
     ("appA_shoulder", "A.22-pseudo-inverse-pushes"): _c("SecA.3.2-pinv-pushes"),
-    ("appA_shoulder", "A.28-stress-optimal"): _c("EqA.28-stress-optimal"),
+    ("appA_shoulder", "A.28-stress-optimal"): _i("EqA.28-stress-optimal"),
     ("appA_shoulder", "A.3-forward-tracking"): _c("FigA.3-forward-tracking", "our model"),
     ("ch6_flexure", "appB-flexure-load"): _c("AppB-flexure-150N", calibrated=True),
     ("ch6_flexure", "figB.2-shape"): _c("FigB.2-shape"),
@@ -157,3 +177,42 @@ def claim_id(script: str, row_id: str, status: str) -> str:
     if status in ("own check", "not in thesis"):
         return f"own:{script}:{row_id}"
     return f"unregistered:{script}:{row_id}"
+
+
+@dataclass(frozen=True)
+class Contradiction:
+    """Two or more places of the thesis that state incompatible things about one quantity.
+
+    ``says`` pairs each place (section, table, figure) with what it states; ``claims`` are the
+    thesis-claim IDs whose verdict it bears on (their notes repeat it).
+    """
+
+    id: str
+    about: str
+    says: tuple[tuple[str, str], ...]
+    claims: tuple[str, ...]
+
+
+#: The thesis's internal contradictions, listed as such in the report (not counted as
+#: claims: no run can decide which place is right).
+CONTRADICTIONS: tuple[Contradiction, ...] = (
+    Contradiction(
+        "T6.1-vs-Sec6.4.2-Fig6.17",
+        "Kolmogorov tracking error of the direct-coil coordinator (the same controller, the "
+        "same kind of reference, on the same prototype)",
+        (
+            ("Table 6.1, Direct Coil", "25 nm RMS, 308 nm max, 19.6 nm mean"),
+            (
+                "§6.4.2, 'Final decoupled parallel SISO control scheme'",
+                "'the rms residual tracking error is as low as the measurement noise "
+                "(E < 8 nm rms)'",
+            ),
+            (
+                "Fig 6.17 caption",
+                "'a residual rms error less than 8 nm rms and a maximum instantaneous error "
+                "of 30 nm' (content up to 200 Hz)",
+            ),
+        ),
+        ("T6.1-direct-coil-rmse", "T6.1-direct-coil-max", "Fig6.17-best-run"),
+    ),
+)

@@ -17,6 +17,7 @@ __all__ = [
     "claim",
     "thesis_claims",
     "CLAIM_STATUSES",
+    "QUICK",
     "CAUSES",
     "count_claims",
     "load_verdicts",
@@ -25,11 +26,26 @@ __all__ = [
 
 #: What a claim row can say about the thesis: its number or behaviour was reproduced; we
 #: measured something different (``note`` says why, ``cause`` classes it, :data:`CAUSES`); it
-#: cannot be decided -- the run was too short (e.g. ``--quick``) or the thesis gives too little
-#: to compare with (``note`` says what would decide it); the number is an input taken from the
-#: thesis (``calibrated``: shown, never counted as reproduced); or the row is our own check
-#: with no thesis number (``own check``; the older spelling ``"not in thesis"`` is accepted).
-CLAIM_STATUSES = ("reproduced", "differs", "inconclusive", "calibrated", "own check")
+#: cannot be decided -- the thesis gives too little to compare with, or the result depends on
+#: an assumption it does not fix (``inconclusive``, ``note`` says what would decide it); this
+#: ``--quick`` run cannot apply the full run's rule (:data:`QUICK`: shorter runs, fewer seeds or
+#: cases -- never decided differently from the full run); the statement holds by construction
+#: (``identity``: an identity, or our own solver's residual or constraint -- checked, shown,
+#: never counted as reproduced); the number is an input taken from the thesis
+#: (``calibrated``: shown, never counted as reproduced); or the row is our own check with no
+#: thesis number (``own check``; the older spelling ``"not in thesis"`` is accepted).
+CLAIM_STATUSES = (
+    "reproduced",
+    "differs",
+    "inconclusive",
+    "inconclusive (quick)",
+    "identity",
+    "calibrated",
+    "own check",
+)
+
+#: The status of a row a ``--quick`` run cannot decide with the full run's rule.
+QUICK = "inconclusive (quick)"
 
 _ALIASES = {"not in thesis": "own check"}
 
@@ -62,9 +78,9 @@ def claim(
     status : str
         One of :data:`CLAIM_STATUSES` (``"not in thesis"`` is read as ``"own check"``).
     note : str, optional
-        Why a ``"differs"`` row differs, what an ``"inconclusive"`` row would need, where a
-        ``"calibrated"`` input comes from, or how the number was measured. Required for those
-        three statuses.
+        Why a ``"differs"`` row differs, what an ``"inconclusive"`` row (or :data:`QUICK`)
+        would need, where a ``"calibrated"`` input comes from, why an ``"identity"`` holds by
+        construction, or how the number was measured. Required for those statuses.
     cause : str, optional
         For a ``"differs"`` row: one of :data:`CAUSES` (else the register's default applies).
 
@@ -76,8 +92,8 @@ def claim(
     Raises
     ------
     ValueError
-        If ``status`` is not one of :data:`CLAIM_STATUSES`, a text field is empty, a
-        ``"differs"``, ``"inconclusive"`` or ``"calibrated"`` row has no ``note``, or ``cause``
+        If ``status`` is not one of :data:`CLAIM_STATUSES`, a text field is empty, a row
+        other than ``"reproduced"`` or ``"own check"`` has no ``note``, or ``cause``
         is not one of :data:`CAUSES` (or is given for a row that does not differ).
     """
     fields = {"id": id, "claim": claim, "thesis": thesis, "measured": measured}
@@ -87,7 +103,7 @@ def claim(
     status = _ALIASES.get(status, status)
     if status not in CLAIM_STATUSES:
         raise ValueError(f"claim status must be one of {CLAIM_STATUSES}, got {status!r}")
-    if status in ("differs", "inconclusive", "calibrated") and not str(note).strip():
+    if status not in ("reproduced", "own check") and not str(note).strip():
         raise ValueError(f"claim {id!r} has status {status!r} but no note saying why")
     if cause and cause not in CAUSES:
         raise ValueError(f"claim cause must be one of {CAUSES} or empty, got {cause!r}")
@@ -110,12 +126,14 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
         ``ID → {"id", "chapter", "status", "cause", "rows"}``, where ``rows`` lists
         ``{"script", "id", "status"}`` of the rows checking it. The status of a claim: an
         own check's own; ``"calibrated"`` for an input taken from the thesis; otherwise
-        ``"differs"`` if any row differs; else ``"reproduced"`` if every row of the claim's
-        *home* script (the script of its first registered row, where the claim is judged in
-        full, e.g. with a sensitivity sweep) reproduced it -- or, the home script not run,
-        if any row did; else ``"inconclusive"``. The chapter is the home row's, else the
-        first row's. ``cause`` (for ``"differs"``) is the first differing row's, else the
-        register's, else ``"unclassified"``.
+        ``"differs"`` if any row differs; else ``"identity"`` for a claim that holds by
+        construction (the register's ``identity``, or a row saying so); else ``"reproduced"``
+        if every row of the claim's *home* script (the script of its first registered row,
+        where the claim is judged in full, e.g. with a sensitivity sweep) reproduced it --
+        or, the home script not run, if any row did; else :data:`QUICK` if a row says so;
+        else ``"inconclusive"``. The chapter is
+        the home row's, else the first row's. ``cause`` (for ``"differs"``) is the first
+        differing row's, else the register's, else ``"unclassified"``.
     """
     home = {}
     for (script, _), entry in REGISTER.items():
@@ -140,8 +158,12 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
             status = "calibrated"
         elif "differs" in statuses:
             status = "differs"
+        elif (entry is not None and entry.identity) or "identity" in statuses:
+            status = "identity"
         elif all(s == "reproduced" for s in at_home) if at_home else "reproduced" in statuses:
             status = "reproduced"
+        elif QUICK in statuses:
+            status = QUICK
         elif all(s in CLAIM_STATUSES for s in statuses):
             status = "inconclusive"
         else:
@@ -178,7 +200,8 @@ def load_verdicts(path) -> dict[str, dict]:
     ------
     ValueError
         If a status is not one of :data:`CLAIM_STATUSES`, a cause not one of :data:`CAUSES`,
-        or a ``"differs"`` entry has no cause.
+        a ``"differs"`` entry has no cause, or the quick status is neither the full one nor
+        :data:`QUICK` (quick never decides differently from the full run).
     """
     data = json.loads(Path(path).read_text(encoding="utf-8"))
     data = {k: v for k, v in data.items() if not k.startswith("_")}
@@ -196,6 +219,13 @@ def load_verdicts(path) -> dict[str, dict]:
             raise ValueError(f"verdict {cid!r}: cause must be one of {CAUSES}, got {cause!r}")
         if "differs" in (entry["quick"], entry["full"]) and not cause:
             raise ValueError(f"verdict {cid!r} differs but gives no cause")
+        if entry["full"] == QUICK:
+            raise ValueError(f"verdict {cid!r}: the full run is never {QUICK!r}")
+        if entry["quick"] not in (entry["full"], QUICK):
+            raise ValueError(
+                f"verdict {cid!r}: quick {entry['quick']!r} decides differently from full "
+                f"{entry['full']!r} (a quick run that cannot apply the full rule says {QUICK!r})"
+            )
     return data
 
 

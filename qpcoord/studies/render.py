@@ -16,7 +16,7 @@ import re
 from pathlib import Path
 
 from .chapters import CHAPTERS
-from .claim_ids import lookup
+from .claim_ids import CONTRADICTIONS, lookup
 from .claims import CAUSES, CLAIM_STATUSES, count_claims
 from .timing import step_timing
 
@@ -41,8 +41,10 @@ _STATUS_TEXT = (
     "Statuses: reproduced (the thesis number or behaviour is met; the note gives the "
     "criterion); differs (we measured something else; the note says why, and the cause class "
     "says whose: thesis error, hardware data, our model); inconclusive (this run cannot "
-    "decide: see the note); calibrated (an input taken from the thesis: shown, not counted as "
-    "reproduced); own check (no thesis number). docs/reproduce.md explains the classes."
+    "decide: see the note); identity (holds by construction -- an identity, our own "
+    "solver's residual or constraint: checked, not counted as reproduced); calibrated (an "
+    "input taken from the thesis: shown, not counted as reproduced); own check (no thesis "
+    "number). docs/reproduce.md explains the classes."
 )
 
 
@@ -140,7 +142,7 @@ def summary_rows(report) -> list[tuple[str, dict[str, int]]]:
 
 def _row_cells(r, row: dict) -> list[str]:
     """A script's claim row for the tables: its thesis-claim ID first, the cause with
-    ``differs``, and ``calibrated`` for an input the register marks so."""
+    ``differs``, and ``calibrated`` / ``identity`` for a claim the register marks so."""
     from .claim_ids import claim_id
 
     entry = lookup(r.name, row["id"])
@@ -148,6 +150,8 @@ def _row_cells(r, row: dict) -> list[str]:
     status = row["status"]
     if entry is not None and entry.calibrated and status != "calibrated":
         status = f"calibrated (row: {status})"
+    elif entry is not None and entry.identity and status not in ("identity", "differs"):
+        status = f"identity (row: {status})"
     elif status == "differs":
         cause = row.get("cause") or (entry.cause if entry else "") or "unclassified"
         status = f"differs ({cause})"
@@ -163,6 +167,23 @@ def _id_rows(report) -> list[list[str]]:
         rows = "; ".join(f"{x['script']}: {x['id']} → {x['status']}" for x in c["rows"])
         out.append([c["id"], c["status"], c["cause"], rows])
     return out
+
+
+_CONTRA_HEAD = ("contradiction", "about", "the thesis says", "claims it bears on")
+
+_CONTRA_TEXT = (
+    "Places where the thesis states incompatible things about one quantity. No run can "
+    "decide which place is right; the claims they bear on say so in their notes."
+)
+
+
+def _contradiction_rows(report) -> list[list[str]]:
+    """The register's contradictions that bear on a claim of this run."""
+    return [
+        [c.id, c.about, "; ".join(f"{w}: {t}" for w, t in c.says), ", ".join(c.claims)]
+        for c in CONTRADICTIONS
+        if any(cid in report.claims for cid in c.claims)
+    ]
 
 
 def _header_items(report) -> list[tuple[str, str]]:
@@ -341,6 +362,10 @@ def render_markdown(report) -> str:
     L += _md_table(["chapter", *SUMMARY_COLUMNS], body)
     L += ["", "## Thesis claims by ID", ""]
     L += _md_table(_ID_HEAD, _id_rows(report))
+    contra = _contradiction_rows(report)
+    if contra:
+        L += ["", "## Thesis contradictions", "", _CONTRA_TEXT, ""]
+        L += _md_table(_CONTRA_HEAD, contra)
     if report.unmapped:
         L += [
             "",
@@ -430,8 +455,8 @@ pre{background:#f6f6f6;padding:.6em;overflow-x:auto;border:1px solid #ddd}
 table{border-collapse:collapse;margin:.6em 0;font-size:.9em}
 th,td{border:1px solid #ccc;padding:.25em .5em;vertical-align:top;text-align:left}
 th{background:#f0f0f0}td.num{text-align:right}
-.reproduced{background:#e3f5e1}.differs{background:#fde2e1}.inconclusive{background:#fff5d6}
-.own-check{background:#e8eef9}.calibrated{background:#eeeeee}.ok{color:#1a7f37;font-weight:600}
+.reproduced{background:#e3f5e1}.differs{background:#fde2e1}.inconclusive{background:#fff5d6}.inconclusive-quick{background:#fff5d6}
+.own-check{background:#e8eef9}.calibrated{background:#eeeeee}.identity{background:#eeeeee}.ok{color:#1a7f37;font-weight:600}
 .failed,.timed-out{color:#c62828;font-weight:600}
 img{max-width:100%;border:1px solid #ddd;margin:.4em 0}figure{margin:.8em 0}
 figcaption{font-size:.85em;color:#555}.muted{color:#666}
@@ -501,6 +526,10 @@ def render_html(report) -> str:
     H += ['<h2 id="claim-ids">Thesis claims by ID</h2>']
     ids = _id_rows(report)
     H += _h_table(_ID_HEAD, ids, row_classes=[_css_class(x[1]) for x in ids])
+    contra = _contradiction_rows(report)
+    if contra:
+        H += ['<h2 id="contradictions">Thesis contradictions</h2>', f"<p>{_e(_CONTRA_TEXT)}</p>"]
+        H += _h_table(_CONTRA_HEAD, contra)
     if report.unmapped:
         H += [
             "<p>Not run (no chapter for their name in <code>SCRIPT_CHAPTERS</code>): "

@@ -27,6 +27,10 @@ def test_verdict_file_matches_the_register():
             assert v["quick"] == v["full"] == "calibrated", entry.id
         else:
             assert "calibrated" not in (v["quick"], v["full"]), entry.id
+        if entry.identity:  # holds by construction: never "reproduced"
+            assert v["quick"] == v["full"] == "identity", entry.id
+        else:
+            assert "identity" not in (v["quick"], v["full"]), entry.id
 
 
 def test_a_changed_verdict_is_reported(tmp_path):
@@ -65,3 +69,76 @@ def test_full_verdicts(tmp_path):
     assert report.ok, [(r.name, r.error) for r in report.failed]
     problems = verdict_mismatches(report.claims, load_verdicts(VERDICTS), "full")
     assert not problems, "\n".join(problems)
+
+
+def test_an_identity_is_never_counted_as_reproduced():
+    from qpcoord.studies.claims import count_claims
+
+    held = claim("def5.4-level1-kept", "c", "Def 5.4", "1e-15", "identity", "by construction")
+    old = claim("def5.4-strict-keeps-main", "c", "Def 5.4", "1e-15", "reproduced")
+    broken = claim("def5.4-level2-kept", "c", "Def 5.4", "0.1", "differs", "a solver bug")
+    claims = thesis_claims([("5", "ch5_hierarchy", held), ("core", "core_priorities", old)])
+    assert claims["Def5.4-decoupling"]["status"] == "identity"
+    assert count_claims(claims.values())["reproduced"] == 0
+    # an identity that fails is a bug: it differs
+    claims = thesis_claims([("5", "ch5_hierarchy", held), ("5", "ch5_hierarchy", broken)])
+    assert claims["Def5.4-decoupling"]["status"] == "differs"
+    with pytest.raises(ValueError, match="no note"):
+        claim("x", "c", "t", "m", "identity")
+
+
+def test_contradictions_name_registered_claims():
+    from qpcoord.studies.claim_ids import CONTRADICTIONS
+
+    ids = {e.id for e in REGISTER.values()}
+    assert CONTRADICTIONS
+    for c in CONTRADICTIONS:
+        assert len(c.says) >= 2, c.id
+        assert set(c.claims) <= ids, (c.id, set(c.claims) - ids)
+
+
+def test_quick_never_decides_differently(tmp_path):
+    from qpcoord.studies.claims import QUICK
+
+    bad = tmp_path / "v.json"
+    bad.write_text(json.dumps({"X": {"quick": "reproduced", "full": "inconclusive"}}))
+    with pytest.raises(ValueError, match="decides differently"):
+        load_verdicts(bad)
+    bad.write_text(json.dumps({"X": {"quick": "inconclusive", "full": "reproduced"}}))
+    with pytest.raises(ValueError, match="decides differently"):
+        load_verdicts(bad)
+    bad.write_text(json.dumps({"X": {"quick": QUICK, "full": QUICK}}))
+    with pytest.raises(ValueError, match="never"):
+        load_verdicts(bad)
+    good = tmp_path / "g.json"
+    good.write_text(json.dumps({"X": {"quick": QUICK, "full": "reproduced"}}))
+    assert load_verdicts(good)["X"]["quick"] == QUICK
+
+
+def test_the_docs_counts_are_the_verdict_files():
+    """docs/reproduce.md's counts table is generated (python -m qpcoord.studies.counts)
+    from the verdict file, which the quick and the full runs are compared with."""
+    from qpcoord.studies.counts import BEGIN, END, _from_verdicts, counts_table
+
+    doc = (Path(__file__).parents[2] / "docs" / "reproduce.md").read_text(encoding="utf-8")
+    block = doc.split(BEGIN, 1)[1].split(END, 1)[0].strip()
+    assert block == counts_table(*_from_verdicts(VERDICTS))
+
+
+def test_counts_table_and_block(tmp_path):
+    from qpcoord.studies.counts import BEGIN, END, counts_table, replace_block
+
+    quick = {
+        "A": ("inconclusive (quick)", ""),
+        "B": ("differs", "our model"),
+        "C": ("inconclusive (quick)", ""),
+    }
+    full = {"A": ("reproduced", ""), "B": ("differs", "our model"), "C": ("inconclusive", "")}
+    table = counts_table(quick, full)
+    assert "| inconclusive (quick) | 2 | 0 |" in table
+    assert "| — our model | 1 | 1 |" in table
+    assert "1 of its 2 `inconclusive (quick)` claims are decided by the full run" in table
+    text = f"x\n{BEGIN}\nold\n{END}\ny"
+    assert replace_block(text, "new") == f"x\n{BEGIN}\nnew\n{END}\ny"
+    with pytest.raises(ValueError, match="no block"):
+        replace_block("no markers", "new")
