@@ -187,6 +187,7 @@ def _cmd_ddl_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from .studies.claims import CLAIM_STATUSES
     from .studies.reproduce import ExamplesNotFoundError, run
 
     try:
@@ -210,10 +211,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         print(f"{r.name:<22} {r.chapter:<7} {r.status:<8} {r.seconds:7.1f} {cpu:>7}")
     print(
         f"{c['ok']} of {c['scripts']} scripts ran in {report.seconds:.1f} s; claims: "
-        + ", ".join(
-            f"{c[s]} {s}"
-            for s in ("reproduced", "differs", "inconclusive", "calibrated", "own check")
-        )
+        + ", ".join(f"{c[s]} {s}" for s in CLAIM_STATUSES)
         + " (thesis claims, each ID counted once)"
     )
     for r in report.failed:

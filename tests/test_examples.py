@@ -158,11 +158,11 @@ def test_thesis_claims_count_once():
         "own:ch6_tracking:mine",
     }
     rmse = claims["T6.1-direct-coil-rmse"]
-    assert rmse["status"] == "differs" and rmse["cause"] == "hardware data"  # register default
+    assert rmse["status"] == "differs" and rmse["cause"] == "our model"  # register default
     assert len(rmse["rows"]) == 3
     assert claims["Fig6.6-piezo-300Hz"]["status"] == "calibrated"  # an input, not a result
     counts = count_claims(claims.values())
-    assert counts["differs"] == 1 and counts["differs: hardware data"] == 1
+    assert counts["differs"] == 1 and counts["differs: our model"] == 1
     assert counts["calibrated"] == 1 and counts["own check"] == 1 and counts["reproduced"] == 0
     # without the differing row the claim is reproduced once, not twice
     again = thesis_claims([rows[0], rows[2]])

@@ -115,9 +115,9 @@ REGISTER: dict[tuple[str, str], ThesisClaim] = {
     ("ch5_compliant", "fig5.8b-pinv-drifts"): _c("Fig5.8b-pinv-drifts"),
     # chapter 6
     ("ch6_tracking", "spec-rmse-70nm"): _c("Spec6.1.2-rmse-70nm", "our model"),
-    ("ch6_tracking", "table6.1-rmse"): _c("T6.1-direct-coil-rmse", "hardware data"),
-    ("ch6_compare", "table6.1-coordinator"): _c("T6.1-direct-coil-rmse", "hardware data"),
-    ("sweep_ddl_seeds", "table6.1-rmse-nominal"): _c("T6.1-direct-coil-rmse", "hardware data"),
+    ("ch6_tracking", "table6.1-rmse"): _c("T6.1-direct-coil-rmse", "our model"),
+    ("ch6_compare", "table6.1-coordinator"): _c("T6.1-direct-coil-rmse", "our model"),
+    ("sweep_ddl_seeds", "table6.1-rmse-nominal"): _c("T6.1-direct-coil-rmse", "our model"),
     ("ch6_tracking", "table6.1-max"): _c("T6.1-direct-coil-max", "our model"),
     ("ch6_tracking", "table6.1-mean"): _c("T6.1-direct-coil-mean", "our model"),
     ("ch6_tracking", "table6.1-power"): _c("T6.1-direct-coil-power-2.25W", calibrated=True),
