@@ -187,7 +187,7 @@ def test_soth_sot_level_2_meets_its_dual_bound(solver):
     sol = _solve(P, solver)
     value, lower, rounding2 = _dual_gap(t2.A, t2.b, t1.A, t1.A @ bv.x, lim.lower, lim.upper, sol.x)
     # the level value computed here and by the library: each ‖A x − b‖ errs by at most
-    # (n + 1)·eps·‖|A||x| + |b|‖ (a dot product of length n, then the subtraction); here
+    # (n + 1)·eps·‖|A||x| + |b|‖ (a dot product of length n, then the subtraction);
     # here ‖|A||x| + |b|‖ = 11 against a value of 0.061: 2.6e-12 relative for both together
     agree = (
         2.0
