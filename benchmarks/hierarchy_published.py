@@ -53,16 +53,16 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:0] = [HERE, os.path.join(HERE, "..", "tests"), os.path.join(HERE, "..", "tests", "core")]
+sys.path[:0] = [HERE, os.path.join(HERE, "..", "tests")]
 
 import math  # noqa: E402
 
 import daqp  # noqa: E402
 import numpy as np  # noqa: E402
-from campaign import level_scales  # noqa: E402
 from hierarchy_bench import daqp_problem  # noqa: E402
-from hlsp import NAMES, load  # noqa: E402
-from oracle import lexicographic  # noqa: E402
+from support.campaign import level_scales  # noqa: E402
+from support.hlsp import NAMES, load  # noqa: E402
+from support.oracle import lexicographic  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 import qpcoord as qc  # noqa: E402

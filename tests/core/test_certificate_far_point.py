@@ -4,16 +4,15 @@ or reported (status "inaccurate"), never frozen and returned as "optimal"."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.linalg import null_space
+from support.dumps import DATA, spec_from_npz
 
 import qpcoord as qc
 import qpcoord.core.methods.hierarchical as hierarchical
 
-_PARALLEL_EDGES = Path(__file__).resolve().parents[1] / "data" / "talos_polygon_parallel_edges.npz"
+_PARALLEL_EDGES = DATA / "talos_polygon_parallel_edges.npz"
 
 #: Level 3 (joint-velocity damping, ``x`` unique) at the lexicographic optimum.
 _LEVEL_3 = 0.47818442
@@ -25,9 +24,7 @@ _DISTANCE = 1e5
 
 
 def _stack() -> qc.Stack:
-    from test_hierarchy_regressions import _spec_from_npz
-
-    return qc.Stack(**_spec_from_npz(_PARALLEL_EDGES))
+    return qc.Stack(**spec_from_npz(_PARALLEL_EDGES))
 
 
 def _inject_far_point(monkeypatch, near) -> list:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
+from support.stacks import retry_leak_case
 
 import qpcoord as qc
 import qpcoord.core.methods.hierarchical as hier
@@ -119,13 +120,7 @@ def test_a_level_met_exactly_with_zero_targets_is_certified(solver):
     Q y ≈ 0, so the level's own scale is ~1e-16) is certified by its value on the library's
     max(1, scale) rule. Found at the merge: every backend returned "inaccurate" (KKT 0.79 on
     level 0) and proxqp spent 3 s in fallbacks on this 5-variable stack."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_properties import _retry_leak_case
-
-    head, extra, options = _retry_leak_case()
+    head, extra, options = retry_leak_case()
     sol = qc.solve_stack([*head, extra], solver=solver, **options)
     assert sol.status == "optimal", sol.info
     assert sol.info["fallbacks"] == []

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support.dumps import spec_from_npz
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -149,42 +150,7 @@ def _stack_from_npz(path: Path, fallback: bool = True) -> qc.Stack:
     """A stack stored level by level as ``L{k}_{j}_eq_{A,b,w}`` / ``L{k}_{j}_in_{C,lo,hi,w}``,
     with optional bounds ``bounds_{lb,ub}`` and hard constraints ``H{j}_eq_{A,b}`` /
     ``H{j}_in_{C,lo,hi}``."""
-    return qc.Stack(**_spec_from_npz(path), fallback=fallback)
-
-
-def _spec_from_npz(path: Path) -> dict:
-    with np.load(path) as f:
-        d = {k: f[k] for k in f.files}
-    levels: dict[int, dict[int, qc.Equality | qc.Inequality]] = {}
-    hard: dict[int, qc.Equality | qc.Inequality] = {}
-    for key in d:
-        if key.startswith("bounds_"):
-            continue
-        if key.startswith("H"):
-            j, kind, _ = key.split("_")
-            j = int(j[1:])
-            p = f"H{j}_{kind}_"
-            if kind == "eq":
-                hard[j] = qc.Equality(d[p + "A"], d[p + "b"])
-            else:
-                hard[j] = qc.Inequality(d[p + "C"], d[p + "lo"], d[p + "hi"])
-            continue
-        k, j, kind, _ = key.split("_")
-        k, j = int(k[1:]), int(j)
-        if j in levels.setdefault(k, {}):
-            continue
-        p = f"L{k}_{j}_{kind}_"
-        if kind == "eq":
-            task = qc.Equality(d[p + "A"], d[p + "b"], weight=d[p + "w"])
-        else:
-            task = qc.Inequality(d[p + "C"], d[p + "lo"], d[p + "hi"], weight=d[p + "w"])
-        levels[k][j] = task
-    bounds = qc.Bounds(d["bounds_lb"], d["bounds_ub"]) if "bounds_lb" in d else None
-    return dict(
-        levels=[[levels[k][j] for j in sorted(levels[k])] for k in sorted(levels)],
-        bounds=bounds,
-        constraints=[hard[j] for j in sorted(hard)] or None,
-    )
+    return qc.Stack(**spec_from_npz(path), fallback=fallback)
 
 
 _DAQP_ONLY = Path(__file__).resolve().parents[1] / "data" / "python_engine_level_qp_infeasible.npz"
@@ -328,7 +294,7 @@ def test_daqp_alone_solves_the_false_infeasible_stacks_in_any_coordinates(case, 
     """The stacks daqp alone called infeasible, in random orthonormal coordinates (a signed
     permutation when there are bounds): daqp alone (``fallback=False``) solves each with the
     same level residuals, and ``Q u`` is the answer in the original coordinates."""
-    spec = _spec_from_npz(case)
+    spec = spec_from_npz(case)
     t0 = spec["levels"][0][0]
     n = (t0.A if isinstance(t0, qc.Equality) else t0.C).shape[1]
     rng = np.random.default_rng(seed)
@@ -355,9 +321,9 @@ def test_nearly_parallel_active_rows_do_not_send_the_refinement_far(solver):
     their difference, on level 2's optimal set (its value unchanged, certified), which
     froze level 3 at 7.1e6 instead of 0.478; "optimal", no warning, and the robot's next
     configuration was garbage. Now those rows count as one at the activity tolerance."""
-    from oracle import lexicographic
+    from support.oracle import lexicographic
 
-    spec = _spec_from_npz(_PARALLEL_EDGES)
+    spec = spec_from_npz(_PARALLEL_EDGES)
     sol = qc.Stack(**spec).solve(engine="python", solver=solver)
     assert sol.status == "optimal"
     ref = lexicographic(spec["levels"])
@@ -365,7 +331,7 @@ def test_nearly_parallel_active_rows_do_not_send_the_refinement_far(solver):
     np.testing.assert_allclose(sol.level_residuals, ref.level_residuals, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(sol.x, ref.x, atol=1e-6)
     if native.available():
-        _same_solution(sol, qc.Stack(**_spec_from_npz(_PARALLEL_EDGES)).solve(engine="native"))
+        _same_solution(sol, qc.Stack(**spec_from_npz(_PARALLEL_EDGES)).solve(engine="native"))
 
 
 _EXTREME_FEET = sorted(_DATA.glob("talos_extreme_feet_*.npz"))
@@ -403,8 +369,8 @@ def test_rows_dependent_on_the_frozen_rows_to_rounding_are_not_stepped_along(pat
     value (7.6e-8, rounding at ``‖b‖`` 1e5) with the frozen one relative to
     ``max(1, value)`` and said "inaccurate"; it is now relative to ``max(1, value, scale)``,
     the level's ``‖b‖ + ‖A‖_F·‖x‖`` (the size of its value's rounding)."""
-    spec = _spec_from_npz(path)
-    sol = {e: qc.Stack(**_spec_from_npz(path)).solve(engine=e) for e in ("python", "native")}
+    spec = spec_from_npz(path)
+    sol = {e: qc.Stack(**spec_from_npz(path)).solve(engine=e) for e in ("python", "native")}
     if not native.available():
         del sol["native"]
     lv = spec["levels"]

@@ -1,6 +1,6 @@
 """Published hierarchical least-squares problems (LexLS, soth, hdaqp; ``tests/data/hlsp``)
 on every backend with the default options, judged against the exact lexicographic
-reference (``tests/oracle.py``) and, for the humanoid, LexLS's published solution.
+reference (:mod:`support.oracle`) and, for the humanoid, LexLS's published solution.
 
 Every level value must match the reference to ``REL`` of its value (a floor of ``FLOOR``
 of the level's scale for levels whose optimum is 0), or the solution must say
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from campaign import level_scales
-from hlsp import NAMES, load
-from oracle import level_residuals, lexicographic
 from scipy.optimize import linprog, lsq_linear
+from support.campaign import level_scales
+from support.hlsp import NAMES, load
+from support.oracle import level_residuals, lexicographic
 
 import qpcoord as qc
 

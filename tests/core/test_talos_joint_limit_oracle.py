@@ -13,7 +13,7 @@ upper bound, band row 9 at its lower bound, x_27 at its upper bound} solved in r
 arithmetic from the stored doubles, then verified (every row and bound met exactly, the
 multipliers of the right sign, the posture strictly convex on the feasible set's affine
 hull). Levels 0-2 are met with residual 0 there, so that point is the lexicographic
-optimum, and it is unique. (The cvxpy oracle of ``tests/oracle.py`` cannot decide this
+optimum, and it is unique. (The cvxpy oracle of :mod:`support.oracle` cannot decide this
 case: Clarabel stops at ``optimal_inaccurate`` on level 1 at the oracle's tolerances, and
 its ~1e-9 accuracy would not separate the engines anyway.)
 
