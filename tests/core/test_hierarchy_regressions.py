@@ -14,7 +14,10 @@ from hypothesis import strategies as st
 from support.dumps import spec_from_npz
 
 import qpcoord as qc
+import qpcoord.core.methods.hierarchical as hierarchical
 from qpcoord.core import native
+from qpcoord.core.linalg import numerical_rank
+from qpcoord.core.polish import active_rank
 
 SOLVERS = qc.available_solvers()
 
@@ -340,6 +343,31 @@ def test_nearly_parallel_active_rows_do_not_send_the_refinement_far(solver):
     np.testing.assert_allclose(sol.x, ref.x, atol=1e-6)
     if native.available():
         _same_solution(sol, qc.Stack(**spec_from_npz(_PARALLEL_EDGES)).solve(engine="native"))
+
+
+def test_nearly_parallel_active_rows_count_as_one_at_the_activity_tolerance(monkeypatch):
+    """The decision behind the test above, which only some rounding paths turn into a far
+    step (on others the two-row step is rejected later): at level 2's refinement the two
+    active hull edges have singular values 0.59 and 2.3e-10, one constraint at the activity
+    tolerance (``active_rank``), two at rounding (``numerical_rank``, which the refinement
+    used before: a step of 1e7 along their difference). 2.3e-10 is 260 times under the
+    activity threshold (1e-7 of 0.59) and 7e4 times over the rounding one (26·eps·0.59), so
+    the decision is the same on every rounding path."""
+    decisions = []
+
+    def spy(s, shape, tol):
+        rank = active_rank(s, shape, tol)
+        decisions.append((s.copy(), shape, rank))
+        return rank
+
+    monkeypatch.setattr(hierarchical, "active_rank", spy)
+    qc.Stack(**spec_from_npz(_PARALLEL_EDGES)).solve(engine="python", solver="daqp")
+    wedges = [(s, shape, rank) for s, shape, rank in decisions if s[-1] < 1e-6 * s[0]]
+    assert wedges
+    for s, shape, rank in wedges:
+        assert shape[0] == 2 and s[-1] < 1e-9 * s[0], s
+        assert rank == 1
+        assert numerical_rank(s, shape) == 2  # rounding alone tells the two apart
 
 
 _EXTREME_FEET = sorted(_DATA.glob("talos_extreme_feet_*.npz"))
