@@ -221,9 +221,9 @@ def soth_sot(rng):
     """The published soth problem (unit rows), moved as hierarchy_published's re-solve."""
     del rng  # the published data; the motion is deterministic
     here = Path(__file__).resolve().parent
-    sys.path[:0] = [str(here), str(here.parent / "tests"), str(here.parent / "tests" / "core")]
+    sys.path[:0] = [str(here), str(here.parent / "tests")]
     import hierarchy_published as hp
-    from hlsp import load
+    from support.hlsp import load
 
     prob = load("soth_sot")
     levels = hp.unit_rows(prob.levels)

@@ -1,10 +1,10 @@
 """Solve time of the published hierarchical least-squares problems, every backend.
 
 The problems of ``tests/data/hlsp`` (LexLS humanoid 88 variables / 5 levels, soth 1–30
-variables, hdaqp basic; see its README), loaded by ``tests/core/hlsp.py``. Each is built
+variables, hdaqp basic; see its README), loaded by ``tests/support/hlsp.py``. Each is built
 once as a ``qc.Stack`` with the default options and re-solved ``--repeats`` times (after
 one untimed solve); the table gives the median time per solve, the solution's status and
-the largest gap of a level value to the exact lexicographic reference (``tests/oracle.py``
+the largest gap of a level value to the exact lexicographic reference (``tests/support/oracle.py``
 with ``polish=True``), relative to the level value (floor 1e-9 of the level's scale).
 BLAS is limited to one thread (threadpoolctl)::
 
@@ -59,17 +59,17 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:0] = [HERE, os.path.join(HERE, "..", "tests"), os.path.join(HERE, "..", "tests", "core")]
+sys.path[:0] = [HERE, os.path.join(HERE, "..", "tests")]
 
 import math  # noqa: E402
 
 import daqp  # noqa: E402
 import numpy as np  # noqa: E402
 from _table import markdown, preamble, sig3, span  # noqa: E402
-from campaign import level_scales  # noqa: E402
 from daqp_form import daqp_problem  # noqa: E402
-from hlsp import NAMES, load  # noqa: E402
-from oracle import lexicographic  # noqa: E402
+from support.campaign import level_scales  # noqa: E402
+from support.hlsp import NAMES, load  # noqa: E402
+from support.oracle import lexicographic  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 import qpcoord as qc  # noqa: E402

@@ -59,6 +59,12 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_second():
     pattern = re.search(r"grep -m1 -E '(.*?)' README.md", ci).group(1)
     assert re.search(pattern, "    " + commands[1])
     assert "-eq 5" in ci  # pytest's "no tests collected" fails CI
+    # the numeric tests again under another OpenBLAS kernel and the native baseline build
+    second = re.search(r"^second=\((.*)\)$", ci, re.M).group(1).split()
+    assert "OPENBLAS_CORETYPE=Prescott" in second and "QPCOORD_NATIVE_ISA=baseline" in second
+    assert re.search(
+        r'^run_pytest env "\$\{second\[@\]\}" .*pytest .*tests/core tests/kinematics$', ci, re.M
+    )
 
 
 @pytest.mark.parametrize("method", ["hierarchical", "weighted"])

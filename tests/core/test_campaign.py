@@ -1,11 +1,11 @@
 """Seeded campaign over the degeneracy kinds of issue 22, judged against the exact
-lexicographic reference (``tests/oracle.py``, ``polish=True``): no level may come out worse than the
-reference by 1e-6 of its scale while the solution says ``"optimal"``."""
+lexicographic reference (:mod:`support.oracle`, ``polish=True``): no level may come out worse
+than the reference by 1e-6 of its scale while the solution says ``"optimal"``."""
 
 from __future__ import annotations
 
 import pytest
-from campaign import KINDS, run
+from support.campaign import KINDS, run
 
 import qpcoord as qc
 
@@ -55,7 +55,7 @@ def test_campaign_slow_other_backends():
 
 
 def test_kinds_are_all_generated():
-    from campaign import make_stack
+    from support.campaign import make_stack
 
     for kind in KINDS:
         spec = make_stack(kind, 0)
@@ -69,7 +69,7 @@ def test_proxqp_honours_the_time_limit_on_slow_outer_iterations():
     first iterations, past a 10 s limit. Chunks are now sized for the worst case."""
     import time
 
-    from campaign import make_stack
+    from support.campaign import make_stack
 
     spec = make_stack("var_scaled", 1)
     t0 = time.perf_counter()
@@ -93,9 +93,9 @@ def test_near_parallel_stacks_need_the_exact_reference(seed):
     With ``polish=True`` (each level made exact: BVLS / verified active set) the reference
     agrees with the library to ~1e-15 of each level's scale."""
     import numpy as np
-    from campaign import level_scales, make_stack
-    from oracle import lexicographic
     from scipy.optimize import lsq_linear
+    from support.campaign import level_scales, make_stack
+    from support.oracle import lexicographic
 
     spec = make_stack("near_parallel", seed)
     plain = lexicographic(spec.levels, spec.bounds)
@@ -122,7 +122,7 @@ def test_level_qp_the_active_set_backends_reject_falls_back_to_clarabel(solver):
     level-1 QP (feasible by construction) is called inconsistent by quadprog and proxqp,
     and daqp returns a point 1e-3 outside it; the fallback chain ended there and the solve
     raised. clarabel (interior point, with a time limit) now ends the chain and solves it."""
-    from campaign import judge, make_stack, reference
+    from support.campaign import judge, make_stack, reference
 
     if "clarabel" not in qc.available_solvers():
         pytest.skip("needs clarabel")

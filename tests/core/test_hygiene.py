@@ -16,6 +16,7 @@ import time
 import numpy as np
 import pytest
 from conftest import SOLVERS
+from support.arrays import force_write
 
 import qpcoord as qc
 from qpcoord.core import backends
@@ -211,12 +212,6 @@ def test_backends_get_the_time_left(solver_name, monkeypatch):
 # --------------------------------------------------------------------------------------
 
 
-def _force_write(arr: np.ndarray, index, value) -> None:
-    """Write into a task's read-only array the way a determined caller can (its base
-    array is writable): the solve-time check must still catch a NaN."""
-    arr.base[index] = value
-
-
 @pytest.mark.parametrize("method", ["hierarchical", "weighted"])
 @pytest.mark.parametrize(
     "which, attr, message",
@@ -238,7 +233,7 @@ def test_nonfinite_data_written_behind_the_task_is_caught_at_solve_time(
     stack.solve(method=method)
     arr = getattr(tasks[which], attr)
     value = np.inf if attr == "C" else np.nan
-    _force_write(arr, (0, 0) if arr.ndim == 2 else 0, value)
+    force_write(arr, (0, 0) if arr.ndim == 2 else 0, value)
 
     def never(*args, **kwargs):
         raise AssertionError("a backend was called with non-finite data")
@@ -389,7 +384,7 @@ def test_nonfinite_data_on_the_closed_form_paths_is_named(method, bounded):
     post = qc.Equality(np.eye(3), np.zeros(3), name="posture")
     stack = qc.Stack([eq, post], bounds=qc.Bounds(-1, 1) if bounded else None)
     stack.solve(method=method)
-    _force_write(post.b, 1, np.nan)
+    force_write(post.b, 1, np.nan)
     with pytest.raises(ValueError, match=r"Equality 'posture': b contains nan at index 1"):
         stack.solve(method=method)
 

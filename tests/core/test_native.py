@@ -22,11 +22,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hlsp import load
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
-from test_hygiene import _force_write
-from test_solver_comparison import CASES, _ids, build, reference, stack
+from support.arrays import force_write as _force_write
+from support.families import CASES, build, reference, stack
+from support.families import case_ids as _ids
+from support.hlsp import load
 
 import qpcoord as qc
 from qpcoord.core import native

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hlsp import load
+from support.hlsp import load
 from test_native import LEVEL_TOL, needs_native, published_module, published_stack, switch_pair
 from test_native_kqr import _check as kqr_check
 from test_native_kqr import _equality_under_bounds

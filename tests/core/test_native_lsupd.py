@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hlsp import load
+from support.hlsp import load
 from test_native import (
     LEVEL_TOL,
     X_TOL,

@@ -37,7 +37,7 @@ def _check(stack: qc.Stack, P, new, plain, oracle: tuple | None = None) -> int:
     ``new``'s least-distance steps."""
     taken, _, _, sp = switch_check(stack, P, new, plain, "least_distance_steps")
     if oracle is not None:
-        from oracle import lexicographic
+        from support.oracle import lexicographic
 
         xn = new.x
         scale = max(1.0, float(np.max(np.abs(sp.x))))

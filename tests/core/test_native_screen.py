@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_hierarchy_regressions import _spec_from_npz
+from support.dumps import spec_from_npz as _spec_from_npz
 from test_native import needs_native, published_stack, switch_pair
 
 import qpcoord as qc

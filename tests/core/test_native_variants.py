@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hlsp import load
 from hypothesis import HealthCheck, assume, given, settings
+from support.families import CASES, build, stack
+from support.hlsp import load
 from test_native import LEVEL_TOL, X_TOL, _same, published_module, stacks
 from test_native_weighted import _same as same_weighted
-from test_solver_comparison import CASES, build, stack
 
 import qpcoord as qc
 from qpcoord.core import native

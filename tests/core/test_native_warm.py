@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hlsp import load
+from support.hlsp import load
 from test_native import published_module
 
 import qpcoord as qc

@@ -20,8 +20,9 @@ import pytest
 import scipy.linalg
 import test_native as tn
 from hypothesis import HealthCheck, given, settings
-from test_hygiene import _force_write
-from test_solver_comparison import CASES, _ids, build, stack
+from support.arrays import force_write as _force_write
+from support.families import CASES, build, stack
+from support.families import case_ids as _ids
 
 import qpcoord as qc
 from qpcoord.core import native, native_weighted

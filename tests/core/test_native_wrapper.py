@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from native_info import info_reference
+from support.native_info import info_reference
 
 import qpcoord as qc
 from qpcoord.core import native

@@ -246,8 +246,11 @@ def test_one_form_task_wrong_number_of_columns(planar, form):
 def test_joint_limits_box(panda, gain, dt):
     limits = qc.JointLimits(panda, gain=gain)
     lo, hi = limits.box(PANDA_Q, dt)
-    np.testing.assert_allclose(lo, gain * (panda.lower - PANDA_Q) / dt, rtol=1e-15)
-    np.testing.assert_allclose(hi, gain * (panda.upper - PANDA_Q) / dt, rtol=1e-15)
+    # the same difference, product and quotient in any order: each side is within three
+    # roundings of the exact value, so the two agree to 6 eps relative (measured: 1 ulp)
+    rel = 6 * np.finfo(float).eps
+    np.testing.assert_allclose(lo, gain * (panda.lower - PANDA_Q) / dt, rtol=rel)
+    np.testing.assert_allclose(hi, gain * (panda.upper - PANDA_Q) / dt, rtol=rel)
     assert np.all(lo < 0) and np.all(hi > 0)
     ineq = limits.update(PANDA_Q, dt=dt)
     assert isinstance(ineq, qc.Inequality) and ineq is limits.task

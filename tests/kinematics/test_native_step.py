@@ -464,7 +464,9 @@ def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind)
 
     ikn, ikp = _pair(robot, levels)
     current = qc.IK(robot, levels(), DT, engine="python")  # Python tasks + native solve
-    from native_info import info_reference  # tests/: not on the allocation subprocess's path
+    from support.native_info import (
+        info_reference,  # tests/: not on the allocation subprocess's path
+    )
 
     binding = 0
     other_path = 0

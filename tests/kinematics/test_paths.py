@@ -12,6 +12,18 @@ from qpcoord import paths
 #: Central-difference step (s) and the agreement required (relative to max(1, |value|)).
 FD_STEP = 1e-5
 FD_TOL = 1e-6
+#: Two evaluations of one closed form (vectorised and scalar, a rotation built two ways, a
+#: formula against its exact value) differ by the rounding of each elementary function
+#: (numpy's sin and cos: within an ulp or two) and of each product and sum over terms no
+#: larger than the value's scale: ``ROUNDING`` ulps of ``max(1, scale)``. A path has a handful
+#: of such operations in a chain; 16 covers them with room (measured: at most 1 ulp).
+ROUNDING = 16 * np.finfo(float).eps
+
+
+def rounding(*values) -> float:
+    """The absolute agreement of two evaluations of values of these magnitudes."""
+    return ROUNDING * max(1.0, *(float(np.max(np.abs(v), initial=0.0)) for v in values))
+
 
 PATHS = {
     "lissajous-default": paths.LissajousSphere,
@@ -71,17 +83,21 @@ def test_lissajous_matches_equation_3_3(rng):
         xp = 0.6 * np.cos(0.4 * t + np.pi / 2)
         yp = 0.6 * np.cos(0.8 * t + np.pi / 2)
         s = 1.5 * np.array([np.cos(xp) * np.cos(yp), np.cos(xp) * np.sin(yp), np.sin(xp)])
+        # |R s| = 1.5 and the centre ~0.5: the terms' scale is 2; the angles 0.4 t, 0.8 t
+        # carry eps·|t| each (times slopes below 1), so |t| counts as a scale too
         np.testing.assert_allclose(
-            p.position(t), R @ s + np.array([0.0, -0.5, 0.2]), rtol=0, atol=1e-14
+            p.position(t), R @ s + np.array([0.0, -0.5, 0.2]), rtol=0, atol=rounding(2.0, t)
         )
 
 
 def test_rotation_helpers_are_right_handed():
     for axis, fn in enumerate((paths.rotation_x, paths.rotation_y, paths.rotation_z)):
         for angle in (0.3, -1.2, 2.5):
-            np.testing.assert_allclose(fn(angle), rotation_about(axis, angle), atol=1e-15)
-    # a quarter turn about z takes x to y
-    np.testing.assert_allclose(paths.rotation_z(np.pi / 2) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+            np.testing.assert_allclose(fn(angle), rotation_about(axis, angle), atol=rounding(1.0))
+    # a quarter turn about z takes x to y (cos(π/2) is 6e-17, not 0)
+    np.testing.assert_allclose(
+        paths.rotation_z(np.pi / 2) @ [1, 0, 0], [0, 1, 0], atol=rounding(1.0)
+    )
 
 
 @pytest.mark.parametrize("name", ["lissajous-default", "lissajous-custom"])
@@ -110,14 +126,14 @@ def test_circle_defaults_are_the_thesis_figure():
     c = paths.Circle()
     np.testing.assert_array_equal(c.center, [1.5, 0.0])
     assert c.radius == 0.5 and c.period == np.pi and c.phase == 0.0 and c.dim == 2
-    np.testing.assert_allclose(c.position(0.0), [2.0, 0.0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(c.position(0.0), [2.0, 0.0], rtol=0, atol=rounding(2.0))
     # counter-clockwise: a quarter period later it is at the top
-    np.testing.assert_allclose(c.position(np.pi / 4), [1.5, 0.5], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(c.position(np.pi / 4), [1.5, 0.5], rtol=0, atol=rounding(2.0))
 
 
 def test_circle_phase_rotates_the_start():
     c = paths.Circle(center=(0.0, 0.0), radius=2.0, phase=np.pi / 2)
-    np.testing.assert_allclose(c.position(0.0), [0.0, 2.0], atol=1e-15)
+    np.testing.assert_allclose(c.position(0.0), [0.0, 2.0], atol=rounding(2.0))
 
 
 # ---------------------------------------------------------------------------------------
@@ -196,7 +212,7 @@ def test_vector_times_give_one_row_per_time(path, method):
     out = fn(t)
     assert out.shape == (5, path.dim)
     for k, tk in enumerate(t):
-        np.testing.assert_allclose(out[k], fn(float(tk)), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(out[k], fn(float(tk)), rtol=0, atol=rounding(out))
     assert fn(0.5).shape == (path.dim,)
     assert fn([0.5]).shape == (1, path.dim)
     assert fn(np.array([])).shape == (0, path.dim)
@@ -271,8 +287,9 @@ def test_bad_times(path, method, t, message):
 def test_horizontal_circle_starts_at_its_start_point():
     start = np.array([0.3, -0.1, 0.5])
     c = paths.HorizontalCircle(start, radius=0.1, period=2.0)
-    np.testing.assert_allclose(c.position(0.0), start, atol=1e-15)
-    np.testing.assert_allclose(c.position(2.0), start, atol=1e-14)
+    np.testing.assert_allclose(c.position(0.0), start, atol=rounding(start))
+    # a full period: the angle 2π·t/T is 2π to its rounding, times the radius 0.1
+    np.testing.assert_allclose(c.position(2.0), start, atol=rounding(start))
     t = np.linspace(0, 2, 7)
     np.testing.assert_allclose(np.linalg.norm(c.position(t) - c.center, axis=1), 0.1)
     h = 1e-6

@@ -22,7 +22,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[3]
 sys.path[:0] = [str(ROOT / "benchmarks"), str(ROOT / "tests"), str(ROOT / "tests" / "core")]
 import hierarchy_bench as hb  # noqa: E402
 import hierarchy_published as hp  # noqa: E402
-from hlsp import load  # noqa: E402
+from support.hlsp import load  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
 from qpcoord.core.native import NativeHierarchy  # noqa: E402

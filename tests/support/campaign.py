@@ -2,10 +2,10 @@
 
 ``make_stack(kind, seed)`` builds one stack of a degeneracy kind (:data:`KINDS`);
 ``judge(stack_spec, solver)`` solves it with qpcoord and compares every level with the
-cvxpy lexicographic reference of ``tests/oracle.py`` with ``polish=True`` (each equality
+cvxpy lexicographic reference of :mod:`support.oracle` with ``polish=True`` (each equality
 level made exact by BVLS / a verified active set). The normal suite runs a small sample
 (``tests/core/test_campaign.py``), the ``slow`` marker 1 000 stacks of each kind;
-``python tests/core/campaign.py N`` prints the counts per backend.
+``PYTHONPATH=tests python -m support.campaign N`` prints the counts per backend.
 
 A level is *wrong* when its residual is above the reference's by more than ``WRONG_TOL``
 of the level's scale (``‖b‖ + ‖A‖_F·‖x‖`` over its tasks, finite limits counted like
@@ -141,7 +141,7 @@ class Verdict:
 
 
 def reference(spec: Spec):
-    from oracle import lexicographic
+    from .oracle import lexicographic
 
     return lexicographic(spec.levels, spec.bounds, polish=True)
 
@@ -230,7 +230,7 @@ def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0
     ``per_kind[solver][kind]`` the same per kind, and the silent wrong levels as
     ``(solver, kind, seed, level, gap)``.
     """
-    from oracle import OracleError
+    from .oracle import OracleError
 
     counts = {s: dict(_zero(), t=[]) for s in solvers}
     per_kind = {s: {k: _zero() for k in kinds} for s in solvers}
@@ -301,9 +301,6 @@ def run(n_per_kind: int, solvers, seed0: int = 0, log=None, damping: float = 0.0
 
 
 if __name__ == "__main__":
-    import os
-
-    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 20
     solvers = sys.argv[2].split(",") if len(sys.argv) > 2 else qc.available_solvers()
     damping = float(sys.argv[3]) if len(sys.argv) > 3 else 0.0

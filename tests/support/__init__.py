@@ -1,0 +1,15 @@
+"""Shared problem builders and oracles of the test suite and the benchmarks.
+
+Test modules import these (``from support.oracle import lexicographic``; pytest puts
+``tests/`` on the path through its ``conftest.py``), never each other. The benchmarks put
+``tests/`` on their path and import the same way.
+
+- :mod:`support.oracle`: the exact lexicographic reference (cvxpy + Clarabel per level).
+- :mod:`support.families`: seeded stack families of the solver comparison and their references.
+- :mod:`support.campaign`: seeded degenerate stacks judged against the reference.
+- :mod:`support.hlsp`: the published hierarchical least-squares problems (``tests/data/hlsp``).
+- :mod:`support.dumps`: stacks stored level by level in ``.npz`` files (``tests/data``).
+- :mod:`support.stacks`: small stacks that several tests share.
+- :mod:`support.arrays`: writing behind a task's read-only arrays.
+- :mod:`support.native_info`: the native engine's ``Solution.info`` by its definition.
+"""
