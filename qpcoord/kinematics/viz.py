@@ -46,12 +46,14 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
+import coal
 import numpy as np
 import pinocchio as pin
 
+from .collision import Obstacle
 from .robot import Robot
 
-__all__ = ["animate", "NoVisualGeometry", "DEFAULT_FPS", "DEFAULT_MAX_FRAMES"]
+__all__ = ["animate", "NoVisualGeometry", "DEFAULT_FPS", "DEFAULT_MAX_FRAMES", "PLANE_THICKNESS"]
 
 
 class NoVisualGeometry(ValueError):
@@ -354,23 +356,119 @@ def _field(obj: Any, names: Iterable[str]) -> Any:
     return None
 
 
-def _obstacles(obstacles: Any) -> list[tuple[str, Any, np.ndarray]]:
-    """``(kind, size, pose)``: kind ``"sphere"`` (size = radius, m) or ``"box"`` (size =
-    full side lengths, m); pose 4×4."""
+#: Thickness (m) of the slab drawn for a half-space: its top face is the plane, the slab
+#: lies on the solid side.
+PLANE_THICKNESS = 0.01
+_SHEET = 0.002  # m, thickness of a two-sided plane's sheet
+_FLAT = ("halfspace", "plane")
+# meshcat's cylinder lies along its frame's y axis; coal's capsules and cylinders along z
+_Y_TO_Z = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
+
+
+class _Shape:
+    """An obstacle to draw: ``kind`` and its numbers (m) in its own frame, ``pose`` (4×4,
+    world). ``"sphere"``: ``size`` the radius; ``"box"``: the side lengths (3,);
+    ``"capsule"`` / ``"cylinder"``: ``(radius, length)`` along the frame's z; ``"ellipsoid"``:
+    the radii (3,); ``"halfspace"`` / ``"plane"``: ``pose``'s z is the unit normal (toward
+    the free side for a half-space), its origin a point of the plane, ``size`` the side of
+    the square patch drawn (m, ``None``: sized to the scene)."""
+
+    __slots__ = ("kind", "size", "pose")
+
+    def __init__(self, kind: str, size: Any, pose: np.ndarray) -> None:
+        self.kind, self.size, self.pose = kind, size, pose
+
+
+def _frame_with_z(z: np.ndarray) -> np.ndarray:
+    """A rotation (3×3) whose third column is the unit vector ``z``."""
+    x = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def _plane(normal: Any, offset: Any, size: Any, what: str, kind: str) -> _Shape:
+    """The plane ``normal · x = offset`` (m): for a half-space the solid side is
+    ``normal · x ≤ offset`` (coal's convention), the normal points to the free side."""
+    try:
+        n = np.asarray(normal, dtype=float).reshape(-1)
+        d = float(offset)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{what}: normal must be 3 numbers and offset a number (m), got {normal!r}, {offset!r}"
+        ) from None
+    norm = float(np.linalg.norm(n)) if n.shape == (3,) else 0.0
+    if n.shape != (3,) or not np.isfinite(norm) or norm == 0.0 or not np.isfinite(d):
+        raise ValueError(
+            f"{what}: normal must be a finite non-zero 3-vector and offset finite (m), got "
+            f"normal={normal!r}, offset={offset!r}"
+        )
+    z = n / norm
+    T = np.eye(4)
+    T[:3, :3] = _frame_with_z(z)
+    T[:3, 3] = (d / norm) * z
+    if size is not None:
+        side = float(size)
+        if not (np.isfinite(side) and side > 0):
+            raise ValueError(f"{what}: size must be a positive side length (m), got {size!r}")
+        size = side
+    return _Shape(kind, size, T)
+
+
+def _coal_shape(obs: Obstacle, what: str) -> _Shape:
+    """A :class:`qpcoord.Obstacle` drawn from its coal geometry and pose."""
+    g, T = obs.geometry(), np.array(obs.pose, dtype=float)
+    if isinstance(g, (coal.Halfspace, coal.Plane)):
+        kind = "halfspace" if isinstance(g, coal.Halfspace) else "plane"
+        R, p = T[:3, :3], T[:3, 3]
+        n = R @ np.array(g.n, dtype=float)  # coal keeps n unit
+        return _plane(n, float(g.d) + float(n @ p), None, what, kind)
+    if isinstance(g, coal.Sphere):
+        return _Shape("sphere", float(g.radius), T)
+    if isinstance(g, coal.Box):
+        return _Shape("box", 2.0 * np.array(g.halfSide, dtype=float), T)
+    if isinstance(g, (coal.Capsule, coal.Cylinder)):
+        kind = "capsule" if isinstance(g, coal.Capsule) else "cylinder"
+        return _Shape(kind, (float(g.radius), 2.0 * float(g.halfLength)), T)
+    if isinstance(g, coal.Ellipsoid):
+        return _Shape("ellipsoid", np.array(g.radii, dtype=float), T)
+    raise ValueError(
+        f"{what}: a {type(g).__name__} cannot be drawn (drawn: coal Sphere, Box, Capsule, "
+        "Cylinder, Ellipsoid, Halfspace, Plane)"
+    )
+
+
+def _obstacles(obstacles: Any) -> list[_Shape]:
+    """The obstacles to draw, checked."""
     if obstacles is None:
         return []
-    if isinstance(obstacles, Mapping) or hasattr(obstacles, "centre"):
+    if isinstance(obstacles, (Mapping, Obstacle)) or any(
+        hasattr(obstacles, a) for a in ("centre", "normal")
+    ):
         obstacles = [obstacles]
-    out: list[tuple[str, Any, np.ndarray]] = []
+    out: list[_Shape] = []
     for k, obs in enumerate(obstacles):
         what = f"obstacles[{k}]"
+        if isinstance(obs, Obstacle):
+            shape = _coal_shape(obs, what)
+            if shape.kind == "sphere" and not shape.size > 0:
+                raise ValueError(f"{what}: radius must be positive (m), got {shape.size!r}")
+            out.append(shape)
+            continue
+        normal = _field(obs, ("normal",))
+        if normal is not None:
+            offset = _field(obs, ("offset",))
+            if offset is None:
+                raise ValueError(f"{what}: a half-space needs normal and offset, got {obs!r}")
+            out.append(_plane(normal, offset, _field(obs, ("size",)), what, "halfspace"))
+            continue
         centre = _field(obs, ("centre", "center"))
         radius = _field(obs, ("radius",))
         half = _field(obs, ("half_extents",))
         if centre is None or (radius is None) == (half is None):
             raise ValueError(
-                f"{what} must be a sphere (centre, radius) or a box (centre, half_extents, "
-                f"optional rotation), as an object with those attributes or a dict; got {obs!r}"
+                f"{what} must be a sphere (centre, radius), a box (centre, half_extents, "
+                "optional rotation), a half-space (normal, offset, optional size) or a "
+                f"qc.Obstacle, as an object with those attributes or a dict; got {obs!r}"
             )
         c = np.asarray(centre, dtype=float).reshape(-1)
         if c.shape != (3,) or not np.all(np.isfinite(c)):
@@ -381,7 +479,7 @@ def _obstacles(obstacles: Any) -> list[tuple[str, Any, np.ndarray]]:
             r = float(radius)
             if not (np.isfinite(r) and r > 0):
                 raise ValueError(f"{what}: radius must be positive and finite (m), got {radius!r}")
-            out.append(("sphere", r, T))
+            out.append(_Shape("sphere", r, T))
             continue
         h = np.asarray(half, dtype=float).reshape(-1)
         if h.shape != (3,) or not np.all(np.isfinite(h)) or np.any(h <= 0):
@@ -394,8 +492,27 @@ def _obstacles(obstacles: Any) -> list[tuple[str, Any, np.ndarray]]:
             if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-6):
                 raise ValueError(f"{what}: rotation must be a 3×3 rotation matrix")
             T[:3, :3] = R
-        out.append(("box", 2.0 * h, T))
+        out.append(_Shape("box", 2.0 * h, T))
     return out
+
+
+def _plane_patch(shape: _Shape, centre: Any, extent: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where a half-space or plane is drawn: ``(pose, side_lengths)`` of the box (m).
+
+    The patch is a square of side ``shape.size`` (default ``max(1, 2 · extent)`` m) centred
+    at the projection of ``centre`` (m, world: the middle of the scene) on the plane, with
+    ``extent`` (m) the size of the scene. A half-space is a slab of
+    :data:`PLANE_THICKNESS` whose top face lies on the plane, on the solid side; a plane a
+    thin sheet centred on it. The pose's z axis is the plane's normal.
+    """
+    T = shape.pose.copy()
+    z, o = T[:3, 2], T[:3, 3]
+    c = np.asarray(centre, dtype=float)
+    p = c - float((c - o) @ z) * z
+    side = shape.size if shape.size is not None else max(1.0, 2.0 * float(extent))
+    thick = PLANE_THICKNESS if shape.kind == "halfspace" else _SHEET
+    T[:3, 3] = p - 0.5 * thick * z if shape.kind == "halfspace" else p
+    return T, np.array([side, side, thick])
 
 
 # ---------------------------------------------------------------------- the call
@@ -439,11 +556,24 @@ def animate(
         ``pinocchio.SE3``) as a sphere and a 10 cm axis triad (x red, y green, z blue).
         One target, a list, or an array of shape (K, 3) / (K, 4, 4).
     obstacles : optional
-        Drawn still, in half-transparent red. Each is a sphere -- any object with
-        ``centre`` (3,) and ``radius`` (m), such as ``qc.Sphere`` -- or a box -- ``centre``,
-        ``half_extents`` (3,) (m) and an optional 3×3 ``rotation`` (box to world), such as
-        ``qc.Box`` -- given as an object with those attributes or a dict with those keys
-        (``center`` is accepted for ``centre``). One obstacle or a list.
+        Drawn still, in half-transparent red. One obstacle or a list; each is
+
+        - a :class:`qpcoord.Obstacle` -- ``qc.Sphere``, ``qc.Box``, ``qc.Capsule``, or
+          ``qc.Obstacle(coal geometry, pose)`` with a coal ``Sphere``, ``Box``, ``Capsule``,
+          ``Cylinder``, ``Ellipsoid``, ``Halfspace`` or ``Plane``: the very objects given to
+          :class:`~qpcoord.CollisionAvoidance`;
+        - a sphere: ``centre`` (3,) and ``radius`` (m);
+        - a box: ``centre``, ``half_extents`` (3,) (m) and an optional 3×3 ``rotation`` (box
+          to world);
+        - a half-space: ``normal`` (3,) and ``offset`` (m), the solid side being
+          ``normal · x ≤ offset`` (coal's ``Halfspace``; the normal points to the free side),
+          and an optional ``size`` (m);
+
+        given as an object with those attributes or a dict with those keys (``center`` is
+        accepted for ``centre``). A half-space is drawn as a square slab of
+        :data:`PLANE_THICKNESS` (1 cm) whose top face lies on the plane, centred at the
+        projection of the scene's middle on it, of side ``size`` (default: twice the
+        scene's extent, at least 1 m); a coal ``Plane`` (two-sided) as a 2 mm sheet.
     fps : float, optional
         Frames kept per second of trajectory time (default :data:`DEFAULT_FPS`, 30). The
         page plays in real time; the browser interpolates between frames.
@@ -518,15 +648,14 @@ def animate(
             node["axes"].set_object(mg.triad(_TARGET_AXIS))
         node.set_transform(T)
     red = mg.MeshLambertMaterial(color=_OBSTACLE_COLOUR, opacity=0.5, transparent=True)
-    for k, (kind, size, T) in enumerate(obstacle_shapes):
-        node = root["obstacles"][f"obstacle_{k}"]
-        node.set_object(mg.Sphere(size) if kind == "sphere" else mg.Box(list(size)), red)
-        node.set_transform(T)
+    solids = [(k, o) for k, o in enumerate(obstacle_shapes) if o.kind not in _FLAT]
+    for k, shape in solids:
+        _draw_solid(root["obstacles"][f"obstacle_{k}"], shape, red, mg)
 
     # the robot: still at the first configuration, then one animation frame per kept sample
     q_pin = q if robot.coordinate_map is None else q @ robot.coordinate_map.T
     keep = _frames(times, float(fps), int(max_frames))
-    points = [T[:3, 3] for _, T in target_poses] + [T[:3, 3] for _, _, T in obstacle_shapes]
+    points = [T[:3, 3] for _, T in target_poses] + [o.pose[:3, 3] for _, o in solids]
     viz.display(q_pin[keep[0]])
     points.extend(np.array(M.translation) for M in viz.visual_data.oMg)
     if len(keep) > 1:
@@ -537,10 +666,40 @@ def animate(
             points.extend(np.array(M.translation) for M in viz.visual_data.oMg)
         viz.viewer = root
         root.set_animation(anim, play=True, repetitions=2**31 - 1 if loop else 1)
-    aim = _frame_camera(root, np.array(points))
+    cloud = np.array(points)
+    lo, hi = cloud.min(axis=0), cloud.max(axis=0)
+    sheet = mg.MeshLambertMaterial(color=_OBSTACLE_COLOUR, opacity=0.3, transparent=True)
+    for k, shape in enumerate(obstacle_shapes):
+        if shape.kind in _FLAT:
+            T, sides = _plane_patch(shape, 0.5 * (lo + hi), float(np.max(hi - lo)))
+            node = root["obstacles"][f"obstacle_{k}"]
+            node.set_object(mg.Box(list(sides)), sheet)
+            node.set_transform(T)
+    aim = _frame_camera(root, cloud)
 
     _write_atomically(out, recorder.html(aim))
     return out
+
+
+def _draw_solid(node: Any, shape: _Shape, material: Any, mg: Any) -> None:
+    """A sphere, box, ellipsoid, cylinder or capsule (a cylinder and two balls) at its pose."""
+    if shape.kind == "sphere":
+        node.set_object(mg.Sphere(shape.size), material)
+    elif shape.kind == "box":
+        node.set_object(mg.Box(list(shape.size)), material)
+    elif shape.kind == "ellipsoid":
+        node.set_object(mg.Ellipsoid(list(shape.size)), material)
+    else:
+        radius, length = shape.size
+        node["body"].set_object(mg.Cylinder(length, radius), material)
+        node["body"].set_transform(_Y_TO_Z)
+        if shape.kind == "capsule":
+            for end, sign in (("top", 1.0), ("bottom", -1.0)):
+                T = np.eye(4)
+                T[2, 3] = sign * 0.5 * length
+                node[end].set_object(mg.Sphere(radius), material)
+                node[end].set_transform(T)
+    node.set_transform(shape.pose)
 
 
 def _frame_camera(root: Any, points: np.ndarray) -> str:
