@@ -27,6 +27,12 @@ geometry (the Panda: 1.5 kB, Talos: 7.5 kB)::
     talos   52 (.stl)           61       12.0 MB (5.8 MB)      0.8 s
     talos   52                  600      16.0 MB (7.6 MB)      2.1-2.8 s
 
+Edges: half-spaces (``{"normal": n, "offset": d}`` or ``qc.Obstacle(coal.Halfspace(n, d))``)
+are drawn as a slab on their solid side, and ``annotations=annotate(ik, trajectory,
+solutions, collision=avoid)`` shows per frame the nearest collision pairs (witness segments
+coloured by distance), the joints at a limit and a text box listing the pair distances and
+the rows the step was held by (:mod:`qpcoord.kinematics.viz_notes`).
+
 Frames are subsampled to ``fps`` (default 30 per second of trajectory time) and at most
 ``max_frames`` (default 600: 20 s at 30 fps; a longer run is shown at a lower rate); three.js
 interpolates between frames when it plays.
@@ -36,6 +42,7 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import json
 import math
 import os
 import tempfile
@@ -52,8 +59,21 @@ import pinocchio as pin
 
 from .collision import Obstacle
 from .robot import Robot
+from .viz_notes import ActiveRow, Annotations, FrameNote, Witness, annotate
 
-__all__ = ["animate", "NoVisualGeometry", "DEFAULT_FPS", "DEFAULT_MAX_FRAMES", "PLANE_THICKNESS"]
+__all__ = [
+    "annotate",
+    "Annotations",
+    "FrameNote",
+    "Witness",
+    "ActiveRow",
+    "OVERLAY_ID",
+    "animate",
+    "NoVisualGeometry",
+    "DEFAULT_FPS",
+    "DEFAULT_MAX_FRAMES",
+    "PLANE_THICKNESS",
+]
 
 
 class NoVisualGeometry(ValueError):
@@ -529,6 +549,7 @@ def animate(
     max_frames: int = DEFAULT_MAX_FRAMES,
     loop: bool = True,
     visual_model: pin.GeometryModel | None = None,
+    annotations: Any = None,
 ) -> Path:
     """Write one self-contained HTML animation of ``robot`` moving along ``trajectory``.
 
@@ -589,6 +610,15 @@ def animate(
         Replay the animation for ever (default) or play it once.
     visual_model : pinocchio.GeometryModel, optional
         Visual geometry to draw instead of the robot's URDF visuals (on ``robot.model``).
+    annotations : optional
+        What each frame shows beyond the robot, one item per configuration of
+        ``trajectory``: :func:`annotate`'s result (pair distances and the IK's active rows),
+        or a list of dicts (or objects) with optional keys ``text`` (str, shown in a box at
+        the top left while the frame is on), ``segments`` (``(p1, p2)`` or ``(p1, p2,
+        state)``: two 3-D points, m; ``state`` ``"clear"`` blue, ``"near"`` orange (the
+        default), ``"inside"`` magenta) and ``joints`` (joint names, each marked by a
+        translucent yellow ball of 6 cm around its origin). Shown at the kept frames (see
+        ``fps``); objects switch at each frame's time, the segments' ends move smoothly.
 
     Returns
     -------
@@ -601,7 +631,9 @@ def animate(
         Configurations of the wrong size or not finite (``trajectory``), missing or bad
         times (``dt``, ``t``), a robot without visual geometry (``robot``), a folder that
         does not exist or is not writable, or a directory (``path``), a bad target or
-        obstacle (``targets[k]``, ``obstacles[k]``), a bad ``fps`` or ``max_frames``.
+        obstacle (``targets[k]``, ``obstacles[k]``), a bad ``fps`` or ``max_frames``,
+        annotations of another length than ``trajectory`` or with a bad segment, state or
+        joint name (``annotations[k]``).
     ImportError
         meshcat is not installed (``pip install "qpcoord[viz]"``).
 
@@ -622,6 +654,7 @@ def animate(
     times, q = _samples(robot, trajectory, dt, t)
     target_poses = _targets(targets)
     obstacle_shapes = _obstacles(obstacles)
+    frame_notes = _notes(annotations, robot, len(times))
     geom = _visual_model(robot, visual_model)
     meshcat, mg, Animation, umsgpack = _meshcat()
     from pinocchio.visualize import MeshcatVisualizer
@@ -658,13 +691,23 @@ def animate(
     points = [T[:3, 3] for _, T in target_poses] + [o.pose[:3, 3] for _, o in solids]
     viz.display(q_pin[keep[0]])
     points.extend(np.array(M.translation) for M in viz.visual_data.oMg)
-    if len(keep) > 1:
-        anim = Animation(default_framerate=float(fps))
+    joints = [np.array([M.translation for M in viz.data.oMi])]  # joint origins (m), per frame
+    anim = Animation(default_framerate=float(fps)) if len(keep) > 1 else None
+    if anim is not None:
+        joints = []
         for k in keep:
             viz.viewer = anim.at_frame(root, float(times[k] * fps))
             viz.display(q_pin[k])
             points.extend(np.array(M.translation) for M in viz.visual_data.oMg)
+            joints.append(np.array([M.translation for M in viz.data.oMi]))
         viz.viewer = root
+    overlay = ""
+    if frame_notes is not None:
+        kept = [frame_notes[k] for k in keep]
+        frames = [float(times[k] * fps) for k in keep]
+        _draw_notes(root, anim, kept, frames, joints, mg)
+        overlay = _overlay_script([float(times[k]) for k in keep], [n[0] for n in kept])
+    if anim is not None:
         root.set_animation(anim, play=True, repetitions=2**31 - 1 if loop else 1)
     cloud = np.array(points)
     lo, hi = cloud.min(axis=0), cloud.max(axis=0)
@@ -677,7 +720,7 @@ def animate(
             node.set_transform(T)
     aim = _frame_camera(root, cloud)
 
-    _write_atomically(out, recorder.html(aim))
+    _write_atomically(out, recorder.html(aim + overlay))
     return out
 
 
@@ -700,6 +743,170 @@ def _draw_solid(node: Any, shape: _Shape, material: Any, mg: Any) -> None:
                 node[end].set_object(mg.Sphere(radius), material)
                 node[end].set_transform(T)
     node.set_transform(shape.pose)
+
+
+# ---------------------------------------------------------------------- annotations
+_SEGMENT_COLOURS = {"clear": 0x4477AA, "near": 0xFF9900, "inside": 0xE0119D}
+_SEGMENT_RADIUS = 0.004  # m, a witness segment's thickness
+_WITNESS_RADIUS = 0.008  # m, its end points
+_JOINT_COLOUR = 0xFFD700  # a joint at a limit: a yellow ball around its origin
+_JOINT_RADIUS = 0.06  # m
+#: the overlay's element id in the page
+OVERLAY_ID = "qpcoord-notes"
+
+_Note = tuple[str, list[tuple[np.ndarray, np.ndarray, str]], list[int]]
+
+
+def _notes(annotations: Any, robot: Robot, n: int) -> list[_Note] | None:
+    """Each sample's ``(text, segments (p1, p2, state), joint ids)``, checked."""
+    if annotations is None:
+        return None
+    if isinstance(annotations, (str, bytes, Mapping)) or not hasattr(annotations, "__len__"):
+        raise ValueError(
+            "annotations must be qc.viz.annotate(...) or a list of per-frame dicts (text, "
+            f"segments, joints), got {type(annotations).__name__}"
+        )
+    if len(annotations) != n:
+        raise ValueError(
+            f"annotations: {len(annotations)} frames for a trajectory of {n} configurations"
+        )
+    model = robot.model
+    out: list[_Note] = []
+    for k, item in enumerate(annotations):
+        what = f"annotations[{k}]"
+        text = _field(item, ("text",))
+        text = "" if text is None else text
+        if not isinstance(text, str):
+            raise ValueError(f"{what}: text must be a string, got {type(text).__name__}")
+        segments = []
+        for s, seg in enumerate(_field(item, ("segments",)) or ()):
+            seg = tuple(seg)
+            state = seg[2] if len(seg) == 3 else "near"
+            try:
+                p = np.array(seg[:2], dtype=float)
+            except (TypeError, ValueError):
+                p = None
+            if len(seg) not in (2, 3) or p is None or p.shape != (2, 3):
+                raise ValueError(
+                    f"{what}: segments[{s}] must be (p1, p2[, state]), two 3-D points (m)"
+                )
+            if not np.all(np.isfinite(p)):
+                raise ValueError(f"{what}: segments[{s}] must be finite (m)")
+            if state not in _SEGMENT_COLOURS:
+                raise ValueError(
+                    f"{what}: segments[{s}] state must be one of {', '.join(_SEGMENT_COLOURS)}, "
+                    f"got {state!r}"
+                )
+            segments.append((p[0], p[1], state))
+        ids = []
+        for name in _field(item, ("joints",)) or ():
+            j = model.getJointId(str(name)) if isinstance(name, str) else model.njoints
+            if not 0 < j < model.njoints:
+                raise ValueError(f"{what}: joints: {name!r} is not a joint of {robot.name!r}")
+            ids.append(int(j))
+        out.append((text, segments, ids))
+    return out
+
+
+def _segment_pose(p1: np.ndarray, p2: np.ndarray) -> tuple[np.ndarray, list[float]]:
+    """Pose and scale of meshcat's unit cylinder (along its y axis) spanning ``p1 → p2``."""
+    d = p2 - p1
+    length = float(np.linalg.norm(d))
+    T = np.eye(4)
+    if length > 1e-9:
+        R = _frame_with_z(d / length)  # columns x, y, z with z along d
+        T[:3, :3] = R[:, [1, 2, 0]]  # y along d (a cyclic permutation: still a rotation)
+    T[:3, 3] = 0.5 * (p1 + p2)
+    return T, [1.0, max(length, 1e-6), 1.0]
+
+
+def _draw_notes(
+    root: Any, anim: Any, notes: list[_Note], frames: list[float], joints: list, mg: Any
+) -> None:
+    """Witness segments (coloured by state) and joint markers: their still state at the
+    first frame, then one key per frame (``anim``; booleans switch at the keys)."""
+    group = root["annotations"]
+    slots = max((len(n[1]) for n in notes), default=0)
+    for s in range(slots):
+        for state, colour in _SEGMENT_COLOURS.items():
+            group[f"pair_{s}"][state].set_object(
+                mg.Cylinder(1.0, _SEGMENT_RADIUS), mg.MeshLambertMaterial(color=colour)
+            )
+        for end in ("p1", "p2"):
+            group[f"pair_{s}_{end}"].set_object(
+                mg.Sphere(_WITNESS_RADIUS), mg.MeshLambertMaterial(color=0x222222)
+            )
+    marked = sorted({j for n in notes for j in n[2]})
+    ball = mg.MeshLambertMaterial(color=_JOINT_COLOUR, opacity=0.6, transparent=True)
+    for j in marked:
+        group["joints"][f"joint_{j}"].set_object(mg.Sphere(_JOINT_RADIUS), ball)
+
+    def at(viewer: Any, path: tuple[str, ...]) -> Any:
+        for name in ("annotations", *path):
+            viewer = viewer[name]
+        return viewer
+
+    def show(path: tuple[str, ...], i: int, key: str, value: Any, jstype: str) -> None:
+        if i == 0:
+            at(root, path).set_property(key, value)
+        if anim is not None:
+            at(anim.at_frame(root, frames[i]), path).set_property(key, jstype, value)
+
+    def place(path: tuple[str, ...], i: int, T: np.ndarray) -> None:
+        if i == 0:
+            at(root, path).set_transform(T)
+        if anim is not None:
+            at(anim.at_frame(root, frames[i]), path).set_transform(T)
+
+    for i, (_, segments, ids) in enumerate(notes):
+        for s in range(slots):
+            on = s < len(segments)
+            p1, p2, state = segments[s] if on else (np.zeros(3), np.zeros(3), "")
+            T, scale = _segment_pose(p1, p2)
+            place((f"pair_{s}",), i, T)
+            show((f"pair_{s}",), i, "scale", scale, "vector3")
+            for st in _SEGMENT_COLOURS:
+                show((f"pair_{s}", st), i, "visible", on and st == state, "boolean")
+            for end, p in (("p1", p1), ("p2", p2)):
+                E = np.eye(4)
+                E[:3, 3] = p
+                place((f"pair_{s}_{end}",), i, E)
+                show((f"pair_{s}_{end}",), i, "visible", on, "boolean")
+        for j in marked:
+            E = np.eye(4)
+            E[:3, 3] = joints[i][j]
+            place(("joints", f"joint_{j}"), i, E)
+            show(("joints", f"joint_{j}"), i, "visible", j in ids, "boolean")
+
+
+def _overlay_script(times: list[float], texts: list[str]) -> str:
+    """JavaScript that shows, in a box over the view, the text of the frame the animation
+    is at (the last key at or before its time, as the switches of the drawn objects)."""
+    data = json.dumps({"t": times, "text": texts}, ensure_ascii=True).replace("<", "\\u003c")
+    return (
+        "\n(function () {\n"
+        f"  const notes = {data};\n"
+        '  const box = document.createElement("pre");\n'
+        f'  box.id = "{OVERLAY_ID}";\n'
+        '  box.style.cssText = "position: fixed; top: 0; left: 0; margin: 6px; padding: 4px 6px; '
+        "font: 11px monospace; background: rgba(255, 255, 255, 0.85); color: #111; "
+        'pointer-events: none; max-width: 60vw; overflow: hidden; z-index: 10";\n'
+        "  document.body.appendChild(box);\n"
+        "  let shown = -1;\n"
+        "  function frame() {\n"
+        "    const actions = viewer.animator.actions;\n"
+        "    const now = actions.length ? actions[0].time : 0;\n"
+        "    let lo = 0, hi = notes.t.length - 1;\n"
+        "    while (lo < hi) {\n"
+        "      const mid = (lo + hi + 1) >> 1;\n"
+        "      if (notes.t[mid] <= now + 1e-6) lo = mid; else hi = mid - 1;\n"
+        "    }\n"
+        "    if (lo !== shown) { box.textContent = notes.text[lo]; shown = lo; }\n"
+        "    requestAnimationFrame(frame);\n"
+        "  }\n"
+        "  frame();\n"
+        "})();\n"
+    )
 
 
 def _frame_camera(root: Any, points: np.ndarray) -> str:
