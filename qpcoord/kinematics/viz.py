@@ -59,7 +59,7 @@ import pinocchio as pin
 
 from .collision import Obstacle
 from .robot import Robot
-from .viz_notes import ActiveRow, Annotations, FrameNote, Witness, annotate
+from .viz_notes import ActiveRow, Annotations, FrameNote, Witness, annotate, between
 
 __all__ = [
     "annotate",
@@ -619,6 +619,8 @@ def animate(
         default), ``"inside"`` magenta) and ``joints`` (joint names, each marked by a
         translucent yellow ball of 6 cm around its origin). Shown at the kept frames (see
         ``fps``); objects switch at each frame's time, the segments' ends move smoothly.
+        With :func:`annotate`'s notes a kept frame's text adds what the skipped
+        configurations before it showed and it does not (:func:`between`).
 
     Returns
     -------
@@ -706,7 +708,14 @@ def animate(
         kept = [frame_notes[k] for k in keep]
         frames = [float(times[k] * fps) for k in keep]
         _draw_notes(root, anim, kept, frames, joints, mg)
-        overlay = _overlay_script([float(times[k]) for k in keep], [n[0] for n in kept])
+        texts = [n[0] for n in kept]
+        if all(isinstance(a, FrameNote) for a in annotations):
+            # the samples a page skips (fps) must not hide an edge: each kept frame's text
+            # adds what the samples since the previous kept frame showed and it does not
+            for i in range(1, len(keep)):
+                extra = between(annotations, int(keep[i - 1]), int(keep[i]))
+                texts[i] = f"{texts[i]}\n{extra}" if extra else texts[i]
+        overlay = _overlay_script([float(times[k]) for k in keep], texts)
     if anim is not None:
         root.set_animation(anim, play=True, repetitions=2**31 - 1 if loop else 1)
     cloud = np.array(points)

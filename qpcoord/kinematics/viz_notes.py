@@ -28,7 +28,15 @@ from .collision import CollisionAvoidance
 from .ik import IK
 from .paths import Path
 
-__all__ = ["annotate", "Annotations", "FrameNote", "Witness", "ActiveRow", "NEAREST_PAIRS"]
+__all__ = [
+    "annotate",
+    "between",
+    "Annotations",
+    "FrameNote",
+    "Witness",
+    "ActiveRow",
+    "NEAREST_PAIRS",
+]
 
 #: Pairs whose witness segments a frame shows by default (nearest first).
 NEAREST_PAIRS = 3
@@ -410,3 +418,42 @@ def _witnesses(
         state = "inside" if d < d_s else "near" if d < d_i else "clear"
         out.append(Witness(int(i), collision.pairs[int(i)], d, points, state))
     return tuple(out)
+
+
+def between(notes: Sequence[FrameNote], first: int, last: int) -> str:
+    """What the configurations strictly between frames ``first`` and ``last`` showed that
+    frame ``last`` does not: a nearer pair, and rows active there but not at ``last``
+    (with the number of steps). Empty when they add nothing -- the lines a page adds to
+    frame ``last``'s text when it skips the frames in between (``fps``)."""
+    hidden = notes[first + 1 : last]
+    if not hidden:
+        return ""
+    lines = []
+    here = notes[last]
+    closest = min(
+        (n for n in hidden if n.nearest), key=lambda n: n.nearest[0].distance, default=None
+    )
+    if closest is not None and (
+        not here.nearest or closest.nearest[0].distance < here.nearest[0].distance
+    ):
+        w = closest.nearest[0]
+        lines.append(
+            f"  nearest {w.distance:+.4f}  {w.pair[0]} – {w.pair[1]}  {w.state} "
+            f"at t = {closest.time:.3f} s"
+        )
+    now = {(r.level, r.task, r.name, r.side) for r in here.active or ()}
+    counts: dict[tuple[str, str, str, str], int] = {}
+    for n in hidden:
+        for r in n.active or ():
+            key = (r.level, r.task, r.name, r.side)
+            if key not in now:
+                counts[key] = counts.get(key, 0) + 1
+    for (level, task, name, side), count in counts.items():
+        sign = "≥" if side == "lower" else "≤"
+        lines.append(f"  also active: [{level}] {task}: {name} {sign} bound ({count} steps)")
+    if not lines:
+        return ""
+    head = (
+        f"between frames (t {hidden[0].time:.3f}–{hidden[-1].time:.3f} s, {len(hidden)} not shown):"
+    )
+    return "\n".join([head, *lines])

@@ -275,10 +275,36 @@ def test_the_page_draws_what_the_notes_say(panda, run, tmp_path, monkeypatch):
     # the overlay: the kept frames' texts, inline, nothing fetched from a network
     html = out.read_text(encoding="utf-8")
     data = json.loads(re.search(r"const notes = (\{.*?\});\n", html).group(1))
-    assert data["text"] == [notes[k].text for k in keep]
+    texts = [t.split("\nbetween frames")[0] for t in data["text"]]
+    assert texts == [notes[k].text for k in keep]
+    for i in range(1, len(keep)):  # what the skipped samples showed is added
+        extra = viz.between(notes, int(keep[i - 1]), int(keep[i]))
+        assert data["text"][i] == (f"{texts[i]}\n{extra}" if extra else texts[i])
     assert data["t"] == pytest.approx([k * DT for k in keep])
     script = html[html.index("const notes") :]
     assert "http" not in script and "<script src" not in html and "<link" not in html
+
+
+def test_skipped_samples_do_not_hide_an_edge(run):
+    """Shown at 10 fps, a 100 Hz run skips 9 samples in 10: the kept frame's text adds the
+    nearest pair and the rows active in between (here: the first steps' acceleration
+    limits, gone by frame 10)."""
+    notes = viz.annotate(run["ik"], run["q"], run["sols"], collision=run["avoid"])
+
+    def rows(k: int) -> set[tuple[str, str, str]]:
+        return {(r.task, r.name, "≥" if r.side == "lower" else "≤") for r in notes[k].active}
+
+    gone = set().union(*(rows(k) for k in range(1, 10))) - rows(10)
+    assert gone, "the run's first steps hold a row that frame 10 does not"
+    text = viz.between(notes, 0, 10)
+    assert text.startswith("between frames (t 0.010–0.090 s, 9 not shown):")
+    for task, name, sign in gone:
+        steps = sum((task, name, sign) in rows(k) for k in range(1, 10))
+        assert f"{task}: {name} {sign} bound ({steps} steps)" in text
+    nearest = min((notes[k] for k in range(1, 10)), key=lambda n: n.nearest[0].distance)
+    if nearest.nearest[0].distance < notes[10].nearest[0].distance:
+        assert f"{nearest.nearest[0].distance:+.4f}" in text
+    assert viz.between(notes, 10, 11) == ""  # nothing skipped
 
 
 def test_a_list_of_frame_dicts_and_a_still(panda, tmp_path, monkeypatch):
@@ -429,7 +455,9 @@ def test_the_annotated_page_shows_each_frame_offline_in_headless_chromium(panda,
             unmarked = pixels(page.screenshot())
             page.evaluate(f"viewer.animator.seek({near * DT})")
             page.wait_for_timeout(300)
-            assert page.evaluate(overlay) == notes[near].text
+            previous = int(keep[list(keep).index(near) - 1])
+            extra = viz.between(notes, previous, near)
+            assert page.evaluate(overlay) == notes[near].text + (f"\n{extra}" if extra else "")
             # the robot and the ball hidden: the segment is not behind them
             page.evaluate(hide("['meshcat', 'robot']") + ";" + hide("['meshcat', 'obstacles']"))
             page.wait_for_timeout(300)
