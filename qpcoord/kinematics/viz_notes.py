@@ -12,7 +12,8 @@ their distance, a marker on each joint at a limit, and a text overlay per frame.
 
 A row is *active* when ``C_i v`` is within ``CHECK_TOL · max(1, |bound|, ‖C_i‖ ‖v‖)`` of a
 finite bound (:data:`~qpcoord.core.elimination.CHECK_TOL`, the tolerance every solution is
-checked to; ``‖C_i‖ ‖v‖`` is the row's rounding scale), *violated* beyond it.
+checked to; ``‖C_i‖ ‖v‖`` is the row's rounding scale), *violated* beyond it: the rule of
+:mod:`qpcoord.core.explain`, whose row test this module uses.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from typing import Any, overload
 
 import numpy as np
 
-from ..core.elimination import CHECK_TOL
+from ..core.explain import _rows
 from .collision import CollisionAvoidance
 from .ik import IK
 from .paths import Path
@@ -247,21 +248,12 @@ def _velocities(ik: IK, solutions: Any, n: int) -> list[np.ndarray]:
 
 # ---------------------------------------------------------------------- rows at a bound
 def _at_bound(values, lower, upper, scale) -> list[tuple[int, str, float, float, float]]:
-    """``(row, side, bound, value, violation)`` of the rows at or beyond a finite bound."""
-    with np.errstate(invalid="ignore"):  # ±inf bounds are never reached
-        tol_lo = CHECK_TOL * np.maximum(np.maximum(1.0, np.abs(lower)), scale)
-        tol_hi = CHECK_TOL * np.maximum(np.maximum(1.0, np.abs(upper)), scale)
-        below, above = lower - values, values - upper
-    at_lo = np.isfinite(lower) & (below >= -tol_lo)
-    at_hi = np.isfinite(upper) & (above >= -tol_hi) & ~at_lo
-    out = []
-    for i in np.flatnonzero(at_lo | at_hi):
-        if at_lo[i]:
-            side, bound, miss = "lower", lower[i], below[i] if below[i] > tol_lo[i] else 0.0
-        else:
-            side, bound, miss = "upper", upper[i], above[i] if above[i] > tol_hi[i] else 0.0
-        out.append((int(i), side, float(bound), float(values[i]), float(miss)))
-    return out
+    """``(row, side, bound, value, violation)`` of the rows at or beyond a finite bound: the
+    rule of :meth:`Solution.explain() <qpcoord.Solution.explain>` (its tolerance)."""
+    return [
+        (r.row, r.side, r.bound, r.value, r.violation)
+        for r in _rows(values, lower, upper, scale)[0]
+    ]
 
 
 def _joint_of(model: Any, i: int) -> tuple[str, str]:
