@@ -867,6 +867,15 @@ def _draw_notes(
         if anim is not None:
             at(anim.at_frame(root, frames[i]), path).set_transform(T)
 
+    def move(path: tuple[str, ...], i: int, p: np.ndarray) -> None:
+        """A ball's centre: a position track alone (its rotation never changes)."""
+        if i == 0:
+            E = np.eye(4)
+            E[:3, 3] = p
+            at(root, path).set_transform(E)
+        if anim is not None:
+            at(anim.at_frame(root, frames[i]), path).set_property("position", "vector3", list(p))
+
     for i, (_, segments, ids) in enumerate(notes):
         for s in range(slots):
             on = s < len(segments)
@@ -877,14 +886,10 @@ def _draw_notes(
             for st in _SEGMENT_COLOURS:
                 show((f"pair_{s}", st), i, "visible", on and st == state, "boolean")
             for end, p in (("p1", p1), ("p2", p2)):
-                E = np.eye(4)
-                E[:3, 3] = p
-                place((f"pair_{s}_{end}",), i, E)
+                move((f"pair_{s}_{end}",), i, p)
                 show((f"pair_{s}_{end}",), i, "visible", on, "boolean")
         for j in marked:
-            E = np.eye(4)
-            E[:3, 3] = joints[i][j]
-            place(("joints", f"joint_{j}"), i, E)
+            move(("joints", f"joint_{j}"), i, joints[i][j])
             show(("joints", f"joint_{j}"), i, "visible", j in ids, "boolean")
 
 
