@@ -614,7 +614,7 @@ def animate(
         What each frame shows beyond the robot, one item per configuration of
         ``trajectory``: :func:`annotate`'s result (pair distances and the IK's active rows),
         or a list of dicts (or objects) with optional keys ``text`` (str, shown in a box at
-        the top left while the frame is on), ``segments`` (``(p1, p2)`` or ``(p1, p2,
+        the bottom left while the frame is on), ``segments`` (``(p1, p2)`` or ``(p1, p2,
         state)``: two 3-D points, m; ``state`` ``"clear"`` blue, ``"near"`` orange (the
         default), ``"inside"`` magenta) and ``joints`` (joint names, each marked by a
         translucent yellow ball of 6 cm around its origin). Shown at the kept frames (see
@@ -756,8 +756,8 @@ def _draw_solid(node: Any, shape: _Shape, material: Any, mg: Any) -> None:
 
 # ---------------------------------------------------------------------- annotations
 _SEGMENT_COLOURS = {"clear": 0x4477AA, "near": 0xFF9900, "inside": 0xE0119D}
-_SEGMENT_RADIUS = 0.004  # m, a witness segment's thickness
-_WITNESS_RADIUS = 0.008  # m, its end points
+_SEGMENT_RADIUS = 0.005  # m, a witness segment's thickness
+_WITNESS_RADIUS = 0.01  # m, its end points
 _JOINT_COLOUR = 0xFFD700  # a joint at a limit: a yellow ball around its origin
 _JOINT_RADIUS = 0.06  # m
 #: the overlay's element id in the page
@@ -902,9 +902,10 @@ def _overlay_script(times: list[float], texts: list[str]) -> str:
         f"  const notes = {data};\n"
         '  const box = document.createElement("pre");\n'
         f'  box.id = "{OVERLAY_ID}";\n'
-        '  box.style.cssText = "position: fixed; top: 0; left: 0; margin: 6px; padding: 4px 6px; '
+        '  box.style.cssText = "position: fixed; bottom: 0; left: 0; margin: 6px; '
+        "padding: 4px 6px; "
         "font: 11px monospace; background: rgba(255, 255, 255, 0.85); color: #111; "
-        'pointer-events: none; max-width: 60vw; overflow: hidden; z-index: 10";\n'
+        'pointer-events: none; max-width: 96vw; max-height: 45vh; overflow: hidden; z-index: 10";\n'
         "  document.body.appendChild(box);\n"
         "  let shown = -1;\n"
         "  function frame() {\n"
