@@ -169,6 +169,20 @@ class Obstacle:
         return f"{type(self).__name__}(name={self.name!r}, centre={self.pose[:3, 3].tolist()})"
 
 
+def _bounding_sphere(go: Any) -> tuple[np.ndarray, float]:
+    """Bounding sphere of a geometry object for the broad phase: centre (m, in its parent
+    joint's frame) and radius (m). An unbounded geometry (a half-space or a plane: coal gives
+    it an infinite radius and a centre near 1e308) gets the origin and an infinite radius,
+    so every pair with it is always a candidate (``gap = −inf``) instead of ``inf − inf``."""
+    g = go.geometry
+    g.computeLocalAABB()
+    centre = np.array(g.aabb_center, dtype=float)
+    radius = float(g.aabb_radius)
+    if not (np.isfinite(radius) and np.all(np.isfinite(centre)) and np.abs(centre).max() < 1e150):
+        return np.zeros(3), np.inf
+    return go.placement.act(centre), radius
+
+
 class Sphere(Obstacle):
     """A ball of ``radius`` (m) centred at ``centre`` (m, world).
 
@@ -481,10 +495,9 @@ class CollisionAvoidance(KinematicTask):
         self._geom_joint = np.array([int(go.parentJoint) for go in gm.geometryObjects])
         centres, radii = [], []
         for go in gm.geometryObjects:
-            g = go.geometry
-            g.computeLocalAABB()
-            centres.append(go.placement.act(np.array(g.aabb_center, dtype=float)))
-            radii.append(float(g.aabb_radius))
+            centre, radius = _bounding_sphere(go)
+            centres.append(centre)
+            radii.append(radius)
         self._geom_centre = np.array(centres)
         self._geom_radius = np.array(radii)
         self._joints = [int(j) for j in np.unique(self._geom_joint[self._geom_joint > 0])]
@@ -529,8 +542,7 @@ class CollisionAvoidance(KinematicTask):
         obs.pose = T
         g = self._obstacle_geometry[int(index)]
         self.geometry_model.geometryObjects[g].placement = pin.SE3(T)
-        go = self.geometry_model.geometryObjects[g]
-        self._geom_centre[g] = go.placement.act(np.array(go.geometry.aabb_center, dtype=float))
+        self._geom_centre[g] = _bounding_sphere(self.geometry_model.geometryObjects[g])[0]
 
     def compute_distances(self, q: Any) -> np.ndarray:
         """Exact distance of every pair at ``q`` (m), shape (rows,), no broad phase (a

@@ -297,3 +297,31 @@ def test_moving_an_obstacle(panda):
     assert ca.compute_distances(q).min() == pytest.approx(ca.distances[ca.active].min())
     with pytest.raises(ValueError, match="index"):
         ca.set_obstacle_pose(3, p)
+
+
+def test_a_half_space_wall_stops_the_hand(panda):
+    """A half-space obstacle (coal gives it an unbounded bounding sphere) is a broad-phase
+    candidate at every step: the hand driven at a wall stops at the safety distance. Without
+    the unbounded case the broad phase computed ``inf − inf`` and never checked the pair (the
+    hand went 0.2 m into the wall)."""
+    dt = 0.01
+    q = panda.reference_configuration("default")
+    start = panda.frame_pose(q, HAND)
+    wall_x = float(start[0, 3]) + 0.15
+    wall = Obstacle(coal.Halfspace(np.array([-1.0, 0.0, 0.0]), -wall_x), name="wall")
+    ca = CollisionAvoidance(panda, [wall], self_collision=False, gain=0.5)
+    target = start.copy()
+    target[:3, 3] += [0.4, 0.0, 0.0]  # 25 cm behind the wall
+    ik = qc.IK(
+        panda,
+        [qc.FrameTask(panda, HAND, target, gain=2.0), qc.PostureTask(panda, q, gain=1.0)],
+        dt,
+        constraints=[ca],
+    )
+    d_min = np.inf
+    for _ in range(int(2.0 / dt)):
+        v, _ = ik.step(q)
+        q = panda.integrate(q, v, dt)
+        d_min = min(d_min, float(ca.compute_distances(q).min()))
+    assert d_min >= ca.min_distance - TOL  # never closer than d_s to the wall
+    assert panda.frame_pose(q, HAND)[0, 3] < wall_x  # the hand stayed in front of it
