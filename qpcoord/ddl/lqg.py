@@ -28,7 +28,7 @@ import math
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
-__all__ = ["LQG", "LinearLaw", "dare_gain", "sensitivity"]
+__all__ = ["LQG", "LinearLaw", "dare_gain", "sensitivity", "state_scale"]
 
 
 def dare_gain(a, b, q, r) -> tuple[np.ndarray, np.ndarray]:
@@ -112,6 +112,25 @@ def sensitivity(plant, law, f) -> np.ndarray:
     return s
 
 
+def state_scale(a, b, w, steps: int = 400) -> np.ndarray:
+    """Typical size of each state (> 0): the square root of the diagonal of the finite-horizon
+    Gramian ``Σ_{k<steps} A^k (B Bᵀ + W) A^kᵀ`` (inputs already in their typical units; a
+    horizon, so that marginal modes such as a rigid body count too). Zero rows (states no
+    input reaches) get the median size."""
+    x = b @ b.T + w
+    g = x.copy()
+    ak = np.eye(a.shape[0])
+    for _ in range(int(steps) - 1):
+        ak = a @ ak
+        g += ak @ x @ ak.T
+        if not np.all(np.isfinite(g)):
+            raise ValueError("the plant's states grow without bound: cannot scale them")
+    d = np.sqrt(np.maximum(np.diag(g), 0.0))
+    pos = d[d > 0.0]
+    fill = float(np.median(pos)) if pos.size else 1.0
+    return np.where(d > 1e-300, d, fill)
+
+
 def _scale(name: str, value, default: float) -> float:
     v = default if value is None else float(value)
     if not math.isfinite(v) or v <= 0.0:
@@ -183,12 +202,24 @@ class LQG(LinearLaw):
         inn = _scale("input_noise", input_noise, 0.01)
         ms = _scale("max_peak_sensitivity", max_peak_sensitivity, 2.0)
         ce, cf = m.c_error, m.c_fine
-        q = ce.T @ ce / se**2 + cf.T @ cf / sf**2
-        r = np.diag([1.0 / suc**2, 1.0 / suf**2])
-        self.P, self.K = dare_gain(m.A, m.B, q, r)
-        self._A, self._B, self._ce = m.A, m.B, ce[0]
         wn = m.G @ m.W @ m.G.T + m.B @ np.diag([(inn * suc) ** 2, (inn * suf) ** 2]) @ m.B.T
-        self._wn = wn + 1e-12 * np.max(np.abs(np.diag(wn))) * np.eye(m.n)
+        # the Riccati equations are solved with each state in units of its typical size
+        # (hard-disk plants mix nm positions, 40 kHz modes and 1e7 input gains)
+        t = state_scale(m.A, m.B @ np.diag([suc, suf]), wn)
+        ti = 1.0 / t
+        su = np.array([suc, suf])
+        a_s = ti[:, None] * m.A * t[None, :]
+        b_s = ti[:, None] * m.B * su[None, :]  # inputs in units of their scales: R = I
+        ce_s, cf_s = ce * t[None, :], cf * t[None, :]
+        q = ce_s.T @ ce_s / se**2 + cf_s.T @ cf_s / sf**2
+        p_s, k_s = dare_gain(a_s, b_s, q, np.eye(2))
+        self.P = ti[:, None] * p_s * ti[None, :]
+        self.K = su[:, None] * k_s * ti[None, :]
+        self._t = t
+        self._scaled = (a_s, ce_s)
+        self._A, self._B, self._ce = m.A, m.B, ce[0]
+        wn_s = ti[:, None] * wn * ti[None, :]
+        self._wn = wn_s + 1e-12 * np.max(np.abs(np.diag(wn_s))) * np.eye(m.n)
         if measurement_noise is not None:
             sv = _scale("measurement_noise", measurement_noise, 1.0)
             self._observer(sv)
@@ -205,9 +236,9 @@ class LQG(LinearLaw):
         self.reset()
 
     def _observer(self, sv: float) -> None:
-        ce = self._ce[None, :]
-        pk, _ = dare_gain(self._A.T, ce.T, self._wn, np.array([[sv * sv]]))
-        self.L = (pk @ ce.T / (ce @ pk @ ce.T + sv * sv))[:, 0]
+        a_s, ce = self._scaled
+        pk, _ = dare_gain(a_s.T, ce.T, self._wn, np.array([[sv * sv]]))
+        self.L = self._t * (pk @ ce.T / (ce @ pk @ ce.T + sv * sv))[:, 0]
 
     def peak(self, n: int = 400) -> float:
         """Peak of ``|S|`` (absolute) over ``n`` log-spaced frequencies up to Nyquist."""
