@@ -78,3 +78,10 @@ def test_linear_plant_of_the_benchmark(bench):
         hdd.evaluate(
             bench, (np.eye(1), np.ones((1, 1)), np.ones((2, 1)), np.zeros((2, 1)), 1e-4), 2
         )
+
+
+@needs_data
+def test_evaluate_refuses_a_controller_that_does_not_stabilise(bench):
+    a, b, c, d, ts = hdd.reference_controller(bench)
+    with pytest.raises(ValueError, match="does not stabilise case 2"):
+        hdd.evaluate(bench, (a, b, -c, -d, ts), 2, t_sim=0.15, t_start=0.1, n_rev=6)

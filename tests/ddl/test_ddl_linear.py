@@ -207,3 +207,18 @@ def test_generic_controllers_run_the_nonlinear_prima_plant(prima, kind):
     m = run.metrics
     assert m["saturated_steps"] == 0 and not m["lost_sync"]
     assert m["rmse"] < (70e-9 if kind == "split" else 10e-9)
+
+
+def test_lqg_robust_rule_checks_stability_not_only_the_peak(prima):
+    from qpcoord.ddl.lqg import closed_loop_poles
+
+    ctl = LQG(prima)
+    assert np.max(np.abs(closed_loop_poles(prima, ctl))) < 1.0
+    other = ddl.DualStage().linear(4000.0)
+    with pytest.raises(ValueError, match=r"robust_plants\[0\] must have the plant's"):
+        LQG(prima, robust_plants=[other])
+    # a controller with the wrong sign destabilises: its peak is reported as inf
+    bad = LQG(prima)
+    bad.K = -bad.K
+    assert np.max(np.abs(closed_loop_poles(prima, bad))) > 1.0
+    assert bad.peak() == math.inf
