@@ -88,6 +88,12 @@ class FrequencySplit:
     ----------
     coarse_crossover, fine_crossover : float
         The loops' crossovers achieved, Hz.
+
+    Raises
+    ------
+    ValueError
+        Bandwidths not ordered below Nyquist, or a closed loop that is unstable on the plant
+        (e.g. an integral law above a stiff channel's first resonance).
     """
 
     def __init__(
@@ -147,6 +153,16 @@ class FrequencySplit:
             self._loops[name] = law
             setattr(self, f"{name}_crossover", _crossover(f, lz))
         self.reset()
+        from .lqg import closed_loop_poles
+
+        rho = float(np.max(np.abs(closed_loop_poles(plant, self))))
+        if rho >= 1.0:
+            raise ValueError(
+                f"coarse_bandwidth = {coarse_bandwidth!r} Hz and fine_bandwidth = "
+                f"{fine_bandwidth!r} Hz give an unstable loop on this plant (largest "
+                f"closed-loop pole modulus {rho:.4f}): lower them below the channels' first "
+                "resonances"
+            )
 
     @staticmethod
     def _lqg_loop(a, b, c_loop, su, wn, ap, bp, cp, f, z, bw, plant):
