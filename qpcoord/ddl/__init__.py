@@ -12,7 +12,8 @@ Quick start::
 Any linear dual stage: :class:`LinearDualStage` (``DualStage().linear(fs)`` is PRIMA's), its
 controllers :class:`LQG`, :class:`FrequencySplit` (the thesis's coordinator) and
 :class:`LinearMPC` (a prioritised stack) with ``reset()`` / ``step(e) -> (u_c, u_f)`` and
-``state_space()``, simulated by :func:`simulate_linear` (or on the nonlinear DualStage through
+``state_space()``, chosen against a :class:`Spec` by :func:`choose_controller`, simulated by
+:func:`simulate_linear` (or on the nonlinear DualStage through
 :class:`OnDualStage`).
 
 Controllers of the DDL plant follow a two-method interface — ``reset(plant, fs, y0, r0)`` and
@@ -22,6 +23,7 @@ controller passes its measurement through a :class:`MeasurementGuard` (``ctl.gua
 """
 
 from . import faults, identify, references, two_ddl
+from .choose import Choice, Spec, choose_controller, surrogate
 from .compare import compare, format_grid, format_table
 from .coordinator import SisoCoordinator
 from .design import DesignReport, LqrDesignReport, design_coordinator, design_lqr
@@ -53,6 +55,7 @@ from .stepper import StepperParams
 
 __all__ = [
     "BladeFlexure",
+    "Choice",
     "DesignModel",
     "DesignReport",
     "DiscreteDualStage",
@@ -79,9 +82,11 @@ __all__ = [
     "ReferenceCheck",
     "Run",
     "SisoCoordinator",
+    "Spec",
     "StepperParams",
     "bandwidth_3db",
     "check_reference",
+    "choose_controller",
     "coarse_frf",
     "compare",
     "design_coordinator",
@@ -102,6 +107,7 @@ __all__ = [
     "simulate_linear",
     "simulated_coarse_margin",
     "step_reference",
+    "surrogate",
     "tracking_metrics",
     "two_ddl",
 ]
