@@ -22,17 +22,25 @@ import math
 
 import numpy as np
 
-from .lqg import dare_gain
+from .lqg import dare_gain, state_scale
 
 __all__ = ["FrequencySplit"]
 
 
 def _siso_lqg(a, b, c, se, su, wn):
-    q = c.T @ c / se**2
-    _, k = dare_gain(a, b, q, np.array([[1.0 / su**2]]))
-    pk, _ = dare_gain(a.T, c.T, wn, np.array([[se * se]]))
-    ll = (pk @ c.T / (c @ pk @ c.T + se * se))[:, 0]
-    return k[0], ll
+    """One-input LQG (regulator on ``c x/se``, input ``u/su``; Kalman noise ``wn``, ``se²``),
+    its Riccati equations solved with states in their typical units (:func:`.lqg.state_scale`).
+    """
+    t = state_scale(a, b * su, wn)
+    ti = 1.0 / t
+    a_s = ti[:, None] * a * t[None, :]
+    b_s = ti[:, None] * b * su
+    c_s = c * t[None, :]
+    _, k_s = dare_gain(a_s, b_s, c_s.T @ c_s / se**2, np.eye(1))
+    w_s = ti[:, None] * wn * ti[None, :]
+    pk, _ = dare_gain(a_s.T, c_s.T, w_s, np.array([[se * se]]))
+    ll = t * (pk @ c_s.T / (c_s @ pk @ c_s.T + se * se))[:, 0]
+    return su * k_s[0] * ti, ll
 
 
 def _loop(a, b, c, k, ll, ap, bp, cp, z):

@@ -222,3 +222,23 @@ def test_lqg_robust_rule_checks_stability_not_only_the_peak(prima):
     bad.K = -bad.K
     assert np.max(np.abs(closed_loop_poles(prima, bad))) > 1.0
     assert bad.peak() == math.inf
+
+
+def test_frequency_split_on_an_integrating_coarse_stage():
+    # a free 2 kg carriage (force → position, 1/(m s²)): no static gain, so the coarse loop
+    # is an LQG whose weight is bisected to the crossover
+    ts = 1e-4
+    w = 2 * math.pi * 1500.0
+    plant = LinearDualStage(
+        control.tf([0.5], [1.0, 0.0, 0.0]),
+        control.tf([2e-6 * w * w], [1.0, 2 * 0.3 * w, w * w]),
+        ts,
+        fine_stroke=40e-6,
+        disturbances=[REF],
+    )
+    ctl = FrequencySplit(plant, 20.0, 300.0)
+    from qpcoord.ddl.lqg import closed_loop_poles
+
+    assert np.max(np.abs(closed_loop_poles(plant, ctl))) < 1.0
+    assert ctl.coarse_crossover == pytest.approx(20.0, rel=0.3)
+    assert _law_matches_state_space(ctl, 1e-7 * np.sin(np.arange(300) * 0.05)) < 1e-8
