@@ -20,8 +20,9 @@ Method for the coordinator (``docs/ch6.md``, "Designing the coordinator for a tu
    ``probability`` p is ``half stroke − u_p`` with ``u_p = σ_f √(2 ln(2 ν₀ T / (−ln p)))``.
    The predicted RMSE is ``√(∫ |H_e|² S df)``.
 3. **Constraints.** The coarse loop keeps a gain margin ≥ ``min_gain_margin`` (6 dB) at the
-   120 Hz carriage mode; the fine PI keeps the robustness rule it was designed with (phase
-   margin ≥ 60°, gain margin ≥ 10 dB, peak |S| ≤ 1.6); ``P ≥ probability``.
+   carriage mode (111–120 Hz over a full step); the fine PI keeps the robustness rule it was
+   designed with (phase margin ≥ 60°, gain margin ≥ 10 dB, peak |S| ≤ 1.6);
+   ``P ≥ probability``.
 4. **Choice, checked by simulation.** The candidates meeting the constraints are ranked by
    predicted RMSE; the best ``n_check`` are simulated on ``check_seeds`` fresh references
    synthesised from ``S`` (:meth:`.psd.OpdPsd.synthesize`, ``check_duration`` s each) and the

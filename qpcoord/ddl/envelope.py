@@ -12,8 +12,8 @@ flexure; ``τ_F`` the low-frequency group delay of the filter, ``2/(2π f_F)`` f
 which that stays within ``half stroke − margin`` at the reference's peak speed (measured on
 the reference low-passed at ``speed_band``, 10 Hz by default — faster content is the fine
 stage's job anyway). The bandwidth the coarse stage **allows** is the largest one keeping the
-coarse loop's gain margin at the ≈ 120 Hz carriage mode ≥ ``min_gain_margin`` (6 dB by
-default, :func:`.loops.coarse_gain_margin`). The rate limit (``max_speed``, 3 mm/s) and the
+coarse loop's gain margin at the carriage mode (worst operating point) ≥ ``min_gain_margin``
+(6 dB by default, :func:`.loops.coarse_gain_margin`). The rate limit (``max_speed``, 3 mm/s) and the
 acceleration the stepper can give the carriage (``K_m I / r_screw`` over the carriage mass)
 bound the envelope itself.
 """

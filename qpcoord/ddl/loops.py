@@ -31,7 +31,13 @@ from scipy.linalg import expm
 
 from .fine import fine_zoh
 
-__all__ = ["LoopResponses", "coordinator_responses", "coarse_gain_margin", "coarse_frequency"]
+__all__ = [
+    "LoopResponses",
+    "coordinator_responses",
+    "coarse_gain_margin",
+    "coarse_frequency",
+    "coarse_operating_points",
+]
 
 
 @dataclass(frozen=True)
@@ -55,9 +61,30 @@ class LoopResponses:
     coarse_loop: np.ndarray
 
 
-def _coarse_zoh(plant, fs: float, current: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """ZOH discretisation of the carriage (α → y_c) of the linearised plant, and m per rad."""
-    sys = plant.linearise(0.0, current, "phase")
+def coarse_operating_points(plant) -> tuple[float, ...]:
+    """Carriage positions (m) where the coarse loop has the least gain margin.
+
+    The softest point of the detent cycle (``cos 4θ_e = −1``, i.e. ``y_c`` an odd multiple of
+    half a full step) next to the stroke centre and next to each stroke end: the detent
+    stiffness is smallest there, which raises the static gain from field phase to carriage
+    position and lowers the carriage mode, and at the ends the flexure load also lowers the
+    magnetic stiffness (load angle).
+    """
+    step = plant.stepper.full_step
+    h = plant.coarse_half_stroke
+    k_end = math.floor(h / step - 0.5)
+    end = (k_end + 0.5) * step
+    if end < 0.5 * step:
+        return (0.5 * step,) if 0.5 * step <= h else (0.0,)
+    return (0.5 * step, end, -end)
+
+
+def _coarse_zoh(
+    plant, fs: float, current: float, y_c: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """ZOH discretisation of the carriage (α → y_c) of the plant linearised at ``y_c`` (m),
+    and the carriage metres per electrical radian."""
+    sys = plant.linearise(y_c, current, "phase")
     a = np.asarray(sys.A, dtype=float)[2:, 2:]
     b = np.asarray(sys.B, dtype=float)[2:, 1:2]
     h = 1.0 / fs
@@ -77,7 +104,7 @@ def _eval_2x2(ad, bd, z: np.ndarray) -> np.ndarray:
     return ((z - a22) * b1 + a12 * b2) / det
 
 
-def coordinator_responses(ctl, plant, fs: float, f) -> LoopResponses:
+def coordinator_responses(ctl, plant, fs: float, f, y_c: float = 0.0) -> LoopResponses:
     """Frequency responses of ``ctl`` (a :class:`SisoCoordinator`) on ``plant`` at ``fs`` Hz.
 
     Parameters
@@ -86,11 +113,13 @@ def coordinator_responses(ctl, plant, fs: float, f) -> LoopResponses:
         Gives ``fine_kp``, ``fine_ki``, ``coarse_cutoff``, ``coarse_order``,
         ``coarse_bandwidth``, ``current``, ``feedforward`` and ``fine_model``.
     plant : DualStage
-        Plant parameters (linearised at the stroke centre; its state is not used).
+        Plant parameters (linearised at ``y_c``; its state is not used).
     fs : float
         Sampling rate, Hz.
     f : array_like
         Frequencies, Hz, in (0, fs/2).
+    y_c : float
+        Carriage position of the linearisation, m (default: the stroke centre).
 
     Returns
     -------
@@ -108,7 +137,7 @@ def coordinator_responses(ctl, plant, fs: float, f) -> LoopResponses:
     # coarse: reference filter, integral phase loop, carriage dynamics
     sos = signal.butter(ctl.coarse_order, ctl.coarse_cutoff, fs=fs, output="sos")
     _, filt = signal.sosfreqz(sos, worN=f, fs=fs)
-    ad, bd, m_per_rad = _coarse_zoh(plant, fs, ctl.current)
+    ad, bd, m_per_rad = _coarse_zoh(plant, fs, ctl.current, y_c)
     gc = _eval_2x2(ad, bd[:, 0], z) / m_per_rad  # y_c per metre of commanded position
     a = 2.0 * math.pi * ctl.coarse_bandwidth * h
     integ = a * z / (z - 1.0)
@@ -120,19 +149,29 @@ def coordinator_responses(ctl, plant, fs: float, f) -> LoopResponses:
     return LoopResponses(f=f, coarse=hc, fine=hf, error=1.0 - hc - hf, coarse_loop=lc)
 
 
-def coarse_frequency(plant, current: float = 1.5) -> float:
-    """Undamped frequency of the carriage mode at the stroke centre, Hz."""
-    return plant.coarse_resonance(0.0, current)
+def coarse_frequency(plant, current: float = 1.5, y_c: float = 0.0) -> float:
+    """Undamped frequency of the carriage mode at carriage position ``y_c`` (m), Hz."""
+    return plant.coarse_resonance(y_c, current)
 
 
 def coarse_gain_margin(ctl, plant, fs: float, n: int = 20000) -> tuple[float, float]:
     """Gain margin of the coarse loop ``L_c`` (absolute, not dB) and its frequency, Hz.
 
-    Evaluated on a dense grid from 1 Hz to 0.45 fs; the phase crossover is where ``L_c``
-    crosses the negative real axis (next to the ≈ 120 Hz carriage mode for every stable
+    The smallest over the carriage's operating points (:func:`coarse_operating_points`).
+    At each, evaluated on a dense grid from 1 Hz to 0.45 fs; the phase crossover is where
+    ``L_c`` crosses the negative real axis (next to the carriage mode for every stable
     setting). ``inf`` if the phase never crosses −180°.
     """
-    fmode = coarse_frequency(plant, ctl.current)
+    best, fbest = math.inf, math.nan
+    for y_c in coarse_operating_points(plant):
+        gm, fgm = _gain_margin_at(ctl, plant, fs, n, y_c)
+        if gm < best:
+            best, fbest = gm, fgm
+    return best, fbest
+
+
+def _gain_margin_at(ctl, plant, fs: float, n: int, y_c: float) -> tuple[float, float]:
+    fmode = coarse_frequency(plant, ctl.current, y_c)
     f = np.unique(
         np.concatenate(
             (
@@ -141,7 +180,7 @@ def coarse_gain_margin(ctl, plant, fs: float, n: int = 20000) -> tuple[float, fl
             )
         )
     )
-    lc = coordinator_responses(ctl, plant, fs, f).coarse_loop
+    lc = coordinator_responses(ctl, plant, fs, f, y_c).coarse_loop
     im = lc.imag
     cross = np.flatnonzero((np.sign(im[:-1]) != np.sign(im[1:])) & (lc.real[:-1] < 0.0))
     if cross.size == 0:

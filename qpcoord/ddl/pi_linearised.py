@@ -19,7 +19,7 @@ the flat-output feed-forward ``M r̈_c + c ṙ_c`` (:class:`.flatness.FlatnessBa
 41 N stiction on the carriage) is large against the forces a µm-scale coarse reference
 needs (``M ω² x`` ≈ 0.2 N for 10 µm at 1 Hz), and a PI designed on the friction-free model
 at 2 Hz has a stiffness of 7.7e4 N/m: it would need a 0.5 mm error to break stiction, and
-its carriage never moves on a Kolmogorov OPD (measured, issue 18: travel ratio 0.00 — the
+its carriage never moves on a Kolmogorov OPD (measured: travel ratio 0.00 — the
 fine stage tracked alone and saturated on a 3× reference). So the linearising law also
 handles friction, the two classical ways (Armstrong-Hélouvry et al. 1994):
 

@@ -461,3 +461,47 @@ class DualStage:
             inputs=["v", "alpha"] if inputs == "phase" else ["v", "i_a", "i_b"],
             outputs=["y", "y_f", "y_c"],
         )
+
+    def linear(
+        self,
+        fs: float = 8000.0,
+        *,
+        y_c: float = 0.0,
+        current: float = 1.5,
+        max_speed: float = 3.0e-3,
+        disturbances=(),
+    ):
+        """This plant as a :class:`.linear_plant.LinearDualStage` at ``fs`` Hz.
+
+        The LQR/MPC design model (:func:`.lqr.design_model`: linearised about rest at ``y_c``
+        with the field amplitude ``current``, the detent averaged over a full step) split into
+        its two actuators: coarse input the field phase α (rad electrical, deviation from
+        the holding phase), fine input the piezo voltage (V, deviation from mid-stroke), both
+        positions in m from the operating point (the fine stage's centre is 0). Fine input
+        range and stroke from :attr:`fine`; coarse stroke what is left of the flexure's
+        travel from ``y_c``; the field phase's rate limit keeps the carriage below
+        ``max_speed`` (m/s, the synchronism limit of the coordinator); measurement noise the
+        metrology quantisation ``q/√12`` and ``noise_rms``. Friction, stiction and the
+        stepper's nonlinear torque are not in it.
+        """
+        from .linear_plant import LinearDualStage
+        from .lqr import design_model
+
+        sysc = design_model(self, fs, y_c, current).continuous
+        a = np.asarray(sysc.A, dtype=float)
+        b = np.asarray(sysc.B, dtype=float)
+        fp = self.fine
+        h = self.coarse_half_stroke
+        zero = np.zeros((1, 1))
+        return LinearDualStage(
+            (a[2:, 2:], b[2:, 1:2], np.array([[1.0, 0.0]]), zero),
+            (a[:2, :2], b[:2, 0:1], np.array([[1.0, 0.0]]), zero),
+            1.0 / positive("fs", fs),
+            fine_range=(fp.v_min - fp.v_centre, fp.v_max - fp.v_centre),
+            coarse_rate=positive("max_speed", max_speed) * self.stepper.electrical_per_metre,
+            coarse_stroke=(-h - y_c, h - y_c),
+            fine_stroke=(fp.stroke_min - fp.centre, fp.stroke_max - fp.centre),
+            disturbances=disturbances,
+            noise_rms=math.sqrt(self.resolution**2 / 12.0 + self.noise_rms**2),
+            name="PRIMA DDL",
+        )

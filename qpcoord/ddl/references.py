@@ -36,7 +36,7 @@ vibrations; amplitudes picked as AT-like levels, not fitted to any result), band
 ``"paranal_250hz_lf10"``: ``"paranal_250hz"`` with 10× the turbulence power below ≈ 2 Hz
 (``low_freq_gain=10``, ``low_freq_corner=2``): a stronger low-frequency wander (longer
 baseline, larger outer scale or slower seeing) for designs that must keep the fine stage off
-its stops (issue 17). Any preset takes ``low_freq_gain`` / ``low_freq_corner`` as overrides.
+its stops. Any preset takes ``low_freq_gain`` / ``low_freq_corner`` as overrides.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Measurement faults (issue 22, item 7): the shared MeasurementGuard and every controller.
+"""Measurement faults: the shared MeasurementGuard and every controller.
 
 Each controller runs 0.3 s of the paranal_250hz Kolmogorov reference at 8 kHz (seed 0); a
 fault is injected at 0.15 s and the run is compared with the fault-free run of the same seed.
@@ -145,7 +145,7 @@ def test_simulate_fault_hook(reference):
 
 
 def test_unguarded_controller_still_fails_loudly(reference):
-    """Without a guard a NaN reaches the plant, which raises (the behaviour of issue 22)."""
+    """Without a guard a NaN reaches the plant, which raises."""
 
     class NoGuard:
         def reset(self, plant, fs, y0, r0):

@@ -1,4 +1,4 @@
-"""Issue 18, findings 1–2: linearised coarse controllers that move the carriage, and the
+"""Linearised coarse controllers that move the carriage, and the
 thesis's current-driven LQR and PQ (qpcoord.ddl.dither, drive, lqr_current, pq_current)."""
 
 from __future__ import annotations

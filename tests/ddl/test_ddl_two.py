@@ -61,7 +61,7 @@ def test_analytic_gain_of_a_second_order_loop():
     # closed form: a second-order F with ζ = 1/√2 has its −3 dB point at ωn exactly
     r = analytic_gain(1 / np.sqrt(2), 300.0)
     assert r["bw_single"] == pytest.approx(300.0, rel=1e-3)
-    # without predictor the gain depends on ζ only, and rises with it (issue 18, finding 6)
+    # without predictor the gain depends on ζ only, and rises with it
     g = [analytic_gain(z, 300.0)["gain"] for z in (0.5, 0.6, 0.7)]
     assert g == pytest.approx([1.49, 1.58, 1.71], abs=0.01)
     assert analytic_gain(0.6, 50.0)["gain"] == pytest.approx(g[1], rel=1e-3)
