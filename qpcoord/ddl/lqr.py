@@ -77,7 +77,8 @@ rms on a 2 s Kolmogorov run, measured; the ``latency2`` case of :mod:`.compare`)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
@@ -151,6 +152,8 @@ class DesignModel:
     continuous: object = field(repr=False)
     states: tuple = STATES
     inputs: tuple = INPUTS
+    #: the plant the model was linearised from (its parameters: friction, mass, resolution)
+    plant: Any = field(default=None, repr=False, compare=False)
 
     @property
     def h(self) -> float:
@@ -229,7 +232,7 @@ def design_model(
             inputs=list(INPUTS),
             outputs=["y", "y_f", "y_c"],
         )
-    return discretise_model(
+    model = discretise_model(
         sysc,
         dp_fine=plant.fine,
         fs=fs,
@@ -237,6 +240,7 @@ def design_model(
         current=current,
         alpha_op=_operating_phase(plant, y_c, current),
     )
+    return replace(model, plant=plant)
 
 
 def discretise_model(
@@ -454,7 +458,7 @@ def kalman_gain(
     sigma_meas : float, optional
         Measurement noise std, m (default: quantisation ``q/√12`` of ``plant``, q = 1.25 nm).
     plant : DualStage, optional
-        Source of the defaults.
+        Source of the defaults (default: the plant ``model`` was designed from).
 
     Returns
     -------
@@ -463,9 +467,9 @@ def kalman_gain(
     Pk : ndarray, shape (4, 4)
         A-priori error covariance (solution of the filter DARE).
     """
-    from .plant import DualStage
-
-    plant = DualStage() if plant is None else plant
+    plant = model.plant if plant is None else plant
+    if plant is None:
+        raise ValueError("plant: kalman_gain needs the plant (model.plant is None)")
     st = plant.stepper
     if sigma_force is None:
         sigma_force = st.coulomb_torque / st.screw_radius
