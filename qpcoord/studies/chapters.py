@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["CHAPTERS", "SCRIPT_CHAPTERS"]
+__all__ = ["CHAPTERS", "SCRIPT_CHAPTERS", "STANDALONE_SCRIPTS"]
 
 #: Chapters in report order, with their titles.
 CHAPTERS: dict[str, str] = {
@@ -34,3 +34,8 @@ SCRIPT_CHAPTERS: tuple[tuple[str, str], ...] = (
     ("bimanual", "core"),
     ("sweep_", "core"),
 )
+
+#: Example scripts outside the reproduction: a public benchmark with its own data and its own
+#: evaluation (``examples/hdd_benchmark.py --data DIR``), run by hand, not by
+#: ``qpcoord reproduce`` (which neither runs nor lists them as unmapped).
+STANDALONE_SCRIPTS: tuple[str, ...] = ("hdd_benchmark",)

@@ -35,7 +35,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .chapters import CHAPTERS, SCRIPT_CHAPTERS
+from .chapters import CHAPTERS, SCRIPT_CHAPTERS, STANDALONE_SCRIPTS
 from .claims import count_claims, thesis_claims
 from .timing import step_timing
 
@@ -204,6 +204,8 @@ def discover(examples_dir: str | Path | None = None) -> tuple[dict[str, list[Pat
     by_chapter: dict[str, list[Path]] = {c: [] for c in CHAPTERS}
     unmapped = []
     for s in scripts:
+        if s.stem in STANDALONE_SCRIPTS:
+            continue
         c = chapter_of(s)
         if c is None:
             unmapped.append(s)
