@@ -34,14 +34,6 @@ warm solve always right after the Python engine)::
 
     python benchmarks/hierarchy_published.py --resolve                 # ~1 min
     python benchmarks/hierarchy_published.py --resolve --steps 300 --problem soth_sot
-
-``--off SWITCH`` (with ``--resolve``, repeatable): one more row, ``native bare (SWITCH
-off)``: a second bare native solver with that ``Hierarchy`` switch (e.g. ``slack_ls``) set
-to False, timed beside the bare one on the same buffers, in alternating order (an A/B within
-one run)::
-
-    python benchmarks/hierarchy_published.py --resolve --problem lexls_test01_humanoid \
-        --off slack_ls
 """
 
 from __future__ import annotations
@@ -165,24 +157,15 @@ def resolve(
     n: int,
     steps: int,
     moved: bool,
-    off: tuple[str, ...] = (),
     order: str = "shuffle",
 ) -> tuple[dict, dict, set]:
     """Per-step times (s) and worst level gap to the Python engine of every solver of
-    :data:`RESOLVE_KEYS` and of a bare native solver per ``Hierarchy`` switch in ``off``
-    (that switch False), interleaved; and DAQP's exit flags."""
+    :data:`RESOLVE_KEYS`, interleaved; and DAQP's exit flags."""
     stack = qc.Stack(levels, bounds=bounds)
     P = stack._compiled
     cold = NativeHierarchy(P, stack.damping)
     bare = NativeHierarchy(P, stack.damping)
     run_bare = bare._solver.run
-    offs = {}
-    for name in off:
-        h = NativeHierarchy(P, stack.damping)
-        if not isinstance(getattr(h._solver, name, None), bool):
-            raise ValueError(f"off: {name!r} is not a switch of the native Hierarchy")
-        setattr(h._solver, name, False)
-        offs[f"native bare ({name} off)"] = h
     box = bounds if bounds is not None else qc.Bounds(np.full(n, -1e30), np.full(n, 1e30))
     H, f = np.eye(n), np.zeros(n)
     A, bu, bl, sense, breaks = daqp_problem(levels, box, n)
@@ -190,7 +173,7 @@ def resolve(
     if model.setup(H, f, A, bu, bl, sense, break_points=breaks)[0] < 0:
         raise RuntimeError("daqp.Model.setup failed")
     move = _mover(levels)
-    keys = (*RESOLVE_KEYS, *offs)
+    keys = RESOLVE_KEYS
     times = {k: [] for k in keys}
     worst = dict.fromkeys(keys, 0.0)
     flags: set = set()
@@ -201,7 +184,6 @@ def resolve(
         times[key].append(time.perf_counter() - t)
         return out
 
-    bares = [("native bare", run_bare), *((k, h._solver.run) for k, h in offs.items())]
     out: dict = {}
 
     def native_cold():
@@ -210,12 +192,9 @@ def resolve(
 
     def native_bare():
         P.refresh_stacked()
-        # the bare solver and its switched-off copies, in alternating order (the later calls
-        # on the same buffers find them in cache)
-        for key, run in bares if step % 2 == 0 else bares[::-1]:
-            code = timed(key, run, step > 0, math.inf)
-            if code:
-                raise RuntimeError(f"{key} call, status {code}")
+        code = timed("native bare", run_bare, step > 0, math.inf)
+        if code:
+            raise RuntimeError(f"native bare call, status {code}")
 
     def daqp_solve():
         out["daqp"] = timed("daqp.solve", daqp.solve, H, f, A, bu, bl, sense, break_points=breaks)
@@ -254,15 +233,14 @@ def resolve(
             ("native bare", bare.x),
             ("daqp.solve", np.asarray(xd)),
             ("daqp Model warm", np.asarray(xm)),
-            *((key, h.x) for key, h in offs.items()),
         ):
             r = np.array([L.residual(x) for L in P.levels])
             worst[key] = max(worst[key], float(np.max(np.abs(r - ref) / np.maximum(1.0, ref))))
     return times, worst, flags
 
 
-def resolve_table(problems, steps: int, off: tuple[str, ...] = (), order: str = "shuffle") -> None:
-    """Print the re-solve table (see the module's docstring); ``off``, ``order``: see
+def resolve_table(problems, steps: int, order: str = "shuffle") -> None:
+    """Print the re-solve table (see the module's docstring); ``order``: see
     :func:`resolve`."""
     how = (
         "solvers in a new random order every step"
@@ -282,7 +260,7 @@ def resolve_table(problems, steps: int, off: tuple[str, ...] = (), order: str = 
                 lab = label + (" (unit rows)" if unit else "")
                 for moved in (False, True):
                     kind = "moved" if moved else "same"
-                    times, worst, flags = resolve(levels, P.bounds, P.n, steps, moved, off, order)
+                    times, worst, flags = resolve(levels, P.bounds, P.n, steps, moved, order)
                     for key in times:
                         us = np.percentile(np.array(times[key][2:]) * 1e6, [50, 90, 99])
                         print(
@@ -300,12 +278,6 @@ def main(argv=None) -> int:
     ap.add_argument("--resolve", action="store_true", help="the re-solve table (issue 24)")
     ap.add_argument("--steps", type=int, default=100, help="--resolve: steps (default 100)")
     ap.add_argument(
-        "--off",
-        action="append",
-        default=[],
-        help="--resolve: also a bare native solver with this Hierarchy switch off (repeatable)",
-    )
-    ap.add_argument(
         "--order",
         choices=("shuffle", "fixed"),
         default="shuffle",
@@ -318,7 +290,7 @@ def main(argv=None) -> int:
             ap.error(f"--steps must be at least 5, got {args.steps}")
         print(f"python {sys.version.split()[0]}, numpy {np.__version__}, daqp 0.11 (H = I)")
         with threadpool_limits(limits=1):
-            resolve_table(args.problem or RESOLVE_DEFAULT, args.steps, tuple(args.off), args.order)
+            resolve_table(args.problem or RESOLVE_DEFAULT, args.steps, args.order)
         return 0
     solvers = args.solver or qc.available_solvers()
     problems = args.problem or NAMES

@@ -16,18 +16,17 @@ constexpr double kEps = std::numeric_limits<double>::epsilon();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kFeasTol = 1e-9;       // FEAS_TOL: closed-form feasibility test, relative
 constexpr double kInfeasTol = 1e-9;     // INFEAS_TOL: hard part violation, relative
-constexpr double kKktTol = 1e-9;        // multiplier sign tolerance, relative to |g|
-constexpr double kViolationTol = 1e-6;  // VIOLATION_TOL: a row counts as violated
 constexpr double kAbsFloor = 1e-14;
 constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every row to this
-constexpr int kIterFactor = 6;
 // a level row (or combination of rows) whose projection on the remaining freedom is under this
 // fraction of the row's norm is dependent on the frozen rows (rounding of the freeze)
 constexpr double kMovableTol = 1e-9;
 constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
-constexpr int kGrowRounds = 3;          // grow_seed: sets grown from the stored one at most
 constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
 constexpr double kQrMargin = 4.0;       // QR closed form: sigma_min bound over the SVD's floor
+// up to this rank, the QR closed form's bound 1/|R11^-1|_F comes by a back substitution per
+// column on its leading entries (above it, by Eigen's blocked triangular solve)
+constexpr int kSmallRinvMax = 16;
 // a level with a singular value under this fraction of the largest (or a damped one) is
 // finished with exact_ (as qpcoord.core.methods.hierarchical.ILL_CONDITIONED)
 constexpr double kIllConditioned = 1e-3;
@@ -202,14 +201,13 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   fqr_.reserve_wy(std::max(n, capacity_));
   const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
   for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
-                 &tmpr_, &xc_, &xold_, &e_, &ute_, &ygrow_})
+                 &tmpr_, &xc_, &xold_, &e_, &ute_})
     v->setZero(big);
   widx_.reserve(max_grows);
   mov_.reserve(std::max(max_in, 1));
   depn_.setZero(std::max(max_in, 1));
   gram_.setZero(std::max(std::min(max_in, n), 1), std::max(std::min(max_in, n), 1));
   keep_.assign(max_grows, 0);
-  wgrow_.assign(max_grows, 0);
   viol_.assign(std::max(max_in, 1), 0);
   Ms_.resize(blocks);
   for (int b = 0; b < blocks; ++b) Ms_[b].setZero(meq_[b], n);  // M = A Z in its left r columns
@@ -301,6 +299,16 @@ void Hierarchy::allocate_per_stage() {
   per_stage_ = true;
 }
 
+void Hierarchy::invalidate_caches() {
+  for (FreezeMemo& f : memos_) {
+    f.valid = f.pending = f.zm_valid = false;
+    f.a_layout = f.c_layout = 0;  // the level's rows compare unequal: M = A Z recomputed
+  }
+  for (ClosedForm& f : cforms_) f.valid = f.svd_valid = false;
+  for (TrialState& t : trials_) t.intact = false;
+  for (BoundRowsMemo& m : bound_memos_) m.valid = false;
+}
+
 bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) {
   if (has_bounds_)
     for (int j = 0; j < n_; ++j)
@@ -345,23 +353,16 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   full.setZero();
   // every inherited row projected at once (one matrix product, not k_ vector products)
   auto CZ = CinZ_.topLeftCorner(k_, r_);
-  if (carry_projection) {
-    // rows inherited since the last projection; the older ones were carried through every
-    // change of Z since (carry_z)
-    if (kz_ < k_ && identity_z && z_identity_) {  // Cin I: the rows themselves
-      CinZ_.block(kz_, 0, k_ - kz_, r_) = Cin_.middleRows(kz_, k_ - kz_);
-      ++identity_products_;
-    } else if (kz_ < k_) {
-      CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() =
-          Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
-    }
-  } else if (identity_z && z_identity_) {
-    CZ = Cin_.topRows(k_);
-    ++identity_products_;
-  } else {
-    CZ.noalias() = Cin_.topRows(k_) * Z_.leftCols(r_);
+  // rows inherited since the last projection; the older ones were carried through every
+  // change of Z since (carry_z)
+  if (kz_ < k_ && z_identity_) {  // Cin I: the rows themselves
+    CinZ_.block(kz_, 0, k_ - kz_, r_) = Cin_.middleRows(kz_, k_ - kz_);
+    ++stats_.identity_products;
+  } else if (kz_ < k_) {
+    CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() =
+        Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
   }
-  kz_ = carry_projection ? k_ : 0;
+  kz_ = k_;
   auto cx = cinx_.head(k_);
   cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
@@ -375,9 +376,9 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
 void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
   if (!has_bounds_) return;
   const int r0 = P.rows, cols = P.cols;
-  // (bound_rows_memo: the rows depend on Z alone, their bounds on x too; no row is skipped
-  // unless a variable has no finite bound, or Z a zero row)
-  BoundRowsMemo* memo = (bound_rows_memo && memo_gate()) ? &bound_memos_[stage] : nullptr;
+  // (the bound-rows cache: the rows depend on Z alone, their bounds on x too; no row is
+  // skipped unless a variable has no finite bound, or Z a zero row)
+  BoundRowsMemo* memo = memo_gate() ? &bound_memos_[stage] : nullptr;
   bool all_finite = memo != nullptr;  // (only the memo reads it: every variable has a side)
   for (int j = 0; j < n_ && all_finite; ++j)
     all_finite = std::isfinite(lb_(j)) || std::isfinite(ub_(j));
@@ -392,7 +393,7 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
       P.id[r0 + j] = capacity_ + j;
     }
     P.rows += n_;
-    ++bound_rows_memo_hits_;
+    ++stats_.bound_rows_memo_hits;
     return;
   }
   auto full = rowbuf_.head(cols);
@@ -414,7 +415,7 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
 }
 
 void Hierarchy::carry_z(PivotedQR& qr, int rank) {
-  if (!carry_projection || kz_ == 0) return;
+  if (kz_ == 0) return;
   // rank reflectors on kz x r (about 4 rank kz r flops) against one product with the new Z
   // when the rows are next needed (2 kz n (r - rank)): many reflectors, or few rows left,
   // and the projection is dropped, recomputed where a level needs it
@@ -490,7 +491,7 @@ bool Hierarchy::memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, cons
 bool Hierarchy::freeze_lookup(int stage, FreezeKind kind, int rank, int mi, bool with_viol) {
   FreezeMemo& f = memos_[stage];
   f.pending = false;
-  if (!freeze_memo || !f.rows_same) return false;  // (memo_entry: the rows changed)
+  if (!f.rows_same) return false;  // (memo_entry: the rows changed)
   // Z on entry is the last call's (z_same) and the stored freeze had it (valid): the rest
   const auto CZ = CinZ_.topLeftCorner(kz_, r_);
   bool hit = f.z_same && f.valid && f.kind == kind && f.rank == rank && f.kz_in == kz_;
@@ -502,8 +503,8 @@ bool Hierarchy::freeze_lookup(int stage, FreezeKind kind, int rank, int mi, bool
     z_identity_ = f.zid_out;
     kz_ = f.kz_out;
     CinZ_.topLeftCorner(kz_, r_) = f.CinZ_out.topLeftCorner(kz_, r_);
-    if (kind == FreezeKind::kNullSpace) ++null_space_freezes_;  // as freeze_null_space counts
-    ++freeze_memo_hits_;
+    if (kind == FreezeKind::kNullSpace) ++stats_.null_space_freezes;  // as freeze_null_space
+    ++stats_.freeze_memo_hits;
     return true;
   }
   // the rows repeat (Z_in is this call's Z), the rest is taken: outputs by freeze_computed
@@ -540,23 +541,20 @@ void Hierarchy::freeze_null_space(int rank) {
   for (int t = 0; t < l; ++t) {  // column t of N: Z_rz^T e_{rank+t} (or Qf e_{rank+t}), permuted
     q.setZero();
     q(rank + t) = 1.0;
-    if (cf_->rz)
-      cf_->trz.apply_zt(q);
-    else
-      cf_->tqr.apply_q(q);
+    cf_->trz.apply_zt(q);
     for (int i = 0; i < r_; ++i) N(cf_->mqr.perm(i), t) = q(i);
   }
   auto Zn = Ztmp_.leftCols(l);
   Zn.noalias() = Z_.leftCols(r_) * N;
   Z_.leftCols(l) = Zn;
   z_identity_ = false;
-  if (carry_projection && kz_ > 0) {
+  if (kz_ > 0) {
     auto CZ = cztmp_.topLeftCorner(kz_, l);
     CZ.noalias() = CinZ_.topLeftCorner(kz_, r_) * N;
     CinZ_.topLeftCorner(kz_, l) = CZ;
   }
   r_ = l;
-  ++null_space_freezes_;
+  ++stats_.null_space_freezes;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -579,7 +577,7 @@ void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W
   factor_rows(P, W);
   // with the slack step the projected objective is rarely needed: formed on first use
   qt_stale_ = true;
-  if (!(slack_ls && P.slacks > 0) && !unit_q_) form_qt(P);
+  if (P.slacks == 0 && !unit_q_) form_qt(P);
 }
 
 void Hierarchy::form_qt(const LsqProblem& P) {
@@ -589,16 +587,11 @@ void Hierarchy::form_qt(const LsqProblem& P) {
   qt_stale_ = false;
 }
 
-int Hierarchy::trial_switches() const {
-  return (trial_qt_tail ? 1 : 0) | (gemv_qr ? 2 : 0) | (rz_min_norm ? 4 : 0) |
-         (wide_ls ? 8 : 0) | (slack_ls ? 16 : 0) | (reuse_k_qr ? 32 : 0);
-}
-
 bool Hierarchy::trial_restore(const LsqProblem& P, const std::vector<int8_t>& W) {
   TrialState& t = *ts_;
   const int k = P.cols, qr = P.qrows;
   if (!t.intact || t.key_k != k || t.key_qrows != qr || t.key_unit_q != unit_q_ ||
-      t.key_switches != trial_switches() || t.key_slacks[0] != P.slacks ||
+      t.key_slacks[0] != P.slacks ||
       t.key_slacks[1] != P.zcols || t.key_slacks[2] != P.slack_q0 ||
       t.key_slacks[3] != P.slack_g0)
     return false;
@@ -625,7 +618,7 @@ bool Hierarchy::trial_restore(const LsqProblem& P, const std::vector<int8_t>& W)
   finish_ready_ = false;
   trial_ready_ = false;
   qt_stale_ = t.key_qt_stale;
-  ++trial_memo_hits_;
+  ++stats_.trial_memo_hits;
   return true;
 }
 
@@ -642,7 +635,6 @@ void Hierarchy::trial_keep(const LsqProblem& P) {
   t.key_qrows = qr;
   t.key_unit_q = unit_q_;
   t.key_qt_stale = qt_stale_;
-  t.key_switches = trial_switches();
   t.key_slacks = {P.slacks, P.zcols, P.slack_q0, P.slack_g0};
   t.key_widx = widx_;
   double* g = t.key_G.data();
@@ -658,14 +650,14 @@ void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) 
   // (trial_memo: the stage's last trial had these rows and objective, its factorisations
   // untouched since: nothing to compute. Only above every computed freeze of the call:
   // below one, Z and with it every projected row differ from the last call's)
-  const bool memo = trial_memo && per_stage_ && z_repeats_;
+  const bool memo = per_stage_ && z_repeats_;
   if (memo && trial_restore(P, W)) return;
   factor_trial_computed(P, W);
   if (memo) trial_keep(P);
 }
 
 void Hierarchy::factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W) {
-  if (!trial_qt_tail || unit_q_) {  // (unit_q_: factor_working forms no Q Qf either)
+  if (unit_q_) {  // (factor_working forms no Q Qf either)
     factor_working(P, W);
     return;
   }
@@ -709,7 +701,7 @@ bool Hierarchy::factor_k(const LsqProblem& P) {
   // a wide K (more free directions than objective rows) of full row rank: K s = -res is
   // consistent and its minimum-norm solution comes from one QR of K^T (nk x qr), without
   // the QR of K and the second one of [R11 R12]^T below
-  if (nk > qr && wide_ls) {
+  if (nk > qr) {
     ts_->kqr_t.matrix(nk, qr) = K.transpose();
     if (ts_->kqr_t.factor(tol, 0.0) == qr) {
       ts_->k_mode = KMode::kWide;
@@ -723,11 +715,13 @@ bool Hierarchy::factor_k(const LsqProblem& P) {
   ts_->k_rz = false;
   if (rk > 0 && rk < nk) {
     const auto Kf = ts_->kqr.matrix();
-    if (rz_min_norm) {
+    {
       MapMat T = ts_->krz.matrix(rk, nk);  // [R11 R12]^T (its upper triangle is not read)
       for (int i = 0; i < rk; ++i) T.col(i).tail(nk - i) = Kf.row(i).segment(i, nk - i).transpose();
-      ts_->k_rz = ts_->krz.factor();  // R11 nonsingular (pivots above tol): false never expected
-      if (ts_->k_rz) ++rz_factors_;
+      // R11 is nonsingular (its pivots are above tol); the QR of [R11 R12]^T stands in should
+      // the RZ meet an exactly zero pivot all the same
+      ts_->k_rz = ts_->krz.factor();
+      if (ts_->k_rz) ++stats_.rz_factors;
     }
     if (!ts_->k_rz) {
       MapMat T = ts_->cqr.matrix(nk, rk);  // [R11 R12]^T
@@ -761,18 +755,18 @@ void Hierarchy::ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
     ts_->wqr.apply_qt(g);
     step.segment(rho, nk) = -g.segment(rho, nk);
     ts_->wqr.apply_q(step);
-    ++least_distance_steps_;
+    ++stats_.least_distance_steps;
     return;
   }
-  if (reuse_k_qr && ts_->k_valid) {
+  if (ts_->k_valid) {
     // the same working set's QR as the last step: the same K (a K^T or slack_step decided
     // by W and P alone: the same path), only the right-hand side changed
-    ++k_qr_reuses_;
+    ++stats_.k_qr_reuses;
   } else {
     ts_->k_valid = false;
-    if (slack_ls && P.slacks > 0) {
+    if (P.slacks > 0) {
       if (slack_step(P, step)) {
-        ++slack_steps_;
+        ++stats_.slack_steps;
         return;
       }
       step.setZero();
@@ -900,7 +894,7 @@ double Hierarchy::sign_tolerance(const LsqProblem& P, const Eigen::Ref<const Vec
   const double gref = std::max(g.cwiseAbs().maxCoeff(), 1e-300);
   const double round =
       kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
-  return (exact_ ? 0.0 : kKktTol * gref) + round;
+  return (exact_ ? 0.0 : settings.kkt_tol * gref) + round;
 }
 
 void Hierarchy::add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
@@ -916,7 +910,7 @@ void Hierarchy::add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
     const double t = bound_step(gp(i), gy(i), P.lo(i), P.hi(i), tiny, sd);
     if (!(t * smax <= 1e-14 * yscale)) continue;  // active_set's `moved` test
     W[i] = sd;
-    ++batch_rows_;
+    ++stats_.batch_rows;
     // (a failed append leaves the row in W: the next iteration refactorises)
     if (current && ts_->wqr.append(P.G.row(i).head(k).transpose())) {
       widx_.push_back(i);
@@ -937,7 +931,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   const auto c = P.c.head(qr);
   const double cn = P.c_norm();
   qscale_ = Q.norm();
-  const int max_iter = kIterFactor * (m + k) + 10;
+  const int max_iter = settings.max_iter_factor * (m + k) + 10;
   auto step = step_.head(k);
   auto dres = dres_.head(qr);
   auto gy = gy_.head(m);
@@ -954,17 +948,17 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
   // tight_batch on a cold start only (no one-sided row in the starting W): rows batched into
   // a seeded start's set end in the stored set more often than its steps would put them
   // there, and the next call's warm trial misses more (random50: +6 % instructions)
-  bool batch_ok = tight_batch;
+  bool batch_ok = true;
   for (int i = 0; i < m && batch_ok; ++i)
     if (W[i] == 1 || W[i] == -1) batch_ok = false;
   bool current = false;  // the working set's factorisation matches W (after an append)
   // the exact finish right after an optimal end: its first step is that end's last one
-  bool reuse = exact_ && finish_ready_ && reuse_finish;
+  bool reuse = exact_ && finish_ready_;
   finish_ready_ = false;
-  // the exact finish right after a warm trial hit (reuse_k_qr): W and y are the trial's, so
-  // is its working set's QR (wqr, widx_) and K's factorisation; the trial kept only the
-  // null-space columns of Q Qf (trial_qt_tail): formed in full when an update needs them
-  bool trial = exact_ && trial_ready_ && reuse_k_qr && !reuse;
+  // the exact finish right after a warm trial hit: W and y are the trial's, so is its
+  // working set's QR (wqr, widx_) and K's factorisation; the trial kept only the
+  // null-space columns of Q Qf (factor_trial): formed in full when an update needs them
+  bool trial = exact_ && trial_ready_ && !reuse;
   trial_ready_ = false;
   // the current working set's sub-threshold step was taken (see `stationary` below)
   bool finished = false;
@@ -979,7 +973,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     } else {
       if (trial) {
         trial = false;
-        if (trial_qt_tail) qt_stale_ = true;
+        qt_stale_ = true;
       } else if (!current) {
         factor_working(P, W);
       }
@@ -1022,16 +1016,14 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
       dropped_since_move = true;
       finished = false;
       // the row leaves: downdate the working set's QR and Q Qf instead of refactorising
-      if (downdate) {
-        const auto pos = std::find(widx_.begin(), widx_.end(), drop);
-        if (pos != widx_.end() &&
-            ts_->wqr.remove(static_cast<int>(pos - widx_.begin()),
-                        ts_->Qt.topLeftCorner(qt_stale_ ? 0 : qr, k))) {
-          widx_.erase(pos);
-          ts_->k_valid = false;
-          current = true;
-          ++downdates_;
-        }
+      const auto pos = std::find(widx_.begin(), widx_.end(), drop);
+      if (pos != widx_.end() &&
+          ts_->wqr.remove(static_cast<int>(pos - widx_.begin()),
+                          ts_->Qt.topLeftCorner(qt_stale_ ? 0 : qr, k))) {
+        widx_.erase(pos);
+        ts_->k_valid = false;
+        current = true;
+        ++stats_.downdates;
       }
       continue;
     }
@@ -1267,9 +1259,8 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
   bool consistent = false;
   // a level's slack rows (mv > 0): the trial in z alone, the working rows' slacks eliminated
   const int reduced =
-      (reduce_slacks && slack_rows_ > 0) ? reduced_set_point(P, slack_rows_, ws, W, &consistent)
-                                         : -1;
-  if (reduced >= 0) ++reduced_trials_;
+      (slack_rows_ > 0) ? reduced_set_point(P, slack_rows_, ws, W, &consistent) : -1;
+  if (reduced >= 0) ++stats_.reduced_trials;
   *found = (reduced >= 0) ? reduced : stored_set_point(P, ws, W, &consistent);
   if (*found != static_cast<int>(ws.id.size()) || !consistent) return false;
   auto yp = xc_.head(k);
@@ -1291,12 +1282,6 @@ bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int har
                                  int zcols, Eigen::Ref<Vec> y, std::vector<int8_t>& W) {
   const int k = P.cols, m = P.rows;
   (void)ws;  // its point is in xc_ already (try_working_set's stored_set_point)
-  // no slack rows (every row must hold at the start): the stored set grown by the rows its
-  // point violates (trial_ready_: that point and W's mapping are stored_set_point's)
-  if (grow_seed && hard_rows == m && zcols == k && trial_ready_ && grow_stored_set(P, y, W)) {
-    ++grown_seeds_;
-    return true;
-  }
   auto yp = xc_.head(k);
   if (!yp.allFinite()) return false;
   // ratio test from z = 0 towards z_p on the rows without slack (feasible at z = 0)
@@ -1348,48 +1333,6 @@ bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int har
   }
   if (block >= 0) W[block] = side;
   return true;
-}
-
-bool Hierarchy::grow_stored_set(const LsqProblem& P, Eigen::Ref<Vec> y,
-                                std::vector<int8_t>& W) {
-  const int k = P.cols, m = P.rows;
-  auto yp = xc_.head(k);
-  auto gy = gy_.head(m);
-  auto step = step_.head(k);
-  std::copy(W.begin(), W.begin() + m, wgrow_.begin());
-  ygrow_.head(k) = yp;
-  trial_ready_ = false;  // wqr and K: the grown sets' from the first round on
-  for (int round = 0; yp.allFinite(); ++round) {
-    gy.noalias() = P.G.topLeftCorner(m, k) * yp;
-    int added = 0;
-    bool tight = true;
-    for (int i = 0; i < m && tight; ++i) {
-      if (W[i]) {  // (2: lo = hi)
-        const double b = (W[i] == 1) ? P.hi(i) : P.lo(i);
-        tight = std::abs(gy(i) - b) <= kWarmFeasTol * std::max(1.0, std::abs(b));
-      } else if (gy(i) > P.hi(i)) {
-        W[i] = 1;
-        ++added;
-      } else if (gy(i) < P.lo(i)) {
-        W[i] = -1;
-        ++added;
-      }
-    }
-    if (!tight) break;
-    if (!added) {  // feasible, W tight: the active set's start
-      y.head(k) = yp;
-      return true;
-    }
-    if (round == kGrowRounds) break;
-    factor_trial(P, W);
-    bool consistent = false;
-    if (!working_set_point(P, W, yp, &consistent) || !consistent) break;
-    ls_step(P, yp, step);
-    yp += step;
-  }
-  std::copy(wgrow_.begin(), wgrow_.begin() + m, W.begin());
-  yp = ygrow_.head(k);
-  return false;
 }
 
 void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>& W,
@@ -1513,7 +1456,7 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
   const bool hit = warm && try_working_set(P, working_[0], y, W_, &found);
   // on a miss: the stored set made feasible (every row has its slack: z = the set's point,
   // each slack the row's violation there)
-  const bool seeded = !hit && warm && seed_on_miss && found > 0 &&
+  const bool seeded = !hit && warm && found > 0 &&
                       seed_working_set(P, working_[0], 0, r_, y, W_);
   if (seeded) ++seeded_;
   if (!hit) {
@@ -1571,12 +1514,9 @@ int Hierarchy::qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floo
   // factorisation stopping there would give
   const int steps = cf_->mqr.factor(0.0, 0.0);
   const auto Af = cf_->mqr.matrix();
-  int rank = steps;
-  if (rank_revealing_qr) {
-    rank = 0;
-    while (rank < steps && std::abs(Af(rank, rank)) > tol) ++rank;
-  }
-  if (rank == 0 || (rank < p && !rank_revealing_qr)) return -1;
+  int rank = 0;
+  while (rank < steps && std::abs(Af(rank, rank)) > tol) ++rank;
+  if (rank == 0) return -1;
   // the dropped block R22 (upper triangle of the trailing block; columns past `steps` were
   // not reduced): its norm bounds the singular values past the rank, which the SVD's rank
   // rule must drop as well
@@ -1593,7 +1533,7 @@ int Hierarchy::qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floo
   // closed form is the plain minimum-norm least-squares solution
   auto Ri = rinv_.topLeftCorner(rank, rank);
   double inv = 0.0;
-  if (small_rinv && rank <= kSmallRinvMax) {
+  if (rank <= kSmallRinvMax) {
     // column j of R11^-1 by back substitution on its j + 1 leading entries (the rest are
     // zero), summed into |R11^-1|_F^2: no blocked solve with an identity right-hand side
     double sum = 0.0;
@@ -1609,31 +1549,21 @@ int Hierarchy::qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floo
       sum += x.squaredNorm();
     }
     inv = std::sqrt(sum);
-    ++small_rinvs_;
+    ++stats_.small_rinvs;
   } else {
     Ri.setIdentity();
     Af.topLeftCorner(rank, rank).triangularView<Eigen::Upper>().solveInPlace(Ri);
     inv = Ri.norm();
   }
   if (!(inv > 0.0) || !std::isfinite(inv) || !(1.0 / inv > kQrMargin * floor)) return -1;
-  // a rank-deficient M: the factorisation of [R11 R12] (tall) or of L = [R11^T; R12^T] (wide)
-  cf_->rz = false;
+  // a rank-deficient M: the RZ factorisation of [R11 R12] (tall) or the QR of
+  // L = [R11^T; R12^T] (wide)
   if (!wide && rank < r) {
-    // (rz_min_norm: the RZ of [R11 R12] in trz, else the QR of T = [R11 R12]^T in tqr)
-    if (rz_min_norm) {
-      MapMat T = cf_->trz.matrix(rank, r);  // [R11 R12]^T (its upper triangle is not read)
-      for (int j = 0; j < rank; ++j)
-        T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
-      if (!cf_->trz.factor()) return -1;
-      ++rz_factors_;
-      cf_->rz = true;
-    } else {
-      MapMat T = cf_->tqr.matrix(r, rank);
-      T.setZero();
-      for (int j = 0; j < rank; ++j)
-        T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
-      if (cf_->tqr.factor(0.0, 0.0) < rank) return -1;
-    }
+    MapMat T = cf_->trz.matrix(rank, r);  // [R11 R12]^T (its upper triangle is not read)
+    for (int j = 0; j < rank; ++j)
+      T.col(j).tail(r - j) = Af.row(j).segment(j, r - j).transpose();
+    if (!cf_->trz.factor()) return -1;
+    ++stats_.rz_factors;
   } else if (wide && rank < me) {
     MapMat L = cf_->tqr.matrix(me, rank);
     L.setZero();
@@ -1648,17 +1578,14 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
                               double tol, double floor, bool same_m, Eigen::Ref<Vec> dz) {
   ClosedForm& f = *cf_;
   const int me = static_cast<int>(M.rows()), r = static_cast<int>(M.cols());
-  const int switches = (rank_revealing_qr ? 1 : 0) | (small_rinv ? 2 : 0) |
-                       (rz_min_norm ? 4 : 0) | (gemv_qr ? 8 : 0);
-  // (closed_form_memo: M bit for bit the one factorised at this level's last call -- A and
-  // Z are, and with A the tolerances, functions of |A|_F, r and the damping: its
+  // (the closed-form cache: M bit for bit the one factorised at this level's last call --
+  // A and Z are, and with A the tolerances, functions of |A|_F, r and the damping: its
   // factorisation, or its failure, is still in f)
-  if (same_m && f.valid && f.key_switches == switches) {
-    ++closed_form_memo_hits_;
+  if (same_m && f.valid) {
+    ++stats_.closed_form_memo_hits;
   } else {
     f.rank = qr_factor(M, tol, floor);
-    f.valid = closed_form_memo;  // (the factorisation of the M now in Ms_ of the stage)
-    f.key_switches = switches;
+    f.valid = true;  // (the factorisation of the M now in Ms_ of the stage)
   }
   const int rank = f.rank;
   if (rank <= 0) return -1;
@@ -1673,15 +1600,12 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
     for (int i = 0; i < r; ++i) dz(f.mqr.perm(i)) = u(i);
   } else if (!wide) {
     // M P = Qf [R11 R12; 0 0] (R22 dropped): dz = P w, w the minimum-norm solution of
-    // [R11 R12] w = (Qf^T e)(0:rank), by the RZ of [R11 R12] or the QR of its transpose
+    // [R11 R12] w = (Qf^T e)(0:rank), by the RZ of [R11 R12]
     auto u = ute_.head(me);
     u = e;
     f.mqr.apply_qt(u);
     auto w = u_.head(r);
-    if (f.rz)
-      f.trz.min_norm_solve(u.head(rank), w);
-    else
-      f.tqr.min_norm_transposed_solve(u.head(rank), w);
+    f.trz.min_norm_solve(u.head(rank), w);
     for (int i = 0; i < r; ++i) dz(f.mqr.perm(i)) = w(i);
   } else {
     // M^T P = Qf [R11 R12; 0 0]: M = P L Qf1^T with L = [R11^T; R12^T] (me x rank, full
@@ -1694,7 +1618,7 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
     for (int i = 0; i < rank; ++i) dz(f.tqr.perm(i)) = u(i);
     f.mqr.apply_q(dz);
   }
-  ++qr_closed_forms_;
+  ++stats_.qr_closed_forms;
   return rank;
 }
 
@@ -1713,15 +1637,12 @@ void Hierarchy::row_space_basis(const Svd& svd, bool by_qr, int rank,
     }
   } else if (rank == r) {  // M has full column rank: the whole space
     out.setIdentity();
-  } else {  // rows of [R11 R12] P^T: P times the first rank columns of T's Q factor
+  } else {  // rows of [R11 R12] P^T: P times its RZ's row space, Z^T [I; 0]
     auto q = u_.head(r);
     for (int j = 0; j < rank; ++j) {
       q.setZero();
       q(j) = 1.0;
-      if (cf_->rz)
-        cf_->trz.apply_zt(q);  // T's row space: Z^T [I; 0]
-      else
-        cf_->tqr.apply_q(q);
+      cf_->trz.apply_zt(q);
       for (int i = 0; i < r; ++i) out(cf_->mqr.perm(i), j) = q(i);
     }
   }
@@ -1741,7 +1662,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   }
   // (the memos: A, C and Z on entry bit for bit the last call's -- M = A Z is then the one
   // in Ms_[stage], and its factorisations those the stage keeps)
-  const bool same_m = memo_entry(stage, Aeq, e0, me, C, i0, mi) && closed_form_memo;
+  const bool same_m = memo_entry(stage, Aeq, e0, me, C, i0, mi);
   if (!same_m) cf_->svd_valid = false;
   const auto Zr = Z_.leftCols(r_);
   // ---- damped closed form of the projected equalities
@@ -1758,9 +1679,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   double M_scale = 0.0;  // |A|_F of the level's equalities (>= s_0 of M)
   if (me) {
     const auto A = Aeq.middleRows(e0, me);
-    if (identity_z && z_identity_) {  // A I: the rows themselves
+    if (z_identity_) {  // A I: the rows themselves
       M = A;
-      ++identity_products_;
+      ++stats_.identity_products;
     } else if (!same_m) {
       auto Ab = Ab_.topRows(me);
       Ab = A;  // contiguous: the product below makes no temporary
@@ -1792,10 +1713,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       // the SVD of [M 0] (me x n, zero columns padded to the stage's fixed width): the same
       // singular values and U; V's first rank columns are M's, padded with zero rows. A fixed
       // size keeps JacobiSVD's workspace (no allocation when r changes)
-      if (!cf_->svd_valid) {  // (closed_form_memo: else the SVD of this M, the last call's)
+      if (!cf_->svd_valid) {  // (else the SVD of this M, the last call's)
         Ms_[stage].rightCols(n_ - r_).setZero();
         svd.compute(Ms_[stage], Eigen::ComputeThinU | Eigen::ComputeThinV);
-        cf_->svd_valid = closed_form_memo;
+        cf_->svd_valid = true;
       }
       const Vec& s = svd.singularValues();
       rank = numerical_rank(s, me, r_, scale);
@@ -1824,8 +1745,8 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     } else if (rank) {
       // (freeze_memo: the same inputs as this level's last freeze: its outputs restored)
       const FreezeKind kind = (by_qr && cf_->wide) ? FreezeKind::kWide
-                              : (by_qr && null_space_freeze) ? FreezeKind::kNullSpace
-                                                             : FreezeKind::kGeneral;
+                              : by_qr                ? FreezeKind::kNullSpace
+                                                     : FreezeKind::kGeneral;
       if (!(memo_gate() && freeze_lookup(stage, kind, rank, mi, false))) {
         if (kind == FreezeKind::kWide) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
           freeze_wide(rank);
@@ -1850,9 +1771,9 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   if (mi) {
     auto Cl = Cl_.topRows(mi);
     Cl = C.middleRows(i0, mi);
-    if (identity_z && z_identity_) {  // C I: the rows themselves
+    if (z_identity_) {  // C I: the rows themselves
       CZl = Cl;
-      ++identity_products_;
+      ++stats_.identity_products;
     } else {
       CZl.noalias() = Cl * Zr;
     }
@@ -1881,12 +1802,11 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // constant in y, kept in dropped2)
   // (the full QR may stop at a pivot column exactly zero: then the whole trailing block is
   // checked to be exactly zero, its rows of R are zero and the compression stays exact)
-  bool full_r = by_qr && !cf_->wide && compress_objective && cf_->mqr.rank() == r_;
-  if (by_qr && !cf_->wide && compress_objective && compress_zero_tail && !full_r &&
-      cf_->mqr.rows() == me && cf_->mqr.cols() == r_) {
+  bool full_r = by_qr && !cf_->wide && cf_->mqr.rank() == r_;
+  if (by_qr && !cf_->wide && !full_r && cf_->mqr.rows() == me && cf_->mqr.cols() == r_) {
     const int t = cf_->mqr.rank();
     full_r = (cf_->mqr.matrix().bottomRightCorner(me - t, r_ - t).array() == 0.0).all();
-    if (full_r) ++zero_tail_compressions_;
+    if (full_r) ++stats_.zero_tail_compressions;
   }
   const int qme = full_r ? r_ : me;
   P.start(qme + ndamp + mv, cols);
@@ -1934,7 +1854,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   const bool hit = warm && try_working_set(P, working_[stage], y, W_, &found);
   slack_rows_ = 0;
   const bool seeded =
-      !hit && warm && seed_on_miss && found > 0 &&
+      !hit && warm && found > 0 &&
       seed_working_set(P, working_[stage], P.rows - mv, r_, y, W_);
   if (seeded) {
     ++seeded_;
@@ -1951,7 +1871,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     }
     if (!active_set(P, y, W_, iters)) return timed_out_ ? kTimeLimit : kNotConverged;
   }
-  // an ill-conditioned or damped level: finished to rounding (a point optimal to kKktTol can
+  // an ill-conditioned or damped level: finished to rounding (a point optimal to settings.kkt_tol can
   // be far from the optimum along a direction of curvature s^2 or tau^2, and is frozen)
   if (me && rank &&
       (by_qr ? cf_->smin < kIllConditioned * M_scale
@@ -1978,26 +1898,25 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     const double gap = std::max(lo(row) - v, v - hi(row));
     const double scale = std::max({finite_abs(lo(row)), finite_abs(hi(row)),
                                    C.row(row).norm() * xscale});
-    if (gap > kViolationTol * scale + kAbsFloor) {
+    if (gap > settings.violation_tol * scale + kAbsFloor) {
       viol_[i] = 1;
       ++nviol;
     }
   }
-  // the freeze: onto null([R11 R12]) from the closed form's own QR (null_space_freeze: a
-  // rank-deficient tall M and no violated row), else F^T = [V_rank, Z^T C_violated^T]
-  // (r x f) factorised, null(F) being what the level leaves free
-  const bool by_null_space =
-      nviol == 0 && rank && by_qr && !cf_->wide && rank < r_ && null_space_freeze;
-  // full_rank_freeze: the level's equalities have rank r (M of full column rank) and no row
-  // is violated: F^T is an orthonormal basis of the whole space, null(F) = {0}
-  const bool no_freedom = full_rank_freeze && nviol == 0 && rank == r_;
-  // wide_freeze: a wide M factorised by the QR of M^T, no row violated: null(M) spans the
-  // last r - rank columns of Qf, Z <- Z Qf by M^T's own reflectors (as a feasible closed form)
-  const bool by_wide = wide_freeze && !no_freedom && nviol == 0 && rank && by_qr && cf_->wide;
+  // the freeze: onto null([R11 R12]) from the closed form's own QR (a rank-deficient tall
+  // M and no violated row), else F^T = [V_rank, Z^T C_violated^T] (r x f) factorised,
+  // null(F) being what the level leaves free
+  const bool by_null_space = nviol == 0 && rank && by_qr && !cf_->wide && rank < r_;
+  // the level's equalities have rank r (M of full column rank) and no row is violated: F^T
+  // would be an orthonormal basis of the whole space, null(F) = {0}
+  const bool no_freedom = nviol == 0 && rank == r_;
+  // a wide M factorised by the QR of M^T, no row violated: null(M) spans the last r - rank
+  // columns of Qf, Z <- Z Qf by M^T's own reflectors (as a feasible closed form)
+  const bool by_wide = !no_freedom && nviol == 0 && rank && by_qr && cf_->wide;
   const bool by_f = !by_null_space && !no_freedom && !by_wide;
   const int k_before = k_;
   inherit(C, lo, hi, i0, mi, &viol_);
-  if (carry_projection && kz_ == k_before) {  // the inherited rows' projections, at hand
+  if (kz_ == k_before) {  // the inherited rows' projections, at hand
     for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
     kz_ = k_;
   }
@@ -2005,10 +1924,10 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     r_ = 0;
     kz_ = 0;
     z_identity_ = false;
-    ++full_rank_freezes_;
+    ++stats_.full_rank_freezes;
     return kOk;
   }
-  if (by_wide) ++wide_freezes_;
+  if (by_wide) ++stats_.wide_freezes;
   // (freeze_memo: the same inputs as this level's last freeze: its outputs restored; the
   // violated rows are inputs of the general freeze only)
   const FreezeKind kind = by_null_space ? FreezeKind::kNullSpace
@@ -2054,7 +1973,7 @@ int Hierarchy::independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, in
     if (s(i) > kMovableTol * scale) continue;
     v.noalias() = Aeq.middleRows(e0, me).transpose() * svd.matrixU().col(i);
     if (s(i) <= kMovableTol * v.norm()) {
-      ++dependent_drops_;
+      ++stats_.dependent_drops;
       return i;
     }
   }
@@ -2079,8 +1998,8 @@ void Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<i
   if (m < 2 || r_ == 0) return;
   MapMat T = fqr_.matrix(r_, m);
   for (int j = 0; j < m; ++j) T.col(j) = R.row(rows[j]).head(r_).transpose() / norms(j);
-  if (gram_screen && independent_by_gram(T)) {
-    ++gram_screens_;
+  if (independent_by_gram(T)) {
+    ++stats_.gram_screens;
     return;
   }
   const int rank = fqr_.factor(kMovableTol, 0.0);
@@ -2093,7 +2012,7 @@ void Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<i
     fqr_.apply_q(v);
     R.row(rows[j]).head(r_) = v.transpose();
   }
-  ++dependent_drops_;
+  ++stats_.dependent_drops;
 }
 
 /// True when the pivoted QR of T (r x m, columns of norm at most 1: projections of rows
@@ -2168,7 +2087,7 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
     bool& flag;
     ~UnitQ() { flag = false; }
   } unit_q{unit_q_};
-  unit_q_ = least_distance;
+  unit_q_ = true;
   auto y = y_.head(r_);
   y.setZero();
   int iters = 0;
@@ -2177,7 +2096,7 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   // on a miss: the stored set made feasible (every row is without slack here; y = 0 is
   // feasible: x meets the inherited rows and the bounds)
   const bool seeded =
-      !hit && warm && seed_on_miss && found > 0 &&
+      !hit && warm && found > 0 &&
       seed_working_set(P, working_[stage], P.rows, r_, y, W_);
   if (seeded) {
     ++seeded_;
@@ -2195,21 +2114,6 @@ int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   x_.noalias() += Zr * y;
   snap(x_);
   return kOk;
-}
-
-int Hierarchy::gemv_steps() {
-  int s = 0;
-  for (TrialState& t : trials_) {
-    s += t.wqr.gemv_steps();
-    for (const PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) s += q->gemv_steps;
-  }
-  for (const ClosedForm* f : {&shared_cf_}) s += f->mqr.gemv_steps + f->tqr.gemv_steps;
-  for (const ClosedForm& f : cforms_) s += f.mqr.gemv_steps + f.tqr.gemv_steps;
-  s += shared_trial_.wqr.gemv_steps();
-  for (const PivotedQR* q : {&shared_trial_.kqr, &shared_trial_.cqr, &shared_trial_.kqr_t})
-    s += q->gemv_steps;
-  for (const PivotedQR* q : {&fqr_, &sqr_}) s += q->gemv_steps;
-  return s;
 }
 
 double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
@@ -2241,67 +2145,23 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
   stats.setZero();
   detail.setZero();
-  for (PivotedQR* q : {&fqr_, &sqr_}) {
-    q->gemv_update = gemv_qr;
-    q->gemv_steps = 0;
-  }
-  if (calls_ > 0 && !per_stage_ &&
-      (freeze_memo || trial_memo || closed_form_memo || bound_rows_memo))
-    allocate_per_stage();  // (the second call: once)
+  if (calls_ > 0 && !per_stage_) allocate_per_stage();  // (the second call: once)
   ++calls_;
-  auto set_cf = [&](ClosedForm& f) {
-    for (PivotedQR* q : {&f.mqr, &f.tqr}) {
-      q->gemv_update = gemv_qr;
-      q->gemv_steps = 0;
-    }
-    f.mqr.wy_right = wy_right;
-    f.mqr.wy_applications = 0;
-  };
-  auto set_trial = [&](TrialState& t) {
-    for (PivotedQR* q : {&t.kqr, &t.cqr, &t.kqr_t}) {
-      q->gemv_update = gemv_qr;
-      q->gemv_steps = 0;
-    }
-    t.wqr.set_gemv_update(gemv_qr);
-    t.wqr.gemv_steps() = 0;
-  };
-  set_cf(shared_cf_);
-  for (ClosedForm& f : cforms_) set_cf(f);
-  set_trial(shared_trial_);
-  for (TrialState& t : trials_) set_trial(t);
-  fqr_.wy_right = wy_right;
+  shared_cf_.mqr.wy_applications = 0;
+  for (ClosedForm& f : cforms_) f.mqr.wy_applications = 0;
   fqr_.wy_applications = 0;
   timed_out_ = false;
   seeded_ = 0;
-  downdates_ = 0;
-  slack_steps_ = 0;
-  least_distance_steps_ = 0;
-  batch_rows_ = 0;
-  grown_seeds_ = 0;
+  stats_ = Stats();
   unit_q_ = false;
-  k_qr_reuses_ = 0;
-  rz_factors_ = 0;
-  identity_products_ = 0;
   ts_->k_valid = false;
   trial_ready_ = false;
-  qr_closed_forms_ = 0;
-  zero_tail_compressions_ = 0;
-  null_space_freezes_ = 0;
-  full_rank_freezes_ = 0;
-  dependent_drops_ = 0;
-  gram_screens_ = 0;
-  wide_freezes_ = 0;
-  freeze_memo_hits_ = 0;
-  trial_memo_hits_ = 0;
-  closed_form_memo_hits_ = 0;
-  bound_rows_memo_hits_ = 0;
-  small_rinvs_ = 0;
-  reduced_trials_ = 0;
-  has_deadline_ = std::isfinite(time_left);
+  const double limit = std::min(time_left, settings.time_limit);
+  has_deadline_ = std::isfinite(limit);
   if (has_deadline_)
     deadline_ = std::chrono::steady_clock::now() +
                 std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                    std::chrono::duration<double>(std::max(time_left, 0.0)));
+                    std::chrono::duration<double>(std::max(limit, 0.0)));
   lb_ = lb;
   ub_ = ub;
   int st = hard_phase(Aeq, beq, C, lo, hi, stats, detail, warm);
@@ -2344,6 +2204,8 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     }
   }
   detail(7) = seeded_;
+  stats_.wy_applications = fqr_.wy_applications + shared_cf_.mqr.wy_applications;
+  for (const ClosedForm& f : cforms_) stats_.wy_applications += f.mqr.wy_applications;
   x_out = x_;
   return kOk;
 }
