@@ -375,8 +375,8 @@ class TrapezoidRZ {
     for (int i = 0; i < rank_; ++i) {
       if (tau_(i) == 0.0) continue;
       // plain loops over the short tail (l = nc - rank entries): Eigen's dot on these
-      // block types is the one PivotedQR::reflect uses, and a second caller made GCC stop
-      // inlining it there (+1.4 % instructions on the humanoid)
+      // block types is the one PivotedQR::reflect uses, which GCC inlines there only while
+      // it has a single caller
       const double* v = B.data() + static_cast<Eigen::Index>(i) * B.outerStride() + rank_;
       double d = x(i);
       for (int t = 0; t < l; ++t) d += v[t] * x(rank_ + t);

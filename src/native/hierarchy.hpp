@@ -13,6 +13,9 @@
 // level's inequality rows, from a feasible start (z = 0, w = the rows' current violation),
 // warm-started from the previous call's working set of that level. The optimum is frozen:
 // Z <- Z null([Vt_rank; violated rows]), satisfied rows are inherited (opened to their value).
+//
+// docs/engine.md describes the design: the stages, the warm start, the caches and the rank
+// decisions, and the invariants each relies on.
 #pragma once
 
 #include <Eigen/Dense>
@@ -105,7 +108,7 @@ struct Settings {
   double time_limit = std::numeric_limits<double>::infinity();
 };
 
-/// Counters of one solve (Hierarchy::stats(); NativeHierarchy.solve's info["stats"]): how
+/// Counters of one solve (Hierarchy::stats(); NativeHierarchy.counters in Python): how
 /// often each path and cache was taken. They describe the work, never the answer.
 struct Stats {
   int downdates = 0;             ///< rows that left a working set by a QR downdate
@@ -155,7 +158,7 @@ class Hierarchy {
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
   double damping() const { return damping_; }
 
-  /// What a user may tune; the defaults are the Python engine's (qpcoord.core.polish).
+  /// What a user may tune; the defaults are the Python engine's tolerances.
   Settings settings;
   /// The counters of the last call.
   const Stats& stats() const { return stats_; }
@@ -189,7 +192,7 @@ class Hierarchy {
   /// damped, and the SVD's truncated closed form is the minimum-norm least-squares solution
   /// of the complete orthogonal decomposition (R22 dropped), computed here. Returns the rank
   /// or -1: use the SVD. same_m: M is bit for bit the one in the stage's Ms_ at its last
-  /// call (closed_form_memo reuses that call's factorisation, or its failure).
+  /// call (the closed-form cache reuses that call's factorisation, or its failure).
   int qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol,
                      double floor, bool same_m, Eigen::Ref<Vec> dz);
   /// qr_closed_form's factorisations (cf_: mqr, and tqr or trz when M is rank-deficient):
@@ -197,7 +200,7 @@ class Hierarchy {
   int qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floor);
   /// The memos' entry test of level stage: true when its rows A and C and Z on entry are bit
   /// for bit those of its last call (then M = A Z is the one in Ms_); keeps what differs.
-  /// False whenever the memos are off or a freeze of this call was computed (memo_gate).
+  /// False on the first call and once a freeze of this call was computed (memo_gate).
   bool memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C, int i0,
                   int mi);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
@@ -212,10 +215,10 @@ class Hierarchy {
   /// computed on first use in a call and kept: every level's add_inherited_rows reads it
   double cin_norm(int i);
   void add_inherited_rows(LsqProblem& P);
-  /// The bounds as rows of P (Z's rows scaled to unit norm; bound_rows_memo: copied from
+  /// The bounds as rows of P (Z's rows scaled to unit norm; the bound-rows cache: copied from
   /// the stage's last call when its Z repeats).
   void add_bound_rows(LsqProblem& P, int stage);
-  /// bound_rows_memo: a stage's bound rows as add_bound_rows wrote them (every variable's
+  /// The bound-rows cache: a stage's bound rows as add_bound_rows wrote them (every variable's
   /// row kept), keyed on the Z (its first r columns) they were projected from.
   struct BoundRowsMemo {
     bool valid = false;
@@ -225,12 +228,12 @@ class Hierarchy {
   };
   std::vector<BoundRowsMemo> bound_memos_;  ///< per stage (levels and the minimum-norm step)
   /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
-  /// projection of the inherited rows (carry_projection); call before r_ changes.
+  /// projection of the inherited rows; call before r_ changes.
   void carry_z(PivotedQR& qr, int rank);
   /// Z <- Z null(F) with F^T the r x f matrix already in fqr_ (rank relative to scale).
   void freeze(double scale);
-  /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (rz:
-  /// N from the stage's trz, else from its tqr); the carried projection Cin Z follows by the same product.
+  /// Z <- Z P N after qr_closed_form found a tall M of rank < r (N from the stage's RZ of
+  /// [R11 R12]); the carried projection Cin Z follows by the same product.
   void freeze_null_space(int rank);
   /// The rank of a level's M without directions dependent on the frozen rows to within the
   /// movable tolerance (robust: see hierarchy.cpp).
@@ -241,16 +244,16 @@ class Hierarchy {
   void drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
                                  const Eigen::Ref<const Vec>& norms);
   /// True when the r x m matrix T proves every pivot of its column-pivoted QR above the
-  /// movable tolerance (gram_screen: see hierarchy.cpp).
+  /// movable tolerance (see hierarchy.cpp).
   bool independent_by_gram(const Eigen::Ref<const Mat>& T);
   /// Z <- Z Qf(:, rank:) after a wide M's QR in the stage's mqr (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
-  /// The freeze a level makes (freeze_memo's key: the same function of the same inputs
+  /// The freeze a level makes (the freeze cache's key: the same function of the same inputs
   /// whether the level ended by its closed form or its active set): Z <- Z Qf by a wide M^T's
   /// reflectors, Z <- Z P N from the QR of [R11 R12], or the QR of F^T = [B, violated rows].
   enum class FreezeKind : int8_t { kWide, kNullSpace, kGeneral };
-  /// freeze_memo: true when the stage's stored freeze had these inputs (memo_entry found the
+  /// The freeze cache: true when the stage's stored freeze had these inputs (memo_entry found the
   /// rows and Z on entry the same; kind, rank, Cin Z now, the violated rows when
   /// with_viol): Z_, r_, z_identity_, kz_ and Cin Z are then set to its outputs. Else false;
   /// when the rows repeat, the other inputs are taken (the outputs by freeze_computed).
@@ -269,9 +272,10 @@ class Hierarchy {
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
   bool active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W, int& iters);
-  /// tight_batch: after the row blocking the step at length zero entered W, the other rows
-  /// outside W (but `dropped`) that block it at length zero (active_set's ratio test on its
-  /// products gp_, gy_) enter too; their QR appended while `current` (else current = false).
+  /// At a degenerate point: after the row blocking the step at length zero entered W, the
+  /// other rows outside W (but `dropped`) that block it at length zero (active_set's ratio
+  /// test on its products gp_, gy_) enter too; their QR appended while `current` (else
+  /// current = false).
   void add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
                          int dropped, double smax, double yscale, bool& current);
   /// Map a stored working set onto P's rows (into W), factor it and write the minimum-norm
@@ -307,6 +311,17 @@ class Hierarchy {
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                        std::vector<int8_t>& W, int* found);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// A stage's warm start and active set, the one rule of the hard phase, the levels and the
+  /// minimum-norm step: with warm, the stored working set ws is tried first (hit: its point
+  /// is the optimum, into y and W_); on a miss whose stored rows matched, the active set
+  /// starts from the stored set made feasible (seed_working_set; the first hard_rows rows of
+  /// P have no slack), else cold: W_ holds the equality rows only and cold_start(y) sets the
+  /// starting point. slack_rows: the level's own rows with one slack column each (the
+  /// reduced trial), 0 otherwise. Returns kOk, or kTimeLimit / kNotConverged.
+  template <typename ColdStart>
+  int warm_started_active_set(const LsqProblem& P, const Working& ws, bool warm, int hard_rows,
+                              int slack_rows, Eigen::Ref<Vec> y, ColdStart cold_start,
+                              int& iters, bool& hit);
   /// After a miss of a level's stored working set: a feasible start near its point. The
   /// stored set's point (its rows held, the least squares on them) gives z_p; the ratio test
   /// from z = 0 (feasible) towards z_p on the rows without slack (the first `hard_rows` rows
@@ -325,13 +340,13 @@ class Hierarchy {
   void factor_rows(const LsqProblem& P, const std::vector<int8_t>& W);
   /// Qt = Q Qf for the working set's current QR (all its transforms so far).
   void form_qt(const LsqProblem& P);
-  /// factor_working for a warm trial (trial_qt_tail): the same QR of G_w^T, but of Q Qf only
+  /// factor_working for a warm trial: the same QR of G_w^T, but of Q Qf only
   /// the columns rank.. that ls_step reads (none when G_w pins y); the active set's updates
   /// need all of Q Qf and start from factor_working
   void factor_trial(const LsqProblem& P, const std::vector<int8_t>& W);
-  /// factor_trial's factorisations, computed (trial_memo missed or off).
+  /// factor_trial's factorisations, computed (the trial cache missed).
   void factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W);
-  /// trial_memo: true when the stage's TrialState is intact and keyed by P's working rows of
+  /// The trial cache: true when the stage's TrialState is intact and keyed by P's working rows of
   /// W and its objective, bit for bit (then widx_ and the flags are set as factor_trial
   /// leaves them); trial_keep stores the key of the trial just factorised.
   bool trial_restore(const LsqProblem& P, const std::vector<int8_t>& W);
@@ -341,7 +356,7 @@ class Hierarchy {
   /// Form the projected objective K = Q N of the working set's QR and factorise it for
   /// ls_step (k_mode_, k_rank_; sets k_valid_); false when K is rounding noise (zero step).
   bool factor_k(const LsqProblem& P);
-  /// The step of ls_step by the slack structure of P (slack_ls): the minimum-norm step with
+  /// The step of ls_step by the slack structure of P: the minimum-norm step with
   /// G_w step = 0 and Q step = -res_ when the system, its slacks eliminated, has full row
   /// rank (then consistent: the same step as the projected least squares); false: take the
   /// general path.
@@ -365,7 +380,7 @@ class Hierarchy {
   int r_ = 0;
   Mat Cin_;  ///< inherited rows (capacity x n)
   Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
-  int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
+  int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_z)
   Vec cinx_;  ///< workspace: Cin x (add_inherited_rows, feasible; read where it is formed)
   Vec lin_, uin_;
   /// |Cin_.row(i)| once computed, else -1 (cin_norm)
@@ -400,21 +415,21 @@ class Hierarchy {
   // stage, whose sizes repeat from one call to the next)
   enum class KMode : int8_t { kZero, kWide, kTall };
   /// A stage's (hard phase, level, minimum norm) working set and K factorisations, one per
-  /// stage: trial_memo finds the stage's last warm trial there at its next call.
+  /// stage: the trial cache finds the stage's last warm trial there at its next call.
   struct TrialState {
     WorkingQR wqr;  ///< G_w^T of the working set (k x kw), updated as rows enter and leave
     PivotedQR kqr;  ///< the projected objective K = Q N (qrows x (k - rank))
     PivotedQR cqr;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
     PivotedQR kqr_t;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
-    TrapezoidRZ krz;  ///< rz_min_norm: [R11 R12] of a rank-deficient K
+    TrapezoidRZ krz;  ///< [R11 R12] of a rank-deficient K
     Mat Qt;           ///< Q Qf
-    /// reuse_k_qr: kqr (and cqr) or kqr_t hold the factorisation of the current working
+    /// kqr (and cqr) or kqr_t hold the factorisation of the current working
     /// set's K on the stage's problem (cleared whenever the working set's QR changes)
     bool k_valid = false;
     KMode k_mode = KMode::kZero;  ///< how that K was solved: negligible, by K^T, by K's QR
     int k_rank = 0;               ///< numerical rank of that K (kTall)
     bool k_rz = false;            ///< that K's minimum-norm step by krz (else cqr)
-    /// trial_memo: wqr, Qt (and K when k_valid) are the factorisations factor_trial made of
+    /// The trial cache: wqr, Qt (and K when k_valid) are the factorisations factor_trial made of
     /// the key below, nothing having changed them since
     bool intact = false;
     int key_k = -1, key_qrows = -1;  ///< the trial's P.cols, P.qrows
@@ -423,7 +438,7 @@ class Hierarchy {
     std::vector<int> key_widx;  ///< its working rows
     Vec key_G, key_Q;           ///< their G_w (kw x k) and the objective Q (qrows x k)
     /// Buffers for problems of up to cols columns, grows rows and qrows objective rows
-    /// (keys: trial_memo's too).
+    /// (keys: the trial cache's too).
     void reserve(int cols, int grows, int qrows, bool keys);
   };
   std::vector<TrialState> trials_;  ///< per stage (from the second call: allocate_per_stage)
@@ -435,18 +450,18 @@ class Hierarchy {
   /// (the first, and a one-shot solve, share one set; nothing allocates after the second).
   void allocate_per_stage();
   TrialState* stage_trial(int stage) { return per_stage_ ? &trials_[stage] : &shared_trial_; }
-  /// A level's closed form from the QR of M = A Z (one per stage): closed_form_memo finds
+  /// A level's closed form from the QR of M = A Z (one per stage): the closed-form cache finds
   /// the factorisation of the level's M of the previous call there when A and Z repeat.
   struct ClosedForm {
     PivotedQR mqr;  ///< M (tall) or M^T (wide): the closed form without an SVD
     /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
     /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
     PivotedQR tqr;
-    TrapezoidRZ trz;     ///< rz_min_norm: [R11 R12] of a rank-deficient tall M
+    TrapezoidRZ trz;     ///< [R11 R12] of a rank-deficient tall M
     bool wide = false;   ///< M^T factorised (me <= r)
     double smin = 0.0;   ///< lower bound 1/|R^-1|_F of sigma_min(M)
     int rank = -1;       ///< qr_factor's result (-1: the SVD path)
-    /// closed_form_memo: the stage's M (Ms_) is the one factorised here (and, svd_valid,
+    /// The closed-form cache: the stage's M (Ms_) is the one factorised here (and, svd_valid,
     /// by its SVD), with these tolerances and switches
     bool valid = false, svd_valid = false;
     /// Buffers for a level of me equality rows in n variables, capacity inherited rows.
@@ -458,21 +473,22 @@ class Hierarchy {
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR sqr_;  ///< slack_step: the transposed system on z
   /// the stage being solved has an objective Q with orthonormal columns (the minimum-norm
-  /// stage with least_distance): ls_step takes the least-distance step, no Q Qf is formed
+  /// stage): ls_step takes the least-distance step, no Q Qf is formed
   bool unit_q_ = false;
-  bool z_identity_ = false;  ///< Z_ is the n x n identity (r_ == n_; identity_z)
+  bool z_identity_ = false;  ///< Z_ is the n x n identity (r_ == n_: products with it are copies)
   /// the last factorisation was stored_set_point's on a level's full problem (W: its mapped
-  /// set; the exact finish after a hit starts from it, reuse_k_qr)
+  /// set; the exact finish after a hit starts from it)
   bool trial_ready_ = false;
   /// Qt not formed for the working set's QR (factor_working of a level with slacks and
-  /// slack_ls: ls_step forms it when its general path needs it; updates skip it till then)
+  /// ls_step forms it when its general path needs it; updates skip it till then)
   bool qt_stale_ = true;
   /// active_set returned optimal and nothing has factorised since: wqr, widx_, Qt, res_
   /// and step_ are those of its final W and y (the exact finish's first iteration)
   bool finish_ready_ = false;
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
-  /// active_set decides stationarity and multiplier signs to rounding, not to settings.kkt_tol and a
-  /// 1e-15 objective gain (the finish of an ill-conditioned or damped level, issue 24)
+  /// active_set decides stationarity and multiplier signs to rounding, not to
+  /// settings.kkt_tol and a 1e-15 objective gain (the finish of an ill-conditioned or damped
+  /// level)
   bool exact_ = false;
   Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,
       e_, ute_;
@@ -486,7 +502,7 @@ class Hierarchy {
   Mat Ztmp_;
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
-  /// freeze_memo: one stage's last freeze, its inputs and its outputs (buffers of fixed
+  /// The freeze cache: one stage's last freeze, its inputs and its outputs (buffers of fixed
   /// size, allocated by allocate_per_stage)
   struct FreezeMemo {
     bool valid = false;     ///< a whole freeze stored: inputs and outputs
@@ -502,9 +518,9 @@ class Hierarchy {
     int a_layout = 0, c_layout = 0;  ///< 0: nothing stored yet
     std::vector<char> viol;
   };
-  std::vector<FreezeMemo> memos_;  ///< per stage (freeze_memo)
-  Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))
-  Mat cztmp_;  ///< null_space_freeze: the product Cin Z P N before it is copied back
+  std::vector<FreezeMemo> memos_;  ///< per level (the freeze cache)
+  Mat nsp_;  ///< freeze_null_space: P N (r x (r - rank))
+  Mat cztmp_;  ///< freeze_null_space: the product Cin Z P N before it is copied back
   Mat rinv_;       ///< R^-1 of the stage's mqr (a bound on M's smallest singular value)
   std::vector<Svd> svds_;
 };
