@@ -41,13 +41,6 @@ Printed: per problem, variant and kind of step, each solver's median µs (with `
 range over N runs, the problems in turn within a run), the native warm solve over DAQP's
 faster path and the largest level gaps; ``--percentiles`` adds median / p90 / p99.
 
-``--off SWITCH`` (with ``--resolve``, repeatable): one more row, ``native bare (SWITCH
-off)``: a second bare native solver with that ``Hierarchy`` switch (e.g. ``slack_ls``) set
-to False, timed beside the bare one on the same buffers, in alternating order (an A/B within
-one run)::
-
-    python benchmarks/hierarchy_published.py --resolve --problem lexls_test01_humanoid \
-        --off slack_ls
 """
 
 from __future__ import annotations
@@ -172,24 +165,15 @@ def resolve(
     n: int,
     steps: int,
     moved: bool,
-    off: tuple[str, ...] = (),
     order: str = "shuffle",
 ) -> tuple[dict, dict, set]:
     """Per-step times (s) and worst level gap to the Python engine of every solver of
-    :data:`RESOLVE_KEYS` and of a bare native solver per ``Hierarchy`` switch in ``off``
-    (that switch False), interleaved; and DAQP's exit flags."""
+    :data:`RESOLVE_KEYS`, interleaved; and DAQP's exit flags."""
     stack = qc.Stack(levels, bounds=bounds)
     P = stack.compiled
     cold = NativeHierarchy(P, stack.damping)
     bare = NativeHierarchy(P, stack.damping)
     run_bare = bare._solver.run
-    offs = {}
-    for name in off:
-        h = NativeHierarchy(P, stack.damping)
-        if not isinstance(getattr(h._solver, name, None), bool):
-            raise ValueError(f"off: {name!r} is not a switch of the native Hierarchy")
-        setattr(h._solver, name, False)
-        offs[f"native bare ({name} off)"] = h
     box = bounds if bounds is not None else qc.Bounds(np.full(n, -1e30), np.full(n, 1e30))
     H, f = np.eye(n), np.zeros(n)
     A, bu, bl, sense, breaks = daqp_problem(levels, box, n)
@@ -197,7 +181,7 @@ def resolve(
     if model.setup(H, f, A, bu, bl, sense, break_points=breaks)[0] < 0:
         raise RuntimeError("daqp.Model.setup failed")
     move = _mover(levels)
-    keys = (*RESOLVE_KEYS, *offs)
+    keys = RESOLVE_KEYS
     times = {k: [] for k in keys}
     worst = dict.fromkeys(keys, 0.0)
     flags: set = set()
@@ -208,7 +192,6 @@ def resolve(
         times[key].append(time.perf_counter() - t)
         return out
 
-    bares = [("native bare", run_bare), *((k, h._solver.run) for k, h in offs.items())]
     out: dict = {}
 
     def native_cold():
@@ -217,12 +200,9 @@ def resolve(
 
     def native_bare():
         P.refresh_stacked()
-        # the bare solver and its switched-off copies, in alternating order (the later calls
-        # on the same buffers find them in cache)
-        for key, run in bares if step % 2 == 0 else bares[::-1]:
-            code = timed(key, run, step > 0, math.inf)
-            if code:
-                raise RuntimeError(f"{key} call, status {code}")
+        code = timed("native bare", run_bare, step > 0, math.inf)
+        if code:
+            raise RuntimeError(f"native bare call, status {code}")
 
     def daqp_solve():
         out["daqp"] = timed("daqp.solve", daqp.solve, H, f, A, bu, bl, sense, break_points=breaks)
@@ -261,7 +241,6 @@ def resolve(
             ("native bare", bare.x),
             ("daqp.solve", np.asarray(xd)),
             ("daqp Model warm", np.asarray(xm)),
-            *((key, h.x) for key, h in offs.items()),
         ):
             r = np.array([L.residual(x) for L in P.levels])
             worst[key] = max(worst[key], float(np.max(np.abs(r - ref) / np.maximum(1.0, ref))))
@@ -271,14 +250,13 @@ def resolve(
 def resolve_table(
     problems,
     steps: int,
-    off: tuple[str, ...] = (),
     order: str = "shuffle",
     runs: int = 1,
     detail: bool = False,
 ) -> str:
     """The re-solve table (see the module's docstring): per problem, variant and kind of
     step, each solver's median µs, the range over ``runs`` runs (all problems in turn per
-    run); ``detail``: also median / p90 / p99 per solver. ``off``, ``order``: see
+    run); ``detail``: also median / p90 / p99 per solver. ``order``: see
     :func:`resolve`."""
     how = (
         "solvers in a new random order every step"
@@ -304,7 +282,7 @@ def resolve_table(
         for lab, P, unit, moved in cases:
             levels = unit_rows(P.levels) if unit else P.levels
             case = (lab, "moved" if moved else "same")
-            times, gaps, fl = resolve(levels, P.bounds, P.n, steps, moved, off, order)
+            times, gaps, fl = resolve(levels, P.bounds, P.n, steps, moved, order)
             us = {k: np.percentile(np.array(t[2:]) * 1e6, [50, 90, 99]) for k, t in times.items()}
             stats.setdefault(case, []).append(us)
             w = worst.setdefault(case, dict.fromkeys(gaps, 0.0))
@@ -357,12 +335,6 @@ def main(argv=None) -> int:
     ap.add_argument("--resolve", action="store_true", help="the re-solve table")
     ap.add_argument("--steps", type=int, default=100, help="--resolve: steps (default 100)")
     ap.add_argument(
-        "--off",
-        action="append",
-        default=[],
-        help="--resolve: also a bare native solver with this Hierarchy switch off (repeatable)",
-    )
-    ap.add_argument(
         "--order",
         choices=("shuffle", "fixed"),
         default="shuffle",
@@ -394,7 +366,6 @@ def main(argv=None) -> int:
                 resolve_table(
                     args.problem or RESOLVE_DEFAULT,
                     args.steps,
-                    tuple(args.off),
                     args.order,
                     args.runs,
                     args.percentiles,

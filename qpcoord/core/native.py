@@ -73,7 +73,7 @@ VARIANTS = {
 #: :data:`VARIANTS`, or ``auto`` / unset for the highest-level build this CPU supports.
 ISA_ENV = "QPCOORD_NATIVE_ISA"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
-ABI_VERSION = 11
+ABI_VERSION = 12
 
 _INF = float("inf")
 
@@ -415,7 +415,8 @@ class NativeHierarchy:
             from the one it was frozen with by more than ``KKT_TOL`` relative to
             ``max(1, value, scale)``, ``scale`` the level's ``‖b‖ + ‖A‖_F·‖x‖`` (inequality
             rows: their nearer bound, weighted), the size of its value's rounding: the
-            lower levels left its optimal set by more than rounding).
+            lower levels left its optimal set by more than rounding). The counters of the
+            call's paths and caches: :attr:`counters`.
 
         Raises
         ------
@@ -449,6 +450,13 @@ class NativeHierarchy:
             self._raise(code, P)
         self._solved = True
         return self.x.copy(), self.res.copy(), self._solver.info(KKT_TOL)
+
+    @property
+    def counters(self):
+        """The last call's counters (a copy of the extension's ``Stats``: how often each path
+        and cache was taken, e.g. ``freeze_memo_hits``, ``downdates``; they describe the
+        work, never the answer)."""
+        return self._solver.stats
 
     def _raise(self, code: int, P: CompiledStack) -> None:
         k = int(self.detail[2])

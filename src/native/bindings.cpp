@@ -163,6 +163,48 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
   m.attr("CHECK_FAILED") = static_cast<int>(qpcoord::kCheckFailed);
   m.attr("REFRESH_IN_PYTHON") = Bound::kRefreshInPython;
 
+  nb::class_<qpcoord::Settings>(m, "Settings",
+                                "What a user may tune in a Hierarchy (Hierarchy.settings).")
+      .def(nb::init<>())
+      .def_rw("kkt_tol", &qpcoord::Settings::kkt_tol,
+              "Multiplier sign tolerance of the active set, relative to the largest entry of "
+              "the gradient (dimensionless). Default 1e-9 (the Python engine's KKT_TOL).")
+      .def_rw("violation_tol", &qpcoord::Settings::violation_tol,
+              "A level row violated at the level's optimum by more than this, relative to its "
+              "scale, is frozen violated, else inherited (dimensionless). Default 1e-6.")
+      .def_rw("max_iter_factor", &qpcoord::Settings::max_iter_factor,
+              "Iteration cap of each active-set solve: max_iter_factor * (rows + columns) + 10 "
+              "iterations. Default 6.")
+      .def_rw("time_limit", &qpcoord::Settings::time_limit,
+              "Wall-clock limit of one solve in seconds (inf: none); the smaller of it and the "
+              "call's time_left applies. Default inf.");
+
+  auto stats = nb::class_<qpcoord::Stats>(
+      m, "Stats", "Counters of one solve: how often each path and cache was taken.");
+#define QPCOORD_STAT(name, doc) stats.def_ro(#name, &qpcoord::Stats::name, doc)
+  QPCOORD_STAT(downdates, "Rows that left a working set by a QR downdate.");
+  QPCOORD_STAT(slack_steps, "Least-squares steps by the slack structure.");
+  QPCOORD_STAT(least_distance_steps, "Minimum-norm steps taken as a least-distance problem.");
+  QPCOORD_STAT(k_qr_reuses, "Least-squares steps that reused the projected objective's QR.");
+  QPCOORD_STAT(batch_rows, "Rows added at once to a working set at a degenerate point.");
+  QPCOORD_STAT(reduced_trials, "Warm trials of a level solved in z alone.");
+  QPCOORD_STAT(rz_factors, "RZ factorisations of [R11 R12].");
+  QPCOORD_STAT(qr_closed_forms, "Levels whose closed form came from a QR (no SVD).");
+  QPCOORD_STAT(small_rinvs, "QR closed forms bounded by back substitution.");
+  QPCOORD_STAT(zero_tail_compressions, "Levels compressed past an exactly zero trailing block.");
+  QPCOORD_STAT(identity_products, "Products with an identity Z skipped.");
+  QPCOORD_STAT(null_space_freezes, "Freezes onto null([R11 R12]) of the closed form's QR.");
+  QPCOORD_STAT(full_rank_freezes, "Levels that left no freedom (no freeze computed).");
+  QPCOORD_STAT(wide_freezes, "Freezes by a wide level's own reflectors.");
+  QPCOORD_STAT(dependent_drops, "Levels whose rows lost directions dependent on frozen rows.");
+  QPCOORD_STAT(gram_screens, "Dependence QRs skipped on a Cholesky proof.");
+  QPCOORD_STAT(freeze_memo_hits, "Freezes restored from the freeze cache.");
+  QPCOORD_STAT(closed_form_memo_hits, "Closed forms whose factorisation was reused.");
+  QPCOORD_STAT(trial_memo_hits, "Warm trials whose factorisations were reused.");
+  QPCOORD_STAT(bound_rows_memo_hits, "Stages whose bound rows came from the cache.");
+  QPCOORD_STAT(wy_applications, "Changes of Z by the compact WY form (builds with FMA).");
+#undef QPCOORD_STAT
+
   nb::class_<Bound>(m, "Hierarchy",
                     "Strict-hierarchy least squares of one stack structure (sizes fixed).",
                     nb::type_slots(bound_slots))
@@ -226,144 +268,14 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
           "step() reads numpy arrays from their heads (True) or through the buffer protocol.")
       .def("info", &Bound::info, nb::arg("kkt_tol"),
            "The last call's info dict (info_dict.hpp; tests/native_info.py defines it).")
-      .def_rw("seed_on_miss", &Hierarchy::seed_on_miss,
-              "Seed a stage's active set (hard phase, level, minimum-norm step) from its missed "
-              "stored working set (True, default) or start it cold (False; for comparisons).")
-      .def_rw("downdate", &Hierarchy::downdate,
-              "Downdate the working set's QR when a row leaves (True, default) or "
-              "refactorise it (False; for comparisons).")
-      .def_prop_ro("downdates", &Hierarchy::downdates,
-                   "Rows that left a working set through a QR downdate in the last call.")
-      .def_rw("rank_revealing_qr", &Hierarchy::rank_revealing_qr,
-              "Closed form of a rank-deficient level from the pivoted QR of its projected "
-              "equalities when the QR shows a clear rank gap (True, default), else the SVD "
-              "(False: the SVD for every rank-deficient level; for comparisons).")
-      .def_rw("compress_objective", &Hierarchy::compress_objective,
-              "Least squares of a tall level whose closed form came from a QR on the compressed "
-              "objective R (True, default) or on its projected equalities (False; comparisons).")
-      .def_rw("wide_ls", &Hierarchy::wide_ls,
-              "Least-squares step of a wide projected objective of full row rank from one QR "
-              "of its transpose (True, default) or two QRs (False; for comparisons).")
-      .def_rw("slack_ls", &Hierarchy::slack_ls,
-              "A level's least-squares step with the slacks of its rows outside the working "
-              "set in closed form (True, default) or by the projected objective (False).")
-      .def_prop_ro("slack_steps", &Hierarchy::slack_steps,
-                   "Least-squares steps taken by slack_ls in the last call.")
-      .def_rw("reuse_finish", &Hierarchy::reuse_finish,
-              "The exact finish of an ill-conditioned level starts from the optimal end's "
-              "factorisation and step (True, default) or recomputes them (False; A/B).")
-      .def_rw("trial_qt_tail", &Hierarchy::trial_qt_tail,
-              "A warm trial computes only the columns of Q Qf its least-squares step reads "
-              "(True, default) or all of them (False; for comparisons).")
-      .def_rw("reduce_slacks", &Hierarchy::reduce_slacks,
-              "A level's warm trial in z alone, the working slack rows' slacks eliminated "
-              "(True, default), or on the full (z, w) (False; for comparisons).")
-      .def_rw("carry_projection", &Hierarchy::carry_projection,
-              "The inherited rows' projection carried from level to level through the "
-              "changes of the null-space basis (True, default) or recomputed per level "
-              "(False; for comparisons).")
-      .def_rw("gemv_qr", &Hierarchy::gemv_qr,
-              "The pivoted QRs apply each reflector to a block of at least 48 x 8 by one "
-              "matrix-vector product and one rank-one update (True; for comparisons) or by "
-              "a dot and an axpy per column (False, default: as fast).")
-      .def_rw("compress_zero_tail", &Hierarchy::compress_zero_tail,
-              "A tall level's objective compressed also when its full pivoted QR stopped at "
-              "an exactly zero trailing block (True, default) or not (False; for "
-              "comparisons).")
-      .def_rw("reuse_k_qr", &Hierarchy::reuse_k_qr,
-              "The least-squares step's QR of the projected objective reused while the "
-              "working set's QR is unchanged (True, default) or refactorised (False).")
-      .def_rw("identity_z", &Hierarchy::identity_z,
-              "Projections on a still-identity null-space basis copied (True, default) or "
-              "multiplied (False; for comparisons).")
-      .def_prop_ro("identity_products", &Hierarchy::identity_products,
-                   "Products with an identity null-space basis skipped in the last call.")
-      .def_rw("rz_min_norm", &Hierarchy::rz_min_norm,
-              "Minimum-norm solutions of [R11 R12] w = b by its RZ factorisation (True, "
-              "default) or by the QR of its transpose (False; for comparisons).")
-      .def_rw("least_distance", &Hierarchy::least_distance,
-              "The minimum-norm stage stepped as a least-distance problem (True, default) "
-              "or by the general least squares (False; for comparisons).")
-      .def_prop_ro("least_distance_steps", &Hierarchy::least_distance_steps,
-                   "Least-squares steps of the last call taken by least_distance.")
-      .def_rw("tight_batch", &Hierarchy::tight_batch,
-              "A step blocked at length zero adds every row blocking it at length zero (True, "
-              "default) or the lowest-index one (False; for comparisons).")
-      .def_prop_ro("batch_rows", &Hierarchy::batch_rows,
-                   "Rows of the last call added to a working set by tight_batch.")
-      .def_rw("gram_screen", &Hierarchy::gram_screen,
-              "The dependence test of a level's moving rows skips its pivoted QR where a "
-              "Cholesky of their shifted Gram matrix proves them independent (True, default; "
-              "x bit for bit the same) or always factorises (False; for comparisons).")
-      .def_prop_ro("gram_screens", &Hierarchy::gram_screens,
-                   "Levels of the last call whose dependence QR gram_screen skipped.")
-      .def_rw("grow_seed", &Hierarchy::grow_seed,
-              "A missed stored set of a stage without slack rows grown by the rows its point "
-              "violates before the seed (True) or the seed alone (False, default).")
-      .def_prop_ro("grown_seeds", &Hierarchy::grown_seeds,
-                   "Stages of the last call started from a grown stored set (grow_seed).")
-      .def_prop_ro("rz_factors", &Hierarchy::rz_factors,
-                   "RZ factorisations of the last call (rz_min_norm).")
-      .def_prop_ro("k_qr_reuses", &Hierarchy::k_qr_reuses,
-                   "Least-squares steps of the last call that reused K's QR (reuse_k_qr).")
-      .def_rw("null_space_freeze", &Hierarchy::null_space_freeze,
-              "A rank-deficient tall level frozen by the null space of its QR (default) or not.")
-      .def_rw("wy_right", &Hierarchy::wy_right,
-              "Z's changes by 16 or more reflectors in the compact WY form (default in the "
-              "x86-64-v3 build) or not.")
-      .def_prop_ro("wy_applications", &Hierarchy::wy_applications,
-                   "Changes of Z or Cin Z of the last call in the compact WY form.")
-      .def_prop_ro("null_space_freezes", &Hierarchy::null_space_freezes,
-                   "Levels of the last call frozen by null_space_freeze.")
-      .def_rw("full_rank_freeze", &Hierarchy::full_rank_freeze,
-              "A level of full rank left without freedom directly (default) or by the freeze.")
-      .def_prop_ro("full_rank_freezes", &Hierarchy::full_rank_freezes,
-                   "Levels of the last call frozen by full_rank_freeze.")
-      .def_prop_ro("dependent_drops", &Hierarchy::dependent_drops,
-                   "Levels of the last call whose rows lost directions dependent to rounding.")
-      .def_rw("wide_freeze", &Hierarchy::wide_freeze,
-              "A wide level frozen by the reflectors of its M^T's QR (True, default), or by "
-              "the freeze (False; for comparisons).")
-      .def_prop_ro("wide_freezes", &Hierarchy::wide_freezes,
-                   "Levels of the last call frozen by wide_freeze.")
-      .def_rw("freeze_memo", &Hierarchy::freeze_memo,
-              "A level's freeze whose inputs (Z, Cin Z, the level's rows, kind, rank, violated "
-              "rows) are bit for bit the previous call's: its stored outputs restored (True, "
-              "default), or every freeze computed (False; for comparisons).")
-      .def_prop_ro("freeze_memo_hits", &Hierarchy::freeze_memo_hits,
-                   "Freezes of the last call restored by freeze_memo.")
-      .def_rw("trial_memo", &Hierarchy::trial_memo,
-              "A stage's warm trial whose working rows and objective are bit for bit the "
-              "previous call's, its factorisations untouched since: reused (True, default), or "
-              "every trial factorised (False; for comparisons).")
-      .def_prop_ro("trial_memo_hits", &Hierarchy::trial_memo_hits,
-                   "Trials of the last call whose factorisations trial_memo reused.")
-      .def_rw("bound_rows_memo", &Hierarchy::bound_rows_memo,
-              "A stage whose Z on entry is bit for bit the previous call's copies its bound "
-              "rows (Z's rows scaled to unit norm) from that call's (True, default), or "
-              "projects and scales every row (False; for comparisons).")
-      .def_prop_ro("bound_rows_memo_hits", &Hierarchy::bound_rows_memo_hits,
-                   "Stages of the last call whose bound rows bound_rows_memo copied.")
-      .def_rw("closed_form_memo", &Hierarchy::closed_form_memo,
-              "A level whose rows and Z on entry are bit for bit the previous call's keeps "
-              "M = A Z and its closed form's QR or SVD (True, default), or computes them "
-              "(False; for comparisons).")
-      .def_prop_ro("closed_form_memo_hits", &Hierarchy::closed_form_memo_hits,
-                   "Levels of the last call whose closed-form factorisation was reused.")
-      .def_rw("small_rinv", &Hierarchy::small_rinv,
-              "The QR closed form's bound on sigma_rank by back substitution up to rank 16 "
-              "(default) or by Eigen's blocked triangular solve.")
-      .def_prop_ro("small_rinvs", &Hierarchy::small_rinvs,
-                   "QR closed forms of the last call bounded by small_rinv.")
-      .def_prop_ro("zero_tail_compressions", &Hierarchy::zero_tail_compressions,
-                   "Levels of the last call compressed by compress_zero_tail.")
-      .def_prop_ro("gemv_steps", &Hierarchy::gemv_steps,
-                   "Reflectors of the last call applied by gemv_qr's matrix-vector product "
-                   "and rank-one update.")
-      .def_prop_ro("reduced_trials", &Hierarchy::reduced_trials,
-                   "Warm trials of the last call solved in z alone (reduce_slacks).")
-      .def_prop_ro("qr_closed_forms", &Hierarchy::qr_closed_forms,
-                   "Levels whose closed form came from a QR (no SVD) in the last call.")
+      .def_rw("settings", &Hierarchy::settings,
+              "The solver's Settings (tolerances, iteration cap, time limit), changed in place.")
+      .def("invalidate_caches", &Hierarchy::invalidate_caches,
+           "Forget every cached factorisation, product and freeze (the next call computes "
+           "them, as when its matrices changed); the stored working sets stay.")
+      .def_prop_ro(
+          "stats", [](const Bound& h) { return h.stats(); },
+          "A copy of the last call's Stats (the counters of the paths and caches taken).")
       .def_prop_ro("n", &Hierarchy::n)
       .def_prop_ro("num_levels", &Hierarchy::num_levels)
       .def_prop_ro("damping", &Hierarchy::damping);

@@ -92,43 +92,19 @@ class PivotedQR {
       A(j, j) = beta;
       tau_(j) = tau;
       // apply to the trailing columns: H_j A(j:m, j+1:nc), v = [1; A(j+1:m, j)]
-      const int len = m_ - j - 1, nt = nc_ - j - 1;
-      if (gemv_update && len >= kGemvMinRows && nt >= kGemvMinCols) {
-        // w = tau A^T v by one matrix-vector product, A -= v w^T by one rank-one update
-        ++gemv_steps;
-        auto w = work_.head(nt);
-        w.noalias() = A.block(j + 1, j + 1, len, nt).transpose() * A.col(j).segment(j + 1, len);
-        w += A.row(j).segment(j + 1, nt).transpose();
-        w *= tau;
-        A.row(j).segment(j + 1, nt) -= w.transpose();
-        A.block(j + 1, j + 1, len, nt).noalias() -= A.col(j).segment(j + 1, len) * w.transpose();
-        for (int c = j + 1; c < nc_; ++c) downdate_norm(A, j, c, tol3z);
-      } else {
-        for (int c = j + 1; c < nc_; ++c) {
-          auto ac = A.col(c).segment(j, m_ - j);
-          const double w = ac(0) + A.col(j).segment(j + 1, len).dot(ac.tail(len));
-          const double tw = tau * w;
-          ac(0) -= tw;
-          ac.tail(len) -= tw * A.col(j).segment(j + 1, len);
-          downdate_norm(A, j, c, tol3z);
-        }
+      const int len = m_ - j - 1;
+      for (int c = j + 1; c < nc_; ++c) {
+        auto ac = A.col(c).segment(j, m_ - j);
+        const double w = ac(0) + A.col(j).segment(j + 1, len).dot(ac.tail(len));
+        const double tw = tau * w;
+        ac(0) -= tw;
+        ac.tail(len) -= tw * A.col(j).segment(j + 1, len);
+        downdate_norm(A, j, c, tol3z);
       }
       ++rank_;
     }
     return rank_;
   }
-
-  /// factor() applies each reflector to the trailing columns by one matrix-vector product and
-  /// one rank-one update (Eigen's kernels) instead of a dot and an axpy per column (the same
-  /// arithmetic, summed in another order). Off by default (the results of the other users
-  /// stay bit for bit); Hierarchy::gemv_qr switches it on for its own factorisations.
-  bool gemv_update = false;
-  /// gemv_update only for trailing blocks of at least this many rows below the pivot and
-  /// columns (smaller ones: the per-column loop, whose overhead is lower)
-  static constexpr int kGemvMinRows = 48;
-  static constexpr int kGemvMinCols = 8;
-  /// Reflectors applied by gemv_update since the counter was last reset (by its owner).
-  int gemv_steps = 0;
 
   int rank() const { return rank_; }
   int rows() const { return m_; }
@@ -149,21 +125,21 @@ class PivotedQR {
   void apply_q(V&& v) const {
     for (int j = rank_ - 1; j >= 0; --j) reflect(j, v);
   }
-  /// B <- B Qf (B: p x m), through a workspace of p doubles; with wy_right (after
-  /// reserve_wy), a B of at least kWyMinRows rows, at least kWyMinReflectors reflectors and
-  /// at most m / 3 (the WY form's
-  /// extra flops, about 4 p k^2 + m k^2 over the loop's 4 p m k, stay small beside the
-  /// products' higher speed), by the compact WY form instead.
+  /// B <- B Qf (B: p x m), through a workspace of p doubles; in a build with FMA (kWyRight)
+  /// and after reserve_wy, a B of at least kWyMinRows rows, at least kWyMinReflectors
+  /// reflectors and at most m / 3 (the WY form's extra flops, about 4 p k^2 + m k^2 over the
+  /// loop's 4 p m k, stay small beside the products' higher speed), by the compact WY form
+  /// instead.
   template <typename B>
   void apply_q_right(B&& b) {
-    if (wy_right && wy_rows_ > 0 && rank_ >= kWyMinReflectors && 3 * rank_ <= m_ &&
+    if (kWyRight && wy_rows_ > 0 && rank_ >= kWyMinReflectors && 3 * rank_ <= m_ &&
         b.rows() >= kWyMinRows && b.rows() <= wy_rows_) {
       apply_q_right_wy(b);
       return;
     }
     for (int j = 0; j < rank_; ++j) reflect_right(j, b);
   }
-  /// Buffers of the compact WY form (apply_q_right with wy_right) for right-hand matrices
+  /// Buffers of the compact WY form (apply_q_right in a kWyRight build) for right-hand matrices
   /// of up to max_right_rows rows: no later call allocates.
   void reserve_wy(int max_right_rows) {
     wy_rows_ = std::max(max_right_rows, 1);
@@ -209,8 +185,14 @@ class PivotedQR {
     b.noalias() -= W2 * V.transpose();
     ++wy_applications;
   }
-  /// apply_q_right by the compact WY form (see reserve_wy); off: one reflector at a time.
-  bool wy_right = false;
+  /// apply_q_right takes the compact WY form where it applies (see reserve_wy) in a build
+  /// with FMA (the x86-64-v3 module), where its matrix products are faster than one
+  /// reflector at a time; without FMA the loop is as fast and takes fewer instructions.
+#if defined(__FMA__)
+  static constexpr bool kWyRight = true;
+#else
+  static constexpr bool kWyRight = false;
+#endif
   /// apply_q_right_wy only from this many reflectors on (fewer: the loop's overhead is lower)
   static constexpr int kWyMinReflectors = 16;
   /// ... and for a B of at least this many rows
@@ -393,8 +375,8 @@ class TrapezoidRZ {
     for (int i = 0; i < rank_; ++i) {
       if (tau_(i) == 0.0) continue;
       // plain loops over the short tail (l = nc - rank entries): Eigen's dot on these
-      // block types is the one PivotedQR::reflect uses, and a second caller made GCC stop
-      // inlining it there (+1.4 % instructions on the humanoid)
+      // block types is the one PivotedQR::reflect uses, which GCC inlines there only while
+      // it has a single caller
       const double* v = B.data() + static_cast<Eigen::Index>(i) * B.outerStride() + rank_;
       double d = x(i);
       for (int t = 0; t < l; ++t) d += v[t] * x(rank_ + t);
@@ -457,10 +439,6 @@ class WorkingQR {
 
   /// The k x kw matrix to fill before factor().
   MapMat matrix(int k, int kw) { return base_.matrix(k, kw); }
-  /// PivotedQR::gemv_update of the initial factorisation.
-  void set_gemv_update(bool on) { base_.gemv_update = on; }
-  /// PivotedQR::gemv_steps of the initial factorisation (reset: set it to 0).
-  int& gemv_steps() { return base_.gemv_steps; }
 
   /// Pivoted Householder QR of matrix() (see PivotedQR::factor); returns the rank.
   int factor(double abs_tol, double rel_tol) {

@@ -13,30 +13,25 @@
 // level's inequality rows, from a feasible start (z = 0, w = the rows' current violation),
 // warm-started from the previous call's working set of that level. The optimum is frozen:
 // Z <- Z null([Vt_rank; violated rows]), satisfied rows are inherited (opened to their value).
+//
+// docs/engine.md describes the design: the stages, the warm start, the caches and the rank
+// decisions, and the invariants each relies on.
 #pragma once
 
 #include <Eigen/Dense>
 #include <array>
 #include <chrono>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "dense.hpp"
 
 namespace qpcoord {
 
-// 5 (session 11): the Weighted binding's set_tasks / refresh, the new Hierarchy switches;
-// 9 (session 14): Hierarchy.gram_screen / gram_screens;
-// 10 (session 15): Hierarchy.freeze_memo, trial_memo, closed_form_memo and their *_hits
-// 11 (session 16): Hierarchy.bound_rows_memo / bound_rows_memo_hits
-inline constexpr int kAbiVersion = 11;
-
-/// Hierarchy::wy_right's default: on where the build has FMA (the x86-64-v3 extension)
-#if defined(__FMA__)
-inline constexpr bool kWyRightDefault = true;
-#else
-inline constexpr bool kWyRightDefault = false;
-#endif
+/// The extension's interface version (qpcoord/core/native.py refuses a module of another):
+/// raised whenever a binding changes.
+inline constexpr int kAbiVersion = 12;
 
 /// The SVD of the closed forms (used when the QR closed form does not apply: damping active
 /// or a rank the QR cannot settle): Eigen's one-sided Jacobi SVD with its QR preconditioner,
@@ -96,6 +91,49 @@ struct LsqProblem {
   double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm);
 };
 
+/// What a user may tune in a Hierarchy (Hierarchy::settings; bound to Python).
+struct Settings {
+  /// Multiplier sign tolerance of the active set, relative to the largest entry of the
+  /// gradient (dimensionless; the Python engine's KKT_TOL). Default 1e-9.
+  double kkt_tol = 1e-9;
+  /// A level row whose violation at the level's optimum exceeds this, relative to the
+  /// row's scale (max(|lo|, |hi|, |C_i| |x|)), is frozen violated, else inherited
+  /// (dimensionless; the Python engine's VIOLATION_TOL). Default 1e-6.
+  double violation_tol = 1e-6;
+  /// Iteration cap of each active-set solve: max_iter_factor (rows + columns) + 10
+  /// iterations (count per row and column of the stage's problem). Default 6.
+  int max_iter_factor = 6;
+  /// Wall-clock limit of one solve, in seconds (inf: none); the smaller of it and the
+  /// solve's time_left applies. Default inf.
+  double time_limit = std::numeric_limits<double>::infinity();
+};
+
+/// Counters of one solve (Hierarchy::stats(); NativeHierarchy.counters in Python): how
+/// often each path and cache was taken. They describe the work, never the answer.
+struct Stats {
+  int downdates = 0;             ///< rows that left a working set by a QR downdate
+  int slack_steps = 0;           ///< least-squares steps by the slack structure (slack_step)
+  int least_distance_steps = 0;  ///< minimum-norm steps as a least-distance problem
+  int k_qr_reuses = 0;           ///< least-squares steps that reused K's factorisation
+  int batch_rows = 0;            ///< rows added at once to a working set at a degenerate point
+  int reduced_trials = 0;        ///< warm trials of a level solved in z alone
+  int rz_factors = 0;            ///< RZ factorisations of [R11 R12]
+  int qr_closed_forms = 0;       ///< levels whose closed form came from the QR of M (no SVD)
+  int small_rinvs = 0;           ///< QR closed forms bounded by back substitution
+  int zero_tail_compressions = 0;  ///< levels compressed past an exactly zero trailing block
+  int identity_products = 0;     ///< products with an identity Z skipped
+  int null_space_freezes = 0;    ///< freezes onto null([R11 R12]) of the closed form's QR
+  int full_rank_freezes = 0;     ///< levels that left no freedom (no freeze computed)
+  int wide_freezes = 0;          ///< freezes by a wide M^T's own reflectors
+  int dependent_drops = 0;       ///< levels whose rows lost directions dependent on frozen ones
+  int gram_screens = 0;          ///< dependence QRs skipped on a Cholesky proof
+  int freeze_memo_hits = 0;      ///< freezes restored from the freeze cache
+  int closed_form_memo_hits = 0;  ///< closed forms whose factorisation was reused
+  int trial_memo_hits = 0;       ///< warm trials whose factorisations were reused
+  int bound_rows_memo_hits = 0;  ///< stages whose bound rows were copied from the cache
+  int wy_applications = 0;       ///< changes of Z by the compact WY form (FMA builds)
+};
+
 /// The strict-hierarchy solver of one stack structure (sizes fixed at construction).
 class Hierarchy {
  public:
@@ -117,218 +155,17 @@ class Hierarchy {
             MRef<Vec> detail);
 
   int n() const { return n_; }
-  /// Rows that left a working set through a downdate of its QR during the last call.
-  int downdates() const { return downdates_; }
-  /// Seed the active set (hard phase, levels, minimum-norm step) from a missed stored
-  /// working set (default) or start cold (A/B).
-  bool seed_on_miss = true;
-  /// Downdate the working set's QR when a row leaves (default) or refactorise (A/B).
-  bool downdate = true;
-  /// Closed form of a rank-deficient level by the pivoted QR of its M when the QR shows a
-  /// clear gap (default), else the SVD (A/B: false takes the SVD for every rank-deficient M).
-  bool rank_revealing_qr = true;
-  /// Least squares of a tall level whose closed form came from the QR of M on the compressed
-  /// objective R (r rows instead of M's me; default) or on M itself (A/B).
-  bool compress_objective = true;
-  /// compress_objective also when M's full pivoted QR stopped at a pivot column exactly zero
-  /// and the trailing block it left is exactly zero (its rows of R are zero: still exact;
-  /// the humanoid box form's level 3, 97 rows, rank 54 of 62; default), or not (A/B: the
-  /// least squares on M's me rows).
-  bool compress_zero_tail = true;
-  /// Levels of the last call compressed by compress_zero_tail.
-  int zero_tail_compressions() const { return zero_tail_compressions_; }
-  /// A wide projected objective K of full row rank: its minimum-norm step from one QR of
-  /// K^T (default) or from the QR of K and of [R11 R12]^T (A/B).
-  bool wide_ls = true;
-  /// A level's least-squares step by its slack structure: each slack in closed form (its own
-  /// objective row) and z from the QR of the small system on z (working rows and equality
-  /// rows) when that has full row rank (default), or from the projected objective K = Q N
-  /// on all of y (A/B).
-  bool slack_ls = true;
-  /// The exact finish of an ill-conditioned level, called right after the active set ended
-  /// optimal on the same problem, starts from that end's factorisation and last step
-  /// (default) or factorises and steps again (A/B: the same numbers, recomputed).
-  bool reuse_finish = true;
-  /// Least-squares steps taken by slack_ls in the last call.
-  int slack_steps() const { return slack_steps_; }
-  /// A warm trial computes of Q Qf only the columns its least-squares step reads (default)
-  /// or all of them, as the active set (A/B).
-  bool trial_qt_tail = true;
-  /// A level's warm trial on the problem in z alone (default): its working slack rows'
-  /// slacks eliminated (w = (g_z z - t) / s), the others' 0; or on the full (z, w) (A/B).
-  bool reduce_slacks = true;
-  /// The inherited rows' projection Cin Z carried from level to level through the same
-  /// orthogonal transforms as Z (default; a row is projected once, when it is inherited), or
-  /// recomputed by a product with Z at every level (A/B).
-  bool carry_projection = true;
-  /// The pivoted QRs of the solve (closed forms, freezes, working sets, least-squares steps)
-  /// apply each reflector to a trailing block of at least 48 x 8 by one matrix-vector product
-  /// and one rank-one update (PivotedQR::gemv_update; the humanoid's 60 x 51 K and its box
-  /// form's 97 x 62 M) or by a dot and an axpy per column (default: the product saves 2-13 %
-  /// of the instructions on the humanoid but no wall time, benchmarks/README.md, solve2).
-  bool gemv_qr = false;
-  /// Reflectors of the last call applied by gemv_qr's product and rank-one update.
-  int gemv_steps();
-  /// The least-squares step's factorisation of the projected objective K = Q N (the pivoted
-  /// QR of K, and of [R11 R12]^T when K is rank-deficient, or of K^T when wide) kept while the
-  /// working set's QR does not change, and reused by the next step on the same working set
-  /// (default): after a full step (W unchanged: the step that confirms stationarity), and by
-  /// the exact finish of a level whose warm trial hit (the trial's working-set QR and K are
-  /// those of the finish's first iteration). Off (A/B): K formed and factorised at every step.
-  bool reuse_k_qr = true;
-  /// The minimum-norm solution of a rank-deficient [R11 R12] w = b (a rank-deficient tall
-  /// level's closed form, and its row space for the freeze; a rank-deficient K's step) by
-  /// the RZ factorisation of [R11 R12] (TrapezoidRZ: R12 folded into R11 by one reflector
-  /// per row, about 4 rank^2 (cols - rank) flops; default) or by the QR of [R11 R12]^T
-  /// (A/B: about 2 cols rank^2).
-  bool rz_min_norm = true;
-  /// While Z is still the identity (no hard equality row, no level frozen yet: every
-  /// problem's first level), a level's projections A Z and C Z and the inherited rows' Cin Z
-  /// are copies of the rows (default), not matrix products with the identity (A/B).
-  bool identity_z = true;
-  /// The freeze of a rank-deficient tall level whose closed form came from the QR of M and
-  /// which leaves no violated row (the humanoid's 97-row level of rank 52 in 60): Z <- Z P N,
-  /// N an orthonormal basis of null([R11 R12]) from the factorisation the closed form already
-  /// made of it (the RZ's rank reflectors, or the QR of [R11 R12]^T, applied to the r - rank
-  /// last unit vectors), one product of Z with the r x (r - rank) N (default); off (A/B): the
-  /// row space basis of [R11 R12] P^T formed, factorised again by freeze() and its rank
-  /// reflectors applied to Z (the same subspace, another orthonormal basis of it).
-  bool null_space_freeze = true;
-  /// A level solved by the active set whose equalities have full column rank r in Z (the QR
-  /// or SVD closed form's rank is r) and which leaves no violated row: no freedom is left,
-  /// r <- 0 without the freeze's QR of F (default; the same x bit for bit, Z is not read
-  /// again), or by the freeze (A/B: F^T, an orthonormal basis of the whole space, factorised
-  /// and applied to Z).
-  bool full_rank_freeze = true;
-  /// Levels of the last call frozen by full_rank_freeze.
-  int full_rank_freezes() const { return full_rank_freezes_; }
-  /// Levels of the last call whose moving rows had directions dependent to within the
-  /// movable tolerance removed (drop_dependent_directions).
-  int dependent_drops() const { return dependent_drops_; }
-  /// drop_dependent_directions first proves the moving rows independent by a Cholesky of
-  /// their shifted Gram matrix (a symmetric product and k^3/3 flops, k = min(rows, r)) and
-  /// skips its pivoted QR when the proof holds (True, default; the same x bit for bit: the QR
-  /// then finds full rank and changes nothing), or always factorises (False; for comparisons).
-  bool gram_screen = true;
-  /// Levels of the last call whose pivoted QR of the moving rows gram_screen skipped.
-  int gram_screens() const { return gram_screens_; }
-  /// A wide level (M = A Z with me <= r, its closed form by the QR of M^T) solved by the
-  /// active set and leaving no violated row: Z <- Z Qf, its first rank columns dropped, by
-  /// the reflectors of M^T's QR (as after a feasible closed form), or by the freeze: Qf's
-  /// first rank columns formed, factorised again and applied (False: the same subspace,
-  /// another orthonormal basis of it). On by default since session 14 (callgrind: chain30
-  /// -4.4 %, soth_sot -2.8 %, Panda stack -2.4 %, random50 -1.5 % instructions); it was off
-  /// because the IK step and Stack.solve, whose rows differ by rounding, then took
-  /// different active-set paths at one step of tests/kinematics/test_native_step.py's
-  /// position loop (5 against 4 iterations, x equal to 3e-15), which that test required to
-  /// be the same path (it now allows such a tie).
-  bool wide_freeze = true;
-  /// Levels of the last call frozen by wide_freeze.
-  int wide_freezes() const { return wide_freezes_; }
-  /// A level's freeze (its change of Z, of r and of the carried projection Cin Z) whose
-  /// inputs are bit for bit those of the same level's freeze in the previous call -- Z and
-  /// Cin Z on entry, the level's rows A and C, the freeze's kind, rank and violated rows --
-  /// restores that freeze's outputs, stored then, instead of computing them again
-  /// (default; a re-solve whose matrices did not change: targets or bounds moved only). The
-  /// freeze is a function of those inputs alone: the same x bit for bit, with no stored
-  /// output whenever one input differs (False: every freeze computed, for comparisons).
-  bool freeze_memo = true;
-  /// Freezes of the last call restored by freeze_memo.
-  int freeze_memo_hits() const { return freeze_memo_hits_; }
-  /// A level whose rows A and Z on entry are bit for bit those of its previous call takes
-  /// M = A Z as it is (the stage keeps it) and its closed form's factorisation (the QR of M
-  /// and of its [R11 R12], or its SVD) as that call left it, instead of computing them again
-  /// (default; a re-solve whose matrices did not change). The same x bit for bit (False:
-  /// every product and factorisation computed, for comparisons).
-  bool closed_form_memo = true;
-  /// Levels of the last call whose closed-form factorisation closed_form_memo reused.
-  int closed_form_memo_hits() const { return closed_form_memo_hits_; }
-  /// A stage's warm trial (the pivoted QR of its stored working set's rows, Q Qf's null-space
-  /// columns, then K's factorisation) whose rows and objective are bit for bit those of the
-  /// same stage's trial in the previous call, its factorisations untouched since (the trial
-  /// hit: no active-set update followed), uses them as they are (default; a re-solve whose
-  /// matrices did not change). Every stage keeps its own factorisations for this. Looked up
-  /// only above every freeze the call computed (below one, Z differs). The same x bit for
-  /// bit (False: every trial factorised, for comparisons).
-  bool trial_memo = true;
-  /// Trials of the last call whose factorisations trial_memo reused.
-  int trial_memo_hits() const { return trial_memo_hits_; }
-  /// A stage's bound rows (the rows of Z scaled to unit norm, one per variable) whose Z on
-  /// entry is bit for bit the same stage's in the previous call are copied as one block from
-  /// that call's (default; only their bounds, which move with x, are computed), or every row
-  /// projected and scaled (False, for comparisons). Looked up only above every freeze the
-  /// call computed (below one, Z differs). The same x bit for bit.
-  bool bound_rows_memo = true;
-  /// Stages of the last call whose bound rows bound_rows_memo copied.
-  int bound_rows_memo_hits() const { return bound_rows_memo_hits_; }
-  /// The QR closed form's bound 1/|R11^-1|_F on sigma_rank(M) for a rank up to
-  /// kSmallRinvMax: R11^-1 by a back substitution per column on its leading entries
-  /// (default), or (A/B) by Eigen's blocked triangular solve of an identity right-hand side
-  /// (the same bound, its sums in another order; it only gates the QR closed form and the
-  /// exact finish of an ill-conditioned level).
-  bool small_rinv = true;
-  static constexpr int kSmallRinvMax = 16;
-  /// QR closed forms of the last call whose bound came by small_rinv.
-  int small_rinvs() const { return small_rinvs_; }
-  /// The changes of Z and of the carried projection Cin Z by a QR's reflectors (a wide
-  /// level's M^T, a freeze's F^T), 16 to m / 3 of them on at least 24 rows, in the compact
-  /// WY form B - ((B V) T) V^T by matrix products, or one reflector at a time. Default on in
-  /// the x86-64-v3 build (FMA: 1-4 % faster on the humanoid's forms, 3 % fewer
-  /// instructions), off in the baseline build (1.8 % fewer instructions, no faster).
-  bool wy_right = kWyRightDefault;
-  /// apply_q_right calls of the last call that took the WY form (wy_right).
-  int wy_applications() const {
-    int w = fqr_.wy_applications + shared_cf_.mqr.wy_applications;
-    for (const ClosedForm& f : cforms_) w += f.mqr.wy_applications;
-    return w;
-  }
-  /// Levels of the last call frozen by null_space_freeze.
-  int null_space_freezes() const { return null_space_freezes_; }
-  /// Products with an identity Z skipped in the last call (identity_z).
-  int identity_products() const { return identity_products_; }
-  /// The minimum-norm stage's least squares min |x + Z y| (Z with orthonormal columns: an
-  /// identity Hessian, |y + Z^T x|^2 + const) stepped as a least-distance problem: the step
-  /// on a working set is -N N^T g, N = the working rows' null space from their QR (updated
-  /// as rows enter and leave), g = Z^T (x + Z y) (default); or by the general least squares
-  /// (A/B: the QR of K = Z N at every working set and the projected objective Z Qf).
-  bool least_distance = true;
-  /// Least-squares steps of the last call taken by least_distance.
-  int least_distance_steps() const { return least_distance_steps_; }
-  /// An active set started cold (no one-sided row in its starting working set: the first
-  /// call, a warm trial that matched nothing, the hard phase) whose step is blocked at length
-  /// zero (a degenerate point: several rows tight there, e.g. the vertex the level above left)
-  /// adds every row that blocks that step at length zero, y unmoved (default), instead of the
-  /// lowest-index one only, each of the others then entering by a step of length zero of its
-  /// own (A/B). Not in Bland's regime (more than kBlandAfter zero steps in a row) once a row
-  /// has left the working set at that point. The same optimum; fewer iterations (cold
-  /// chain30 27 -> 20 per solve).
-  bool tight_batch = true;
-  /// Rows of the last call added to a working set by tight_batch (besides the blocking row).
-  int batch_rows() const { return batch_rows_; }
-  /// A stage without slack rows (a level of equalities only, the minimum-norm step) whose
-  /// stored working set missed: before the seed's ratio test from z = 0, grow the stored set
-  /// by the rows its point violates and re-solve on it, a few rounds (kGrowRounds), and start
-  /// the active set at that point when it is feasible (the set then differs from the optimal
-  /// one by the rows to drop, not by every row the ratio test from z = 0 loses), else the
-  /// seed as before. The same optimum and fewer iterations on a miss (chain30 7.7 -> 5.6 per
-  /// solve) but not fewer instructions: a level whose optimum is not unique keeps the vertex
-  /// the grown set started on (chain30's level 3: 18 rows), where the seed from z = 0 sheds
-  /// the rows not tight at z = 0 (3-8 rows), and the warm trials' QR of the larger sets costs
-  /// more than the iterations saved (chain30 +10 %). Off by default (benchmarks/README.md,
-  /// 2026-11-28, branch `chain`).
-  bool grow_seed = false;
-  /// Stages of the last call whose active set started from a grown stored set (grow_seed).
-  int grown_seeds() const { return grown_seeds_; }
-  /// RZ factorisations of the last call (rz_min_norm).
-  int rz_factors() const { return rz_factors_; }
-  /// Least-squares steps of the last call that reused K's factorisation (reuse_k_qr).
-  int k_qr_reuses() const { return k_qr_reuses_; }
-  /// Warm trials of the last call solved in z alone (reduce_slacks).
-  int reduced_trials() const { return reduced_trials_; }
-  /// Levels whose closed form came from the QR of M (no SVD) in the last call.
-  int qr_closed_forms() const { return qr_closed_forms_; }
   int num_levels() const { return static_cast<int>(meq_.size()) - 1; }
   double damping() const { return damping_; }
+
+  /// What a user may tune; the defaults are the Python engine's tolerances.
+  Settings settings;
+  /// The counters of the last call.
+  const Stats& stats() const { return stats_; }
+  /// Forget every cached factorisation, product and freeze (the next call computes them
+  /// all, as when its matrices changed); the stored working sets stay. The next call's x is
+  /// the same bit for bit: a cache only ever returns what computing gives.
+  void invalidate_caches();
 
  private:
   struct Working {  ///< a stage's final working set: (row id, side)
@@ -355,7 +192,7 @@ class Hierarchy {
   /// damped, and the SVD's truncated closed form is the minimum-norm least-squares solution
   /// of the complete orthogonal decomposition (R22 dropped), computed here. Returns the rank
   /// or -1: use the SVD. same_m: M is bit for bit the one in the stage's Ms_ at its last
-  /// call (closed_form_memo reuses that call's factorisation, or its failure).
+  /// call (the closed-form cache reuses that call's factorisation, or its failure).
   int qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<const Vec>& e, double tol,
                      double floor, bool same_m, Eigen::Ref<Vec> dz);
   /// qr_closed_form's factorisations (cf_: mqr, and tqr or trz when M is rank-deficient):
@@ -363,7 +200,7 @@ class Hierarchy {
   int qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floor);
   /// The memos' entry test of level stage: true when its rows A and C and Z on entry are bit
   /// for bit those of its last call (then M = A Z is the one in Ms_); keeps what differs.
-  /// False whenever the memos are off or a freeze of this call was computed (memo_gate).
+  /// False on the first call and once a freeze of this call was computed (memo_gate).
   bool memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C, int i0,
                   int mi);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
@@ -378,10 +215,10 @@ class Hierarchy {
   /// computed on first use in a call and kept: every level's add_inherited_rows reads it
   double cin_norm(int i);
   void add_inherited_rows(LsqProblem& P);
-  /// The bounds as rows of P (Z's rows scaled to unit norm; bound_rows_memo: copied from
+  /// The bounds as rows of P (Z's rows scaled to unit norm; the bound-rows cache: copied from
   /// the stage's last call when its Z repeats).
   void add_bound_rows(LsqProblem& P, int stage);
-  /// bound_rows_memo: a stage's bound rows as add_bound_rows wrote them (every variable's
+  /// The bound-rows cache: a stage's bound rows as add_bound_rows wrote them (every variable's
   /// row kept), keyed on the Z (its first r columns) they were projected from.
   struct BoundRowsMemo {
     bool valid = false;
@@ -390,14 +227,13 @@ class Hierarchy {
     Vec nrm;   ///< each row's norm before scaling (the bounds are scaled by it)
   };
   std::vector<BoundRowsMemo> bound_memos_;  ///< per stage (levels and the minimum-norm step)
-  int bound_rows_memo_hits_ = 0;
   /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
-  /// projection of the inherited rows (carry_projection); call before r_ changes.
+  /// projection of the inherited rows; call before r_ changes.
   void carry_z(PivotedQR& qr, int rank);
   /// Z <- Z null(F) with F^T the r x f matrix already in fqr_ (rank relative to scale).
   void freeze(double scale);
-  /// null_space_freeze: Z <- Z P N after qr_closed_form found a tall M of rank < r (rz:
-  /// N from the stage's trz, else from its tqr); the carried projection Cin Z follows by the same product.
+  /// Z <- Z P N after qr_closed_form found a tall M of rank < r (N from the stage's RZ of
+  /// [R11 R12]); the carried projection Cin Z follows by the same product.
   void freeze_null_space(int rank);
   /// The rank of a level's M without directions dependent on the frozen rows to within the
   /// movable tolerance (robust: see hierarchy.cpp).
@@ -408,16 +244,16 @@ class Hierarchy {
   void drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
                                  const Eigen::Ref<const Vec>& norms);
   /// True when the r x m matrix T proves every pivot of its column-pivoted QR above the
-  /// movable tolerance (gram_screen: see hierarchy.cpp).
+  /// movable tolerance (see hierarchy.cpp).
   bool independent_by_gram(const Eigen::Ref<const Mat>& T);
   /// Z <- Z Qf(:, rank:) after a wide M's QR in the stage's mqr (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
-  /// The freeze a level makes (freeze_memo's key: the same function of the same inputs
+  /// The freeze a level makes (the freeze cache's key: the same function of the same inputs
   /// whether the level ended by its closed form or its active set): Z <- Z Qf by a wide M^T's
   /// reflectors, Z <- Z P N from the QR of [R11 R12], or the QR of F^T = [B, violated rows].
   enum class FreezeKind : int8_t { kWide, kNullSpace, kGeneral };
-  /// freeze_memo: true when the stage's stored freeze had these inputs (memo_entry found the
+  /// The freeze cache: true when the stage's stored freeze had these inputs (memo_entry found the
   /// rows and Z on entry the same; kind, rank, Cin Z now, the violated rows when
   /// with_viol): Z_, r_, z_identity_, kz_ and Cin Z are then set to its outputs. Else false;
   /// when the rows repeat, the other inputs are taken (the outputs by freeze_computed).
@@ -429,17 +265,17 @@ class Hierarchy {
   /// a memo on, its buffers allocated, and no freeze of this call computed so far (Z may
   /// repeat the last call's)
   bool memo_gate() const {
-    return per_stage_ && (freeze_memo || closed_form_memo || trial_memo || bound_rows_memo) &&
-           z_repeats_;
+    return per_stage_ && z_repeats_;
   }
   bool z_repeats_ = false;
   void snap(Vec& x) const;
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
   bool active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W, int& iters);
-  /// tight_batch: after the row blocking the step at length zero entered W, the other rows
-  /// outside W (but `dropped`) that block it at length zero (active_set's ratio test on its
-  /// products gp_, gy_) enter too; their QR appended while `current` (else current = false).
+  /// At a degenerate point: after the row blocking the step at length zero entered W, the
+  /// other rows outside W (but `dropped`) that block it at length zero (active_set's ratio
+  /// test on its products gp_, gy_) enter too; their QR appended while `current` (else
+  /// current = false).
   void add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
                          int dropped, double smax, double yscale, bool& current);
   /// Map a stored working set onto P's rows (into W), factor it and write the minimum-norm
@@ -454,7 +290,7 @@ class Hierarchy {
   /// widx_): G_w y = t, t the rows' active bounds, into y (P.cols entries); *consistent: G_w y
   /// = t holds to 1e-10 max(1, |t|). False (y unset) when an active bound is infinite.
   /// The gradient g = Q^T (Q y - c) of P at y into gvec_, and the tolerance below which a
-  /// multiplier counts as negative: kKktTol of max |g| (none in the exact finish) plus the
+  /// multiplier counts as negative: settings.kkt_tol of max |g| (none in the exact finish) plus the
   /// rounding of g itself, qn being the scale of Q (multipliers_ok, reduced_multipliers_ok).
   double sign_tolerance(const LsqProblem& P, const Eigen::Ref<const Vec>& y, double qn);
   bool working_set_point(const LsqProblem& P, const std::vector<int8_t>& W, Eigen::Ref<Vec> y,
@@ -475,6 +311,17 @@ class Hierarchy {
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                        std::vector<int8_t>& W, int* found);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// A stage's warm start and active set, the one rule of the hard phase, the levels and the
+  /// minimum-norm step: with warm, the stored working set ws is tried first (hit: its point
+  /// is the optimum, into y and W_); on a miss whose stored rows matched, the active set
+  /// starts from the stored set made feasible (seed_working_set; the first hard_rows rows of
+  /// P have no slack), else cold: W_ holds the equality rows only and cold_start(y) sets the
+  /// starting point. slack_rows: the level's own rows with one slack column each (the
+  /// reduced trial), 0 otherwise. Returns kOk, or kTimeLimit / kNotConverged.
+  template <typename ColdStart>
+  int warm_started_active_set(const LsqProblem& P, const Working& ws, bool warm, int hard_rows,
+                              int slack_rows, Eigen::Ref<Vec> y, ColdStart cold_start,
+                              int& iters, bool& hit);
   /// After a miss of a level's stored working set: a feasible start near its point. The
   /// stored set's point (its rows held, the least squares on them) gives z_p; the ratio test
   /// from z = 0 (feasible) towards z_p on the rows without slack (the first `hard_rows` rows
@@ -485,11 +332,6 @@ class Hierarchy {
   /// point and W's mapping are reused, not recomputed).
   bool seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows, int zcols,
                         Eigen::Ref<Vec> y, std::vector<int8_t>& W);
-  /// grow_seed: from the stored set's point (xc_, stored_set_point's), add to W every row
-  /// that point violates and move to the point of the grown set (its QR and least-squares
-  /// step), at most kGrowRounds times; true with y that point when it meets every row and W's
-  /// rows are tight there (the active set's start), else false with W and xc_ as on entry.
-  bool grow_stored_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W);
   /// Factorise the working set W: pivoted QR of G_w^T (wqr), its rows in widx_, and
   /// Qt = Q Qf (the objective in the QR's basis: its last columns span null(G_w)).
   void factor_working(const LsqProblem& P, const std::vector<int8_t>& W);
@@ -498,25 +340,23 @@ class Hierarchy {
   void factor_rows(const LsqProblem& P, const std::vector<int8_t>& W);
   /// Qt = Q Qf for the working set's current QR (all its transforms so far).
   void form_qt(const LsqProblem& P);
-  /// factor_working for a warm trial (trial_qt_tail): the same QR of G_w^T, but of Q Qf only
+  /// factor_working for a warm trial: the same QR of G_w^T, but of Q Qf only
   /// the columns rank.. that ls_step reads (none when G_w pins y); the active set's updates
   /// need all of Q Qf and start from factor_working
   void factor_trial(const LsqProblem& P, const std::vector<int8_t>& W);
-  /// factor_trial's factorisations, computed (trial_memo missed or off).
+  /// factor_trial's factorisations, computed (the trial cache missed).
   void factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W);
-  /// trial_memo: true when the stage's TrialState is intact and keyed by P's working rows of
+  /// The trial cache: true when the stage's TrialState is intact and keyed by P's working rows of
   /// W and its objective, bit for bit (then widx_ and the flags are set as factor_trial
   /// leaves them); trial_keep stores the key of the trial just factorised.
   bool trial_restore(const LsqProblem& P, const std::vector<int8_t>& W);
   void trial_keep(const LsqProblem& P);
-  /// The switches that change a trial's factorisations, as bits (part of trial_memo's key).
-  int trial_switches() const;
   /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
   void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
   /// Form the projected objective K = Q N of the working set's QR and factorise it for
   /// ls_step (k_mode_, k_rank_; sets k_valid_); false when K is rounding noise (zero step).
   bool factor_k(const LsqProblem& P);
-  /// The step of ls_step by the slack structure of P (slack_ls): the minimum-norm step with
+  /// The step of ls_step by the slack structure of P: the minimum-norm step with
   /// G_w step = 0 and Q step = -res_ when the system, its slacks eliminated, has full row
   /// rank (then consistent: the same step as the projected least squares); false: take the
   /// general path.
@@ -540,7 +380,7 @@ class Hierarchy {
   int r_ = 0;
   Mat Cin_;  ///< inherited rows (capacity x n)
   Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
-  int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_projection)
+  int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_z)
   Vec cinx_;  ///< workspace: Cin x (add_inherited_rows, feasible; read where it is formed)
   Vec lin_, uin_;
   /// |Cin_.row(i)| once computed, else -1 (cin_norm)
@@ -561,13 +401,12 @@ class Hierarchy {
   std::chrono::steady_clock::time_point deadline_;
   Vec frozen_value_;  ///< each level's value when it was frozen
   int seeded_ = 0;    ///< stages of this call started from a seeded working set (detail[7])
-  int downdates_ = 0;  ///< rows that left a working set by a QR downdate in this call
+  Stats stats_;       ///< this call's counters
 
   std::vector<Working> working_;  ///< per stage (hard, levels, min-norm)
   LsqProblem P_;
   LsqProblem Pr_;        ///< a level's warm trial in z alone (reduced_set_point)
   int slack_rows_ = 0;   ///< slack rows of the level being tried (0: none, or not a level)
-  int reduced_trials_ = 0;  ///< warm trials of this call solved in z alone
   Vec y_;
   std::vector<int8_t> W_;
 
@@ -576,31 +415,30 @@ class Hierarchy {
   // stage, whose sizes repeat from one call to the next)
   enum class KMode : int8_t { kZero, kWide, kTall };
   /// A stage's (hard phase, level, minimum norm) working set and K factorisations, one per
-  /// stage: trial_memo finds the stage's last warm trial there at its next call.
+  /// stage: the trial cache finds the stage's last warm trial there at its next call.
   struct TrialState {
     WorkingQR wqr;  ///< G_w^T of the working set (k x kw), updated as rows enter and leave
     PivotedQR kqr;  ///< the projected objective K = Q N (qrows x (k - rank))
     PivotedQR cqr;  ///< [R11 R12]^T of a rank-deficient K (its minimum-norm step)
     PivotedQR kqr_t;  ///< K^T of a wide K (qrows < k - rank): its full-row-rank step
-    TrapezoidRZ krz;  ///< rz_min_norm: [R11 R12] of a rank-deficient K
+    TrapezoidRZ krz;  ///< [R11 R12] of a rank-deficient K
     Mat Qt;           ///< Q Qf
-    /// reuse_k_qr: kqr (and cqr) or kqr_t hold the factorisation of the current working
+    /// kqr (and cqr) or kqr_t hold the factorisation of the current working
     /// set's K on the stage's problem (cleared whenever the working set's QR changes)
     bool k_valid = false;
     KMode k_mode = KMode::kZero;  ///< how that K was solved: negligible, by K^T, by K's QR
     int k_rank = 0;               ///< numerical rank of that K (kTall)
     bool k_rz = false;            ///< that K's minimum-norm step by krz (else cqr)
-    /// trial_memo: wqr, Qt (and K when k_valid) are the factorisations factor_trial made of
+    /// The trial cache: wqr, Qt (and K when k_valid) are the factorisations factor_trial made of
     /// the key below, nothing having changed them since
     bool intact = false;
     int key_k = -1, key_qrows = -1;  ///< the trial's P.cols, P.qrows
     bool key_unit_q = false, key_qt_stale = false;
-    int key_switches = -1;  ///< trial_switches() then
     std::array<int, 4> key_slacks{};  ///< P.slacks, zcols, slack_q0, slack_g0 (ls_step's path)
     std::vector<int> key_widx;  ///< its working rows
     Vec key_G, key_Q;           ///< their G_w (kw x k) and the objective Q (qrows x k)
     /// Buffers for problems of up to cols columns, grows rows and qrows objective rows
-    /// (keys: trial_memo's too).
+    /// (keys: the trial cache's too).
     void reserve(int cols, int grows, int qrows, bool keys);
   };
   std::vector<TrialState> trials_;  ///< per stage (from the second call: allocate_per_stage)
@@ -612,76 +450,59 @@ class Hierarchy {
   /// (the first, and a one-shot solve, share one set; nothing allocates after the second).
   void allocate_per_stage();
   TrialState* stage_trial(int stage) { return per_stage_ ? &trials_[stage] : &shared_trial_; }
-  int trial_memo_hits_ = 0;         ///< trials of this call restored by trial_memo
-  /// A level's closed form from the QR of M = A Z (one per stage): closed_form_memo finds
+  /// A level's closed form from the QR of M = A Z (one per stage): the closed-form cache finds
   /// the factorisation of the level's M of the previous call there when A and Z repeat.
   struct ClosedForm {
     PivotedQR mqr;  ///< M (tall) or M^T (wide): the closed form without an SVD
     /// rank-deficient closed form: [R11 R12]^T of a tall M (its row space, the minimum-norm
     /// solve), or [R11^T; R12^T] of a wide M (the least squares in M^T's range)
     PivotedQR tqr;
-    TrapezoidRZ trz;     ///< rz_min_norm: [R11 R12] of a rank-deficient tall M
+    TrapezoidRZ trz;     ///< [R11 R12] of a rank-deficient tall M
     bool wide = false;   ///< M^T factorised (me <= r)
-    bool rz = false;     ///< [R11 R12] went by trz (else tqr)
     double smin = 0.0;   ///< lower bound 1/|R^-1|_F of sigma_min(M)
     int rank = -1;       ///< qr_factor's result (-1: the SVD path)
-    /// closed_form_memo: the stage's M (Ms_) is the one factorised here (and, svd_valid,
+    /// The closed-form cache: the stage's M (Ms_) is the one factorised here (and, svd_valid,
     /// by its SVD), with these tolerances and switches
     bool valid = false, svd_valid = false;
-    int key_switches = -1;
     /// Buffers for a level of me equality rows in n variables, capacity inherited rows.
     void reserve(int n, int me, int capacity);
   };
   std::vector<ClosedForm> cforms_;  ///< per stage (from the second call)
   ClosedForm shared_cf_;            ///< every level's in the first call
   ClosedForm* cf_ = nullptr;        ///< the level being solved's
-  int closed_form_memo_hits_ = 0;   ///< closed forms of this call whose factorisation was reused
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR sqr_;  ///< slack_step: the transposed system on z
-  int slack_steps_ = 0;  ///< steps by slack_step in this call
   /// the stage being solved has an objective Q with orthonormal columns (the minimum-norm
-  /// stage with least_distance): ls_step takes the least-distance step, no Q Qf is formed
+  /// stage): ls_step takes the least-distance step, no Q Qf is formed
   bool unit_q_ = false;
-  int least_distance_steps_ = 0;  ///< steps by least_distance in this call
-  int batch_rows_ = 0;  ///< rows added by tight_batch in this call
-  int grown_seeds_ = 0;  ///< stages of this call started from a grown stored set (grow_seed)
-  int rz_factors_ = 0;  ///< RZ factorisations of this call
-  bool z_identity_ = false;  ///< Z_ is the n x n identity (r_ == n_; identity_z)
-  int identity_products_ = 0;  ///< products with the identity Z skipped in this call
+  bool z_identity_ = false;  ///< Z_ is the n x n identity (r_ == n_: products with it are copies)
   /// the last factorisation was stored_set_point's on a level's full problem (W: its mapped
-  /// set; the exact finish after a hit starts from it, reuse_k_qr)
+  /// set; the exact finish after a hit starts from it)
   bool trial_ready_ = false;
-  int k_qr_reuses_ = 0;  ///< least-squares steps of this call that reused K's QR
   /// Qt not formed for the working set's QR (factor_working of a level with slacks and
-  /// slack_ls: ls_step forms it when its general path needs it; updates skip it till then)
+  /// ls_step forms it when its general path needs it; updates skip it till then)
   bool qt_stale_ = true;
   /// active_set returned optimal and nothing has factorised since: wqr, widx_, Qt, res_
   /// and step_ are those of its final W and y (the exact finish's first iteration)
   bool finish_ready_ = false;
   double qscale_ = 0.0;  ///< |Q|_F of the stage being solved
-  /// active_set decides stationarity and multiplier signs to rounding, not to kKktTol and a
-  /// 1e-15 objective gain (the finish of an ill-conditioned or damped level, issue 24)
+  /// active_set decides stationarity and multiplier signs to rounding, not to
+  /// settings.kkt_tol and a 1e-15 objective gain (the finish of an ill-conditioned or damped
+  /// level)
   bool exact_ = false;
   Vec res_, dres_, step_, gvec_, u_, mu_, gy_, gp_, tvec_, rowbuf_, zc_, tmpr_, xc_, xold_,
       e_, ute_;
   std::vector<int> widx_, mov_;
   std::vector<char> keep_, viol_;
-  std::vector<int8_t> wgrow_;  ///< grow_stored_set: the stored set's W, restored on failure
-  Vec ygrow_;                  ///< grow_stored_set: the stored set's point, restored on failure
   std::vector<Mat> Ms_;  ///< per stage: the projected equalities A Z
   Mat Ab_;  ///< a level's equality rows, copied contiguous (max_eq x n): Eigen's GEMM copies a
             ///< strided (row-major input) left factor into a heap temporary otherwise
   Mat Cl_;   ///< a level's inequality rows, copied contiguous (max_in x n)
   Mat CZl_;  ///< their projection C Z (max_in x n: the left r columns)
   Mat Ztmp_;
-  int null_space_freezes_ = 0;  ///< levels frozen by null_space_freeze in this call
-  int full_rank_freezes_ = 0;  ///< levels frozen by full_rank_freeze in this call
-  int dependent_drops_ = 0;    ///< levels whose moving rows lost dependent directions
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
-  int gram_screens_ = 0;       ///< levels whose dependence QR gram_screen skipped
-  int wide_freezes_ = 0;       ///< levels frozen by wide_freeze in this call
-  /// freeze_memo: one stage's last freeze, its inputs and its outputs (buffers of fixed
+  /// The freeze cache: one stage's last freeze, its inputs and its outputs (buffers of fixed
   /// size, allocated by allocate_per_stage)
   struct FreezeMemo {
     bool valid = false;     ///< a whole freeze stored: inputs and outputs
@@ -697,13 +518,9 @@ class Hierarchy {
     int a_layout = 0, c_layout = 0;  ///< 0: nothing stored yet
     std::vector<char> viol;
   };
-  std::vector<FreezeMemo> memos_;  ///< per stage (freeze_memo)
-  int freeze_memo_hits_ = 0;       ///< freezes of this call restored by freeze_memo
-  int small_rinvs_ = 0;        ///< closed forms of this call bounded by small_rinv
-  Mat nsp_;  ///< null_space_freeze: P N (r x (r - rank))
-  Mat cztmp_;  ///< null_space_freeze: the product Cin Z P N before it is copied back
-  int zero_tail_compressions_ = 0;  ///< levels compressed by compress_zero_tail in this call
-  int qr_closed_forms_ = 0;  ///< closed forms by QR in this call
+  std::vector<FreezeMemo> memos_;  ///< per level (the freeze cache)
+  Mat nsp_;  ///< freeze_null_space: P N (r x (r - rank))
+  Mat cztmp_;  ///< freeze_null_space: the product Cin Z P N before it is copied back
   Mat rinv_;       ///< R^-1 of the stage's mqr (a bound on M's smallest singular value)
   std::vector<Svd> svds_;
 };

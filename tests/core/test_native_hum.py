@@ -1,26 +1,21 @@
-"""The native engine's freeze of a rank-deficient tall level by the null space of its QR
-(``Hierarchy.null_space_freeze``, issue 24).
+"""The native engine's freeze of a rank-deficient tall level by the null space of its QR,
+and the changes of Z in the compact WY form.
 
 A tall equality level M (me x r) whose closed form came from the pivoted QR of M,
 M P = Qm [R11 R12; 0 R22] with R22 below the rank tolerance (dropped), is frozen onto
-null([R11 R12] P^T): the level's row space. The default path takes an orthonormal basis N of
-null([R11 R12]) from the factorisation the closed form already made of [R11 R12] (the RZ's
-rank reflectors, or the QR of [R11 R12]^T with ``rz_min_norm`` off), applied to the last
-r - rank unit vectors, and sets Z <- Z P N by one product (the carried projection Cin Z
-likewise). Switched off, the row space basis is formed, factorised again by the freeze and
-its rank reflectors applied to Z: the same subspace in another orthonormal basis. A level
-that leaves violated rows takes the general freeze either way.
+null([R11 R12] P^T): an orthonormal basis N of null([R11 R12]) comes from the RZ the closed
+form already made of [R11 R12], applied to the last r - rank unit vectors, and Z <- Z P N by
+one product (the carried projection Cin Z likewise). A level that leaves violated rows takes
+the general freeze.
 
-``wy_right``: a change of Z (and of the carried projection Cin Z) by the reflectors of a
-QR (a wide level's M^T, a freeze's F^T) of 16 to m / 3 reflectors on at least 24 rows is
-applied in the compact WY form (LAPACK's dlarft and dlarfb): Qf = I - V T V^T, B Qf =
-B - ((B V) T) V^T by matrix products, not one reflector at a time (the humanoid's wide
-level 1: 21 reflectors on its 88 x 86 Z and on 72 inherited rows). The same transform, its
-sums in another order. On by default in the x86-64-v3 build (FMA), off in the baseline one.
-
-Every step here equals the solver with the switch off and the Python engine (level values
-1e-9 relative, x where unique), and the path was taken (``null_space_freezes``,
-``wy_applications``).
+In the x86-64-v3 build (FMA), a change of Z (and of the carried projection Cin Z) by the
+reflectors of a QR (a wide level's M^T, a freeze's F^T) of 16 to m / 3 reflectors on at
+least 24 rows is applied in the compact WY form (LAPACK's dlarft and dlarfb): Qf = I - V T
+V^T, B Qf = B - ((B V) T) V^T by matrix products (the humanoid's wide level 1: 21
+reflectors on its 88 x 86 Z and on 72 inherited rows); the baseline build applies one
+reflector at a time. Every step here equals the Python engine (level values 1e-9 relative,
+x where unique), and the path was taken (``Stats.null_space_freezes``,
+``Stats.wy_applications``).
 """
 
 from __future__ import annotations
@@ -28,32 +23,28 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from support.hlsp import load
-from test_native import LEVEL_TOL, needs_native, published_module, published_stack, switch_pair
-from test_native_kqr import _check as kqr_check
+from test_native import (
+    LEVEL_TOL,
+    native_solver,
+    needs_native,
+    path_check,
+    published_module,
+    published_stack,
+)
 from test_native_kqr import _equality_under_bounds
 
 import qpcoord as qc
-
-#: each switch's counter of the path it takes
-COUNTER = {"null_space_freeze": "null_space_freezes", "wy_right": "wy_applications"}
+from qpcoord.core import native
 
 
-def _pair(stack: qc.Stack, rz: bool = True, switch: str = "null_space_freeze"):
-    """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off, both with
-    ``rz_min_norm = rz``."""
-    # null_space_freeze: on by default; wy_right: on by default in the x86-64-v3 build only
-    P, new, plain = switch_pair(stack, switch, default=None if switch == "wy_right" else True)
-    for h in (new, plain):
-        h._solver.rz_min_norm = rz
-    return P, new, plain
+def _check(stack: qc.Stack, P, h, unique_x: bool, counter: str = "null_space_freezes") -> int:
+    """The Python engine's level values (x where unique); returns the path's ``counter``."""
+    return path_check(stack, P, h, counter, unique_x)[0]
 
 
-def _check(
-    stack: qc.Stack, P, new, plain, unique_x: bool, switch: str = "null_space_freeze"
-) -> int:
-    """test_native_kqr's comparison (both solvers, the Python engine; level values, x where
-    unique) with this file's counters: ``new``'s count of the switch's path."""
-    return kqr_check(stack, P, new, plain, unique_x, switch, counters=COUNTER)
+def _fma() -> bool:
+    """The loaded extension is the x86-64-v3 build (FMA: the WY form of the changes of Z)."""
+    return native.load().ISA == "x86-64-v3"
 
 
 @needs_native
@@ -65,25 +56,24 @@ def _check(
 def test_moving_humanoid_null_space_freeze_equals_python(box, unit):
     """The LexLS humanoid moved as hierarchy_published's re-solve table: its 97-row level of
     rank 52 in 60 (box form: 54 in 62) is frozen by the null space of its QR at every step;
-    level values equal the general freeze's and the Python engine's (x: the ill-conditioned
+    level values equal the Python engine's (x: the ill-conditioned
     minimum-norm point, not compared)."""
     st, move = published_stack("lexls_test01_humanoid", box, unit)
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         move(step)
-        total += _check(st, P, new, plain, unique_x=False)
+        total += _check(st, P, h, unique_x=False)
     assert total >= 4
 
 
 @needs_native
-@pytest.mark.parametrize("rz", [True, False], ids=["by RZ", "by QR of [R11 R12]^T"])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_rank_deficient_tall_closed_forms(seed, rz):
+def test_rank_deficient_tall_closed_forms(seed):
     """Tall equality levels of low rank (30 x 24 of rank 9, 20 x 24 of rank 6) whose closed
     forms are accepted, then a full-rank level: both rank-deficient levels frozen by the null
-    space (N from the RZ or from the QR of [R11 R12]^T); x is unique and equals the general
-    freeze's and the Python engine's over changing targets."""
+    space (N from the RZ); x is unique and equals the Python engine's over changing
+    targets."""
     rng = np.random.default_rng(seed)
     n = 24
     A1 = rng.standard_normal((30, 9)) @ rng.standard_normal((9, n))
@@ -92,33 +82,32 @@ def test_rank_deficient_tall_closed_forms(seed, rz):
     b1, b2, b3 = (rng.standard_normal(m) for m in (30, 20, 5))
     t1, t2, t3 = qc.Equality(A1, b1), qc.Equality(A2, b2), qc.Equality(A3, b3)
     st = qc.Stack([t1, t2, t3])
-    P, new, plain = _pair(st, rz)
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         t1.update(b=b1 + 0.3 * step * rng.standard_normal(30))
         t2.update(b=b2 + 0.3 * np.cos(step) * rng.standard_normal(20))
-        total += _check(st, P, new, plain, unique_x=True)
+        total += _check(st, P, h, unique_x=True)
     assert total == 8  # both rank-deficient levels at every step
 
 
 @needs_native
-@pytest.mark.parametrize("rz", [True, False], ids=["by RZ", "by QR of [R11 R12]^T"])
 @pytest.mark.parametrize(
     ("seed", "rank", "cond", "unique", "taken"),
     [(1, 12, 1e-1, True, True), (4, 9, 1e-6, False, True), (5, 15, 1e-9, False, False)],
     ids=["rank 12", "ill-conditioned, rank 9", "very ill-conditioned, rank 15"],
 )
-def test_rank_deficient_level_held_by_the_bounds(seed, rank, cond, unique, taken, rz):
+def test_rank_deficient_level_held_by_the_bounds(seed, rank, cond, unique, taken):
     """A 30 x 20 equality level of low rank held by the bounds (its active set ends with
     no violated row: the null-space freeze after a least squares), moving, ill-conditioned
     up to sigma_min / sigma_max = 1e-9 (there damped: the SVD's closed form and the general
-    freeze): equal to the general freeze and the Python engine."""
+    freeze): equal to the Python engine."""
     st, move = _equality_under_bounds(seed, rank, cond)
-    P, new, plain = _pair(st, rz)
+    P, h = native_solver(st)
     total = 0
     for step in range(6):
         move(step)
-        total += _check(st, P, new, plain, unique_x=unique)
+        total += _check(st, P, h, unique_x=unique)
     assert (total > 0) == taken
 
 
@@ -129,8 +118,7 @@ def test_rank_near_the_tolerance(gap):
     rank tolerance (30 eps |A|_F, about 1.3e-14 here): below it the QR drops the direction
     and the null-space freeze keeps it free; above it the direction is under the damping
     threshold (1e-7): the SVD's damped closed form, and the general freeze (1e-14: at the
-    tolerance, either). Always the same level values as the switch off and the Python engine,
-    over changing targets."""
+    tolerance, either). Always the Python engine's level values, over changing targets."""
     rng = np.random.default_rng(3)
     n = 20
     U, _ = np.linalg.qr(rng.standard_normal((30, 9)))
@@ -141,11 +129,11 @@ def test_rank_near_the_tolerance(gap):
     eq = qc.Equality(A, b0)
     last = qc.Equality(rng.standard_normal((4, n)), rng.standard_normal(4))
     st = qc.Stack([eq, last])
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         eq.update(b=b0 + 0.1 * np.sin(step + np.arange(30)))
-        total += _check(st, P, new, plain, unique_x=False)
+        total += _check(st, P, h, unique_x=False)
     if gap < 1e-14:
         assert total == 4
     elif gap > 1e-14:
@@ -153,10 +141,10 @@ def test_rank_near_the_tolerance(gap):
 
 
 @needs_native
-def test_violated_rows_take_the_general_freeze_bit_for_bit():
+def test_violated_rows_take_the_general_freeze():
     """A level with a rank-deficient tall equality part and an inequality row it cannot
     meet (violated at its optimum): the freeze must hold that row too, so the general freeze
-    runs with the switch on as well, the same numbers bit for bit."""
+    runs, not the null space of the closed form's QR; the Python engine's level values."""
     rng = np.random.default_rng(9)
     n = 12
     A = rng.standard_normal((16, 5)) @ rng.standard_normal((5, n))
@@ -167,11 +155,9 @@ def test_violated_rows_take_the_general_freeze_bit_for_bit():
     st = qc.Stack(
         [lev, qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))], constraints=cons
     )
-    P, new, plain = _pair(st)
-    xn, rn, _ = new.solve(P)
-    xp, rp, _ = plain.solve(P)
-    assert new._solver.null_space_freezes == 0
-    assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
+    P, h = native_solver(st)
+    _, rn, _ = h.solve(P)
+    assert h.counters.null_space_freezes == 0
     sp = st.solve(engine="python")
     assert np.all(np.abs(rn - sp.level_residuals) <= LEVEL_TOL * np.maximum(1.0, rn))
 
@@ -180,15 +166,15 @@ def test_violated_rows_take_the_general_freeze_bit_for_bit():
 @pytest.mark.parametrize(("box", "unit"), [(False, False), (True, False)], ids=["rows", "box form"])
 def test_moving_humanoid_wy_equals_python(box, unit):
     """The moving humanoid: its wide level of 21 rows changes Z (and, rows form, the 72
-    inherited rows' projection) in the WY form at every step; level values equal the
-    reflector loop's and the Python engine's."""
+    inherited rows' projection) in the WY form at every step (the FMA build); level values
+    equal the Python engine's."""
     st, move = published_stack("lexls_test01_humanoid", box, unit)
-    P, new, plain = _pair(st, switch="wy_right")
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         move(step)
-        total += _check(st, P, new, plain, unique_x=False, switch="wy_right")
-    assert total >= 4
+        total += _check(st, P, h, unique_x=False, counter="wy_applications")
+    assert (total >= 4) if _fma() else (total == 0)
 
 
 @needs_native
@@ -197,7 +183,7 @@ def test_moving_humanoid_wy_equals_python(box, unit):
 def test_wide_levels_under_inherited_rows_by_wy(seed, rows):
     """An inequality level of 30 rows over 64 variables (its rows inherited: the carried
     projection), then wide equality levels of 15-20 rows (16 and more: the WY form on Z and
-    on Cin Z; 15: the loop), then a last level: x is unique and equals the loop's and the
+    on Cin Z in the FMA build; 15: the loop), then a last level: x is unique and equals the
     Python engine's over changing targets."""
     rng = np.random.default_rng(seed)
     n = 64
@@ -209,39 +195,23 @@ def test_wide_levels_under_inherited_rows_by_wy(seed, rows):
     e2 = qc.Equality(rng.standard_normal((rows, n)), rng.standard_normal(rows))
     last = qc.Equality(rng.standard_normal((n, n)), rng.standard_normal(n))
     st = qc.Stack([ineq, e1, e2, last], bounds=qc.Bounds(-5 * np.ones(n), 5 * np.ones(n)))
-    P, new, plain = _pair(st, switch="wy_right")
+    P, h = native_solver(st)
     b1 = e1.b.copy()
     total = 0
     for step in range(4):
         ineq.update(lower=lo0 + 0.3 * np.sin(0.7 * step + np.arange(30)))
         e1.update(b=b1 + 0.2 * np.cos(step + np.arange(rows)))
-        total += _check(st, P, new, plain, unique_x=True, switch="wy_right")
-    assert (total > 0) == (rows >= 16)
-
-
-@needs_native
-def test_wy_right_default_per_build():
-    """wy_right is on by default in the x86-64-v3 build, off in the baseline build."""
-    from qpcoord.core import native
-
-    base = native.import_variant("baseline")
-    assert not base.Hierarchy(4, [0, 2], [0, 0], False, 0.0).wy_right
-    try:
-        v3 = native.import_variant("x86-64-v3")
-    except (native.NativeUnavailableError, ValueError):
-        pytest.skip("no x86-64-v3 build on this machine")
-    assert v3.Hierarchy(4, [0, 2], [0, 0], False, 0.0).wy_right
+        total += _check(st, P, h, unique_x=True, counter="wy_applications")
+    assert (total > 0) == (rows >= 16 and _fma())
 
 
 @needs_native
 @pytest.mark.parametrize("variant", ["baseline", "x86-64-v3"])
-@pytest.mark.parametrize("switch", ["null_space_freeze", "wy_right"])
-def test_each_build_takes_the_paths(monkeypatch, variant, switch):
-    """Each build (baseline, x86-64-v3 where this CPU runs it) on the moving humanoid, each
-    switch forced on against off: the path is taken and the level values equal the Python
-    engine's (the builds round differently: FMA)."""
-    from qpcoord.core import native
-
+@pytest.mark.parametrize("counter", ["null_space_freezes", "wy_applications"])
+def test_each_build_takes_the_paths(monkeypatch, variant, counter):
+    """Each build (baseline, x86-64-v3 where this CPU runs it) on the moving humanoid: the
+    null-space freeze is taken by both, the WY form by the x86-64-v3 build only (FMA), and
+    the level values equal the Python engine's (the builds round differently)."""
     try:
         mod = native.import_variant(variant)
     except (native.NativeUnavailableError, ValueError):
@@ -250,11 +220,14 @@ def test_each_build_takes_the_paths(monkeypatch, variant, switch):
     hp = published_module()
     prob = load("lexls_test01_humanoid")
     st = qc.Stack(prob.levels, bounds=prob.bounds)
-    P, new, plain = _pair(st, switch=switch)
-    assert type(new._solver).__module__ == mod.__name__
+    P, h = native_solver(st)
+    assert type(h._solver).__module__ == mod.__name__
     move = hp._mover(prob.levels)
     total = 0
     for step in range(3):
         move(step)
-        total += _check(st, P, new, plain, unique_x=False, switch=switch)
-    assert total >= 3
+        total += _check(st, P, h, unique_x=False, counter=counter)
+    if counter == "wy_applications" and variant == "baseline":
+        assert total == 0
+    else:
+        assert total >= 3

@@ -1,17 +1,16 @@
-"""The native active set's cold start at a degenerate point (issue 24,
-``Hierarchy.tight_batch``).
+"""The native active set's cold start at a degenerate point.
 
 A level solved after another that left x on a vertex of the bounds (or of inherited
 inequality rows) starts its active set at a point where many rows are tight. Started cold
 (no stored working set: the first call, ``warm=False``), its first steps are blocked at
 length zero one row at a time: each blocking row enters by an iteration of its own (a
-least-squares step and a ratio test that move nothing). With ``tight_batch`` (default) a
-step blocked at length zero adds every row that blocks it at length zero at once (y does not
-move). The optimum is the same: here the level values equal the switch-off path's and the
-Python engine's (``LEVEL_TOL`` relative), x (unique: the minimum-norm completion) the same,
+least-squares step and a ratio test that move nothing). Instead, a step blocked at length
+zero adds every row that blocks it at length zero at once (y does not move). The optimum is
+the same: here the level values equal the Python engine's (``LEVEL_TOL`` relative), x
+(unique: the minimum-norm completion) the same,
 on changing data, cold and warm, with ties in the ratio test (duplicated rows: dependent
 working rows), equal bounds, no freedom left and inherited inequality rows; the path was
-taken (``batch_rows``) and cost fewer iterations.
+taken (``Stats.batch_rows``).
 """
 
 from __future__ import annotations
@@ -20,31 +19,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_native import LEVEL_TOL, needs_native, switch_check, switch_pair
+from test_native import LEVEL_TOL, native_solver, needs_native, path_check
 
 import qpcoord as qc
 
 _DATA = Path(__file__).resolve().parents[1] / "data"
 
 
-def _pair(stack: qc.Stack):
-    """(P, new, plain): two native solvers of ``stack``, tight_batch on and off."""
-    return switch_pair(stack, "tight_batch")
-
-
-def _iterations(info: dict) -> int:
-    """Active-set iterations of one call (hard phase, levels, minimum-norm stage)."""
-    return int(
-        sum(info["active_set_iterations"]) + info["hard_iterations"] + info["min_norm_iterations"]
-    )
-
-
-def _check(stack: qc.Stack, P, new, plain, warm: bool) -> tuple[int, int, int]:
-    """Solve with both (cold unless ``warm``) and with the Python engine: the same level
-    values, the same x (unique). Returns (rows batched by ``new``, its iterations, those of
-    ``plain``)."""
-    batched, infon, infop, _ = switch_check(stack, P, new, plain, "batch_rows", warm=warm)
-    return batched, _iterations(infon), _iterations(infop)
+def _check(stack: qc.Stack, P, h, warm: bool) -> int:
+    """Solve natively (cold unless ``warm``) and with the Python engine: the same level
+    values, the same x (unique). Returns the rows batched."""
+    return path_check(stack, P, h, "batch_rows", warm=warm)[0]
 
 
 def _vertex_stack(
@@ -95,31 +80,26 @@ def _vertex_stack(
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
 def test_cold_solves_on_changing_data(seed):
     """Cold solves of a stack whose first level ends on a vertex of the box: the same level
-    values and x as the switch-off path and the Python engine at every step; rows were
-    batched and the iterations are no more than the one-row-at-a-time path's."""
+    values and x as the Python engine at every step; rows were batched."""
     st, move = _vertex_stack(seed)
-    P, new, plain = _pair(st)
-    batched = it_new = it_plain = 0
+    P, h = native_solver(st)
+    batched = 0
     for step in range(5):
         move(step)
-        b, i_n, i_p = _check(st, P, new, plain, warm=False)
-        batched += b
-        it_new += i_n
-        it_plain += i_p
+        batched += _check(st, P, h, warm=False)
     assert batched > 0
-    assert it_new < it_plain, (it_new, it_plain)
 
 
 @needs_native
 @pytest.mark.parametrize("seed", [0, 3])
 def test_warm_steps_after_a_cold_first_call(seed):
     """Warm from step to step (the stored working sets of a batched first call): the same
-    values and x as the switch-off path and the Python engine."""
+    values and x as the Python engine."""
     st, move = _vertex_stack(seed)
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     for step in range(8):
         move(step)
-        _check(st, P, new, plain, warm=True)
+        _check(st, P, h, warm=True)
 
 
 @needs_native
@@ -132,24 +112,24 @@ def test_degenerate_cases(equal, duplicate, inequality):
     """Equal bounds (equality rows of the working set from the start), hard rows duplicating
     bounds (exact ties in the ratio test; the second of each pair is dependent on the
     first in the working set), an inequality level whose rows are inherited: the same as the
-    switch-off path and the Python engine, cold and warm."""
+    Python engine, cold and warm."""
     batched = 0
     for seed in (5, 6, 7):
         st, move = _vertex_stack(
             seed, equal_bounds=equal, duplicate=duplicate, inequality_level=inequality
         )
-        P, new, plain = _pair(st)
+        P, h = native_solver(st)
         for step in range(3):
             move(step)
-            batched += _check(st, P, new, plain, warm=False)[0]
-            _check(st, P, new, plain, warm=True)
+            batched += _check(st, P, h, warm=False)
+            _check(st, P, h, warm=True)
     assert batched > 0
 
 
 def no_freedom_stack() -> tuple[qc.Stack, qc.Equality, np.ndarray]:
     """``(stack, e1, A1)``: 6 variables in a box of ±0.2, a 3-row level far outside it (ends on
     bounds), then a square level that fixes every variable (no freedom left below it); move
-    the first level's target with ``e1.update(b=A1 @ ...)`` (also test_native_chain)."""
+    the first level's target with ``e1.update(b=A1 @ ...)`` (also test_native_seeded)."""
     rng = np.random.default_rng(11)
     n = 6
     A1 = rng.standard_normal((3, n))
@@ -163,36 +143,32 @@ def no_freedom_stack() -> tuple[qc.Stack, qc.Equality, np.ndarray]:
 @needs_native
 def test_no_freedom_left():
     """Levels that fix every variable (the null space empty after the second level) on top
-    of a first level that ends on bounds: the same as the switch-off path and the Python
-    engine."""
+    of a first level that ends on bounds: the same as the Python engine."""
     st, e1, A1 = no_freedom_stack()
     n = A1.shape[1]
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     for step in range(3):
         e1.update(b=A1 @ np.full(n, 0.5 + 0.1 * step))
-        _check(st, P, new, plain, warm=False)
-        _check(st, P, new, plain, warm=True)
+        _check(st, P, h, warm=False)
+        _check(st, P, h, warm=True)
 
 
 @needs_native
-def test_switch_off_batches_nothing():
-    """The switch off: no row batched; on: the counter is reset at every call (a warm call
-    after a batched cold one reports its own count)."""
+def test_batch_counter_is_per_call():
+    """The counter is reset at every call (a warm call after a batched cold one reports its
+    own count)."""
     st, move = _vertex_stack(0)
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     move(0)
-    new.solve(P, warm=False)
-    first = new._solver.batch_rows
-    assert first > 0
-    plain.solve(P, warm=False)
-    assert plain._solver.batch_rows == 0
-    new.solve(P, warm=True)  # the same data: every stored working set hits
-    assert new._solver.batch_rows == 0
+    h.solve(P, warm=False)
+    assert h.counters.batch_rows > 0
+    h.solve(P, warm=True)  # the same data: every stored working set hits
+    assert h.counters.batch_rows == 0
 
 
 @needs_native
 def test_steps_of_rounding_at_a_large_point_end_the_active_set():
-    """A stationary point far from the origin ends the level (session 15): level 0, 5
+    """A stationary point far from the origin ends the level: level 0, 5
     inequality rows of rank 3 in 8 variables, leaves level 1 (6 equality rows, satisfiable)
     a point at |y| ~ 650 after a drop; the least-squares steps there are rounding of
     Q y - c (relative to |Q| |y|, not to |Q y| ~ |c|: 1e-10 long, gaining 1e-26 each),

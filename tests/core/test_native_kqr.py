@@ -1,6 +1,5 @@
-"""The native engine's least squares with fewer factorisations (issue 24): the QR of the
-projected objective reused (``Hierarchy.reuse_k_qr``) and minimum-norm solutions of
-trapezoidal systems by an RZ factorisation (``Hierarchy.rz_min_norm``).
+"""The native engine's least squares with fewer factorisations: the QR of the projected
+objective reused, and minimum-norm solutions of trapezoidal systems by an RZ factorisation.
 
 A level's least-squares step factorises K = Q N, the objective projected on the null space
 of the working set's rows (the LexLS humanoid's level 4: 60 x 51-53, rank 50-51). K depends
@@ -8,58 +7,33 @@ on the working set's QR alone, so its factorisation is kept while that QR does n
 and reused by the next step: after a full step (the working set unchanged: the step that
 confirms stationarity), and by the exact finish of an ill-conditioned level whose warm trial
 hit (the finish starts from the trial's working set, point and K). Every step here equals
-the solver with the switch off and the Python engine (level values 1e-9 relative, x where
-unique), and the reuse was taken (``k_qr_reuses``).
+the Python engine (level values 1e-9 relative, x where unique), and the reuse was taken
+(``Stats.k_qr_reuses``).
 
 A rank-deficient tall level's closed form (M P = Qm [R11 R12; 0 R22], R22 dropped), its row
-space (the freeze) and a rank-deficient K's step solve [R11 R12] w = b in minimum norm. With
-``rz_min_norm`` the R12 block is folded into R11 by one Householder reflector per row (the
-RZ factorisation, LAPACK's xTZRZF: about 4 rank^2 (cols - rank) flops) instead of a pivoted
-QR of [R11 R12]^T (about 2 cols rank^2): the humanoid's 60 x 52 and 53 x 51 blocks. The same
-solution and subspace in exact arithmetic; here equal to the QR's and the Python engine's,
-and taken (``rz_factors``).
+space (the freeze) and a rank-deficient K's step solve [R11 R12] w = b in minimum norm: the
+R12 block is folded into R11 by one Householder reflector per row (the RZ factorisation,
+LAPACK's xTZRZF: about 4 rank^2 (cols - rank) flops; the humanoid's 60 x 52 and 53 x 51
+blocks). Here equal to the Python engine's, and taken (``Stats.rz_factors``).
 
-``identity_z``: until a hard equality row or a level's freeze changes it, the null-space
-basis Z is the identity (every problem's first level when there are no hard equalities); its
-projections A Z, C Z and Cin Z are then the rows themselves, copied instead of multiplied
-(the humanoid's level 0: 72 x 88 by 88 x 88). A product with the identity is exact, so the
-numbers are the same bit for bit.
+Until a hard equality row or a level's freeze changes it, the null-space basis Z is the
+identity (every problem's first level when there are no hard equalities); its projections
+A Z, C Z and Cin Z are then the rows themselves, copied instead of multiplied (the
+humanoid's level 0: 72 x 88 by 88 x 88; ``Stats.identity_products``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native import needs_native, published_stack, switch_check, switch_pair
+from test_native import native_solver, needs_native, path_check, published_stack
 
 import qpcoord as qc
 
-#: each switch's counter of the path it takes
-COUNTER = {
-    "reuse_k_qr": "k_qr_reuses",
-    "rz_min_norm": "rz_factors",
-    "identity_z": "identity_products",
-}
 
-
-def _pair(stack: qc.Stack, switch: str = "reuse_k_qr"):
-    """(P, new, plain): two native solvers of ``stack``, ``switch`` on and off."""
-    return switch_pair(stack, switch)
-
-
-def _check(
-    stack: qc.Stack,
-    P,
-    new,
-    plain,
-    unique_x: bool,
-    switch: str = "reuse_k_qr",
-    counters: dict | None = None,
-) -> int:
-    """Solve with both and the Python engine, compare; return ``new``'s count of the
-    switch's path (its counter in ``counters``, default this file's :data:`COUNTER`)."""
-    counter = (COUNTER if counters is None else counters)[switch]
-    return switch_check(stack, P, new, plain, counter, unique_x)[0]
+def _check(stack: qc.Stack, P, h, unique_x: bool, counter: str = "k_qr_reuses") -> int:
+    """Solve natively and with the Python engine, compare; return the path's ``counter``."""
+    return path_check(stack, P, h, counter, unique_x)[0]
 
 
 @needs_native
@@ -71,15 +45,15 @@ def _check(
 def test_moving_humanoid_reuses_k_and_equals_python(box, unit, least):
     """The LexLS humanoid (88 variables, 5 levels) moved as hierarchy_published's re-solve
     table: its level 4's rank-deficient K is reused (after full steps, and by the exact
-    finish after a warm hit), and the level values equal the refactorising solver's and the
-    Python engine's (x is the ill-conditioned minimum-norm point: not compared). The unit-row
-    copy's warm trials hit less often on that level: fewer reuses."""
+    finish after a warm hit), and the level values equal the Python engine's (x is the
+    ill-conditioned minimum-norm point: not compared). The unit-row copy's warm trials hit less
+    often on that level: fewer reuses."""
     st, move = published_stack("lexls_test01_humanoid", box, unit)
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(5):
         move(step)
-        total += _check(st, P, new, plain, unique_x=False)
+        total += _check(st, P, h, unique_x=False)
     assert total >= least
 
 
@@ -118,47 +92,31 @@ def test_equality_level_on_the_bounds(seed, rank, cond, unique):
     """An equality level held by the bounds, moving: full-rank and rank-deficient K (the
     minimum-norm step through the QR of [R11 R12]^T, also reused), well- and
     ill-conditioned (sigma_min / sigma_max = 1e-6: the exact finish, started from the warm
-    trial's K): equal to the refactorising solver and the Python engine at every step, x
+    trial's K): equal to the Python engine at every step, x
     compared where the problem is well conditioned."""
     st, move = _equality_under_bounds(seed, rank, cond)
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(8):
         move(step)
-        total += _check(st, P, new, plain, unique_x=unique)
+        total += _check(st, P, h, unique_x=unique)
     assert total > 0
-
-
-@needs_native
-def test_switch_off_is_the_default_numbers_where_nothing_is_reused():
-    """Where no step reuses K (a stack of equality levels: closed forms only), both
-    settings give the same numbers bit for bit."""
-    rng = np.random.default_rng(7)
-    n = 10
-    st = qc.Stack(
-        [qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3)) for _ in range(3)]
-    )
-    P, new, plain = _pair(st)
-    xn, rn, _ = new.solve(P)
-    xp, rp, _ = plain.solve(P)
-    assert new._solver.k_qr_reuses == 0
-    assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
 
 
 @needs_native
 @pytest.mark.parametrize(
     ("box", "unit"), [(False, False), (True, False), (False, True)], ids=["rows", "box", "unit"]
 )
-def test_moving_humanoid_rz_equals_the_qr_and_python(box, unit):
+def test_moving_humanoid_rz_equals_python(box, unit):
     """The moving humanoid: its last level's rank-deficient M (60-62 columns, rank 52-54)
-    and K (rank 50-51 of 51-53) go by RZ; level values equal the transposed QR's and the
-    Python engine's (x: the ill-conditioned minimum-norm point, not compared)."""
+    and K (rank 50-51 of 51-53) go by RZ; level values equal the Python engine's (x: the
+    ill-conditioned minimum-norm point, not compared)."""
     st, move = published_stack("lexls_test01_humanoid", box, unit)
-    P, new, plain = _pair(st, "rz_min_norm")
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         move(step)
-        total += _check(st, P, new, plain, unique_x=False, switch="rz_min_norm")
+        total += _check(st, P, h, unique_x=False, counter="rz_factors")
     assert total >= 4
 
 
@@ -168,7 +126,7 @@ def test_rank_deficient_tall_levels_closed_form_and_freeze(seed):
     """Tall equality levels of low rank (30 x 24 of rank 9, 20 x 24 of rank 6) with their
     closed forms feasible: the minimum-norm step and the row space frozen come from the RZ;
     the last level and the minimum-norm stage then see the same null space. x is unique:
-    equal to the transposed QR's and the Python engine's, over changing targets."""
+    equal to the Python engine's, over changing targets."""
     rng = np.random.default_rng(seed)
     n = 24
     A1 = rng.standard_normal((30, 9)) @ rng.standard_normal((9, n))
@@ -177,12 +135,12 @@ def test_rank_deficient_tall_levels_closed_form_and_freeze(seed):
     b1, b2, b3 = (rng.standard_normal(m) for m in (30, 20, 5))
     t1, t2, t3 = qc.Equality(A1, b1), qc.Equality(A2, b2), qc.Equality(A3, b3)
     st = qc.Stack([t1, t2, t3])
-    P, new, plain = _pair(st, "rz_min_norm")
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         t1.update(b=b1 + 0.3 * step * rng.standard_normal(30))
         t2.update(b=b2 + 0.3 * np.cos(step) * rng.standard_normal(20))
-        total += _check(st, P, new, plain, unique_x=True, switch="rz_min_norm")
+        total += _check(st, P, h, unique_x=True, counter="rz_factors")
     assert total >= 8  # both rank-deficient levels at every step
 
 
@@ -194,22 +152,22 @@ def test_rank_deficient_tall_levels_closed_form_and_freeze(seed):
 )
 def test_rank_deficient_k_by_rz(seed, rank, cond, unique):
     """An equality level held by the bounds (its active set's K rank-deficient): the
-    minimum-norm step by the RZ equals the transposed QR's and the Python engine's."""
+    minimum-norm step by the RZ equals the Python engine's."""
     st, move = _equality_under_bounds(seed, rank, cond)
-    P, new, plain = _pair(st, "rz_min_norm")
+    P, h = native_solver(st)
     total = 0
     for step in range(8):
         move(step)
-        total += _check(st, P, new, plain, unique_x=unique, switch="rz_min_norm")
+        total += _check(st, P, h, unique_x=unique, counter="rz_factors")
     assert total > 0
 
 
 @needs_native
 @pytest.mark.parametrize("hard", [False, True], ids=["no hard rows", "hard equality"])
-def test_identity_z_copies_are_the_products_bit_for_bit(hard):
+def test_identity_z_copies_equal_python(hard):
     """A stack of inequality and equality levels under bounds (optionally a hard equality
     row first: Z is not the identity at level 0, nothing is copied), moving: the copies
-    give the products' numbers bit for bit, and the Python engine's."""
+    give the Python engine's numbers."""
     rng = np.random.default_rng(11)
     n = 16
     C = rng.standard_normal((10, n))
@@ -221,14 +179,9 @@ def test_identity_z_copies_are_the_products_bit_for_bit(hard):
     levels = [[ineq, qc.Equality(rng.standard_normal((2, n)), rng.standard_normal(2))], eq, last]
     cons = [qc.Equality(rng.standard_normal((1, n)), [0.1])] if hard else None
     st = qc.Stack(levels, bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=cons)
-    P, new, plain = _pair(st, "identity_z")
+    P, h = native_solver(st)
     total = 0
     for step in range(5):
         ineq.update(lower=lo0 + 0.2 * np.sin(0.8 * step + np.arange(10)))
-        xn, rn, _ = new.solve(P)
-        total += new._solver.identity_products
-        xp, rp, _ = plain.solve(P)
-        assert plain._solver.identity_products == 0
-        assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
-        total += _check(st, P, new, plain, unique_x=True, switch="identity_z")
-    assert (total == 0) if hard else (total >= 10)
+        total += _check(st, P, h, unique_x=True, counter="identity_products")
+    assert (total == 0) if hard else (total >= 5)

@@ -1,6 +1,6 @@
-"""The native engine's memos of a re-solve whose matrices did not change (issue 24, session 15).
+"""The native engine's caches of a re-solve whose matrices did not change.
 
-``Hierarchy.freeze_memo``: a level's freeze -- the change of the null-space basis Z, of the
+The freeze cache: a level's freeze -- the change of the null-space basis Z, of the
 free dimension r and of the carried projection of the inherited rows -- is a function of Z
 and of that projection on entry, of the level's rows and of the freeze's kind, rank and
 violated rows; none of them depends on the targets or on the bounds' values. A re-solve whose
@@ -8,25 +8,27 @@ matrices did not change (targets, bounds moved: the benchmarks' re-solves, an LT
 coordinator) restores the stored outputs of the level's last freeze instead of applying its
 reflectors to Z again.
 
-``Hierarchy.trial_memo``: a stage's warm trial factorises its stored working set's rows
+The trial cache: a stage's warm trial factorises its stored working set's rows
 (pivoted QR of G_w^T), the objective's null-space columns (Q Qf) and K = Q N; each stage
 keeps its own factorisations, and a trial whose working rows and objective are bit for bit
 the last trial's of the stage, nothing having updated them since (it hit), uses them as
 they are.
 
-``Hierarchy.closed_form_memo``: a level whose rows and Z on entry are bit for bit its last
+The closed-form cache: a level whose rows and Z on entry are bit for bit its last
 call's keeps M = A Z (each stage holds its own) and the factorisations of its closed form
-(the pivoted QR of M, the RZ or QR of its [R11 R12], or M's SVD; each stage keeps its own):
+(the pivoted QR of M and the RZ of its [R11 R12], or M's SVD; each stage keeps its own):
 only the solves with the new targets run.
 
-``Hierarchy.bound_rows_memo`` (session 16): a stage whose Z on entry is bit for bit its last
+The bound-rows cache: a stage whose Z on entry is bit for bit its last
 call's copies its bound rows (Z's rows scaled to unit norm) as one block from that call's;
 only their bounds, which move with x and the box, are computed.
 
-The tests compare solvers with the memos on against one with all off, bit for bit (x's and
-the level values' bits, the info dicts), along sequences in which each level's matrix stays,
-changes, or comes back to an earlier value (a memo keyed on too little would restore a stale
-factorisation there), and check that the memos are used where the matrices repeat and not
+The tests compare a solver using its caches against a twin that makes the same calls with
+every cache dropped before each (``Hierarchy.invalidate_caches``: it computes every
+factorisation and freeze, from the same stored working sets), bit for bit (x's and the level
+values' bits, the info dicts), along sequences in which each level's matrix stays, changes, or
+comes back to an earlier value (a cache keyed on too little would restore a stale
+factorisation there), and check that the caches are used where the matrices repeat and not
 where they change.
 """
 
@@ -36,7 +38,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_native import benchmark_module, needs_native, published_stack, switch_pair
+from test_native import benchmark_module, native_solver, needs_native, published_stack
 
 import qpcoord as qc
 
@@ -46,29 +48,35 @@ def _bits(v: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(v, dtype=np.float64).view(np.uint64)
 
 
-MEMOS = ("freeze_memo", "trial_memo", "closed_form_memo", "bound_rows_memo")
+#: The caches' hit counters (``Stats``): freezes, trials, closed forms, bound rows.
+HITS = ("freeze_memo_hits", "trial_memo_hits", "closed_form_memo_hits", "bound_rows_memo_hits")
 
 
-def _memo_pair(stack: qc.Stack, memos=MEMOS):
-    """``(P, new, plain)``: native solvers of ``stack``, ``new`` with the memos ``memos`` on
-    (the others off), ``plain`` with none (all on by default)."""
-    P, new, plain = switch_pair(stack, "freeze_memo")
-    for memo in MEMOS:
-        setattr(new._solver, memo, memo in memos)
-        setattr(plain._solver, memo, False)
+def _memo_pair(stack: qc.Stack):
+    """``(P, new, plain)``: two native solvers of ``stack``; ``_same_step`` drops ``plain``'s
+    caches before each of its calls."""
+    P, new = native_solver(stack)
+    _, plain = native_solver(stack)
     return P, new, plain
 
 
-def _same_step(P, new, plain, warm: bool = True) -> tuple[int, int, int]:
-    """One solve by each: x, level values and info bit for bit the same; returns ``new``'s
-    hits (freeze_memo, trial_memo, closed_form_memo, bound_rows_memo) (``plain`` has none)."""
+def _hits(h) -> tuple[int, int, int, int]:
+    stats = h.counters
+    return tuple(getattr(stats, k) for k in HITS)
+
+
+def _same_step(P, new, plain, warm: bool = True) -> tuple[int, int, int, int]:
+    """One solve by each (``plain`` with its caches dropped first: everything computed): x,
+    level values and info bit for bit the same; returns ``new``'s hits (:data:`HITS`)."""
     xn, rn, infon = new.solve(P, warm=warm)
+    plain._solver.invalidate_caches()
     xp, rp, infop = plain.solve(P, warm=warm)
     np.testing.assert_array_equal(_bits(xn), _bits(xp))
     np.testing.assert_array_equal(_bits(rn), _bits(rp))
+    hits = _hits(new)
+    assert _hits(plain) == (0, 0, 0, 0)
     assert infon == infop
-    assert all(getattr(plain._solver, m + "_hits") == 0 for m in MEMOS)
-    return tuple(getattr(new._solver, m + "_hits") for m in MEMOS)
+    return hits
 
 
 def _random_stack(seed: int):
@@ -103,21 +111,15 @@ def _move(task, rng, A=None) -> None:
 
 
 @needs_native
-@pytest.mark.parametrize(
-    "memos",
-    [MEMOS, MEMOS[:1], MEMOS[1:2], MEMOS[2:3], MEMOS[3:]],
-    ids=["all", "freeze", "trial", "closed form", "bound rows"],
-)
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 10_000))
-def test_memos_equal_the_factorisations_computed_along_changing_matrices(seed, memos):
+def test_memos_equal_the_factorisations_computed_along_changing_matrices(seed):
     """Each step moves every target and, per level, keeps the matrix, switches to the other
     one or back (then the stored freeze of the first matrices may be restored: correct only
-    if the memo's key holds every input): the solver with the memo equals the one without,
-    bit for bit, each step, warm or cold. (Seeds 0-59 of this generator: 251 restored
-    freezes in 600 steps.)"""
+    if the cache's key holds every input): the solver with its caches equals the one that
+    computes everything, bit for bit, each step, warm or cold."""
     stack, tasks, mats, rng = _random_stack(seed)
-    P, new, plain = _memo_pair(stack, memos)
+    P, new, plain = _memo_pair(stack)
     current = [0] * len(tasks)
     for _step in range(10):
         for i, task in enumerate(tasks):
@@ -151,7 +153,7 @@ def test_memo_restores_every_freeze_of_a_re_solve_and_none_of_a_changed_stack():
         for t, b0 in zip(tasks, base, strict=True):
             t.update(b=b0 + 0.2 * np.sin(0.05 * step + np.arange(b0.shape[0])))
         hits.append(_same_step(P, new, plain))
-    assert plain._solver.wide_freezes > 0  # the binding levels' freezes
+    assert plain.counters.wide_freezes > 0  # the binding levels' freezes
     freezes = [h[0] for h in hits]
     assert freezes[-1] > 0 and freezes[-1] == freezes[-2]  # every freeze of the re-solve
     assert sum(h[1] for h in hits[4:]) > 0  # warm trials reused
@@ -196,17 +198,18 @@ def test_soth_re_solve_reuses_every_trial():
 
 
 @needs_native
-def test_memo_switches_and_counters_are_exposed():
-    """The memos are on by default, settable, and count 0 before any solve."""
-    from qpcoord.core.native import NativeHierarchy
-
+def test_counters_are_exposed_and_per_call():
+    """The hit counters are 0 before any solve, count a re-solve's hits, and are a copy (a
+    later call does not change an earlier call's)."""
     stack = qc.Stack([qc.Equality(np.eye(3)[:2], np.ones(2)), qc.Equality(np.eye(3), np.zeros(3))])
-    h = NativeHierarchy(stack._compiled, stack.damping)
-    for memo in MEMOS:
-        assert getattr(h._solver, memo) is True
-        setattr(h._solver, memo, False)
-        assert getattr(h._solver, memo) is False
-    assert all(getattr(h._solver, m + "_hits") == 0 for m in MEMOS)
+    P, h = native_solver(stack)
+    assert _hits(h) == (0, 0, 0, 0)
+    first = []
+    for _ in range(4):
+        h.solve(P)
+        first.append(h.counters)
+    assert h.counters.closed_form_memo_hits == _hits(h)[2] > 0
+    assert first[0].closed_form_memo_hits == 0
 
 
 @needs_native
@@ -218,7 +221,7 @@ def test_bound_rows_memo_follows_the_box_and_its_open_sides():
     bench = benchmark_module("hierarchy_bench")
     scen = bench._scenario(bench.chain30, np.random.default_rng(0))
     stack, bounds = scen["stack"], scen["daqp"][1]
-    P, new, plain = _memo_pair(stack, ("freeze_memo", "bound_rows_memo"))
+    P, new, plain = _memo_pair(stack)
     n = 30
     copied = []
     for step in range(16):

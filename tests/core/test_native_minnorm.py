@@ -1,5 +1,4 @@
-"""The native engine's minimum-norm stage as a least-distance problem (issue 24,
-``Hierarchy.least_distance``).
+"""The native engine's minimum-norm stage as a least-distance problem.
 
 After the last level, the native engine finds the minimum-norm x = xbar + Z y over the
 last optimal set: min |xbar + Z y| over the bounds and the inherited rows, Z an orthonormal
@@ -8,17 +7,16 @@ identity Hessian (strictly convex in y, so the point y, and x, is unique). On a 
 with null space N (the last columns of its rows' QR) the least-squares step
 min |Z (y + N s) + xbar| is s = -N^T g, g = Z^T (Z y + xbar): K = Z N has orthonormal
 columns, so the general path's QR of K (and the projected objective Z Qf) is not needed.
-Same point in exact arithmetic; here equal to the general path's (switch off), the Python
-engine's and the cvxpy oracle's on changing data and on the degenerate cases (bounds active
-at the start, equal bounds, no freedom left, inherited inequality rows), and the path was
-taken (``least_distance_steps``).
+Here equal to the Python engine's and the cvxpy oracle's on changing data and on the degenerate
+cases (bounds active at the start, equal bounds, no freedom left, inherited inequality rows), and
+the path was taken (``Stats.least_distance_steps``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native import needs_native, switch_check, switch_pair
+from test_native import X_TOL, native_solver, needs_native, path_check
 
 import qpcoord as qc
 
@@ -26,20 +24,15 @@ import qpcoord as qc
 ORACLE_X_TOL = 1e-6
 
 
-def _pair(stack: qc.Stack):
-    """(P, new, plain): two native solvers of ``stack``, least_distance on and off."""
-    return switch_pair(stack, "least_distance")
-
-
-def _check(stack: qc.Stack, P, new, plain, oracle: tuple | None = None) -> int:
-    """Solve with both, the Python engine (and the oracle on ``oracle`` = (levels, bounds,
-    constraints), the stack's arguments); the minimum-norm x is unique: compare it. Returns
-    ``new``'s least-distance steps."""
-    taken, _, _, sp = switch_check(stack, P, new, plain, "least_distance_steps")
+def _check(stack: qc.Stack, P, h, oracle: tuple | None = None) -> int:
+    """Solve natively, with the Python engine (and the oracle on ``oracle`` = (levels,
+    bounds, constraints), the stack's arguments); the minimum-norm x is unique: compare it.
+    Returns the least-distance steps."""
+    taken, _, sp = path_check(stack, P, h, "least_distance_steps")
     if oracle is not None:
         from support.oracle import lexicographic
 
-        xn = new.x
+        xn = h.x
         scale = max(1.0, float(np.max(np.abs(sp.x))))
         ox = lexicographic(*oracle).x
         assert np.max(np.abs(xn - ox)) <= ORACLE_X_TOL * scale, np.max(np.abs(xn - ox))
@@ -87,16 +80,16 @@ def _feasible_stack(seed: int, n: int = 14, equal_bounds: int = 0, hard: bool = 
 
 @needs_native
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
-def test_moving_stack_same_point_as_general_path_python_and_oracle(seed):
+def test_moving_stack_same_point_as_python_and_oracle(seed):
     """Consistent levels under bounds, moving: the minimum-norm point rests on bounds and
-    inherited inequality rows; equal to the general path's, the Python engine's and the
-    oracle's at every step (warm from step to step), and the least-distance path ran."""
+    inherited inequality rows; equal to the Python engine's and the oracle's at every step (warm
+    from step to step), and the least-distance path ran."""
     st, move, args = _feasible_stack(seed)
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(6):
         move(step)
-        total += _check(st, P, new, plain, oracle=args if step % 2 == 0 else None)
+        total += _check(st, P, h, oracle=args if step % 2 == 0 else None)
     assert total > 0
 
 
@@ -106,14 +99,14 @@ def test_moving_stack_same_point_as_general_path_python_and_oracle(seed):
 )
 def test_equal_bounds_and_hard_rows(equal, hard):
     """Variables with lb = ub (equality rows of the working set from the start) and a hard
-    equality row (Z is not the identity from the start): same point as the general path,
-    the Python engine and the oracle."""
+    equality row (Z is not the identity from the start): same point as the Python engine
+    and the oracle."""
     st, move, args = _feasible_stack(5, equal_bounds=equal, hard=hard)
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         move(step)
-        total += _check(st, P, new, plain, oracle=args if step == 0 else None)
+        total += _check(st, P, h, oracle=args if step == 0 else None)
     assert total > 0
 
 
@@ -132,18 +125,18 @@ def test_bounds_active_at_the_start():
     x0[:3] = 0.4  # on the lower bounds
     e = qc.Equality(A, A @ x0)
     st = qc.Stack([e], bounds=qc.Bounds(lb, ub))
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(4):
         e.update(b=A @ x0 + 0.05 * step * rng.standard_normal(3))
-        total += _check(st, P, new, plain, oracle=([e], qc.Bounds(lb, ub), None))
+        total += _check(st, P, h, oracle=([e], qc.Bounds(lb, ub), None))
     assert total > 0
 
 
 @needs_native
 def test_no_freedom_left_takes_no_step():
     """Levels that fix every variable (the null space is empty): no least-distance step,
-    and the same x as the general path bit for bit."""
+    and the Python engine's x."""
     rng = np.random.default_rng(3)
     n = 6
     st = qc.Stack(
@@ -153,36 +146,32 @@ def test_no_freedom_left_takes_no_step():
         ],
         bounds=qc.Bounds(-10 * np.ones(n), 10 * np.ones(n)),
     )
-    P, new, plain = _pair(st)
-    xn, rn, _ = new.solve(P)
-    xp, rp, _ = plain.solve(P)
-    assert new._solver.least_distance_steps == 0
-    assert np.array_equal(xn, xp) and np.array_equal(rn, rp)
-    assert _check(st, P, new, plain) == 0
+    P, h = native_solver(st)
+    assert _check(st, P, h) == 0
 
 
 @needs_native
 def test_unconstrained_minimum_norm_is_the_closed_form():
     """A minimum-norm point inside the box is the closed form xbar - Z Z^T xbar: the active
-    set does not run (no step), both settings give the same x bit for bit."""
+    set does not run (no step); the Python engine's x."""
     rng = np.random.default_rng(4)
     n = 10
     st = qc.Stack(
         [qc.Equality(rng.standard_normal((3, n)), 0.1 * rng.standard_normal(3))],
         bounds=qc.Bounds(-10 * np.ones(n), 10 * np.ones(n)),
     )
-    P, new, plain = _pair(st)
-    xn, _, _ = new.solve(P)
-    xp, _, _ = plain.solve(P)
-    assert new._solver.least_distance_steps == 0
-    assert np.array_equal(xn, xp)
+    P, h = native_solver(st)
+    xn, _, info = h.solve(P)
+    assert h.counters.least_distance_steps == 0 and info["min_norm_iterations"] == 0
+    xbar = st.solve(engine="python").x
+    assert np.max(np.abs(xn - xbar)) <= X_TOL * max(1.0, float(np.max(np.abs(xbar))))
 
 
 @needs_native
-def test_chain30_moving_equals_general_path_and_python():
+def test_chain30_moving_equals_python():
     """hierarchy_bench's chain30 (30 variables, joint-limit bounds, 3/3/6/6 equality rows),
     moved as the benchmark moves it: the minimum-norm stage's least-distance steps give the
-    general path's and the Python engine's x (unique) at every step."""
+    Python engine's x (unique) at every step."""
     import sys
     from pathlib import Path
 
@@ -193,9 +182,9 @@ def test_chain30_moving_equals_general_path_and_python():
         sys.path.pop(0)
     sc = hb._scenario(hb.chain30, np.random.default_rng(0))
     st = sc["stack"]
-    P, new, plain = _pair(st)
+    P, h = native_solver(st)
     total = 0
     for step in range(12):
         sc["move"](step)
-        total += _check(st, P, new, plain)
+        total += _check(st, P, h)
     assert total > 0

@@ -10,9 +10,9 @@
 // copies it to a heap temporary; an operator-new count reported both as 0. operator new
 // (libstdc++'s) calls malloc, so std::vector and friends are counted too. glibc only.
 //
-// Without it (weighted_driver.cpp, for now) only the global operator new is counted, which
-// misses Eigen's allocations: with the malloc count, weighted_driver's refactor mode shows
-// 3 allocations per call (not fixed in this header's round: weighted.cpp has another owner).
+// Without it (weighted_driver.cpp) only the global operator new is counted, which misses
+// Eigen's allocations: with the malloc count, weighted_driver's refactor mode shows 3
+// allocations per call.
 #pragma once
 
 #ifdef QPCOORD_COUNT_MALLOC

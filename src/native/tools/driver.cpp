@@ -4,7 +4,7 @@
 // allocations (a counting malloc: tools/count_allocations.hpp) made by the solves after the
 // first pass.
 //
-//   g++ -O2 -g -std=c++17 -DNDEBUG -I<eigen3> -Isrc/native src/native/tools/driver.cpp \
+//   g++ -O2 -g -std=c++17 -DNDEBUG -I<eigen3> -Isrc/native src/native/tools/driver.cpp
 //       src/native/hierarchy.cpp -o /tmp/driver
 //   /tmp/driver FILE.bin [repeats] [cold|warm] [XOUT.bin]
 //
@@ -12,16 +12,6 @@
 // the same command with -march=x86-64-v3 (e.g. -o /tmp/driver_v3); compare the two binaries
 // alternated on the same files (the v3 build's FMA rounds otherwise: x equal to ~1e-12, not
 // bit for bit). valgrind's callgrind runs both (it emulates AVX2 and FMA, not AVX-512).
-//
-// QPCOORD_DRIVER_OFF=name,name,...: switch those Hierarchy options off (A/B in one binary):
-// reduce_slacks, trial_qt_tail, carry_projection, seed_on_miss, downdate, rank_revealing_qr,
-// compress_objective, wide_ls, gemv_qr, compress_zero_tail, reuse_k_qr, rz_min_norm,
-// identity_z, least_distance, null_space_freeze, wy_right, tight_batch, full_rank_freeze,
-// wide_freeze, small_rinv, gram_screen, freeze_memo, trial_memo, closed_form_memo,
-// bound_rows_memo.
-//
-// QPCOORD_DRIVER_ON=gemv_qr,wy_right,grow_seed: switch these non-default options on
-// (wy_right is on by default in a build with FMA, e.g. -march=x86-64-v3).
 //
 // Prints the mean, median, p90 and p99 per solve; with XOUT.bin, writes every solve's x
 // (float64, n per solve, in order) to compare two builds.
@@ -40,6 +30,18 @@
 #define QPCOORD_COUNT_MALLOC  // count malloc (Eigen allocates there), not only operator new
 #include "tools/count_allocations.hpp"
 #include "tools/dump_file.hpp"
+
+// Under valgrind --tool=callgrind --collect-atstart=no, only the second pass is counted (the
+// warm re-solve: the first pass allocates and fills the per-stage buffers).
+#if defined(__has_include)
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>
+#define QPCOORD_DRIVER_COLLECT() CALLGRIND_TOGGLE_COLLECT
+#endif
+#endif
+#ifndef QPCOORD_DRIVER_COLLECT
+#define QPCOORD_DRIVER_COLLECT() (void)0
+#endif
 
 using namespace qpcoord;
 using RowMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
@@ -65,43 +67,6 @@ int main(int argc, char** argv) {
   const size_t per = dump.per;
   const std::vector<double>& data = dump.data;
   Hierarchy h(n, meq, min, has_bounds, damping);
-  if (const char* off = std::getenv("QPCOORD_DRIVER_OFF")) {
-    const std::string list = std::string(",") + off + ",";
-    auto has = [&](const char* name) {
-      return list.find(std::string(",") + name + ",") != std::string::npos;
-    };
-    if (has("reduce_slacks")) h.reduce_slacks = false;
-    if (has("trial_qt_tail")) h.trial_qt_tail = false;
-    if (has("carry_projection")) h.carry_projection = false;
-    if (has("gemv_qr")) h.gemv_qr = false;
-    if (has("compress_zero_tail")) h.compress_zero_tail = false;
-    if (has("reuse_k_qr")) h.reuse_k_qr = false;
-    if (has("rz_min_norm")) h.rz_min_norm = false;
-    if (has("identity_z")) h.identity_z = false;
-    if (has("least_distance")) h.least_distance = false;
-    if (has("tight_batch")) h.tight_batch = false;
-    if (has("null_space_freeze")) h.null_space_freeze = false;
-    if (has("wy_right")) h.wy_right = false;
-    if (has("full_rank_freeze")) h.full_rank_freeze = false;
-    if (has("wide_freeze")) h.wide_freeze = false;
-    if (has("small_rinv")) h.small_rinv = false;
-    if (has("seed_on_miss")) h.seed_on_miss = false;
-    if (has("downdate")) h.downdate = false;
-    if (has("rank_revealing_qr")) h.rank_revealing_qr = false;
-    if (has("compress_objective")) h.compress_objective = false;
-    if (has("wide_ls")) h.wide_ls = false;
-    if (has("gram_screen")) h.gram_screen = false;
-    if (has("freeze_memo")) h.freeze_memo = false;
-    if (has("trial_memo")) h.trial_memo = false;
-    if (has("closed_form_memo")) h.closed_form_memo = false;
-    if (has("bound_rows_memo")) h.bound_rows_memo = false;
-  }
-  if (const char* on = std::getenv("QPCOORD_DRIVER_ON")) {
-    const std::string list = std::string(",") + on + ",";
-    if (list.find(",gemv_qr,") != std::string::npos) h.gemv_qr = true;
-    if (list.find(",wy_right,") != std::string::npos) h.wy_right = true;
-    if (list.find(",grow_seed,") != std::string::npos) h.grow_seed = true;
-  }
   Vec x(n), res(L), detail(8);
   Mat stats(L + 2, 3);
   long long allocs_after_first = 0;
@@ -125,6 +90,7 @@ int main(int argc, char** argv) {
       VecMap lo(p, mi), hi(p + mi, mi), sw(p + 2 * mi, mi);
       p += 3 * mi;
       VecMap lb(p, n), ub(p + n, n);
+      if (rep == 1 && s == 0) QPCOORD_DRIVER_COLLECT();  // on: the second pass starts
       const long long a0 = g_allocs;
       const auto t0 = std::chrono::steady_clock::now();
       const bool warm = !cold && (rep || s);
@@ -137,6 +103,7 @@ int main(int argc, char** argv) {
       each.push_back(dt);
       if (xout) std::fwrite(x.data(), sizeof(double), size_t(n), xout);
       if (rep > 0) allocs_after_first += g_allocs - a0;
+      if (rep == 1 && s == steps - 1) QPCOORD_DRIVER_COLLECT();  // off: it ended
       if (code) {
         std::fprintf(stderr, "step %d: status %d\n", s, code);
         return 1;
@@ -146,10 +113,10 @@ int main(int argc, char** argv) {
       closed += static_cast<long long>(stats.col(2).sum());
       per_stage += stats;
       seeded += static_cast<long long>(detail(7));
-      qr_forms += h.qr_closed_forms();
+      qr_forms += h.stats().qr_closed_forms;
       if (each_step)
         std::fprintf(stderr, "pass %d step %d: %.1f us, iterations %.0f, QR closed forms %d\n",
-                     rep, s, 1e6 * dt, stats.col(0).sum(), h.qr_closed_forms());
+                     rep, s, 1e6 * dt, stats.col(0).sum(), h.stats().qr_closed_forms);
     }
   }
   if (xout) std::fclose(xout);

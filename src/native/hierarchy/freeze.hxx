@@ -1,0 +1,175 @@
+// qpcoord native engine, Hierarchy: the freezes (Z <- Z null(F) in its three kinds, the carried
+// projection Cin Z) and the tests of rows dependent on the frozen ones.
+// Part of hierarchy.cpp's translation unit (included there, after its helpers).
+namespace qpcoord {
+
+void Hierarchy::carry_z(PivotedQR& qr, int rank) {
+  if (kz_ == 0) return;
+  // rank reflectors on kz x r (about 4 rank kz r flops) against one product with the new Z
+  // when the rows are next needed (2 kz n (r - rank)): many reflectors, or few rows left,
+  // and the projection is dropped, recomputed where a level needs it
+  if (2 * rank * r_ > n_ * (r_ - rank)) {
+    kz_ = 0;
+    return;
+  }
+  // Cin Z <- Cin Z Qf, its first rank columns dropped: the projection of the rows inherited
+  // so far onto the new Z, at the cost of the rank reflectors (not a product with Z)
+  auto CZ = CinZ_.topLeftCorner(kz_, r_);
+  qr.apply_q_right(CZ);
+  for (int i = 0; i < r_ - rank; ++i) CinZ_.col(i).head(kz_) = CinZ_.col(rank + i).head(kz_);
+}
+
+void Hierarchy::freeze(double scale) {
+  const int f = fqr_.cols();
+  if (f == 0 || r_ == 0) return;
+  // numerical rank as qpcoord.core.linalg.numerical_rank: relative to max(|F|_2, scale),
+  // the first pivot (largest row norm of F) standing for |F|_2
+  const MapMat Ft = fqr_.matrix();
+  const double first = Ft.colwise().norm().maxCoeff();
+  const double tol = std::max(f, r_) * kEps * std::max(first, scale);
+  const int rank = fqr_.factor(tol, 0.0);
+  if (rank == 0) return;
+  auto Zr = Z_.leftCols(r_);
+  z_identity_ = false;
+  fqr_.apply_q_right(Zr);  // Z Qf: its last r - rank columns span Z null(F)
+  carry_z(fqr_, rank);
+  for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
+  r_ -= rank;
+}
+
+void Hierarchy::freeze_wide(int rank) {
+  auto Zr = Z_.leftCols(r_);
+  z_identity_ = false;
+  cf_->mqr.apply_q_right(Zr);
+  carry_z(cf_->mqr, rank);
+  for (int i = 0; i < r_ - rank; ++i) Z_.col(i) = Z_.col(rank + i);
+  r_ -= rank;
+}
+
+void Hierarchy::freeze_null_space(int rank) {
+  const int l = r_ - rank;
+  auto N = nsp_.topLeftCorner(r_, l);
+  auto q = u_.head(r_);
+  for (int t = 0; t < l; ++t) {  // column t of N: Z_rz^T e_{rank+t} (or Qf e_{rank+t}), permuted
+    q.setZero();
+    q(rank + t) = 1.0;
+    cf_->trz.apply_zt(q);
+    for (int i = 0; i < r_; ++i) N(cf_->mqr.perm(i), t) = q(i);
+  }
+  auto Zn = Ztmp_.leftCols(l);
+  Zn.noalias() = Z_.leftCols(r_) * N;
+  Z_.leftCols(l) = Zn;
+  z_identity_ = false;
+  if (kz_ > 0) {
+    auto CZ = cztmp_.topLeftCorner(kz_, l);
+    CZ.noalias() = CinZ_.topLeftCorner(kz_, r_) * N;
+    CinZ_.topLeftCorner(kz_, l) = CZ;
+  }
+  r_ = l;
+  ++stats_.null_space_freezes;
+}
+
+/// The rank of a level's M = A Z (its SVD in svds_ of the stage, numerical rank `rank`)
+/// without the directions in which the level's rows are dependent on the frozen rows to
+/// within kMovableTol: a left singular vector u_i with s_i <= kMovableTol |A^T u_i| is a
+/// combination of the level's rows within kMovableTol of the frozen rows' span, rounding of
+/// the freeze (the movable test of the inequality rows, drop_dependent_directions); it is
+/// left to the lower levels as an exactly dependent one would be, not damped and frozen (the
+/// Talos CoM level below the support polygon, which pins the CoM: 2 directions of ~1e-13
+/// frozen would leave the posture level well above its optimum). Only
+/// s_i <= kMovableTol * scale can qualify (|A^T u_i| <= |A|_F = scale): no product otherwise.
+int Hierarchy::independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, int me, int rank,
+                                double scale) {
+  const Vec& s = svd.singularValues();
+  auto v = rowbuf_.head(n_);
+  for (int i = 0; i < rank; ++i) {
+    if (s(i) > kMovableTol * scale) continue;
+    v.noalias() = Aeq.middleRows(e0, me).transpose() * svd.matrixU().col(i);
+    if (s(i) <= kMovableTol * v.norm()) {
+      ++stats_.dependent_drops;
+      return i;
+    }
+  }
+  return rank;
+}
+
+/// Rows rows[j] of R (their first r_ columns: projections C_i Z of rows of norm norms[j])
+/// with every direction in which they are dependent to within kMovableTol of their own rows'
+/// norms removed: each row is replaced by its projection on the span of the pivot rows of a
+/// pivoted QR of the rows scaled by 1 / |C_i|, stopped at the first pivot whose distance to the
+/// span of the previous ones is at most kMovableTol. The per-row movable test
+/// (|C_i Z| > kMovableTol |C_i|, both engines) generalised to rows together: a row, or a
+/// combination of rows, within kMovableTol of the frozen rows' span is rounding of the freeze
+/// (the Talos support polygon, a function of the CoM and the feet: with the feet frozen by an
+/// ill-conditioned level (condition 3e6, targets 1e5), its 6 projected rows have rank 2 plus
+/// singular values ~1e-13; the active set stepped along them to y = 1e17 (level value 4.5
+/// for 2e4) and did not converge on the next level: tests/data/talos_extreme_feet_{10,11}.npz).
+/// Uses fqr_ (free until the level's freeze) and tmpr_.
+void Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
+                                          const Eigen::Ref<const Vec>& norms) {
+  const int m = static_cast<int>(rows.size());
+  if (m < 2 || r_ == 0) return;
+  MapMat T = fqr_.matrix(r_, m);
+  for (int j = 0; j < m; ++j) T.col(j) = R.row(rows[j]).head(r_).transpose() / norms(j);
+  if (independent_by_gram(T)) {
+    ++stats_.gram_screens;
+    return;
+  }
+  const int rank = fqr_.factor(kMovableTol, 0.0);
+  if (rank >= std::min(m, r_)) return;
+  auto v = tmpr_.head(r_);
+  for (int j = 0; j < m; ++j) {
+    v = R.row(rows[j]).head(r_).transpose();
+    fqr_.apply_qt(v);
+    v.tail(r_ - rank).setZero();
+    fqr_.apply_q(v);
+    R.row(rows[j]).head(r_) = v.transpose();
+  }
+  ++stats_.dependent_drops;
+}
+
+/// True when the pivoted QR of T (r x m, columns of norm at most 1: projections of rows
+/// scaled by their own norms) provably keeps min(m, r) pivots above kMovableTol, so that
+/// drop_dependent_directions would change nothing: a Cholesky of G - delta I, G = T^T T
+/// (m <= r) or T T^T (m > r), k = min(m, r), succeeds. Then lambda_min(G) > delta - err, err
+/// the rounding of G and of the Cholesky (at most 16 (m + r) eps trace(G), trace(G) =
+/// |T|_F^2), so sigma_k(T) > 2 sqrt(m) kMovableTol; every pivot of the QR is at least
+/// sigma_k(T) / sqrt(m) (at step j, the largest remaining column of the projection P T off
+/// the j - 1 chosen columns is at least |P T|_2 / sqrt(m) >= sigma_j(T) / sqrt(m)), twice the
+/// tolerance. A failed Cholesky proves nothing (the QR decides). k^2 max(m, r) / 2 + k^3 / 6
+/// multiply-adds in products where the QR takes about 2 m r k in matrix-vector steps (the
+/// humanoid: 72 moving rows in 88 columns at its first level).
+bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T) {
+  const int r = static_cast<int>(T.rows()), m = static_cast<int>(T.cols());
+  const int k = std::min(m, r);
+  if (k == 0 || k > gram_.rows()) return false;
+  auto G = gram_.topLeftCorner(k, k);
+  G.setZero();
+  if (m <= r)
+    G.selfadjointView<Eigen::Lower>().rankUpdate(T.transpose());
+  else
+    G.selfadjointView<Eigen::Lower>().rankUpdate(T);
+  const double trace = G.trace();
+  if (!std::isfinite(trace)) return false;
+  const double need = 4.0 * m * kMovableTol * kMovableTol;
+  const double delta = need + 16.0 * (m + r) * kEps * trace;
+  G.diagonal().array() -= delta;
+  // G = L L^T in the lower triangle, in place, a column of L at a time: L(j+1:, j) from one
+  // product of L(j+1:, 0:j) with L(j, 0:j) (no allocation; fewer instructions than Eigen's
+  // blocked LLT or the row-oriented form at these sizes: 72 x 72 on the humanoid)
+  for (int j = 0; j < k; ++j) {
+    const double d2 = G(j, j) - G.row(j).head(j).squaredNorm();
+    if (!(d2 > 0.0)) return false;
+    const double d = std::sqrt(d2);
+    G(j, j) = d;
+    const int below = k - j - 1;
+    if (below > 0) {
+      auto col = G.col(j).tail(below);
+      if (j > 0) col.noalias() -= G.bottomLeftCorner(below, j) * G.row(j).head(j).transpose();
+      col /= d;
+    }
+  }
+  return true;
+}
+
+}  // namespace qpcoord

@@ -1,0 +1,295 @@
+// qpcoord native engine, Hierarchy: the problem's data and workspace: LsqProblem, the constructor
+// and the buffers, the inherited rows and the bounds as rows of a stage's problem.
+// Part of hierarchy.cpp's translation unit (included there, after its helpers).
+namespace qpcoord {
+
+void LsqProblem::resize(int max_qrows, int max_grows, int max_cols) {
+  Q.resize(max_qrows, max_cols);
+  c.resize(max_qrows);
+  G.resize(max_grows, max_cols);
+  lo.resize(max_grows);
+  hi.resize(max_grows);
+  id.assign(max_grows, -1);
+}
+
+void LsqProblem::start(int qrows_, int cols_) {
+  qrows = qrows_;
+  cols = cols_;
+  rows = 0;
+  dropped2 = 0.0;
+  zcols = slacks = slack_q0 = slack_g0 = 0;
+  Q.topLeftCorner(qrows, cols).setZero();
+  c.head(qrows).setZero();
+}
+
+double LsqProblem::add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid,
+                           double ref_norm) {
+  if (!std::isfinite(l) && !std::isfinite(u)) return 0.0;
+  const double nrm = g.norm();
+  if (!(nrm > 1e-12 * std::max(ref_norm, 1e-300))) return 0.0;  // cannot bind: constant row
+  G.row(rows).head(cols) = g.transpose() / nrm;
+  lo(rows) = l / nrm;
+  hi(rows) = u / nrm;
+  id[rows] = gid;
+  ++rows;
+  return nrm;
+}
+
+Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has_bounds,
+                     double damping)
+    : n_(n), meq_(std::move(meq)), min_(std::move(min)), has_bounds_(has_bounds),
+      damping_(damping) {
+  const int blocks = static_cast<int>(meq_.size());
+  eq0_.assign(blocks, 0);
+  in0_.assign(blocks, 0);
+  int e = 0, c = 0, max_eq = 0, max_in = 0;
+  for (int b = 0; b < blocks; ++b) {
+    eq0_[b] = e;
+    in0_[b] = c;
+    e += meq_[b];
+    c += min_[b];
+    max_eq = std::max(max_eq, meq_[b]);
+    max_in = std::max(max_in, min_[b]);
+  }
+  capacity_ = c;
+  x_.resize(n);
+  frozen_value_.setZero(std::max(blocks - 1, 1));
+  Z_.resize(n, n);
+  Cin_.resize(std::max(capacity_, 1), n);
+  CinZ_.resize(std::max(capacity_, 1), std::max(n, 1));
+  cinx_.resize(std::max(capacity_, 1));
+  lin_.resize(std::max(capacity_, 1));
+  cin_norm_.resize(std::max(capacity_, 1));
+  uin_.resize(std::max(capacity_, 1));
+  inid_.assign(std::max(capacity_, 1), -1);
+  lb_.resize(n);
+  ub_.resize(n);
+  // largest stage: (z, w) with w over a level's rows, or the hard phase (slack per hard row
+  // and per bound); Q holds equalities, damping rows and slack rows (or Z for the min norm)
+  const int hard_cols = n + min_[0] + (has_bounds ? n : 0);
+  const int max_cols = std::max({n + max_in, hard_cols, 1});
+  const int max_qrows = std::max({max_eq + n + max_in, n, min_[0] + (has_bounds ? n : 0), 1});
+  const int max_grows = capacity_ + (has_bounds ? n : 0) + max_in + 1;
+  P_.resize(max_qrows, max_grows, max_cols);
+  Pr_.resize(max_qrows, max_grows, std::max(n, 1));
+  y_.setZero(max_cols);
+  W_.assign(max_grows, 0);
+  working_.resize(blocks + 1);
+  for (auto& w : working_) {
+    w.id.reserve(max_grows);
+    w.side.reserve(max_grows);
+  }
+  // the first call's working-set and K factorisations, shared by its stages (the memos'
+  // per-stage ones are allocated at the second call: a one-shot solve never pays for them)
+  shared_trial_.reserve(max_cols, max_grows, max_qrows, false);
+  ts_ = &shared_trial_;
+  sqr_.reserve(max_cols, max_grows + max_qrows, 1);
+  // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
+  fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
+  fqr_.reserve_wy(std::max(n, capacity_));
+  const int big = std::max({max_cols, max_grows, max_qrows, n, max_eq, 1});
+  for (Vec* v : {&res_, &dres_, &step_, &gvec_, &u_, &mu_, &gy_, &gp_, &tvec_, &rowbuf_, &zc_,
+                 &tmpr_, &xc_, &xold_, &e_, &ute_})
+    v->setZero(big);
+  widx_.reserve(max_grows);
+  mov_.reserve(std::max(max_in, 1));
+  depn_.setZero(std::max(max_in, 1));
+  gram_.setZero(std::max(std::min(max_in, n), 1), std::max(std::min(max_in, n), 1));
+  keep_.assign(max_grows, 0);
+  viol_.assign(std::max(max_in, 1), 0);
+  Ms_.resize(blocks);
+  for (int b = 0; b < blocks; ++b) Ms_[b].setZero(meq_[b], n);  // M = A Z in its left r columns
+  svds_.resize(blocks);
+  Ztmp_.setZero(n, n);
+  Ab_.setZero(std::max(max_eq, 1), n);
+  Cl_.setZero(std::max(max_in, 1), n);
+  CZl_.setZero(std::max(max_in, 1), std::max(n, 1));
+  shared_cf_.reserve(n, max_eq, capacity_);
+  cf_ = &shared_cf_;
+  rinv_.setZero(std::max(n, 1), std::max(n, 1));
+  nsp_.setZero(std::max(n, 1), std::max(n, 1));
+  cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
+}
+
+void Hierarchy::TrialState::reserve(int cols, int grows, int qrows, bool keys) {
+  wqr.reserve(cols, grows, qrows);
+  kqr.reserve(qrows, cols, 1);
+  cqr.reserve(cols, cols, 1);
+  krz.reserve(cols, cols);
+  kqr_t.reserve(cols, qrows, 1);
+  Qt.setZero(qrows, cols);
+  if (!keys) return;
+  key_widx.reserve(grows);
+  key_G.setZero(static_cast<Eigen::Index>(cols) * cols);  // kw <= k rows kept (trial_keep)
+  key_Q.setZero(static_cast<Eigen::Index>(qrows) * cols);
+}
+
+void Hierarchy::ClosedForm::reserve(int n, int me, int capacity) {
+  mqr.reserve(std::max({n, me, 1}), std::max({n, me, 1}), std::max({n, capacity, 1}));
+  mqr.reserve_wy(std::max({n, capacity, 1}));
+  tqr.reserve(std::max({n, me, 1}), std::max(n, 1), 1);
+  trz.reserve(std::max(n, 1), std::max(n, 1));
+}
+
+void Hierarchy::allocate_per_stage() {
+  // the first call's shared factorisations are not used again (freed first: a lower peak)
+  shared_trial_ = TrialState();
+  shared_cf_ = ClosedForm();
+  const int n = n_, blocks = static_cast<int>(meq_.size());
+  const int nb = has_bounds_ ? n : 0;
+  // each stage's working-set and K factorisations (the trial cache), sized for its own problem:
+  // a level's has at most n + min_[b] columns (z and its slacks), the inequality rows of the
+  // blocks above (inherited), the bounds and its own rows, and meq_[b] + n + min_[b]
+  // objective rows (equalities or their R, damping, slacks); the minimum-norm stage n columns
+  // and n objective rows; the hard phase's phase 1 a slack column and an objective row per
+  // hard inequality row and per bound
+  trials_.resize(blocks + 1);
+  int above = 0;  // inequality rows of the blocks above stage b
+  for (int b = 0; b <= blocks; ++b) {
+    int cols = n + min_[0] + nb, grows = min_[0] + nb + 1, qrows = min_[0] + nb;
+    if (b > 0 && b < blocks) {
+      cols = n + min_[b];
+      grows = above + nb + min_[b] + 1;
+      qrows = meq_[b] + n + min_[b];
+    } else if (b == blocks) {
+      cols = n;
+      grows = capacity_ + nb + 1;
+      qrows = n;
+    }
+    cols = std::max(cols, 1);
+    qrows = std::max(qrows, 1);
+    if (b < blocks) above += min_[b];
+    trials_[b].reserve(cols, grows, qrows, true);
+  }
+  // each level's closed-form factorisations (the closed-form cache), sized for its equality rows
+  cforms_.resize(blocks);
+  for (int b = 0; b < blocks; ++b) cforms_[b].reserve(n, meq_[b], capacity_);
+  // each level's cache entry and freeze (the freeze cache; not the hard phase's)
+  memos_.resize(blocks);
+  // each level's and the minimum-norm step's bound rows (the bound-rows cache)
+  bound_memos_.resize(blocks + 1);
+  for (int b = 1; has_bounds_ && b <= blocks; ++b) {
+    BoundRowsMemo& m = bound_memos_[b];
+    m.Z.setZero(n, n);
+    m.G.setZero(n, n);
+    m.nrm.setZero(n);
+  }
+  for (int b = 1; b < blocks; ++b) {
+    FreezeMemo& f = memos_[b];
+    f.Z_in.setZero(n, n);
+    f.Z_out.setZero(n, n);
+    f.CinZ_in.setZero(std::max(capacity_, 1), std::max(n, 1));
+    f.CinZ_out.setZero(std::max(capacity_, 1), std::max(n, 1));
+    f.A.setZero(static_cast<Eigen::Index>(meq_[b]) * n);
+    f.C.setZero(static_cast<Eigen::Index>(min_[b]) * n);
+    f.viol.assign(std::max(min_[b], 1), 0);
+  }
+  per_stage_ = true;
+}
+
+bool Hierarchy::feasible(const Eigen::Ref<const Vec>& x) {
+  if (has_bounds_)
+    for (int j = 0; j < n_; ++j)
+      if (!in_box(x(j), lb_(j), ub_(j))) return false;
+  if (k_ == 0) return true;
+  // one product (Cin_ is column-major: a row's dot product would read it with a stride)
+  auto cx = cinx_.head(k_);
+  cx.noalias() = Cin_.topRows(k_) * x;
+  for (int i = 0; i < k_; ++i)
+    if (!in_box(cx(i), lin_(i), uin_(i))) return false;
+  return true;
+}
+
+void Hierarchy::snap(Vec& x) const {
+  if (has_bounds_) x = x.cwiseMax(lb_).cwiseMin(ub_);
+}
+
+void Hierarchy::inherit(const CRef<Mat>& C, const CRef<Vec>& lo, const CRef<Vec>& hi, int row0,
+                        int m, const std::vector<char>* skip) {
+  for (int i = 0; i < m; ++i) {
+    if (skip && (*skip)[i]) continue;
+    const int g = row0 + i;
+    if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
+    const double v = C.row(g).dot(x_);
+    Cin_.row(k_) = C.row(g);
+    cin_norm_(k_) = -1.0;  // |Cin_.row(k_)| on first use (cin_norm)
+    lin_(k_) = std::min(lo(g), v);  // opened to the current value: may stay, never grow
+    uin_(k_) = std::max(hi(g), v);
+    inid_[k_] = g;
+    ++k_;
+  }
+}
+
+double Hierarchy::cin_norm(int i) {
+  if (cin_norm_(i) < 0.0) cin_norm_(i) = Cin_.row(i).norm();
+  return cin_norm_(i);
+}
+
+void Hierarchy::add_inherited_rows(LsqProblem& P) {
+  if (k_ == 0) return;
+  auto full = rowbuf_.head(P.cols);
+  full.setZero();
+  // every inherited row projected at once (one matrix product, not k_ vector products)
+  auto CZ = CinZ_.topLeftCorner(k_, r_);
+  // rows inherited since the last projection; the older ones were carried through every
+  // change of Z since (carry_z)
+  if (kz_ < k_ && z_identity_) {  // Cin I: the rows themselves
+    CinZ_.block(kz_, 0, k_ - kz_, r_) = Cin_.middleRows(kz_, k_ - kz_);
+    ++stats_.identity_products;
+  } else if (kz_ < k_) {
+    CinZ_.block(kz_, 0, k_ - kz_, r_).noalias() =
+        Cin_.middleRows(kz_, k_ - kz_) * Z_.leftCols(r_);
+  }
+  kz_ = k_;
+  auto cx = cinx_.head(k_);
+  cx.noalias() = Cin_.topRows(k_) * x_;
+  for (int i = 0; i < k_; ++i) {
+    full.head(r_) = CZ.row(i).transpose();
+    const double l = std::min(lin_(i) - cx(i), 0.0);
+    const double u = std::max(uin_(i) - cx(i), 0.0);
+    P.add_row(full, l, u, inid_[i], cin_norm(i));
+  }
+}
+
+void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
+  if (!has_bounds_) return;
+  const int r0 = P.rows, cols = P.cols;
+  // (the bound-rows cache: the rows depend on Z alone, their bounds on x too; no row is
+  // skipped unless a variable has no finite bound, or Z a zero row)
+  BoundRowsMemo* memo = memo_gate() ? &bound_memos_[stage] : nullptr;
+  bool all_finite = memo != nullptr;  // (only the memo reads it: every variable has a side)
+  for (int j = 0; j < n_ && all_finite; ++j)
+    all_finite = std::isfinite(lb_(j)) || std::isfinite(ub_(j));
+  if (all_finite && memo->valid && memo->r == r_ &&
+      (r_ == 0 ||
+       std::memcmp(memo->Z.data(), Z_.data(), sizeof(double) * n_ * r_) == 0)) {
+    P.G.block(r0, 0, n_, r_) = memo->G.topLeftCorner(n_, r_);
+    if (cols > r_) P.G.block(r0, r_, n_, cols - r_).setZero();
+    for (int j = 0; j < n_; ++j) {  // (as add_row: the bound over the row's norm)
+      P.lo(r0 + j) = std::min(lb_(j) - x_(j), 0.0) / memo->nrm(j);
+      P.hi(r0 + j) = std::max(ub_(j) - x_(j), 0.0) / memo->nrm(j);
+      P.id[r0 + j] = capacity_ + j;
+    }
+    P.rows += n_;
+    ++stats_.bound_rows_memo_hits;
+    return;
+  }
+  auto full = rowbuf_.head(cols);
+  full.setZero();
+  for (int j = 0; j < n_; ++j) {
+    full.head(r_) = Z_.row(j).head(r_).transpose();
+    const double l = std::min(lb_(j) - x_(j), 0.0);
+    const double u = std::max(ub_(j) - x_(j), 0.0);
+    const double nrm = P.add_row(full, l, u, capacity_ + j, 1.0);
+    if (memo) memo->nrm(j) = nrm;
+  }
+  if (!memo) return;
+  // stored when every row was kept (a skipped row shifts the others: not one block)
+  memo->valid = (P.rows - r0 == n_);
+  if (!memo->valid) return;
+  memo->r = r_;
+  memo->Z.leftCols(r_) = Z_.leftCols(r_);
+  memo->G.topLeftCorner(n_, r_) = P.G.block(r0, 0, n_, r_);
+}
+
+}  // namespace qpcoord
