@@ -88,8 +88,7 @@ def test_figures_copied(site: Path) -> None:
 #   that block prints. The printed output must match it: text word for word (runs of blank
 #   space are one space), ``…`` in the page stands for any text (a time, a path), and numbers
 #   match within NUMBER_RTOL relative or NUMBER_ATOL absolute.
-# * A run block that prints must be followed by its output block, on every page but those in
-#   OUTPUT_NOT_SHOWN_YET.
+# * A run block that prints must be followed by its output block.
 
 #: A page prints values rounded to 3-4 significant digits; the last digit may flip between
 #: BLAS kernels or CPUs (one unit of the 4th digit is at most 1e-3 of the value), so 2e-3.
@@ -98,17 +97,6 @@ NUMBER_RTOL = 2e-3
 #: 1e-6 are at the solvers' tolerances (CHECK_TOL 1e-6, KKT_TOL 1e-9 relative) and rounding
 #: (1e-17 on one machine, 3e-16 on another): they are compared absolutely, all equal to 0.
 NUMBER_ATOL = 1e-6
-
-#: Pages whose run blocks print without showing the output yet (pages kept by the chapters'
-#: owners); the test still runs their blocks.
-OUTPUT_NOT_SHOWN_YET = {"ch5.md", "ch6.md", "appA.md", "appB.md", "appC.md", "reproduce.md"}
-
-#: Pages whose shown-only blocks are still fenced as run blocks (a sketch with a placeholder
-#: name): their run fails until the page marks the sketch; strict, so that the fix shows.
-SKETCHES_NOT_MARKED_YET = {
-    "appC.md": "block 0 calls a placeholder stage_driver",
-    "ch6.md": "block 1 uses a placeholder controller ctl",
-}
 
 _FENCE = re.compile(r"^```([\w-]*)([^\n]*)\n(.*?)^```[ \t]*$", re.S | re.M)
 _NUMBER = r"[-+−]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -183,16 +171,11 @@ def test_output_check_compares_numbers_with_the_stated_tolerance() -> None:
 #: built), whatever default the Python-engine pass of the suite sets.
 @pytest.mark.engine_independent
 @pytest.mark.parametrize("page", [p.relative_to(ROOT).as_posix() for p in _pages()])
-def test_the_snippets_of_a_page_run_and_print_what_it_shows(
-    page, tmp_path, monkeypatch, capsys, request
-):
+def test_the_snippets_of_a_page_run_and_print_what_it_shows(page, tmp_path, monkeypatch, capsys):
     path = ROOT / page
     blocks = page_blocks(path)
     if not any(kind == "run" for kind, _, _ in blocks):
         pytest.skip(f"{page} has no run block")
-    if path.name in SKETCHES_NOT_MARKED_YET:
-        reason = SKETCHES_NOT_MARKED_YET[path.name]
-        request.node.add_marker(pytest.mark.xfail(reason=reason, raises=NameError, strict=True))
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": "__main__"}
     for i, (kind, code, expected) in enumerate(blocks):
@@ -204,7 +187,7 @@ def test_the_snippets_of_a_page_run_and_print_what_it_shows(
         if expected:
             problem = check_output(printed, expected)
             assert problem is None, f"{page} block {i}: {problem}"
-        elif printed.strip() and path.name not in OUTPUT_NOT_SHOWN_YET:
+        elif printed.strip():
             pytest.fail(
                 f"{page} block {i} prints but the page shows no text block after it:\n{printed}"
             )
