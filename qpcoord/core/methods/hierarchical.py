@@ -32,8 +32,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import qr
 
+from ..backends import check_solver
 from ..compile import CompiledStack
-from ..elimination import Reduced
+from ..elimination import CHECK_TOL, Reduced
+from ..errors import SolverError
 from ..linalg import filtered_svd, numerical_rank, svd
 from ..polish import (
     KKT_FEAS_TOL,
@@ -44,12 +46,13 @@ from ..polish import (
     prepare,
     pull_back,
 )
-from ..tolerance import at_bounds
+from ..tolerance import at_bounds, within
 
 __all__ = [
     "solve_hierarchical",
     "solve_equality_chain",
     "dependent_by_row_norms",
+    "solve_python",
     "VIOLATION_TOL",
 ]
 
@@ -159,6 +162,29 @@ def dependent_by_row_norms(P: CompiledStack) -> tuple[int, float] | None:
             Vr = Vt[new:].T
             Z = Vr if Z is None else Z @ Vr
     return None
+
+
+def solve_python(P: CompiledStack, damping: float) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The Python engine's strict hierarchy of ``P`` (the default backend, the default
+    regularisation: neither changes a certified answer) with its tasks' current numbers:
+    ``(x, level values, info)``, ``x`` checked against the bounds and hard rows
+    (:class:`~qpcoord.errors.SolverError` if it misses them by more than ``CHECK_TOL``).
+    For an engine whose rank decisions differ from this one's on ``P``
+    (:func:`dependent_by_row_norms`)."""
+    P.refresh()
+    R = Reduced(P.n, P.capacity).reset(P.lb, P.ub, check_solver(None))
+    info = solve_hierarchical(P, R, damping, 1e-9)
+    x = R.x
+    H = P.hard
+    ok = P.lb is None or P.ub is None or within(x, P.lb, P.ub, CHECK_TOL)
+    if ok and H.m_eq:
+        scale = max(1.0, float(np.max(np.abs(H.be))))
+        ok = float(np.max(np.abs(H.Ae @ x - H.be))) <= CHECK_TOL * scale
+    if ok and H.m_in:
+        ok = within(H.C @ x, H.lo, H.hi, CHECK_TOL)
+    if not ok:
+        raise SolverError("the Python engine returned a point violating the bounds or hard rows")
+    return x, np.array([L.residual(x) for L in P.levels]), info
 
 
 def _drop_dependent(D: np.ndarray, norms: np.ndarray) -> np.ndarray:
