@@ -256,6 +256,10 @@ def test_near_parallel_family_is_never_silently_wrong(engine, solver):
     assert outcomes.count("reached") == len(FAST_SEEDS) - outcomes.count("skipped"), outcomes
 
 
+#: The campaign, seeds 1000–1999 (30–100 s per engine on the project's 2-core machine,
+#: ``pytest -m slow tests/core/test_near_degenerate.py``): with the combined row as the rank
+#: measure 247 stacks were silently wrong on python/daqp and python/quadprog, 249 on the
+#: native engine; with the rows' norms, 0 on each (1 000 reached).
 @pytest.mark.slow
 @pytest.mark.parametrize(("engine", "solver"), _engines())
 def test_near_parallel_family_campaign(engine, solver):
