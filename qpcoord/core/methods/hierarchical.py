@@ -32,8 +32,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import qr
 
+from ..backends import check_solver
 from ..compile import CompiledStack
-from ..elimination import Reduced
+from ..elimination import CHECK_TOL, Reduced
+from ..errors import SolverError
 from ..linalg import filtered_svd, numerical_rank, svd
 from ..polish import (
     KKT_FEAS_TOL,
@@ -44,9 +46,15 @@ from ..polish import (
     prepare,
     pull_back,
 )
-from ..tolerance import at_bounds
+from ..tolerance import at_bounds, within
 
-__all__ = ["solve_hierarchical", "solve_equality_chain", "VIOLATION_TOL"]
+__all__ = [
+    "solve_hierarchical",
+    "solve_equality_chain",
+    "dependent_by_row_norms",
+    "solve_python",
+    "VIOLATION_TOL",
+]
 
 #: Relative slack (to the row's scale) above which an inequality row is frozen as violated.
 VIOLATION_TOL = 1e-6
@@ -82,20 +90,101 @@ MOVABLE_TOL = 1e-9
 
 def _independent_rank(A: np.ndarray, U: np.ndarray, s: np.ndarray, rank: int, scale: float):
     """The rank of a level's ``M = A Z`` (SVD ``U, s``, numerical rank ``rank``) without the
-    directions in which the level's rows are dependent on the frozen ones to within
-    :data:`MOVABLE_TOL`: a left singular vector ``uᵢ`` with ``sᵢ ≤ MOVABLE_TOL·‖Aᵀuᵢ‖`` is a
-    combination of the rows that the freeze left only by rounding. Such a direction is left
-    to the lower levels, as an exactly dependent one is, instead of being damped and frozen
-    (Talos with targets at 1e5: the CoM level below a support polygon that already pins the
-    CoM froze 2 directions of ~1e-13 and the posture level below ended 1.6 %–8 % above its
-    optimum; ``tests/data/talos_extreme_feet_*.npz``). Only ``sᵢ ≤ MOVABLE_TOL·scale`` can
-    qualify (``‖Aᵀuᵢ‖ ≤ ‖A‖_F = scale``)."""
+    directions in which the level's rows are dependent to within :data:`MOVABLE_TOL` of the
+    rows they combine: a left singular vector ``uᵢ`` with ``sᵢ ≤ MOVABLE_TOL·Σⱼ|uᵢⱼ|·‖Aⱼ‖``
+    is a combination of the rows that only rounding keeps (each row's projection carries an
+    error of ``ε·κ`` times its own norm, so a combination's carries ``ε·κ·Σⱼ|uᵢⱼ|·‖Aⱼ‖``:
+    ≤ 2e-9 of it for ``κ`` up to ``1/damping`` = 1e7). Such a direction is left to the lower
+    levels, as an exactly dependent one is, instead of being damped and frozen. Two cases:
+    the combination lies in the frozen rows' span (``‖Aᵀuᵢ‖`` itself is large: Talos with
+    targets at 1e5, the CoM level below a support polygon that already pins the CoM froze 2
+    directions of ~1e-13 and the posture level below ended 1.6 %–8 % above its optimum;
+    ``tests/data/talos_extreme_feet_*.npz``), or the level's own rows nearly cancel (rows
+    parallel to ~1e-10: ``‖Aᵀuᵢ‖`` is as small as ``sᵢ``; the point kept along that direction
+    is set by gradients under ``KKT_TOL`` and decides the lower levels: a level below ended
+    340× above its optimum). The inequality rows' :func:`_drop_dependent` applies the same
+    measure (rows scaled by their own norms). Only ``sᵢ ≤ MOVABLE_TOL·scale`` can qualify
+    (``Σⱼ|uᵢⱼ|·‖Aⱼ‖ ≤ ‖A‖_F = scale`` for a unit ``uᵢ``)."""
+    norms = None
     for i in range(rank):
         if s[i] > MOVABLE_TOL * scale:
             continue
-        if s[i] <= MOVABLE_TOL * float(np.linalg.norm(A.T @ U[:, i])):
+        if norms is None:
+            norms = np.sqrt(np.einsum("ij,ij->i", A, A))
+        if s[i] <= MOVABLE_TOL * float(np.abs(U[:, i]) @ norms):
             return i
     return rank
+
+
+def dependent_by_row_norms(P: CompiledStack) -> tuple[int, float] | None:
+    """The first level whose equality rows have a direction that :func:`_independent_rank`
+    leaves to the lower levels only because the rows nearly cancel: ``sᵢ`` within
+    :data:`MOVABLE_TOL` of the rows it combines (``Σⱼ|uᵢⱼ|·‖Aⱼ‖``) but not of the combined
+    row (``‖Aᵀuᵢ‖``, the measure of the native engine's ``Hierarchy::independent_rank``).
+    Returns ``(level, sᵢ / Σⱼ|uᵢⱼ|·‖Aⱼ‖)`` or ``None``.
+
+    The freedom is followed as the Python engine's equality rows leave it (hard equalities,
+    then each level's independent rank); the inequality rows a level freezes as violated
+    depend on the solution and are not followed (they only take freedom away). Cost: one
+    SVD per equality level. The native engine's answer on such a stack is not the Python
+    engine's: that level's rank decision is within rounding and the levels below depend on
+    it (:meth:`qpcoord.core.native.NativeHierarchy.solve` says ``"inaccurate"``).
+    """
+    Z: np.ndarray | None = None
+    H = P.hard
+    if H.m_eq:
+        U, s, Vt = svd(H.Ae, full=True)
+        Z = Vt[numerical_rank(s, H.Ae.shape) :].T
+    for k, L in enumerate(P.levels):
+        r = P.n if Z is None else Z.shape[1]
+        if r == 0:
+            return None
+        if not L.m_eq or L.identity:
+            continue
+        A = L.Ae
+        M = A if Z is None else A @ Z
+        scale = float(np.sqrt(np.vdot(A, A)))
+        U, s, Vt = svd(M, full=False)
+        rank = numerical_rank(s, M.shape, scale)
+        new = _independent_rank(A, U, s, rank, scale)
+        if new < rank:
+            old = rank
+            for i in range(rank):
+                if s[i] <= MOVABLE_TOL * scale and s[i] <= MOVABLE_TOL * float(
+                    np.linalg.norm(A.T @ U[:, i])
+                ):
+                    old = i
+                    break
+            if old > new:
+                norms = np.sqrt(np.einsum("ij,ij->i", A, A))
+                return k, float(s[new] / (np.abs(U[:, new]) @ norms))
+        if new:
+            Vr = Vt[new:].T
+            Z = Vr if Z is None else Z @ Vr
+    return None
+
+
+def solve_python(P: CompiledStack, damping: float) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The Python engine's strict hierarchy of ``P`` (the default backend, the default
+    regularisation: neither changes a certified answer) with its tasks' current numbers:
+    ``(x, level values, info)``, ``x`` checked against the bounds and hard rows
+    (:class:`~qpcoord.errors.SolverError` if it misses them by more than ``CHECK_TOL``).
+    For an engine whose rank decisions differ from this one's on ``P``
+    (:func:`dependent_by_row_norms`)."""
+    P.refresh()
+    R = Reduced(P.n, P.capacity).reset(P.lb, P.ub, check_solver(None))
+    info = solve_hierarchical(P, R, damping, 1e-9)
+    x = R.x
+    H = P.hard
+    ok = P.lb is None or P.ub is None or within(x, P.lb, P.ub, CHECK_TOL)
+    if ok and H.m_eq:
+        scale = max(1.0, float(np.max(np.abs(H.be))))
+        ok = float(np.max(np.abs(H.Ae @ x - H.be))) <= CHECK_TOL * scale
+    if ok and H.m_in:
+        ok = within(H.C @ x, H.lo, H.hi, CHECK_TOL)
+    if not ok:
+        raise SolverError("the Python engine returned a point violating the bounds or hard rows")
+    return x, np.array([L.residual(x) for L in P.levels]), info
 
 
 def _drop_dependent(D: np.ndarray, norms: np.ndarray) -> np.ndarray:
