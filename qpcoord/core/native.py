@@ -37,7 +37,6 @@ import numpy as np
 from .compile import CompiledStack
 from .conflict import infeasible
 from .errors import SolverError
-from .methods.hierarchical import dependent_by_row_norms, solve_python
 from .polish import KKT_TOL
 
 __all__ = [
@@ -389,7 +388,6 @@ class NativeHierarchy:
         self._damping = float(damping)
         self._mod = mod
         self._solved = False
-        self._audit: tuple[tuple[int, ...], tuple[int, float] | None] | None = None
 
     def solve(
         self, P: CompiledStack, warm: bool = True, time_left: float | None = None
@@ -440,7 +438,7 @@ class NativeHierarchy:
             out = self._step(warm, left, KKT_TOL)
             if out.__class__ is tuple:
                 self._solved = True
-                return self._audited(P, out)
+                return out
             code = out
             if code == self._mod.REFRESH_IN_PYTHON:  # a task's data is not float64 of its
                 P.refresh_stacked()  # shape, or the levels alias their tasks: converts/raises
@@ -452,31 +450,7 @@ class NativeHierarchy:
             self._solved = False  # the stored working sets may be from another problem
             self._raise(code, P)
         self._solved = True
-        return self._audited(P, (self.x.copy(), self.res.copy(), self._solver.info(KKT_TOL)))
-
-    def _audited(self, P: CompiledStack, out: tuple) -> tuple:
-        """``out``, or where a level's equality rows nearly cancel (:func:`~qpcoord.core.
-        methods.hierarchical.dependent_by_row_norms`: the Python engine leaves that direction
-        to the lower levels, this build's ``independent_rank`` keeps it, and the levels below
-        depend on the choice) the Python engine's answer, with ``info["rank_decision"]``
-        (``{"level", "reason"}``) and its certificate as ``info["uncertified"]``. The test is
-        computed again only when a task's matrix or weight changed (``matrix_version``)."""
-        key = tuple([t.matrix_version for t in P._task_rows[0]])
-        if self._audit is None or self._audit[0] != key:
-            self._audit = (key, dependent_by_row_norms(P))
-        hit = self._audit[1]
-        if hit is None:
-            return out
-        k, ratio = hit
-        x, res, python_info = solve_python(P, self._damping)
-        info = out[2]
-        info["uncertified"] = python_info["uncertified"]
-        info["rank_decision"] = {
-            "level": k,
-            "reason": f"rows of level {k} cancel to {ratio:.2g} of their norms (under 1e-9): "
-            "a direction the lower levels decide; solved by the Python engine",
-        }
-        return x, res, info
+        return self.x.copy(), self.res.copy(), self._solver.info(KKT_TOL)
 
     @property
     def counters(self):

@@ -32,10 +32,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import qr
 
-from ..backends import check_solver
 from ..compile import CompiledStack
-from ..elimination import CHECK_TOL, Reduced
-from ..errors import SolverError
+from ..elimination import Reduced
 from ..linalg import filtered_svd, numerical_rank, svd
 from ..polish import (
     KKT_FEAS_TOL,
@@ -46,13 +44,11 @@ from ..polish import (
     prepare,
     pull_back,
 )
-from ..tolerance import at_bounds, within
+from ..tolerance import at_bounds
 
 __all__ = [
     "solve_hierarchical",
     "solve_equality_chain",
-    "dependent_by_row_norms",
-    "solve_python",
     "VIOLATION_TOL",
 ]
 
@@ -114,77 +110,6 @@ def _independent_rank(A: np.ndarray, U: np.ndarray, s: np.ndarray, rank: int, sc
         if s[i] <= MOVABLE_TOL * float(np.abs(U[:, i]) @ norms):
             return i
     return rank
-
-
-def dependent_by_row_norms(P: CompiledStack) -> tuple[int, float] | None:
-    """The first level whose equality rows have a direction that :func:`_independent_rank`
-    leaves to the lower levels only because the rows nearly cancel: ``sᵢ`` within
-    :data:`MOVABLE_TOL` of the rows it combines (``Σⱼ|uᵢⱼ|·‖Aⱼ‖``) but not of the combined
-    row (``‖Aᵀuᵢ‖``, the measure of the native engine's ``Hierarchy::independent_rank``).
-    Returns ``(level, sᵢ / Σⱼ|uᵢⱼ|·‖Aⱼ‖)`` or ``None``.
-
-    The freedom is followed as the Python engine's equality rows leave it (hard equalities,
-    then each level's independent rank); the inequality rows a level freezes as violated
-    depend on the solution and are not followed (they only take freedom away). Cost: one
-    SVD per equality level. The native engine's answer on such a stack is not the Python
-    engine's: that level's rank decision is within rounding and the levels below depend on
-    it (:meth:`qpcoord.core.native.NativeHierarchy.solve` says ``"inaccurate"``).
-    """
-    Z: np.ndarray | None = None
-    H = P.hard
-    if H.m_eq:
-        U, s, Vt = svd(H.Ae, full=True)
-        Z = Vt[numerical_rank(s, H.Ae.shape) :].T
-    for k, L in enumerate(P.levels):
-        r = P.n if Z is None else Z.shape[1]
-        if r == 0:
-            return None
-        if not L.m_eq or L.identity:
-            continue
-        A = L.Ae
-        M = A if Z is None else A @ Z
-        scale = float(np.sqrt(np.vdot(A, A)))
-        U, s, Vt = svd(M, full=False)
-        rank = numerical_rank(s, M.shape, scale)
-        new = _independent_rank(A, U, s, rank, scale)
-        if new < rank:
-            old = rank
-            for i in range(rank):
-                if s[i] <= MOVABLE_TOL * scale and s[i] <= MOVABLE_TOL * float(
-                    np.linalg.norm(A.T @ U[:, i])
-                ):
-                    old = i
-                    break
-            if old > new:
-                norms = np.sqrt(np.einsum("ij,ij->i", A, A))
-                return k, float(s[new] / (np.abs(U[:, new]) @ norms))
-        if new:
-            Vr = Vt[new:].T
-            Z = Vr if Z is None else Z @ Vr
-    return None
-
-
-def solve_python(P: CompiledStack, damping: float) -> tuple[np.ndarray, np.ndarray, dict]:
-    """The Python engine's strict hierarchy of ``P`` (the default backend, the default
-    regularisation: neither changes a certified answer) with its tasks' current numbers:
-    ``(x, level values, info)``, ``x`` checked against the bounds and hard rows
-    (:class:`~qpcoord.errors.SolverError` if it misses them by more than ``CHECK_TOL``).
-    For an engine whose rank decisions differ from this one's on ``P``
-    (:func:`dependent_by_row_norms`)."""
-    P.refresh()
-    R = Reduced(P.n, P.capacity).reset(P.lb, P.ub, check_solver(None))
-    info = solve_hierarchical(P, R, damping, 1e-9)
-    x = R.x
-    H = P.hard
-    ok = P.lb is None or P.ub is None or within(x, P.lb, P.ub, CHECK_TOL)
-    if ok and H.m_eq:
-        scale = max(1.0, float(np.max(np.abs(H.be))))
-        ok = float(np.max(np.abs(H.Ae @ x - H.be))) <= CHECK_TOL * scale
-    if ok and H.m_in:
-        ok = within(H.C @ x, H.lo, H.hi, CHECK_TOL)
-    if not ok:
-        raise SolverError("the Python engine returned a point violating the bounds or hard rows")
-    return x, np.array([L.residual(x) for L in P.levels]), info
 
 
 def _drop_dependent(D: np.ndarray, norms: np.ndarray) -> np.ndarray:

@@ -70,22 +70,28 @@ void Hierarchy::freeze_null_space(int rank) {
 }
 
 /// The rank of a level's M = A Z (its SVD in svds_ of the stage, numerical rank `rank`)
-/// without the directions in which the level's rows are dependent on the frozen rows to
-/// within kMovableTol: a left singular vector u_i with s_i <= kMovableTol |A^T u_i| is a
-/// combination of the level's rows within kMovableTol of the frozen rows' span, rounding of
-/// the freeze (the movable test of the inequality rows, drop_dependent_directions); it is
-/// left to the lower levels as an exactly dependent one would be, not damped and frozen (the
+/// without the directions in which the level's rows are dependent to within kMovableTol of
+/// the rows they combine: a left singular vector u_i with
+/// s_i <= kMovableTol sum_j |u_ij| |A_j| is a combination that only rounding keeps (each
+/// row's projection carries an error proportional to its own norm, so a combination's to
+/// sum_j |u_ij| |A_j|). It is left to the lower levels as an exactly dependent one would be,
+/// not damped and frozen. Two cases: the combination lies in the frozen rows' span (the
 /// Talos CoM level below the support polygon, which pins the CoM: 2 directions of ~1e-13
-/// frozen would leave the posture level well above its optimum). Only
-/// s_i <= kMovableTol * scale can qualify (|A^T u_i| <= |A|_F = scale): no product otherwise.
+/// frozen would leave the posture level well above its optimum), or the level's own rows
+/// nearly cancel (rows parallel to ~1e-10: the point kept along that direction is set by
+/// gradients under the KKT tolerance and decides the levels below). The Python engine's
+/// _independent_rank and the inequality rows' drop_dependent_directions use the same
+/// measure. Only s_i <= kMovableTol * scale can qualify (sum_j |u_ij| |A_j| <= |A|_F = scale
+/// for a unit u_i): no row norm is computed otherwise.
 int Hierarchy::independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, int me, int rank,
                                 double scale) {
   const Vec& s = svd.singularValues();
-  auto v = rowbuf_.head(n_);
   for (int i = 0; i < rank; ++i) {
     if (s(i) > kMovableTol * scale) continue;
-    v.noalias() = Aeq.middleRows(e0, me).transpose() * svd.matrixU().col(i);
-    if (s(i) <= kMovableTol * v.norm()) {
+    double combined = 0.0;
+    for (int j = 0; j < me; ++j)
+      combined += std::abs(svd.matrixU()(j, i)) * Aeq.row(e0 + j).norm();
+    if (s(i) <= kMovableTol * combined) {
       ++stats_.dependent_drops;
       return i;
     }
