@@ -28,12 +28,14 @@ SCRIPTS = [p for p in ALL_SCRIPTS if p.stem not in STANDALONE_SCRIPTS]
 VERDICTS = ROOT / "tests" / "studies" / "verdicts.json"
 
 #: Thesis claims the quick run must decide (reach the full run's verdict): those whose quick
-#: run is the full run's (Thm 4.2, Lemma 4.2, Fig 5.9, §6.3, appendices A and C) and the ch6
-#: spec, judged on the same references in both.
+#: run is the full run's (Lemma 4.1, Thm 4.2, Lemma 4.2, §5.3.5, Fig 5.9, §6.3, appendices A
+#: and C) and the ch6 spec, judged on the same references in both.
 QUICK_MUST_DECIDE = (
     "Def5.4-decoupling",
+    "Lem4.1-not-involutive",
     "Thm4.2-periodic",
     "Thm4.2-involutive",
+    "Sec5.3.5-limits-level",
     "Lem4.2-each-leaf-periodic",
     "Fig5.9-periodic",
     "Spec6.1.2-rmse-70nm",
