@@ -125,8 +125,9 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
     dict
         ``ID → {"id", "chapter", "status", "cause", "rows"}``, where ``rows`` lists
         ``{"script", "id", "status"}`` of the rows checking it. The status of a claim: an
-        own check's own; ``"calibrated"`` for an input taken from the thesis; otherwise
-        ``"differs"`` if any row differs; else ``"identity"`` for a claim that holds by
+        own check's own; otherwise ``"differs"`` if any row differs (a calibrated input
+        whose check fails too); else ``"calibrated"`` for an input taken from the thesis;
+        else ``"identity"`` for a claim that holds by
         construction (the register's ``identity``, or a row saying so); else ``"reproduced"``
         if every row of the claim's *home* script (the script of its first registered row,
         where the claim is judged in full, e.g. with a sensitivity sweep) reproduced it --
@@ -154,10 +155,10 @@ def thesis_claims(rows: Iterable[tuple[str, str, dict]]) -> dict[str, dict]:
         at_home = [r["status"] for r in c["rows"] if r["script"] == home.get(cid)]
         if cid.startswith("own:"):
             status = statuses[0]
+        elif "differs" in statuses:  # a failed calibration or identity check is shown
+            status = "differs"
         elif (entry is not None and entry.calibrated) or "calibrated" in statuses:
             status = "calibrated"
-        elif "differs" in statuses:
-            status = "differs"
         elif (entry is not None and entry.identity) or "identity" in statuses:
             status = "identity"
         elif all(s == "reproduced" for s in at_home) if at_home else "reproduced" in statuses:
