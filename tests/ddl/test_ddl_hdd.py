@@ -124,3 +124,29 @@ def test_evaluate_refuses_a_controller_that_does_not_stabilise(bench):
     a, b, c, d, ts = hdd.reference_controller(bench)
     with pytest.raises(ValueError, match="does not stabilise case 2"):
         hdd.evaluate(bench, (a, b, -c, -d, ts), 2, t_sim=0.15, t_start=0.1, n_rev=6)
+
+
+@needs_data
+def test_designed_and_reduced_controller_meet_the_spec_on_fresh_disturbances(bench):
+    # the design and its reduction on the nine cases, with noise the evaluation never uses
+    # (seeds 1001–1014); 3σ on a 0.1 s window moves by ~0.1 %-points with the seeds, the
+    # 0.3 s figure of the worst case (7) is 6.70 %: the bound 7 % is the goal itself
+    from qpcoord.ddl import sensitivity
+    from qpcoord.ddl.lqg import closed_loop_poles
+
+    law = hdd.design_controller(bench)
+    red = hdd.reduced_controller(law)
+    assert red[0].shape == (hdd.REDUCED_ORDER, hdd.REDUCED_ORDER)
+
+    class Law:
+        def state_space(self):
+            return red
+
+    f = np.geomspace(10.0, 0.499 / bench.Ts, 800)
+    for case in hdd.CASES:
+        plant = hdd.linear_plant(bench, case, disturbance_models=False)
+        assert np.max(np.abs(closed_loop_poles(plant, Law()))) < 1.0
+        assert np.max(np.abs(sensitivity(plant, Law(), f))) <= 2.0  # 6 dB
+    dist = hdd.disturbances(bench, 7, 0.25, seeds=range(1001, 1015))
+    r = hdd.evaluate(bench, red, 7, t_sim=0.25, n_rev=12, dist=dist)
+    assert r["sigma3_pct"] < 7.0 and r["pzt_max"] < 0.5 * bench.pzt_stroke
