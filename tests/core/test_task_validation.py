@@ -437,6 +437,73 @@ CASES = [
         ValueError,
         "Bounds 'vel': lower > upper at index 0 (np.float64(3.0) > np.float64(1.0))",
     ),
+    # limits whose rows satisfy lower <= upper but hold a wrong-sided infinity on both
+    # sides, or NaN beside an allowed infinity: the hot path's order test alone would
+    # pass the first kind, so its infinity reductions must name them
+    (
+        "bd lo=hi=+inf",
+        lambda: B([inf, 0.0], [inf, 1.0], name="vel"),
+        ValueError,
+        "Bounds 'vel': lower has the non-allowed value np.float64(inf) at index 0",
+    ),
+    (
+        "bd lo=hi=-inf",
+        lambda: B([0.0, -inf], [1.0, -inf], name="vel"),
+        ValueError,
+        "Bounds 'vel': upper has the non-allowed value np.float64(-inf) at index 1",
+    ),
+    (
+        "bd scalar lo=hi=+inf",
+        lambda: B(inf, inf, name="vel"),
+        ValueError,
+        "Bounds 'vel': lower has the non-allowed value np.float64(inf) at index 0",
+    ),
+    (
+        "bd lo nan, hi +inf",
+        lambda: B([nan, 0.0], inf, name="vel"),
+        ValueError,
+        "Bounds 'vel': lower contains NaN at index 0",
+    ),
+    (
+        "bd upd lo=hi=+inf",
+        lambda: B([0.0, 0.0], [1.0, 1.0], name="vel").update(lower=[0.0, inf], upper=[1.0, inf]),
+        ValueError,
+        "Bounds 'vel': lower has the non-allowed value np.float64(inf) at index 1",
+    ),
+    (
+        "in lo=hi=+inf",
+        lambda: I(np.eye(3), lower=[0.0, inf, 0.0], upper=[1.0, inf, 1.0], name="t"),
+        ValueError,
+        "Inequality 't': lower has the non-allowed value np.float64(inf) at index 1",
+    ),
+    (
+        "in lo=hi=-inf",
+        lambda: I(np.eye(3), lower=-inf, upper=[0.0, 0.0, -inf], name="t"),
+        ValueError,
+        "Inequality 't': upper has the non-allowed value np.float64(-inf) at index 2",
+    ),
+    (
+        "in upd lo=hi=-inf",
+        lambda: I(np.eye(3), lower=0.0, upper=1.0, name="t").update(
+            lower=[-inf, 0.0, 0.0], upper=[-inf, 1.0, 1.0]
+        ),
+        ValueError,
+        "Inequality 't': upper has the non-allowed value np.float64(-inf) at index 0",
+    ),
+    (
+        "in upd lo>hi",
+        lambda: I(np.eye(3), lower=0.0, upper=1.0, name="t").update(
+            lower=[0.0, 2.0, 0.0], upper=1.0
+        ),
+        ValueError,
+        "Inequality 't': lower > upper at row 1 (np.float64(2.0) > np.float64(1.0))",
+    ),
+    (
+        "eq b nan scalar",
+        lambda: E(np.eye(3), nan, name="t"),
+        ValueError,
+        "Equality 't': b contains NaN at index 0",
+    ),
 ]
 
 
