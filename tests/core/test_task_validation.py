@@ -670,6 +670,31 @@ def test_a_stack_of_constraints_only_and_mixed_levels_compiles():
     assert np.shares_memory(P.levels[0].C, P.C) and np.shares_memory(P.levels[1].Ae, P.Aeq)
 
 
+def test_compiled_rows_name_each_task_once_at_its_first_row():
+    """The bookkeeping the native engine's refresh reads (``set_tasks``): every task once,
+    constraints first, then the levels in order, each with its row count and first row in
+    the stacked arrays; the per-block views and the copies agree with it."""
+    h1, h2 = _eye(3, "h1"), _box(3, "h2")
+    a, b, c = _eye(3, "a"), _box(3, "b"), _box(3, "c")
+    d = E(np.ones((2, 3)), 0.0, name="d")
+    s = Stack([[a, b, c], d], constraints=[h1, h2])
+    P = s._compiled
+    eq_tasks, eq_rows, eq_first, in_tasks, in_rows, in_first = P._task_rows
+    assert [t.name for t in eq_tasks] == ["h1", "a", "d"]
+    assert (eq_rows, eq_first) == ([3, 3, 2], [0, 3, 6])
+    assert [t.name for t in in_tasks] == ["h2", "b", "c"]
+    assert (in_rows, in_first) == ([3, 3, 3], [0, 3, 6])
+    assert [op[0] for op in P._eq_ops] == eq_tasks and [op[0] for op in P._in_ops] == in_tasks
+    for op, first, rows in zip(P._in_ops, in_first, in_rows, strict=True):
+        assert op[2].shape == (rows, 3) and np.shares_memory(op[2], P.C[first : first + rows])
+    assert P.levels[0].C.shape == (6, 3) and P.levels[1].C.shape == (0, 3)
+    assert not P.equalities_only
+    assert Stack([a, d], bounds=B(-1.0, 1.0)).compiled.equalities_only
+    assert not Stack([a], constraints=[h1]).compiled.equalities_only
+    assert not Stack([a], constraints=[h2]).compiled.equalities_only
+    assert not Stack([a, b]).compiled.equalities_only
+
+
 # ---------------------------------------------------------------------------------------
 # finiteness checks are exact and silent: large finite numbers are not "non-finite"
 
