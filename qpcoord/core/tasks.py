@@ -249,7 +249,11 @@ def _limits(
     warning, on large finite limits such as ``±1e308``.)
     """
     lo = _entries(lower, rows, "lower", label)
-    hi = _entries(upper, rows, "upper", label)
+    try:
+        hi = _entries(upper, rows, "upper", label)
+    except (TypeError, ValueError):
+        _named_vector_check(lo, "lower", label, -1)  # a bad lower is named first, as ever
+        raise
     if (
         rows
         and _max(lo, None) < _INF

@@ -498,6 +498,19 @@ CASES = [
         ValueError,
         "Inequality 't': lower > upper at row 1 (np.float64(2.0) > np.float64(1.0))",
     ),
+    # two bad limits: lower's problem is named first, as each side is checked in turn
+    (
+        "in lo nan, hi complex",
+        lambda: I(np.eye(3), lower=[nan, 0.0, 0.0], upper=[1j, 0.0, 0.0], name="t"),
+        ValueError,
+        "Inequality 't': lower contains NaN at index 0",
+    ),
+    (
+        "in lo nan, hi shape",
+        lambda: I(np.eye(3), lower=[nan, 0.0, 0.0], upper=[1.0, 1.0], name="t"),
+        ValueError,
+        "Inequality 't': lower contains NaN at index 0",
+    ),
     (
         "eq b nan scalar",
         lambda: E(np.eye(3), nan, name="t"),
