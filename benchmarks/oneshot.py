@@ -20,8 +20,9 @@ sets up once) and the warm call that follows the first (a re-solve's first call)
     python benchmarks/oneshot.py                 # 3 000 steps, a few seconds
     python benchmarks/oneshot.py --runs 5 --parts
 
-Printed: median / p90 µs per call and the ratio of medians to the direct DAQP call; with
-``--runs N`` each cell is the range over N runs.
+Printed: median / p90 µs per call and the ratio of medians to the direct DAQP call (with
+``--runs N`` each cell is the range over N runs), then DAQP's exit flag and the largest
+difference of its ``x`` to ``Stack.solve(method="weighted")``'s: the same QP.
 """
 
 from __future__ import annotations
@@ -148,6 +149,21 @@ def parts() -> dict[str, object]:
     }
 
 
+def same_problem() -> str:
+    """A line saying the direct call solves the weighted QP of the stack: DAQP's exit flag and
+    the largest difference of its ``x`` to ``Stack.solve(method="weighted")``'s (the same
+    level weights, ``weight_ratio=1e-3``, and regularisation, ``1e-9``)."""
+    A, b, lb, ub = problem()
+    x, _, flag, _ = calls()["daqp.solve weighted QP"]()
+    levels = [qc.Equality(Ai, bi) for Ai, bi in zip(A, b, strict=True)]
+    stack = qc.Stack(levels, bounds=qc.Bounds(lb, ub), weight_ratio=1e-3, regularization=1e-9)
+    dx = float(np.max(np.abs(x - stack.solve(method="weighted", engine="python").x)))
+    return (
+        f"The direct call's QP is the stack's weighted QP: daqp exit flag {flag}, "
+        f'max |dx| {dx:.1e} to `Stack.solve(method="weighted")`.'
+    )
+
+
 def median_p90(samples: list[float]) -> tuple[float, float]:
     a = np.array(samples[2:]) * 1e6  # the first calls warm the caches
     return float(np.median(a)), float(np.percentile(a, 90))
@@ -205,6 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         head = ("call", "median µs", "p90 µs", "median / direct daqp.solve")
         print(markdown(head, body, "lrrr"))
+        print("\n" + same_problem())
         if args.parts:
             shares = [run_parts(args.steps) for _ in range(args.runs)]
             print("\nMedian µs of each part of a one-shot `qc.solve_stack`, timed alone:\n")
