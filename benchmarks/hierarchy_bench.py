@@ -48,7 +48,8 @@ call — "native warm" measured right after a Python-engine solve costs up to 2�
 solves, and the step after it is not timed.
 Then the one-shot cost: ``qc.solve_stack`` of a 7-variable, 3-level stack (each engine) vs one
 direct ``daqp.solve`` of the weighted QP, with the ratio of medians to that direct call (the
-goal: within 4×).
+goal: within 4×). Here each native one-shot follows a Python-engine one (which evicts the
+caches); ``benchmarks/oneshot.py`` times the native one-shot alone, and its parts.
 
     python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds

@@ -127,6 +127,28 @@ def test_stack_bench_one_shot_table():
     assert "daqp exit flags [1]" in note
 
 
+def test_oneshot_table():
+    """``oneshot.py``: every call and part has its row, and the direct daqp call solves the
+    stack's weighted QP (its x matches qpcoord's weighted method to daqp's tolerance)."""
+    pytest.importorskip("daqp")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "oneshot.py"), "--steps", "20", "--parts"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = proc.stdout
+    for row in ("tasks + Bounds", "qc.solve_stack", "Stack + solve", "daqp.solve weighted QP"):
+        assert f"| {row} |" in out
+    assert "| native engine: first (cold) call |" in out
+    note = next(line for line in out.splitlines() if line.startswith("The direct call's QP"))
+    assert "daqp exit flag 1," in note
+    assert float(note.split("max |dx| ")[1].split(" ")[0]) < 1e-6
+
+
 def test_engine_agreement_table():
     """``engine_agreement.py``: the category table over the seeds asked for, and every row
     it lists as silent is one (both "optimal", a level value apart by more than 1e-6; seeds

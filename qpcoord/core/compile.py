@@ -21,7 +21,7 @@ import numpy as np
 
 from .elimination import FEAS_TOL
 from .linalg import all_finite
-from .tasks import Bounds, Equality, Inequality, _bad_box, find_bad_value
+from .tasks import Bounds, Equality, Inequality, _bad_box, _full, find_bad_value
 from .tolerance import widen
 
 __all__ = ["CompiledLevel", "CompiledStack", "compile_stack"]
@@ -50,12 +50,23 @@ class CompiledLevel:
     buffers: InitVar[bool] = True
 
     def __post_init__(self, buffers: bool) -> None:
-        self._eq_shapes = [t.A.shape for t in self.eqs]
-        self._in_shapes = [t.C.shape for t in self.ineqs]
-        #: number of equality rows
-        self.m_eq = sum([s[0] for s in self._eq_shapes])
-        #: number of inequality rows
-        self.m_in = sum([s[0] for s in self._in_shapes])
+        eqs, ineqs = self.eqs, self.ineqs
+        # one task per kind is the common level: no list of row counts to sum
+        if len(eqs) == 1:
+            shape = eqs[0].A.shape
+            self._eq_shapes = [shape]
+            #: number of equality rows
+            self.m_eq = shape[0]
+        else:
+            self._eq_shapes = [t.A.shape for t in eqs]
+            self.m_eq = sum([s[0] for s in self._eq_shapes])
+        if ineqs:
+            self._in_shapes = [t.C.shape for t in ineqs]
+            #: number of inequality rows
+            self.m_in = sum([s[0] for s in self._in_shapes])
+        else:
+            self._in_shapes = []
+            self.m_in = 0
         #: the level is exactly ``x = be`` (one unit-weight identity task, no inequalities)
         self.identity = False
         if buffers:
@@ -168,10 +179,7 @@ class CompiledStack:
         return self._equalities_only
 
     def __post_init__(self) -> None:
-        self._equalities_only = not (
-            self.hard.m_eq or self.hard.m_in or any(L.m_in for L in self.levels)
-        )
-        self._stack_buffers()
+        self._stack_buffers()  # and _equalities_only
 
     @property
     def capacity(self) -> int:
@@ -215,26 +223,33 @@ class CompiledStack:
         without rows of a kind gets the shared empty view of that kind)."""
         blocks = [self.hard, *self.levels]
         n = self.n
-        me = sum([B.m_eq for B in blocks])
-        mi = sum([B.m_in for B in blocks])
+        me = mi = 0
+        for B in blocks:
+            me += B.m_eq
+            mi += B.m_in
+        self._equalities_only = not (self.hard.m_eq or mi)
         Aeq = self.Aeq = np.zeros((me, n))
         beq = self.beq = np.zeros(me)
         C = self.C = np.zeros((mi, n))
         clo = self.clo = np.zeros(mi)
         chi = self.chi = np.zeros(mi)
-        csw = self.csw = np.empty(mi)
-        csw.fill(1.0)
+        csw = self.csw = _full(mi, 1.0)
         #: the box as the native engine reads it (±inf without bounds)
-        self.lbs = np.empty(n)
-        self.lbs.fill(-np.inf)
-        self.ubs = np.empty(n)
-        self.ubs.fill(np.inf)
+        self.lbs = _full(n, -np.inf)
+        self.ubs = _full(n, np.inf)
+        # each copy a refresh makes, per kind: (task, shape, its rows of the stacked arrays)
+        # and, for the native engine's own refresh (NativeHierarchy: Hierarchy.set_tasks),
+        # the same as tasks, row counts and first rows
         eq_ops: list[tuple] = []  # (task, shape, A rows, b rows)
         in_ops: list[tuple] = []  # (task, shape, C rows, lo, hi, sw)
-        no_eq = (Aeq[:0], beq[:0])
-        no_in = (C[:0], clo[:0], chi[:0], csw[:0])
-        eq_first: list[int] = []  # each op's first row in the stacked arrays
+        eq_tasks: list[Equality] = []
+        eq_rows: list[int] = []
+        eq_first: list[int] = []
+        in_tasks: list[Inequality] = []
+        in_rows: list[int] = []
         in_first: list[int] = []
+        no_eq = (Aeq[:0], beq[:0])
+        no_in = (C[:0], clo[:0], chi[:0], csw[:0]) if mi else (C, clo, chi, csw)
         i = j = 0
         for B in blocks:
             i1, j1 = i + B.m_eq, j + B.m_in
@@ -242,36 +257,37 @@ class CompiledStack:
             ineq = (C[j:j1], clo[j:j1], chi[j:j1], csw[j:j1]) if j1 > j else no_in
             B._use(*eq, *ineq)
             if len(B.eqs) == 1:  # one task: its rows are the block's
-                eq_ops.append((B.eqs[0], B._eq_shapes[0], *eq))
+                t, shape = B.eqs[0], B._eq_shapes[0]
+                eq_ops.append((t, shape, *eq))
+                eq_tasks.append(t)
+                eq_rows.append(shape[0])
                 eq_first.append(i)
             else:
                 for t, shape in zip(B.eqs, B._eq_shapes, strict=True):
                     m = i + shape[0]
                     eq_ops.append((t, shape, Aeq[i:m], beq[i:m]))
+                    eq_tasks.append(t)
+                    eq_rows.append(shape[0])
                     eq_first.append(i)
                     i = m
             if len(B.ineqs) == 1:
-                in_ops.append((B.ineqs[0], B._in_shapes[0], *ineq))
+                u, shape = B.ineqs[0], B._in_shapes[0]
+                in_ops.append((u, shape, *ineq))
+                in_tasks.append(u)
+                in_rows.append(shape[0])
                 in_first.append(j)
-            else:
+            elif B.ineqs:
                 for u, shape in zip(B.ineqs, B._in_shapes, strict=True):
                     m = j + shape[0]
                     in_ops.append((u, shape, C[j:m], clo[j:m], chi[j:m], csw[j:m]))
+                    in_tasks.append(u)
+                    in_rows.append(shape[0])
                     in_first.append(j)
                     j = m
             i, j = i1, j1
         self._eq_ops = eq_ops
         self._in_ops = in_ops
-        # the same copies as (tasks, row counts, first rows) per kind, for the native
-        # engine's own refresh (NativeHierarchy: Hierarchy.set_tasks)
-        self._task_rows = (
-            [op[0] for op in eq_ops],
-            [op[1][0] for op in eq_ops],
-            eq_first,
-            [op[0] for op in in_ops],
-            [op[1][0] for op in in_ops],
-            in_first,
-        )
+        self._task_rows = (eq_tasks, eq_rows, eq_first, in_tasks, in_rows, in_first)
         self._aliased = False
 
     def refresh_stacked(self) -> None:
@@ -322,6 +338,11 @@ def _not_a_task(t, where: str, j: int) -> str:
     return f"{where}, task {j}: expected an Equality or Inequality, got {type(t).__name__}"
 
 
+def _where(k: int) -> str:
+    """The name of block ``k`` in messages (block 0: the hard constraints)."""
+    return "constraints" if k == 0 else f"level {k - 1}"
+
+
 def compile_stack(levels, bounds, constraints) -> CompiledStack:
     """Validate a stack's structure and build its buffers.
 
@@ -352,13 +373,17 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
         raise ValueError("empty stack: give at least one level with one task")
     norm_levels = []
     for k, lev in enumerate(levels):
-        tasks = [lev] if isinstance(lev, (Equality, Inequality, Bounds)) else lev
-        try:
-            tasks = list(tasks)
-        except TypeError:
-            raise ValueError(
-                f"level {k}: expected a task or a list of tasks, got {type(lev).__name__}"
-            ) from None
+        if lev.__class__ is list:  # the common level: a list, or one task
+            tasks = lev[:]
+        elif isinstance(lev, (Equality, Inequality, Bounds)):
+            tasks = [lev]
+        else:
+            try:
+                tasks = list(lev)
+            except TypeError:
+                raise ValueError(
+                    f"level {k}: expected a task or a list of tasks, got {type(lev).__name__}"
+                ) from None
         if not tasks:
             raise ValueError(f"level {k} is empty: give it at least one task or remove it")
         norm_levels.append(tasks)
@@ -367,14 +392,14 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
     # level or the constraints (the first other object of the levels is reported, else of
     # the constraints)
     n = None
-    first = None
+    first: tuple = ()  # (block, task) of the first task: named only in a message
     bad_task: list[str | None] = [None, None]  # levels, constraints
     blocks = []
     for k, tasks in enumerate([hard_tasks, *norm_levels]):
-        where = "constraints" if k == 0 else f"level {k - 1}"
         eqs, ineqs = [], []
         for j, t in enumerate(tasks):
-            if isinstance(t, Equality):
+            cls = t.__class__
+            if cls is Equality or (cls is not Inequality and isinstance(t, Equality)):
                 eqs.append(t)
                 cols = t.A.shape[1]
             elif isinstance(t, Inequality):
@@ -382,14 +407,14 @@ def compile_stack(levels, bounds, constraints) -> CompiledStack:
                 cols = t.C.shape[1]
             else:
                 if bad_task[k == 0] is None:
-                    bad_task[k == 0] = _not_a_task(t, where, j)
+                    bad_task[k == 0] = _not_a_task(t, _where(k), j)
                 continue
             if n is None:
-                n, first = cols, f"{where}, {t.label}"
+                n, first = cols, (k, t)
             elif cols != n:
                 raise ValueError(
-                    f"{where}, {t.label}: has {cols} columns but {first} has {n}: "
-                    "all tasks must act on the same variable"
+                    f"{_where(k)}, {t.label}: has {cols} columns but {_where(first[0])}, "
+                    f"{first[1].label} has {n}: all tasks must act on the same variable"
                 )
         blocks.append((eqs, ineqs))
     if bad_task[0] or bad_task[1]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from functools import cached_property
@@ -63,6 +64,27 @@ def _call_native(
         raise
 
 
+_INF = math.inf
+
+
+def _check_options(regularization: object, damping: object, weight_ratio: object) -> None:
+    """``ValueError`` naming the first of a :class:`Stack`'s numeric options that is not a
+    finite number in its range (``damping`` may be 0, the others must be positive)."""
+    for name, value, lo_ok in (
+        ("regularization", regularization, False),
+        ("damping", damping, True),
+        ("weight_ratio", weight_ratio, False),
+    ):
+        if not (type(value) is float and isfinite(value)) and (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float, np.floating, np.integer))
+            or not np.isfinite(value)
+        ):
+            raise ValueError(f"{name} must be a finite number, got {value!r}")
+        if value < 0 or (value == 0 and not lo_ok):
+            raise ValueError(f"{name} must be {'>= 0' if lo_ok else '> 0'}, got {value!r}")
+
+
 class Stack:
     """A prioritised stack of tasks, solved once per control step.
 
@@ -115,19 +137,15 @@ class Stack:
     ) -> None:
         if not isinstance(fallback, bool):
             raise ValueError(f"fallback must be True or False, got {fallback!r}")
-        for name, value, lo_ok in (
-            ("regularization", regularization, False),
-            ("damping", damping, True),
-            ("weight_ratio", weight_ratio, False),
+        if not (  # the common case (Python floats in range) without _check_options
+            type(regularization) is float
+            and type(damping) is float
+            and type(weight_ratio) is float
+            and 0.0 < regularization < _INF
+            and 0.0 <= damping < _INF
+            and 0.0 < weight_ratio < _INF
         ):
-            if not (type(value) is float and isfinite(value)) and (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float, np.floating, np.integer))
-                or not np.isfinite(value)
-            ):
-                raise ValueError(f"{name} must be a finite number, got {value!r}")
-            if value < 0 or (value == 0 and not lo_ok):
-                raise ValueError(f"{name} must be {'>= 0' if lo_ok else '> 0'}, got {value!r}")
+            _check_options(regularization, damping, weight_ratio)
         self._compiled = compile_stack(levels, bounds, constraints)
         self.regularization = float(regularization)
         self.damping = float(damping)

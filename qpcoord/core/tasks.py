@@ -64,6 +64,10 @@ MATRIX_RANGE = (1e-150, 1e150)
 _max, _min = np.maximum.reduce, np.minimum.reduce
 #: numpy dtype kinds converted to float without a check: bool, signed, unsigned, float
 _REAL_KINDS = ("b", "i", "u", "f")
+#: the native float64 dtype: an array of it is copied with ``ndarray.copy`` (a third of
+#: ``np.array(..., dtype=float)``'s time on control-step sizes)
+_F64 = np.dtype(float)
+_INF = math.inf
 
 
 def _full(rows: int, value: float) -> np.ndarray:
@@ -105,8 +109,11 @@ def _w(view: np.ndarray) -> np.ndarray:
 def _numeric(value: ArrayLike, what: str, label: str, noun: str = "numeric") -> np.ndarray:
     """``value`` as a new float array; complex input is a ``TypeError`` and non-numeric input
     a ``ValueError``, both naming ``what`` (numpy would drop an imaginary part)."""
-    if type(value) is np.ndarray and value.dtype.kind in _REAL_KINDS:
-        return np.array(value, dtype=float, order="C")  # the common case: no check, one copy
+    if type(value) is np.ndarray:
+        if value.dtype is _F64:
+            return value.copy()  # the common case: no check, one C-ordered copy
+        if value.dtype.kind in _REAL_KINDS:
+            return np.array(value, dtype=float, order="C")
     try:
         complex_in = np.iscomplexobj(value)
     except (TypeError, ValueError):  # ragged lists: let np.array name the problem
@@ -157,6 +164,21 @@ def _matrix(value: ArrayLike, what: str, label: str) -> np.ndarray:
     )
 
 
+def _entries(value: ArrayLike, rows: int, what: str, label: str) -> np.ndarray:
+    """``value`` as a new float array of ``rows`` entries (scalars broadcast, a row or column
+    matrix is flattened); its numbers are not checked (:func:`_vector` does)."""
+    if type(value) is float or type(value) is int:  # a Python scalar (not a bool): broadcast
+        return _full(rows, float(value))
+    arr = _numeric(value, what, label)  # a copy, as in _matrix
+    if arr.ndim == 0:
+        arr = _full(rows, float(arr))
+    elif arr.ndim == 2 and 1 in arr.shape:
+        arr.shape = (arr.size,)  # in place: arr stays the owner of its data
+    if arr.ndim != 1 or arr.shape[0] != rows:
+        raise ValueError(f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}")
+    return arr
+
+
 def _vector(value: ArrayLike, rows: int, what: str, label: str, allow_inf: int = 0) -> np.ndarray:
     """Validate a length-``rows`` vector; scalars broadcast.
 
@@ -164,21 +186,23 @@ def _vector(value: ArrayLike, rows: int, what: str, label: str, allow_inf: int =
     """
     if type(value) is float or type(value) is int:  # a Python scalar (not a bool): broadcast
         v = float(value)
-        if math.isfinite(v) or (allow_inf and v == allow_inf * math.inf):
+        if math.isfinite(v) or (allow_inf and v == allow_inf * _INF):
             return _frozen(_full(rows, v))
-        arr = _full(rows, v)  # NaN or a wrong-sided infinity: named below
-    else:
-        arr = _numeric(value, what, label)  # a copy, as in _matrix
-        if arr.ndim == 0:
-            arr = _full(rows, float(arr))
-        elif arr.ndim == 2 and 1 in arr.shape:
-            arr.shape = (arr.size,)  # in place: arr stays the owner of its data
-        if arr.ndim != 1 or arr.shape[0] != rows:
-            raise ValueError(
-                f"{label}: {what} must have {rows} entries, got shape {np.shape(value)}"
-            )
-        if all_finite(arr):
-            return _frozen(arr)  # fresh, C-contiguous, the owner of its data
+    arr = _entries(value, rows, what, label)
+    # one reduction on the hot path (NaN fails every comparison, so it goes to the named
+    # checks below, as does an empty vector)
+    if rows and (
+        (allow_inf < 0 and _max(arr, None) < _INF)
+        or (allow_inf > 0 and _min(arr, None) > -_INF)
+        or (allow_inf == 0 and _max(np.abs(arr), None) < _INF)
+    ):
+        return _frozen(arr)  # fresh, C-contiguous, the owner of its data
+    return _named_vector_check(arr, what, label, allow_inf)
+
+
+def _named_vector_check(arr: np.ndarray, what: str, label: str, allow_inf: int) -> np.ndarray:
+    """``arr`` read-only if it has no NaN and no infinity ``allow_inf`` forbids, else the
+    ``ValueError`` naming the first bad entry (``allow_inf`` as in :func:`_vector`)."""
     if np.any(np.isnan(arr)):
         i = int(np.flatnonzero(np.isnan(arr))[0])
         raise ValueError(f"{label}: {what} contains NaN at index {i}")
@@ -204,11 +228,43 @@ def _weight(value: ArrayLike, rows: int, label: str) -> np.ndarray:
     return w
 
 
-def _check_order(lower: np.ndarray, upper: np.ndarray, label: str) -> None:
+def _check_order(lower: np.ndarray, upper: np.ndarray, label: str, where: str = "row") -> None:
     bad = lower > upper
     if np.count_nonzero(bad):
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"{label}: lower > upper at row {i} ({lower[i]!r} > {upper[i]!r})")
+        raise ValueError(f"{label}: lower > upper at {where} {i} ({lower[i]!r} > {upper[i]!r})")
+
+
+def _limits(
+    lower: ArrayLike, upper: ArrayLike, rows: int, label: str, where: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Validated read-only ``(lower, upper)`` of ``rows`` entries: no NaN, ``-inf`` only in
+    ``lower``, ``+inf`` only in ``upper``, ``lower ≤ upper`` (``where``: "row" or "index" in
+    the message).
+
+    Three reductions on the hot path (``lower ≤ upper`` fails for NaN on either side and for
+    ``lower > upper``; ``max(lower) < +inf`` and ``min(upper) > −inf`` for the infinities);
+    only if one fails, the checks of :func:`_vector` and :func:`_check_order` name the
+    problem. (``lower − upper ≤ 0`` would take one reduction but overflows, with numpy's
+    warning, on large finite limits such as ``±1e308``.)
+    """
+    lo = _entries(lower, rows, "lower", label)
+    try:
+        hi = _entries(upper, rows, "upper", label)
+    except (TypeError, ValueError):
+        _named_vector_check(lo, "lower", label, -1)  # a bad lower is named first, as ever
+        raise
+    if (
+        rows
+        and _max(lo, None) < _INF
+        and _min(hi, None) > -_INF
+        and _min(np.less_equal(lo, hi), None)
+    ):
+        return _frozen(lo), _frozen(hi)
+    lo = _named_vector_check(lo, "lower", label, -1)
+    hi = _named_vector_check(hi, "upper", label, +1)
+    _check_order(lo, hi, label, where)
+    return lo, hi
 
 
 def _is_identity(A: np.ndarray) -> bool:
@@ -286,12 +342,16 @@ class Equality(_Task):
     _MATRIX_ATTRS = frozenset(("A", "weight"))
 
     def __init__(self, A: ArrayLike, b: ArrayLike, weight: ArrayLike = 1.0, name: str = "") -> None:
-        self.name = str(name)
-        label = _label(self.kind, self.name)
-        self.A = _matrix(A, "A", label)
-        self.is_identity = _is_identity(self.A)
-        self.b = _vector(b, self.A.shape[0], "b", label)
-        self._set_weight(_weight(weight, self.A.shape[0], label), weight)
+        name = str(name)
+        label = _label(self.kind, name)
+        A = _matrix(A, "A", label)
+        m = A.shape[0]
+        b = _vector(b, m, "b", label)
+        w = _weight(weight, m, label)
+        # the instance dict written directly: none of these is set yet, so _Task.__setattr__
+        # would only pass them on
+        self.__dict__.update(name=name, A=A, is_identity=_is_identity(A), b=b)
+        self._set_weight(w, weight)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -384,16 +444,19 @@ class Inequality(_Task):
         weight: ArrayLike = 1.0,
         name: str = "",
     ) -> None:
-        self.name = str(name)
-        label = self.label
+        name = str(name)
+        label = _label(self.kind, name)
         if lower is None and upper is None:
             raise ValueError(f"{label}: give lower, upper or both")
-        self.C = _matrix(C, "C", label)
-        m = self.C.shape[0]
-        self.lower = _vector(-np.inf if lower is None else lower, m, "lower", label, allow_inf=-1)
-        self.upper = _vector(np.inf if upper is None else upper, m, "upper", label, allow_inf=+1)
-        _check_order(self.lower, self.upper, label)
-        self._set_weight(_weight(weight, m, label), weight)
+        C = _matrix(C, "C", label)
+        m = C.shape[0]
+        lo, hi = _limits(
+            -_INF if lower is None else lower, _INF if upper is None else upper, m, label, "row"
+        )
+        w = _weight(weight, m, label)
+        # the instance dict written directly, as in Equality.__init__
+        self.__dict__.update(name=name, C=C, lower=lo, upper=hi)
+        self._set_weight(w, weight)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -420,9 +483,12 @@ class Inequality(_Task):
                 raise ValueError(
                     f"{label}: update changes C's shape {self.C.shape} to {newC.shape}"
                 )
-        lo = self.lower if lower is None else _vector(lower, m, "lower", label, allow_inf=-1)
-        hi = self.upper if upper is None else _vector(upper, m, "upper", label, allow_inf=+1)
-        _check_order(lo, hi, label)
+        if lower is not None and upper is not None:
+            lo, hi = _limits(lower, upper, m, label, "row")
+        else:
+            lo = self.lower if lower is None else _vector(lower, m, "lower", label, allow_inf=-1)
+            hi = self.upper if upper is None else _vector(upper, m, "upper", label, allow_inf=+1)
+            _check_order(lo, hi, label)
         if weight is not None:
             neww = _weight(weight, m, label)
         if newC is not None:
@@ -490,9 +556,10 @@ class Bounds:
     def __init__(
         self, lower: ArrayLike | None = None, upper: ArrayLike | None = None, name: str = "bounds"
     ) -> None:
-        self.name = str(name)
-        self.version = 0  # incremented by update(): stacks re-read the bounds then
-        self._set(-np.inf if lower is None else lower, np.inf if upper is None else upper)
+        d = self.__dict__  # not through Bounds.__setattr__: nothing to update yet
+        d["name"] = str(name)
+        d["version"] = 0  # incremented by update(): stacks re-read the bounds then
+        self._set(-_INF if lower is None else lower, _INF if upper is None else upper)
 
     def _set(self, lower: ArrayLike, upper: ArrayLike) -> None:
         n = None
@@ -503,24 +570,18 @@ class Bounds:
             elif np.ndim(v) > 0:
                 n = int(np.size(v))
         lo, hi = self._validate(lower, upper, 1 if n is None else n)
-        self._lower_in, self._upper_in, self.n = lower, upper, n
-        if n is not None:
+        d = self.__dict__
+        if n is None:
+            d["_lower_in"], d["_upper_in"], d["n"] = lower, upper, n
+        else:
             # the validated copies, not the caller's arrays (a later update re-reads them)
-            self._lower_in, self._upper_in = lo, hi
-            _setattr(self, "lower", lo)
-            _setattr(self, "upper", hi)
+            d["_lower_in"], d["_upper_in"], d["n"] = lo, hi, n
+            d["lower"], d["upper"] = lo, hi
 
     def _validate(
         self, lower: ArrayLike, upper: ArrayLike, n: int
     ) -> tuple[np.ndarray, np.ndarray]:
-        label = self.label
-        lo = _vector(lower, n, "lower", label, allow_inf=-1)
-        hi = _vector(upper, n, "upper", label, allow_inf=+1)
-        bad = lo > hi
-        if np.count_nonzero(bad):
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"{label}: lower > upper at index {i} ({lo[i]!r} > {hi[i]!r})")
-        return lo, hi
+        return _limits(lower, upper, n, _label(self.kind, self.name), "index")
 
     @property
     def label(self) -> str:

@@ -437,6 +437,86 @@ CASES = [
         ValueError,
         "Bounds 'vel': lower > upper at index 0 (np.float64(3.0) > np.float64(1.0))",
     ),
+    # limits whose rows satisfy lower <= upper but hold a wrong-sided infinity on both
+    # sides, or NaN beside an allowed infinity: the hot path's order test alone would
+    # pass the first kind, so its infinity reductions must name them
+    (
+        "bd lo=hi=+inf",
+        lambda: B([inf, 0.0], [inf, 1.0], name="vel"),
+        ValueError,
+        "Bounds 'vel': lower has the non-allowed value np.float64(inf) at index 0",
+    ),
+    (
+        "bd lo=hi=-inf",
+        lambda: B([0.0, -inf], [1.0, -inf], name="vel"),
+        ValueError,
+        "Bounds 'vel': upper has the non-allowed value np.float64(-inf) at index 1",
+    ),
+    (
+        "bd scalar lo=hi=+inf",
+        lambda: B(inf, inf, name="vel"),
+        ValueError,
+        "Bounds 'vel': lower has the non-allowed value np.float64(inf) at index 0",
+    ),
+    (
+        "bd lo nan, hi +inf",
+        lambda: B([nan, 0.0], inf, name="vel"),
+        ValueError,
+        "Bounds 'vel': lower contains NaN at index 0",
+    ),
+    (
+        "bd upd lo=hi=+inf",
+        lambda: B([0.0, 0.0], [1.0, 1.0], name="vel").update(lower=[0.0, inf], upper=[1.0, inf]),
+        ValueError,
+        "Bounds 'vel': lower has the non-allowed value np.float64(inf) at index 1",
+    ),
+    (
+        "in lo=hi=+inf",
+        lambda: I(np.eye(3), lower=[0.0, inf, 0.0], upper=[1.0, inf, 1.0], name="t"),
+        ValueError,
+        "Inequality 't': lower has the non-allowed value np.float64(inf) at index 1",
+    ),
+    (
+        "in lo=hi=-inf",
+        lambda: I(np.eye(3), lower=-inf, upper=[0.0, 0.0, -inf], name="t"),
+        ValueError,
+        "Inequality 't': upper has the non-allowed value np.float64(-inf) at index 2",
+    ),
+    (
+        "in upd lo=hi=-inf",
+        lambda: I(np.eye(3), lower=0.0, upper=1.0, name="t").update(
+            lower=[-inf, 0.0, 0.0], upper=[-inf, 1.0, 1.0]
+        ),
+        ValueError,
+        "Inequality 't': upper has the non-allowed value np.float64(-inf) at index 0",
+    ),
+    (
+        "in upd lo>hi",
+        lambda: I(np.eye(3), lower=0.0, upper=1.0, name="t").update(
+            lower=[0.0, 2.0, 0.0], upper=1.0
+        ),
+        ValueError,
+        "Inequality 't': lower > upper at row 1 (np.float64(2.0) > np.float64(1.0))",
+    ),
+    # two bad limits: lower's problem is named first, as each side is checked in turn
+    (
+        "in lo nan, hi complex",
+        lambda: I(np.eye(3), lower=[nan, 0.0, 0.0], upper=[1j, 0.0, 0.0], name="t"),
+        ValueError,
+        "Inequality 't': lower contains NaN at index 0",
+    ),
+    (
+        "in lo nan, hi shape",
+        lambda: I(np.eye(3), lower=[nan, 0.0, 0.0], upper=[1.0, 1.0], name="t"),
+        ValueError,
+        "Inequality 't': lower contains NaN at index 0",
+    ),
+    (
+        "eq b nan scalar",
+        lambda: E(np.eye(3), nan, name="t"),
+        ValueError,
+        "Equality 't': b contains NaN at index 0",
+    ),
 ]
 
 
@@ -601,6 +681,31 @@ def test_a_stack_of_constraints_only_and_mixed_levels_compiles():
     assert [(L.m_eq, L.m_in) for L in P.levels] == [(3, 3), (3, 0)]
     assert P.Aeq.shape == (6, 3) and P.C.shape == (6, 3)
     assert np.shares_memory(P.levels[0].C, P.C) and np.shares_memory(P.levels[1].Ae, P.Aeq)
+
+
+def test_compiled_rows_name_each_task_once_at_its_first_row():
+    """The bookkeeping the native engine's refresh reads (``set_tasks``): every task once,
+    constraints first, then the levels in order, each with its row count and first row in
+    the stacked arrays; the per-block views and the copies agree with it."""
+    h1, h2 = _eye(3, "h1"), _box(3, "h2")
+    a, b, c = _eye(3, "a"), _box(3, "b"), _box(3, "c")
+    d = E(np.ones((2, 3)), 0.0, name="d")
+    s = Stack([[a, b, c], d], constraints=[h1, h2])
+    P = s._compiled
+    eq_tasks, eq_rows, eq_first, in_tasks, in_rows, in_first = P._task_rows
+    assert [t.name for t in eq_tasks] == ["h1", "a", "d"]
+    assert (eq_rows, eq_first) == ([3, 3, 2], [0, 3, 6])
+    assert [t.name for t in in_tasks] == ["h2", "b", "c"]
+    assert (in_rows, in_first) == ([3, 3, 3], [0, 3, 6])
+    assert [op[0] for op in P._eq_ops] == eq_tasks and [op[0] for op in P._in_ops] == in_tasks
+    for op, first, rows in zip(P._in_ops, in_first, in_rows, strict=True):
+        assert op[2].shape == (rows, 3) and np.shares_memory(op[2], P.C[first : first + rows])
+    assert P.levels[0].C.shape == (6, 3) and P.levels[1].C.shape == (0, 3)
+    assert not P.equalities_only
+    assert Stack([a, d], bounds=B(-1.0, 1.0)).compiled.equalities_only
+    assert not Stack([a], constraints=[h1]).compiled.equalities_only
+    assert not Stack([a], constraints=[h2]).compiled.equalities_only
+    assert not Stack([a, b]).compiled.equalities_only
 
 
 # ---------------------------------------------------------------------------------------
