@@ -80,6 +80,8 @@ TABLES: dict[str, Table] = {
     "weighted_bench": Table("weighted_bench.py", (), ("--quick",)),
     "mpc_bench": Table("mpc_bench.py", (), ("--quick", "--steps", "600")),
     "collision_bench": Table("collision_bench.py", (), ("--steps", "20", "--repeats", "1")),
+    "oneshot": Table("oneshot.py", ("--runs", "3", "--parts"), ("--steps", "200")),
+    "ddl_hdd": Table("ddl_hdd.py", (), ("--repeats", "1", "--steps", "2000")),
     "engine_agreement": Table("engine_agreement.py", ("--seeds", "400"), ("--seeds", "4")),
 }
 
