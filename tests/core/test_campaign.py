@@ -1,4 +1,4 @@
-"""Seeded campaign over the degeneracy kinds of issue 22, judged against the exact
+"""Seeded campaign over the degeneracy kinds of :mod:`support.campaign`, judged against the exact
 lexicographic reference (:mod:`support.oracle`, ``polish=True``): no level may come out worse
 than the reference by 1e-6 of its scale while the solution says ``"optimal"``."""
 
