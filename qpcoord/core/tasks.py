@@ -340,6 +340,10 @@ class Equality(_Task):
 
     kind = "Equality"
     _MATRIX_ATTRS = frozenset(("A", "weight"))
+    # written through the instance dict by the constructor and update (one dict update)
+    A: np.ndarray
+    b: np.ndarray
+    is_identity: bool
 
     def __init__(self, A: ArrayLike, b: ArrayLike, weight: ArrayLike = 1.0, name: str = "") -> None:
         name = str(name)
@@ -435,6 +439,10 @@ class Inequality(_Task):
 
     kind = "Inequality"
     _MATRIX_ATTRS = frozenset(("C", "weight"))
+    # written through the instance dict by the constructor and update (one dict update)
+    C: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
 
     def __init__(
         self,
@@ -544,6 +552,12 @@ class Bounds:
     #: the validated arrays (absent while the bounds are scalars: ``n is None``)
     lower: np.ndarray
     upper: np.ndarray
+    # written through the instance dict (not through __setattr__, which validates lower/upper)
+    name: str
+    version: int
+    n: int | None
+    _lower_in: Any
+    _upper_in: Any
 
     def __setattr__(self, name: str, value: Any) -> None:
         # bounds.lower = ... is update(lower=...): validated, counted in version (the
