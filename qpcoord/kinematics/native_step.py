@@ -388,6 +388,13 @@ class NativeIKStep(NativeHierarchy):
             and not self.weighted
         )
 
+    @property
+    def counters(self) -> Any:
+        """The last strict-hierarchy step's counters (a copy of the extension's ``Stats``, as
+        :attr:`NativeHierarchy.counters <qpcoord.core.native.NativeHierarchy.counters>`; the
+        info's ``stats``)."""
+        return self._solver.stats
+
     def _add_frame(self, solver: Any, fid: int) -> int:
         model, data = self._model, self._data
         frame = model.frames[fid]

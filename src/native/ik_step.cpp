@@ -512,8 +512,12 @@ class IKStep {
   /// info, from the bound stats / detail).
   nb::dict info(double kkt_tol) const {
     const OutArr& st = out_[12];
-    return info_keys_.make(st.data(), static_cast<int>(st.shape(0)), out_[13].data(), kkt_tol);
+    return info_keys_.make(st.data(), static_cast<int>(st.shape(0)), out_[13].data(), kkt_tol,
+                           h_.stats());
   }
+
+  /// The last strict-hierarchy solve's counters (a copy is the info's "stats").
+  const Stats& counters() const { return h_.stats(); }
 
   /// The rows a kernel writes (for tests): its index in the order added.
   int num_tasks() const { return static_cast<int>(kernels_.size()); }
@@ -942,6 +946,9 @@ void bind_ik_step(nb::module_& m) {
            nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false,
            nb::arg("refactor") = true)
       .def("info", &IKStep::info, nb::arg("kkt_tol"))
+      .def_prop_ro(
+          "stats", [](const IKStep& s) { return s.counters(); },
+          "A copy of the last strict-hierarchy solve's Stats (the counters of its paths).")
       .def("set_copies", &IKStep::set_copies, nb::arg("x"), nb::arg("res"),
            nb::arg("q_next").none(),
            "The bound x, res and q_next (None: no integrator) whose copies solve_step "

@@ -478,7 +478,8 @@ def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind)
         vc = sc.x
         assert sn.info.keys() == sc.info.keys()
         nh = ikn._native
-        assert sn.info == info_reference(nh.stats, nh.detail, nh.stats.shape[0] - 2), step
+        levels = nh.stats.shape[0] - 2
+        assert sn.info == info_reference(nh.stats, nh.detail, levels, nh.counters), step
         if kind == "position":
             # the same rows to rounding: the same solver path, but where rounding breaks a
             # tie between rows tight at length zero (since session 14's wide_freeze, whose Z
