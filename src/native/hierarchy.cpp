@@ -34,6 +34,8 @@ constexpr int kSmallRinvMax = 16;
 // a level with a singular value under this fraction of the largest (or a damped one) is
 // finished with exact_ (as qpcoord.core.methods.hierarchical.ILL_CONDITIONED)
 constexpr double kIllConditioned = 1e-3;
+// room for a cache key's sizes and flags, in bytes (KeyedCache: 3 ints per block part)
+constexpr std::size_t kKeyHeader = 256;
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
@@ -41,62 +43,6 @@ inline bool in_box(double v, double lo, double hi) {
   return v >= widen_lo(lo) && v <= widen_hi(hi);
 }
 inline double finite_abs(double v) { return std::isfinite(v) ? std::abs(v) : 0.0; }
-
-/// a and b (the same shape) equal bit for bit (0.0 and -0.0 differ: the freeze cache restores
-/// outputs only for inputs that are the same bits)
-template <typename A, typename B>
-bool same_bits(const A& a, const B& b) {
-  if (a.rows() == 0) return true;  // (no memcmp of empty, possibly null, data)
-  for (Eigen::Index j = 0; j < a.cols(); ++j)
-    if (std::memcmp(a.col(j).data(), b.col(j).data(), sizeof(double) * a.rows()) != 0)
-      return false;
-  return true;
-}
-
-/// The caches' copy of a level's rows a (m x n, any strides): true when buf holds them bit
-/// for bit in the layout `layout` names (1 rows, 2 columns contiguous in a, 3 neither: entry
-/// by entry), else they are copied into buf (its first m n entries) in a's layout, layout set
-/// and false returned. One memcmp for a block of C-ordered rows (numpy's stacked arrays).
-template <typename R>
-bool same_rows_or_copy(const R& a, Vec& buf, int& layout) {
-  const Eigen::Index m = a.rows(), n = a.cols();
-  if (m == 0 || n == 0) {
-    const bool same = layout == 1;
-    layout = 1;
-    return same;
-  }
-  double* out = buf.data();
-  if (a.outerStride() != 1 && a.innerStride() != 1) {  // entry by entry
-    bool same = layout == 3;
-    for (Eigen::Index j = 0; same && j < n; ++j)
-      for (Eigen::Index i = 0; same && i < m; ++i) {
-        const double v = a(i, j);
-        same = std::memcmp(&v, out + j * m + i, sizeof v) == 0;
-      }
-    if (same) return true;
-    for (Eigen::Index j = 0; j < n; ++j)
-      for (Eigen::Index i = 0; i < m; ++i) out[j * m + i] = a(i, j);
-    layout = 3;
-    return false;
-  }
-  // runs of contiguous entries: the rows (1) or the columns (2); one run when they follow
-  // each other
-  const int now = (a.outerStride() == 1) ? 1 : 2;
-  Eigen::Index runs = (now == 1) ? m : n, len = (now == 1) ? n : m;
-  const Eigen::Index stride = (now == 1) ? a.innerStride() : a.outerStride();
-  if (stride == len) {
-    len *= runs;
-    runs = 1;
-  }
-  const std::size_t bytes = sizeof(double) * len;
-  bool same = layout == now;
-  for (Eigen::Index k = 0; same && k < runs; ++k)
-    same = std::memcmp(a.data() + k * stride, out + k * len, bytes) == 0;
-  if (same) return true;
-  for (Eigen::Index k = 0; k < runs; ++k) std::memcpy(out + k * len, a.data() + k * stride, bytes);
-  layout = now;
-  return false;
-}
 
 /// The ratio test of one row: the step length (>= 0; inf if it never blocks) at which a row
 /// whose product with the step is gp and with the current point gy reaches its bound, the
@@ -132,7 +78,7 @@ namespace qpcoord {
 int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                           const CRef<Vec>& lo, const CRef<Vec>& hi, MRef<Mat> stats,
                           MRef<Vec> detail, bool warm) {
-  ts_ = stage_trial(0);
+  enter_stage(0);
   z_repeats_ = true;  // (the trial cache's gate in the hard phase; set again after it)
   x_.setZero();
   Z_.setIdentity();
@@ -276,15 +222,15 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   const int b = k + 1;
   const int me = meq_[b], mi = min_[b], e0 = eq0_[b], i0 = in0_[b];
   const int stage = b;
-  ts_ = stage_trial(stage);
-  cf_ = per_stage_ ? &cforms_[stage] : &shared_cf_;
+  enter_stage(stage);
+  cf_ = per_stage_ ? &cforms_[stage].value : &shared_cf_;
   if (r_ == 0) {
     inherit(C, lo, hi, i0, mi, nullptr);
     return kOk;
   }
   // (the memos: A, C and Z on entry bit for bit the last call's -- M = A Z is then the one
   // in Ms_[stage], and its factorisations those the stage keeps)
-  const bool same_m = memo_entry(stage, Aeq, e0, me, C, i0, mi);
+  const bool same_m = closed_form_lookup(stage, Aeq, e0, me, C, i0, mi);
   if (!same_m) cf_->svd_valid = false;
   const auto Zr = Z_.leftCols(r_);
   // ---- damped closed form of the projected equalities
@@ -354,6 +300,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
       }
     }
   }
+  if (!same_m) closed_form_store(stage);  // (M and its factorisations: of these inputs)
   bool ok = feasible(xc);
   if (ok)
     for (int i = 0; i < mi && ok; ++i) ok = in_box(row_dot(C, i0 + i, xc), lo(i0 + i), hi(i0 + i));
@@ -572,7 +519,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
 
 int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   const int stage = static_cast<int>(meq_.size());
-  ts_ = stage_trial(stage);
+  enter_stage(stage);
   if (r_ == 0) return kOk;
   const auto Zr = Z_.leftCols(r_);
   auto zx = tmpr_.head(r_);
@@ -648,7 +595,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   if (calls_ > 0 && !per_stage_) allocate_per_stage();  // (the second call: once)
   ++calls_;
   shared_cf_.mqr.wy_applications = 0;
-  for (ClosedForm& f : cforms_) f.mqr.wy_applications = 0;
+  for (ClosedFormCache& f : cforms_) f.value.mqr.wy_applications = 0;
   fqr_.wy_applications = 0;
   timed_out_ = false;
   seeded_ = 0;
@@ -705,7 +652,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   }
   detail(7) = seeded_;
   stats_.wy_applications = fqr_.wy_applications + shared_cf_.mqr.wy_applications;
-  for (const ClosedForm& f : cforms_) stats_.wy_applications += f.mqr.wy_applications;
+  for (const ClosedFormCache& f : cforms_) stats_.wy_applications += f.value.mqr.wy_applications;
   x_out = x_;
   return kOk;
 }
