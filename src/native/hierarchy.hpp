@@ -184,6 +184,57 @@ class Hierarchy {
             const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw, MRef<Mat> stats,
             bool warm);
   int min_norm(MRef<Mat> stats, bool warm);
+  /// solve's arguments have the sizes of this structure and no NaN or wrong-sided infinity:
+  /// kOk, else kBadInput.
+  int check_input(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                  const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                  const CRef<Vec>& lb, const CRef<Vec>& ub, const MRef<Vec>& x_out,
+                  const MRef<Vec>& res_out, const MRef<Mat>& stats,
+                  const MRef<Vec>& detail) const;
+  /// A call's start: the caches' buffers at the second call, the counters reset, the
+  /// deadline set.
+  void start_call(double time_left);
+  /// The end check of x (finite, bounds, hard rows: check_point) and each level's value at
+  /// x with its worst deviation from the value it was frozen with (detail 5, 6).
+  int certify(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+              const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw, MRef<Vec> x_out,
+              MRef<Vec> res_out, MRef<Vec> detail);
+
+  /// A level's rows in the stacked arrays (references valid for one call) and where they are.
+  struct LevelRows {
+    const CRef<Mat>& Aeq;
+    const CRef<Vec>& beq;
+    const CRef<Mat>& C;
+    const CRef<Vec>& lo;
+    const CRef<Vec>& hi;
+    const CRef<Vec>& sw;
+    int stage, me, mi, e0, i0;  ///< its stage; equality and inequality rows, their first
+  };
+  /// What a level's closed form found (its step x + Z dz is in xc_).
+  struct LevelForm {
+    int rank = 0;         ///< numerical rank of M (independent of the frozen rows)
+    double tau = 0.0;     ///< the damping threshold (singular values under it are damped)
+    double scale = 0.0;   ///< |A|_F of the level's equalities (>= s_0 of M)
+    bool by_qr = false;   ///< from the pivoted QR of M (no damping applies), no SVD
+  };
+  /// The closed form: M = A Z (unless same_m: the closed-form cache's), the minimum-norm
+  /// damped least-squares step of M dz = e by the QR of M when it settles the rank, else the
+  /// SVD; xc_ = x + Z dz.
+  LevelForm level_closed_form(const LevelRows& d, bool same_m);
+  /// True when xc_ meets the bounds, the inherited rows and the level's rows: x moves there,
+  /// the level's rows are inherited and its optimal set frozen.
+  bool accept_closed_form(const LevelRows& d, const LevelForm& form);
+  /// The level's least squares in y = (z, w) into P_: its objective (M, or the R of its QR,
+  /// the damping rows), the inherited rows, the bounds and its moving rows with their slacks
+  /// (mov_; CZl_ = C Z). Returns the number of moving rows.
+  int level_problem(const LevelRows& d, const LevelForm& form);
+  /// The level is ill-conditioned or damped: its active set is finished to rounding.
+  bool ill_conditioned(const LevelRows& d, const LevelForm& form) const;
+  /// Marks in viol_ the moving rows the new x leaves violated (relative to their scale);
+  /// returns their number.
+  int violated_rows(const LevelRows& d);
+  /// Inherits the level's satisfied rows and freezes its optimal set (Z <- Z null(F)).
+  void freeze_level(const LevelRows& d, const LevelForm& form, int nviol);
 
   /// The closed form of a level's projected equalities M dz = e by a pivoted QR of M (tall)
   /// or M^T (wide), when the QR reveals M's numerical rank with a clear gap: the trailing
