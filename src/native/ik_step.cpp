@@ -152,7 +152,7 @@ struct Frame {
 };
 
 struct Kernel {
-  int kind = 0;
+  Kind kind = kPosition;
   nb::object task, eq;
   int frame = -1;
   std::vector<int> sel;  ///< per row: the axis (0..5) or, for a posture, the joint's v index
@@ -271,7 +271,7 @@ class IKStep {
         if (i < 0 || i >= nq_) throw nb::value_error("add_task: q index out of range");
     }
     Kernel k;
-    k.kind = kind;
+    k.kind = static_cast<Kind>(kind);
     k.task = std::move(task);
     k.eq = std::move(eq);
     k.frame = frame;
@@ -667,6 +667,17 @@ PyType_Slot ik_step_slots[] = {{Py_tp_traverse, reinterpret_cast<void*>(ik_step_
 }  // namespace
 
 void bind_ik_step(nb::module_& m) {
+  // the task kinds (qpcoord.kinematics.native_step.TaskKind names them alike)
+  nb::enum_<Kind>(m, "IKTaskKind", nb::is_arithmetic(), "The native IK step's task kernels.")
+      .value("POSITION", kPosition)
+      .value("FRAME_POSITION", kFramePosition)
+      .value("POSE", kPose)
+      .value("ORIENTATION", kOrientation)
+      .value("COM", kCom)
+      .value("POSTURE", kPosture)
+      .value("POSE_SPLIT", kPoseSplit)
+      .value("COM_BAND", kComBand)
+      .value("SUPPORT_POLYGON", kSupportPolygon);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
