@@ -73,7 +73,7 @@ VARIANTS = {
 #: :data:`VARIANTS`, or ``auto`` / unset for the highest-level build this CPU supports.
 ISA_ENV = "QPCOORD_NATIVE_ISA"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
-ABI_VERSION = 12
+ABI_VERSION = 14
 
 _INF = float("inf")
 
@@ -416,8 +416,10 @@ class NativeHierarchy:
             from the one it was frozen with by more than ``KKT_TOL`` relative to
             ``max(1, value, scale)``, ``scale`` the level's ``‖b‖ + ‖A‖_F·‖x‖`` (inequality
             rows: their nearer bound, weighted), the size of its value's rounding: the
-            lower levels left its optimal set by more than rounding). The counters of the
-            call's paths and caches: :attr:`counters`.
+            lower levels left its optimal set by more than rounding), ``stats`` (the
+            call's counters: a ``Stats`` whose attributes count how often each path and
+            cache was taken, e.g. ``freeze_memo_hits``, ``downdates``; they describe the
+            work, never the answer; a copy, as :attr:`counters`).
 
         Raises
         ------

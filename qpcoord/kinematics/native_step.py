@@ -40,6 +40,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
@@ -63,30 +64,45 @@ from .frame_tasks import (
 from .robot import Robot
 from .tasks import JointLimits, KinematicTask, Limit, PositionTask, PostureTask, VelocityLimits
 
-__all__ = ["NativeIKStep", "IKStepSpec", "KERNELS", "native_kind", "integration_plan"]
+__all__ = ["NativeIKStep", "IKStepSpec", "KERNELS", "TaskKind", "native_kind", "integration_plan"]
 
-#: Kernel codes of ``qpcoord._native.IKStep.add_task`` by task class (6:
-#: ``FrameTask(error="split")``; 7 and 8 are inequalities: ``src/native/support_kernels.hpp``).
+
+class TaskKind(IntEnum):
+    """The native IK step's task kernels (``qpcoord._native.IKTaskKind``, the same names and
+    values: ``src/native/ik_step.cpp``'s ``Kind``; ``ik_step/kernels.hxx`` evaluates each)."""
+
+    POSITION = 0
+    FRAME_POSITION = 1
+    POSE = 2
+    ORIENTATION = 3
+    COM = 4
+    POSTURE = 5
+    POSE_SPLIT = 6  #: ``FrameTask(error="split")``
+    COM_BAND = 7  #: an inequality (``src/native/support_kernels.hpp``)
+    SUPPORT_POLYGON = 8  #: an inequality (``src/native/support_kernels.hpp``)
+
+
+#: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
 KERNELS = {
-    PositionTask: 0,
-    FramePositionTask: 1,
-    FrameTask: 2,
-    OrientationTask: 3,
-    ComTask: 4,
-    PostureTask: 5,
-    ComBand: 7,
-    SupportPolygon: 8,
+    PositionTask: TaskKind.POSITION,
+    FramePositionTask: TaskKind.FRAME_POSITION,
+    FrameTask: TaskKind.POSE,
+    OrientationTask: TaskKind.ORIENTATION,
+    ComTask: TaskKind.COM,
+    PostureTask: TaskKind.POSTURE,
+    ComBand: TaskKind.COM_BAND,
+    SupportPolygon: TaskKind.SUPPORT_POLYGON,
 }
 #: The band kernels (Inequality rows).
-_BANDS = (7, 8)
+_BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON)
 
 _F64 = np.dtype(np.float64)
 _clock = time.perf_counter
 _jacobians = pin.computeJointJacobians
 
 
-def native_kind(task: KinematicTask) -> int | None:
-    """The native kernel of ``task`` (a code of :data:`KERNELS`), or ``None`` if its rows are
+def native_kind(task: KinematicTask) -> TaskKind | None:
+    """The native kernel of ``task`` (:data:`KERNELS`), or ``None`` if its rows are
     built by its Python ``_refresh`` (exact classes only: a subclass may change them)."""
     if task.lm_rows is not None:
         return None  # its damping rows read the error its Python refresh records
@@ -95,11 +111,12 @@ def native_kind(task: KinematicTask) -> int | None:
         return kind
     if kind is None or task.kind != "equality":
         return None
-    if kind == 0 and task.robot.frame_id is None:
+    if kind == TaskKind.POSITION and task.robot.frame_id is None:
         return None  # no default frame: its _refresh raises the robot's message
-    if kind == 2 and isinstance(task, FrameTask) and task.error == "split":
-        return 6
-    if kind == 5 and isinstance(task, PostureTask) and _posture_q_index(task) is None:
+    if kind == TaskKind.POSE and isinstance(task, FrameTask) and task.error == "split":
+        return TaskKind.POSE_SPLIT
+    posture = kind == TaskKind.POSTURE and isinstance(task, PostureTask)
+    if posture and _posture_q_index(task) is None:
         return None
     return kind
 
@@ -168,11 +185,11 @@ def integration_plan(robot: Any) -> list[int] | None:
     return plan
 
 
-def _selection(task: KinematicTask, kind: int) -> list[int]:
+def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
-    if kind == 0:
+    if kind == TaskKind.POSITION:
         return [int(r) for r in task.robot.rows]
-    if isinstance(task, PostureTask):  # kind 5
+    if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
     if kind in _BANDS:
         return list(range(task.task.shape[0]))
@@ -180,12 +197,12 @@ def _selection(task: KinematicTask, kind: int) -> list[int]:
     return [int(r) for r in task.selected_rows]
 
 
-def _frame_id(task: KinematicTask, kind: int) -> int:
+def _frame_id(task: KinematicTask, kind: TaskKind) -> int:
     """The frame a kernel of ``kind`` reads for ``task`` (its own, or its robot's default)."""
     fid: int | None
     if isinstance(task, (FramePositionTask, FrameTask, OrientationTask)):
         fid = task.frame_id
-    else:  # kind 0: a PositionTask, on a robot with a default frame (native_kind)
+    else:  # POSITION: a PositionTask, on a robot with a default frame (native_kind)
         fid = task.robot.frame_id
     assert fid is not None, kind
     return int(fid)
@@ -309,10 +326,10 @@ class NativeIKStep(NativeHierarchy):
                         self._python_tasks.append(owner)
                 else:
                     frame = -1
-                    if kind == 4 and not self.com:  # views: computed at each step
+                    if kind == TaskKind.COM and not self.com:  # views: computed at each step
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
-                    elif kind not in (4, 5):
+                    elif kind not in (TaskKind.COM, TaskKind.POSTURE):
                         fid = _frame_id(owner, kind)
                         if fid not in frames:
                             frames[fid] = self._add_frame(solver, fid)
@@ -330,7 +347,7 @@ class NativeIKStep(NativeHierarchy):
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     slots = []
-                    if isinstance(owner, SupportPolygon):  # kind 8
+                    if isinstance(owner, SupportPolygon):  # TaskKind.SUPPORT_POLYGON
                         for fid in owner.frame_ids:
                             if fid not in frames:
                                 frames[fid] = self._add_frame(solver, fid)
@@ -371,7 +388,7 @@ class NativeIKStep(NativeHierarchy):
             solver.set_weighted(float(spec.regularization), float(spec.weight_ratio), self.active)
             # a kernel that writes a task's A (all but a posture's) refactors at every step;
             # without one, the tasks' matrix_version decides (as NativeWeighted.run)
-            writes_a = any(native_kind(t) != 5 for t in self.kernel_tasks)
+            writes_a = any(native_kind(t) != TaskKind.POSTURE for t in self.kernel_tasks)
             self._watched = [] if writes_a else [t for B in blocks for t in (*B.eqs, *B.ineqs)]
             self._versions: list | None = None
         #: the copy of :attr:`q_next` the last ``step(..., integrate=True)`` returned with its
@@ -387,6 +404,13 @@ class NativeIKStep(NativeHierarchy):
             not (self._hybrid or self._python_limits or self._M is not None or self.com)
             and not self.weighted
         )
+
+    @property
+    def counters(self) -> Any:
+        """The last strict-hierarchy step's counters (a copy of the extension's ``Stats``, as
+        :attr:`NativeHierarchy.counters <qpcoord.core.native.NativeHierarchy.counters>`; the
+        info's ``stats``)."""
+        return self._solver.stats
 
     def _add_frame(self, solver: Any, fid: int) -> int:
         model, data = self._model, self._data

@@ -2,9 +2,13 @@
 #include <nanobind/eigen/dense.h>
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
 #include <array>
+#include <iterator>
+#include <new>
+#include <string>
 
 #include "cpu_isa.hpp"
 #include "hierarchy.hpp"
@@ -78,7 +82,8 @@ struct Bound : Hierarchy {
   nb::dict info(double kkt_tol) const {
     if (!bound) throw nb::value_error("info: call bind first");
     const Arr& st = a[10];
-    return info_keys.make(st.data(), static_cast<int>(st.shape(0)), a[11].data(), kkt_tol);
+    return info_keys.make(st.data(), static_cast<int>(st.shape(0)), a[11].data(), kkt_tol,
+                          stats());
   }
 
   /// refresh + run + (x copy, res copy, info) in one call; an int status when the solve
@@ -179,31 +184,70 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
               "Wall-clock limit of one solve in seconds (inf: none); the smaller of it and the "
               "call's time_left applies. Default inf.");
 
-  auto stats = nb::class_<qpcoord::Stats>(
-      m, "Stats", "Counters of one solve: how often each path and cache was taken.");
-#define QPCOORD_STAT(name, doc) stats.def_ro(#name, &qpcoord::Stats::name, doc)
-  QPCOORD_STAT(downdates, "Rows that left a working set by a QR downdate.");
-  QPCOORD_STAT(slack_steps, "Least-squares steps by the slack structure.");
-  QPCOORD_STAT(least_distance_steps, "Minimum-norm steps taken as a least-distance problem.");
-  QPCOORD_STAT(k_qr_reuses, "Least-squares steps that reused the projected objective's QR.");
-  QPCOORD_STAT(batch_rows, "Rows added at once to a working set at a degenerate point.");
-  QPCOORD_STAT(reduced_trials, "Warm trials of a level solved in z alone.");
-  QPCOORD_STAT(rz_factors, "RZ factorisations of [R11 R12].");
-  QPCOORD_STAT(qr_closed_forms, "Levels whose closed form came from a QR (no SVD).");
-  QPCOORD_STAT(small_rinvs, "QR closed forms bounded by back substitution.");
-  QPCOORD_STAT(zero_tail_compressions, "Levels compressed past an exactly zero trailing block.");
-  QPCOORD_STAT(identity_products, "Products with an identity Z skipped.");
-  QPCOORD_STAT(null_space_freezes, "Freezes onto null([R11 R12]) of the closed form's QR.");
-  QPCOORD_STAT(full_rank_freezes, "Levels that left no freedom (no freeze computed).");
-  QPCOORD_STAT(wide_freezes, "Freezes by a wide level's own reflectors.");
-  QPCOORD_STAT(dependent_drops, "Levels whose rows lost directions dependent on frozen rows.");
-  QPCOORD_STAT(gram_screens, "Dependence QRs skipped on a Cholesky proof.");
-  QPCOORD_STAT(freeze_memo_hits, "Freezes restored from the freeze cache.");
-  QPCOORD_STAT(closed_form_memo_hits, "Closed forms whose factorisation was reused.");
-  QPCOORD_STAT(trial_memo_hits, "Warm trials whose factorisations were reused.");
-  QPCOORD_STAT(bound_rows_memo_hits, "Stages whose bound rows came from the cache.");
-  QPCOORD_STAT(wy_applications, "Changes of Z by the compact WY form (builds with FMA).");
-#undef QPCOORD_STAT
+  // The counters by name: their attributes, equality (every counter equal) and repr (the
+  // non-zero ones) come from this one table.
+  using S = qpcoord::Stats;
+  struct Counter {
+    const char* name;
+    int S::*field;
+    const char* doc;
+  };
+  static constexpr Counter kCounters[] = {
+    {"downdates", &S::downdates, "Rows that left a working set by a QR downdate."},
+    {"slack_steps", &S::slack_steps, "Least-squares steps by the slack structure."},
+    {"least_distance_steps", &S::least_distance_steps, "Minimum-norm steps taken as a least-distance problem."},
+    {"k_qr_reuses", &S::k_qr_reuses, "Least-squares steps that reused the projected objective's QR."},
+    {"batch_rows", &S::batch_rows, "Rows added at once to a working set at a degenerate point."},
+    {"reduced_trials", &S::reduced_trials, "Warm trials of a level solved in z alone."},
+    {"rz_factors", &S::rz_factors, "RZ factorisations of [R11 R12]."},
+    {"qr_closed_forms", &S::qr_closed_forms, "Levels whose closed form came from a QR (no SVD)."},
+    {"small_rinvs", &S::small_rinvs, "QR closed forms bounded by back substitution."},
+    {"zero_tail_compressions", &S::zero_tail_compressions, "Levels compressed past an exactly zero trailing block."},
+    {"identity_products", &S::identity_products, "Products with an identity Z skipped."},
+    {"null_space_freezes", &S::null_space_freezes, "Freezes onto null([R11 R12]) of the closed form's QR."},
+    {"full_rank_freezes", &S::full_rank_freezes, "Levels that left no freedom (no freeze computed)."},
+    {"wide_freezes", &S::wide_freezes, "Freezes by a wide level's own reflectors."},
+    {"dependent_drops", &S::dependent_drops, "Levels whose rows lost directions dependent on frozen rows."},
+    {"gram_screens", &S::gram_screens, "Dependence QRs skipped on a Cholesky proof."},
+    {"freeze_memo_hits", &S::freeze_memo_hits, "Freezes restored from the freeze cache."},
+    {"closed_form_memo_hits", &S::closed_form_memo_hits, "Closed forms whose factorisation was reused."},
+    {"trial_memo_hits", &S::trial_memo_hits, "Warm trials whose factorisations were reused."},
+    {"bound_rows_memo_hits", &S::bound_rows_memo_hits, "Stages whose bound rows came from the cache."},
+    {"wy_applications", &S::wy_applications, "Changes of Z by the compact WY form (builds with FMA)."},
+  };
+  auto stats = nb::class_<S>(m, "Stats",
+                             "Counters of one solve: how often each path and cache was taken "
+                             "(they describe the work, never the answer).");
+  for (const Counter& c : kCounters) stats.def_ro(c.name, c.field, c.doc);
+  stats.def("__eq__", [](const S& a, const S& b) {
+    for (const Counter& c : kCounters)
+      if (a.*c.field != b.*c.field) return false;
+    return true;
+  }, nb::is_operator());
+  // pickled with the Solution whose info holds it: the counters in the table's order
+  stats.def("__getstate__", [](const S& s) {
+    nb::list out;
+    for (const Counter& c : kCounters) out.append(s.*c.field);
+    return nb::tuple(out);
+  });
+  stats.def("__setstate__", [](S& s, const nb::tuple& state) {
+    if (nb::len(state) != std::size(kCounters)) throw nb::value_error("Stats: wrong state size");
+    new (&s) S();
+    std::size_t i = 0;
+    for (const Counter& c : kCounters) s.*c.field = nb::cast<int>(state[i++]);
+  });
+  stats.def("__repr__", [](const S& s) {
+    std::string out = "Stats(";
+    const char* sep = "";
+    for (const Counter& c : kCounters)
+      if (s.*c.field != 0) {
+        out += sep;
+        out += c.name;
+        out += "=" + std::to_string(s.*c.field);
+        sep = ", ";
+      }
+    return out + ")";
+  });
 
   nb::class_<Bound>(m, "Hierarchy",
                     "Strict-hierarchy least squares of one stack structure (sizes fixed).",

@@ -34,6 +34,8 @@ constexpr int kSmallRinvMax = 16;
 // a level with a singular value under this fraction of the largest (or a damped one) is
 // finished with exact_ (as qpcoord.core.methods.hierarchical.ILL_CONDITIONED)
 constexpr double kIllConditioned = 1e-3;
+// room for a cache key's sizes and flags, in bytes (KeyedCache: 3 ints per block part)
+constexpr std::size_t kKeyHeader = 256;
 
 inline double widen_lo(double lo) { return lo - kFeasTol * std::max(1.0, std::abs(lo)); }
 inline double widen_hi(double hi) { return hi + kFeasTol * std::max(1.0, std::abs(hi)); }
@@ -41,62 +43,6 @@ inline bool in_box(double v, double lo, double hi) {
   return v >= widen_lo(lo) && v <= widen_hi(hi);
 }
 inline double finite_abs(double v) { return std::isfinite(v) ? std::abs(v) : 0.0; }
-
-/// a and b (the same shape) equal bit for bit (0.0 and -0.0 differ: the freeze cache restores
-/// outputs only for inputs that are the same bits)
-template <typename A, typename B>
-bool same_bits(const A& a, const B& b) {
-  if (a.rows() == 0) return true;  // (no memcmp of empty, possibly null, data)
-  for (Eigen::Index j = 0; j < a.cols(); ++j)
-    if (std::memcmp(a.col(j).data(), b.col(j).data(), sizeof(double) * a.rows()) != 0)
-      return false;
-  return true;
-}
-
-/// The caches' copy of a level's rows a (m x n, any strides): true when buf holds them bit
-/// for bit in the layout `layout` names (1 rows, 2 columns contiguous in a, 3 neither: entry
-/// by entry), else they are copied into buf (its first m n entries) in a's layout, layout set
-/// and false returned. One memcmp for a block of C-ordered rows (numpy's stacked arrays).
-template <typename R>
-bool same_rows_or_copy(const R& a, Vec& buf, int& layout) {
-  const Eigen::Index m = a.rows(), n = a.cols();
-  if (m == 0 || n == 0) {
-    const bool same = layout == 1;
-    layout = 1;
-    return same;
-  }
-  double* out = buf.data();
-  if (a.outerStride() != 1 && a.innerStride() != 1) {  // entry by entry
-    bool same = layout == 3;
-    for (Eigen::Index j = 0; same && j < n; ++j)
-      for (Eigen::Index i = 0; same && i < m; ++i) {
-        const double v = a(i, j);
-        same = std::memcmp(&v, out + j * m + i, sizeof v) == 0;
-      }
-    if (same) return true;
-    for (Eigen::Index j = 0; j < n; ++j)
-      for (Eigen::Index i = 0; i < m; ++i) out[j * m + i] = a(i, j);
-    layout = 3;
-    return false;
-  }
-  // runs of contiguous entries: the rows (1) or the columns (2); one run when they follow
-  // each other
-  const int now = (a.outerStride() == 1) ? 1 : 2;
-  Eigen::Index runs = (now == 1) ? m : n, len = (now == 1) ? n : m;
-  const Eigen::Index stride = (now == 1) ? a.innerStride() : a.outerStride();
-  if (stride == len) {
-    len *= runs;
-    runs = 1;
-  }
-  const std::size_t bytes = sizeof(double) * len;
-  bool same = layout == now;
-  for (Eigen::Index k = 0; same && k < runs; ++k)
-    same = std::memcmp(a.data() + k * stride, out + k * len, bytes) == 0;
-  if (same) return true;
-  for (Eigen::Index k = 0; k < runs; ++k) std::memcpy(out + k * len, a.data() + k * stride, bytes);
-  layout = now;
-  return false;
-}
 
 /// The ratio test of one row: the step length (>= 0; inf if it never blocks) at which a row
 /// whose product with the step is gp and with the current point gy reaches its bound, the
@@ -126,13 +72,14 @@ inline double bound_step(double gp, double gy, double lo, double hi, double tiny
 #include "hierarchy/least_squares.hxx"
 #include "hierarchy/warm_start.hxx"
 #include "hierarchy/closed_form.hxx"
+#include "hierarchy/level.hxx"
 
 namespace qpcoord {
 
 int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                           const CRef<Vec>& lo, const CRef<Vec>& hi, MRef<Mat> stats,
                           MRef<Vec> detail, bool warm) {
-  ts_ = stage_trial(0);
+  enter_stage(0);
   z_repeats_ = true;  // (the trial cache's gate in the hard phase; set again after it)
   x_.setZero();
   Z_.setIdentity();
@@ -273,203 +220,30 @@ int Hierarchy::hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef
 int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
                      const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
                      MRef<Mat> stats, bool warm) {
-  const int b = k + 1;
-  const int me = meq_[b], mi = min_[b], e0 = eq0_[b], i0 = in0_[b];
-  const int stage = b;
-  ts_ = stage_trial(stage);
-  cf_ = per_stage_ ? &cforms_[stage] : &shared_cf_;
-  if (r_ == 0) {
+  const int stage = k + 1;
+  const LevelRows d{Aeq, beq, C, lo, hi, sw, stage, meq_[stage], min_[stage], eq0_[stage],
+                    in0_[stage]};
+  const int mi = d.mi, i0 = d.i0;
+  enter_stage(stage);
+  cf_ = per_stage_ ? &cforms_[stage].value : &shared_cf_;
+  if (r_ == 0) {  // no freedom left: the level's rows are inherited as they are
     inherit(C, lo, hi, i0, mi, nullptr);
     return kOk;
   }
-  // (the memos: A, C and Z on entry bit for bit the last call's -- M = A Z is then the one
-  // in Ms_[stage], and its factorisations those the stage keeps)
-  const bool same_m = memo_entry(stage, Aeq, e0, me, C, i0, mi);
+  // ---- the damped closed form of the projected equalities M dz = e, M = A Z (M and its
+  // factorisations from the closed-form cache when A, C and Z on entry are the last call's)
+  const bool same_m = closed_form_lookup(stage, Aeq, d.e0, d.me, C, i0, mi);
   if (!same_m) cf_->svd_valid = false;
-  const auto Zr = Z_.leftCols(r_);
-  // ---- damped closed form of the projected equalities
-  int rank = 0;
-  double tau = 0.0;
-  // M = A Z in the left r columns of the stage's me x n buffer: no reallocation when r
-  // changes from call to call (e.g. as a level's active inequality rows change)
-  auto M = Ms_[stage].leftCols(r_);
-  auto& svd = svds_[stage];
-  auto e = e_.head(me);
-  auto xc = xc_.head(n_);
-  xc = x_;
-  bool by_qr = false;  // closed form from a QR of M (no damping can apply), no SVD
-  double M_scale = 0.0;  // |A|_F of the level's equalities (>= s_0 of M)
-  if (me) {
-    const auto A = Aeq.middleRows(e0, me);
-    if (z_identity_) {  // A I: the rows themselves
-      M = A;
-      ++stats_.identity_products;
-    } else if (!same_m) {
-      auto Ab = Ab_.topRows(me);
-      Ab = A;  // contiguous: the product below makes no temporary
-      M.noalias() = Ab * Zr;
-    }
-    e.noalias() = -A * x_;
-    e += beq.segment(e0, me);
-    const double scale = A.norm();
-    M_scale = scale;
-    // |M|_2 <= |M|_F <= |A|_F (Z orthonormal): the damping threshold and the rank tolerance
-    // of the SVD, max(s_0, scale) = scale, are known before any factorisation
-    tau = damping_ * scale;
-    auto dz = tmpr_.head(r_);
-    const double rank_tol = std::max(me, r_) * kEps * scale;
-    // the QR closed form only where sigma_rank(M) is well above kMovableTol * scale too: no
-    // direction of M can then be dependent on the frozen rows to within kMovableTol (the
-    // SVD path's independent_rank considers none), which the QR path does not test (without
-    // this floor, damping 0 solved rows dependent to 1e-10 exactly, x ~ 1e10, where the
-    // Python engine leaves them to the lower levels: tests/core/test_native_damped.py)
-    const double floor = std::max({tau, rank_tol, kMovableTol * scale});
-    const int qr_rank = qr_closed_form(M, e, rank_tol, floor, same_m, dz);
-    by_qr = qr_rank > 0;
-    if (by_qr) {
-      rank = qr_rank;
-      xc.noalias() += Zr * dz;
-    } else {
-      // thin V: its first rank columns are all a level uses (the damped step, the damping
-      // rows, the freeze); the null space of M comes from the freeze of V_rank
-      // the SVD of [M 0] (me x n, zero columns padded to the stage's fixed width): the same
-      // singular values and U; V's first rank columns are M's, padded with zero rows. A fixed
-      // size keeps JacobiSVD's workspace (no allocation when r changes)
-      if (!cf_->svd_valid) {  // (else the SVD of this M, the last call's)
-        Ms_[stage].rightCols(n_ - r_).setZero();
-        svd.compute(Ms_[stage], Eigen::ComputeThinU | Eigen::ComputeThinV);
-        cf_->svd_valid = true;
-      }
-      const Vec& s = svd.singularValues();
-      rank = numerical_rank(s, me, r_, scale);
-      rank = independent_rank(svd, Aeq, e0, me, rank, scale);
-      if (rank) {
-        tau = damping_ * std::max(s(0), scale);
-        auto ute = ute_.head(rank);
-        ute.noalias() = svd.matrixU().leftCols(rank).transpose() * e;
-        for (int i = 0; i < rank; ++i)
-          ute(i) *= (s(i) >= tau) ? 1.0 / s(i) : s(i) / (tau * tau);
-        dz.noalias() = svd.matrixV().topLeftCorner(r_, rank) * ute;
-        xc.noalias() += Zr * dz;
-      }
-    }
-  }
-  bool ok = feasible(xc);
-  if (ok)
-    for (int i = 0; i < mi && ok; ++i) ok = in_box(row_dot(C, i0 + i, xc), lo(i0 + i), hi(i0 + i));
-  if (ok) {
-    x_ = xc;
-    snap(x_);
-    inherit(C, lo, hi, i0, mi, nullptr);
-    if (by_qr && !cf_->wide && rank == r_) {  // M has full column rank: no freedom left
-      r_ = 0;
-      z_identity_ = false;
-    } else if (rank) {
-      // (the freeze cache: the same inputs as this level's last freeze: its outputs restored)
-      const FreezeKind kind = (by_qr && cf_->wide) ? FreezeKind::kWide
-                              : by_qr                ? FreezeKind::kNullSpace
-                                                     : FreezeKind::kGeneral;
-      if (!(memo_gate() && freeze_lookup(stage, kind, rank, mi, false))) {
-        if (kind == FreezeKind::kWide) {  // wide: null(M) = span(Qf(:, rank:)) of M^T's QR
-          freeze_wide(rank);
-        } else if (kind == FreezeKind::kNullSpace) {  // Z <- Z P null([R11 R12])
-          freeze_null_space(rank);
-        } else {  // Z <- Z null(B^T), B an orthonormal basis of M's row space
-          row_space_basis(svd, by_qr, rank, fqr_.matrix(r_, rank));
-          freeze(1.0);
-        }
-        freeze_computed(stage);
-      }
-    }
+  const LevelForm form = level_closed_form(d, same_m);
+  if (accept_closed_form(d, form)) {  // it meets every row: the level's optimum, frozen
     stats(stage, 2) = 1.0;
     return kOk;
   }
-  // ---- exact active-set least squares in y = (z, w)
-  mov_.clear();  // level rows z can move, with a finite side
-  // the level's rows projected, C Z, by one product (rows copied contiguous first: no
-  // temporary), used for the moving rows' test, their rows of P, the freeze of the violated
-  // rows and the carried projection of the rows the level leaves to the next
-  auto CZl = CZl_.topLeftCorner(mi, r_);
-  if (mi) {
-    auto Cl = Cl_.topRows(mi);
-    Cl = C.middleRows(i0, mi);
-    if (z_identity_) {  // C I: the rows themselves
-      CZl = Cl;
-      ++stats_.identity_products;
-    } else {
-      CZl.noalias() = Cl * Zr;
-    }
-  }
-  for (int i = 0; i < mi; ++i) {
-    const int g = i0 + i;
-    if (!std::isfinite(lo(g)) && !std::isfinite(hi(g))) continue;
-    const double cn = C.row(g).norm();
-    if (CZl.row(i).norm() > kMovableTol * cn) {
-      depn_(static_cast<int>(mov_.size())) = cn;  // the row's norm, for the drop below
-      mov_.push_back(i);
-    }
-  }
-  const int mv = static_cast<int>(mov_.size());
-  if (mv > 1) drop_dependent_directions(CZl, mov_, depn_.head(mv));
-  int ndamp = 0;
-  static const Vec kNoSvd;  // empty: no equality rows, or the QR path (no SVD this call)
-  const Vec& s = (me && !by_qr) ? svd.singularValues() : kNoSvd;
-  if (!by_qr)
-    for (int i = 0; i < rank; ++i)
-      if (s(i) < tau) ++ndamp;
-  const int cols = r_ + mv;
+  // ---- else the exact active-set least squares in y = (z, w), w the moving rows' slacks
+  const int mv = level_problem(d, form);
   LsqProblem& P = P_;
-  // a tall level factorised by the QR (M P = Qm [R; 0]): its objective rows compressed to
-  // R P^T and (Qm^T e)(0:r), exactly (an orthogonal transform; the rest of Qm^T e is
-  // constant in y, kept in dropped2)
-  // (the full QR may stop at a pivot column exactly zero: then the whole trailing block is
-  // checked to be exactly zero, its rows of R are zero and the compression stays exact)
-  bool full_r = by_qr && !cf_->wide && cf_->mqr.rank() == r_;
-  if (by_qr && !cf_->wide && !full_r && cf_->mqr.rows() == me && cf_->mqr.cols() == r_) {
-    const int t = cf_->mqr.rank();
-    full_r = (cf_->mqr.matrix().bottomRightCorner(me - t, r_ - t).array() == 0.0).all();
-    if (full_r) ++stats_.zero_tail_compressions;
-  }
-  const int qme = full_r ? r_ : me;
-  P.start(qme + ndamp + mv, cols);
-  if (qme < me) {
-    const auto Af = cf_->mqr.matrix();
-    for (int j = 0; j < r_; ++j) P.Q.col(cf_->mqr.perm(j)).head(j + 1) = Af.col(j).head(j + 1);
-    auto u = ute_.head(me);
-    u = e;
-    cf_->mqr.apply_qt(u);
-    P.c.head(r_) = u.head(r_);
-    P.dropped2 = u.tail(me - r_).squaredNorm();
-  } else if (me) {
-    P.Q.topLeftCorner(me, r_) = M;
-    P.c.head(me) = e;
-  }
-  {
-    int d = qme;
-    for (int i = 0; i < rank && ndamp; ++i)
-      if (s(i) < tau)
-        P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i).head(r_);
-  }
-  add_inherited_rows(P);
-  add_bound_rows(P, stage);
-  auto y = y_.head(cols);
-  auto g = rowbuf_.head(cols);
-  const int slack_g0 = P.rows;
-  for (int j = 0; j < mv; ++j) {
-    const int row = i0 + mov_[j];
-    const double v = C.row(row).dot(x_);
-    P.Q(qme + ndamp + j, r_ + j) = sw(row);
-    g.setZero();
-    g.head(r_) = CZl.row(mov_[j]).transpose();
-    g(r_ + j) = -1.0;
-    P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
-  }
-  if (P.rows == slack_g0 + mv && P.qrows == qme + ndamp + mv) {  // every level row kept
-    P.zcols = r_;
-    P.slacks = mv;
-    P.slack_q0 = qme + ndamp;
-    P.slack_g0 = slack_g0;
-  }
+  const auto Zr = Z_.leftCols(r_);
+  auto y = y_.head(r_ + mv);
   int iters = 0;
   bool hit = false;
   // the cold start: z = 0, each slack its row's violation at x
@@ -487,9 +261,7 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   // an ill-conditioned or damped level: finished to rounding (a point optimal to
   // settings.kkt_tol can be far from the optimum along a direction of curvature s^2 or
   // tau^2, and is frozen)
-  if (me && rank &&
-      (by_qr ? cf_->smin < kIllConditioned * M_scale
-             : s(rank - 1) < std::max(tau, kIllConditioned * s(0)))) {
+  if (ill_conditioned(d, form)) {
     exact_ = true;
     const bool done = active_set(P, y, W_, iters);
     exact_ = false;
@@ -501,78 +273,14 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
   xold_.head(n_) = x_;
   x_.noalias() += Zr * y.head(r_);
   snap(x_);
-  // ---- classify the level's rows on the new point; freeze
-  std::fill(viol_.begin(), viol_.begin() + mi, 0);
-  const double xscale =
-      std::max(xold_.head(n_).cwiseAbs().maxCoeff(), x_.cwiseAbs().maxCoeff());
-  int nviol = 0;
-  for (int j = 0; j < mv; ++j) {
-    const int i = mov_[j], row = i0 + i;
-    const double v = C.row(row).dot(x_);
-    const double gap = std::max(lo(row) - v, v - hi(row));
-    const double scale = std::max({finite_abs(lo(row)), finite_abs(hi(row)),
-                                   C.row(row).norm() * xscale});
-    if (gap > settings.violation_tol * scale + kAbsFloor) {
-      viol_[i] = 1;
-      ++nviol;
-    }
-  }
-  // the freeze: onto null([R11 R12]) from the closed form's own QR (a rank-deficient tall
-  // M and no violated row), else F^T = [V_rank, Z^T C_violated^T] (r x f) factorised,
-  // null(F) being what the level leaves free
-  const bool by_null_space = nviol == 0 && rank && by_qr && !cf_->wide && rank < r_;
-  // the level's equalities have rank r (M of full column rank) and no row is violated: F^T
-  // would be an orthonormal basis of the whole space, null(F) = {0}
-  const bool no_freedom = nviol == 0 && rank == r_;
-  // a wide M factorised by the QR of M^T, no row violated: null(M) spans the last r - rank
-  // columns of Qf, Z <- Z Qf by M^T's own reflectors (as a feasible closed form)
-  const bool by_wide = !no_freedom && nviol == 0 && rank && by_qr && cf_->wide;
-  const bool by_f = !by_null_space && !no_freedom && !by_wide;
-  const int k_before = k_;
-  inherit(C, lo, hi, i0, mi, &viol_);
-  if (kz_ == k_before) {  // the inherited rows' projections, at hand
-    for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
-    kz_ = k_;
-  }
-  if (no_freedom) {  // what freeze() ends with for F of rank r (carry_z drops Cin Z)
-    r_ = 0;
-    kz_ = 0;
-    z_identity_ = false;
-    ++stats_.full_rank_freezes;
-    return kOk;
-  }
-  if (by_wide) ++stats_.wide_freezes;
-  // (the freeze cache: the same inputs as this level's last freeze: its outputs restored; the
-  // violated rows are inputs of the general freeze only)
-  const FreezeKind kind = by_null_space ? FreezeKind::kNullSpace
-                          : by_wide     ? FreezeKind::kWide
-                                        : FreezeKind::kGeneral;
-  if (memo_gate() && freeze_lookup(stage, kind, rank, mi, by_f))
-    return kOk;
-  if (by_null_space) {
-    freeze_null_space(rank);
-  } else if (by_wide) {
-    freeze_wide(rank);
-  } else {
-    // F^T = [B, (C_violated Z)^T], B an orthonormal basis of M's row space
-    MapMat Ft = fqr_.matrix(r_, rank + nviol);
-    row_space_basis(svd, by_qr, rank, Ft.leftCols(rank));
-    int f = rank;
-    double fro = 0.0;
-    for (int i = 0; i < mi; ++i) {
-      if (!viol_[i]) continue;
-      Ft.col(f++) = CZl.row(i).transpose();
-      fro += C.row(i0 + i).squaredNorm();
-    }
-    freeze(std::max(1.0, std::sqrt(fro)));
-  }
-  freeze_computed(stage);
+  // ---- the rows its optimum leaves violated; the freeze of its optimal set
+  freeze_level(d, form, violated_rows(d));
   return kOk;
 }
 
 int Hierarchy::min_norm(MRef<Mat> stats, bool warm) {
   const int stage = static_cast<int>(meq_.size());
-  ts_ = stage_trial(stage);
+  enter_stage(stage);
   if (r_ == 0) return kOk;
   const auto Zr = Z_.leftCols(r_);
   auto zx = tmpr_.head(r_);
@@ -624,10 +332,11 @@ double Hierarchy::level_value(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq,
                               scale);
 }
 
-int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
-                     const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
-                     const CRef<Vec>& lb, const CRef<Vec>& ub, bool warm, double time_left,
-                     MRef<Vec> x_out, MRef<Vec> res_out, MRef<Mat> stats, MRef<Vec> detail) {
+int Hierarchy::check_input(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                           const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                           const CRef<Vec>& lb, const CRef<Vec>& ub, const MRef<Vec>& x_out,
+                           const MRef<Vec>& res_out, const MRef<Mat>& stats,
+                           const MRef<Vec>& detail) const {
   const int L = num_levels();
   const int me = eq0_.back() + meq_.back();
   const int mi = in0_.back() + min_.back();
@@ -643,12 +352,14 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     if (lo(i) == kInf || hi(i) == -kInf) return kBadInput;
   for (int j = 0; j < n_; ++j)
     if (lb(j) == kInf || ub(j) == -kInf) return kBadInput;
-  stats.setZero();
-  detail.setZero();
+  return kOk;
+}
+
+void Hierarchy::start_call(double time_left) {
   if (calls_ > 0 && !per_stage_) allocate_per_stage();  // (the second call: once)
   ++calls_;
   shared_cf_.mqr.wy_applications = 0;
-  for (ClosedForm& f : cforms_) f.mqr.wy_applications = 0;
+  for (ClosedFormCache& f : cforms_) f.value.mqr.wy_applications = 0;
   fqr_.wy_applications = 0;
   timed_out_ = false;
   seeded_ = 0;
@@ -662,24 +373,11 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
     deadline_ = std::chrono::steady_clock::now() +
                 std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                     std::chrono::duration<double>(std::max(limit, 0.0)));
-  lb_ = lb;
-  ub_ = ub;
-  int st = hard_phase(Aeq, beq, C, lo, hi, stats, detail, warm);
-  z_repeats_ = true;  // (the freeze cache: the first freeze's lookup compares Z itself)
-  if (st != kOk) return st;
-  for (int k = 0; k < L; ++k) {
-    st = level(k, Aeq, beq, C, lo, hi, sw, stats, warm);
-    if (st != kOk) {
-      detail(2) = k + 1;
-      return st;
-    }
-    frozen_value_(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_);
-  }
-  st = min_norm(stats, warm);
-  if (st != kOk) {
-    detail(2) = L + 1;
-    return st;
-  }
+}
+
+int Hierarchy::certify(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                       const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                       MRef<Vec> x_out, MRef<Vec> res_out, MRef<Vec> detail) {
   if (!x_.allFinite()) return kNonFinite;
   // the check of every returned x (as Stack._check): bounds, hard equalities, hard rows
   double where = 0.0;
@@ -693,7 +391,7 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
   // each level keeps the value it was frozen with (lower levels move in its optimal set
   // only): the worst deviation, relative to max(1, the frozen value, the level's scale at x,
   // |b| + |A|_F |x|: the size of its rounding), is reported (Python: status "inaccurate")
-  for (int k = 0; k < L; ++k) {
+  for (int k = 0; k < num_levels(); ++k) {
     double scale = 0.0;
     res_out(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_, &scale);
     const double dev =
@@ -703,9 +401,46 @@ int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>
       detail(6) = k;
     }
   }
+  return kOk;
+}
+
+int Hierarchy::solve(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                     const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                     const CRef<Vec>& lb, const CRef<Vec>& ub, bool warm, double time_left,
+                     MRef<Vec> x_out, MRef<Vec> res_out, MRef<Mat> stats, MRef<Vec> detail) {
+  if (check_input(Aeq, beq, C, lo, hi, sw, lb, ub, x_out, res_out, stats, detail) != kOk)
+    return kBadInput;
+  stats.setZero();
+  detail.setZero();
+  start_call(time_left);
+  lb_ = lb;
+  ub_ = ub;
+  // the hard phase: x meets the bounds and the hard rows, Z spans the hard equalities' null space
+  int st = hard_phase(Aeq, beq, C, lo, hi, stats, detail, warm);
+  z_repeats_ = true;  // (the freeze cache: the first freeze's lookup compares Z itself)
+  if (st != kOk) return st;
+  // the levels, in order: each moves x in Z's span to its optimum and freezes its optimal set
+  const int L = num_levels();
+  for (int k = 0; k < L; ++k) {
+    st = level(k, Aeq, beq, C, lo, hi, sw, stats, warm);
+    if (st != kOk) {
+      detail(2) = k + 1;
+      return st;
+    }
+    frozen_value_(k) = level_value(k, Aeq, beq, C, lo, hi, sw, x_);
+  }
+  // the point of least norm in the last optimal set
+  st = min_norm(stats, warm);
+  if (st != kOk) {
+    detail(2) = L + 1;
+    return st;
+  }
+  // the end check of x, each level's value and its deviation from its frozen value
+  st = certify(Aeq, beq, C, lo, hi, sw, x_out, res_out, detail);
+  if (st != kOk) return st;
   detail(7) = seeded_;
   stats_.wy_applications = fqr_.wy_applications + shared_cf_.mqr.wy_applications;
-  for (const ClosedForm& f : cforms_) stats_.wy_applications += f.mqr.wy_applications;
+  for (const ClosedFormCache& f : cforms_) stats_.wy_applications += f.value.mqr.wy_applications;
   x_out = x_;
   return kOk;
 }

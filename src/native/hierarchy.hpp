@@ -26,12 +26,13 @@
 #include <vector>
 
 #include "dense.hpp"
+#include "keyed_cache.hpp"
 
 namespace qpcoord {
 
 /// The extension's interface version (qpcoord/core/native.py refuses a module of another):
 /// raised whenever a binding changes.
-inline constexpr int kAbiVersion = 12;
+inline constexpr int kAbiVersion = 14;
 
 /// The SVD of the closed forms (used when the QR closed form does not apply: damping active
 /// or a rank the QR cannot settle): Eigen's one-sided Jacobi SVD with its QR preconditioner,
@@ -183,6 +184,57 @@ class Hierarchy {
             const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw, MRef<Mat> stats,
             bool warm);
   int min_norm(MRef<Mat> stats, bool warm);
+  /// solve's arguments have the sizes of this structure and no NaN or wrong-sided infinity:
+  /// kOk, else kBadInput.
+  int check_input(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+                  const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw,
+                  const CRef<Vec>& lb, const CRef<Vec>& ub, const MRef<Vec>& x_out,
+                  const MRef<Vec>& res_out, const MRef<Mat>& stats,
+                  const MRef<Vec>& detail) const;
+  /// A call's start: the caches' buffers at the second call, the counters reset, the
+  /// deadline set.
+  void start_call(double time_left);
+  /// The end check of x (finite, bounds, hard rows: check_point) and each level's value at
+  /// x with its worst deviation from the value it was frozen with (detail 5, 6).
+  int certify(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
+              const CRef<Vec>& lo, const CRef<Vec>& hi, const CRef<Vec>& sw, MRef<Vec> x_out,
+              MRef<Vec> res_out, MRef<Vec> detail);
+
+  /// A level's rows in the stacked arrays (references valid for one call) and where they are.
+  struct LevelRows {
+    const CRef<Mat>& Aeq;
+    const CRef<Vec>& beq;
+    const CRef<Mat>& C;
+    const CRef<Vec>& lo;
+    const CRef<Vec>& hi;
+    const CRef<Vec>& sw;
+    int stage, me, mi, e0, i0;  ///< its stage; equality and inequality rows, their first
+  };
+  /// What a level's closed form found (its step x + Z dz is in xc_).
+  struct LevelForm {
+    int rank = 0;         ///< numerical rank of M (independent of the frozen rows)
+    double tau = 0.0;     ///< the damping threshold (singular values under it are damped)
+    double scale = 0.0;   ///< |A|_F of the level's equalities (>= s_0 of M)
+    bool by_qr = false;   ///< from the pivoted QR of M (no damping applies), no SVD
+  };
+  /// The closed form: M = A Z (unless same_m: the closed-form cache's), the minimum-norm
+  /// damped least-squares step of M dz = e by the QR of M when it settles the rank, else the
+  /// SVD; xc_ = x + Z dz.
+  LevelForm level_closed_form(const LevelRows& d, bool same_m);
+  /// True when xc_ meets the bounds, the inherited rows and the level's rows: x moves there,
+  /// the level's rows are inherited and its optimal set frozen.
+  bool accept_closed_form(const LevelRows& d, const LevelForm& form);
+  /// The level's least squares in y = (z, w) into P_: its objective (M, or the R of its QR,
+  /// the damping rows), the inherited rows, the bounds and its moving rows with their slacks
+  /// (mov_; CZl_ = C Z). Returns the number of moving rows.
+  int level_problem(const LevelRows& d, const LevelForm& form);
+  /// The level is ill-conditioned or damped: its active set is finished to rounding.
+  bool ill_conditioned(const LevelRows& d, const LevelForm& form) const;
+  /// Marks in viol_ the moving rows the new x leaves violated (relative to their scale);
+  /// returns their number.
+  int violated_rows(const LevelRows& d);
+  /// Inherits the level's satisfied rows and freezes its optimal set (Z <- Z null(F)).
+  void freeze_level(const LevelRows& d, const LevelForm& form, int nviol);
 
   /// The closed form of a level's projected equalities M dz = e by a pivoted QR of M (tall)
   /// or M^T (wide), when the QR reveals M's numerical rank with a clear gap: the trailing
@@ -198,11 +250,16 @@ class Hierarchy {
   /// qr_closed_form's factorisations (cf_: mqr, and tqr or trz when M is rank-deficient):
   /// the rank, or -1 (no clear gap: the SVD).
   int qr_factor(const Eigen::Ref<const Mat>& M, double tol, double floor);
-  /// The memos' entry test of level stage: true when its rows A and C and Z on entry are bit
-  /// for bit those of its last call (then M = A Z is the one in Ms_); keeps what differs.
-  /// False on the first call and once a freeze of this call was computed (memo_gate).
-  bool memo_entry(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C, int i0,
-                  int mi);
+  /// The closed-form cache's lookup at level stage's entry: true when its rows A and C and
+  /// Z are bit for bit those the stage's M (Ms_) and its factorisations were computed from.
+  /// The rows are compared first, Z only once they repeat (a changed Jacobian differs at its
+  /// first entries: then Z is not recorded). False on the first call and below a freeze
+  /// computed in this call (memo_gate).
+  bool closed_form_lookup(int stage, const CRef<Mat>& Aeq, int e0, int me, const CRef<Mat>& C,
+                          int i0, int mi);
+  /// M = A Z was computed from the inputs closed_form_lookup gave: the entry holds it (when
+  /// the lookup gave them all).
+  void closed_form_store(int stage);
   /// An orthonormal basis of M's row space (r x rank) into out: V_rank of the SVD, or from
   /// the QR of qr_closed_form (rank-deficient tall M: the QR of [R11 R12]^T in the stage's tqr).
   void row_space_basis(const Svd& svd, bool by_qr, int rank,
@@ -218,15 +275,14 @@ class Hierarchy {
   /// The bounds as rows of P (Z's rows scaled to unit norm; the bound-rows cache: copied from
   /// the stage's last call when its Z repeats).
   void add_bound_rows(LsqProblem& P, int stage);
-  /// The bound-rows cache: a stage's bound rows as add_bound_rows wrote them (every variable's
-  /// row kept), keyed on the Z (its first r columns) they were projected from.
-  struct BoundRowsMemo {
-    bool valid = false;
-    int r = -1;
-    Mat Z, G;  ///< the key Z (n x r) and the scaled rows (n x r)
-    Vec nrm;   ///< each row's norm before scaling (the bounds are scaled by it)
+  /// The bound-rows cache's value: a stage's bound rows as add_bound_rows wrote them (every
+  /// variable's row kept); its key: r and the Z (n x r) they were projected from.
+  struct BoundRows {
+    Mat G;    ///< the scaled rows (n x r)
+    Vec nrm;  ///< each row's norm before scaling (the bounds are scaled by it)
   };
-  std::vector<BoundRowsMemo> bound_memos_;  ///< per stage (levels and the minimum-norm step)
+  using BoundRowsCache = KeyedCache<BoundRows, Stats, &Stats::bound_rows_memo_hits>;
+  std::vector<BoundRowsCache> bound_rows_;  ///< per stage (levels and the minimum-norm step)
   /// Apply a change of Z (Z <- Z Qf of qr, its first rank columns dropped) to the carried
   /// projection of the inherited rows; call before r_ changes.
   void carry_z(PivotedQR& qr, int rank);
@@ -253,21 +309,22 @@ class Hierarchy {
   /// whether the level ended by its closed form or its active set): Z <- Z Qf by a wide M^T's
   /// reflectors, Z <- Z P N from the QR of [R11 R12], or the QR of F^T = [B, violated rows].
   enum class FreezeKind : int8_t { kWide, kNullSpace, kGeneral };
-  /// The freeze cache: true when the stage's stored freeze had these inputs (memo_entry found the
-  /// rows and Z on entry the same; kind, rank, Cin Z now, the violated rows when
+  /// The freeze cache: true when the stage's stored freeze had these inputs (the level's
+  /// entry held: rows and Z on entry the same; kind, rank, Cin Z now, the violated rows when
   /// with_viol): Z_, r_, z_identity_, kz_ and Cin Z are then set to its outputs. Else false;
-  /// when the rows repeat, the other inputs are taken (the outputs by freeze_computed).
+  /// when the rows repeat the inputs are recorded (the outputs by freeze_computed).
   bool freeze_lookup(int stage, FreezeKind kind, int rank, int mi, bool with_viol);
-  /// A freeze was computed: its outputs stored with freeze_lookup's inputs (when it took
+  /// A freeze was computed: its outputs stored with freeze_lookup's inputs (when it recorded
   /// them); the lower levels look nothing up in this call (their Z differs from the previous
   /// call's: a comparison and copies for nothing, the IK's case).
   void freeze_computed(int stage);
-  /// a memo on, its buffers allocated, and no freeze of this call computed so far (Z may
-  /// repeat the last call's)
+  /// the caches on (their buffers allocated), and no freeze of this call computed so far (Z
+  /// may repeat the last call's)
   bool memo_gate() const {
     return per_stage_ && z_repeats_;
   }
   bool z_repeats_ = false;
+  bool entry_rows_same_ = false;  ///< closed_form_lookup of the level being solved: A, C repeat
   void snap(Vec& x) const;
 
   /// Exact primal active set from the feasible y; W: 0 free, -1 lower, +1 upper, 2 equality.
@@ -346,11 +403,10 @@ class Hierarchy {
   void factor_trial(const LsqProblem& P, const std::vector<int8_t>& W);
   /// factor_trial's factorisations, computed (the trial cache missed).
   void factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W);
-  /// The trial cache: true when the stage's TrialState is intact and keyed by P's working rows of
-  /// W and its objective, bit for bit (then widx_ and the flags are set as factor_trial
-  /// leaves them); trial_keep stores the key of the trial just factorised.
-  bool trial_restore(const LsqProblem& P, const std::vector<int8_t>& W);
-  void trial_keep(const LsqProblem& P);
+  /// The trial cache: true when the stage's trial state holds the factorisations of P's
+  /// working rows of W and its objective, bit for bit (then widx_ and the flags are set as
+  /// factor_trial leaves them); else the inputs are recorded (factor_trial stores).
+  bool trial_lookup(const LsqProblem& P, const std::vector<int8_t>& W);
   /// The minimum-residual step in null(G_w) from y (factor_working first); res_ = Q y - c.
   void ls_step(const LsqProblem& P, const Eigen::Ref<const Vec>& y, Eigen::Ref<Vec> step);
   /// Form the projected objective K = Q N of the working set's QR and factorise it for
@@ -429,27 +485,29 @@ class Hierarchy {
     KMode k_mode = KMode::kZero;  ///< how that K was solved: negligible, by K^T, by K's QR
     int k_rank = 0;               ///< numerical rank of that K (kTall)
     bool k_rz = false;            ///< that K's minimum-norm step by krz (else cqr)
-    /// The trial cache: wqr, Qt (and K when k_valid) are the factorisations factor_trial made of
-    /// the key below, nothing having changed them since
-    bool intact = false;
-    int key_k = -1, key_qrows = -1;  ///< the trial's P.cols, P.qrows
-    bool key_unit_q = false, key_qt_stale = false;
-    std::array<int, 4> key_slacks{};  ///< P.slacks, zcols, slack_q0, slack_g0 (ls_step's path)
-    std::vector<int> key_widx;  ///< its working rows
-    Vec key_G, key_Q;           ///< their G_w (kw x k) and the objective Q (qrows x k)
-    /// Buffers for problems of up to cols columns, grows rows and qrows objective rows
-    /// (keys: the trial cache's too).
-    void reserve(int cols, int grows, int qrows, bool keys);
+    /// qt_stale_ as factor_trial left it (the trial cache restores it with the rest)
+    bool qt_stale = true;
+    /// Buffers for problems of up to cols columns, grows rows and qrows objective rows.
+    void reserve(int cols, int grows, int qrows);
   };
-  std::vector<TrialState> trials_;  ///< per stage (from the second call: allocate_per_stage)
-  TrialState shared_trial_;         ///< every stage's in the first call (a one-shot solve)
-  TrialState* ts_ = nullptr;        ///< the stage being solved's
-  bool per_stage_ = false;          ///< trials_, cforms_ and memos_ allocated and in use
+  /// The trial cache: its value the factorisations (wqr, Qt, and K when k_valid) factor_trial
+  /// made of a working set, nothing having changed them since (every update drops it); its
+  /// key: the working rows of G and the objective Q, the sizes and the slack layout.
+  using TrialCache = KeyedCache<TrialState, Stats, &Stats::trial_memo_hits>;
+  std::vector<TrialCache> trials_;  ///< per stage (from the second call: allocate_per_stage)
+  TrialCache shared_trial_;         ///< every stage's in the first call (a one-shot solve)
+  TrialCache* tc_ = nullptr;        ///< the stage being solved's
+  TrialState* ts_ = nullptr;        ///< its value
+  bool per_stage_ = false;          ///< the per-stage caches allocated and in use
   long calls_ = 0;                  ///< solve calls so far
   /// The memos' per-stage factorisations and stored inputs, allocated at the second call
   /// (the first, and a one-shot solve, share one set; nothing allocates after the second).
   void allocate_per_stage();
-  TrialState* stage_trial(int stage) { return per_stage_ ? &trials_[stage] : &shared_trial_; }
+  /// tc_ and ts_ set to the stage's trial state
+  void enter_stage(int stage) {
+    tc_ = per_stage_ ? &trials_[stage] : &shared_trial_;
+    ts_ = &tc_->value;
+  }
   /// A level's closed form from the QR of M = A Z (one per stage): the closed-form cache finds
   /// the factorisation of the level's M of the previous call there when A and Z repeat.
   struct ClosedForm {
@@ -461,15 +519,18 @@ class Hierarchy {
     bool wide = false;   ///< M^T factorised (me <= r)
     double smin = 0.0;   ///< lower bound 1/|R^-1|_F of sigma_min(M)
     int rank = -1;       ///< qr_factor's result (-1: the SVD path)
-    /// The closed-form cache: the stage's M (Ms_) is the one factorised here (and, svd_valid,
-    /// by its SVD), with these tolerances and switches
-    bool valid = false, svd_valid = false;
+    /// mqr holds the factorisation of the stage's M (Ms_), svd_valid its SVD (svds_)
+    bool factored = false, svd_valid = false;
     /// Buffers for a level of me equality rows in n variables, capacity inherited rows.
     void reserve(int n, int me, int capacity);
   };
-  std::vector<ClosedForm> cforms_;  ///< per stage (from the second call)
-  ClosedForm shared_cf_;            ///< every level's in the first call
-  ClosedForm* cf_ = nullptr;        ///< the level being solved's
+  /// The closed-form cache: its value M = A Z (in Ms_) and its factorisations; its key: the
+  /// level's rows A and C, r, z_identity_ and Z on entry (A and Z make M and, with A, the
+  /// tolerances: functions of |A|_F, r and the damping)
+  using ClosedFormCache = KeyedCache<ClosedForm, Stats, &Stats::closed_form_memo_hits>;
+  std::vector<ClosedFormCache> cforms_;  ///< per stage (from the second call)
+  ClosedForm shared_cf_;                 ///< every level's in the first call
+  ClosedForm* cf_ = nullptr;             ///< the level being solved's
   PivotedQR fqr_;  ///< F^T of a freeze (r x f)
   PivotedQR sqr_;  ///< slack_step: the transposed system on z
   /// the stage being solved has an objective Q with orthonormal columns (the minimum-norm
@@ -502,23 +563,17 @@ class Hierarchy {
   Mat Ztmp_;
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
-  /// The freeze cache: one stage's last freeze, its inputs and its outputs (buffers of fixed
-  /// size, allocated by allocate_per_stage)
-  struct FreezeMemo {
-    bool valid = false;     ///< a whole freeze stored: inputs and outputs
-    bool pending = false;   ///< inputs taken by the lookup, outputs due from freeze_computed
-    FreezeKind kind = FreezeKind::kGeneral;
-    int rank = 0, r_in = 0, kz_in = 0, r_out = 0, kz_out = 0;
-    bool zid_in = false, zid_out = false;
-    Mat Z_in, Z_out, CinZ_in, CinZ_out;
-    Vec A, C;  ///< the level's rows at the last entry, in their layout (same_rows_or_copy)
-    bool rows_same = false;  ///< memo_entry of this call: A and C repeat
-    bool z_same = false;     ///< memo_entry of this call: A, C and Z repeat
-    bool zm_valid = false;   ///< Z_in, r_in, zid_in hold the last entry's Z
-    int a_layout = 0, c_layout = 0;  ///< 0: nothing stored yet
-    std::vector<char> viol;
+  /// The freeze cache's value: a level's Z, r, z_identity_ and Cin Z after its freeze; its
+  /// key: the freeze's kind and rank, Cin Z on entry, the violated rows -- and, through the
+  /// closed-form cache's entry test that must hold, the level's rows and Z on entry.
+  struct Frozen {
+    int r = 0, kz = 0;
+    bool zid = false;
+    Mat Z, CinZ;
   };
-  std::vector<FreezeMemo> memos_;  ///< per level (the freeze cache)
+  using FreezeCache = KeyedCache<Frozen, Stats, &Stats::freeze_memo_hits>;
+  std::vector<FreezeCache> freezes_;  ///< per level
+  std::vector<char> freeze_pending_;  ///< per level: freeze_lookup recorded, outputs due
   Mat nsp_;  ///< freeze_null_space: P N (r x (r - rank))
   Mat cztmp_;  ///< freeze_null_space: the product Cin Z P N before it is copied back
   Mat rinv_;       ///< R^-1 of the stage's mqr (a bound on M's smallest singular value)

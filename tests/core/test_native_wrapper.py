@@ -144,10 +144,11 @@ def test_info_equals_its_definition_on_moving_and_unchanged_steps():
             pos.update(b=2.0 * np.sin(0.7 * step + np.arange(4)))
         sol = s.solve(engine="native")  # its info built by the native step (Hierarchy.info)
         nh = s._native
-        assert sol.info == info_reference(nh.stats, nh.detail, 3)
+        assert sol.info == info_reference(nh.stats, nh.detail, 3, nh.counters)
         for old in seen:
             assert sol.info["active_set_iterations"] is not old["active_set_iterations"]
             assert sol.info["closed_form_levels"] is not old["closed_form_levels"]
+            assert sol.info["stats"] is not old["stats"]  # each call's own counters
         sol.info["active_set_iterations"].append(-1)  # a caller's edit stays its own
         sol.info["closed_form_levels"].append(-1)
         seen.append(sol.info)
@@ -298,7 +299,7 @@ def test_the_native_info_equals_the_python_info_when_uncertified():
     nh.detail[5] = 10 * KKT_TOL  # as a call would write it: level 0 moved by 10 x KKT_TOL
     nh.detail[6] = 0
     info = nh._solver.info(KKT_TOL)
-    assert info == info_reference(nh.stats, nh.detail, 1)
+    assert info == info_reference(nh.stats, nh.detail, 1, nh.counters)
     assert info["uncertified"] == [(0, 10 * KKT_TOL)]
 
 
@@ -317,3 +318,18 @@ def test_a_stack_in_a_cycle_through_its_native_solver_is_collected():
     del s, t
     gc.collect()
     assert alive() is None
+
+
+@needs_native
+def test_the_info_stats_pickle_and_name_the_counters_taken():
+    """``info["stats"]`` (the call's counters) survives pickling equal and its repr names the
+    non-zero counters: an unchanged re-solve takes the caches."""
+    import pickle
+
+    s = qc.Stack([qc.Equality(np.eye(3), [0.1, 2.0, 0.3])], bounds=qc.Bounds(-1.0, 1.0))
+    for _ in range(2):  # (the caches are allocated at the second call, used from the third)
+        s.solve(engine="native")
+    stats = s.solve(engine="native").info["stats"]
+    assert pickle.loads(pickle.dumps(stats)) == stats
+    assert stats.trial_memo_hits > 0 and "trial_memo_hits=" in repr(stats)
+    assert "downdates" not in repr(stats) and stats.downdates == 0

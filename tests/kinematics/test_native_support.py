@@ -12,7 +12,7 @@ from test_native_step import needs_native, run_counting_malloc
 import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.kinematics.frame_tasks import ComBand, SupportPolygon
-from qpcoord.kinematics.native_step import native_kind
+from qpcoord.kinematics.native_step import TaskKind, native_kind
 from qpcoord.robots import absolute_angle_map, planar_chain
 
 DT = 1e-3
@@ -118,7 +118,8 @@ def test_native_band_rows_equal_the_python_refresh(request, name, kind):
     ikn = qc.IK(robot, [tn, qc.PostureTask(robot, q, gain=2.0)], DT, limits=None, engine="native")
     ikp = qc.IK(robot, [tp, qc.PostureTask(robot, q, gain=2.0)], DT, limits=None, engine="python")
     band = tn[0]
-    assert native_kind(band) in (7, 8) and band in ikn._native.kernel_tasks
+    assert native_kind(band) in (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON)
+    assert band in ikn._native.kernel_tasks
     assert not ikn._native._hybrid
     for step in range(3):
         qs = q if step == 0 else robot.integrate(q, 0.2 * np.sin(np.arange(robot.nv) + step), 0.1)
@@ -453,3 +454,14 @@ def test_the_native_band_kernels_do_not_allocate(tmp_path, talos, build):
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
     assert counts == {"variant": build, "bands": "0", "whole": "0"}, out
+
+
+@needs_native
+def test_the_task_kinds_are_the_extensions():
+    """``TaskKind`` names the extension's task kernels with the same values (one kind, one
+    kernel)."""
+    ext = native.load().IKTaskKind
+    assert {k.name: int(k) for k in TaskKind} == {
+        name: int(getattr(ext, name)) for name in TaskKind.__members__
+    }
+    assert len(ext.__members__) == len(TaskKind)

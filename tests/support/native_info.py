@@ -8,8 +8,9 @@ import numpy as np
 from qpcoord.core.polish import KKT_TOL
 
 
-def info_reference(stats: np.ndarray, detail: np.ndarray, levels: int) -> dict:
-    """The info dict by its definition (the Python engine's counts), from the arrays."""
+def info_reference(stats: np.ndarray, detail: np.ndarray, levels: int, counters) -> dict:
+    """The info dict by its definition (the Python engine's counts), from the arrays, and the
+    solver's counters (its ``Stats``: ``NativeHierarchy.counters``)."""
     its = [int(v) for v in stats[:, 0]]
     stages = range(stats.shape[0])
     dev = float(detail[5])
@@ -23,4 +24,5 @@ def info_reference(stats: np.ndarray, detail: np.ndarray, levels: int) -> dict:
         "closed_form_levels": [k - 1 for k in stages if stats[k, 2] and 1 <= k <= levels],
         "qp_calls": sum(1 for k in stages if stats[k, 0] or stats[k, 1]),
         "uncertified": [(int(detail[6]), dev)] if dev > KKT_TOL else [],
+        "stats": counters,
     }

@@ -85,11 +85,9 @@ int Hierarchy::qr_closed_form(const Eigen::Ref<const Mat>& M, const Eigen::Ref<c
   // (the closed-form cache: M bit for bit the one factorised at this level's last call --
   // A and Z are, and with A the tolerances, functions of |A|_F, r and the damping: its
   // factorisation, or its failure, is still in f)
-  if (same_m && f.valid) {
-    ++stats_.closed_form_memo_hits;
-  } else {
+  if (!(same_m && f.factored)) {
     f.rank = qr_factor(M, tol, floor);
-    f.valid = true;  // (the factorisation of the M now in Ms_ of the stage)
+    f.factored = true;  // (the factorisation of the M now in Ms_ of the stage)
   }
   const int rank = f.rank;
   if (rank <= 0) return -1;

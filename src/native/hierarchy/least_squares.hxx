@@ -18,7 +18,7 @@ void Hierarchy::factor_rows(const LsqProblem& P, const std::vector<int8_t>& W) {
 
 void Hierarchy::factor_working(const LsqProblem& P, const std::vector<int8_t>& W) {
   finish_ready_ = false;
-  ts_->intact = false;
+  tc_->drop();
   factor_rows(P, W);
   // with the slack step the projected objective is rarely needed: formed on first use
   qt_stale_ = true;
@@ -36,10 +36,13 @@ void Hierarchy::factor_trial(const LsqProblem& P, const std::vector<int8_t>& W) 
   // (the trial cache: the stage's last trial had these rows and objective, its factorisations
   // untouched since: nothing to compute. Only above every computed freeze of the call:
   // below one, Z and with it every projected row differ from the last call's)
-  const bool memo = per_stage_ && z_repeats_;
-  if (memo && trial_restore(P, W)) return;
+  const bool memo = memo_gate();
+  if (memo && trial_lookup(P, W)) return;
   factor_trial_computed(P, W);
-  if (memo) trial_keep(P);
+  if (memo) {
+    ts_->qt_stale = qt_stale_;
+    tc_->store();
+  }
 }
 
 void Hierarchy::factor_trial_computed(const LsqProblem& P, const std::vector<int8_t>& W) {
@@ -47,7 +50,7 @@ void Hierarchy::factor_trial_computed(const LsqProblem& P, const std::vector<int
     factor_working(P, W);
     return;
   }
-  ts_->intact = false;
+  tc_->drop();
   const int k = P.cols;
   // not the active set's end any more: the exact finish must not reuse this factorisation
   finish_ready_ = false;
@@ -309,7 +312,7 @@ void Hierarchy::add_zero_blockers(const LsqProblem& P, std::vector<int8_t>& W,
 
 bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<int8_t>& W,
                            int& iters) {
-  ts_->intact = false;  // (the trial cache: its updates change the stage's factorisations)
+  tc_->drop();  // (the trial cache: its updates change the stage's factorisations)
   const int k = P.cols;
   const int m = P.rows;
   const int qr = P.qrows;

@@ -81,8 +81,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   }
   // the first call's working-set and K factorisations, shared by its stages (the memos'
   // per-stage ones are allocated at the second call: a one-shot solve never pays for them)
-  shared_trial_.reserve(max_cols, max_grows, max_qrows, false);
-  ts_ = &shared_trial_;
+  shared_trial_.value.reserve(max_cols, max_grows, max_qrows);
+  enter_stage(0);
   sqr_.reserve(max_cols, max_grows + max_qrows, 1);
   // (apply_q_right: Z, and the carried projection of up to capacity inherited rows)
   fqr_.reserve(std::max(n, 1), n + max_in + 1, std::max(n, capacity_));
@@ -111,17 +111,13 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   cztmp_.setZero(std::max(capacity_, 1), std::max(n, 1));
 }
 
-void Hierarchy::TrialState::reserve(int cols, int grows, int qrows, bool keys) {
+void Hierarchy::TrialState::reserve(int cols, int grows, int qrows) {
   wqr.reserve(cols, grows, qrows);
   kqr.reserve(qrows, cols, 1);
   cqr.reserve(cols, cols, 1);
   krz.reserve(cols, cols);
   kqr_t.reserve(cols, qrows, 1);
   Qt.setZero(qrows, cols);
-  if (!keys) return;
-  key_widx.reserve(grows);
-  key_G.setZero(static_cast<Eigen::Index>(cols) * cols);  // kw <= k rows kept (trial_keep)
-  key_Q.setZero(static_cast<Eigen::Index>(qrows) * cols);
 }
 
 void Hierarchy::ClosedForm::reserve(int n, int me, int capacity) {
@@ -133,7 +129,7 @@ void Hierarchy::ClosedForm::reserve(int n, int me, int capacity) {
 
 void Hierarchy::allocate_per_stage() {
   // the first call's shared factorisations are not used again (freed first: a lower peak)
-  shared_trial_ = TrialState();
+  shared_trial_ = TrialCache();
   shared_cf_ = ClosedForm();
   const int n = n_, blocks = static_cast<int>(meq_.size());
   const int nb = has_bounds_ ? n : 0;
@@ -159,30 +155,39 @@ void Hierarchy::allocate_per_stage() {
     cols = std::max(cols, 1);
     qrows = std::max(qrows, 1);
     if (b < blocks) above += min_[b];
-    trials_[b].reserve(cols, grows, qrows, true);
+    trials_[b].value.reserve(cols, grows, qrows);
+    // its key: the sizes, up to grows working rows' indices and (kw <= k) cols x cols
+    // entries of them, the objective (qrows x cols)
+    trials_[b].reserve_key(kKeyHeader + sizeof(int) * grows +
+                           sizeof(double) * (static_cast<std::size_t>(cols) * cols +
+                                             static_cast<std::size_t>(qrows) * cols));
   }
   // each level's closed-form factorisations (the closed-form cache), sized for its equality rows
   cforms_.resize(blocks);
-  for (int b = 0; b < blocks; ++b) cforms_[b].reserve(n, meq_[b], capacity_);
-  // each level's cache entry and freeze (the freeze cache; not the hard phase's)
-  memos_.resize(blocks);
-  // each level's and the minimum-norm step's bound rows (the bound-rows cache)
-  bound_memos_.resize(blocks + 1);
+  // (its key: the level's rows A and C, and Z)
+  for (int b = 1; b < blocks; ++b) {
+    cforms_[b].value.reserve(n, meq_[b], capacity_);
+    cforms_[b].reserve_key(kKeyHeader +
+                           sizeof(double) * static_cast<std::size_t>(meq_[b] + min_[b] + n) * n);
+  }
+  // each level's freeze (the freeze cache; not the hard phase's); its key: the freeze's kind
+  // and rank, the violated rows, Cin Z (up to capacity x n)
+  freezes_.resize(blocks);
+  freeze_pending_.assign(blocks, 0);
+  for (int b = 1; b < blocks; ++b) {
+    Frozen& f = freezes_[b].value;
+    f.Z.setZero(n, n);
+    f.CinZ.setZero(std::max(capacity_, 1), std::max(n, 1));
+    freezes_[b].reserve_key(kKeyHeader + min_[b] +
+                            sizeof(double) * static_cast<std::size_t>(capacity_) * n);
+  }
+  // each level's and the minimum-norm step's bound rows (the bound-rows cache); its key: Z
+  bound_rows_.resize(blocks + 1);
   for (int b = 1; has_bounds_ && b <= blocks; ++b) {
-    BoundRowsMemo& m = bound_memos_[b];
-    m.Z.setZero(n, n);
+    BoundRows& m = bound_rows_[b].value;
     m.G.setZero(n, n);
     m.nrm.setZero(n);
-  }
-  for (int b = 1; b < blocks; ++b) {
-    FreezeMemo& f = memos_[b];
-    f.Z_in.setZero(n, n);
-    f.Z_out.setZero(n, n);
-    f.CinZ_in.setZero(std::max(capacity_, 1), std::max(n, 1));
-    f.CinZ_out.setZero(std::max(capacity_, 1), std::max(n, 1));
-    f.A.setZero(static_cast<Eigen::Index>(meq_[b]) * n);
-    f.C.setZero(static_cast<Eigen::Index>(min_[b]) * n);
-    f.viol.assign(std::max(min_[b], 1), 0);
+    bound_rows_[b].reserve_key(kKeyHeader + sizeof(double) * static_cast<std::size_t>(n) * n);
   }
   per_stage_ = true;
 }
@@ -256,22 +261,24 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
   const int r0 = P.rows, cols = P.cols;
   // (the bound-rows cache: the rows depend on Z alone, their bounds on x too; no row is
   // skipped unless a variable has no finite bound, or Z a zero row)
-  BoundRowsMemo* memo = memo_gate() ? &bound_memos_[stage] : nullptr;
-  bool all_finite = memo != nullptr;  // (only the memo reads it: every variable has a side)
+  BoundRowsCache* cache = memo_gate() ? &bound_rows_[stage] : nullptr;
+  bool all_finite = cache != nullptr;  // (only the cache reads it: every variable has a side)
   for (int j = 0; j < n_ && all_finite; ++j)
     all_finite = std::isfinite(lb_(j)) || std::isfinite(ub_(j));
-  if (all_finite && memo->valid && memo->r == r_ &&
-      (r_ == 0 ||
-       std::memcmp(memo->Z.data(), Z_.data(), sizeof(double) * n_ * r_) == 0)) {
-    P.G.block(r0, 0, n_, r_) = memo->G.topLeftCorner(n_, r_);
+  if (cache) {
+    cache->begin();
+    cache->same_block(Z_.leftCols(r_));
+  }
+  if (all_finite && cache->hit(stats_)) {
+    const BoundRows& m = cache->value;
+    P.G.block(r0, 0, n_, r_) = m.G.topLeftCorner(n_, r_);
     if (cols > r_) P.G.block(r0, r_, n_, cols - r_).setZero();
     for (int j = 0; j < n_; ++j) {  // (as add_row: the bound over the row's norm)
-      P.lo(r0 + j) = std::min(lb_(j) - x_(j), 0.0) / memo->nrm(j);
-      P.hi(r0 + j) = std::max(ub_(j) - x_(j), 0.0) / memo->nrm(j);
+      P.lo(r0 + j) = std::min(lb_(j) - x_(j), 0.0) / m.nrm(j);
+      P.hi(r0 + j) = std::max(ub_(j) - x_(j), 0.0) / m.nrm(j);
       P.id[r0 + j] = capacity_ + j;
     }
     P.rows += n_;
-    ++stats_.bound_rows_memo_hits;
     return;
   }
   auto full = rowbuf_.head(cols);
@@ -281,15 +288,16 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
     const double l = std::min(lb_(j) - x_(j), 0.0);
     const double u = std::max(ub_(j) - x_(j), 0.0);
     const double nrm = P.add_row(full, l, u, capacity_ + j, 1.0);
-    if (memo) memo->nrm(j) = nrm;
+    if (cache) cache->value.nrm(j) = nrm;
   }
-  if (!memo) return;
+  if (!cache) return;
   // stored when every row was kept (a skipped row shifts the others: not one block)
-  memo->valid = (P.rows - r0 == n_);
-  if (!memo->valid) return;
-  memo->r = r_;
-  memo->Z.leftCols(r_) = Z_.leftCols(r_);
-  memo->G.topLeftCorner(n_, r_) = P.G.block(r0, 0, n_, r_);
+  if (P.rows - r0 != n_) {
+    cache->drop();
+    return;
+  }
+  cache->value.G.topLeftCorner(n_, r_) = P.G.block(r0, 0, n_, r_);
+  cache->store();
 }
 
 }  // namespace qpcoord
