@@ -115,8 +115,11 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
         return None  # no default frame: its _refresh raises the robot's message
     if kind == TaskKind.POSE and isinstance(task, FrameTask) and task.error == "split":
         return TaskKind.POSE_SPLIT
-    posture = kind == TaskKind.POSTURE and isinstance(task, PostureTask)
-    if posture and _posture_q_index(task) is None:
+    if (
+        kind == TaskKind.POSTURE
+        and isinstance(task, PostureTask)
+        and _posture_q_index(task) is None
+    ):
         return None
     return kind
 

@@ -356,7 +356,7 @@ def test_repeated_solve_is_a_warm_hit():
 def test_unchanged_humanoid_is_a_warm_hit(box):
     """The LexLS humanoid solved again unchanged: every stage the active set solves is a
     warm hit (its stored working set kept the equality rows lo = hi of the stage, which the
-    stored set does not list: issue 24, the box form missed at two levels on every call),
+    stored set does not list: without it the box form missed at two levels on every call),
     and x is the cold solve's and the Python engine's.
 
     (Before the active set took a step that gains under 1e-15 of a large objective but is no

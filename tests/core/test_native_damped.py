@@ -1,4 +1,4 @@
-"""Damped (near-singular) levels: both engines against an exact rational solution (issue 24).
+"""Damped (near-singular) levels: both engines against an exact rational solution.
 
 A level whose projected matrix has a singular value ``s`` between the numerical rank
 tolerance and the damping threshold ``τ = damping·s₀`` is solved as the damped least-squares
@@ -244,7 +244,7 @@ def damped_stack(spec: dict) -> qc.Stack:
     )
 
 
-#: Found by hypothesis (session 10, damping 1e-3, n = 6, the damped level 1 below a level
+#: Found by hypothesis (damping 1e-3, n = 6, the damped level 1 below a level
 #: with one equality row and one inequality row): the draws of :func:`_damped_spec`.
 #: Native vs Python: x 1.15e-7 apart (2 levels), level 2's value 3.1e-9 relative (3 levels).
 FOUND_X = [56, 6, 2, 1, 0.001, -5.0, 5, 1, True, False, False]
@@ -290,7 +290,7 @@ def test_native_matches_python_on_damped_stacks(spec):
 
 def test_a_level_daqp_calls_infeasible_is_solved_by_the_fallback():
     """Found by hypothesis (damping 1e-7): daqp's usual settings return exit flag -1 on level
-    1's feasible QP. Its last attempt (a proximal term of the Hessian's scale, 2026-11-28)
+    1's feasible QP. Its last attempt (a proximal term of the Hessian's scale)
     solves it, or else the default fallback (quadprog) does: either way to the native engine's
     level values. (The fallback path itself: test_hierarchy_regressions' stored stacks.)"""
     A0 = np.array(

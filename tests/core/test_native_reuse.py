@@ -1,10 +1,9 @@
-"""The native engine's per-level bookkeeping of the inherited rows (issue 24, helper
-"reuse", session 13).
+"""The native engine's per-level bookkeeping of the inherited rows.
 
 ``Hierarchy::cin_norm``: an inherited row's norm |C_i| (the scale below which its projection
 cannot bind) is computed once per call, on first use, not at every level's
 ``add_inherited_rows`` (soth_sot: 30 rows x 5 levels). The same numbers bit for bit (no
-switch; the driver's x on the nine dumps of session 12 is byte-identical, warm and cold,
+switch; the driver's x on the dumped problems is byte-identical, warm and cold,
 baseline and x86-64-v3 builds).
 
 The tests run moved stacks whose later levels inherit many rows (soth_sot's 30 joint

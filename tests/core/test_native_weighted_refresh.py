@@ -1,4 +1,4 @@
-"""The native weighted QP refreshes its stacked arrays natively (issue 24, session 11).
+"""The native weighted QP refreshes its stacked arrays natively.
 
 ``NativeWeighted.solve`` (``Stack.solve(method="weighted")`` on the native engine) copied the
 tasks' numbers with the Python :meth:`CompiledStack.refresh_stacked`; it now uses the native

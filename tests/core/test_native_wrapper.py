@@ -1,4 +1,4 @@
-"""The Python around the native strict-hierarchy call (issue 24: ``Stack.solve`` within a few
+"""The Python around the native strict-hierarchy call (``Stack.solve`` within a few
 µs of the bare ``Hierarchy.run``), checked against what it replaced.
 
 - :meth:`CompiledStack.refresh_stacked` copies every task's numbers each call (skipping
@@ -9,7 +9,7 @@
 - :meth:`NativeHierarchy._info` keeps the counts it read from ``stats`` with its bytes: every
   call's dict equals the one recomputed from ``stats`` / ``detail`` by the rules of the
   Python engine, and its lists are new objects each call;
-- since 2026-11-28 the refresh, the solve, the copies and the info dict are one native call
+- the refresh, the solve, the copies and the info dict are one native call
   (``Hierarchy.step``, ``src/native/refresh.hpp``): its info equals ``_info``'s, and a task
   whose data is not float64 of its shape (another dtype, byte order, a broadcast) takes the
   Python refresh, with the same stacked arrays and solution; strided arrays and ndarray

@@ -759,7 +759,7 @@ def test_weighted_hybrid_step_matches_the_python_engine(robots):
         np.testing.assert_allclose(vn, cold, rtol=0, atol=1e-9, err_msg=f"step {step}")
         # four levels 1e-3 apart (the last weighted 1e-9): the Python engine's QP is in the
         # whitened variables u = T z of the weighted rows' QR, as the native one, so x and
-        # the level values agree to the issue's 1e-9 (with the formed H, cond ~1e12: x
+        # the level values agree to 1e-9 (with the formed H, cond ~1e12: x
         # differed by up to 1e-3 on 6 of 40 steps, level 1 by 1.3e-4 relative)
         np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
         np.testing.assert_allclose(
