@@ -59,7 +59,15 @@ import pinocchio as pin
 
 from .collision import Obstacle
 from .robot import Robot
-from .viz_notes import ActiveRow, Annotations, FrameNote, Witness, annotate, between
+from .viz_notes import (
+    ActiveRow,
+    Annotations,
+    FrameNote,
+    Witness,
+    annotate,
+    between,
+    trajectory_samples,
+)
 
 __all__ = [
     "annotate",
@@ -230,23 +238,7 @@ def _samples(
     robot: Robot, trajectory: Any, dt: float | None, t: Any
 ) -> tuple[np.ndarray, np.ndarray]:
     """Times (s, shape (N,)) and configurations (robot coordinates, (N, nq))."""
-    if hasattr(trajectory, "q") and hasattr(trajectory, "t"):
-        q, times = trajectory.q, trajectory.t if t is None else t
-    else:
-        q, times = trajectory, t
-    try:
-        q = np.array(q, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError("trajectory must be a qc.Trajectory or an (N, nq) array") from None
-    if q.ndim == 1 and q.size == robot.nq:
-        q = q[None, :]
-    if q.ndim != 2 or q.shape[0] == 0 or q.shape[1] != robot.nq:
-        raise ValueError(
-            f"trajectory must hold configurations of shape (N, nq) with nq = {robot.nq} "
-            f"for robot {robot.name!r}, got shape {q.shape}"
-        )
-    for k in range(q.shape[0]):
-        robot.check_configuration(q[k], f"trajectory[{k}]")
+    q, times = trajectory_samples(robot, trajectory, t)
     n = q.shape[0]
     if times is None:
         if dt is None:
@@ -257,9 +249,6 @@ def _samples(
             raise ValueError(f"dt must be a positive time step (s), got {dt!r}")
         times = np.arange(n) * float(dt)
     else:
-        times = np.array(times, dtype=float).reshape(-1)
-        if times.shape != (n,) or not np.all(np.isfinite(times)):
-            raise ValueError(f"t must hold {n} finite sample times (s), got shape {times.shape}")
         if n > 1 and np.any(np.diff(times) <= 0):
             raise ValueError("t: sample times must increase")
     return times - times[0], q

@@ -191,9 +191,10 @@ class Annotations(Sequence[FrameNote]):
 
 
 # ---------------------------------------------------------------------- inputs
-def _configurations(ik: IK, trajectory: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Configurations (N, nq) and their times (s): the trajectory's, ``t``, or ``k · dt``."""
-    robot = ik.robot
+def trajectory_samples(robot: Any, trajectory: Any, t: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    """Validated configurations (N, nq) of ``trajectory`` (a ``qc.Trajectory`` or an array)
+    and their times (s, shape (N,)): ``t``, else the trajectory's, else ``None``. Shared by
+    :func:`annotate` and :func:`qpcoord.viz.animate`."""
     times = None
     if hasattr(trajectory, "q") and hasattr(trajectory, "t"):
         trajectory, times = trajectory.q, trajectory.t
@@ -205,19 +206,26 @@ def _configurations(ik: IK, trajectory: Any, t: Any) -> tuple[np.ndarray, np.nda
         q = q[None, :]
     if q.ndim != 2 or q.shape[0] == 0 or q.shape[1] != robot.nq:
         raise ValueError(
-            f"trajectory must hold configurations of shape (N, nq) with nq = {robot.nq}, "
-            f"got shape {q.shape}"
+            f"trajectory must hold configurations of shape (N, nq) with nq = {robot.nq} "
+            f"for robot {robot.name!r}, got shape {q.shape}"
         )
     for k in range(q.shape[0]):
         robot.check_configuration(q[k], f"trajectory[{k}]")
     if t is not None:
         times = t
     if times is None:
-        return q, np.arange(q.shape[0]) * ik.dt
+        return q, None
+    n = q.shape[0]
     times = np.array(times, dtype=float).reshape(-1)
-    if times.shape != (q.shape[0],) or not np.all(np.isfinite(times)):
-        raise ValueError(f"t must hold {q.shape[0]} finite times (s), got shape {times.shape}")
+    if times.shape != (n,) or not np.all(np.isfinite(times)):
+        raise ValueError(f"t must hold {n} finite sample times (s), got shape {times.shape}")
     return q, times
+
+
+def _configurations(ik: IK, trajectory: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Configurations (N, nq) and their times (s): ``t``, the trajectory's, or ``k · dt``."""
+    q, times = trajectory_samples(ik.robot, trajectory, t)
+    return q, np.arange(q.shape[0]) * ik.dt if times is None else times
 
 
 def _velocities(ik: IK, solutions: Any, n: int) -> list[np.ndarray]:
