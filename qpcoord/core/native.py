@@ -35,8 +35,7 @@ from typing import NoReturn
 import numpy as np
 
 from .compile import CompiledStack
-from .conflict import infeasible
-from .errors import SolverError
+from .errors import InfeasibleError, SolverError
 from .polish import KKT_TOL
 
 __all__ = [
@@ -490,7 +489,10 @@ def raise_status(
     prefix: str = "",
 ) -> NoReturn:
     """Raise the exception of a native engine's non-zero status ``code`` with the Python
-    engine's messages (shared by the strict hierarchy and the weighted QP).
+    engine's messages (shared by the strict hierarchy and the weighted QP). An
+    :class:`InfeasibleError` carries no conflict: the entry points a user calls
+    (``Stack.solve``, the IK step) name it (:func:`~qpcoord.core.conflict.infeasible`), so a
+    caller that falls back (``PersistentQP``) pays no conflict search.
 
     ``d`` is the engine's ``detail`` array (0: residual of the hard equalities, 1: relative
     violation of the hard part, 3/4: which check failed and where), ``x`` its output array.
@@ -503,29 +505,20 @@ def raise_status(
         raise ValueError(f"native engine rejected the data (status {code})")
     if code == mod.INFEASIBLE_EQ:
         names = ", ".join(t.label for t in P.hard.eqs)
-        raise infeasible(
+        raise InfeasibleError(
             f"hard equality constraints are inconsistent ({names}): "
             f"least-squares residual {d[0]:.3g}",
-            P,
-            P.lbs,
-            P.ubs,
         )
     if code == mod.INFEASIBLE_HARD and np.isinf(d[1]):
-        raise infeasible(
+        raise InfeasibleError(
             "constraints: the hard equalities fix x completely and it violates the bounds "
             "or hard inequalities",
-            P,
-            P.lbs,
-            P.ubs,
         )
     if code == mod.INFEASIBLE_HARD:
-        raise infeasible(
+        raise InfeasibleError(
             "constraints: bounds and hard constraints are inconsistent (native engine's "
             + hard_phase.format(d[1])
             + ")",
-            P,
-            P.lbs,
-            P.ubs,
         )
     if code == mod.NOT_CONVERGED:
         raise SolverError(f"{prefix}native engine: the active set{stage} did not converge")

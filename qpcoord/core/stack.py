@@ -253,10 +253,14 @@ class Stack:
             raise ValueError(f"strict must be True or False, got {strict!r}")
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-        if method == "weighted" and resolve_weighted_engine(engine, solver) == "native":
-            return self._solve_native_weighted(t0, warm_start, limit)
-        if resolve_engine(engine, method, solver) == "native":
-            return self._solve_native(t0, warm_start, strict, limit)
+        try:
+            if method == "weighted" and resolve_weighted_engine(engine, solver) == "native":
+                return self._solve_native_weighted(t0, warm_start, limit)
+            if resolve_engine(engine, method, solver) == "native":
+                return self._solve_native(t0, warm_start, strict, limit)
+        except InfeasibleError as exc:  # the engine's words, and the rows in conflict
+            P = self._compiled
+            raise infeasible(str(exc), P, P.lbs, P.ubs).with_traceback(exc.__traceback__) from None
         # every QP the Python engine starts gets the time left (backends.deadline); a backend
         # failure once it has passed is a SolverError that says so
         with deadline(limit) as budget:

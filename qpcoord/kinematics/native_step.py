@@ -48,7 +48,8 @@ import pinocchio as pin
 
 from ..core.backends import DEFAULT_TIME_LIMIT
 from ..core.compile import CompiledStack
-from ..core.errors import SolverError
+from ..core.conflict import infeasible
+from ..core.errors import InfeasibleError, SolverError
 from ..core.native import NativeHierarchy, load, raise_status
 from ..core.native_weighted import weighted_info
 from ..core.polish import KKT_TOL
@@ -555,6 +556,13 @@ class NativeIKStep(NativeHierarchy):
             sw[...] = task.sqrt_weight
 
     def _fail(self, code: int, q: Any, t: float, reference: Any) -> None:
+        try:
+            self._raise_status(code, q, t, reference)
+        except InfeasibleError as exc:  # the engine's words, and the rows in conflict
+            P = self.P
+            raise infeasible(str(exc), P, P.lbs, P.ubs).with_traceback(exc.__traceback__) from None
+
+    def _raise_status(self, code: int, q: Any, t: float, reference: Any) -> None:
         mod = self._mod
         if code == mod.IK_BAD_Q:
             self.robot.check_configuration(q)  # names q
