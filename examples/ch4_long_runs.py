@@ -110,7 +110,7 @@ three clauses of Conjecture 4.1 from the multi-start study (criteria in
 :func:`conjecture_claims`): δ = 1 inconclusive (step-dependent), δ = 2 differs (a thesis
 error: 9 of 10 starts never converge), δ = 3 reproduced. ``--quick`` (3 starts, 10 periods,
 no T/400) decides none of them. The single planar runs above are kept for their figures
-(no dt/2 check any more: they no longer decide anything).
+(no dt/2 check: they decide nothing).
 
 Run: ``python examples/ch4_long_runs.py [--quick] [--out DIR]``
 (``--planar-periods`` / ``--spatial-periods`` change the run lengths).
@@ -713,7 +713,7 @@ def main(argv=None) -> int:
         p.error("each run needs at least 2 periods")
 
     t0 = time.perf_counter()
-    # single-start runs (figures, Remark 4.4); the planar ones no longer decide Conjecture 4.1
+    # single-start runs (figures, Remark 4.4); the planar ones do not decide Conjecture 4.1
     # (the multi-start study below does), so only the spatial 5R gets the dt/2 check
     rows = [
         run_case(

@@ -241,7 +241,7 @@ def tracking_claims(
             "coarse stage frozen (coarse cut-off 0.01 Hz) fails the spec on each -- otherwise "
             "the reference does not test coordination. The same references and run length "
             "in quick and full runs. The shipped paranal_250hz preset spans about 10–14 µm and "
-            "is tracked within spec by the fine stage alone, so it no longer decides this "
+            "is tracked within spec by the fine stage alone, so it does not decide this "
             f"row. {why_st[0].upper()}{why_st[1:]}.",
         )
     )

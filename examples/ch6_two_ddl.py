@@ -87,8 +87,8 @@ def two_ddl_claims(o: dict, s: dict, k: float, gap: float, analytic: dict) -> li
             st,
             f"Criterion: gain within ±{100 * GAIN_TOL:g} % of 1.6 on our loops. The analytic "
             "second-order F is context, not a test: its ζ is not given, and some ζ in the "
-            "plausible 0.3–1.0 always gives 1.6 ± 10 %, so a rule on it could not fail (it "
-            "made this row inconclusive before; it no longer decides)."
+            "plausible 0.3–1.0 always gives 1.6 ± 10 %, so a rule on it could not fail; it does "
+            "not decide the row."
             + (
                 f" Our F (fine PI + piezo, no resonant peak) is not second order and gives "
                 f"{gain:.2f}: the gain depends on F's shape, which our loop design fixes and "

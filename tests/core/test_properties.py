@@ -381,11 +381,9 @@ def _hard_violations(spec: Spec, x: np.ndarray, tol: float = 1e-6) -> list[str]:
     return out
 
 
-#: Property/backend combinations that fail today because of a library bug, as strict xfails
-#: (so that a fix shows up as XPASS). Keys: (test key, solver, family).
+#: Property/backend combinations that fail because of an open library bug, as strict xfails
+#: (so that a fix shows up as XPASS). Keys: (test key, solver, family). None is open.
 KNOWN: dict[tuple[str, str, str], str] = {}
-# fixed: proxqp's relaxed retry leaked ~4e-6 into higher levels (the exact refinement now
-# accepts a point found with rows opened by δ when it is within ~10δ of its objective)
 
 
 def _grid(key: str, families=("",)):

@@ -124,13 +124,13 @@ def test_sizes(name, nq, nv, manifold_robots):
     assert (robot.nq, robot.nv) == (nq, nv)
 
 
-def test_panda_urdf_has_nine_joints_and_today_panda_seven():
+def test_panda_urdf_has_nine_joints_and_the_bundled_panda_seven():
     path = example_robot_data_urdf("panda_description/urdf/panda.urdf")
     full = qc.Robot.from_urdf(path, frame="panda_hand_tcp")
     assert (full.nq, full.nv) == (9, 9)
-    today = qc.robots.load("panda")
-    assert (today.nq, today.frame) == (7, "panda_hand_tcp")
-    assert today.reference_names() == ("default",)
+    arm = qc.robots.load("panda")
+    assert (arm.nq, arm.frame) == (7, "panda_hand_tcp")
+    assert arm.reference_names() == ("default",)
 
 
 def test_from_urdf_never_frees_a_base_silently():
