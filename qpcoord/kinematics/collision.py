@@ -584,10 +584,11 @@ class CollisionAvoidance(KinematicTask):
             P1, P2, N = self._P1, self._P2, self._N
             for k in candidates:
                 res = pin.computeDistance(gm, gd, int(k))
-                distances[k] = res.min_distance
-                P1[k] = res.getNearestPoint1()
-                P2[k] = res.getNearestPoint2()
-                N[k] = res.normal
+                d = distances[k] = res.min_distance
+                if d < d_i:  # witness points and normal only for a row that gets written
+                    P1[k] = res.getNearestPoint1()
+                    P2[k] = res.getNearestPoint2()
+                    N[k] = res.normal
             act = candidates[distances[candidates] < d_i]
             if act.size:
                 n, p1, p2 = N[act], P1[act], P2[act]
