@@ -38,14 +38,17 @@ removed (``pinocchio.removeCollisionPairs``), as are pairs on one joint or on tw
 joints. A broad phase skips the pairs whose bounding spheres are farther apart than ``d_i``
 before calling coal.
 
-Measured on the Panda (2 shared cores, OpenBLAS single-threaded,
-``benchmarks/collision_bench.py``, a 5 s random-target run at dt = 0.01 s): one
-:meth:`~CollisionAvoidance.update` -- forward kinematics, broad phase, one coal call per
-candidate pair and the rows -- costs a median
-**≈ 70 µs** with self-collision only (44 pairs), **≈ 75 µs** with one sphere (61 pairs) and
-**≈ 160 µs** with a sphere, a box and a capsule (95 pairs, more pairs near each other). A whole
-``IK.step`` with the task at level 0 above a pose and a posture task: ≈ 0.5 ms (≈ 0.3 ms without
-the task). Meshes instead of hulls (``convex=False``) cost milliseconds a step.
+Each step's rows -- the broad phase, coal's distance for each candidate pair, the witness
+points and the Jacobian rows -- are computed in one native call (``qpcoord._collision``, on
+coal's C++ library; :mod:`qpcoord.kinematics.collision_kernel`) or, where that module or a
+shape is not available, by the same rows in Python (:attr:`CollisionAvoidance.native` says
+which). Measured on the Panda (2-core Xeon, OpenBLAS single-threaded,
+``python benchmarks/collision_bench.py``, a 5 s random-target run at dt = 0.01 s): one
+:meth:`~CollisionAvoidance.update` -- forward kinematics and Jacobians, then the rows --
+costs a median **≈ 32 µs** with self-collision only (44 pairs) or with one sphere (61 pairs)
+and **≈ 55 µs** with a sphere, a box and a capsule (95 pairs, more of them near each other);
+the Python rows cost 82, 82 and 166 µs. Meshes instead of hulls (``convex=False``, Python
+rows) cost milliseconds a step.
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..core.tasks import Inequality
+from .collision_kernel import native_kernel
 from .robot import Robot
 from .tasks import KinematicTask
 
@@ -376,6 +380,10 @@ class CollisionAvoidance(KinematicTask):
         phase, ``inf`` for pairs it skipped (farther than ``d_i``).
     active : numpy.ndarray of bool
         Rows with a damper at the last update.
+    native : bool
+        Whether a step computes the rows natively (``qpcoord._collision``: the broad phase,
+        coal's distances and the rows in one call) or in Python (the same rows; see
+        :mod:`qpcoord.kinematics.collision_kernel` for when the native rows are not used).
 
     Raises
     ------
@@ -521,6 +529,22 @@ class CollisionAvoidance(KinematicTask):
         self._P1 = np.zeros((m, 3))
         self._P2 = np.zeros((m, 3))
         self._N = np.zeros((m, 3))
+        columns = [[int(c) for c in np.flatnonzero(support[j])] for j in range(njoints)]
+        self._kernel: Any = native_kernel(
+            robot,
+            gm,
+            self._geom_centre,
+            self._geom_radius,
+            self._first,
+            self._second,
+            columns,
+            d_s,
+            d_i,
+        )
+        if self._kernel is not None:
+            self._kernel.bind(self._C, self._lower, self.distances, self.active.view(np.uint8))
+        self._kernel_data = robot.data  # the Data whose memory the kernel reads
+        self.native = self._kernel is not None
 
     # -- helpers ------------------------------------------------------------------------
     def effective_gain(self, dt: float) -> float:
@@ -543,6 +567,8 @@ class CollisionAvoidance(KinematicTask):
         g = self._obstacle_geometry[int(index)]
         self.geometry_model.geometryObjects[g].placement = pin.SE3(T)
         self._geom_centre[g] = _bounding_sphere(self.geometry_model.geometryObjects[g])[0]
+        if self._kernel is not None:
+            self._kernel.set_placement(g, T[:3, :3].copy(), T[:3, 3].copy(), self._geom_centre[g])
 
     def compute_distances(self, q: Any) -> np.ndarray:
         """Exact distance of every pair at ``q`` (m), shape (rows,), no broad phase (a
@@ -557,6 +583,18 @@ class CollisionAvoidance(KinematicTask):
 
     # -- per step -----------------------------------------------------------------------
     def _refresh(self, q, t, dt, reference) -> Inequality:
+        if self._kernel is not None and self.robot.data is self._kernel_data:
+            return self._native_refresh(q, dt)
+        return self._python_refresh(q, dt)
+
+    def _native_refresh(self, q: np.ndarray, dt: float) -> Inequality:
+        """The rows of :meth:`_python_refresh`, computed by ``qpcoord._collision``."""
+        self.robot._update(q, 1)
+        self._kernel.update(self.effective_gain(dt))
+        return self.task._assign(self._lower, self._upper, C=self._C)
+
+    def _python_refresh(self, q: np.ndarray, dt: float) -> Inequality:
+        """The rows in Python: the reference of the native kernel."""
         robot, gm, gd = self.robot, self.geometry_model, self.geometry_data
         model, data = robot.model, robot.data
         robot._update(q, 1)
