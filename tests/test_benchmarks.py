@@ -43,6 +43,7 @@ def test_quick_without_placo(tmp_path):
         "panda-position",
         "--scenario",
         "panda-pose",
+        "--engines",
     )
     assert "PlaCo skipped: no interpreter at" in stdout
     if any("skipped" in r.get("note", "") for r in rows):  # example-robot-data missing
@@ -84,6 +85,8 @@ def test_lockstep_only(tmp_path):
         pytest.skip(rows[0]["note"])
     assert {r["mode"] for r in rows} == {"lockstep"}
     assert "one after the other (not run)" in stdout
+    # without --engines, qpcoord's default engine and method only
+    assert {r["solver"] for r in rows if "solver" in r} == {"qpcoord strict native"}
 
 
 def test_rejects_too_few_steps(tmp_path):
@@ -125,6 +128,46 @@ def test_stack_bench_one_shot_table():
     dx = float(note.split("max |dx| ")[1].split(";")[0])
     assert dx < 1e-6
     assert "daqp exit flags [1]" in note
+
+
+def _script(*args: str, timeout: float = 300) -> str:
+    """stdout of ``python benchmarks/ARGS...`` with one BLAS thread (exit status 0 asserted)."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / args[0]), *args[1:]],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=timeout,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout
+
+
+#: (script and arguments, module it needs, a row it prints by default, what only a flag adds)
+DEFAULT_OUTPUTS = [
+    (("stack_bench.py", "--quick", "--solver", "daqp", "--sizes", "7"), "daqp",
+     "| 7 | weighted | daqp |", "daqp.solve floor"),
+    (("weighted_bench.py", "--quick"), "daqp", "| persistent n=12 | native |", "DDL MPC"),
+    (("mpc_bench.py", "--quick", "--steps", "600"), "daqp", "| weighted | kolmogorov |",
+     "with every backend"),
+    (("hierarchy_published.py", "--resolve", "--steps", "6", "--problem", "soth_sot"), "daqp",
+     "| soth_sot | 30 | moved |", "| same |"),
+    (("collision_bench.py", "--steps", "20", "--repeats", "1"), "coal",
+     "| qpcoord IK.step, collision at level 0 |", "`CollisionAvoidance.update` alone"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("args", "needs", "row", "flagged"), DEFAULT_OUTPUTS)
+def test_default_output_leaves_the_extra_rows_to_a_flag(args, needs, row, flagged):
+    """By default a script prints what a user compares (``row``); the extra rows or tables
+    (``stack_bench.py --one-shot``, ``weighted_bench.py --mpc``, ``mpc_bench.py --backends``,
+    ``hierarchy_published.py --same``, ``collision_bench.py --update``) only with their
+    flag."""
+    pytest.importorskip(needs)
+    out = _script(*args)
+    assert row in out
+    assert flagged not in out
 
 
 def test_oneshot_table():
