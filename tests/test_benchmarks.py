@@ -17,6 +17,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "ik_peers.py"
+LEXLS_BENCH = ROOT / "benchmarks" / "lexls" / "bench.py"
 
 
 def _run(tmp_path: Path, *args: str) -> tuple[str, list[dict]]:
@@ -168,6 +169,51 @@ def test_default_output_leaves_the_extra_rows_to_a_flag(args, needs, row, flagge
     out = _script(*args)
     assert row in out
     assert flagged not in out
+
+
+def test_ddl_bench_table():
+    """``ddl_bench.py --quick``: machine, command, one row per rate with positive times."""
+    out = _script("ddl_bench.py", "--quick")
+    lines = out.splitlines()
+    assert lines[0].startswith("Machine: ")
+    assert lines[1] == "Command: `python benchmarks/ddl_bench.py --quick`"
+    rows = {ln.split("|")[1].strip(): ln for ln in lines if ln.startswith("| ") and "0 |" in ln}
+    assert set(rows) == {"5000", "8000"}
+    for row in rows.values():
+        cells = [c.strip() for c in row.split("|")[1:-1]]
+        assert cells[1] == "1.0" and all(float(c) > 0 for c in cells[3:])
+
+
+def test_ddl_margin_table():
+    """``ddl_margin.py --quick``: a row per bandwidth, a predicted / simulated pair per
+    carriage position."""
+    out = _script("ddl_margin.py", "--quick")
+    assert out.startswith("Machine: ")
+    rows = [ln for ln in out.splitlines() if ln.startswith("| ") and ln[2].isdigit()]
+    assert [r.split("|")[1].strip() for r in rows] == ["1", "4", "6"]
+    for row in rows:
+        pairs = [c for c in row.split("|") if " / " in c]
+        assert len(pairs) == 3, row
+
+
+def test_lexls_bench_without_lexls(tmp_path):
+    """``lexls/bench.py`` without a LexLS checkout: the native driver's column for every
+    problem and one line saying LexLS was skipped (g++ and Eigen's headers needed)."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, str(LEXLS_BENCH), "--quick", "--lexls", str(tmp_path / "none")],
+        capture_output=True, text=True, env=env, timeout=900,
+    )  # fmt: skip
+    if proc.returncode != 0 and "needs g++ and Eigen's headers" in proc.stderr:
+        pytest.skip("no g++ or Eigen headers to build the C++ drivers")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = proc.stdout
+    rows = [ln.split("|") for ln in out.splitlines() if ln.startswith("| ")]
+    body = {r[1].strip(): [c.strip() for c in r[2:-1]] for r in rows[2:]}
+    assert set(body) == {"humanoid (published rows)", "soth_sot", "chain30", "random50"}
+    for n, lexls, native, gap in body.values():
+        assert int(n) > 0 and lexls == gap == "–" and float(native) > 0
+    assert out.rstrip().splitlines()[-1].startswith("LexLS skipped: no checkout at ")
 
 
 def test_oneshot_table():
