@@ -216,6 +216,24 @@ def test_lexls_bench_without_lexls(tmp_path):
     assert out.rstrip().splitlines()[-1].startswith("LexLS skipped: no checkout at ")
 
 
+def test_readme_holds_every_table_with_its_command():
+    """Every table of ``python -m benchmarks`` has one marker pair in benchmarks/README.md
+    (so ``--write`` writes them all), every marker pair is one of them, and each block opens
+    with its machine line and the command ``python -m benchmarks`` runs for it."""
+    import re
+    import shlex
+
+    writer = _writer()
+    text = (ROOT / "benchmarks" / "README.md").read_text()
+    assert set(re.findall(r"^<!-- table: (\S+) -->$", text, re.M)) == set(writer.TABLES)
+    for name, table in writer.TABLES.items():
+        block = text.split(f"<!-- table: {name} -->\n", 1)[1].split("<!-- /table -->", 1)[0]
+        lines = block.splitlines()
+        assert lines[0].startswith("Machine: ") and " cores" in lines[0], name
+        command = shlex.join(["python", f"benchmarks/{table.script}", *table.full])
+        assert lines[1] == f"Command: `{command}`", name
+
+
 def test_oneshot_table():
     """``oneshot.py``: every call and part has its row, and the direct daqp call solves the
     stack's weighted QP (its x matches qpcoord's weighted method to daqp's tolerance)."""
