@@ -34,8 +34,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 NATIVE = ROOT / "src" / "native"
-sys.path.insert(0, str(HERE.parent))  # the benchmarks' table writer
-from _table import markdown, preamble, span  # noqa: E402
+sys.path[:0] = [str(HERE), str(HERE.parent)]  # compare.py beside it, the table writer above
+from _table import markdown, preamble, sig3, span  # noqa: E402
 from compare import read, values  # noqa: E402
 
 #: (dump name, label) of the problems, in the table's order.
@@ -104,10 +104,12 @@ def gap(dump: Path, xa: Path, xb: Path) -> float:
 
 
 def lexls_dir(arg: str | None) -> Path:
+    """The LexLS checkout: ``--lexls``, else ``$LEXLS_DIR``, else ``benchmarks/.lexls``."""
     return Path(arg or os.environ.get("LEXLS_DIR") or HERE.parent / ".lexls")
 
 
 def lexls_commit(path: Path) -> str:
+    """``LexLS `<short commit>``` of the checkout at ``path``, for the table's caption."""
     cmd = ["git", "-C", str(path), "rev-parse", "--short", "HEAD"]
     out = subprocess.run(cmd, capture_output=True, text=True)
     return f"LexLS `{out.stdout.strip()}`" if out.returncode == 0 else "LexLS (not a git checkout)"
@@ -172,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         "of the two answers, relative to max(1, value):\n"
     )
     body = [
-        (label, sizes[name], span(times[name]["lexls"], _sig), span(times[name]["native"], _sig),
+        (label, sizes[name], span(times[name]["lexls"], sig3), span(times[name]["native"], sig3),
          f"{gaps[name]:.1e}" if name in gaps else "–")
         for name, label in PROBLEMS
     ]  # fmt: skip
@@ -183,10 +185,6 @@ def main(argv: list[str] | None = None) -> int:
             "https://github.com/jrl-umi3218/lexls there, or give --lexls DIR)."
         )
     return 0
-
-
-def _sig(v: float) -> str:
-    return f"{v:.1f}" if v < 100 else f"{v:.0f}"
 
 
 if __name__ == "__main__":
