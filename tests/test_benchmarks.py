@@ -1,8 +1,9 @@
-"""``benchmarks/ik_peers.py --quick`` runs without PlaCo (and says so), in lockstep and back to
-back; no timed assertion.
+"""Smoke runs of the benchmark scripts and of ``python -m benchmarks --write``; no timed
+assertion.
 
-The benchmark is a script, not a module of the package: it is run as a subprocess, as a
-user runs it. The checks are on its output's content (rows, errors, limits), never on times.
+A benchmark is a script, not a module of the package: it is run as a subprocess, as a user
+runs it. The checks are on its output's content (rows, errors, limits, which rows its flags
+add) and on the README's table markers, never on times.
 """
 
 from __future__ import annotations
