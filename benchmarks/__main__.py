@@ -39,14 +39,13 @@ class Table:
 TABLES: dict[str, Table] = {
     "hierarchy_bench": Table(
         "hierarchy_bench.py",
-        ("--steps", "300", "--no-python", "--no-one-shot", "--runs", "4"),
+        ("--steps", "300", "--no-python", "--runs", "4"),
         (
             "--quick",
             "--scenario",
             "panda9",
             "--scenario",
             "chain30",
-            "--no-one-shot",
             "--runs",
             "2",
         ),
@@ -66,23 +65,26 @@ TABLES: dict[str, Table] = {
         + ("--problem", "lexls_test01_humanoid", "--problem", "soth_sot"),
         ("--solver", "daqp", "--problem", "soth_sot", "--repeats", "2"),
     ),
+    "lexls": Table("lexls/bench.py", (), ("--quick",)),
+    "engine_agreement": Table("engine_agreement.py", ("--seeds", "400"), ("--seeds", "4")),
+    "oneshot": Table("oneshot.py", ("--runs", "3"), ("--steps", "200")),
+    "stack_bench": Table(
+        "stack_bench.py",
+        ("--solver", "daqp"),
+        ("--quick", "--solver", "daqp", "--sizes", "7"),
+    ),
+    "weighted_bench": Table("weighted_bench.py", (), ("--quick",)),
     "ik_peers": Table(
         "ik_peers.py",
         (),
         ("--quick", "--no-placo", "--no-pink", "--scenario", "panda-position"),
     ),
     "native_ik_step": Table("native_ik_step.py", (), ("--steps", "30", "--runs", "2")),
-    "stack_bench": Table(
-        "stack_bench.py",
-        ("--solver", "daqp"),
-        ("--quick", "--solver", "daqp", "--sizes", "7", "--one-shot-steps", "12"),
-    ),
-    "weighted_bench": Table("weighted_bench.py", (), ("--quick",)),
-    "mpc_bench": Table("mpc_bench.py", (), ("--quick", "--steps", "600")),
     "collision_bench": Table("collision_bench.py", (), ("--steps", "20", "--repeats", "1")),
-    "oneshot": Table("oneshot.py", ("--runs", "3", "--parts"), ("--steps", "200")),
+    "mpc_bench": Table("mpc_bench.py", (), ("--quick", "--steps", "600")),
+    "ddl_bench": Table("ddl_bench.py", (), ("--quick",)),
+    "ddl_margin": Table("ddl_margin.py", (), ("--quick",)),
     "ddl_hdd": Table("ddl_hdd.py", (), ("--repeats", "1", "--steps", "2000")),
-    "engine_agreement": Table("engine_agreement.py", ("--seeds", "400"), ("--seeds", "4")),
 }
 
 

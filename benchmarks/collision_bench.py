@@ -6,8 +6,9 @@ with self-collision on and one sphere obstacle in front of it, min distance 0.02
 influence / detection distance 0.10 m. Convex hulls of the collision meshes everywhere.
 
 - qpcoord: ``CollisionAvoidance`` (44 self pairs after the SRDF + 17 robot-vs-sphere pairs)
-  at level 0 above a pose task and a posture task (``IK.step``: strict priorities), and the
-  task's ``update`` alone (the per-step collision cost) with 0, 1 and 3 obstacles.
+  at level 0 above a pose task and a posture task (``IK.step``: strict priorities), and, with
+  ``--update``, the task's ``update`` alone (the per-step collision cost) with 0, 1 and 3
+  obstacles.
 - Pink: ``SelfCollisionBarrier`` over the same pairs (``Configuration.update`` computes every
   pair distance, no broad phase), ``solve_ik`` with the same QP solver (daqp).
 - mink (if ``pip install mink mujoco`` worked): the MuJoCo Panda is built from the same URDF
@@ -19,7 +20,7 @@ influence / detection distance 0.10 m. Convex hulls of the collision meshes ever
 Times include each library's forward kinematics, distance queries and QP solve. Medians and
 99th percentiles of the per-step wall time; no timed assertions. BLAS is single-threaded.
 
-Run: ``python benchmarks/collision_bench.py [--steps 500] [--repeats 2]``
+Run: ``python benchmarks/collision_bench.py [--steps 500] [--repeats 2] [--update]``
 """
 
 from __future__ import annotations
@@ -205,16 +206,9 @@ def bench_mink(robot, steps, repeats):
     return (times, None, len(limit.geom_id_pairs)), None
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=500)
-    parser.add_argument("--repeats", type=int, default=2)
-    args = parser.parse_args(argv)
-    robot = qc.robots.load("panda")
-    q0, _, (c, r) = scenario(robot, args.steps)
-    p = robot.frame_pose(q0, HAND)[:3, 3]
-
-    print(preamble())
+def update_table(robot, steps: int, c, r, p) -> None:
+    """Print the table of ``CollisionAvoidance.update`` alone: self only, one sphere (centre
+    ``c``, radius ``r``), and a sphere, a box and a capsule around the hand's start ``p``."""
     print("`CollisionAvoidance.update` alone (FK + broad phase + coal + rows), Panda:\n")
     cases = {
         "self only": [],
@@ -227,11 +221,31 @@ def main(argv=None):
     }
     alone = []
     for label, obstacles in cases.items():
-        times, pairs, active = bench_refresh(robot, args.steps, obstacles)
+        times, pairs, active = bench_refresh(robot, steps, obstacles)
         med, p99 = _stats(times)
         alone.append((label, pairs, f"{active:.1f}", f"{med:.1f}", f"{p99:.1f}"))
     head = ("obstacles", "pairs", "active", "median µs", "p99 µs")
     print(markdown(head, alone, "lrrrr"))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=500)
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument(
+        "--update",
+        action="store_true",
+        help="first, CollisionAvoidance.update alone with 0, 1 and 3 obstacles",
+    )
+    args = parser.parse_args(argv)
+    robot = qc.robots.load("panda")
+    q0, _, (c, r) = scenario(robot, args.steps)
+    p = robot.frame_pose(q0, HAND)[:3, 3]
+
+    print(preamble())
+    if args.update:
+        update_table(robot, args.steps, c, r, p)
+        print()
 
     rows = []
     res = bench_qpcoord(robot, args.steps, args.repeats)
@@ -247,7 +261,7 @@ def main(argv=None):
 
     base = _stats(res[0])[0]
     print(
-        f"\nPer control step, self-collision + 1 sphere ({args.steps} steps × {args.repeats}); "
+        f"Per control step, self-collision + 1 sphere ({args.steps} steps × {args.repeats}); "
         "ratio: median over qpcoord's; min d: the smallest pair distance over the run on "
         "qpcoord's hulls ('–' for mink: MuJoCo's distances are not comparable):\n"
     )
@@ -262,8 +276,8 @@ def main(argv=None):
         table.append((label, pairs, f"{med:.1f}", f"{p99:.1f}", f"{med / base:.2f}", dm))
     head = ("library", "pairs", "median µs", "p99 µs", "ratio", "min d (m)")
     print(markdown(head, table, "lrrrrr"))
-    for line in skipped:
-        print(line)
+    if skipped:
+        print("\n" + "\n".join(skipped))
 
 
 if __name__ == "__main__":

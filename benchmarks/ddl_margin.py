@@ -18,7 +18,6 @@ does not assert.
 from __future__ import annotations
 
 import argparse
-import platform
 
 import numpy as np
 from scipy import signal
@@ -26,6 +25,11 @@ from scipy import signal
 import qpcoord.ddl as ddl
 from qpcoord.ddl.loops import _gain_margin_at, coarse_gain_margin, coarse_operating_points
 from qpcoord.ddl.stability import simulated_coarse_margin
+
+try:
+    from benchmarks._table import markdown, preamble
+except ImportError:  # run as a script from benchmarks/
+    from _table import markdown, preamble
 
 FS = 8000.0
 
@@ -48,32 +52,37 @@ def ramp_ringing(bandwidth: float, speed: float = 1.0e-4, duration: float = 1.5)
     return float(np.std(band[-int(FS) :]))
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true")
-    args = ap.parse_args()
+    ap.add_argument("--quick", action="store_true", help="3 bandwidths instead of 10")
+    args = ap.parse_args(argv)
     bws = (1.0, 4.0, 6.0) if args.quick else (0.5, 1.0, 2.0, 3.0, 4.0, 4.4, 5.0, 6.0, 8.0, 12.0)
     plant = ddl.DualStage()
     pts = {"centre": 0.0, "softest": coarse_operating_points(plant)[0]}
     pts["end"] = coarse_operating_points(plant)[1]
-    print(f"# {platform.machine()} {platform.python_version()}, default DualStage at {FS:g} Hz")
-    head = "| f_bw Hz | margin used dB |"
-    for name, y in pts.items():
-        head += f" {name} ({y * 1e3:+.3f} mm) pred / meas |"
-    head += " ringing on ramp, friction on [nm] |"
-    print(head)
-    print("|---" * (3 + len(pts)) + "|")
+    print(preamble())
+    print(
+        f"The default DualStage at {FS:g} Hz; per carriage position, the gain margin "
+        "predicted / simulated (their difference); ringing: rms of the carriage mode on a "
+        "100 µm/s ramp, friction on:\n"
+    )
+    head = ["f_bw (Hz)", "margin used (dB)"]
+    head += [f"{name} ({y * 1e3:+.3f} mm)" for name, y in pts.items()]
+    head += ["ringing (nm)"]
+    body = []
     for bw in bws:
         ctl = ddl.SisoCoordinator(coarse_bandwidth=bw)
         gm = coarse_gain_margin(ctl, plant, FS, n=4000)[0]
-        row = f"| {bw:g} | {20 * np.log10(gm):+.2f} |"
+        row = [f"{bw:g}", f"{20 * np.log10(gm):+.2f}"]
         for y in pts.values():
             pred = _gain_margin_at(ctl, plant, FS, 4000, y)[0]
             meas = simulated_coarse_margin(plant, FS, bw, y_c=y)
-            row += f" {pred:.3f} / {meas:.3f} ({100 * (meas / pred - 1):+.1f} %) |"
-        row += f" {ramp_ringing(bw) * 1e9:.1f} |"
-        print(row, flush=True)
+            row.append(f"{pred:.3f} / {meas:.3f} ({100 * (meas / pred - 1):+.1f} %)")
+        row.append(f"{ramp_ringing(bw) * 1e9:.1f}")
+        body.append(row)
+    print(markdown(head, body, "r" * len(head)))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -46,15 +46,16 @@ the Python engine (and the native cold solve) evict the caches before the next s
 call — "native warm" measured right after a Python-engine solve costs up to 2× its time alone
 — so the Python engine runs as the oracle every 10th step only, after that step's timed
 solves, and the step after it is not timed.
-Then the one-shot cost: ``qc.solve_stack`` of a 7-variable, 3-level stack (each engine) vs one
-direct ``daqp.solve`` of the weighted QP, with the ratio of medians to that direct call (the
-goal: within 4×). Here each native one-shot follows a Python-engine one (which evicts the
-caches); ``benchmarks/oneshot.py`` times the native one-shot alone, and its parts.
+With ``--one-shot``, then the one-shot cost: ``qc.solve_stack`` of a 7-variable, 3-level stack
+(each engine) vs one direct ``daqp.solve`` of the weighted QP, with the ratio of medians to
+that direct call (the goal: within 4×). Here each native one-shot follows a Python-engine one
+(which evicts the caches); ``benchmarks/oneshot.py`` times the native one-shot alone, and its
+parts.
 
     python benchmarks/hierarchy_bench.py            # ~2–3 min
     python benchmarks/hierarchy_bench.py --quick    # a few seconds
     python benchmarks/hierarchy_bench.py --scenario panda9 --scenario random50 --steps 300
-    python benchmarks/hierarchy_bench.py --steps 300 --no-python --no-one-shot --runs 4
+    python benchmarks/hierarchy_bench.py --steps 300 --no-python --runs 4
 
 Printed: each engine's median µs per scenario, with ``--runs N`` the range over N runs (the
 scenarios in turn within a run), the native warm solve over DAQP's faster path and the largest
@@ -549,7 +550,12 @@ def main(argv=None) -> int:
         action="store_true",
         help="also the table of median / p90 / p99 per scenario and engine",
     )
-    ap.add_argument("--no-one-shot", action="store_true", help="skip the one-shot table")
+    ap.add_argument(
+        "--one-shot",
+        action="store_true",
+        help="after the re-solve table, the one-shot table: qc.solve_stack of a new stack "
+        "(each engine) against one direct daqp.solve of the weighted QP",
+    )
     ap.add_argument(
         "--no-python",
         action="store_true",
@@ -607,7 +613,7 @@ def main(argv=None) -> int:
             print("\n" + percentiles(results))
         for line in dict.fromkeys(notes):
             print(line)
-        if args.no_one_shot:
+        if not args.one_shot:
             return 0
         print(
             "\nOne-shot: `qc.solve_stack` of a 7-variable, 3-level stack against one direct "

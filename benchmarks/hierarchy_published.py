@@ -20,11 +20,11 @@ the Python engine (default backend), the native engine warm (``Stack.solve``), c
 from its own last step), DAQP's hierarchical mode from Python (``daqp.solve`` with ``H = I``,
 the bounds hard, one soft block per level; its arrays built outside the timer) and a
 ``daqp.Model`` kept across steps (``update`` of the right-hand sides + ``solve``: DAQP's warm
-path). Two kinds of step: ``same`` (the unchanged stack solved again) and ``moved`` (every
-right-hand side shifted by ``1e-3 sin(...)`` times its row's norm). Each solver's level values
-are checked against the Python engine's at every step (``max |Δr| / max(1, r)``). DAQP
-normalises each soft row, so on the published rows (norms 0.02–431 on the humanoid) it solves
-another problem; the ``(unit rows)`` copies divide each row and its bounds by the row's norm,
+path). Its steps are ``moved`` (every right-hand side shifted by ``1e-3 sin(...)`` times its
+row's norm); ``--same`` adds ``same`` steps (the unchanged stack solved again). Each solver's
+level values are checked against the Python engine's at every step (``max |Δr| / max(1, r)``).
+DAQP normalises each soft row, so on the published rows (norms 0.02–431 on the humanoid) it
+solves another problem; the ``(unit rows)`` copies divide each row and its bounds by the row's norm,
 where every solver solves the same problem. The solvers run in a new (seeded) random order
 every step (``--order shuffle``, the default), so that each follows every
 other about equally often: the solver right after the Python engine finds the caches evicted
@@ -253,11 +253,12 @@ def resolve_table(
     order: str = "shuffle",
     runs: int = 1,
     detail: bool = False,
+    same: bool = False,
 ) -> str:
     """The re-solve table (see the module's docstring): per problem, variant and kind of
-    step, each solver's median µs, the range over ``runs`` runs (all problems in turn per
-    run); ``detail``: also median / p90 / p99 per solver. ``order``: see
-    :func:`resolve`."""
+    step (``moved``; with ``same`` also ``same``), each solver's median µs, the range over
+    ``runs`` runs (all problems in turn per run); ``detail``: also median / p90 / p99 per
+    solver. ``order``: see :func:`resolve`."""
     how = (
         "solvers in a new random order every step"
         if order == "shuffle"
@@ -273,7 +274,7 @@ def resolve_table(
         (label + (" (unit rows)" if unit else ""), P, unit, moved)
         for label, P in variants
         for unit in (False, True)
-        for moved in (False, True)
+        for moved in ((False, True) if same else (True,))
     ]
     stats: dict[tuple[str, str], list[dict]] = {}
     worst: dict[tuple[str, str], dict] = {}
@@ -352,6 +353,11 @@ def main(argv=None) -> int:
         action="store_true",
         help="--resolve: also the table of median / p90 / p99 per solver",
     )
+    ap.add_argument(
+        "--same",
+        action="store_true",
+        help="--resolve: also the 'same' steps (the unchanged stack solved again)",
+    )
     args = ap.parse_args(argv)
     if args.resolve:
         if args.steps < 5:
@@ -369,6 +375,7 @@ def main(argv=None) -> int:
                     args.order,
                     args.runs,
                     args.percentiles,
+                    args.same,
                 )
             )
         return 0

@@ -1,4 +1,4 @@
-"""Per-step differential IK: qpcoord (native / Python engines) vs Pink vs PlaCo.
+"""Per-step differential IK: qpcoord vs Pink vs PlaCo.
 
 Scenarios (same targets, same start, same hard limits for every solver, 1 kHz):
 
@@ -17,9 +17,9 @@ Solvers, stepped in lockstep (one step of each in turn, the order rotating every
 - ``qpcoord strict native``: :class:`qpcoord.IK`, ``method="hierarchical"``, default
   engine: one native call per step (task rows, limit box, strict hierarchy and the
   integration of ``q``: ``IK.step_integrate``);
-- ``qpcoord strict python``: the same IK with ``engine="python"`` (Python task refresh, the
-  Python engine on daqp, ``robot.integrate``);
-- ``qpcoord weighted native``: the same stack as one weighted QP (``weight_ratio`` 1e-3), its
+- with ``--engines``, ``qpcoord strict python``: the same IK with ``engine="python"`` (Python
+  task refresh, the Python engine on daqp, ``robot.integrate``), and ``qpcoord weighted
+  native`` (Panda only): the same stack as one weighted QP (``weight_ratio`` 1e-3), its
   default engine: one native call per step as the strict one (task rows, limit box, the native
   weighted QP and the integration of ``q``: ``IK.step_integrate``);
 - ``pink``: ``pink.solve_ik`` with ``solver="daqp"`` (the same backend), then
@@ -53,6 +53,7 @@ Run::
     python benchmarks/ik_peers.py --make-placo-venv   # create benchmarks/.placo-venv first
     python benchmarks/ik_peers.py --profile           # cProfile of the native Panda IK step
     python benchmarks/ik_peers.py --no-back-to-back   # the lockstep columns only
+    python benchmarks/ik_peers.py --engines           # also qpcoord's other engine and method
 
 One table, two kinds of run. **Lockstep**: the solvers stepped in turn as above (the order
 rotating every step), so load falls on all alike, but each solver's caches are cold at its
@@ -412,13 +413,13 @@ def _row(name: str, loop, meter: Meter, ts: np.ndarray, mode: str) -> dict:
     }
 
 
-def _makers(sc: dict, placo: Path | None, pink: bool) -> list:
-    """Constructors of the scenario's solvers, in the lockstep's order (PlaCo last)."""
-    makers = [
-        lambda: QpcoordLoop(sc, "hierarchical", "native", "qpcoord strict native"),
-        lambda: QpcoordLoop(sc, "hierarchical", "python", "qpcoord strict python"),
-    ]
-    if sc["name"] != "talos":
+def _makers(sc: dict, placo: Path | None, pink: bool, engines: bool) -> list:
+    """Constructors of the scenario's solvers, in the lockstep's order (PlaCo last); qpcoord's
+    Python engine and weighted method only with ``engines``."""
+    makers = [lambda: QpcoordLoop(sc, "hierarchical", "native", "qpcoord strict native")]
+    if engines:
+        makers.append(lambda: QpcoordLoop(sc, "hierarchical", "python", "qpcoord strict python"))
+    if engines and sc["name"] != "talos":
         makers.append(lambda: QpcoordLoop(sc, "weighted", None, "qpcoord weighted native"))
     if pink:
         makers.append(lambda: PinkLoop(sc))
@@ -437,7 +438,7 @@ def _build(make, name: str, notes: list[str]):
 
 
 def run_back_to_back(
-    name: str, steps: int, speed: float, placo: Path | None, pink: bool
+    name: str, steps: int, speed: float, placo: Path | None, pink: bool, engines: bool
 ) -> list[dict]:
     """Each solver runs the whole trajectory alone, one solver after the other (same scenario,
     same per-step timer, same meters as :func:`run`), built fresh: no other solver's steps
@@ -446,7 +447,7 @@ def run_back_to_back(
     sc = scenario(name, steps, speed)
     notes: list[str] = []
     rows = []
-    for make in _makers(sc, placo, pink):
+    for make in _makers(sc, placo, pink, engines):
         loop = _build(make, name, notes)
         if loop is None:
             continue
@@ -557,12 +558,16 @@ def make_placo_venv() -> Path:
     return PLACO_VENV / "bin" / "python"
 
 
-def run(name: str, steps: int, speed: float, placo: Path | None, pink: bool) -> list[dict]:
+def run(
+    name: str, steps: int, speed: float, placo: Path | None, pink: bool, engines: bool
+) -> list[dict]:
     """Run one scenario with every available solver in lockstep; one row per solver."""
     sc = scenario(name, steps, speed)
     notes: list[str] = []
     loops = [
-        loop for make in _makers(sc, placo, pink) if (loop := _build(make, name, notes)) is not None
+        loop
+        for make in _makers(sc, placo, pink, engines)
+        if (loop := _build(make, name, notes)) is not None
     ]
     meters = [Meter(sc) for _ in loops]
     times = np.full((len(loops), steps), np.nan)
@@ -683,6 +688,12 @@ def main(argv=None) -> int:
         action="store_true",
         help="skip the back-to-back runs (each solver's whole trajectory alone)",
     )
+    p.add_argument(
+        "--engines",
+        action="store_true",
+        help="also qpcoord's Python engine and its weighted method (rows 'qpcoord strict "
+        "python', 'qpcoord weighted native'; the Panda only for the weighted one)",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the rows here")
     args = p.parse_args(argv)
     if args.steps is not None and args.steps < 20:
@@ -713,9 +724,9 @@ def main(argv=None) -> int:
         if args.quick:
             steps = 60
         try:
-            rows += run(name, steps, args.speed, placo, pink)
+            rows += run(name, steps, args.speed, placo, pink, args.engines)
             if not args.no_back_to_back:
-                rows += run_back_to_back(name, steps, args.speed, placo, pink)
+                rows += run_back_to_back(name, steps, args.speed, placo, pink, args.engines)
         except ValueError as exc:  # example-robot-data missing
             rows.append({"scenario": name, "note": f"{name} skipped: {exc}"})
     print(

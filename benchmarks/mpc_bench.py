@@ -2,6 +2,7 @@
 
     python benchmarks/mpc_bench.py              # 20 000 steps each (2.5 s of control)
     python benchmarks/mpc_bench.py --quick      # 2 000 steps
+    python benchmarks/mpc_bench.py --backends   # and the MPC's QPs through every backend
     python benchmarks/mpc_bench.py --json rows.json
 
 For each method (``weighted`` on the persistent daqp workspace, ``hierarchical`` through
@@ -10,11 +11,10 @@ For each method (``weighted`` on the persistent daqp workspace, ``hierarchical``
 call (``MPC.solve_times``). BLAS is limited to one thread. The table reports median, p99 and
 max per step, the share of steps over 125 µs, the run's RMSE and fallback steps, and how
 many steps a cached critical region answered (``PersistentQP.region_steps``) and how many
-went to daqp (``qp_steps``). A
-second table solves the MPC's QPs of a Kolmogorov run with every installed backend through
-the general ``Stack.solve(method="weighted")`` path (µs per QP, largest cost deviation from
-the persistent daqp answer, relative to the cost of not moving). This script reports; it
-asserts nothing.
+went to daqp (``qp_steps``). With ``--backends``, a second table solves the MPC's QPs of a
+Kolmogorov run with every installed backend through the general
+``Stack.solve(method="weighted")`` path (µs per QP, largest cost deviation from the persistent
+daqp answer, relative to the cost of not moving). This script reports; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -121,6 +121,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--steps", type=int, default=20000)
+    ap.add_argument(
+        "--backends",
+        action="store_true",
+        help="also the MPC's QPs through Stack.solve(method='weighted') with every backend",
+    )
     ap.add_argument("--json", default=None, help="also write the rows to this file")
     args = ap.parse_args(argv)
     steps = 2000 if args.quick else args.steps
@@ -143,16 +148,18 @@ def main(argv=None) -> int:
         for r in rows
     ]  # fmt: skip
     print(markdown(head, body, "llrrrrrrrrrr"))
-    with threadpool_limits(limits=1):
-        brows = backend_rows(steps // 5)
-    print("\nThe MPC's QPs through `Stack.solve(method='weighted')` with every backend:\n")
-    head = ("solver", "QPs", "failures", "median µs", "p99 µs", "max cost dev.")
-    body = [
-        (b["solver"], b["qps"], b["failures"], f"{b['median_us']:.0f}", f"{b['p99_us']:.0f}",
-         f"{b['max_cost_dev']:.1e}")
-        for b in brows
-    ]  # fmt: skip
-    print(markdown(head, body, "lrrrrr"))
+    brows = []
+    if args.backends:
+        with threadpool_limits(limits=1):
+            brows = backend_rows(steps // 5)
+        print("\nThe MPC's QPs through `Stack.solve(method='weighted')` with every backend:\n")
+        head = ("solver", "QPs", "failures", "median µs", "p99 µs", "max cost dev.")
+        body = [
+            (b["solver"], b["qps"], b["failures"], f"{b['median_us']:.0f}",
+             f"{b['p99_us']:.0f}", f"{b['max_cost_dev']:.1e}")
+            for b in brows
+        ]  # fmt: skip
+        print(markdown(head, body, "lrrrrr"))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"mpc": rows, "backends": brows}, fh, indent=2)

@@ -132,11 +132,6 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     args = parser.parse_args()
     robot = qc.robots.load("panda")
-    print(preamble())
-    print(
-        f"{args.steps} steps per run, lockstep; each cell the range over {args.runs} run(s) "
-        "(µs); |Δv|: the largest velocity difference to the native step over all runs:\n"
-    )
     table, binding = [], {}
     with threadpool_limits(1):
         for name, pose in (("panda-position", False), ("panda-pose", True)):
@@ -147,12 +142,15 @@ def main() -> None:
                 worst = max(e["dv"][p] for e in runs)
                 dv = "–" if p == PATHS[0] else f"{worst:.1e}"
                 table.append((name, p, *(span(stats[:, i]) for i in range(3)), dv))
+    binds = ", ".join(f"{span(b, '{:.0f}')} of {name}" for name, b in binding.items())
+    print(preamble())
+    print(
+        f"{args.steps} steps per run, lockstep, a speed limit binding on {binds} steps; each "
+        f"cell the range over {args.runs} run(s) (µs); |Δv|: the largest velocity difference to "
+        "the native step over all runs:\n"
+    )
     head = ("scenario", "path", "median µs", "p90 µs", "p99 µs", "max |Δv| (rad/s)")
     print(markdown(head, table, "llrrrr"))
-    print(
-        "\nSteps with a speed limit binding, per run: "
-        + "; ".join(f"{name} {', '.join(map(str, b))}" for name, b in binding.items())
-    )
 
 
 if __name__ == "__main__":

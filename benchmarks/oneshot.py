@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
             ratio = [r[key][0] / r[floor][0] for r in runs]
             body.append((key, span(med), span(p90), span(ratio, "{:.2f}") + "×"))
         print(
-            f"\nOne-shot, 7 variables, 3 levels, new tasks every call; {args.steps} calls per "
+            f"One-shot, 7 variables, 3 levels, new tasks every call; {args.steps} calls per "
             f"run, {args.runs} run(s):\n"
         )
         head = ("call", "median µs", "p90 µs", "median / direct daqp.solve")

@@ -7,13 +7,15 @@ stack``)::
     python benchmarks/stack_bench.py --quick         # smoke run, a few seconds
     python benchmarks/stack_bench.py --solver daqp --steps 2000 --sizes 7
     python benchmarks/stack_bench.py --profile --solver daqp   # cProfile of the n=7 hot path
+    python benchmarks/stack_bench.py --one-shot      # and the one-shot table
     python benchmarks/stack_bench.py --one-shot-only   # only the one-shot table (~20 s)
 
-After the re-solve table, a **one-shot** table: per step of the same closed loop,
-a stack built from scratch and solved once (``qc.solve_stack`` of new tasks and bounds, both
-engines) beside the floor, one direct ``daqp.solve`` of the weighted QP of the same numbers
-(the soft limits as slack variables; ``H`` and ``f`` formed inside its timer), with the ratio
-of each median to the floor's (the goal for the native engine: within 4×).
+With ``--one-shot``, after the re-solve table, a **one-shot** table: per step of the same
+closed loop, a stack built from scratch and solved once (``qc.solve_stack`` of new tasks and
+bounds, both engines) beside the floor, one direct ``daqp.solve`` of the weighted QP of the
+same numbers (the soft limits as slack variables; ``H`` and ``f`` formed inside its timer),
+with the ratio of each median to the floor's (the goal for the native engine: within 4×).
+``oneshot.py`` measures the one-shot call on a fixed problem (the README's one-shot table).
 
 See benchmarks/README.md for the scenario and the measured table.
 """
@@ -203,7 +205,13 @@ def main(argv=None) -> int:
         "--one-shot-steps",
         type=int,
         default=None,
-        help="steps of the one-shot table (default 300, --quick 25; 0 skips it)",
+        help="steps of the one-shot table (default 300, --quick 25)",
+    )
+    ap.add_argument(
+        "--one-shot",
+        action="store_true",
+        help="after the closed loop, the one-shot table: qc.solve_stack of a new stack per "
+        "step (both engines) against one direct daqp.solve of the same QP",
     )
     ap.add_argument("--one-shot-only", action="store_true", help="only the one-shot table")
     ap.add_argument(
@@ -239,12 +247,12 @@ def main(argv=None) -> int:
         slow_steps=args.slow_steps,
     )
     wall = time.perf_counter() - t0
-    versions = ", ".join(f"{k} {v}" for k, v in qc.solver_versions().items())
-    print(f"Backends: {versions}.")
-    print(f"The closed loop (wall time {wall:.0f} s):\n")
+    used = {r["solver"] for r in rows}
+    versions = ", ".join(f"{k} {v}" for k, v in qc.solver_versions().items() if k in used)
+    print(f"The closed loop, backends {versions} (wall time {wall:.0f} s):\n")
     print(format_loops(rows))
     shots = []
-    if shot_steps > 0:
+    if args.one_shot:
         with threadpool_limits(1):
             shots = one_shot(args.sizes, max(shot_steps, 10), args.seed)
         print("\nOne-shot (a new stack per step, solved once) vs one direct `daqp.solve`:\n")

@@ -2,6 +2,7 @@
 
     python benchmarks/weighted_bench.py                # 3 runs of every scenario (~2 min)
     python benchmarks/weighted_bench.py --quick        # a smoke run
+    python benchmarks/weighted_bench.py --mpc          # and the DDL MPC on both engines
     python benchmarks/weighted_bench.py --json rows.json
 
 Scenarios, each run 3 times (``--runs``), the two engines interleaved within a run:
@@ -15,10 +16,10 @@ Scenarios, each run 3 times (``--runs``), the two engines interleaved within a r
   effort; a hard inequality; a box) whose right-hand sides move every step:
   ``PersistentQP.solve_x`` (timed alone: the tasks' ``update`` calls are not) on the native
   workspace against the daqp workspace, stepped alternately on two copies of the stack.
-* ``DDL MPC kolmogorov`` / ``DDL MPC step``: the 8 kHz MPC of ``benchmarks/mpc_bench.py``
-  (``method="weighted"``, the parametric path with its critical-region cache) on the 250 Hz
-  Kolmogorov case and on a 5 mm step, whole runs alternating between the engines
-  (``MPC.solve_times``: state update + QP).
+* with ``--mpc``, ``DDL MPC kolmogorov`` / ``DDL MPC step``: the 8 kHz MPC of
+  ``benchmarks/mpc_bench.py`` (``method="weighted"``, the parametric path with its
+  critical-region cache) on the 250 Hz Kolmogorov case and on a 5 mm step, whole runs
+  alternating between the engines (``MPC.solve_times``: state update + QP).
 
 One BLAS thread. Times in µs per step: median, p90, p99 of each run and, in the table, the
 median over runs with the spread (min–max over runs). This script reports; it asserts nothing.
@@ -140,8 +141,8 @@ def mpc_run(steps: int, case: str) -> dict:
 
 def table(results: dict) -> str:
     lines = [
-        "| scenario | engine | median µs | p90 µs | p99 µs | runs: medians | notes |",
-        "|---|---|---:|---:|---:|---|---|",
+        "| scenario | engine | median µs | p90 µs | p99 µs | notes |",
+        "|---|---|---:|---:|---:|---|",
     ]
     for scen, runs in results.items():
         for engine in ("native", "python+daqp"):
@@ -161,7 +162,7 @@ def table(results: dict) -> str:
                     notes.append(f"{key} {v:.2g}" if isinstance(v, float) else f"{key} {v}")
             lines.append(
                 f"| {scen} | {engine} | {cell(med)} | {cell(p90)} | {cell(p99)} | "
-                f"{', '.join(f'{v:.1f}' for v in med)} | {'; '.join(notes)} |"
+                f"{'; '.join(notes)} |"
             )
     return "\n".join(lines)
 
@@ -171,6 +172,11 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="smoke run (few steps, 1 run)")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--steps", type=int, default=2000, help="steps per stack/persistent loop")
+    ap.add_argument(
+        "--mpc",
+        action="store_true",
+        help="also the DDL MPC of mpc_bench.py (Kolmogorov case, 5 mm step) on both engines",
+    )
     ap.add_argument("--mpc-steps", type=int, default=8000, help="DDL MPC steps per run")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args(argv)
@@ -184,11 +190,13 @@ def main(argv=None) -> int:
                 results.setdefault(f"stack n={n}", []).append(stack_runs(n, steps))
         for n in (12, 30):
             results.setdefault(f"persistent n={n}", []).append(persistent_run(n, steps))
-        for case in ("kolmogorov", "step"):
+        for case in ("kolmogorov", "step") if args.mpc else ():
             results.setdefault(f"DDL MPC {case}", []).append(mpc_run(mpc_steps, case))
     print(preamble())
     print(
-        f"{runs} run(s), {steps} steps per loop, {mpc_steps} MPC steps, one BLAS thread; "
+        f"{runs} run(s), {steps} steps per loop"
+        + (f", {mpc_steps} MPC steps" if args.mpc else "")
+        + "; one BLAS thread; "
         "cells: the median over the runs (min–max):\n"
     )
     print(table(results))

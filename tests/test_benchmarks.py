@@ -1,8 +1,9 @@
-"""``benchmarks/ik_peers.py --quick`` runs without PlaCo (and says so), in lockstep and back to
-back; no timed assertion.
+"""Smoke runs of the benchmark scripts and of ``python -m benchmarks --write``; no timed
+assertion.
 
-The benchmark is a script, not a module of the package: it is run as a subprocess, as a
-user runs it. The checks are on its output's content (rows, errors, limits), never on times.
+A benchmark is a script, not a module of the package: it is run as a subprocess, as a user
+runs it. The checks are on its output's content (rows, errors, limits, which rows its flags
+add) and on the README's table markers, never on times.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "ik_peers.py"
+LEXLS_BENCH = ROOT / "benchmarks" / "lexls" / "bench.py"
 
 
 def _run(tmp_path: Path, *args: str) -> tuple[str, list[dict]]:
@@ -43,6 +45,7 @@ def test_quick_without_placo(tmp_path):
         "panda-position",
         "--scenario",
         "panda-pose",
+        "--engines",
     )
     assert "PlaCo skipped: no interpreter at" in stdout
     if any("skipped" in r.get("note", "") for r in rows):  # example-robot-data missing
@@ -84,6 +87,8 @@ def test_lockstep_only(tmp_path):
         pytest.skip(rows[0]["note"])
     assert {r["mode"] for r in rows} == {"lockstep"}
     assert "one after the other (not run)" in stdout
+    # without --engines, qpcoord's default engine and method only
+    assert {r["solver"] for r in rows if "solver" in r} == {"qpcoord strict native"}
 
 
 def test_rejects_too_few_steps(tmp_path):
@@ -125,6 +130,109 @@ def test_stack_bench_one_shot_table():
     dx = float(note.split("max |dx| ")[1].split(";")[0])
     assert dx < 1e-6
     assert "daqp exit flags [1]" in note
+
+
+def _script(*args: str, timeout: float = 300) -> str:
+    """stdout of ``python benchmarks/ARGS...`` with one BLAS thread (exit status 0 asserted)."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / args[0]), *args[1:]],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=timeout,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout
+
+
+#: (script and arguments, module it needs, a row it prints by default, what only a flag adds)
+DEFAULT_OUTPUTS = [
+    (("stack_bench.py", "--quick", "--solver", "daqp", "--sizes", "7"), "daqp",
+     "| 7 | weighted | daqp |", "daqp.solve floor"),
+    (("weighted_bench.py", "--quick"), "daqp", "| persistent n=12 | native |", "DDL MPC"),
+    (("mpc_bench.py", "--quick", "--steps", "600"), "daqp", "| weighted | kolmogorov |",
+     "with every backend"),
+    (("hierarchy_published.py", "--resolve", "--steps", "6", "--problem", "soth_sot"), "daqp",
+     "| soth_sot | 30 | moved |", "| same |"),
+    (("collision_bench.py", "--steps", "20", "--repeats", "1"), "coal",
+     "| qpcoord IK.step, collision at level 0 |", "`CollisionAvoidance.update` alone"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("args", "needs", "row", "flagged"), DEFAULT_OUTPUTS)
+def test_default_output_leaves_the_extra_rows_to_a_flag(args, needs, row, flagged):
+    """By default a script prints what a user compares (``row``); the extra rows or tables
+    (``stack_bench.py --one-shot``, ``weighted_bench.py --mpc``, ``mpc_bench.py --backends``,
+    ``hierarchy_published.py --same``, ``collision_bench.py --update``) only with their
+    flag."""
+    pytest.importorskip(needs)
+    out = _script(*args)
+    assert row in out
+    assert flagged not in out
+
+
+def test_ddl_bench_table():
+    """``ddl_bench.py --quick``: machine, command, one row per rate with positive times."""
+    out = _script("ddl_bench.py", "--quick")
+    lines = out.splitlines()
+    assert lines[0].startswith("Machine: ")
+    assert lines[1] == "Command: `python benchmarks/ddl_bench.py --quick`"
+    rows = {ln.split("|")[1].strip(): ln for ln in lines if ln.startswith("| ") and "0 |" in ln}
+    assert set(rows) == {"5000", "8000"}
+    for row in rows.values():
+        cells = [c.strip() for c in row.split("|")[1:-1]]
+        assert cells[1] == "1.0" and all(float(c) > 0 for c in cells[3:])
+
+
+def test_ddl_margin_table():
+    """``ddl_margin.py --quick``: a row per bandwidth, a predicted / simulated pair per
+    carriage position."""
+    out = _script("ddl_margin.py", "--quick")
+    assert out.startswith("Machine: ")
+    rows = [ln for ln in out.splitlines() if ln.startswith("| ") and ln[2].isdigit()]
+    assert [r.split("|")[1].strip() for r in rows] == ["1", "4", "6"]
+    for row in rows:
+        pairs = [c for c in row.split("|") if " / " in c]
+        assert len(pairs) == 3, row
+
+
+def test_lexls_bench_without_lexls(tmp_path):
+    """``lexls/bench.py`` without a LexLS checkout: the native driver's column for every
+    problem and one line saying LexLS was skipped (g++ and Eigen's headers needed)."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, str(LEXLS_BENCH), "--quick", "--lexls", str(tmp_path / "none")],
+        capture_output=True, text=True, env=env, timeout=900,
+    )  # fmt: skip
+    if proc.returncode != 0 and "needs g++ and Eigen's headers" in proc.stderr:
+        pytest.skip("no g++ or Eigen headers to build the C++ drivers")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = proc.stdout
+    rows = [ln.split("|") for ln in out.splitlines() if ln.startswith("| ")]
+    body = {r[1].strip(): [c.strip() for c in r[2:-1]] for r in rows[2:]}
+    assert set(body) == {"humanoid (published rows)", "soth_sot", "chain30", "random50"}
+    for n, lexls, native, gap in body.values():
+        assert int(n) > 0 and lexls == gap == "–" and float(native) > 0
+    assert out.rstrip().splitlines()[-1].startswith("LexLS skipped: no checkout at ")
+
+
+def test_readme_holds_every_table_with_its_command():
+    """Every table of ``python -m benchmarks`` has one marker pair in benchmarks/README.md
+    (so ``--write`` writes them all), every marker pair is one of them, and each block opens
+    with its machine line and the command ``python -m benchmarks`` runs for it."""
+    import re
+    import shlex
+
+    writer = _writer()
+    text = (ROOT / "benchmarks" / "README.md").read_text()
+    assert set(re.findall(r"^<!-- table: (\S+) -->$", text, re.M)) == set(writer.TABLES)
+    for name, table in writer.TABLES.items():
+        block = text.split(f"<!-- table: {name} -->\n", 1)[1].split("<!-- /table -->", 1)[0]
+        lines = block.splitlines()
+        assert lines[0].startswith("Machine: ") and " cores" in lines[0], name
+        command = shlex.join(["python", f"benchmarks/{table.script}", *table.full])
+        assert lines[1] == f"Command: `{command}`", name
 
 
 def test_oneshot_table():

@@ -1,7 +1,8 @@
 // LexLS (jrl-umi3218/lexls, C++, header-only, BSD-2) on the problems dumped for the native
 // engine's driver (src/native/tools/dump_problems.py; read by src/native/tools/dump_file.hpp,
 // the driver's reader too): the fastest published strict-hierarchy solver, run on this
-// machine rather than quoted from its paper. Not built by pip or CI: LexLS is not on PyPI.
+// machine rather than quoted from its paper. Not built by pip or CI: LexLS is not on PyPI;
+// benchmarks/lexls/bench.py builds it and the native driver and prints the table.
 //
 //   git clone https://github.com/jrl-umi3218/lexls /tmp/lexls   (only include/ is needed)
 //   g++ -O2 -std=c++17 -DNDEBUG -I<eigen3> -I/tmp/lexls/include \
