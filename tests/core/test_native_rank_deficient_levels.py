@@ -42,8 +42,8 @@ def test_closed_forms_by_qr_and_by_svd_agree_with_python(cond):
     well-conditioned (QR), just above the threshold (SVD, undamped), below it (SVD, damped:
     s = 5e-8 < 1e-7 s_ref) and exactly rank-deficient levels all give the Python engine's
     answer, with the box inactive and active. (Far below the threshold, s ~ 1e-8..1e-12, the
-    next level's value differs between the engines, with the old build too: a known
-    discrepancy, not covered here.)"""
+    next level's value differs between the engines: a known discrepancy, not covered
+    here.)"""
     rng = np.random.default_rng(int(cond) % 97 if math.isfinite(cond) else 7)
     n = 7
     U, _ = np.linalg.qr(rng.standard_normal((4, 4)))

@@ -438,7 +438,8 @@ def test_a_shape_change_and_a_nan_behind_a_view_are_caught_by_the_weighted_solve
 
 @needs_native
 def test_a_stack_in_a_cycle_through_its_native_weighted_solver_is_collected():
-    """The weighted solver now holds the stack's tasks too: its ``tp_traverse``."""
+    """The weighted solver holds the stack's tasks too: its ``tp_traverse`` lets the garbage
+    collector see through a cycle."""
     import gc
     import weakref
 

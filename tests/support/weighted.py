@@ -15,6 +15,7 @@ X_TOL = 1e-9
 
 
 def relative_dx(a: np.ndarray, b: np.ndarray) -> float:
+    """‖a − b‖∞ relative to max(1, ‖b‖∞)."""
     return float(np.max(np.abs(a - b))) / max(1.0, float(np.max(np.abs(b))))
 
 
