@@ -179,6 +179,83 @@ def test_import_graph_sees_lazy_and_type_checking_imports(tmp_path):
     assert cycles(graph) == [["p.a", "p.c", "p.sub.b"]]
 
 
+def _is_venv(folder: Path) -> bool:
+    """A virtual environment (``.venv``, ``benchmarks/.placo-venv``, ...): not the project's."""
+    return folder.name.endswith("venv") or (folder / "pyvenv.cfg").is_file()
+
+
+def python_files(folder: Path) -> list[Path]:
+    """The ``.py`` files under ``folder``, virtual environments and caches left out."""
+    out: list[Path] = []
+    for path in sorted(folder.iterdir()):
+        if path.is_dir() and not path.is_symlink():
+            if not (_is_venv(path) or path.name == "__pycache__"):
+                out += python_files(path)
+        elif path.suffix == ".py" and path.is_file():
+            out.append(path)
+    return out
+
+
+def imports_of_test_modules(folders: list[Path]) -> list[str]:
+    """``file:line: module`` for every import of a test module (``test_*.py`` under a folder of
+    ``folders``) by any ``.py`` file of ``folders``: by name (``import test_x``, ``from
+    test_x import f``: pytest's prepend mode puts each test folder on the path), relative
+    (``from .test_x import f``) or dotted (``tests.core.test_x``, ``from tests.core import
+    test_x``); at module level, in a function or under ``TYPE_CHECKING`` alike."""
+    files = [path for folder in folders for path in python_files(folder)]
+    stems = {path.stem for path in files if path.name.startswith("test_")}
+    found: list[str] = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names: list[str] = []
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                names = [base] + [f"{base}.{alias.name}" for alias in node.names]
+            for name in names:
+                hit = [part for part in name.split(".") if part in stems]
+                if hit:
+                    rel = path.relative_to(folders[0].parent)
+                    found.append(f"{rel}:{node.lineno}: {hit[0]}")
+                    break
+    return found
+
+
+def test_no_test_module_imports_a_test_module():
+    """Tests and benchmarks share problem builders, oracles and fixtures through
+    ``tests/support`` (or a benchmark's own module), never through a test module."""
+    folders = [ROOT / "tests", ROOT / "benchmarks"]
+    files = [path for folder in folders for path in python_files(folder)]
+    assert any(path.name.startswith("test_") for path in files)
+    assert not any(".placo-venv" in path.parts for path in files)
+    assert imports_of_test_modules(folders) == []
+
+
+def test_test_module_imports_are_found(tmp_path):
+    """The check above can fail: every kind of import of a test module is reported, and
+    imports of support modules, of ``conftest`` and of libraries are not."""
+    tests, bench = tmp_path / "tests", tmp_path / "benchmarks"
+    (tests / "core").mkdir(parents=True)
+    (tests / "support").mkdir()
+    (bench / ".venv" / "lib").mkdir(parents=True)
+    (tests / "core" / "test_a.py").write_text("from support.stacks import s\nimport pytest\n")
+    (tests / "core" / "test_b.py").write_text("def f():\n    from test_a import g\n")
+    (tests / "core" / "test_c.py").write_text("import tests.core.test_a as t\n")
+    (tests / "core" / "test_d.py").write_text("from tests.core import test_a\n")
+    (tests / "core" / "test_e.py").write_text("from .test_a import g\nfrom conftest import S\n")
+    (tests / "support" / "stacks.py").write_text("import test_a\n")
+    (bench / "bench.py").write_text("from support.stacks import s\n")
+    (bench / ".venv" / "lib" / "test_x.py").write_text("import test_a\n")
+    assert imports_of_test_modules([tests, bench]) == [
+        "tests/core/test_b.py:2: test_a",
+        "tests/core/test_c.py:1: test_a",
+        "tests/core/test_d.py:1: test_a",
+        "tests/core/test_e.py:1: test_a",
+        "tests/support/stacks.py:1: test_a",
+    ]
+
+
 def test_layers_contract_is_kept():
     """import-linter's ``layers`` contract of pyproject.toml: cli > studies > robots |
     coordination | ddl | musculo | hysteresis > kinematics > core."""

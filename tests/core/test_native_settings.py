@@ -10,7 +10,8 @@ import math
 
 import numpy as np
 import pytest
-from test_native import _hard_random_stack, native_solver, needs_native
+from support.native_engine import assert_same, native_solver, needs_native
+from support.stacks import hard_random_stack
 
 import qpcoord as qc
 from qpcoord.core.methods.hierarchical import VIOLATION_TOL
@@ -19,7 +20,7 @@ from qpcoord.core.polish import KKT_TOL
 
 @needs_native
 def test_defaults_are_the_python_engines_tolerances():
-    _, h = native_solver(_hard_random_stack(0, n=10, levels=2))
+    _, h = native_solver(hard_random_stack(0, n=10, levels=2))
     s = h._solver.settings
     assert s.kkt_tol == KKT_TOL
     assert s.violation_tol == VIOLATION_TOL
@@ -31,7 +32,7 @@ def test_defaults_are_the_python_engines_tolerances():
 def test_iteration_cap_ends_the_active_set():
     """A cap below what a cold solve takes: 'did not converge' (naming the stage); restored,
     the next call (cold: the failed one dropped the stored sets) solves as before."""
-    stack = _hard_random_stack(0)
+    stack = hard_random_stack(0)
     P, h = native_solver(stack)
     x0, _, info = h.solve(P, warm=False)
     # the cap is max_iter_factor (rows + columns) + 10: 0 leaves 10 iterations per stage
@@ -48,7 +49,7 @@ def test_iteration_cap_ends_the_active_set():
 def test_time_limit_setting_and_the_calls_limit():
     """settings.time_limit bounds every call (the smaller of it and the call's time_left
     applies): an expired limit is the Python engine's time-limit error."""
-    stack = _hard_random_stack(1)
+    stack = hard_random_stack(1)
     P, h = native_solver(stack)
     h._solver.settings.time_limit = 0.0
     with pytest.raises(qc.SolverError, match="time limit reached"):
@@ -57,3 +58,13 @@ def test_time_limit_setting_and_the_calls_limit():
     with pytest.raises(qc.SolverError, match="time limit reached"):
         h.solve(P, warm=False, time_left=0.0)
     h.solve(P, warm=False, time_left=10.0)
+
+
+@needs_native
+def test_time_limit_gives_the_python_engines_error():
+    """An expired deadline ends the native active set with the Python engine's message."""
+    s = hard_random_stack(0)
+    with pytest.raises(qc.SolverError, match=r"time limit of 1e-09 s reached.*native engine"):
+        s.solve(engine="native", time_limit=1e-9)
+    sn = s.solve(engine="native", time_limit=math.inf)  # not poisoned: a cold solve
+    assert_same(s.solve(engine="python"), sn)

@@ -17,19 +17,18 @@ import warnings
 import cvxpy as cp
 import numpy as np
 import pytest
-import scipy.linalg
-import test_native as tn
 from hypothesis import HealthCheck, given, settings
 from support.arrays import force_write as _force_write
 from support.families import CASES, build, stack
 from support.families import case_ids as _ids
+from support.stacks import clipped_stack, hard_random_stack
+from support.strategies import stacks as random_stacks
+from support.weighted import X_TOL, assert_same_weighted, condition, epsilon, objective, relative_dx
 
 import qpcoord as qc
 from qpcoord.core import native, native_weighted
 from qpcoord.core.persistent import PersistentQP
 
-#: x: ‖x_native − x_python‖∞ ≤ X_TOL·max(1, ‖x_python‖∞) (the optimum is unique).
-X_TOL = 1e-9
 #: x against the cvxpy oracle (Clarabel's tolerances).
 ORACLE_TOL = 1e-6
 
@@ -40,74 +39,6 @@ if not BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
         + str(native._load_error)
     )
 needs_native = pytest.mark.skipif(not BUILT, reason="the native weighted QP is not built")
-
-
-def _dx(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.max(np.abs(a - b))) / max(1.0, float(np.max(np.abs(b))))
-
-
-def objective(s: qc.Stack, x: np.ndarray, eps: float) -> float:
-    """The weighted QP's cost at ``x`` (slacks at their optimum: each row's violation)."""
-    total, beta = 0.5 * eps * float(x @ x), 1.0
-    for L in s._compiled.levels:
-        total += 0.5 * beta * L.residual(x) ** 2
-        beta *= s.weight_ratio
-    return total
-
-
-def _eps(s: qc.Stack, sol: qc.Solution) -> float:
-    """``ε`` of the solve (0 unless the native engine reported it was added)."""
-    if not sol.info.get("regularized"):
-        return 0.0
-    hd = 0.0
-    beta = 1.0
-    d = np.zeros(s.n)
-    for L in s._compiled.levels:
-        if L.m_eq:
-            d += beta * np.einsum("ij,ij->j", L.Ae, L.Ae)
-        beta *= s.weight_ratio
-    hd = float(d.max())
-    return s.regularization * max(1.0, hd)
-
-
-def condition(s: qc.Stack) -> float:
-    """Condition number of the weighted QP's Hessian in ``(z, w)`` -- on the hard equalities'
-    null space, with the slacks' diagonal ``ρᵏ sw²``, without ``ε`` (``inf`` when singular):
-    the amplification of rounding in ``x`` by either engine."""
-    P = s._compiled
-    H, beta, slack = np.zeros((P.n, P.n)), 1.0, [np.zeros(0)]
-    for L in P.levels:
-        if L.m_eq:
-            H += beta * (L.Ae.T @ L.Ae)
-        slack.append(beta * L.sw**2)
-        beta *= s.weight_ratio
-    if P.hard.m_eq:
-        Z = scipy.linalg.null_space(P.hard.Ae)
-        H = Z.T @ H @ Z
-    ev = np.concatenate((np.linalg.eigvalsh(H) if H.size else np.zeros(0), *slack))
-    if ev.size == 0:
-        return 1.0
-    return float(ev.max() / ev.min()) if ev.min() > 0 else math.inf
-
-
-def _same(s: qc.Stack, sp: qc.Solution, sn: qc.Solution) -> None:
-    """The same optimum. The native cost is never above the Python engine's (to rounding);
-    where the optimum is unique and the QP well conditioned, the same ``x`` to ``X_TOL`` (or
-    rounding amplified by the condition number). Otherwise ``x`` is (nearly) free along the
-    Hessian's weak directions and only the cost is compared."""
-    assert sn.solver == "native" and sn.method == "weighted" and sn.status == "optimal"
-    e = _eps(s, sn)
-    fp, fn = objective(s, sp.x, e), objective(s, sn.x, e)
-    kappa = condition(s)
-    if sn.info["regularized"] or kappa > 1e8:
-        assert fn <= fp + 1e-9 * max(1.0, abs(fp)), (fp, fn)
-        return
-    assert fn <= fp + 1e-10 * max(1.0, abs(fp)), (fp, fn)
-    dx = _dx(sn.x, sp.x)
-    # rounding amplified by the condition number (both engines); X_TOL up to kappa ~ 4.5e3
-    # (measured on 8 000 hypothesis stacks: 6e-8 at kappa 7e5, 3.7e-7 at 1.5e7)
-    tol = max(X_TOL, 1e3 * kappa * np.finfo(float).eps)
-    assert dx <= tol, (dx, kappa, sp.x, sn.x)
 
 
 def weighted_oracle(s: qc.Stack, eps: float) -> np.ndarray:
@@ -153,7 +84,7 @@ def weighted_oracle(s: qc.Stack, eps: float) -> np.ndarray:
 
 @needs_native
 def test_weighted_default_is_native_where_built():
-    s = tn._small_stack()
+    s = clipped_stack()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert s.solve(method="weighted").solver == "native"
@@ -166,7 +97,7 @@ def test_weighted_default_is_native_where_built():
 
 
 def test_weighted_falls_back_to_python_without_the_extension(missing_extension):
-    s = tn._small_stack()
+    s = clipped_stack()
     with pytest.warns(RuntimeWarning, match="native engine is not built"):
         sol = s.solve(method="weighted")
     assert sol.solver != "native"
@@ -187,7 +118,7 @@ def test_native_weighted_matches_python(name, seed):
     s = stack(spec)
     sp = s.solve(method="weighted", engine="python")
     sn = stack(spec).solve(method="weighted")
-    _same(s, sp, sn)
+    assert_same_weighted(s, sp, sn)
 
 
 @needs_native
@@ -195,7 +126,7 @@ def test_native_weighted_matches_python(name, seed):
 def test_native_weighted_matches_oracle(name, seed):
     s = stack(build(name, seed))
     sn = s.solve(method="weighted")
-    eps = _eps(s, sn)
+    eps = epsilon(s, sn)
     ref = weighted_oracle(s, eps)
     if sn.info["regularized"] or condition(s) > 1e8:
         # x is (nearly) undetermined along the Hessian's null space: the same cost, the
@@ -204,19 +135,19 @@ def test_native_weighted_matches_oracle(name, seed):
         assert fn <= fo + 1e-9 * max(1.0, abs(fo)), (fo, fn)
         assert abs(fn - fo) <= 1e-7 * max(1.0, abs(fo)), (fo, fn)
     else:
-        assert _dx(sn.x, ref) <= ORACLE_TOL
+        assert relative_dx(sn.x, ref) <= ORACLE_TOL
 
 
 @needs_native
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(tn.stacks())
+@given(random_stacks())
 def test_native_weighted_matches_python_on_random_stacks(spec):
     s = stack(spec)
     sp = s.solve(method="weighted", engine="python")
     sn = s.solve(method="weighted")
-    _same(s, sp, sn)
+    assert_same_weighted(s, sp, sn)
     again = s.solve(method="weighted")  # warm: the same data, the stored working set
-    _same(s, sp, again)
+    assert_same_weighted(s, sp, again)
     assert again.info["iterations"] == 0 and not again.info["refactored"]
 
 
@@ -240,7 +171,7 @@ def test_warm_start_gives_the_cold_answer():
         sc = stack(spec).solve(method="weighted")
         assert sc.info["warm_start_hit"] is False
         np.testing.assert_allclose(sw.x, sc.x, rtol=0, atol=1e-10)
-        _same(warm, stack(spec).solve(method="weighted", engine="python"), sw)
+        assert_same_weighted(warm, stack(spec).solve(method="weighted", engine="python"), sw)
         hits += sw.info["warm_start_hit"]
     assert hits > 10
 
@@ -255,7 +186,7 @@ def test_changed_matrix_is_refactored():
     t.update(A=1.5 * t.A)
     sn = s.solve(method="weighted")
     assert sn.info["refactored"]
-    _same(s, s.solve(method="weighted", engine="python"), sn)
+    assert_same_weighted(s, s.solve(method="weighted", engine="python"), sn)
 
 
 @needs_native
@@ -322,16 +253,16 @@ def test_nan_in_a_right_hand_side_names_it():
 
 @needs_native
 def test_time_limit_gives_the_python_engines_error():
-    s = tn._hard_random_stack(0)
+    s = hard_random_stack(0)
     with pytest.raises(qc.SolverError, match=r"time limit of 1e-09 s reached.*native engine"):
         s.solve(method="weighted", time_limit=1e-9)
     sn = s.solve(method="weighted", time_limit=math.inf)  # not poisoned
-    _same(s, s.solve(method="weighted", engine="python"), sn)
+    assert_same_weighted(s, s.solve(method="weighted", engine="python"), sn)
 
 
 @needs_native
 def test_level_values_are_each_levels_residual():
-    s = tn._hard_random_stack(1)
+    s = hard_random_stack(1)
     sol = s.solve(method="weighted")
     ref = np.array([L.residual(sol.x) for L in s._compiled.levels])
     np.testing.assert_allclose(sol.level_residuals, ref, rtol=1e-12, atol=1e-14)
@@ -384,7 +315,7 @@ def test_persistent_native_matches_daqp_over_500_steps():
             soft.update(lower=-0.3 - 0.1 * rng.random(4), upper=0.3 + 0.1 * rng.random(4))
         a, b = pn.solve(), pd.solve()
         assert a.info["persistent"] and a.solver == "native" and b.solver == "daqp"
-        worst = max(worst, _dx(a.x, b.x))
+        worst = max(worst, relative_dx(a.x, b.x))
         hits += a.info["iterations"] == 0
         np.testing.assert_allclose(a.level_residuals, b.level_residuals, rtol=1e-6, atol=1e-9)
     assert worst < 1e-8, worst
@@ -408,7 +339,7 @@ def test_persistent_native_is_the_general_weighted_answer():
         track.update(b=np.cos(0.2 * k + np.arange(6)))
         a = pq.solve()
         b = s2.solve(method="weighted", engine="python")
-        assert _dx(a.x, b.x) <= X_TOL
+        assert relative_dx(a.x, b.x) <= X_TOL
         assert abs(a.x.sum() - 0.5) <= 1e-12
 
 
@@ -425,7 +356,7 @@ def test_persistent_native_falls_back_on_infeasible_steps():
     hard.update(lower=[-1.0, -1.0], upper=[1.0, 1.0])
     sol = pq.solve()
     assert sol.info["persistent"]
-    _same(s, s.solve(method="weighted", engine="python"), s.solve(method="weighted"))
+    assert_same_weighted(s, s.solve(method="weighted", engine="python"), s.solve(method="weighted"))
 
 
 def _region_pq(seed: int, engine: str, n: int = 8, p: int = 3) -> PersistentQP:
@@ -462,27 +393,6 @@ def test_persistent_native_regions_match_daqp(seed):
     worst = 0.0
     for k in range(300):
         theta = 3.0 * np.sin(0.02 * k) * direction + 0.3 * np.sin(0.11 * k)
-        worst = max(worst, _dx(pn.solve_theta(theta), pd.solve_theta(theta)))
+        worst = max(worst, relative_dx(pn.solve_theta(theta), pd.solve_theta(theta)))
     assert worst < 1e-8, worst
     assert pn.region_steps > 150 and pn.qp_steps > 0 and pn.fallbacks == 0
-
-
-# ---------------------------------------------------------------------------------------
-# no allocation per call (the C++ driver, built here when a compiler and Eigen are found)
-# ---------------------------------------------------------------------------------------
-
-
-@pytest.mark.engine_independent
-@needs_native
-def test_no_allocation_after_the_first_call(weighted_driver):
-    """``src/native/tools/weighted_driver.cpp`` counts heap allocations (malloc, where Eigen
-    allocates, and ``operator new``) over 2 000 solves after the first: 0 with the factor
-    kept and 0 with it rebuilt every call (the rebuild made 3 mallocs per call, products with
-    strided views of the rows, until they were copied into a contiguous buffer)."""
-    import subprocess
-
-    exe = str(weighted_driver)
-    out = subprocess.run([exe, "12"], check=True, capture_output=True, text=True).stdout
-    lines = out.strip().splitlines()
-    assert len(lines) == 2, out
-    assert all(line.endswith("allocations after the first 0") for line in lines), out

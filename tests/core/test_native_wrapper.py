@@ -1,29 +1,35 @@
-"""The Python around the native strict-hierarchy call (``Stack.solve`` within a few
-µs of the bare ``Hierarchy.run``), checked against what it replaced.
+"""The Python around the native calls (``Stack.solve``, strict hierarchy and weighted QP):
+the tasks' numbers reach the solver, and the ``Solution``, its ``info`` and the errors are the
+Python engine's.
 
-- :meth:`CompiledStack.refresh_stacked` copies every task's numbers each call (skipping
-  unchanged matrices by ``matrix_version`` was tried and dropped: a value written into a
-  task's array behind its back, ``test_hygiene``'s NaN, would no longer reach the native
-  check): after every kind of change the stacked arrays equal those of a stack compiled
-  afresh, and the native solve equals a fresh Python solve;
-- :meth:`NativeHierarchy._info` keeps the counts it read from ``stats`` with its bytes: every
-  call's dict equals the one recomputed from ``stats`` / ``detail`` by the rules of the
-  Python engine, and its lists are new objects each call;
-- the refresh, the solve, the copies and the info dict are one native call
-  (``Hierarchy.step``, ``src/native/refresh.hpp``): its info equals ``_info``'s, and a task
-  whose data is not float64 of its shape (another dtype, byte order, a broadcast) takes the
-  Python refresh, with the same stacked arrays and solution; strided arrays and ndarray
-  subclasses are copied natively.
+- The refresh copies every task's numbers each call (a value written into a task's array
+  behind its back, ``test_hygiene``'s NaN, must reach the native check): after every kind of
+  change the stacked arrays equal those of a stack compiled afresh, and the native solve
+  (strict hierarchy and weighted QP) equals a fresh Python solve; the arrays stay the same
+  objects from call to call.
+- The refresh, the solve, the copies and the info dict are one native call
+  (``Hierarchy.step``, ``src/native/refresh.hpp``); a task whose data is not float64 of its
+  shape (another dtype, byte order, a broadcast, unaligned data) takes the Python refresh
+  (``CompiledStack.refresh_stacked``), with the same stacked arrays and solution; strided
+  arrays and ndarray subclasses are copied natively.
+- ``NativeHierarchy._info``: every call's dict equals the one recomputed from ``stats`` /
+  ``detail`` by the rules of the Python engine, and its lists are new objects each call.
+- Bad numbers found at solve time (a NaN, a wrong-sided infinity, a bad warm start) are
+  named as the Python engine names them; a stack in a cycle through its native solver is
+  collected.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.arrays import force_write as _force_write
+from support.native_engine import needs_native
 from support.native_info import info_reference
+from support.stacks import clipped_stack, hard_random_stack
+from support.weighted import assert_same_weighted
 
 import qpcoord as qc
-from qpcoord.core import native
 from qpcoord.core.polish import KKT_TOL
 
 #: An array put in a task as it is: ``object.__setattr__`` bypasses the rebinding rule
@@ -31,10 +37,6 @@ from qpcoord.core.polish import KKT_TOL
 #: library code may; the native copy must still read (or hand over) what it finds there
 _as_is = object.__setattr__
 
-needs_native = pytest.mark.skipif(
-    not native.available(),
-    reason=f"the native engine (qpcoord._native) is not built: {native._load_error}",
-)
 
 STACKED = ("Aeq", "beq", "C", "clo", "chi", "csw", "lbs", "ubs")
 
@@ -333,3 +335,192 @@ def test_the_info_stats_pickle_and_name_the_counters_taken():
     assert pickle.loads(pickle.dumps(stats)) == stats
     assert stats.trial_memo_hits > 0 and "trial_memo_hits=" in repr(stats)
     assert "downdates" not in repr(stats) and stats.downdates == 0
+
+
+def _solve(s: qc.Stack) -> qc.Solution:
+    return s.solve(method="weighted", engine="native")
+
+
+def _count_python_refresh(s: qc.Stack, monkeypatch) -> list:
+    calls: list = []
+    P = s._compiled
+    real = P.refresh_stacked
+    monkeypatch.setattr(P, "refresh_stacked", lambda: calls.append(1) or real())
+    return calls
+
+
+def _assign(t, name: str, value) -> None:
+    """A matrix of another layout or dtype put in place as is (``update``, and so
+    ``task.A = ...``, would convert it; ``object.__setattr__`` bypasses it, as library code
+    may), with the version bump ``update`` makes: the weighted engine refactors on it."""
+    object.__setattr__(t, name, value)
+    object.__setattr__(t, "matrix_version", t.matrix_version + 1)
+
+
+def _like_fresh_python(s, tasks, box, got: qc.Solution) -> None:
+    _assert_like_fresh(s, tasks, box)
+    fresh = _build(tasks, box)
+    assert_same_weighted(fresh, fresh.solve(method="weighted", engine="python"), got)
+
+
+@needs_native
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_weighted_solve_refreshes_natively_after_every_kind_of_change(seed, monkeypatch):
+    """Every kind of change above (right-hand sides, new and in-place
+    matrices, weights, limits, the hard rows, nothing), then strided, Fortran-ordered and
+    subclassed arrays and a moved box: the Python refresh is never called."""
+    rng, tasks, box = _tasks(seed)
+    pos, wpos, lim, post, hard = tasks
+    s = _build(tasks, box)
+    _solve(s)
+    assert s._native_weighted._solver.fast_arrays  # numpy arrays read from their heads
+    calls = _count_python_refresh(s, monkeypatch)
+    n = 7
+    big = rng.standard_normal((6, 2 * n))
+
+    more = [
+        lambda: _assign(pos, "A", big[::2, ::2]),  # strided (a view of the caller's)
+        lambda: _assign(wpos, "A", np.asfortranarray(rng.standard_normal((2, n)))),
+        lambda: _assign(lim, "C", rng.standard_normal((3, n)).view(_Sub)),  # buffer protocol
+        lambda: setattr(lim, "lower", big[0, :6:2] - 5.0),  # a strided vector
+        lambda: box.update(lower=-0.5 * np.ones(n)),  # a new box version
+    ]
+    for change in _changes(rng, tasks) + more:
+        change()
+        _like_fresh_python(s, tasks, box, _solve(s))
+    assert calls == []
+
+
+@needs_native
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda t: setattr(t[0], "b", np.array([1, -2, 3])),  # int64: converted by numpy
+        lambda t: _assign(t[0], "A", t[0].A.astype(">f8")),  # another byte order (same values)
+        lambda t: setattr(t[2], "upper", np.array([0.4])),  # broadcast to the rows
+        lambda t: _assign(t[2], "C", t[2].C.astype(np.float32)),  # rounded: a new matrix
+        lambda t: setattr(t[0], "b", _misaligned([0.5, -1.0, 2.0])),
+    ],
+)
+def test_data_the_native_copy_does_not_take_goes_to_the_python_refresh(change, monkeypatch):
+    """The same answer through ``refresh_stacked``; with the tasks' own arrays back, the
+    native copy takes them again."""
+    rng, tasks, box = _tasks(6)
+    s = _build(tasks, box)
+    _solve(s)
+    calls = _count_python_refresh(s, monkeypatch)
+    saved = [dict(vars(t)) for t in tasks]
+    change(tasks)
+    _like_fresh_python(s, tasks, box, _solve(s))
+    assert calls == [1]
+    for t, attrs in zip(tasks, saved, strict=True):
+        vars(t).update(attrs)
+    _like_fresh_python(s, tasks, box, _solve(s))
+    assert calls == [1]
+
+
+@needs_native
+def test_a_shape_change_and_a_nan_behind_a_view_are_caught_by_the_weighted_solve():
+    t = qc.Equality(np.eye(4)[:2], [1.0, 2.0], name="reach")
+    s = qc.Stack([t, qc.Equality(np.eye(4), np.zeros(4))], bounds=qc.Bounds(-5.0, 5.0))
+    _solve(s)
+    A = np.array(t.A)
+    object.__setattr__(t, "A", A)  # as is (task.A = A would copy it)
+    A.shape = (4, 2)  # the same object, another shape
+    with pytest.raises(ValueError, match=r"Equality 'reach': A changed shape from \(2, 4\)"):
+        _solve(s)
+    object.__setattr__(t, "A", np.eye(4)[:2].copy())
+    _solve(s)
+    t.b.base[1] = np.nan
+    with pytest.raises(ValueError, match="reach"):
+        _solve(s)
+
+
+@needs_native
+def test_a_stack_in_a_cycle_through_its_native_weighted_solver_is_collected():
+    """The weighted solver holds the stack's tasks too: its ``tp_traverse`` lets the garbage
+    collector see through a cycle."""
+    import gc
+    import weakref
+
+    t = qc.Equality(np.eye(3), [1.0, 2.0, 3.0], name="reach")
+    s = qc.Stack([t], bounds=qc.Bounds(-5.0, 5.0))
+    _solve(s)
+    assert s._native_weighted is not None
+    t.owner = s  # the cycle: stack -> solver -> task -> stack
+    alive = weakref.ref(s)
+    del s, t
+    gc.collect()
+    assert alive() is None
+
+
+@needs_native
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_nan_in_a_task_names_it(engine):
+    t = qc.Inequality(np.eye(2), lower=[0.0, 0.0], name="fence")
+    s = qc.Stack([t, qc.Equality(np.eye(2), [1.0, 1.0])], bounds=qc.Bounds(-2.0, 2.0))
+    s.solve(engine=engine)
+    _force_write(t.C, (0, 0), np.nan)  # reached the array without update()
+    with pytest.raises(ValueError, match=r"Inequality 'fence': C contains nan.*found at solve"):
+        s.solve(engine=engine)
+
+
+@needs_native
+def test_bad_warm_start_is_rejected():
+    with pytest.raises(ValueError, match="warm_start"):
+        clipped_stack().solve(engine="native", warm_start=[1.0])
+
+
+@needs_native
+@pytest.mark.parametrize("engine", ["python", "native"])
+def test_wrong_sided_infinity_in_the_bounds_is_named(engine):
+    s = qc.Stack([qc.Equality(np.eye(2), [1.0, 1.0])], bounds=qc.Bounds(-2.0, 2.0))
+    s.solve(engine=engine)
+    _force_write(s._compiled.lb, (0,), np.inf)  # reached the array without a setter
+    with pytest.raises(ValueError, match="found at solve time"):
+        s.solve(engine=engine)
+
+
+@needs_native
+def test_repeated_calls_reuse_the_buffers():
+    """The per-step path writes the tasks' numbers straight into the compiled stack's stacked
+    arrays, which the native solver is bound to: the same objects every step, and every
+    level's buffers are views of them (no copy between refresh and the native call)."""
+    s = hard_random_stack(2)
+    s.solve(engine="native")
+    nh, P = s._native, s._compiled
+    arrays = (P.Aeq, P.beq, P.C, P.clo, P.chi, P.csw, nh.x, nh.res, nh.stats, nh.detail)
+    ids = [id(a) for a in arrays]
+    for _ in range(5):
+        s.solve(engine="native")
+    assert s._native is nh
+    assert [id(a) for a in arrays] == ids
+    for L in P.levels:
+        assert np.shares_memory(L.C, P.C) and np.shares_memory(L.lo, P.clo)
+
+
+@needs_native
+def test_engines_alternate_on_one_stack():
+    """A Python solve lets a level read its task's arrays in place; the next native solve
+    must still see every number (the stacked arrays are rewritten, the views restored),
+    with weighted rows and a bounds update in between."""
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal((3, 6))
+    pos = qc.Equality(A, rng.standard_normal(3))
+    post = qc.Equality(np.eye(6), rng.standard_normal(6), weight=np.linspace(0.5, 2.0, 6))
+    lim = qc.Inequality(rng.standard_normal((2, 6)), -0.2, 0.3)
+    box = qc.Bounds(-0.8 * np.ones(6), 0.8 * np.ones(6))
+    s = qc.Stack([pos, [post, lim]], bounds=box)
+    for step in range(6):
+        pos.update(b=np.sin(0.3 * step + np.arange(3)))
+        if step == 3:
+            box.update(lower=-0.5 * np.ones(6))
+        engine = ("python", "native")[step % 2]
+        got = s.solve(engine=engine)
+        fresh = qc.Stack([pos, [post, lim]], bounds=box).solve(engine="python")
+        np.testing.assert_allclose(
+            got.level_residuals, fresh.level_residuals, rtol=1e-9, atol=1e-12
+        )
+        assert (got.x >= -0.8 - 1e-12).all() and (got.x <= 0.8 + 1e-12).all()
+        if step >= 3:
+            assert (got.x >= -0.5 - 1e-12).all()

@@ -4,16 +4,13 @@ its errors."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.counting_malloc import run_counting_malloc
+from support.native_engine import needs_native
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -27,8 +24,6 @@ from qpcoord.kinematics.frame_tasks import (
 from qpcoord.kinematics.native_step import native_kind
 from qpcoord.kinematics.paths import Circle, HorizontalCircle
 from qpcoord.kinematics.tasks import AccelerationLimits, PositionBand
-
-needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 DT = 0.01
 #: the controlled frame and the default-frame robot of each test robot
@@ -946,49 +941,6 @@ def test_a_path_of_the_wrong_dimension_raises_the_tasks_message(robots):
         ik.step(_start(robot), reference=Circle())
     with pytest.raises(ValueError, match="no target"):
         ik.step(_start(robot))
-
-
-_COUNTING_MALLOC = r"""
-#define _GNU_SOURCE
-#include <dlfcn.h>
-#include <stddef.h>
-static long long calls = 0;
-static void* (*next_malloc)(size_t) = 0;
-static void* (*next_realloc)(void*, size_t) = 0;
-long long qpcoord_malloc_calls(void) { return calls; }
-void* malloc(size_t s) {
-  if (!next_malloc) next_malloc = dlsym(RTLD_NEXT, "malloc");
-  ++calls;
-  return next_malloc(s);
-}
-void* realloc(void* p, size_t s) {
-  if (!next_realloc) next_realloc = dlsym(RTLD_NEXT, "realloc");
-  ++calls;
-  return next_realloc(p, s);
-}
-"""
-
-
-def run_counting_malloc(tmp_path: Path, script: str, env: dict | None = None) -> str:
-    """Run ``script`` (a template with ``{tests}``: this folder, ``{lib}``: the shim, whose
-    ``qpcoord_malloc_calls()`` counts malloc/realloc calls) in a fresh Python with the
-    counting shim preloaded and ``env`` added to the environment; its stdout. Skips without
-    a C compiler or glibc."""
-    cc = shutil.which("cc") or shutil.which("gcc")
-    if cc is None or not sys.platform.startswith("linux"):
-        pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
-    src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
-    src.write_text(_COUNTING_MALLOC)
-    subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
-    proc = subprocess.run(
-        [sys.executable, "-c", script.format(tests=str(Path(__file__).parent), lib=str(lib))],
-        capture_output=True,
-        text=True,
-        env={**os.environ, **(env or {}), "LD_PRELOAD": str(lib), "OPENBLAS_NUM_THREADS": "1"},
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return proc.stdout
 
 
 _ALLOCATION_RUN = r"""

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_native_step import needs_native, run_counting_malloc
+from support.counting_malloc import run_counting_malloc
+from support.native_engine import needs_native
 
 import qpcoord as qc
 from qpcoord.core import native

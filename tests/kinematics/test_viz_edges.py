@@ -393,7 +393,8 @@ def test_the_annotated_page_shows_each_frame_offline_in_headless_chromium(panda,
     limit is marked in yellow; nothing but the file and its data: URLs is requested."""
     import io
 
-    from test_viz import _chromium, _need  # tests/kinematics is on sys.path (prepend mode)
+    from support.browser import chromium as _chromium
+    from support.browser import need_browser as _need
 
     exe = _chromium()
     if exe is None:

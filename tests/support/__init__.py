@@ -9,7 +9,15 @@ Test modules import these (``from support.oracle import lexicographic``; pytest 
 - :mod:`support.campaign`: seeded degenerate stacks judged against the reference.
 - :mod:`support.hlsp`: the published hierarchical least-squares problems (``tests/data/hlsp``).
 - :mod:`support.dumps`: stacks stored level by level in ``.npz`` files (``tests/data``).
-- :mod:`support.stacks`: small stacks that several tests share.
+- :mod:`support.stacks`: stacks that several tests share (random conflicting levels, a box
+  vertex, no freedom left, ...).
 - :mod:`support.arrays`: writing behind a task's read-only arrays.
 - :mod:`support.native_info`: the native engine's ``Solution.info`` by its definition.
+- :mod:`support.native_engine`: whether the native engine is built (``needs_native``), a
+  native solver of a compiled stack, and the comparison of its answers with the Python engine's.
+- :mod:`support.published`: the benchmark scripts as modules; published stacks and their moves.
+- :mod:`support.strategies`: hypothesis strategies of random stacks.
+- :mod:`support.weighted`: the weighted QP's cost, condition number and comparison.
+- :mod:`support.counting_malloc`: a child Python whose malloc calls are counted.
+- :mod:`support.browser`: a headless Chromium, or the reason a test skips.
 """

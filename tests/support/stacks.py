@@ -56,3 +56,83 @@ def retry_leak_case() -> tuple[list, list, dict]:
         constraints=[qc.Inequality([[-1.55, 1.1, 0.07, 0.2, 0.08]], [-1.49], [0.98])],
     )
     return head, extra, options
+
+
+def hard_random_stack(seed: int, n: int = 40, levels: int = 8) -> qc.Stack:
+    """Levels of unit inequality rows that conflict: many active-set iterations."""
+    rng = np.random.default_rng(seed)
+    tasks = []
+    for _ in range(levels):
+        C = rng.standard_normal((15, n))
+        C /= np.linalg.norm(C, axis=1)[:, None]
+        lo = rng.uniform(0.2, 1.0, 15)
+        tasks.append(
+            [
+                qc.Equality(rng.standard_normal((4, n)), rng.standard_normal(4)),
+                qc.Inequality(C, lo, lo + 0.1),
+            ]
+        )
+    return qc.Stack(tasks, bounds=qc.Bounds(-np.ones(n), np.ones(n)))
+
+
+def vertex_stack(
+    seed: int,
+    n: int = 12,
+    equal_bounds: int = 0,
+    duplicate: bool = False,
+    inequality_level: bool = False,
+):
+    """Bounds |x_j| <= 0.3, a first level of 4 equality rows far out of reach (its optimum
+    rests on many bounds: a vertex of the box in most directions), then equality levels of 3
+    and 2 rows that start there. ``equal_bounds`` variables get lb = ub; ``duplicate`` adds
+    hard inequality rows equal to the first bounds (rows tied with the bounds in every
+    ratio test: dependent working rows); ``inequality_level`` puts first an inequality level
+    whose rows end tight (inherited by the levels below). Returns (stack, move(step))."""
+    rng = np.random.default_rng(seed)
+    lb = np.full(n, -0.3)
+    ub = np.full(n, 0.3)
+    for j in range(equal_bounds):
+        lb[j] = ub[j] = rng.uniform(-0.2, 0.2)
+    A1 = rng.standard_normal((4, n))
+    b1 = 5.0 * rng.standard_normal(4)
+    e1 = qc.Equality(A1, b1)
+    A2 = rng.standard_normal((3, n))
+    e2 = qc.Equality(A2, rng.standard_normal(3))
+    A3 = rng.standard_normal((2, n))
+    e3 = qc.Equality(A3, rng.standard_normal(2))
+    levels: list = [e1, e2, e3]
+    if inequality_level:
+        C = rng.standard_normal((3, n))
+        C /= np.linalg.norm(C, axis=1)[:, None]
+        ineq = qc.Inequality(C, np.full(3, 0.05), np.full(3, np.inf))
+        levels.insert(0, ineq)
+    cons = None
+    if duplicate:
+        D = np.eye(n)[:4]
+        cons = [qc.Inequality(D, lb[:4].copy(), ub[:4].copy())]
+    st = qc.Stack(levels, bounds=qc.Bounds(lb, ub), constraints=cons)
+    d1 = rng.standard_normal(4)
+
+    def move(step: int) -> None:
+        e1.update(b=b1 + 0.3 * np.sin(0.7 * step) * d1)
+
+    return st, move
+
+
+def no_freedom_stack() -> tuple[qc.Stack, qc.Equality, np.ndarray]:
+    """``(stack, e1, A1)``: 6 variables in a box of ±0.2, a 3-row level far outside it (ends on
+    bounds), then a square level that fixes every variable (no freedom left below it); move
+    the first level's target with ``e1.update(b=A1 @ ...)``."""
+    rng = np.random.default_rng(11)
+    n = 6
+    A1 = rng.standard_normal((3, n))
+    A2 = rng.standard_normal((n, n))
+    e1 = qc.Equality(A1, 4.0 * rng.standard_normal(3))
+    e2 = qc.Equality(A2, 0.1 * rng.standard_normal(n))
+    st = qc.Stack([e1, e2], bounds=qc.Bounds(np.full(n, -0.2), np.full(n, 0.2)))
+    return st, e1, A1
+
+
+def clipped_stack() -> qc.Stack:
+    """One level of 3 equality rows (targets 1, 2, 3) that the box [-1, 1] clips to 1."""
+    return qc.Stack([qc.Equality(np.eye(3), [1.0, 2.0, 3.0])], bounds=qc.Bounds(-1.0, 1.0))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_native import X_TOL, native_solver, needs_native, path_check
+from support.native_engine import X_TOL, native_solver, needs_native, path_check
 
 import qpcoord as qc
 

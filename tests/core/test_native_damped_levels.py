@@ -27,7 +27,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
-from test_native import LEVEL_TOL, X_TOL, _same, benchmark_module, needs_native
+from support.native_engine import LEVEL_TOL, X_TOL, assert_same, needs_native
+from support.published import benchmark_module
 
 import qpcoord as qc
 
@@ -265,9 +266,9 @@ def _same_damped(sp: qc.Solution, sn: qc.Solution, damped_level: int) -> None:
     There only the levels above the damped one, whose values are the lexicographic optimum,
     are compared (to ``LEVEL_TOL``); where every level above ended in its closed form (the
     same formula in both engines) or the damped level is the first, ``x̄`` is defined and
-    everything is compared (:func:`test_native._same`)."""
+    everything is compared (:func:`support.native_engine.assert_same`)."""
     if set(range(damped_level)) <= set(sn.info["closed_form_levels"]):
-        _same(sp, sn)
+        assert_same(sp, sn)
         return
     rp, rn = sp.level_residuals[:damped_level], sn.level_residuals[:damped_level]
     assert np.all(np.abs(rn - rp) <= LEVEL_TOL * np.maximum(1.0, rp)), (rp, rn)

@@ -38,7 +38,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_native import benchmark_module, native_solver, needs_native, published_stack
+from support.native_engine import native_solver, needs_native
+from support.published import benchmark_module, published_stack
 
 import qpcoord as qc
 

@@ -26,20 +26,18 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from support.families import CASES, build, stack
 from support.hlsp import load
-from test_native import LEVEL_TOL, X_TOL, _same, published_module, stacks
-from test_native_weighted import _same as same_weighted
+from support.native_engine import BUILT, LEVEL_TOL, X_TOL, assert_same, needs_native
+from support.published import published_module
+from support.strategies import stacks
+from support.weighted import assert_same_weighted
 
 import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.kinematics import frame_tasks
 from qpcoord.kinematics.frame_tasks import FrameTask
 
-BUILT = native.available()
 #: the builds this machine has and can run (lowest level first)
 VARIANTS = native.built_variants() if BUILT else ()
-needs_native = pytest.mark.skipif(
-    not BUILT, reason=f"the native engine (qpcoord._native) is not built: {native._load_error}"
-)
 X86_64_LINUX = sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64")
 
 
@@ -255,11 +253,11 @@ def test_every_build_matches_python(monkeypatch, name):
         sp = stack(spec).solve(engine="python")
         sn = stack(spec).solve(engine="native")
         assert sn.status == "optimal", (case, seed)
-        _same(sp, sn)
+        assert_same(sp, sn)
         spec = build(case, seed)
         wp = stack(spec).solve(method="weighted", engine="python")
         wn = stack(spec).solve(method="weighted", engine="native")
-        same_weighted(stack(build(case, seed)), wp, wn)
+        assert_same_weighted(stack(build(case, seed)), wp, wn)
 
 
 @pytest.mark.skipif(len(VARIANTS) < 2, reason="one build only")
@@ -276,7 +274,7 @@ def test_the_builds_agree_on_random_stacks(spec):
             s = stack(spec)
             solved[name] = (s.solve(engine="native"), s.solve(engine="native"))
             for sn in solved[name]:
-                _same(sp, sn)
+                assert_same(sp, sn)
     base = solved["baseline"]
     for name in VARIANTS[1:]:
         for a, b in zip(base, solved[name], strict=True):
