@@ -32,7 +32,9 @@ if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
 TEST_ENGINE = os.environ.get("QPCOORD_TEST_ENGINE", "")
 if TEST_ENGINE not in ("", "python", "native"):
     raise pytest.UsageError(f"QPCOORD_TEST_ENGINE must be python or native, got {TEST_ENGINE!r}")
-_NATIVE_DEFAULT_MODULES = frozenset({"test_native", "test_native_weighted", "test_native_step"})
+_NATIVE_DEFAULT_MODULES = frozenset(
+    {"test_native_engine_choice", "test_native_weighted", "test_native_step"}
+)
 
 
 @pytest.fixture(scope="module", autouse=True)

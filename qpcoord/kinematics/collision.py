@@ -43,7 +43,7 @@ points and the Jacobian rows -- are computed in one native call (``qpcoord._coll
 coal's C++ library; :mod:`qpcoord.kinematics.collision_kernel`) or, where that module or a
 shape is not available, by the same rows in Python (:attr:`CollisionAvoidance.native` says
 which). Measured on the Panda (2-core Xeon, OpenBLAS single-threaded,
-``python benchmarks/collision_bench.py``, a 5 s random-target run at dt = 0.01 s): one
+``python benchmarks/collision_bench.py --update``, a 5 s random-target run at dt = 0.01 s): one
 :meth:`~CollisionAvoidance.update` -- forward kinematics and Jacobians, then the rows --
 costs a median **≈ 32 µs** with self-collision only (44 pairs) or with one sphere (61 pairs)
 and **≈ 55 µs** with a sphere, a box and a capsule (95 pairs, more of them near each other);

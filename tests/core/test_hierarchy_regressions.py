@@ -188,7 +188,7 @@ def test_level_qp_with_a_regularisation_only_z_block_is_solved_by_daqp_alone():
 
 
 _DATA = Path(__file__).resolve().parents[1] / "data"
-#: Random stacks (test_native's generator, 4 of 40 000 seeds) on which daqp alone called a
+#: Random stacks (tests/support/strategies.py, 4 of 40 000 seeds) on which daqp alone called a
 #: level QP infeasible that is feasible by construction (z = 0 with its slacks).
 _DAQP_FALSE_INFEASIBLE = sorted(_DATA.glob("daqp_false_infeasible_[0-9]*.npz"))
 #: The one of them the proximal attempt does not solve: its level QP (f ~5e4, rows at 1e5)

@@ -232,8 +232,8 @@ def test_steps_of_rounding_at_a_large_point_end_the_active_set():
     a point at |y| ~ 650 after a drop; the least-squares steps there are rounding of
     Q y - c (relative to |Q| |y|, not to |Q y| ~ |c|: 1e-10 long, gaining 1e-26 each),
     which the stationarity floor, relative to |c| only, took for progress: "the active set of
-    level 1 did not converge" until the iteration cap (found by the random stacks of
-    test_native_caches, seed 4857; the Python engine solved it). It ends, with the Python
+    level 1 did not converge" until the iteration cap (found by a random stack,
+    seed 4857; the Python engine solved it). It ends, with the Python
     engine's level values."""
     d = np.load(_DATA / "native_rounding_steps_4857.npz")
     tasks = [qc.Inequality(d["C0"], upper=d["u0"])]

@@ -7,7 +7,6 @@ The fallback tests run everywhere: they simulate a missing extension.
 
 from __future__ import annotations
 
-import os
 import warnings
 
 import numpy as np
@@ -17,18 +16,6 @@ from support.stacks import clipped_stack
 
 import qpcoord as qc
 from qpcoord.core import native
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _test_engine():
-    """This module tests the native engine *as the default*: it stays the default under
-    ``QPCOORD_TEST_ENGINE`` (which sets the default engine of the other modules)."""
-    if not os.environ.get("QPCOORD_TEST_ENGINE"):
-        yield
-        return
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(native, "DEFAULT_ENGINE", "native")
-        yield
 
 
 def test_default_falls_back_with_one_warning(missing_extension, monkeypatch):

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import io
 import os
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.browser import chromium, need_browser
 
 import qpcoord as qc
 
@@ -290,39 +290,23 @@ def test_duck_typed_obstacles_and_own_visual_model(tmp_path):
 
 
 # ---------------------------------------------------------------------- in a browser
-def _chromium() -> str | None:
-    exe = os.environ.get("QPCOORD_CHROMIUM")
-    if exe:
-        return exe
-    for name in ("chromium", "chromium-browser", "google-chrome", "chrome"):
-        found = shutil.which(name)
-        if found:
-            return found
-    return None
-
-
-def _need(reason: str):
-    """Skip -- or fail where CI promised a browser (QPCOORD_REQUIRE_BROWSER=1)."""
-    if os.environ.get("QPCOORD_REQUIRE_BROWSER", "") not in ("", "0"):
-        pytest.fail(f"QPCOORD_REQUIRE_BROWSER is set but {reason}")
-    pytest.skip(reason)
-
-
 def test_the_page_renders_the_robot_offline_in_headless_chromium(panda, tmp_path):
     """Open the written file in headless Chromium (software WebGL), with the network off,
     and look at it: a canvas, a robot in it (pixels that vanish when the robot is hidden),
     the red obstacle and the green target, a pose that changes along the animation, and no
     request but the file itself and its inlined data: URLs."""
-    exe = _chromium()
+    exe = chromium()
     if exe is None:
-        _need(
+        need_browser(
             "no Chromium browser found (install Debian's `chromium` or set "
             "QPCOORD_CHROMIUM=/path/to/chrome): the offline screenshot test needs one"
         )
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
-        _need("playwright is not installed (pip install playwright; it is in the test extra)")
+        need_browser(
+            "playwright is not installed (pip install playwright; it is in the test extra)"
+        )
     from PIL import Image
 
     page_path = viz.animate(
@@ -392,7 +376,7 @@ def test_the_page_renders_the_robot_offline_in_headless_chromium(panda, tmp_path
 def test_no_browser_skips_with_a_reason_or_fails_where_ci_promised_one(monkeypatch):
     monkeypatch.delenv("QPCOORD_REQUIRE_BROWSER", raising=False)
     with pytest.raises(pytest.skip.Exception, match="no Chromium"):
-        _need("no Chromium browser found")
+        need_browser("no Chromium browser found")
     monkeypatch.setenv("QPCOORD_REQUIRE_BROWSER", "1")
     with pytest.raises(pytest.fail.Exception, match="QPCOORD_REQUIRE_BROWSER is set"):
-        _need("no Chromium browser found")
+        need_browser("no Chromium browser found")

@@ -379,7 +379,7 @@ bool Hierarchy::active_set(const LsqProblem& P, Eigen::Ref<Vec> y, std::vector<i
     qy = res + c;
     // (the rounding of res = Q y - c is relative to |Q| |y|, not to |Q y| ~ |c|, where y is
     // large and Q y cancels: a 30 x 8 level whose point sat at |y| ~ 650 gained ~1e-26 per
-    // step of ~1e-10, rounding, without end -- tests/core/test_native_memo.py's seed 4857)
+    // step of ~1e-10, rounding, without end -- tests/core/test_native_active_set.py's seed 4857)
     const double qys = exact_ ? 0.0 : qscale_ * yscale;
     const double floor = 1e-28 * std::max({cn * cn, qy.squaredNorm(), qys * qys});
     // (exact_: a step is taken unless it is rounding: on a direction of curvature tau^2 a

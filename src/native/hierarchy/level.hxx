@@ -43,7 +43,7 @@ Hierarchy::LevelForm Hierarchy::level_closed_form(const LevelRows& d, bool same_
     // direction of M can then be dependent on the frozen rows to within kMovableTol (the
     // SVD path's independent_rank considers none), which the QR path does not test (without
     // this floor, damping 0 solved rows dependent to 1e-10 exactly, x ~ 1e10, where the
-    // Python engine leaves them to the lower levels: tests/core/test_native_damped.py)
+    // Python engine leaves them to the lower levels: tests/core/test_native_damped_levels.py)
     const double floor = std::max({tau, rank_tol, kMovableTol * scale});
     const int qr_rank = qr_closed_form(M, e, rank_tol, floor, same_m, dz);
     by_qr = qr_rank > 0;

@@ -1,5 +1,5 @@
 // Profiling / allocation driver of the native core, without Python (built only by hand or by
-// tests/core/test_native.py): reads problems written by dump_problems.py, solves every step
+// tests/core/test_native_allocation.py): reads problems written by dump_problems.py, solves every step
 // warm (as Stack.solve does), repeats, and reports the time per solve and the heap
 // allocations (a counting malloc: tools/count_allocations.hpp) made by the solves after the
 // first pass.
