@@ -223,6 +223,15 @@ def test_the_default_limits_leave_the_singular_elbow_cycle(engine):
     assert _reversals(vs[-500:]) > 400 and err > 1e-3
 
 
+def test_engines_agree_on_the_singular_elbow():
+    # one box, two engines, the default limits: the same v at every step to well within the
+    # rounding the folded arm amplifies (its Jacobian's smallest singular value ~2e-3: ~1e-13
+    # rad/s on ~3 rad/s, 1.2e3 steps; 1e-7 leaves room for other BLAS kernels)
+    vn, _ = _elbow_run(lambda r: "robot", "native")
+    vp, _ = _elbow_run(lambda r: "robot", "python")
+    np.testing.assert_allclose(vn, vp, atol=1e-7)
+
+
 def _brakes_in_time(D, v, a, dt, K, rel):
     """The fastest braking from (D, v) keeps v_j dt ≤ K D_j at every step, to ``rel`` of the
     start distance (the rounding of the D_j subtractions)."""
