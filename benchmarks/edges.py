@@ -45,6 +45,7 @@ Run::
 
     python benchmarks/edges.py            # all scenarios (a few seconds)
     python benchmarks/edges.py --steps 500
+    python benchmarks/edges.py --pairs 300   # and the random elbow-limit pairs (minutes)
 """
 
 from __future__ import annotations
@@ -418,6 +419,44 @@ def held(steps: int, dt: float = 0.01) -> tuple[Rows, list[str]]:
     return _position_rows(HELD_Q0, HELD_TARGET, steps, dt, variants, pink, mink)
 
 
+def pairs(count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1) -> str:
+    """``count`` random UR10 start/target pairs whose deadbeat-ish ``tool0`` task drives the
+    elbow toward its limit at ±π (start elbow ±[2.2, 3.0] rad, target reached with the elbow
+    at ±[2.4, 3.12] rad, the same sign), per position-limit gain ``K``, task gain and task
+    ``lm_damping``: how many runs still reverse more than 10 times a second over the last
+    500 steps, and how many reach the target to 1e-6 m."""
+    ur10 = qc.robots.load("ur10")
+    rng = np.random.default_rng(seed)
+    cases = []
+    for _ in range(count):
+        q0 = rng.uniform(-np.pi, np.pi, 6)
+        q0[2] = rng.uniform(2.2, 3.0) * rng.choice([-1, 1])
+        goal = rng.uniform(-np.pi, np.pi, 6)
+        goal[2] = np.sign(q0[2]) * rng.uniform(2.4, 3.12)
+        cases.append((q0, ur10.frame_pose(goal, FRAME)[:3, 3].copy()))
+    out = [
+        f"### UR10, {count} random elbow-limit pairs ({steps} steps, dt 10 ms, seed {seed})",
+        "",
+        "| JointLimits gain | task gain (1/s) | task lm_damping | runs reversing > 10/s "
+        "| runs reaching 1e-6 m |",
+        "|---:|---:|---:|---:|---:|",
+    ]
+    variants = [(g, K, 0.0) for g in (100.0, 50.0, 30.0) for K in (1.0, 0.8, 0.5)]
+    variants.append((100.0, 0.5, 1.0))
+    for task_gain, K, lm in variants:
+        chatter = reached = 0
+        for q0, target in cases:
+            task = qc.FramePositionTask(ur10, FRAME, target, gain=task_gain, lm_damping=lm)
+            limits = [qc.JointLimits(ur10, gain=K), qc.VelocityLimits(ur10)]
+            ik = qc.IK(ur10, [task, qc.PostureTask(ur10, q0)], dt=dt, limits=limits)
+            vs, qs = _qc_loop(ur10, q0, ik, steps)
+            err = float(np.linalg.norm(task.compute_error(qs[-1])))
+            chatter += metrics(vs, dt, ur10, qs, err)["reversals/s"] > 10
+            reached += err < 1e-6
+        out.append(f"| {K:g} | {task_gain:g} | {lm:g} | {chatter} | {reached} |")
+    return "\n".join(out)
+
+
 COLUMNS = ["reversals/s", "max jump", "max |a|", "violation", "settle (s)", "|v| end", "error",
            "steps to 1e-6", "QP failed at step"]  # fmt: skip
 
@@ -441,6 +480,12 @@ def table(title: str, result: tuple[Rows, list[str]]) -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=2000)
+    parser.add_argument(
+        "--pairs",
+        type=int,
+        default=0,
+        help="also run this many random UR10 elbow-limit pairs per gain (300: ~3 min)",
+    )
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.ERROR)  # Pink logs configurations past a limit
     print(table(f"UR10, unreachable target 3.7 m away ({args.steps} steps, dt 10 ms)",
@@ -457,6 +502,9 @@ def main(argv=None) -> int:
     print()
     print(table(f"Panda joint 1 into its limit, a_max 50 rad/s² ({args.steps} steps, dt 1 ms)",
                 limit(args.steps)))  # fmt: skip
+    if args.pairs > 0:
+        print()
+        print(pairs(args.pairs))
     return 0
 
 
