@@ -1,45 +1,61 @@
-"""At the edges: an unreachable target and a joint driven into its position limit, qpcoord
-against Pink on the same scenario, one table each.
+"""At the edges: an unreachable target, a joint driven into its position limit and an elbow
+on its limit at a singular configuration, qpcoord against Pink and mink on the same scenario,
+one table each.
 
 Scenarios:
 
 - ``unreachable``: UR10, ``tool0`` pose target 3.7 m from the base (the arm reaches 1.3 m),
-  deadbeat frame task (qpcoord gain ``1/dt``, Pink gain 1) over a posture (qpcoord: the
-  level below; Pink: cost 1e-3), the robot's position and speed limits, dt = 10 ms, 2 000
-  steps. Rows: without damping, and with Levenberg–Marquardt damping ``lm_damping=1``
-  (qpcoord: on the task, Pink: the same parameter of its ``FrameTask``).
+  deadbeat frame task (qpcoord gain ``1/dt``, Pink and mink gain 1) over a posture (qpcoord:
+  the level below; Pink and mink: cost 1e-3), the robot's position and speed limits,
+  dt = 10 ms, 2 000 steps. Rows: without damping, and with Levenberg–Marquardt damping
+  ``lm_damping=1`` (qpcoord: on the task, Pink and mink: the same parameter of their
+  ``FrameTask``).
 - ``reachable``: the same with a target 0.24 m from the start pose: steps until the pose
   error is below 1e-6 (does the damping slow a reachable target?).
 - ``elbow``: UR10 ``tool0`` position target near its base (reachable with the elbow at
-  2.60 rad), deadbeat task over a posture, dt = 10 ms: with the one-step joint-limit box the
-  elbow lands on its limit at π, where the folded arm is singular; rows: that box
-  (``JointLimits`` gain 1, the IK's default), its damper form (gain 0.5, Pink's default),
-  and with ``AccelerationLimits(50)``; Pink with its default limits, and with its
-  ``AccelerationLimit(50)``.
+  2.60 rad), deadbeat task over a posture, dt = 10 ms: a one-step joint-limit box lands the
+  elbow on its limit at π, where the folded arm is singular; rows: the IK's default limits
+  (``JointLimits`` gain 0.5, a damper), the one-step box (gain 1), and the default with
+  ``AccelerationLimits(50)``; Pink with its default limits (``ConfigurationLimit`` gain 0.5)
+  and with its ``AccelerationLimit(50)``; mink with its ``ConfigurationLimit`` (gain 0.95)
+  and with gain 0.5, both beside its ``VelocityLimit`` (the robot's speed limits).
+- ``held``: UR10 from ``HELD_Q0`` toward ``HELD_TARGET``: the deadbeat task rests the elbow
+  on its limit at −π, 0.19 m from the target; rows with and without ``lm_damping=1``.
 - ``limit``: Panda joint 1 pulled 1 rad past its upper limit by a posture (gain 20/s; Pink
   gain 0.02 per step), dt = 1 ms, 2 000 steps, acceleration limit 50 rad/s² (qpcoord:
-  ``AccelerationLimits(robot, 50)`` with and without its braking rows; Pink:
-  ``AccelerationLimit(model, 50)`` beside its configuration and velocity limits).
+  ``AccelerationLimits(robot, 50)`` beside the default limits, with and without its braking
+  rows; Pink: ``AccelerationLimit(model, 50)`` beside its configuration and velocity limits;
+  mink has no acceleration limit).
+
+mink runs in its own environment (``benchmarks/mink_side.py`` under
+``benchmarks/.mink-venv``, see :data:`MINK_SETUP`) on a MuJoCo model built from the same
+URDF, ``tool0`` a site; the note under each table gives its version and how far its
+``tool0`` pose is from qpcoord's, or why it did not run.
 
 Columns: velocity reversals per second over the last 500 steps (a joint's velocity changing
 sign between two steps, both above 1e-6 rad/s), the largest step jump ``max |v_k − v_{k−1}|``
 (rad/s), the largest acceleration (rad/s²), the largest position-limit violation (rad), the
 settle time (s: from then on ``|v| < 1e-3 rad/s``; ``—`` if never), ``|v|`` at the end,
-the final task error (UR10: ``log6`` norm of the pose error; Panda: distance of joint 1 to
-its limit, rad), the steps until the pose error is below 1e-6, and the step at which a QP
-had no solution (the run stops there; the other columns cover the steps before).
+the final task error (UR10: ``log6`` norm of the pose error, or the position error in m;
+Panda: distance of joint 1 to its limit, rad), the steps until the pose error is below 1e-6,
+and the step at which a QP had no solution (the run stops there; the other columns cover
+the steps before).
 
 Run::
 
     python benchmarks/edges.py            # all scenarios (a few seconds)
     python benchmarks/edges.py --steps 500
+    python benchmarks/edges.py --pairs 300   # and the random elbow-limit pairs (minutes)
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
+import subprocess
+from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -52,6 +68,13 @@ from qpcoord.kinematics.tasks import AccelerationLimits  # noqa: E402
 
 Q_UR = np.array([0.0, -1.2, 1.6, -1.9, -1.57, 0.0])
 FRAME = "tool0"
+HERE = Path(__file__).resolve().parent
+#: mink's own environment (MuJoCo is not a qpcoord dependency): ``benchmarks/mink_side.py``
+MINK_VENV = HERE / ".mink-venv"
+MINK_SETUP = (
+    "python3 -m venv benchmarks/.mink-venv && "
+    "benchmarks/.mink-venv/bin/pip install -r benchmarks/mink-requirements.txt"
+)
 
 
 def metrics(vs: np.ndarray, dt: float, robot, qs: np.ndarray, error: float) -> dict:
@@ -110,11 +133,100 @@ def _qc_loop(robot, q0, ik, steps):
     return np.array(vs), np.array(qs)
 
 
+def _joint_body(model, joint: int) -> str:
+    """The URDF link a joint moves: the body frame at the joint's own frame."""
+    for frame in model.frames:
+        if (
+            frame.type == pin.FrameType.BODY
+            and frame.parentJoint == joint
+            and frame.placement.isIdentity()
+        ):
+            return frame.name
+    raise ValueError(f"no body frame at joint {model.names[joint]}")
+
+
+def mink_runs(robot, runs: list[dict], dt: float) -> tuple[dict, str]:
+    """mink's runs (``benchmarks/mink_side.py`` in ``benchmarks/.mink-venv``) on a MuJoCo
+    model of the same URDF, ``FRAME`` as a site: (label -> (vs, qs, failed), a note).
+
+    Each run: ``label``, ``q0``, ``steps``, ``target`` (4 × 4), ``position_only``, ``gain``
+    (per step), ``lm_damping``, ``posture_cost``, ``config_gain`` (``None``: mink's default);
+    mink's ``ConfigurationLimit`` and ``VelocityLimit`` (the robot's speed limits)."""
+    python = MINK_VENV / "bin" / "python"
+    if not python.exists():
+        return {}, f"mink: not run (no benchmarks/.mink-venv; {MINK_SETUP})"
+    model = robot.model
+    frame = model.frames[model.getFrameId(FRAME)]
+    quat = pin.Quaternion(frame.placement.rotation)
+    check = [np.asarray(r["q0"], dtype=float) for r in runs]
+    check.append(robot.random_configuration(0))
+    scenario = {
+        "urdf": str(robot.urdf_path),
+        "package_dir": str(robot.package_dirs[0]),
+        "site": {
+            "body": _joint_body(model, frame.parentJoint),
+            "pos": frame.placement.translation.tolist(),
+            "quat": [quat.w, quat.x, quat.y, quat.z],
+        },
+        "joints": list(model.names[1:]),
+        "velocity": robot.velocity_limit.tolist(),
+        "check": [q.tolist() for q in check],
+        "dt": dt,
+        "runs": [
+            {**r, "q0": np.asarray(r["q0"]).tolist(), "target": np.asarray(r["target"]).tolist()}
+            for r in runs
+        ],
+    }
+    done = subprocess.run(
+        [str(python), str(HERE / "mink_side.py")],
+        input=json.dumps(scenario) + "\n",
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        tail = done.stderr.strip().splitlines()[-1:] or ["no message"]
+        return {}, f"mink: failed ({tail[0]})"
+    out = json.loads(done.stdout)
+    same = max(
+        float(np.abs(np.array(T) - robot.frame_pose(q, FRAME)).max())
+        for q, T in zip(check, out["poses"], strict=True)
+    )
+    results = {}
+    for r in out["runs"]:
+        vs = np.vstack([np.zeros(robot.nv), np.array(r["v"]).reshape(-1, robot.nv)])
+        results[r["label"]] = (vs, np.array(r["q"]).reshape(-1, robot.nq), r["failed"])
+    note = (
+        f"mink {out['mink']} (MuJoCo {out['mujoco']}) on a MuJoCo model of the same URDF: "
+        f"{FRAME}'s pose agrees with qpcoord's to {same:.1g} at {len(check)} configurations."
+    )
+    return results, note
+
+
 def _pose_error(robot, q, T) -> float:
     return float(np.linalg.norm(pin.log6(pin.SE3(T).actInv(pin.SE3(robot.frame_pose(q, FRAME))))))
 
 
-def reach(target_offset, steps: int, dt: float = 0.01) -> list[tuple[str, dict]]:
+Rows = list[tuple[str, dict]]
+
+
+def _mink_rows(robot, runs: list[dict], dt: float, error, steps_to=None) -> tuple[Rows, str]:
+    """mink's rows of a table: ``error(q)`` the final task error, ``steps_to(qs)`` the
+    "steps to 1e-6" column (if given)."""
+    results, note = mink_runs(robot, runs, dt)
+    rows = []
+    for r in runs:
+        if r["label"] not in results:
+            continue
+        vs, qs, failed = results[r["label"]]
+        rows.append((r["label"], metrics(vs, dt, robot, qs, error(qs[-1]))))
+        if steps_to is not None:
+            rows[-1][1]["steps to 1e-6"] = steps_to(qs)
+        rows[-1][1]["QP failed at step"] = failed
+    return rows, note
+
+
+def reach(target_offset, steps: int, dt: float = 0.01) -> tuple[Rows, list[str]]:
     from pink.tasks import FrameTask, PostureTask
 
     ur10 = qc.robots.load("ur10")
@@ -144,7 +256,30 @@ def reach(target_offset, steps: int, dt: float = 0.01) -> list[tuple[str, dict]]
         )
         rows[-1][1]["steps to 1e-6"] = _steps_to(ur10, qs, T)
         rows[-1][1]["QP failed at step"] = failed
-    return rows
+    runs = [
+        _mink_run(f"mink lm_damping={lm:g}", Q_UR, steps, T, False, lm_damping=lm)
+        for lm in (0.0, 1.0)
+    ]
+    more, note = _mink_rows(
+        ur10, runs, dt, lambda q: _pose_error(ur10, q, T), lambda qs: _steps_to(ur10, qs, T)
+    )
+    return rows + more, [note]
+
+
+def _mink_run(label, q0, steps, target, position_only, lm_damping=0.0, config_gain=None):
+    """One mink run: deadbeat frame task (gain 1 per step) over a posture at cost 1e-3, as
+    Pink's rows."""
+    return {
+        "label": label,
+        "q0": q0,
+        "steps": steps,
+        "target": target,
+        "position_only": position_only,
+        "gain": 1.0,
+        "lm_damping": lm_damping,
+        "posture_cost": 1e-3,
+        "config_gain": config_gain,
+    }
 
 
 def _steps_to(robot, qs, T) -> int | None:
@@ -154,7 +289,7 @@ def _steps_to(robot, qs, T) -> int | None:
     return None
 
 
-def limit(steps: int, dt: float = 1e-3, a_max: float = 50.0) -> list[tuple[str, dict]]:
+def limit(steps: int, dt: float = 1e-3, a_max: float = 50.0) -> tuple[Rows, list[str]]:
     from pink.limits import AccelerationLimit, ConfigurationLimit, VelocityLimit
     from pink.tasks import PostureTask
 
@@ -185,43 +320,39 @@ def limit(steps: int, dt: float = 1e-3, a_max: float = 50.0) -> list[tuple[str, 
         ("pink AccelerationLimit", metrics(vs, dt, panda, qs, abs(qs[-1, 0] - panda.upper[0])))
     )
     rows[-1][1]["QP failed at step"] = failed
-    return rows
+    return rows, ["mink: no row (mink 1.3 has no acceleration limit)."]
 
 
 ELBOW_TARGET = np.array([-0.118, 0.193, 0.303])  # tool0, m: reached with the elbow at 2.60 rad
+#: UR10 start and tool0 target (m) from which a deadbeat task rests the elbow on its limit at
+#: -π with the target 0.19 m away: reached (elbow at -2.29 rad) by a task of gain ≤ 50/s
+HELD_Q0 = np.array([-0.83, -3.04, -2.46, -2.84, -1.6, -1.77])
+HELD_TARGET = np.array([0.087, -0.028, 0.494])
 
 
-def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> list[tuple[str, dict]]:
-    """UR10 ``tool0`` position target near the base: a deadbeat task drives the elbow onto
-    its limit at π, where the arm is folded (the Jacobian's smallest singular value 0.002)."""
+def _position_rows(q0, target, steps, dt, variants, pink_variants, mink_variants):
+    """A deadbeat ``tool0`` position task over a posture on the UR10, one row per variant:
+    qpcoord ``(label, limits, lm_damping)``, Pink ``(label, acceleration limit or None,
+    lm_damping)``, mink ``(label, ConfigurationLimit gain or None, lm_damping)``."""
     from pink.limits import AccelerationLimit, ConfigurationLimit, VelocityLimit
     from pink.tasks import FrameTask, PostureTask
 
     ur10 = qc.robots.load("ur10")
-    q0 = np.array([0.0, -1.2, 2.6, -1.9, -1.57, 0.0])
 
     def error(q):
-        return float(np.linalg.norm(ur10.frame_pose(q, FRAME)[:3, 3] - ELBOW_TARGET))
+        return float(np.linalg.norm(ur10.frame_pose(q, FRAME)[:3, 3] - target))
 
     rows = []
-    variants = (
-        ("qpcoord JointLimits (gain 1)", [qc.JointLimits(ur10), qc.VelocityLimits(ur10)]),
-        ("qpcoord JointLimits(gain=0.5)", [qc.JointLimits(ur10, 0.5), qc.VelocityLimits(ur10)]),
-        (
-            f"qpcoord + AccelerationLimits({a_max:g})",
-            [qc.JointLimits(ur10), qc.VelocityLimits(ur10), AccelerationLimits(ur10, a_max)],
-        ),
-    )
-    for label, limits in variants:
-        task = qc.FramePositionTask(ur10, FRAME, ELBOW_TARGET, gain=1 / dt)
-        ik = qc.IK(ur10, [task, qc.PostureTask(ur10, q0)], dt=dt, limits=limits)
+    for label, limits_of, lm in variants:
+        task = qc.FramePositionTask(ur10, FRAME, target, gain=1 / dt, lm_damping=lm)
+        ik = qc.IK(ur10, [task, qc.PostureTask(ur10, q0)], dt=dt, limits=limits_of(ur10))
         vs, qs = _qc_loop(ur10, q0, ik, steps)
         rows.append((label, metrics(vs, dt, ur10, qs, error(qs[-1]))))
         rows[-1][1]["QP failed at step"] = None
     model = ur10.model
-    for label, accel in (("pink", None), (f"pink + AccelerationLimit({a_max:g})", a_max)):
-        hand = FrameTask(FRAME, position_cost=1.0, orientation_cost=0.0, gain=1.0)
-        hand.set_target(pin.SE3(np.eye(3), ELBOW_TARGET))
+    for label, accel, lm in pink_variants:
+        hand = FrameTask(FRAME, position_cost=1.0, orientation_cost=0.0, gain=1.0, lm_damping=lm)
+        hand.set_target(pin.SE3(np.eye(3), target))
         posture = PostureTask(cost=1e-3)
         posture.set_target(q0.copy())
         limits = [ConfigurationLimit(model), VelocityLimit(model)]
@@ -232,14 +363,106 @@ def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> list[tuple[str, 
         vs, qs, failed = _pink_loop(ur10, q0, [hand, posture], dt, steps, limits=limits, accel=acc)
         rows.append((label, metrics(vs, dt, ur10, qs, error(qs[-1]))))
         rows[-1][1]["QP failed at step"] = failed
-    return rows
+    T = np.eye(4)
+    T[:3, 3] = target
+    runs = [
+        _mink_run(label, q0, steps, T, True, lm_damping=lm, config_gain=gain)
+        for label, gain, lm in mink_variants
+    ]
+    more, note = _mink_rows(ur10, runs, dt, error)
+    return rows + more, [note]
+
+
+def _robot_limits(robot):
+    return "robot"
+
+
+def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> tuple[Rows, list[str]]:
+    """UR10 ``tool0`` position target near the base: a deadbeat task drives the elbow onto
+    its limit at π, where the arm is folded (the Jacobian's smallest singular value 0.002)."""
+    variants = (
+        ('qpcoord limits="robot" (JointLimits gain 0.5)', _robot_limits, 0.0),
+        (
+            "qpcoord JointLimits(gain=1)",
+            lambda r: [qc.JointLimits(r, gain=1.0), qc.VelocityLimits(r)],
+            0.0,
+        ),
+        (
+            f"qpcoord + AccelerationLimits({a_max:g})",
+            lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
+            0.0,
+        ),
+    )
+    pink = (("pink (ConfigurationLimit gain 0.5)", None, 0.0),
+            (f"pink + AccelerationLimit({a_max:g})", a_max, 0.0))  # fmt: skip
+    mink = (("mink (ConfigurationLimit gain 0.95)", None, 0.0),
+            ("mink ConfigurationLimit(gain=0.5)", 0.5, 0.0))  # fmt: skip
+    q0 = np.array([0.0, -1.2, 2.6, -1.9, -1.57, 0.0])
+    return _position_rows(q0, ELBOW_TARGET, steps, dt, variants, pink, mink)
+
+
+def held(steps: int, dt: float = 0.01) -> tuple[Rows, list[str]]:
+    """UR10 ``tool0`` position target 0.19 m from where a deadbeat task rests the elbow on
+    its limit at −π: the other joints alternate at their speed limits whatever the
+    position-limit gain; the task's ``lm_damping`` settles them there."""
+    variants = (
+        ('qpcoord limits="robot"', _robot_limits, 0.0),
+        (
+            "qpcoord JointLimits(gain=1)",
+            lambda r: [qc.JointLimits(r, gain=1.0), qc.VelocityLimits(r)],
+            0.0,
+        ),
+        ('qpcoord limits="robot", lm_damping=1', _robot_limits, 1.0),
+    )
+    pink = (("pink", None, 0.0), ("pink lm_damping=1", None, 1.0))
+    mink = (("mink", None, 0.0), ("mink lm_damping=1", None, 1.0))
+    return _position_rows(HELD_Q0, HELD_TARGET, steps, dt, variants, pink, mink)
+
+
+def pairs(count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1) -> str:
+    """``count`` random UR10 start/target pairs whose deadbeat-ish ``tool0`` task drives the
+    elbow toward its limit at ±π (start elbow ±[2.2, 3.0] rad, target reached with the elbow
+    at ±[2.4, 3.12] rad, the same sign), per position-limit gain ``K``, task gain and task
+    ``lm_damping``: how many runs still reverse more than 10 times a second over the last
+    500 steps, and how many reach the target to 1e-6 m."""
+    ur10 = qc.robots.load("ur10")
+    rng = np.random.default_rng(seed)
+    cases = []
+    for _ in range(count):
+        q0 = rng.uniform(-np.pi, np.pi, 6)
+        q0[2] = rng.uniform(2.2, 3.0) * rng.choice([-1, 1])
+        goal = rng.uniform(-np.pi, np.pi, 6)
+        goal[2] = np.sign(q0[2]) * rng.uniform(2.4, 3.12)
+        cases.append((q0, ur10.frame_pose(goal, FRAME)[:3, 3].copy()))
+    out = [
+        f"### UR10, {count} random elbow-limit pairs ({steps} steps, dt 10 ms, seed {seed})",
+        "",
+        "| JointLimits gain | task gain (1/s) | task lm_damping | runs reversing > 10/s "
+        "| runs reaching 1e-6 m |",
+        "|---:|---:|---:|---:|---:|",
+    ]
+    variants = [(g, K, 0.0) for g in (100.0, 50.0, 30.0) for K in (1.0, 0.8, 0.5)]
+    variants.append((100.0, 0.5, 1.0))
+    for task_gain, K, lm in variants:
+        chatter = reached = 0
+        for q0, target in cases:
+            task = qc.FramePositionTask(ur10, FRAME, target, gain=task_gain, lm_damping=lm)
+            limits = [qc.JointLimits(ur10, gain=K), qc.VelocityLimits(ur10)]
+            ik = qc.IK(ur10, [task, qc.PostureTask(ur10, q0)], dt=dt, limits=limits)
+            vs, qs = _qc_loop(ur10, q0, ik, steps)
+            err = float(np.linalg.norm(task.compute_error(qs[-1])))
+            chatter += metrics(vs, dt, ur10, qs, err)["reversals/s"] > 10
+            reached += err < 1e-6
+        out.append(f"| {K:g} | {task_gain:g} | {lm:g} | {chatter} | {reached} |")
+    return "\n".join(out)
 
 
 COLUMNS = ["reversals/s", "max jump", "max |a|", "violation", "settle (s)", "|v| end", "error",
            "steps to 1e-6", "QP failed at step"]  # fmt: skip
 
 
-def table(title: str, rows: list[tuple[str, dict]]) -> str:
+def table(title: str, result: tuple[Rows, list[str]]) -> str:
+    rows, notes = result
     cols = [c for c in COLUMNS if any(c in r for _, r in rows)]
     out = [f"### {title}", "", "| solver | " + " | ".join(cols) + " |"]
     out.append("|---|" + "---:|" * len(cols))
@@ -249,12 +472,20 @@ def table(title: str, rows: list[tuple[str, dict]]) -> str:
             x = r.get(c)
             cells.append("—" if x is None else f"{x:.3g}" if isinstance(x, float) else str(x))
         out.append(f"| {name} | " + " | ".join(cells) + " |")
+    if notes:
+        out += ["", *notes]
     return "\n".join(out)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=2000)
+    parser.add_argument(
+        "--pairs",
+        type=int,
+        default=0,
+        help="also run this many random UR10 elbow-limit pairs per gain (300: ~3 min)",
+    )
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.ERROR)  # Pink logs configurations past a limit
     print(table(f"UR10, unreachable target 3.7 m away ({args.steps} steps, dt 10 ms)",
@@ -266,8 +497,14 @@ def main(argv=None) -> int:
     print(table(f"UR10, elbow onto its limit at π, folded ({args.steps} steps, dt 10 ms)",
                 elbow(args.steps)))  # fmt: skip
     print()
+    print(table(f"UR10, elbow held on its limit at −π by a deadbeat task ({args.steps} "
+                "steps, dt 10 ms)", held(args.steps)))  # fmt: skip
+    print()
     print(table(f"Panda joint 1 into its limit, a_max 50 rad/s² ({args.steps} steps, dt 1 ms)",
                 limit(args.steps)))  # fmt: skip
+    if args.pairs > 0:
+        print()
+        print(pairs(args.pairs))
     return 0
 
 

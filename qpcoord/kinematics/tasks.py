@@ -842,8 +842,16 @@ class Limit(KinematicTask):
 class JointLimits(Limit):
     """Joint position limits at velocity level: ``K (q_min − q)/dt ≤ v ≤ K (q_max − q)/dt``.
 
-    With ``K = 1`` one Euler step ``q + dt v`` lands at most on the limit; ``K < 1`` slows
-    the approach. A configuration already outside a limit gets a box that pushes it back.
+    One Euler step ``q + dt v`` covers at most the fraction ``K`` of a joint's distance to
+    its limit. The default ``K = 0.5`` is a velocity damper: the joint approaches its limit
+    exponentially at rate ``K/dt`` (1/s), decelerating at most ``(K/dt) v_max``. With
+    ``K = 1`` a joint lands exactly on its limit in one step from any distance; a fast task
+    (gain near ``1/dt``) at a singular configuration on that limit (a folded arm's elbow) can
+    then lock into a two-step cycle on and off the limit at the speed limits, which ``K < 1``
+    leaves (UR10 in ``benchmarks/edges.py``: 499 velocity reversals/s with ``K = 1``, none
+    with 0.5). A fast task held on a limit by a target it cannot reach from there is settled
+    by its ``lm_damping``. A configuration already outside a limit gets a box that moves it
+    back by at least the fraction ``K`` of its excess per step.
 
     Only joints with one position variable per velocity (revolute, prismatic; ``q`` index
     ``model.joints[j].idx_q`` ↔ ``v`` index ``idx_v``) are limited. A free-flyer, planar,
@@ -854,7 +862,8 @@ class JointLimits(Limit):
     ----------
     robot : Robot
     gain : float
-        ``K`` in ``(0, 1]``, default 1.
+        ``K`` in ``(0, 1]`` (dimensionless: the fraction of the distance to the limit one step
+        may cover), default 0.5.
     lower, upper : array_like, shape (nq,), optional
         Limits (rad, m) in ``q``'s layout; default the robot's.
 
@@ -867,7 +876,7 @@ class JointLimits(Limit):
     def __init__(
         self,
         robot: Robot,
-        gain: float = 1.0,
+        gain: float = 0.5,
         lower: ArrayLike | None = None,
         upper: ArrayLike | None = None,
     ) -> None:
@@ -974,10 +983,9 @@ class AccelerationLimits(Limit):
     moves back with the acceleration limit.
 
     The braking rows are computed for the gain of ``position_limits``: give the IK's own
-    :class:`JointLimits` when it has another gain (a damper ``K < 1``) or other bounds, so
-    that the joint also slows down for that box (with the robot's limits at gain 1 instead,
-    a damper ``K = 0.5`` beside it decelerates at up to 60 rad/s² for ``a_max = 50``,
-    dt = 1 ms).
+    :class:`JointLimits` when it has another gain or other bounds, so that the joint also
+    slows down for that box (braking rows for ``K = 1`` beside a damper ``K = 0.5`` let the
+    joint decelerate at up to 60 rad/s² for ``a_max = 50``, dt = 1 ms).
 
     Parameters
     ----------
@@ -987,9 +995,9 @@ class AccelerationLimits(Limit):
         six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``).
     position_limits : "robot", JointLimits or None
         The position limits braked before, and their gain (default ``"robot"``: the
-        robot's finite limits of its 1-DoF joints, as ``JointLimits(robot)``, gain 1); give
-        the IK's own :class:`JointLimits` if it has another gain or other bounds; ``None``:
-        no braking.
+        robot's finite limits of its 1-DoF joints, as ``JointLimits(robot)``, its default
+        gain 0.5: the IK's ``limits="robot"``); give the IK's own :class:`JointLimits` if it
+        has another gain or other bounds; ``None``: no braking.
 
     Raises
     ------

@@ -34,10 +34,14 @@ def _drive_into_limit(robot, q0, joint, past, limits_of, engine, steps):
     return np.array(vs), np.array(qs)
 
 
-def _limits(a_max, brake=True):
+def _limits(a_max, brake=True, gain=None):
+    """The robot's position limits (the default gain, or ``gain``), speed limits and
+    acceleration limits ``a_max`` braking before those position limits (or not)."""
+
     def make(robot):
-        acc = AccelerationLimits(robot, a_max, position_limits="robot" if brake else None)
-        return [qc.JointLimits(robot), qc.VelocityLimits(robot), acc]
+        joint_limits = qc.JointLimits(robot) if gain is None else qc.JointLimits(robot, gain)
+        acc = AccelerationLimits(robot, a_max, position_limits=joint_limits if brake else None)
+        return [joint_limits, qc.VelocityLimits(robot), acc]
 
     return make
 
@@ -61,10 +65,12 @@ def test_joint_brakes_into_its_limit_within_the_acceleration_bound(panda, engine
 
 
 def test_without_braking_the_limit_stops_the_joint_in_one_step(panda):
-    # the failure the braking term removes: the position limit's box wins over the
-    # acceleration box and the joint stops from its speed limit in one step (~2 000 rad/s²)
+    # the failure the braking term removes: the one-step position box (gain 1) wins over
+    # the acceleration box and the joint stops from its speed limit in one step
+    # (~2 000 rad/s²)
     q0 = _panda_start(panda)
-    vs, _ = _drive_into_limit(panda, q0, 0, 1.0, _limits(A_MAX, brake=False), "python", 2000)
+    no_brake = _limits(A_MAX, brake=False, gain=1.0)
+    vs, _ = _drive_into_limit(panda, q0, 0, 1.0, no_brake, "python", 2000)
     assert (np.abs(np.diff(vs, axis=0)) / DT).max() > 20 * A_MAX
 
 
@@ -140,7 +146,13 @@ def test_joint_limit_gain_is_a_velocity_damper(panda):
     assert panda.upper[0] - qs[-1, 0] < 1e-6
     # the plain one-step box (K = 1) stops the joint from its speed limit in one step
     vs1, _ = _drive_into_limit(
-        panda, q0, 0, 1.0, lambda r: [qc.JointLimits(r), qc.VelocityLimits(r)], "python", 2500
+        panda,
+        q0,
+        0,
+        1.0,
+        lambda r: [qc.JointLimits(r, gain=1.0), qc.VelocityLimits(r)],
+        "python",
+        2500,
     )
     assert -(np.diff(vs1[:, 0]) / DT).min() > 0.9 * panda.velocity_limit[0] / DT
 
@@ -186,6 +198,38 @@ def test_elbow_at_its_limit_at_a_singularity_does_not_chatter(engine):
     vs, err = _elbow_run(lambda r: [qc.JointLimits(r, gain=0.5), qc.VelocityLimits(r)], engine)
     assert _reversals(vs[-500:]) == 0
     assert err < 1e-6
+
+
+@pytest.mark.parametrize("engine", ["native", "python"])
+def test_the_default_limits_leave_the_singular_elbow_cycle(engine):
+    # limits="robot": the default position-limit gain (0.5, a damper) does not let the elbow
+    # land on π in one step from wherever it is, so the two-step cycle of the one-step box
+    # (gain 1: ~500 reversals/s, checked below) is left and the target reached
+    vs, err = _elbow_run(lambda r: "robot", engine)
+    assert _reversals(vs[-500:]) == 0  # the posture level still moves, smoothly
+    assert err < 1e-6
+    # with acceleration limits beside them (braking for the same default gain): no jump
+    # above a_max dt at any step, to rounding of v (~3 rad/s · 1e-15)
+    dt, a_max = 0.01, 50.0
+    vs, err = _elbow_run(
+        lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
+        engine,
+    )
+    assert np.abs(np.diff(vs, axis=0)).max() <= a_max * dt * (1 + 1e-9)
+    assert _reversals(vs[-500:]) == 0
+    assert err < 1e-6
+    # the one-step box on the same run: the cycle, every joint at its speed limit
+    vs, err = _elbow_run(lambda r: [qc.JointLimits(r, gain=1.0), qc.VelocityLimits(r)], engine)
+    assert _reversals(vs[-500:]) > 400 and err > 1e-3
+
+
+def test_engines_agree_on_the_singular_elbow():
+    # one box, two engines, the default limits: the same v at every step to well within the
+    # rounding the folded arm amplifies (its Jacobian's smallest singular value ~2e-3: ~1e-13
+    # rad/s on ~3 rad/s, 1.2e3 steps; 1e-7 leaves room for other BLAS kernels)
+    vn, _ = _elbow_run(lambda r: "robot", "native")
+    vp, _ = _elbow_run(lambda r: "robot", "python")
+    np.testing.assert_allclose(vn, vp, atol=1e-7)
 
 
 def _brakes_in_time(D, v, a, dt, K, rel):

@@ -126,7 +126,7 @@ def test_talos_joint_limits_hold_against_the_posture(talos):
 
 def test_joint_limits_map_q_to_v_indices(talos, solo):
     for robot in (talos, solo):
-        lim = JointLimits(robot)
+        lim = JointLimits(robot, gain=1.0)
         assert lim.joints.min() == 6  # the free-flyer (v 0..5) is unlimited
         np.testing.assert_array_equal(lim._q_index, lim._v_index + 1)  # 7 q vs 6 v entries
         q = robot.random_configuration(0)
@@ -150,7 +150,7 @@ def test_continuous_and_spherical_joints_are_unlimited():
     model.lowerPositionLimit[:] = -1.0
     model.upperPositionLimit[:] = 1.0
     robot = qc.Robot(model)
-    lim = JointLimits(robot)
+    lim = JointLimits(robot, gain=1.0)
     assert (robot.nq, robot.nv) == (7, 5)
     np.testing.assert_array_equal(lim.joints, [4])  # only the revolute joint
     lo, hi = lim.box(robot.neutral(), 0.1)

@@ -260,7 +260,7 @@ def test_joint_limits_box(panda, gain, dt):
 
 
 def test_joint_limits_custom_limits(planar):
-    limits = qc.JointLimits(planar, lower=[-1.0, -2.0, -3.0], upper=2.0)
+    limits = qc.JointLimits(planar, gain=1.0, lower=[-1.0, -2.0, -3.0], upper=2.0)
     lo, hi = limits.box(np.zeros(3), 0.5)
     np.testing.assert_allclose(lo, [-2.0, -4.0, -6.0])
     np.testing.assert_allclose(hi, [4.0, 4.0, 4.0])
@@ -269,12 +269,12 @@ def test_joint_limits_custom_limits(planar):
 def test_joint_limits_euler_step_lands_at_most_on_the_limit(panda):
     dt = 0.02
     q = panda.upper - 0.01
-    _, hi = qc.JointLimits(panda).box(q, dt)
+    _, hi = qc.JointLimits(panda, gain=1.0).box(q, dt)
     np.testing.assert_allclose(q + dt * hi, panda.upper, rtol=0, atol=1e-12)
 
 
 def test_joint_limits_outside_a_limit_pushes_back(planar):
-    limits = qc.JointLimits(planar, lower=-1.0, upper=1.0)
+    limits = qc.JointLimits(planar, gain=1.0, lower=-1.0, upper=1.0)
     q = np.array([1.5, -1.2, 0.0])  # above, below, inside
     lo, hi = limits.box(q, 0.1)
     assert np.all(lo <= hi)
