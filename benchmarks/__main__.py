@@ -1,4 +1,5 @@
-"""Run the benchmarks and (``--write``) put their tables into ``benchmarks/README.md``.
+"""Run the benchmarks and (``--write``) put their tables into ``benchmarks/README.md`` (and
+the dual-stage ones into ``benchmarks/ddl.md``).
 
     python -m benchmarks                      # every table, printed
     python -m benchmarks stack_bench --quick  # one benchmark, its smoke configuration
@@ -27,11 +28,13 @@ HERE = Path(__file__).resolve().parent
 
 @dataclass(frozen=True)
 class Table:
-    """A README table: the script that prints it, with its full and its smoke arguments."""
+    """A table of a page: the script that prints it, with its full and its smoke arguments,
+    and the page (a file of ``benchmarks/``) that holds it."""
 
     script: str
     full: tuple[str, ...]
     quick: tuple[str, ...]
+    page: str = "README.md"
 
 
 #: The README's tables in its order. ``hierarchy_published`` leaves out scs, which does not
@@ -81,10 +84,19 @@ TABLES: dict[str, Table] = {
     ),
     "native_ik_step": Table("native_ik_step.py", (), ("--steps", "30", "--runs", "2")),
     "collision_bench": Table("collision_bench.py", (), ("--steps", "20", "--repeats", "1")),
-    "mpc_bench": Table("mpc_bench.py", (), ("--quick", "--steps", "600")),
-    "ddl_bench": Table("ddl_bench.py", (), ("--quick",)),
-    "ddl_margin": Table("ddl_margin.py", (), ("--quick",)),
-    "ddl_hdd": Table("ddl_hdd.py", (), ("--repeats", "1", "--steps", "2000")),
+    "cell_stacks": Table("cell_stacks.py", (), ("--steps", "30", "--runs", "1")),
+    "edges": Table(
+        "edges.py",
+        (),
+        (
+            "--steps",
+            "600",
+        ),
+    ),
+    "mpc_bench": Table("mpc_bench.py", (), ("--quick", "--steps", "600"), "ddl.md"),
+    "ddl_bench": Table("ddl_bench.py", (), ("--quick",), "ddl.md"),
+    "ddl_margin": Table("ddl_margin.py", (), ("--quick",), "ddl.md"),
+    "ddl_hdd": Table("ddl_hdd.py", (), ("--repeats", "1", "--steps", "2000"), "ddl.md"),
 }
 
 
@@ -126,18 +138,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
     ap.add_argument("names", nargs="*", metavar="NAME", help=f"tables: {', '.join(TABLES)}")
     ap.add_argument("--quick", action="store_true", help="each script's smoke configuration")
-    ap.add_argument("--write", action="store_true", help="splice the tables into the README")
-    ap.add_argument(
-        "--readme", type=Path, default=HERE / "README.md", help="the file --write edits"
-    )
+    ap.add_argument("--write", action="store_true", help="splice the tables into their pages")
+    ap.add_argument("--dir", type=Path, default=HERE, help="the folder of the pages --write edits")
     args = ap.parse_args(argv)
-    if args.quick and args.write and args.readme.resolve() == (HERE / "README.md").resolve():
-        ap.error("--quick --write would put smoke-run numbers into the README; give --readme")
+    if args.quick and args.write and args.dir.resolve() == HERE.resolve():
+        ap.error("--quick --write would put smoke-run numbers into the pages; give --dir")
     names = _select(args.names)
+    pages = {TABLES[n].page for n in names}
     if args.write:  # every marker pair present before anything runs
-        text = args.readme.read_text()
+        texts = {page: (args.dir / page).read_text() for page in pages}
         for name in names:
-            splice(text, name, "")
+            splice(texts[TABLES[name].page], name, "")
     blocks: dict[str, str] = {}
     failed: list[str] = []
     for name in names:
@@ -151,11 +162,16 @@ def main(argv: list[str] | None = None) -> int:
             continue
         blocks[name] = out
     if failed:
-        sys.stderr.write(f"failed: {', '.join(failed)}; {args.readme} not changed\n")
+        sys.stderr.write(f"failed: {', '.join(failed)}; no page changed\n")
         return 1
     if args.write:
-        write_tables(args.readme, blocks)
-        print(f"wrote {len(blocks)} table(s) into {args.readme}")
+        write_tables(
+            {
+                args.dir / page: {n: b for n, b in blocks.items() if TABLES[n].page == page}
+                for page in sorted(pages)
+            }
+        )
+        print(f"wrote {len(blocks)} table(s) into {', '.join(sorted(pages))}")
     return 0
 
 

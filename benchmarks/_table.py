@@ -121,8 +121,8 @@ def command(argv: Sequence[str] | None = None) -> str:
 
 
 def preamble(argv: Sequence[str] | None = None) -> str:
-    """The two lines every benchmark prints first: its machine and its command."""
-    return f"Machine: {machine()}.\nCommand: `{command(argv)}`"
+    """The line every benchmark prints first: its machine and its command."""
+    return f"Machine: {machine()}. Command: `{command(argv)}`"
 
 
 def splice(text: str, name: str, block: str) -> str:
@@ -140,12 +140,17 @@ def splice(text: str, name: str, block: str) -> str:
     return pattern.sub(lambda m: f"{begin}\n{body}{END}", text, count=1)
 
 
-def write_tables(path: Path, blocks: dict[str, str]) -> None:
-    """Splice every table of ``blocks`` into the file at ``path``, all or none: the new text
-    goes to a temporary file beside it that replaces it in one rename."""
-    text = path.read_text()
-    for name, block in blocks.items():
-        text = splice(text, name, block)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+def write_tables(pages: dict[Path, dict[str, str]]) -> None:
+    """Splice every table into its page, all or none: every page's new text is made (a
+    missing marker raises) before any is written; each goes to a temporary file beside its
+    page that replaces it in one rename."""
+    texts = {}
+    for path, blocks in pages.items():
+        text = path.read_text()
+        for name, block in blocks.items():
+            text = splice(text, name, block)
+        texts[path] = text
+    for path, text in texts.items():
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)

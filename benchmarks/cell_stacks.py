@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for name in a.scenario or ("panda", "talos"):
         rows += run(name, a.steps, a.runs)
-    print(preamble(argv))
+    print(preamble())
     print(
         f"µs per step, {a.steps} steps, the range over {a.runs} run(s); ratio: median over "
         "the scenario's first row:\n"

@@ -6,7 +6,8 @@ with self-collision on and one sphere obstacle in front of it, min distance 0.02
 influence / detection distance 0.10 m. Convex hulls of the collision meshes everywhere.
 
 - qpcoord: ``CollisionAvoidance`` (44 self pairs after the SRDF + 17 robot-vs-sphere pairs)
-  at level 0 above a pose task and a posture task (``IK.step``: strict priorities), and, with
+  at level 0 above a pose task and a posture task (``IK.step``: strict priorities, the
+  default engine), and, with
   ``--update``, the task's ``update`` alone (the per-step collision cost) with 0, 1 and 3
   obstacles.
 - Pink: ``SelfCollisionBarrier`` over the same pairs (``Configuration.update`` computes every
@@ -70,7 +71,7 @@ def bench_qpcoord(robot, steps, repeats, method="hierarchical", collision=True):
     reach = qc.FrameTask(robot, HAND, None, gain=3.0)
     posture = qc.PostureTask(robot, q0, gain=0.5)
     levels = [ca, reach, posture] if collision else [reach, posture]
-    ik = qc.IK(robot, levels, DT, solver="daqp", method=method)
+    ik = qc.IK(robot, levels, DT, method=method)  # qpcoord's default engine
     times, d_min = [], np.inf
     for _ in range(repeats):
         q = q0.copy()

@@ -29,7 +29,7 @@ Scenarios:
 
 mink runs in its own environment (``benchmarks/mink_side.py`` under
 ``benchmarks/.mink-venv``, see :data:`MINK_SETUP`) on a MuJoCo model built from the same
-URDF, ``tool0`` a site; the note under each table gives its version and how far its
+URDF, ``tool0`` a site; the notes under the table give its version and how far its
 ``tool0`` pose is from qpcoord's, or why it did not run.
 
 Columns: velocity reversals per second over the last 500 steps (a joint's velocity changing
@@ -37,9 +37,8 @@ sign between two steps, both above 1e-6 rad/s), the largest step jump ``max |v_k
 (rad/s), the largest acceleration (rad/s²), the largest position-limit violation (rad), the
 settle time (s: from then on ``|v| < 1e-3 rad/s``; ``—`` if never), ``|v|`` at the end,
 the final task error (UR10: ``log6`` norm of the pose error, or the position error in m;
-Panda: distance of joint 1 to its limit, rad), the steps until the pose error is below 1e-6,
-and the step at which a QP had no solution (the run stops there; the other columns cover
-the steps before).
+Panda: distance of joint 1 to its limit, rad) and the step at which a QP had no solution
+(the run stops there; the other columns cover the steps before).
 
 Run::
 
@@ -62,6 +61,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
+from _table import markdown, preamble  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
 from qpcoord.kinematics.tasks import AccelerationLimits  # noqa: E402
@@ -404,14 +404,10 @@ def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> tuple[Rows, list
 def held(steps: int, dt: float = 0.01) -> tuple[Rows, list[str]]:
     """UR10 ``tool0`` position target 0.19 m from where a deadbeat task rests the elbow on
     its limit at −π: the other joints alternate at their speed limits whatever the
-    position-limit gain; the task's ``lm_damping`` settles them there."""
+    position-limit gain (0.5 or 1: the same numbers); the task's ``lm_damping`` settles them
+    there."""
     variants = (
-        ('qpcoord limits="robot"', _robot_limits, 0.0),
-        (
-            "qpcoord JointLimits(gain=1)",
-            lambda r: [qc.JointLimits(r, gain=1.0), qc.VelocityLimits(r)],
-            0.0,
-        ),
+        ('qpcoord limits="robot"', _robot_limits, 0.0),  # the same with JointLimits(gain=1)
         ('qpcoord limits="robot", lm_damping=1', _robot_limits, 1.0),
     )
     pink = (("pink", None, 0.0), ("pink lm_damping=1", None, 1.0))
@@ -458,23 +454,23 @@ def pairs(count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1) -> str
 
 
 COLUMNS = ["reversals/s", "max jump", "max |a|", "violation", "settle (s)", "|v| end", "error",
-           "steps to 1e-6", "QP failed at step"]  # fmt: skip
+           "QP failed at step"]  # fmt: skip
 
 
-def table(title: str, result: tuple[Rows, list[str]]) -> str:
-    rows, notes = result
-    cols = [c for c in COLUMNS if any(c in r for _, r in rows)]
-    out = [f"### {title}", "", "| solver | " + " | ".join(cols) + " |"]
-    out.append("|---|" + "---:|" * len(cols))
-    for name, r in rows:
-        cells = []
-        for c in cols:
-            x = r.get(c)
-            cells.append("—" if x is None else f"{x:.3g}" if isinstance(x, float) else str(x))
-        out.append(f"| {name} | " + " | ".join(cells) + " |")
-    if notes:
-        out += ["", *notes]
-    return "\n".join(out)
+def table(cases: list[tuple[str, tuple[Rows, list[str]]]]) -> str:
+    """One markdown table: a row per case and solver; the cases' notes below it, once each."""
+    rows: list[list[str]] = []
+    notes: list[str] = []
+    for case, (case_rows, case_notes) in cases:
+        for name, r in case_rows:
+            cells = []
+            for c in COLUMNS:
+                x = r.get(c)
+                cells.append("—" if x is None else f"{x:.3g}" if isinstance(x, float) else str(x))
+            rows.append([case, name, *cells])
+        notes += [n for n in case_notes if n not in notes]
+    out = markdown(["case", "solver", *COLUMNS], rows, "ll" + "r" * len(COLUMNS))
+    return "\n".join([out, *([""] + notes if notes else [])])
 
 
 def main(argv=None) -> int:
@@ -488,20 +484,22 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.ERROR)  # Pink logs configurations past a limit
-    print(table(f"UR10, unreachable target 3.7 m away ({args.steps} steps, dt 10 ms)",
-                reach(None, args.steps)))  # fmt: skip
-    print()
-    print(table("UR10, reachable target 0.24 m away (300 steps, dt 10 ms)",
-                reach([0.2, -0.1, 0.1], 300)))  # fmt: skip
-    print()
-    print(table(f"UR10, elbow onto its limit at π, folded ({args.steps} steps, dt 10 ms)",
-                elbow(args.steps)))  # fmt: skip
-    print()
-    print(table(f"UR10, elbow held on its limit at −π by a deadbeat task ({args.steps} "
-                "steps, dt 10 ms)", held(args.steps)))  # fmt: skip
-    print()
-    print(table(f"Panda joint 1 into its limit, a_max 50 rad/s² ({args.steps} steps, dt 1 ms)",
-                limit(args.steps)))  # fmt: skip
+    n = args.steps
+    cases = [
+        ("UR10 unreachable, 3.7 m", reach(None, n)),
+        ("UR10 reachable, 0.24 m", reach([0.2, -0.1, 0.1], 300)),
+        ("UR10 elbow onto its limit at π", elbow(n)),
+        ("UR10 elbow held on −π", held(n)),
+        ("Panda joint 1 into its limit", limit(n)),
+    ]
+    print(preamble())
+    print(
+        f"UR10 at dt 10 ms ({n} steps; the reachable target 300), Panda at dt 1 ms ({n} "
+        "steps); jumps in rad/s per step, |a| in rad/s², settle: time until |v| stays below "
+        "1e-3 rad/s ('—': never), error: the final task error (UR10: m or log6 norm; Panda: "
+        "joint 1's distance to its limit, rad):\n"
+    )
+    print(table(cases))
     if args.pairs > 0:
         print()
         print(pairs(args.pairs))

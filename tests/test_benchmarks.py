@@ -177,7 +177,7 @@ def test_ddl_bench_table():
     out = _script("ddl_bench.py", "--quick")
     lines = out.splitlines()
     assert lines[0].startswith("Machine: ")
-    assert lines[1] == "Command: `python benchmarks/ddl_bench.py --quick`"
+    assert lines[0].endswith(" Command: `python benchmarks/ddl_bench.py --quick`")
     rows = {ln.split("|")[1].strip(): ln for ln in lines if ln.startswith("| ") and "0 |" in ln}
     assert set(rows) == {"5000", "8000"}
     for row in rows.values():
@@ -217,22 +217,28 @@ def test_lexls_bench_without_lexls(tmp_path):
     assert out.rstrip().splitlines()[-1].startswith("LexLS skipped: no checkout at ")
 
 
-def test_readme_holds_every_table_with_its_command():
-    """Every table of ``python -m benchmarks`` has one marker pair in benchmarks/README.md
-    (so ``--write`` writes them all), every marker pair is one of them, and each block opens
-    with its machine line and the command ``python -m benchmarks`` runs for it."""
+def test_pages_hold_every_table_with_its_command():
+    """Every table of ``python -m benchmarks`` has one marker pair in its page
+    (benchmarks/README.md or ddl.md, so ``--write`` writes them all), every marker pair is one
+    of them, and each block opens with its machine line, which ends with the command
+    ``python -m benchmarks`` runs for it; the README stays under 300 lines."""
     import re
     import shlex
 
     writer = _writer()
-    text = (ROOT / "benchmarks" / "README.md").read_text()
-    assert set(re.findall(r"^<!-- table: (\S+) -->$", text, re.M)) == set(writer.TABLES)
+    pages = {t.page for t in writer.TABLES.values()}
+    for page in pages:
+        text = (ROOT / "benchmarks" / page).read_text()
+        want = {n for n, t in writer.TABLES.items() if t.page == page}
+        assert set(re.findall(r"^<!-- table: (\S+) -->$", text, re.M)) == want, page
     for name, table in writer.TABLES.items():
+        text = (ROOT / "benchmarks" / table.page).read_text()
         block = text.split(f"<!-- table: {name} -->\n", 1)[1].split("<!-- /table -->", 1)[0]
         lines = block.splitlines()
         assert lines[0].startswith("Machine: ") and " cores" in lines[0], name
         command = shlex.join(["python", f"benchmarks/{table.script}", *table.full])
-        assert lines[1] == f"Command: `{command}`", name
+        assert lines[0].endswith(f" Command: `{command}`"), name
+    assert len((ROOT / "benchmarks" / "README.md").read_text().splitlines()) < 300
 
 
 def test_oneshot_table():
@@ -360,7 +366,7 @@ def test_write_splices_the_table_between_its_markers(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.run(
         [sys.executable, "-m", "benchmarks", "engine_agreement", "--quick", "--write",
-         "--readme", str(readme)],
+         "--dir", str(tmp_path)],
         cwd=ROOT, capture_output=True, text=True, env=env, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -371,7 +377,7 @@ def test_write_splices_the_table_between_its_markers(tmp_path):
     assert after == README.split("old numbers\n<!-- /table -->\n", 1)[1]
     lines = block.splitlines()
     assert lines[0].startswith("Machine: ") and " cores" in lines[0] and "qpcoord" in lines[0]
-    assert lines[1] == "Command: `python benchmarks/engine_agreement.py --seeds 4`"
+    assert lines[0].endswith(" Command: `python benchmarks/engine_agreement.py --seeds 4`")
     assert "| category | disagreements |" in block and "old numbers" not in block
     assert block.strip() in proc.stdout  # the README holds what the command printed
 
@@ -392,16 +398,56 @@ def test_failed_run_or_missing_marker_leaves_the_readme_unchanged(tmp_path):
     orig = writer.TABLES
     writer.TABLES = tables
     try:
-        assert writer.main(["--write", "--readme", str(readme)]) == 1
+        assert writer.main(["--write", "--dir", str(tmp_path)]) == 1
         assert readme.read_text() == README
         assert not list(tmp_path.glob(".README.md*"))  # no temporary file left
         writer.TABLES = {**tables, "missing": writer.Table(str(good), (), ())}
         with pytest.raises(ValueError, match="table 'missing': 0 marker pairs"):
-            writer.main(["missing", "--write", "--readme", str(readme)])
+            writer.main(["missing", "--write", "--dir", str(tmp_path)])
         assert readme.read_text() == README
-        assert writer.main(["engine_agreement", "--write", "--readme", str(readme)]) == 0
+        assert writer.main(["engine_agreement", "--write", "--dir", str(tmp_path)]) == 0
     finally:
         writer.TABLES = orig
     text = readme.read_text()
     assert "<!-- table: engine_agreement -->\n| a |\n| --- |\n| 1 |\n<!-- /table -->" in text
     assert "other old numbers" in text and text.endswith("Prose after.\n")
+
+
+def test_cell_stacks_table():
+    """``cell_stacks.py``: a row per Panda and Talos stack, positive times, ratio 1 on each
+    scenario's first row."""
+    out = _script("cell_stacks.py", "--steps", "20", "--runs", "1")
+    rows = [
+        ln.split("|")[1:-1]
+        for ln in out.splitlines()
+        if ln.startswith("| Panda") or ln.startswith("| Talos")
+    ]  # noqa: E501
+    names = [r[0].strip() for r in rows]
+    assert names == [
+        "Panda: pose + posture",
+        "Panda: + table band",
+        "Panda: + sphere",
+        "Panda: + self-collision + sphere",
+        "Talos: feet, hand, posture",
+        "Talos: + CoM in the support polygon",
+    ]
+    for r in rows:
+        assert float(r[1]) > 0 and float(r[2]) > 0
+    assert rows[0][3].strip() == rows[4][3].strip() == "1.00×"
+
+
+def test_edges_table():
+    """``edges.py``: one table, a row per case and solver, qpcoord and Pink in every case."""
+    pytest.importorskip("pink")
+    out = _script("edges.py", "--steps", "600")
+    rows = [
+        ln.split("|")[1:3]
+        for ln in out.splitlines()
+        if ln.startswith("| UR10") or ln.startswith("| Panda")
+    ]  # noqa: E501
+    cases = {c.strip() for c, _ in rows}
+    assert len(cases) == 5
+    for case in cases:
+        solvers = [s.strip() for c, s in rows if c.strip() == case]
+        assert any(s.startswith("qpcoord") for s in solvers), case
+        assert any(s.startswith("pink") for s in solvers), case
