@@ -196,7 +196,9 @@ class KinematicTask(ABC):
         ``e`` is its distance outside ``[lower, upper]``), zero once the task is met. Far from
         an unreachable target it slows the motion to a stop instead of chattering at the
         speed limits. The damping rows are :attr:`lm_rows` (``nv`` rows beside the task in
-        its level); the task's rows are then built by its Python refresh.
+        its level; in a strict hierarchy they fix the level's null space); they are zero once
+        the error is below ``LM_ERROR_FLOOR`` = 1e-6 (task units). The task's rows are then
+        built by its Python refresh.
 
     Raises
     ------
@@ -751,13 +753,19 @@ class OneFormTask(KinematicTask):
         return self.task.update(A=self.form(q))  # validated: user code computes it
 
 
+#: Error (task units, ``√(Σ wᵢ eᵢ²)``) below which a task's Levenberg–Marquardt damping rows
+#: are zero: the task counts as met (the convergence the damping must not slow, 1e-6).
+LM_ERROR_FLOOR = 1e-6
+
+
 class LMDamping(KinematicTask):
     """The Levenberg–Marquardt damping rows of a task: ``√μ · v = 0`` on all ``nv`` rows,
     ``μ = lm_damping · Σ wᵢ eᵢ²`` from the owner's error at its last refresh.
 
     Built by a task constructed with ``lm_damping > 0`` (its :attr:`KinematicTask.lm_rows`);
     :class:`~qpcoord.IK` places it in the owner's level, right after it, and refreshes it
-    after the owner. All rows are zero once the owner's error is (the task is met).
+    after the owner. All rows are zero once the owner's error is below
+    :data:`LM_ERROR_FLOOR` (the task is met).
 
     Parameters
     ----------
@@ -798,6 +806,11 @@ class LMDamping(KinematicTask):
             owner._lm_e = None
         else:
             mu = self.mu
+        # below LM_ERROR_FLOOR the rows are zero, not tiny: in a strict hierarchy rows of any
+        # positive size fix the level's null space, so rows at rounding size would switch the
+        # levels below on and off from step to step around a met task
+        if mu <= self.owner.lm_damping * LM_ERROR_FLOOR**2:
+            mu = 0.0
         np.multiply(self._eye, np.sqrt(mu), out=self._A)
         return self.task._assign(self._A)
 

@@ -76,13 +76,30 @@ def test_rows_zero_at_target_and_placed_in_the_level(ur10):
     ik.step(Q0)
     # at the target: e is rounding of a ~1 m pose (two FK paths), mu = 3 |e|^2 ~ 1e-32
     assert task.lm_rows.mu < 1e-28
-    assert np.abs(task.lm_rows.task.A).max() < 1e-14
+    assert not task.lm_rows.task.A.any()  # below LM_ERROR_FLOOR: exactly zero
     # away from the target: mu = lm_damping * |e|^2 (unit weights)
     q = Q0 + 0.1
     ik.step(q)
     e = task.compute_error(q)
     assert task.lm_rows.mu == pytest.approx(3.0 * e @ e, rel=1e-12)
     np.testing.assert_allclose(task.lm_rows.task.A, np.sqrt(3.0 * e @ e) * np.eye(6))
+
+
+@pytest.mark.parametrize("engine", ["native", "python"])
+@pytest.mark.parametrize("offset", [1e-12, 5e-7])
+def test_a_met_task_leaves_its_null_space_to_the_levels_below(ur10, engine, offset):
+    """A damped task whose error is below LM_ERROR_FLOOR has zero damping rows, so the
+    posture below moves the arm in the task's null space (rows of any positive size would
+    fix it: in a strict hierarchy a tiny row is still a row)."""
+    target = ur10.frame_pose(Q0, "tool0")[:3, 3] + [offset, 0.0, 0.0]
+    task = qc.FramePositionTask(ur10, "tool0", target, gain=1 / DT, lm_damping=1.0)
+    ik = qc.IK(ur10, [task, qc.PostureTask(ur10, Q0 + 0.2, gain=1.0)], dt=DT, engine=engine)
+    v, _ = ik.step(Q0)
+    assert not task.lm_rows.task.A.any()
+    # the posture's pull (gain 1/s, 0.2 rad per joint) in the 3-dimensional null space
+    assert np.linalg.norm(v) > 0.05
+    J = ur10.frame_jacobian(Q0, "tool0")[:3]
+    np.testing.assert_allclose(J @ v, np.array([offset, 0.0, 0.0]) / DT, rtol=0, atol=1e-9)
 
 
 def test_without_damping_no_rows(ur10):
