@@ -66,7 +66,7 @@ def test_the_one_call_step_follows_the_python_engine(panda, pose):
         hm.set_target(target)
         q_next, v, sol = ikn.step_integrate(qn)
         pin.computeJointJacobians(panda.model, panda.data, qn)
-        assert nm._solver.step(qn, 0.0, None, k > 0, 10.0, True) == 0
+        assert nm._solver.step(qn, k > 0, 10.0, True) == 0
         assert np.array_equal(v, nm.x) and np.array_equal(q_next, nm.q_next)  # bit for bit
         assert np.array_equal(sol.level_residuals, nm.res)
         assert sol.info == nm._solver.info(KKT_TOL)

@@ -401,15 +401,15 @@ def test_add_task_rejects_bad_band_data(talos):
     ik = qc.IK(talos, [[band, poly]], DT, limits=None, engine="native")
     solver = ik._native._solver
     with pytest.raises(ValueError, match="ComBand has 3 rows"):
-        solver.add_task(7, band, band.task, -1, [0, 1], 0, [])
+        solver.add_task(7, -1, [0, 1], 0, [])
     with pytest.raises(ValueError, match="unknown frame slot"):
-        solver.add_task(8, poly, poly.task, -1, list(range(8)), 3, [0, 99])
+        solver.add_task(8, -1, list(range(8)), 3, [0, 99])
     with pytest.raises(ValueError, match="frames x contact points"):
-        solver.add_task(8, poly, poly.task, -1, list(range(7)), 3, [0, 1])
+        solver.add_task(8, -1, list(range(7)), 3, [0, 1])
     with pytest.raises(ValueError, match="rows out of range"):
-        solver.add_task(8, poly, poly.task, -1, list(range(8)), 9, [0])
+        solver.add_task(8, -1, list(range(8)), 9, [0])
     with pytest.raises(ValueError, match="unknown kind"):
-        solver.add_task(9, poly, poly.task, -1, list(range(8)), 3, [0])
+        solver.add_task(9, -1, list(range(8)), 3, [0])
 
 
 # ---------------------------------------------------------------------------------------
@@ -435,10 +435,10 @@ for name, stack in (("bands", [[polygon, band]]), ("whole", levels)):
     assert not ik._native._hybrid
     call = ik._native._solver.step
     for _ in range(20):
-        assert call(q, 0.0, None, True, 10.0, True) == 0
+        assert call(q, True, 10.0, True) == 0
     before = count()
     for _ in range(500):
-        call(q, 0.0, None, True, 10.0, True)
+        call(q, True, 10.0, True)
     print(name, count() - before)
 """
 
