@@ -18,6 +18,8 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   masks, weights),
 - :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
   not in it; a continuous joint's are),
+- :class:`~qpcoord.PositionBand` on a robot with a default frame (inequality rows ``C``,
+  ``lower``, ``upper``: the frame's position rows),
 - :class:`~qpcoord.ComBand` and :class:`~qpcoord.SupportPolygon` (inequality rows ``C``,
   ``lower``, ``upper``; ``src/native/support_kernels.hpp``: the polygon's hull as
   ``frame_tasks._hull``, its ``edges`` set after each step; collinear contacts or a
@@ -72,7 +74,15 @@ from .frame_tasks import (
     SupportPolygon,
 )
 from .robot import Robot
-from .tasks import JointLimits, KinematicTask, Limit, PositionTask, PostureTask, VelocityLimits
+from .tasks import (
+    JointLimits,
+    KinematicTask,
+    Limit,
+    PositionBand,
+    PositionTask,
+    PostureTask,
+    VelocityLimits,
+)
 
 __all__ = ["NativeIKStep", "IKStepSpec", "KERNELS", "TaskKind", "native_kind", "integration_plan"]
 
@@ -90,6 +100,7 @@ class TaskKind(IntEnum):
     POSE_SPLIT = 6  #: ``FrameTask(error="split")``
     COM_BAND = 7  #: an inequality (``src/native/support_kernels.hpp``)
     SUPPORT_POLYGON = 8  #: an inequality (``src/native/support_kernels.hpp``)
+    POSITION_BAND = 9  #: an inequality on the default frame's position rows
 
 
 #: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
@@ -102,9 +113,10 @@ KERNELS = {
     PostureTask: TaskKind.POSTURE,
     ComBand: TaskKind.COM_BAND,
     SupportPolygon: TaskKind.SUPPORT_POLYGON,
+    PositionBand: TaskKind.POSITION_BAND,
 }
 #: The band kernels (Inequality rows).
-_BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON)
+_BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON, TaskKind.POSITION_BAND)
 
 _F64 = np.dtype(np.float64)
 _clock = time.perf_counter
@@ -158,8 +170,8 @@ def _push_posture(slot: _Slot) -> None:
     slot.solver.set_target(slot.k, _f64(slot.task.q_ref), None)
 
 
-def _push_com_band(slot: _Slot) -> None:
-    task = slot.task  # a ComBand
+def _push_faces(slot: _Slot) -> None:
+    task = slot.task  # a ComBand or a PositionBand
     slot.solver.set_faces(slot.k, _f64(task.lower), _f64(task.upper))
 
 
@@ -188,7 +200,8 @@ _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.ORIENTATION: _push_orientation,
     TaskKind.COM: _push_point,
     TaskKind.POSTURE: _push_posture,
-    TaskKind.COM_BAND: _push_com_band,
+    TaskKind.COM_BAND: _push_faces,
+    TaskKind.POSITION_BAND: _push_faces,
     TaskKind.SUPPORT_POLYGON: _push_polygon,
 }
 
@@ -259,6 +272,8 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
     if task.lm_rows is not None:
         return None  # its damping rows read the error its Python refresh records
     kind = KERNELS.get(type(task))
+    if kind == TaskKind.POSITION_BAND and task.robot.frame_id is None:
+        return None  # no default frame: its _refresh raises the robot's message
     if kind in _BANDS:
         return kind
     if kind is None or task.kind != "equality":
@@ -342,7 +357,7 @@ def integration_plan(robot: Any) -> list[int] | None:
 
 def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
-    if kind == TaskKind.POSITION:
+    if kind in (TaskKind.POSITION, TaskKind.POSITION_BAND):
         return [int(r) for r in task.robot.rows]
     if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
@@ -503,8 +518,14 @@ class NativeIKStep(NativeHierarchy):
                 m = u.C.shape[0]
                 owner = owners.get(id(u))
                 kind = None if owner is None else native_kind(owner)
-                if owner is not None and kind in _BANDS:  # ComBand, SupportPolygon: natively
-                    if not self.com:
+                if owner is not None and kind in _BANDS:  # the bands: natively
+                    frame = -1
+                    if kind == TaskKind.POSITION_BAND:
+                        fid = _frame_id(owner, kind)
+                        if fid not in frames:
+                            frames[fid] = self._add_frame(solver, fid)
+                        frame = frames[fid]
+                    elif not self.com:
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     slots = []
@@ -513,7 +534,7 @@ class NativeIKStep(NativeHierarchy):
                             if fid not in frames:
                                 frames[fid] = self._add_frame(solver, fid)
                             slots.append(frames[fid])
-                    k = solver.add_task(kind, -1, _selection(owner, kind), j, slots)
+                    k = solver.add_task(kind, frame, _selection(owner, kind), j, slots)
                     self._slots.append(_Slot(solver, self._moving, k, kind, owner))
                     self.kernel_tasks.append(owner)
                     j += m

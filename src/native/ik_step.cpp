@@ -141,9 +141,12 @@ enum Kind : int {
   kPoseSplit,  ///< FrameTask(error="split")
   kComBand,         ///< ComBand (an inequality: support_kernels.hpp)
   kSupportPolygon,  ///< SupportPolygon (an inequality: support_kernels.hpp)
+  kPositionBand,    ///< PositionBand (an inequality on the frame's position rows)
 };
 
-bool is_band(Kind k) { return k == kComBand || k == kSupportPolygon; }
+bool is_band(Kind k) { return k == kComBand || k == kSupportPolygon || k == kPositionBand; }
+/// the bands on the CoM (their rows read data.com and data.Jcom)
+bool on_com(Kind k) { return k == kComBand || k == kSupportPolygon; }
 
 struct Frame {
   View Rj, pj;  ///< rotation and translation of the parent joint (views of data.oMi[j])
@@ -267,21 +270,24 @@ class IKStep {
   /// SupportPolygon's frame slots. Returns the kernel's index (the setters' k); it runs once
   /// its gain, weights, target and outputs are set.
   int add_task(int kind, int frame, std::vector<int> sel, int row0, std::vector<int> qidx) {
-    if (kind < kPosition || kind > kSupportPolygon)
+    if (kind < kPosition || kind > kPositionBand)
       throw nb::value_error("add_task: unknown kind");
     const bool band = is_band(static_cast<Kind>(kind));
-    if ((kind != kCom && kind != kPosture && !band) &&
-        (frame < 0 || frame >= (int)frames_.size()))
+    const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
+    if ((kind != kPosture && !com) && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
-    if ((kind == kCom || band) && !com_.p) throw nb::value_error("add_task: set_com first");
+    if (com && !com_.p) throw nb::value_error("add_task: set_com first");
     if (!bound_) throw nb::value_error("add_task: bind first");
     const int rows = static_cast<int>(sel.size());
     if (rows < 1 || row0 < 0 || row0 + rows > static_cast<int>(out_[band ? 2 : 0].shape(0)))
       throw nb::value_error("add_task: rows out of range");
     for (int s : sel)
-      if (s < 0 || s >= (kind == kPosture ? nv_ : band ? rows : 6))
+      if (s < 0 || s >= (kind == kPosture ? nv_ : on_com(static_cast<Kind>(kind)) ? rows : 6))
         throw nb::value_error("add_task: row selection out of range");
-    if (band) {  // sel: the rows 0..rows-1; qidx: a SupportPolygon's frame slots
+    if (kind == kPositionBand && rows > 3)
+      throw nb::value_error("add_task: a PositionBand has at most 3 rows");
+    if (band) {  // sel: the rows 0..rows-1 (a PositionBand: the axes); qidx: a
+                 // SupportPolygon's frame slots
       if (kind == kComBand && rows != 3) throw nb::value_error("add_task: a ComBand has 3 rows");
       for (int f : qidx)
         if (f < 0 || f >= (int)frames_.size())
@@ -378,13 +384,15 @@ class IKStep {
   /// kTaskData + k until a target is set again.
   void forget_target(int k) { kernel(k, "forget_target").given &= ~4; }
 
-  /// A COM_BAND kernel's faces lower, upper (3,) m (NaN rejected, +-inf on its side).
+  /// A COM_BAND (3,) or POSITION_BAND (rows,) kernel's faces lower, upper (m; NaN
+  /// rejected, +-inf on its side).
   void set_faces(int k, nb::handle lower, nb::handle upper) {
     Kernel& K = kernel(k, "set_faces");
-    if (K.kind != kComBand) throw nb::value_error("set_faces: not a band with faces");
+    if (K.kind != kComBand && K.kind != kPositionBand)
+      throw nb::value_error("set_faces: not a band with faces");
     support::Band& b = bands_[K.band];
-    read_values(lower, 3, 0, b.lo.data(), "set_faces: lower", true);
-    read_values(upper, 3, 0, b.hi.data(), "set_faces: upper", true);
+    read_values(lower, K.rows, 0, b.lo.data(), "set_faces: lower", true);
+    read_values(upper, K.rows, 0, b.hi.data(), "set_faces: upper", true);
     K.given |= 4;
   }
 
@@ -766,8 +774,9 @@ class IKStep {
   /// task kind is evaluated (ik_step/kernels.hxx). False: its data cannot be used.
   bool run_kernel(Kernel& k, const double* q, int64_t qs);
 
-  /// A ComBand / SupportPolygon kernel (support_kernels.hpp): its Inequality's C, lower,
-  /// upper and the stacked rows C, clo, chi, csw from row k.row0 (C unweighted, as stacked).
+  /// A band kernel (ComBand, SupportPolygon: support_kernels.hpp; PositionBand): its
+  /// Inequality's C, lower, upper and the stacked rows C, clo, chi, csw from row k.row0 (C
+  /// unweighted, as stacked).
   bool run_band(const Kernel& k, support::Band& b);
 
   /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
@@ -841,7 +850,8 @@ void bind_ik_step(nb::module_& m) {
       .value("POSTURE", kPosture)
       .value("POSE_SPLIT", kPoseSplit)
       .value("COM_BAND", kComBand)
-      .value("SUPPORT_POLYGON", kSupportPolygon);
+      .value("SUPPORT_POLYGON", kSupportPolygon)
+      .value("POSITION_BAND", kPositionBand);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
@@ -873,7 +883,8 @@ void bind_ik_step(nb::module_& m) {
            "T* (4, 4) and the target's body twist (6,); ORIENTATION R* (3, 3) and (3,); "
            "POSTURE q_ref (nq,). Finite values.")
       .def("set_faces", &IKStep::set_faces, nb::arg("k"), nb::arg("lower"), nb::arg("upper"),
-           "A COM_BAND kernel's faces (3,) each (m; -inf / inf on its side).")
+           "A COM_BAND (3,) or POSITION_BAND (rows,) kernel's faces (m; -inf / inf on its "
+           "side).")
       .def("set_contacts", &IKStep::set_contacts, nb::arg("k"), nb::arg("points"),
            nb::arg("margin"),
            "A SUPPORT_POLYGON kernel's contact points (per frame, 3) in frame coordinates "

@@ -17,6 +17,7 @@ from test_native_step import DT, FRAMES, KINDS, _kind_levels, _pair, _robot, _st
 import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.kinematics.frame_tasks import ComTask, FrameTask
+from qpcoord.kinematics.native_step import TaskKind, native_kind
 
 needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
@@ -36,9 +37,18 @@ def _assert_rows_match(ikn: qc.IK, ikp: qc.IK, q: np.ndarray, t: float) -> None:
     np.testing.assert_allclose(Pn.beq, Pp.beq, rtol=0, atol=1e-12 * scale)
     np.testing.assert_array_equal(Pn.lbs, Pp.lbs)
     np.testing.assert_array_equal(Pn.ubs, Pp.ubs)
-    for tn, tp in zip(ikn._dynamic, ikp._dynamic, strict=True):
-        np.testing.assert_allclose(tn.task.A, tp.task.A, rtol=0, atol=1e-12 * scale)
-        np.testing.assert_allclose(tn.task.b, tp.task.b, rtol=0, atol=1e-12 * scale)
+    for tn, tp in zip(ikn._dynamic, ikp._dynamic, strict=True):  # the tasks' own rows
+        en, ep = tn.task, tp.task
+        if isinstance(en, qc.Equality):
+            np.testing.assert_allclose(en.A, ep.A, rtol=0, atol=1e-12 * scale)
+            np.testing.assert_allclose(en.b, ep.b, rtol=0, atol=1e-12 * scale)
+        else:
+            s = max(1.0, float(np.abs(ep.C).max()))
+            np.testing.assert_allclose(en.C, ep.C, rtol=0, atol=1e-12 * s)
+            for a, b in ((en.lower, ep.lower), (en.upper, ep.upper)):
+                np.testing.assert_array_equal(np.isinf(a), np.isinf(b))
+                ok = np.isfinite(b)
+                np.testing.assert_allclose(a[ok], b[ok], rtol=0, atol=1e-12 * s)
 
 
 def _assign(robot: qc.Robot, kind: str, task, posture, q: np.ndarray, seed: int) -> None:
@@ -176,3 +186,50 @@ def test_a_dropped_step_unbinds_its_tasks_and_tasks_pickle(robots):
     gc.collect()
     assert all(t._bound == () for t in tasks)
     tasks[0].set_target(np.eye(4))  # nothing bound: a plain assignment
+
+
+def _assert_band_rows_match(ikn: qc.IK, ikp: qc.IK, q: np.ndarray) -> None:
+    """The stacked inequality rows and the bands' own rows against the Python refresh (the
+    tolerance of :func:`_assert_rows_match`)."""
+    _assert_rows_match(ikn, ikp, q, 0.0)
+    Pn, Pp = ikn.stack._compiled, ikp.stack._compiled
+    scale = max(1.0, float(np.abs(Pp.C).max()))
+    finite = np.isfinite(Pp.clo) | np.isfinite(Pp.chi)
+    np.testing.assert_allclose(Pn.C, Pp.C, rtol=0, atol=1e-12 * scale)
+    for a, b in ((Pn.clo, Pp.clo), (Pn.chi, Pp.chi)):
+        np.testing.assert_array_equal(np.isinf(a), np.isinf(b))
+        ok = np.isfinite(b)
+        np.testing.assert_allclose(a[ok], b[ok], rtol=0, atol=1e-12 * scale)
+    assert finite.any()
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "planar_3r", "talos"])
+def test_position_band_kernel_equals_the_python_refresh(robots, name):
+    """PositionBand on the default frame (its robot's position rows), as a hard constraint and
+    at a soft level, faces and gain assigned between steps: the rows of its Python refresh
+    at random configurations near the start (talos: a floating base)."""
+    robot = _robot(robots, name)
+    ee = robot.with_frame(FRAMES[name]) if robot.frame != FRAMES[name] else robot
+    q0 = _start(robot)
+
+    def build(engine: str) -> tuple[qc.IK, qc.PositionBand]:
+        y = ee.position(q0)
+        hard = qc.PositionBand(ee, lower=y - 0.02, upper=y + [0.05] * ee.m, gain=10.0)
+        soft = qc.PositionBand(ee, lower=[-np.inf] * (ee.m - 1) + [y[-1] + 0.01], gain=5.0)
+        levels = [soft, qc.PostureTask(robot, q0, gain=1.0)]
+        return qc.IK(robot, levels, DT, constraints=[hard], engine=engine), hard
+
+    (ikn, hn), (ikp, hp) = build("native"), build("python")
+    assert not ikn._native._hybrid
+    assert [native_kind(t) for t in ikn._native.kernel_tasks].count(TaskKind.POSITION_BAND) == 2
+    rng = np.random.default_rng(5)
+    for k in range(4):  # near the start, where the hard band can hold
+        q = robot.integrate(q0, rng.uniform(-0.3, 0.3, robot.nv), 1.0)
+        if k:
+            lo = ee.position(q) + rng.uniform(-0.1, 0.0, ee.m)
+            gain = float(rng.uniform(2.0, 20.0))
+            for band in (hn, hp):
+                band.set_band(lower=lo, upper=lo + 0.2)
+                band.gain = gain
+        _assert_band_rows_match(ikn, ikp, q)

@@ -605,7 +605,7 @@ def test_hybrid_step_matches_the_python_engine(robots):
     ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
     hybrid = ikn._native
     assert hybrid._python_tasks and hybrid._python_limits
-    assert [type(t) for t in hybrid.kernel_tasks] == [FrameTask, qc.PostureTask]
+    assert [type(t) for t in hybrid.kernel_tasks] == [PositionBand, FrameTask, qc.PostureTask]
     for step in range(60):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)

@@ -126,7 +126,6 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
 bool IKStep::run_band(const Kernel& k, support::Band& b) {
   const int rows = k.rows;
   const double gain = k.gain;
-  const double c[3] = {com_[0], com_[1], com_[2]};  // data.com[0]
   double* C = out_[2].data() + static_cast<size_t>(k.row0) * nv_;
   double* lo = out_[3].data() + k.row0;
   double* hi = out_[4].data() + k.row0;
@@ -148,6 +147,18 @@ bool IKStep::run_band(const Kernel& k, support::Band& b) {
     sw[r] = k.sw[r];
     return true;
   };
+  if (k.kind == kPositionBand) {  // y the frame's position rows, C their Jacobian
+    const Frame& f = frames_[k.frame];
+    frame_jacobian(f);
+    for (int r = 0; r < rows; ++r) {
+      const int a = k.sel[r];
+      // y is finite: +-inf - y stays +-inf
+      if (!put(r, Jt_.row(a), gain * (b.lo[r] - f.p[a]), gain * (b.hi[r] - f.p[a])))
+        return false;
+    }
+    return true;
+  }
+  const double c[3] = {com_[0], com_[1], com_[2]};  // data.com[0]
   if (k.kind == kComBand) {
     for (int a = 0; a < 3; ++a) {
       for (int j = 0; j < nv_; ++j) Jt_(0, j) = Jcom_(a, j);
