@@ -12,7 +12,17 @@ import pickle
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_native_step import DT, FRAMES, KINDS, _kind_levels, _pair, _robot, _start, robots
+from test_native_step import (
+    DT,
+    FRAMES,
+    KINDS,
+    _kind_levels,
+    _pair,
+    _robot,
+    _start,
+    robots,
+    run_counting_malloc,
+)
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -233,3 +243,46 @@ def test_position_band_kernel_equals_the_python_refresh(robots, name):
                 band.set_band(lower=lo, upper=lo + 0.2)
                 band.gain = gain
         _assert_band_rows_match(ikn, ikp, q)
+
+
+_ALLOCATION_RUN = r"""
+import ctypes, sys
+import numpy as np, pinocchio as pin, qpcoord as qc
+sys.path.insert(0, {tests!r})
+from test_native_step import FRAMES, DT
+count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
+count.restype = ctypes.c_longlong
+robot = qc.robots.load("panda")
+ee = robot.with_frame(FRAMES["panda"])
+q = robot.random_configuration(3)
+T = robot.frame_pose(q, FRAMES["panda"])
+band = qc.PositionBand(ee, lower=[-np.inf, -np.inf, T[2, 3] - 0.05], gain=10.0)
+hand = qc.FrameTask(robot, FRAMES["panda"], T, gain=5.0)
+ik = qc.IK(robot, [band, hand, qc.PostureTask(robot, q)], DT, engine="native")
+assert not ik._native._hybrid
+pin.computeJointJacobians(robot.model, robot.data, q)
+call, slot = ik._native._solver.step, ik._native._slots[1]
+for _ in range(20):
+    slot.set_target(T, None)
+    assert call(q, True, 10.0, True) == 0
+before = count()
+for _ in range(500):
+    call(q, True, 10.0, True)
+print("step", count() - before)
+before = count()
+for _ in range(500):
+    slot.set_target(T, None)
+print("set_target", count() - before)
+"""
+
+
+@pytest.mark.engine_independent
+@needs_native
+@pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
+def test_the_step_and_its_target_setter_do_not_allocate(tmp_path, build):
+    """The native call with a PositionBand, a FrameTask and a posture, and the kernel's
+    target setter (what FrameTask.set_target calls every control step), make no heap
+    allocation after the first calls. Each build of the extension."""
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
+    counts = dict(line.split() for line in out.splitlines())
+    assert counts == {"step": "0", "set_target": "0"}, out
