@@ -49,6 +49,11 @@ __all__ = ["Equality", "Inequality", "Bounds", "Task"]
 #: ``_Task.__setattr__``)
 _setattr = object.__setattr__
 
+#: Counts every ``update(...)`` and public attribute write of a task: a compiled step that
+#: holds a copy of tasks' weights or binds their arrays (the native IK step) looks at them
+#: again only when it moved (one comparison per step).
+TASK_WRITES = [0]
+
 
 def _label(kind: str, name: str) -> str:
     return f"{kind} {name!r}" if name else f"{kind} (unnamed)"
@@ -304,6 +309,7 @@ class _Task:
             self.update(**{name: value})  # validated, copied, counted in matrix_version
             return
         _setattr(self, name, value)
+        TASK_WRITES[0] += 1
 
     @property
     def label(self) -> str:
@@ -394,6 +400,7 @@ class Equality(_Task):
             self._set_weight(neww)
         if newA is not None or neww is not None:
             _setattr(self, "matrix_version", self.matrix_version + 1)
+        TASK_WRITES[0] += 1
         return self
 
     def _assign(self, A: np.ndarray | None = None, b: np.ndarray | None = None) -> Equality:
@@ -507,6 +514,7 @@ class Inequality(_Task):
             self._set_weight(neww)
         if newC is not None or neww is not None:
             _setattr(self, "matrix_version", self.matrix_version + 1)
+        TASK_WRITES[0] += 1
         return self
 
     def _assign(

@@ -501,7 +501,7 @@ class FrameTask(_ErrorTask):
         self._init_equality(robot, 6, sel, weights, name or f"frame {frame}")
         self._init_lm(lm_damping)
         #: the validated target pose as a 4×4 (rotation, m), written in place by set_target;
-        #: ``_target_T`` is this array once a target is set (the native kernel reads it)
+        #: ``_target_T`` is this array once a target is set (the native IK step copies it)
         self._pose = np.eye(4)
         self._target_T: np.ndarray | None = None
         self._target_se3: pin.SE3 | None = None  # ``target``, built on first read
@@ -562,13 +562,19 @@ class FrameTask(_ErrorTask):
             and type(target) is np.ndarray
             and copy(target, RIGID_TOLERANCE, self._pose)
         ):  # a float64 4×4 checked and copied in one native call: no pin.SE3 built here
-            self._target_se3 = None
+            se3 = None
         else:
-            self._target_se3 = _as_se3(target, "target")  # the full checks and messages
-            self._pose[...] = self._target_se3.homogeneous
-        self._target_T = self._pose
-        self._target_inv_se3 = None
-        self.target_velocity = nu
+            se3 = _as_se3(target, "target")  # the full checks and messages
+            self._pose[...] = se3.homogeneous
+        # written to the instance dict, the bound native steps told once (not four
+        # KinematicTask.__setattr__ calls: set_target runs every control step)
+        d = self.__dict__
+        d["_target_se3"] = se3
+        d["_target_T"] = self._pose
+        d["_target_inv_se3"] = None
+        d["target_velocity"] = nu
+        for slot in self._bound:  # the native IK steps holding a copy: the new target
+            slot.set_target(self._pose, nu)
 
     def set_target_from_configuration(self, q: Any) -> None:
         """Set the target to the frame's pose at configuration ``q`` (hold it there)."""
@@ -664,8 +670,12 @@ class FramePositionTask(_ErrorTask):
 
     def set_target(self, target: Any, velocity: Any = None) -> None:
         """Set the desired origin ``p*`` (m, world) and optionally its velocity (m/s)."""
-        self.target = _vector(target, 3, "target", "m")
-        self.target_velocity = None if velocity is None else _vector(velocity, 3, "velocity", "m/s")
+        y = _vector(target, 3, "target", "m")
+        v = None if velocity is None else _vector(velocity, 3, "velocity", "m/s")
+        d = self.__dict__  # the bound native steps told once, below
+        d["target"], d["target_velocity"] = y, v
+        for slot in self._bound:  # the native IK steps holding a copy: the new target
+            slot.set_target(y, v)
 
     def set_target_from_configuration(self, q: Any) -> None:
         """Set the target to the frame's origin at configuration ``q``."""
@@ -744,8 +754,10 @@ class OrientationTask(_ErrorTask):
         target frame (rad/s), a feed-forward ``Jlog₃(E) Eᵀ ω*``."""
         R = _as_rotation(target, "target")
         w = None if velocity is None else _vector(velocity, 3, "velocity", "rad/s")
-        self.target, self._target_t = R, R.T.copy()
-        self.target_velocity = w
+        d = self.__dict__  # the bound native steps told once, below
+        d["target"], d["_target_t"], d["target_velocity"] = R, R.T.copy(), w
+        for slot in self._bound:  # the native IK steps holding a copy: the new target
+            slot.set_target(R, w)
 
     def set_target_from_configuration(self, q: Any) -> None:
         """Set the target to the frame's orientation at configuration ``q``."""
@@ -914,8 +926,12 @@ class ComTask(_ErrorTask):
 
     def set_target(self, target: Any, velocity: Any = None) -> None:
         """Set the desired CoM ``c*`` (m, world) and optionally its velocity (m/s)."""
-        self.target = _vector(target, 3, "target", "m")
-        self.target_velocity = None if velocity is None else _vector(velocity, 3, "velocity", "m/s")
+        y = _vector(target, 3, "target", "m")
+        v = None if velocity is None else _vector(velocity, 3, "velocity", "m/s")
+        d = self.__dict__  # the bound native steps told once, below
+        d["target"], d["target_velocity"] = y, v
+        for slot in self._bound:  # the native IK steps holding a copy: the new target
+            slot.set_target(y, v)
 
     def set_target_from_configuration(self, q: Any) -> None:
         """Set the target to the CoM at configuration ``q``."""

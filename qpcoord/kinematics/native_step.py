@@ -18,21 +18,30 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   masks, weights),
 - :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
   not in it; a continuous joint's are),
+- :class:`~qpcoord.PositionBand` on a robot with a default frame (inequality rows ``C``,
+  ``lower``, ``upper``: the frame's position rows),
 - :class:`~qpcoord.ComBand` and :class:`~qpcoord.SupportPolygon` (inequality rows ``C``,
   ``lower``, ``upper``; ``src/native/support_kernels.hpp``: the polygon's hull as
-  ``frame_tasks._hull``, its ``edges`` set; faces, margin, gain and contact points read every
-  step; collinear contacts or a non-finite row make Python raise the task's message),
+  ``frame_tasks._hull``, its ``edges`` set after each step; collinear contacts or a
+  non-finite row make Python raise the task's message),
 - :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
   intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
 
 Every other task (other bands, relative frames, collision, user tasks, a posture over a
 continuous joint) and constant Equality/Inequality rows keep their Python ``_refresh``, run
 before the native call and copied into the same arrays (a hybrid step); any other limit
-(acceleration limits, user limits) makes the whole box Python-computed. The kernels also
-write each task's own ``task.task`` arrays (``A``, ``b``; ``C``, ``lower``, ``upper``) and
-count a new ``A`` (``C``) in its ``matrix_version``, as its ``_refresh`` would. With
+(acceleration limits, user limits) makes the whole box Python-computed. With
 ``integrate=True`` (:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call
 writes ``q_next`` (:func:`integration_plan`).
+
+The boundary is data only (``docs/engine.md``, *The IK step*): the native step holds its own
+copy of each kernel's parameters (gain, row weights, target and feed-forward, faces, contact
+points, limits), set through its typed setters when a task's parameter is assigned (the task
+tells the steps it is bound to: ``KinematicTask._bound``) and, for a path or the run's
+reference, evaluated by ``reference_at`` before each step; it reads no task attribute while it
+runs. The kernels write each task's own ``task.task`` arrays (``A``, ``b``; ``C``, ``lower``,
+``upper``: bound once, as output buffers) and this module counts a new ``A`` (``C``) in its
+``matrix_version``, as its ``_refresh`` would.
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -54,6 +64,7 @@ from ..core.native import NativeHierarchy, load, raise_status
 from ..core.native_weighted import weighted_info
 from ..core.polish import KKT_TOL
 from ..core.solution import Solution
+from ..core.tasks import TASK_WRITES, Equality, _w
 from .frame_tasks import (
     ComBand,
     ComTask,
@@ -63,7 +74,15 @@ from .frame_tasks import (
     SupportPolygon,
 )
 from .robot import Robot
-from .tasks import JointLimits, KinematicTask, Limit, PositionTask, PostureTask, VelocityLimits
+from .tasks import (
+    JointLimits,
+    KinematicTask,
+    Limit,
+    PositionBand,
+    PositionTask,
+    PostureTask,
+    VelocityLimits,
+)
 
 __all__ = ["NativeIKStep", "IKStepSpec", "KERNELS", "TaskKind", "native_kind", "integration_plan"]
 
@@ -81,6 +100,7 @@ class TaskKind(IntEnum):
     POSE_SPLIT = 6  #: ``FrameTask(error="split")``
     COM_BAND = 7  #: an inequality (``src/native/support_kernels.hpp``)
     SUPPORT_POLYGON = 8  #: an inequality (``src/native/support_kernels.hpp``)
+    POSITION_BAND = 9  #: an inequality on the default frame's position rows
 
 
 #: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
@@ -93,13 +113,157 @@ KERNELS = {
     PostureTask: TaskKind.POSTURE,
     ComBand: TaskKind.COM_BAND,
     SupportPolygon: TaskKind.SUPPORT_POLYGON,
+    PositionBand: TaskKind.POSITION_BAND,
 }
 #: The band kernels (Inequality rows).
-_BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON)
+_BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON, TaskKind.POSITION_BAND)
 
 _F64 = np.dtype(np.float64)
 _clock = time.perf_counter
 _jacobians = pin.computeJointJacobians
+
+
+def _f64(x: Any) -> np.ndarray:
+    """``x`` as a float64 array (``x`` itself when it is one)."""
+    if type(x) is np.ndarray and x.dtype == _F64:
+        return x
+    return np.asarray(x, dtype=float)
+
+
+def _push_position(slot: _Slot) -> None:
+    task = slot.task  # a PositionTask
+    y = task.target
+    moving = slot.moving
+    if slot in moving:
+        moving.remove(slot)
+    if type(y) is np.ndarray and y.dtype == _F64 and y.shape == (task.robot.m,):
+        slot.solver.set_target(slot.k, y, None)
+    else:  # a path, the run's reference, or numbers reference_at converts: at every step
+        moving.append(slot)
+
+
+def _push_point(slot: _Slot) -> None:
+    task = slot.task  # a FramePositionTask or a ComTask
+    y, v = task.target, task.target_velocity
+    if y is None:
+        raise ValueError("no target")
+    slot.solver.set_target(slot.k, _f64(y), v if v is None else _f64(v))
+
+
+def _push_pose(slot: _Slot) -> None:
+    task = slot.task  # a FrameTask: _target_T its validated 4×4 (None without a target)
+    T, v = task._target_T, task.target_velocity
+    if T is None:
+        raise ValueError("no target")
+    slot.solver.set_target(slot.k, T, v if v is None else _f64(v))
+
+
+def _push_orientation(slot: _Slot) -> None:
+    task = slot.task  # an OrientationTask: _target_t is R*ᵀ, what its _evaluate reads
+    Rt, v = task._target_t, task.target_velocity
+    if Rt is None:
+        raise ValueError("no target")
+    slot.solver.set_target(slot.k, Rt.T, v if v is None else _f64(v))
+
+
+def _push_posture(slot: _Slot) -> None:
+    slot.solver.set_target(slot.k, _f64(slot.task.q_ref), None)
+
+
+def _push_faces(slot: _Slot) -> None:
+    task = slot.task  # a ComBand or a PositionBand
+    slot.solver.set_faces(slot.k, _f64(task.lower), _f64(task.upper))
+
+
+def _push_polygon(slot: _Slot) -> None:
+    task = slot.task  # a SupportPolygon
+    slot.solver.set_contacts(slot.k, _f64(task.contact_points), task.margin)
+
+
+def _push_joint_limits(slot: _Slot) -> None:
+    lim = slot.task  # a JointLimits
+    qi = lim.q_index
+    lo, hi = (lim.lower, lim.upper) if qi is None else (lim.lower[qi], lim.upper[qi])
+    slot.solver.set_joint_limits(slot.k, lim.gain, _f64(lo), _f64(hi))
+
+
+def _push_velocity_limits(slot: _Slot) -> None:
+    slot.solver.set_velocity_limits(slot.k, _f64(slot.task.limit))  # a VelocityLimits
+
+
+#: How each kernel's parameters (target, faces, contact points) go to the native step.
+_PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
+    TaskKind.POSITION: _push_position,
+    TaskKind.FRAME_POSITION: _push_point,
+    TaskKind.POSE: _push_pose,
+    TaskKind.POSE_SPLIT: _push_pose,
+    TaskKind.ORIENTATION: _push_orientation,
+    TaskKind.COM: _push_point,
+    TaskKind.POSTURE: _push_posture,
+    TaskKind.COM_BAND: _push_faces,
+    TaskKind.POSITION_BAND: _push_faces,
+    TaskKind.SUPPORT_POLYGON: _push_polygon,
+}
+
+
+class _Slot:
+    """A task bound to one kernel (``kind`` a :class:`TaskKind`) or limit (``kind`` None) of
+    a native step (``solver``, index ``k``), told of every parameter write of the task (its
+    ``_bound``, until the step is dropped), and what of the task the step holds (its gain;
+    its weights and output arrays, by identity)."""
+
+    __slots__ = ("k", "kind", "task", "solver", "moving", "push", "gain", "arrays", "set_target")
+
+    def __init__(
+        self, solver: Any, moving: list[_Slot], k: int, kind: TaskKind | None, task: Any
+    ) -> None:
+        self.k, self.kind, self.solver, self.moving = k, kind, solver, moving
+        self.task: Any = task  # its class is the kind's (KERNELS)
+        if kind is not None:
+            self.push = _PUSH[kind]
+        elif isinstance(task, VelocityLimits):
+            self.push = _push_velocity_limits
+        else:
+            self.push = _push_joint_limits
+        self.gain: Any = None
+        self.arrays: tuple[np.ndarray, ...] = ()
+        #: ``set_target(target, velocity)`` of this kernel: a task's own set_target calls it
+        #: with its validated float64 target (FrameTask: T* (4, 4), OrientationTask: R*
+        #: (3, 3), FramePositionTask and ComTask: (3,)) and velocity (or None), one native
+        #: call per control step
+        self.set_target = partial(solver.set_target, k)
+        task._bound = (*task._bound, self)
+
+    def unbind(self) -> None:
+        """Tell the task no more (its step is dropped)."""
+        self.task._bound = tuple(s for s in self.task._bound if s is not self)
+
+    def changed(self) -> None:
+        """Copy the task's parameters (gain, target, ...) into the native step: at compile
+        and whenever one is assigned. Data the kernel cannot use leaves it without a target
+        (its step then raises the task's own message)."""
+        try:
+            if self.kind is not None:
+                gain = self.task.gain
+                if gain != self.gain:  # (NaN: always, and refused)
+                    self.solver.set_gain(self.k, gain)
+                    self.gain = gain
+            self.push(self)
+        except (TypeError, ValueError):
+            if self in self.moving:
+                self.moving.remove(self)
+            if self.kind is None:
+                self.solver.forget_limit(self.k)
+            else:
+                self.solver.forget_target(self.k)
+
+    def task_arrays(self) -> tuple[np.ndarray, ...]:
+        """The task's weights and output arrays (``sqrt_weight`` and ``A``, ``b`` or ``C``,
+        ``lower``, ``upper``)."""
+        eq = self.task.task
+        if isinstance(eq, Equality):
+            return eq.sqrt_weight, eq.A, eq.b
+        return eq.sqrt_weight, eq.C, eq.lower, eq.upper
 
 
 def native_kind(task: KinematicTask) -> TaskKind | None:
@@ -108,6 +272,8 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
     if task.lm_rows is not None:
         return None  # its damping rows read the error its Python refresh records
     kind = KERNELS.get(type(task))
+    if kind == TaskKind.POSITION_BAND and task.robot.frame_id is None:
+        return None  # no default frame: its _refresh raises the robot's message
     if kind in _BANDS:
         return kind
     if kind is None or task.kind != "equality":
@@ -191,7 +357,7 @@ def integration_plan(robot: Any) -> list[int] | None:
 
 def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
-    if kind == TaskKind.POSITION:
+    if kind in (TaskKind.POSITION, TaskKind.POSITION_BAND):
         return [int(r) for r in task.robot.rows]
     if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
@@ -317,6 +483,11 @@ class NativeIKStep(NativeHierarchy):
         self._eq_ops: list[tuple] = []  # (task, A rows, b rows): copied every step
         self._in_ops: list[tuple] = []  # (task, C rows, lo, hi, sw)
         self.com = False
+        #: per kernel (in the order added), then per limit: the task bound to it
+        self._slots: list[_Slot] = []
+        #: the kernels whose target moves with time (a path, the run's reference): their
+        #: ``reference_at(t, reference)`` is copied in before every step
+        self._moving: list[_Slot] = []
         frames: dict[int, int] = {}
         i = j = 0
         for B in blocks:
@@ -339,15 +510,22 @@ class NativeIKStep(NativeHierarchy):
                             frames[fid] = self._add_frame(solver, fid)
                         frame = frames[fid]
                     qidx = _posture_q_index(owner) if isinstance(owner, PostureTask) else []
-                    solver.add_task(kind, owner, t, frame, _selection(owner, kind), i, qidx)
+                    k = solver.add_task(kind, frame, _selection(owner, kind), i, qidx)
+                    self._slots.append(_Slot(solver, self._moving, k, kind, owner))
                     self.kernel_tasks.append(owner)
                 i += m
             for u in B.ineqs:
                 m = u.C.shape[0]
                 owner = owners.get(id(u))
                 kind = None if owner is None else native_kind(owner)
-                if owner is not None and kind in _BANDS:  # ComBand, SupportPolygon: natively
-                    if not self.com:
+                if owner is not None and kind in _BANDS:  # the bands: natively
+                    frame = -1
+                    if kind == TaskKind.POSITION_BAND:
+                        fid = _frame_id(owner, kind)
+                        if fid not in frames:
+                            frames[fid] = self._add_frame(solver, fid)
+                        frame = frames[fid]
+                    elif not self.com:
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
                     slots = []
@@ -356,7 +534,8 @@ class NativeIKStep(NativeHierarchy):
                             if fid not in frames:
                                 frames[fid] = self._add_frame(solver, fid)
                             slots.append(frames[fid])
-                    solver.add_task(kind, owner, u, -1, _selection(owner, kind), j, slots)
+                    k = solver.add_task(kind, frame, _selection(owner, kind), j, slots)
+                    self._slots.append(_Slot(solver, self._moving, k, kind, owner))
                     self.kernel_tasks.append(owner)
                     j += m
                     continue
@@ -376,6 +555,24 @@ class NativeIKStep(NativeHierarchy):
                 self._python_limits = True
                 solver.limits_mode = 2
         self._hybrid = bool(self._python_tasks or self._eq_ops or self._in_ops)
+        #: the kernels' tasks whose matrix each step writes: their ``matrix_version`` counts a
+        #: new matrix per step, as their ``_assign(A, b)`` would (a posture writes only b)
+        #: (their instance dicts: one item write each per step)
+        self._bumps = [
+            sl.task.task.__dict__ for sl in self._slots if sl.kind not in (None, TaskKind.POSTURE)
+        ]
+        for d in self._bumps:  # the class default 0 as an instance item
+            d.setdefault("matrix_version", 0)
+        #: the support polygons (slot, task): their ``edges`` after a step
+        self._polygons = [
+            (sl.k, sl.task) for sl in self._slots if sl.kind == TaskKind.SUPPORT_POLYGON
+        ]
+        #: ``TASK_WRITES`` when the kernels' weights and output arrays were last bound
+        self._writes = -1
+        self._solver = solver
+        for slot in self._slots:  # a task without a target yet: named at the first step
+            slot.changed()
+        self._bind_arrays()
         #: q_next of the last ``step(..., integrate=True)`` (nq,), overwritten by the next one
         self.q_next = np.zeros(robot.nq)
         plan = integration_plan(robot)
@@ -401,13 +598,16 @@ class NativeIKStep(NativeHierarchy):
         self.q_next_out: np.ndarray | None = None
         if not self.weighted:  # the strict step's answer in one call (IKStep.solve_step)
             solver.set_copies(self.x, self.res, self.q_next if plan is not None else None)
-        self._solver = solver
         #: the strict step of kernels only on plain coordinates (no Python rows, no Python
         #: limits, no coordinate map, no CoM): :meth:`step`'s short path
         self._plain = (
             not (self._hybrid or self._python_limits or self._M is not None or self.com)
             and not self.weighted
         )
+
+    def __del__(self) -> None:
+        for slot in getattr(self, "_slots", ()):  # the tasks no longer tell this step
+            slot.unbind()
 
     @property
     def counters(self) -> Any:
@@ -438,16 +638,77 @@ class NativeIKStep(NativeHierarchy):
 
     def _add_limit(self, solver: Any, lim: Limit) -> None:
         if isinstance(lim, VelocityLimits):
-            solver.add_velocity_limits(lim, lim.limit)
-            return
-        assert isinstance(lim, JointLimits)  # the two kinds with a kernel
-        qi = lim.q_index
-        if qi is None:
-            solver.add_joint_limits(lim, lim.lower, lim.upper, [], [])
-        else:  # lim.joints: the v index of each limited joint
-            solver.add_joint_limits(
-                lim, lim.lower[qi], lim.upper[qi], qi.tolist(), lim.joints.tolist()
-            )
+            i = solver.add_velocity_limits()
+        else:
+            assert isinstance(lim, JointLimits)  # the two kinds with a kernel
+            qi = lim.q_index
+            if qi is None:
+                i = solver.add_joint_limits([], [])
+            else:  # lim.joints: the v index of each limited joint
+                i = solver.add_joint_limits(qi.tolist(), lim.joints.tolist())
+        self._slots.append(_Slot(solver, self._moving, i, None, lim))
+
+    # ------------------------------------------------------------------ parameters
+    def _bind_arrays(self) -> None:
+        """Bind the kernels' weights and output arrays where a task holds new ones (an
+        ``update(...)`` rebinds them; ``TASK_WRITES`` counts it)."""
+        solver = self._solver
+        for slot in self._slots:
+            if slot.kind is None:
+                continue
+            arrays = slot.task_arrays()
+            old = slot.arrays
+            if old and all(a is b for a, b in zip(arrays, old, strict=True)):
+                continue
+            if not old or arrays[0] is not old[0]:
+                solver.set_weights(slot.k, _f64(arrays[0]))
+            # the task's own arrays (read-only views): the kernel writes their memory
+            if len(arrays) == 3:
+                solver.bind_rows(slot.k, _w(arrays[1]), _w(arrays[2]))
+            else:
+                solver.bind_band_rows(slot.k, *(_w(a) for a in arrays[1:]))
+            slot.arrays = arrays
+        self._writes = TASK_WRITES[0]
+
+    def _inputs(self, q: np.ndarray, t: float, reference: Any) -> None:
+        """Before a step: the arrays a task's ``update`` rebound (``TASK_WRITES`` moved) and
+        the moving targets at time ``t`` (s), evaluated by the task's ``reference_at``
+        (which raises its own message)."""
+        if TASK_WRITES[0] != self._writes:
+            self._bind_arrays()
+        for slot in self._moving:
+            task = slot.task
+            assert isinstance(task, PositionTask)
+            y, v = task.reference_at(t, reference)
+            try:
+                self._solver.set_target(slot.k, _f64(y), _f64(v))
+            except (TypeError, ValueError) as exc:
+                self._task_failed(task, q, t, reference, exc)
+
+    def _task_failed(
+        self, task: KinematicTask, q: np.ndarray, t: float, reference: Any, exc: Exception
+    ) -> None:
+        """Raise the message of ``task`` whose data its kernel cannot use: its Python
+        refresh's own, else one naming it (``exc``: what the native setter said)."""
+        task._refresh(q, t, self.spec.dt, reference)  # raises the task's own message
+        raise ValueError(
+            f"{task.task.label}: its data cannot be read by the native IK step ({exc}); use "
+            "IK(..., engine='python')"
+        ) from exc
+
+    def _after_rows(self, versions: bool = True) -> None:
+        """What a step's rows change on the Python side: the ``matrix_version`` of the tasks
+        whose matrix the kernels wrote (``versions``), a support polygon's ``edges``."""
+        if versions:
+            for d in self._bumps:
+                d["matrix_version"] += 1
+        for k, task in self._polygons:
+            task.edges = self._solver.edges(k)
+
+    def _wrote_rows(self, code: int) -> bool:
+        """Did the native call with status ``code`` write every kernel's rows?"""
+        mod = self._mod
+        return code != mod.IK_BAD_Q and code < mod.IK_TASK_DATA and code != mod.BAD_INPUT
 
     # ------------------------------------------------------------------ per step
     def step(self, q: Any, t: float, reference: Any, integrate: bool = False) -> Solution:
@@ -461,12 +722,16 @@ class NativeIKStep(NativeHierarchy):
         t0 = _clock()
         if self._plain and type(q) is np.ndarray and q.dtype == _F64 and q.shape == self._qshape:
             # the common case in a few lines (0.2 µs of attribute reads and branches less)
+            if TASK_WRITES[0] != self._writes or self._moving:
+                self._inputs(q, float(t), reference)
             _jacobians(self._model, self._data, q)
             self.robot.data_changed()
-            out = self._solver.solve_step(
-                q, float(t), reference, self._solved, DEFAULT_TIME_LIMIT, integrate, KKT_TOL
-            )
+            out = self._solver.solve_step(q, self._solved, DEFAULT_TIME_LIMIT, integrate, KKT_TOL)
             if type(out) is tuple and not out[2]["uncertified"]:
+                for d in self._bumps:  # _after_rows inline (its common part)
+                    d["matrix_version"] += 1
+                if self._polygons:
+                    self._after_rows(versions=False)
                 self._solved = True
                 x, res, info, self.q_next_out = out
                 return Solution(x, "optimal", res, "native", _clock() - t0, "hierarchical", info)
@@ -475,6 +740,8 @@ class NativeIKStep(NativeHierarchy):
         if type(q) is not np.ndarray or q.dtype != _F64 or q.shape != self._qshape or self._hybrid:
             q = robot.check_configuration(q)
         t = float(t)
+        if TASK_WRITES[0] != self._writes or self._moving:
+            self._inputs(q, t, reference)
         if self._hybrid:  # first: a Python task may evaluate the robot elsewhere (its data)
             self._python_rows(q, t, reference)
         if self._python_limits:
@@ -489,9 +756,7 @@ class NativeIKStep(NativeHierarchy):
         if self.weighted:
             return self._step_weighted(q, t, reference, integrate, t0)
         # one call: the step, then (x copy, res copy, info, q_next copy or None) built in C++
-        out = self._solver.solve_step(
-            q, t, reference, self._solved, DEFAULT_TIME_LIMIT, integrate, KKT_TOL
-        )
+        out = self._solver.solve_step(q, self._solved, DEFAULT_TIME_LIMIT, integrate, KKT_TOL)
         return self._answer(out, q, t, reference, t0)
 
     def _answer(self, out: Any, q: np.ndarray, t: float, reference: Any, t0: float) -> Solution:
@@ -500,7 +765,10 @@ class NativeIKStep(NativeHierarchy):
         (``time.perf_counter``, s)."""
         if type(out) is int:
             self._solved = False
+            if self._wrote_rows(out):
+                self._after_rows()
             self._fail(out, q, t, reference)
+        self._after_rows()
         self._solved = True
         x, res, info, self.q_next_out = out
         status = "optimal"
@@ -525,9 +793,9 @@ class NativeIKStep(NativeHierarchy):
             versions = [t.matrix_version for t in self._watched]
             refactor = versions != self._versions
             self._versions = versions
-        code = self._solver.step(
-            q, t, reference, self._solved, DEFAULT_TIME_LIMIT, integrate, refactor
-        )
+        code = self._solver.step(q, self._solved, DEFAULT_TIME_LIMIT, integrate, refactor)
+        if self._wrote_rows(code):
+            self._after_rows()
         if code:
             self._solved = False
             self._versions = None  # the next step sets up again

@@ -72,6 +72,19 @@ _HUGE = 1e300
 _FLOATING_ROOTS = ("JointModelFreeFlyer", "JointModelPlanar")
 
 
+#: The attributes of a kinematic task that the native IK step holds a copy of (its kernels'
+#: parameters): assigning one tells the steps the task is bound to (``_bound``), which copy
+#: it again. (A write into such an array in place is not an assignment: assign the new
+#: array, or call the task's setter.)
+PARAMETERS = frozenset(
+    (
+        "gain", "target", "target_velocity", "_target_T", "_target_t", "q_ref", "lower",
+        "upper", "contact_points", "margin", "limit",
+    )
+)  # fmt: skip
+_setattr = object.__setattr__
+
+
 def _gain(value: object, what: str = "gain") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{what} must be a number (1/s), got {value!r}")
@@ -233,6 +246,25 @@ class KinematicTask(ABC):
     lm_rows: LMDamping | None = None
     #: The error of the last refresh (kept rows, task units), recorded only with lm_rows
     _lm_e: np.ndarray | None = None
+    #: The native IK steps' slots that hold a copy of this task's parameters
+    #: (``qpcoord.kinematics.native_step``), told of every parameter write; not pickled
+    _bound: tuple = ()
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        _setattr(self, name, value)
+        if name in PARAMETERS and self._bound:
+            self._parameters_written()
+
+    def _parameters_written(self) -> None:
+        """Tell the bound native steps that a parameter changed (a setter that writes
+        several through ``__dict__`` calls it once)."""
+        for slot in self._bound:
+            slot.changed()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state.pop("_bound", None)  # the native steps of this process (rebuilt with an IK)
+        return state
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Self:
         base = KinematicTask

@@ -2,10 +2,12 @@
 //
 // The task kernels mirror the Python tasks' _refresh (qpcoord/kinematics/tasks.py,
 // frame_tasks.py) term by term: the same error, Jacobian, gain, feed-forward and weights.
-// Targets and gains are read from the task objects at every step (an attribute read, the
-// array re-mapped only when the task holds a new object), so set_target(...) and a changed
-// gain are followed as by the Python path. Nothing in step() allocates on the C++ side
-// (buffers sized at compile time); the Python objects it reads are the tasks' own.
+// The step is built from typed data only: per kernel its kind, frame slot, row selection and
+// row offset (add_task), its parameters held here (gain, row weights, target, feed-forward,
+// band faces, contact points: set_* setters, which the Python side calls when a task's
+// parameter changed), and its output arrays (bind_rows / bind_band_rows: the task's own
+// A, b or C, lower, upper, bound once). No Python attribute is read and no Python code is
+// called by step(); nothing in it allocates (buffers sized when the kernel is added).
 #include "ik_step.hpp"
 
 #include <nanobind/eigen/dense.h>
@@ -17,6 +19,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "hierarchy.hpp"
@@ -37,23 +40,27 @@ using spatial::Vec3;
 using spatial::Vec6;
 
 using OutArr = nb::ndarray<double, nb::numpy, nb::c_contig, nb::device::cpu>;
+/// A task's own output array (any strides): bound once by bind_rows / bind_band_rows
+using RowsArr = nb::ndarray<double, nb::numpy, nb::device::cpu>;
 using CMap = Eigen::Map<const Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 using MMap = Eigen::Map<Mat, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 /// step() codes beyond the Hierarchy's: a bad q (Python re-checks it to name it), or a task
-/// whose data the kernel cannot use (Python runs its _refresh, which raises its message).
+/// whose data the kernel cannot use (a kernel never given its parameters, a support polygon
+/// whose contacts are collinear, a non-finite band row: Python runs the task's _refresh,
+/// which raises its message).
 constexpr int kBadQ = 100;
 constexpr int kTaskData = 200;
 
-/// A float64 array seen through its strides (any order), kept alive by `keep`.
+/// A float64 array seen through its strides (any order), kept alive by `keep`: the views of
+/// Pinocchio's data (data.J, data.oMi[j], data.com[0], data.Jcom) bound once.
 struct View {
   nb::object keep;
   const double* p = nullptr;
   int64_t rows = 0, cols = 1, s0 = 1, s1 = 1;
   double operator[](int64_t i) const { return p[i * s0]; }
   double operator()(int64_t i, int64_t j) const { return p[i * s0 + j * s1]; }
-  double* w() const { return const_cast<double*>(p); }  // the memory behind a read-only view
 };
 
 /// A float64 buffer (native byte order, strides whole elements) of a Python object, released
@@ -78,9 +85,7 @@ struct Buffer {
 };
 
 /// Map `h` (a float64 array of `ndim` dimensions, native byte order, read through the buffer
-/// protocol: a numpy array's DLPack export, which a nanobind ndarray cast goes through, costs
-/// more, and a kernel re-maps a target at every step after set_target) into v; false if it is
-/// not one.
+/// protocol) into v; false if it is not one.
 bool view_of(nb::handle h, View& v, size_t ndim) {
   const Buffer a(h.ptr());
   if (!a.ok || a.b.ndim != static_cast<int>(ndim)) return false;
@@ -98,38 +103,34 @@ bool view_of(nb::handle h, View& v, size_t ndim) {
   return true;
 }
 
-/// Attribute `name` of `owner` (a new reference).
-nb::object attr(nb::handle owner, nb::handle name) {
-  PyObject* o = PyObject_GetAttr(owner.ptr(), name.ptr());
-  if (!o) throw nb::python_error();
-  return nb::steal(o);
-}
-
-double float_attr(nb::handle owner, nb::handle name) {
-  nb::object o = attr(owner, name);
-  const double v = PyFloat_AsDouble(o.ptr());
-  if (v == -1.0 && PyErr_Occurred()) throw nb::python_error();
-  return v;
-}
-
-/// Re-map v from owner.name when the attribute holds another object than last time.
-/// Returns 1 mapped, 0 None, -1 something else.
-int cached(nb::handle owner, nb::handle name, View& v, size_t ndim, int64_t rows) {
-  nb::object o = attr(owner, name);
-  if (o.ptr() == v.keep.ptr() && v.p) return 1;
-  if (o.is_none()) {
-    v.keep = o;
-    v.p = nullptr;
-    return 0;
+/// Copy `h`, a float64 array of shape (rows,) (cols == 0) or (rows, cols), row by row into
+/// out (rows * max(cols, 1) values), read through the buffer protocol (a setter's argument:
+/// no DLPack conversion, which costs more for a per-step target); every value must be
+/// finite unless `inf_ok` (band faces). Throws ValueError naming `what` otherwise.
+void read_values(nb::handle h, int64_t rows, int64_t cols, double* out, const char* what,
+                 bool inf_ok = false) {
+  const Buffer a(h.ptr());
+  const int ndim = cols ? 2 : 1;
+  if (!a.ok || a.b.ndim != ndim || a.b.shape[0] != rows || (cols && a.b.shape[1] != cols)) {
+    const std::string shape =
+        cols ? "(" + std::to_string(rows) + ", " + std::to_string(cols) + ")"
+             : "(" + std::to_string(rows) + ",)";
+    throw nb::value_error((std::string(what) + ": expected a float64 array of shape " + shape)
+                              .c_str());
   }
-  if (!view_of(o, v, ndim) || v.rows != rows) {
-    v.keep = nb::object();
-    v.p = nullptr;
-    return -1;
-  }
-  return 1;
+  const auto* p = static_cast<const double*>(a.b.buf);
+  const int64_t s0 = a.b.strides[0] / 8, s1 = cols ? a.b.strides[1] / 8 : 1;
+  const int64_t nc = cols ? cols : 1;
+  for (int64_t i = 0; i < rows; ++i)
+    for (int64_t j = 0; j < nc; ++j) {
+      const double v = p[i * s0 + j * s1];
+      if (inf_ok ? std::isnan(v) : !std::isfinite(v))
+        throw nb::value_error((std::string(what) + ": not finite").c_str());
+      out[i * nc + j] = v;
+    }
 }
 
+/// The task kernels (qpcoord.kinematics.native_step.TaskKind names them alike).
 enum Kind : int {
   kPosition = 0,
   kFramePosition,
@@ -140,7 +141,12 @@ enum Kind : int {
   kPoseSplit,  ///< FrameTask(error="split")
   kComBand,         ///< ComBand (an inequality: support_kernels.hpp)
   kSupportPolygon,  ///< SupportPolygon (an inequality: support_kernels.hpp)
+  kPositionBand,    ///< PositionBand (an inequality on the frame's position rows)
 };
+
+bool is_band(Kind k) { return k == kComBand || k == kSupportPolygon || k == kPositionBand; }
+/// the bands on the CoM (their rows read data.com and data.Jcom)
+bool on_com(Kind k) { return k == kComBand || k == kSupportPolygon; }
 
 struct Frame {
   View Rj, pj;  ///< rotation and translation of the parent joint (views of data.oMi[j])
@@ -151,25 +157,53 @@ struct Frame {
   Vec3 p;
 };
 
+/// A strided output array of a task (its A, b, C, lower or upper), bound once.
+struct Out {
+  RowsArr arr;
+  double* p = nullptr;
+  int64_t s0 = 0, s1 = 0;
+  double& operator[](int64_t i) const { return p[i * s0]; }
+  double& operator()(int64_t i, int64_t j) const { return p[i * s0 + j * s1]; }
+  void set(RowsArr a) {
+    arr = std::move(a);
+    p = arr.data();
+    s0 = arr.stride(0);
+    s1 = arr.ndim() == 2 ? arr.stride(1) : 0;
+  }
+};
+
 struct Kernel {
   Kind kind = kPosition;
-  nb::object task, eq;
   int frame = -1;
-  std::vector<int> sel;  ///< per row: the axis (0..5) or, for a posture, the joint's v index
+  int rows = 0;
+  std::vector<int> sel;   ///< per row: the axis (0..5) or, for a posture, the joint's v index
   std::vector<int> qidx;  ///< posture: per row, the joint's q index
   int row0 = 0;
-  View target, vel, sw, A, b;
-  Mat3 Rinv = Mat3::Identity();  ///< FrameTask: its target's inverse (R*^T, -R*^T p*)
-  Vec3 pinv = Vec3::Zero();
+  // parameters (set_gain, set_weights, set_target / set_faces / set_contacts)
+  double gain = 0.0;
+  Vec sw;      ///< sqrt(weight) of each row
+  Vec target;  ///< POSITION (rows), FRAME_POSITION / COM (3), POSTURE (nq)
+  Vec6 vel = Vec6::Zero();  ///< feed-forward (POSITION: rows entries), if has_vel
+  bool has_vel = false;
+  Mat3 Rinv = Mat3::Identity();  ///< POSE: the target's inverse (R*^T, -R*^T p*);
+  Vec3 pinv = Vec3::Zero();      ///< ORIENTATION: R*^T in Rinv
+  // outputs: the task's own arrays (Equality: A (rows, nv), b; Inequality: C, lower, upper)
+  Out A, b, lower, upper;
+  /// which of gain (1), weights (2), target (4), outputs (8) were set: step() runs a kernel
+  /// only once all are (kReady)
+  int given = 0;
+  static constexpr int kReady = 15;
   int band = -1;  ///< a band kind: its index in IKStep::bands_
 };
 
 struct Limit {
-  nb::object lim;
   bool velocity = false;  ///< VelocityLimits (else JointLimits)
-  View lower, upper;      ///< JointLimits: q layout (all of q, or the indexed entries)
+  double gain = 1.0;      ///< JointLimits: K
+  Vec lower, upper;       ///< JointLimits: q layout (all of q, or the indexed entries);
+                          ///< VelocityLimits: the limit in upper
   std::vector<int> qi, vi;
   bool indexed = false;
+  bool given = false;  ///< set_joint_limits / set_velocity_limits called
 };
 
 class IKStep {
@@ -184,10 +218,6 @@ class IKStep {
     lo_.resize(nv);
     hi_.resize(nv);
     hi2_.resize(nv);
-    for (const char* s : {"gain", "sqrt_weight", "A", "b", "target", "target_velocity",
-                          "_target_T", "_target_t", "q_ref", "reference_at", "rotation",
-                          "translation", "matrix_version"})
-      names_.push_back(nb::str(s));
   }
 
   void bind(OutArr Aeq, OutArr beq, OutArr C, OutArr clo, OutArr chi, OutArr csw, OutArr lbs,
@@ -234,36 +264,39 @@ class IKStep {
     return static_cast<int>(frames_.size()) - 1;
   }
 
-  /// qidx: for a posture, the q index of each row's joint (a 1-DoF joint: q_ref - q there).
-  void add_task(int kind, nb::object task, nb::object eq, int frame, std::vector<int> sel,
-                int row0, std::vector<int> qidx) {
-    if (kind < kPosition || kind > kSupportPolygon)
+  /// A kernel of `kind` writing rows row0.. of the stacked equalities (a band: inequalities).
+  /// sel: per row, the axis of the full error (a posture: the joint's v index; a band: the
+  /// rows 0..rows-1); qidx: a posture's q index per row (a 1-DoF joint: q_ref - q there), a
+  /// SupportPolygon's frame slots. Returns the kernel's index (the setters' k); it runs once
+  /// its gain, weights, target and outputs are set.
+  int add_task(int kind, int frame, std::vector<int> sel, int row0, std::vector<int> qidx) {
+    if (kind < kPosition || kind > kPositionBand)
       throw nb::value_error("add_task: unknown kind");
-    const bool band = kind == kComBand || kind == kSupportPolygon;
-    if ((kind != kCom && kind != kPosture && !band) &&
-        (frame < 0 || frame >= (int)frames_.size()))
+    const bool band = is_band(static_cast<Kind>(kind));
+    const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
+    if ((kind != kPosture && !com) && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
-    if ((kind == kCom || band) && !com_.p) throw nb::value_error("add_task: set_com first");
+    if (com && !com_.p) throw nb::value_error("add_task: set_com first");
     if (!bound_) throw nb::value_error("add_task: bind first");
     const int rows = static_cast<int>(sel.size());
-    if (row0 < 0 || row0 + rows > static_cast<int>(out_[band ? 2 : 0].shape(0)))
+    if (rows < 1 || row0 < 0 || row0 + rows > static_cast<int>(out_[band ? 2 : 0].shape(0)))
       throw nb::value_error("add_task: rows out of range");
     for (int s : sel)
-      if (s < 0 || s >= (kind == kPosture ? nv_ : band ? rows : 6))
+      if (s < 0 || s >= (kind == kPosture ? nv_ : on_com(static_cast<Kind>(kind)) ? rows : 6))
         throw nb::value_error("add_task: row selection out of range");
-    if (band) {  // sel: the rows 0..rows-1; qidx: a SupportPolygon's frame slots
+    if (kind == kPositionBand && rows > 3)
+      throw nb::value_error("add_task: a PositionBand has at most 3 rows");
+    if (band) {  // sel: the rows 0..rows-1 (a PositionBand: the axes); qidx: a
+                 // SupportPolygon's frame slots
       if (kind == kComBand && rows != 3) throw nb::value_error("add_task: a ComBand has 3 rows");
       for (int f : qidx)
         if (f < 0 || f >= (int)frames_.size())
           throw nb::value_error("add_task: unknown frame slot");
       if (kind == kSupportPolygon && (qidx.empty() || rows % (int)qidx.size() != 0))
         throw nb::value_error("add_task: rows must be frames x contact points");
-      if (band_names_.empty())
-        for (const char* s : {"C", "lower", "upper", "contact_points", "margin", "edges"})
-          band_names_.push_back(nb::str(s));
       bands_.emplace_back();
       bands_.back().frames = qidx;
-      if (kind == kSupportPolygon) bands_.back().size(rows, nv_);
+      if (kind == kSupportPolygon) bands_.back().size(rows, nv_, rows / (int)qidx.size());
     }
     if (kind == kPosture) {
       if (qidx.size() != sel.size()) throw nb::value_error("add_task: one q index per row");
@@ -272,42 +305,194 @@ class IKStep {
     }
     Kernel k;
     k.kind = static_cast<Kind>(kind);
-    k.task = std::move(task);
-    k.eq = std::move(eq);
     k.frame = frame;
+    k.rows = rows;
     k.sel = std::move(sel);
     k.row0 = row0;
     k.qidx = std::move(qidx);
+    k.sw.setZero(rows);
+    k.target.setZero(kind == kPosture ? nq_ : kind == kPosition ? rows : 3);
     if (band) k.band = static_cast<int>(bands_.size()) - 1;
     if (kind != kPosture) writes_a_ = true;  // its rows' matrix changes with q
     kernels_.push_back(std::move(k));
+    return static_cast<int>(kernels_.size()) - 1;
   }
 
-  void add_joint_limits(nb::object lim, nb::handle lower, nb::handle upper, std::vector<int> qi,
-                        std::vector<int> vi) {
+  /// Kernel k's gain K (1/s; finite).
+  void set_gain(int k, double gain) {
+    Kernel& K = kernel(k, "set_gain");
+    if (!std::isfinite(gain)) throw nb::value_error("set_gain: the gain is not finite");
+    K.gain = gain;
+    K.given |= 1;
+  }
+
+  /// Kernel k's row weights, as sqrt(weight) (rows,): finite.
+  void set_weights(int k, nb::handle sqrt_weight) {
+    Kernel& K = kernel(k, "set_weights");
+    read_values(sqrt_weight, K.rows, 0, K.sw.data(), "set_weights");
+    K.given |= 2;
+  }
+
+  /// Kernel k's target and feed-forward (velocity None: none), by kind:
+  /// POSITION y* (rows,) m and dy*/dt (rows,) m/s; FRAME_POSITION and COM the point (3,) m
+  /// and its velocity (3,) m/s; POSE and POSE_SPLIT T* (4, 4) and the target's body twist
+  /// (6,) m/s, rad/s; ORIENTATION R* (3, 3) and its angular velocity (3,) rad/s, target
+  /// frame; POSTURE q_ref (nq,), no velocity. Finite values; the caller has checked that a
+  /// rotation is one (the task's set_target).
+  void set_target(int k, nb::handle target, nb::handle velocity) {
+    Kernel& K = kernel(k, "set_target");
+    if (is_band(K.kind)) throw nb::value_error("set_target: a band kernel (set_faces)");
+    int nvel = 3;
+    switch (K.kind) {
+      case kPose:
+      case kPoseSplit: {
+        double T[16];
+        read_values(target, 4, 4, T, "set_target");
+        Vec3 pt;
+        for (int i = 0; i < 3; ++i) {
+          pt[i] = T[4 * i + 3];
+          for (int j = 0; j < 3; ++j) K.Rinv(j, i) = T[4 * i + j];
+        }
+        K.pinv.noalias() = -(K.Rinv * pt);
+        nvel = 6;
+        break;
+      }
+      case kOrientation: {
+        double R[9];
+        read_values(target, 3, 3, R, "set_target");
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) K.Rinv(j, i) = R[3 * i + j];
+        break;
+      }
+      case kPosition:
+        nvel = K.rows;
+        [[fallthrough]];
+      default:
+        read_values(target, K.target.size(), 0, K.target.data(), "set_target");
+    }
+    if (velocity.is_none()) {
+      K.has_vel = false;
+    } else {
+      if (K.kind == kPosture) throw nb::value_error("set_target: a posture has no velocity");
+      read_values(velocity, nvel, 0, K.vel.data(), "set_target: velocity");
+      K.has_vel = true;
+    }
+    K.given |= 4;
+  }
+
+  /// Kernel k has no usable target (the task's data could not be set): step() returns
+  /// kTaskData + k until a target is set again.
+  void forget_target(int k) { kernel(k, "forget_target").given &= ~4; }
+
+  /// A COM_BAND (3,) or POSITION_BAND (rows,) kernel's faces lower, upper (m; NaN
+  /// rejected, +-inf on its side).
+  void set_faces(int k, nb::handle lower, nb::handle upper) {
+    Kernel& K = kernel(k, "set_faces");
+    if (K.kind != kComBand && K.kind != kPositionBand)
+      throw nb::value_error("set_faces: not a band with faces");
+    support::Band& b = bands_[K.band];
+    read_values(lower, K.rows, 0, b.lo.data(), "set_faces: lower", true);
+    read_values(upper, K.rows, 0, b.hi.data(), "set_faces: upper", true);
+    K.given |= 4;
+  }
+
+  /// A SUPPORT_POLYGON kernel's contact points (points per frame, 3), frame coordinates
+  /// (m), and margin (m).
+  void set_contacts(int k, nb::handle points, double margin) {
+    Kernel& K = kernel(k, "set_contacts");
+    if (K.kind != kSupportPolygon) throw nb::value_error("set_contacts: not a support polygon");
+    support::Band& b = bands_[K.band];
+    if (!std::isfinite(margin)) throw nb::value_error("set_contacts: margin not finite");
+    read_values(points, b.points.rows(), 3, b.points.data(), "set_contacts");
+    b.margin = margin;
+    K.given |= 4;
+  }
+
+  /// The arrays an equality kernel writes its rows into (the task's own A (rows, nv) and b
+  /// (rows,), unweighted: the stacked rows get sqrt(weight) x them).
+  void bind_rows(int k, RowsArr A, RowsArr b) {
+    Kernel& K = kernel(k, "bind_rows");
+    if (is_band(K.kind)) throw nb::value_error("bind_rows: a band kernel (bind_band_rows)");
+    if (A.ndim() != 2 || A.shape(0) != (size_t)K.rows || A.shape(1) != (size_t)nv_ ||
+        b.ndim() != 1 || b.shape(0) != (size_t)K.rows)
+      throw nb::value_error("bind_rows: A must be (rows, nv), b (rows,)");
+    K.A.set(std::move(A));
+    K.b.set(std::move(b));
+    K.given |= 8;
+  }
+
+  /// The arrays a band kernel writes its rows into (the task's own C (rows, nv), lower and
+  /// upper (rows,)).
+  void bind_band_rows(int k, RowsArr C, RowsArr lower, RowsArr upper) {
+    Kernel& K = kernel(k, "bind_band_rows");
+    if (!is_band(K.kind)) throw nb::value_error("bind_band_rows: not a band kernel");
+    const size_t r = K.rows;
+    if (C.ndim() != 2 || C.shape(0) != r || C.shape(1) != (size_t)nv_ || lower.ndim() != 1 ||
+        lower.shape(0) != r || upper.ndim() != 1 || upper.shape(0) != r)
+      throw nb::value_error("bind_band_rows: C must be (rows, nv), lower and upper (rows,)");
+    K.A.set(std::move(C));
+    K.lower.set(std::move(lower));
+    K.upper.set(std::move(upper));
+    K.given |= 8;
+  }
+
+  /// The hull edges of a SUPPORT_POLYGON kernel at the last step (its task's `edges`).
+  int edges(int k) {
+    Kernel& K = kernel(k, "edges");
+    if (K.kind != kSupportPolygon) throw nb::value_error("edges: not a support polygon");
+    return bands_[K.band].edges;
+  }
+
+  /// A JointLimits box over qi -> vi (both empty: all of q, q and v sharing one layout).
+  /// Returns its index for set_joint_limits.
+  int add_joint_limits(std::vector<int> qi, std::vector<int> vi) {
     Limit L;
-    L.lim = std::move(lim);
     L.indexed = !qi.empty() || !vi.empty();
-    if (!view_of(lower, L.lower, 1) || !view_of(upper, L.upper, 1))
-      throw nb::value_error("add_joint_limits: lower/upper must be float64 vectors");
-    const int64_t n = L.indexed ? static_cast<int64_t>(qi.size()) : nv_;
-    if (L.lower.rows != n || L.upper.rows != n || qi.size() != vi.size())
-      throw nb::value_error("add_joint_limits: sizes do not match");
+    if (qi.size() != vi.size()) throw nb::value_error("add_joint_limits: sizes do not match");
+    if (!L.indexed && nq_ != nv_)
+      throw nb::value_error("add_joint_limits: an unindexed box needs nq == nv");
     for (size_t i = 0; i < qi.size(); ++i)
       if (qi[i] < 0 || qi[i] >= nq_ || vi[i] < 0 || vi[i] >= nv_)
         throw nb::value_error("add_joint_limits: index out of range");
+    const int n = L.indexed ? static_cast<int>(qi.size()) : nv_;
+    L.lower.setZero(n);
+    L.upper.setZero(n);
     L.qi = std::move(qi);
     L.vi = std::move(vi);
     limits_.push_back(std::move(L));
+    return static_cast<int>(limits_.size()) - 1;
   }
 
-  void add_velocity_limits(nb::object lim, nb::handle limit) {
+  /// JointLimits i's gain K (in (0, 1]) and limits (rad, m; +-inf for no limit) in the
+  /// layout of add_joint_limits (the indexed entries, or all of q).
+  void set_joint_limits(int i, double gain, nb::handle lower, nb::handle upper) {
+    Limit& L = limit(i, "set_joint_limits");
+    if (L.velocity) throw nb::value_error("set_joint_limits: a velocity limit");
+    if (!std::isfinite(gain)) throw nb::value_error("set_joint_limits: gain not finite");
+    read_values(lower, L.lower.size(), 0, L.lower.data(), "set_joint_limits: lower", true);
+    read_values(upper, L.upper.size(), 0, L.upper.data(), "set_joint_limits: upper", true);
+    L.gain = gain;
+    L.given = true;
+  }
+
+  /// A VelocityLimits box; returns its index for set_velocity_limits.
+  int add_velocity_limits() {
     Limit L;
-    L.lim = std::move(lim);
     L.velocity = true;
-    if (!view_of(limit, L.upper, 1) || L.upper.rows != nv_)
-      throw nb::value_error("add_velocity_limits: limit must be nv float64 values");
+    L.upper.setZero(nv_);
     limits_.push_back(std::move(L));
+    return static_cast<int>(limits_.size()) - 1;
+  }
+
+  /// Limit i has no usable data: step() returns kBadInput until it is set again.
+  void forget_limit(int i) { limit(i, "forget_limit").given = false; }
+
+  /// VelocityLimits i's limit (nv,) (rad/s, m/s; inf for no limit).
+  void set_velocity_limits(int i, nb::handle limit_) {
+    Limit& L = limit(i, "set_velocity_limits");
+    if (!L.velocity) throw nb::value_error("set_velocity_limits: a joint limit");
+    read_values(limit_, nv_, 0, L.upper.data(), "set_velocity_limits", true);
+    L.given = true;
   }
 
   /// Limits: 0 none, 1 native (the added ones), 2 the box already in box_lo / box_hi.
@@ -365,8 +550,8 @@ class IKStep {
   /// q: a float64 (native byte order) vector of nq entries, read through the buffer protocol
   /// (a nanobind ndarray argument costs 0.2 us more per call: numpy's DLPack export); anything
   /// else returns kBadQ (the Python side checks q first and names it).
-  int step(nb::handle q, double t, nb::handle reference, bool warm, double time_left,
-           bool integrate = false, bool refactor = true) {
+  int step(nb::handle q, bool warm, double time_left, bool integrate = false,
+           bool refactor = true) {
     failed = -1;
     if (!bound_ || !J_.p) return kBadInput;
     const Buffer qb(q.ptr());
@@ -391,18 +576,18 @@ class IKStep {
       f.p += pj;
     }
     for (size_t i = 0; i < kernels_.size(); ++i) {
-      if (!run_kernel(kernels_[i], qp, qs, t, reference)) {
+      if (kernels_[i].given != Kernel::kReady || !run_kernel(kernels_[i], qp, qs)) {
         failed = static_cast<int>(i);
         return kTaskData + static_cast<int>(i);
       }
-      // a new A, as the task's _assign(A, b) counts it (a posture writes only b)
-      if (kernels_[i].kind != kPosture) bump_matrix_version(kernels_[i].eq);
     }
     double* lbs = out_[6].data();
     double* ubs = out_[7].data();
     double* blo = out_[8].data();
     double* bhi = out_[9].data();
     if (limits_mode == 1) {
+      for (const Limit& L : limits_)
+        if (!L.given) return kBadInput;  // the Python side sets every limit before a step
       box(qp, qs);
       for (int i = 0; i < nv_; ++i) {
         blo[i] = lbs[i] = lo_[i];
@@ -446,11 +631,11 @@ class IKStep {
 
   /// step() and, on success, (x.copy(), res.copy(), info(kkt_tol), q_next.copy() or None) in
   /// one call (None: integrate was False); else step()'s status code (an int).
-  nb::object solve_step(nb::handle q, double t, nb::handle reference, bool warm,
-                        double time_left, bool integrate, double kkt_tol) {
+  nb::object solve_step(nb::handle q, bool warm, double time_left, bool integrate,
+                        double kkt_tol) {
     if (!copy_x_.is_valid()) throw nb::value_error("solve_step: call set_copies first");
     if (w_) throw nb::value_error("solve_step: the strict hierarchy's step (not weighted)");
-    const int code = step(q, t, reference, warm, time_left, integrate, true);
+    const int code = step(q, warm, time_left, integrate, true);
     if (code) return nb::int_(code);
     nb::object x = nb::steal(PyObject_CallNoArgs(copy_x_.ptr()));
     if (!x.is_valid()) throw nb::python_error();
@@ -465,8 +650,9 @@ class IKStep {
     return nb::make_tuple(x, r, info(kkt_tol), qn);
   }
 
-  /// The Python objects held (tasks, limits, the arrays they are read from, copy methods),
-  /// for tp_traverse: a task referring back to the IK that owns this step makes a cycle.
+  /// The Python objects held (the views of Pinocchio's data, the copy methods), for
+  /// tp_traverse. (The tasks' output arrays are held as nanobind ndarrays: arrays, which
+  /// refer to no task.)
   int traverse(visitproc visit, void* arg) const {
     auto view = [&](const View& v) { return v.keep.is_valid() ? visit(v.keep.ptr(), arg) : 0; };
     int rc = 0;
@@ -476,19 +662,6 @@ class IKStep {
       if ((rc = view(*v))) return rc;
     for (const Frame& f : frames_)
       if ((rc = view(f.Rj)) || (rc = view(f.pj))) return rc;
-    for (const Kernel& k : kernels_) {
-      for (const nb::object* o : {&k.task, &k.eq})
-        if (o->is_valid() && (rc = visit(o->ptr(), arg))) return rc;
-      for (const View* v : {&k.target, &k.vel, &k.sw, &k.A, &k.b})
-        if ((rc = view(*v))) return rc;
-    }
-    for (const Limit& L : limits_) {
-      if (L.lim.is_valid() && (rc = visit(L.lim.ptr(), arg))) return rc;
-      if ((rc = view(L.lower)) || (rc = view(L.upper))) return rc;
-    }
-    for (const auto& b : bands_)
-      for (const View* v : {&b.C, &b.lower, &b.upper, &b.sw, &b.lo, &b.hi, &b.points})
-        if ((rc = view(*v))) return rc;
     return 0;
   }
 
@@ -550,18 +723,16 @@ class IKStep {
     }
   }
 
-  /// Write row r of kernel k: A row (pin coordinates in src, mapped here), b value.
-  /// (A row of a column-major matrix: an inner stride, so that no copy is made.)
-  /// eq.matrix_version += 1 (what a persistent solver watches to refactorise).
-  void bump_matrix_version(nb::handle eq) {
-    nb::object v = attr(eq, names_[12]);
-    PyObject* next = PyNumber_Add(v.ptr(), one_.ptr());
-    if (!next) throw nb::python_error();
-    // object.__setattr__ (the tasks' own writes, qpcoord/core/tasks.py): not the task
-    // class's Python __setattr__ (its rebinding rule), a Python call per step
-    const int rc = PyObject_GenericSetAttr(eq.ptr(), names_[12].ptr(), next);
-    Py_DECREF(next);
-    if (rc != 0) throw nb::python_error();
+  Kernel& kernel(int k, const char* who) {
+    if (k < 0 || k >= static_cast<int>(kernels_.size()))
+      throw nb::value_error((std::string(who) + ": no kernel " + std::to_string(k)).c_str());
+    return kernels_[k];
+  }
+
+  Limit& limit(int i, const char* who) {
+    if (i < 0 || i >= static_cast<int>(limits_.size()))
+      throw nb::value_error((std::string(who) + ": no limit " + std::to_string(i)).c_str());
+    return limits_[i];
   }
 
   /// The kernel's selected rows a = k.sel[r] of Jt_ with right-hand sides
@@ -577,6 +748,9 @@ class IKStep {
     }
   }
 
+  /// Write row r of kernel k: its task's A row (pin coordinates in src, mapped here) and b
+  /// value, and the stacked row (times sqrt(weight)). (A row of a column-major matrix: an
+  /// inner stride, so that no copy is made.)
   void write_row(const Kernel& k, int r,
                  const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& src,
                  double bval) {
@@ -588,20 +762,22 @@ class IKStep {
     } else {
       row_ = src.transpose();
     }
-    double* Ap = k.A.w();
     for (int c = 0; c < nv_; ++c) {
-      Ap[r * k.A.s0 + c * k.A.s1] = row_[c];
+      k.A(r, c) = row_[c];
       Aeq[c] = row_[c] * s;
     }
-    k.b.w()[r * k.b.s0] = bval;
+    k.b[r] = bval;
     *beq = bval * s;
   }
 
-  bool run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::handle reference);
+  /// Kernel k's rows at configuration q (stride qs) from its parameters: the one place a
+  /// task kind is evaluated (ik_step/kernels.hxx). False: its data cannot be used.
+  bool run_kernel(Kernel& k, const double* q, int64_t qs);
 
-  /// A ComBand / SupportPolygon kernel (support_kernels.hpp): its Inequality's C, lower,
-  /// upper and the stacked rows C, clo, chi, csw from row k.row0 (C unweighted, as stacked).
-  bool run_band(const Kernel& k, support::Band<View>& b, double gain, int rows);
+  /// A band kernel (ComBand, SupportPolygon: support_kernels.hpp; PositionBand): its
+  /// Inequality's C, lower, upper and the stacked rows C, clo, chi, csw from row k.row0 (C
+  /// unweighted, as stacked).
+  bool run_band(const Kernel& k, support::Band& b);
 
   /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
   void box(const double* q, int64_t qs);
@@ -629,18 +805,15 @@ class IKStep {
   std::vector<Kernel> kernels_;
   std::vector<Limit> limits_;
   /// ComBand / SupportPolygon data (support_kernels.hpp)
-  std::vector<support::Band<View>> bands_;
-  std::vector<nb::str> band_names_;  ///< their attribute names (set by the first one)
-  std::vector<nb::str> names_;
+  std::vector<support::Band> bands_;
   info::Keys info_keys_;  ///< info()'s keys (info_dict.hpp)
-  nb::int_ one_ = nb::int_(1);
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
   nb::object copy_x_, copy_res_, copy_q_next_;  ///< set_copies: the outputs' copy methods
 };
 
-/// Cyclic garbage collection of an IKStep: it holds the IK's task objects (a task that refers
-/// back to its IK, e.g. through a monkeypatched attribute, makes a cycle through it).
+/// Cyclic garbage collection of an IKStep: it holds Python objects (views of Pinocchio's
+/// data, bound copy methods of its output arrays).
 int ik_step_traverse(PyObject* self, visitproc visit, void* arg) {
   Py_VISIT(Py_TYPE(self));
   if (!nb::inst_ready(self)) return 0;
@@ -677,7 +850,8 @@ void bind_ik_step(nb::module_& m) {
       .value("POSTURE", kPosture)
       .value("POSE_SPLIT", kPoseSplit)
       .value("COM_BAND", kComBand)
-      .value("SUPPORT_POLYGON", kSupportPolygon);
+      .value("SUPPORT_POLYGON", kSupportPolygon)
+      .value("POSITION_BAND", kPositionBand);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
@@ -691,14 +865,58 @@ void bind_ik_step(nb::module_& m) {
       .def("set_com", &IKStep::set_com)
       .def("set_coordinate_map", &IKStep::set_coordinate_map)
       .def("add_frame", &IKStep::add_frame)
-      .def("add_task", &IKStep::add_task)
-      .def("add_joint_limits", &IKStep::add_joint_limits)
-      .def("add_velocity_limits", &IKStep::add_velocity_limits)
+      .def("add_task", &IKStep::add_task, nb::arg("kind"), nb::arg("frame"), nb::arg("sel"),
+           nb::arg("row0"), nb::arg("qidx"),
+           "A kernel of kind (IKTaskKind) on frame slot frame (-1: none), rows sel from row0 "
+           "of the stacked rows; qidx: a posture's q indices, a support polygon's frame "
+           "slots. Returns its index k; it runs once set_gain, set_weights, its target "
+           "(set_target / set_faces / set_contacts) and its outputs (bind_rows / "
+           "bind_band_rows) are set.")
+      .def("set_gain", &IKStep::set_gain, nb::arg("k"), nb::arg("gain"),
+           "Kernel k's gain K (1/s), finite.")
+      .def("set_weights", &IKStep::set_weights, nb::arg("k"), nb::arg("sqrt_weight"),
+           "Kernel k's sqrt(row weights), a float64 (rows,) array, finite.")
+      .def("set_target", &IKStep::set_target, nb::arg("k"), nb::arg("target"),
+           nb::arg("velocity").none(),
+           "Kernel k's target and feed-forward (None: none), float64 arrays: POSITION y* "
+           "(rows,) and dy*/dt (rows,); FRAME_POSITION, COM (3,) and (3,); POSE, POSE_SPLIT "
+           "T* (4, 4) and the target's body twist (6,); ORIENTATION R* (3, 3) and (3,); "
+           "POSTURE q_ref (nq,). Finite values.")
+      .def("set_faces", &IKStep::set_faces, nb::arg("k"), nb::arg("lower"), nb::arg("upper"),
+           "A COM_BAND (3,) or POSITION_BAND (rows,) kernel's faces (m; -inf / inf on its "
+           "side).")
+      .def("set_contacts", &IKStep::set_contacts, nb::arg("k"), nb::arg("points"),
+           nb::arg("margin"),
+           "A SUPPORT_POLYGON kernel's contact points (per frame, 3) in frame coordinates "
+           "(m) and margin (m).")
+      .def("bind_rows", &IKStep::bind_rows, nb::arg("k"), nb::arg("A").noconvert(),
+           nb::arg("b").noconvert(),
+           "The writable float64 arrays (rows, nv) and (rows,) an equality kernel writes its "
+           "unweighted rows into (bound until bound again).")
+      .def("bind_band_rows", &IKStep::bind_band_rows, nb::arg("k"), nb::arg("C").noconvert(),
+           nb::arg("lower").noconvert(), nb::arg("upper").noconvert(),
+           "The writable float64 arrays (rows, nv), (rows,), (rows,) a band kernel writes "
+           "its rows into.")
+      .def("forget_target", &IKStep::forget_target, nb::arg("k"),
+           "Kernel k has no usable target: step() returns IK_TASK_DATA + k until one is set.")
+      .def("forget_limit", &IKStep::forget_limit, nb::arg("i"),
+           "Limit i has no usable data: step() returns BAD_INPUT until it is set again.")
+      .def("edges", &IKStep::edges, nb::arg("k"),
+           "A SUPPORT_POLYGON kernel's hull edges at the last step.")
+      .def("add_joint_limits", &IKStep::add_joint_limits, nb::arg("qi"), nb::arg("vi"),
+           "A JointLimits box over the q indices qi -> v indices vi (both empty: all of q); "
+           "its index for set_joint_limits.")
+      .def("set_joint_limits", &IKStep::set_joint_limits, nb::arg("i"), nb::arg("gain"),
+           nb::arg("lower"), nb::arg("upper"),
+           "JointLimits i's gain and limits (float64, the layout of add_joint_limits).")
+      .def("add_velocity_limits", &IKStep::add_velocity_limits,
+           "A VelocityLimits box; its index for set_velocity_limits.")
+      .def("set_velocity_limits", &IKStep::set_velocity_limits, nb::arg("i"), nb::arg("limit"),
+           "VelocityLimits i's limit (nv,) float64.")
       .def("set_integrator", &IKStep::set_integrator, nb::arg("plan"), nb::arg("q_next"))
       .def("set_weighted", &IKStep::set_weighted, nb::arg("regularization"),
            nb::arg("weight_ratio"), nb::arg("active"))
-      .def("step", &IKStep::step, nb::arg("q"), nb::arg("t"), nb::arg("reference").none(),
-           nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false,
+      .def("step", &IKStep::step, nb::arg("q"), nb::arg("warm"), nb::arg("time_left"), nb::arg("integrate") = false,
            nb::arg("refactor") = true)
       .def("info", &IKStep::info, nb::arg("kkt_tol"))
       .def_prop_ro(
@@ -708,8 +926,8 @@ void bind_ik_step(nb::module_& m) {
            nb::arg("q_next").none(),
            "The bound x, res and q_next (None: no integrator) whose copies solve_step "
            "returns.")
-      .def("solve_step", &IKStep::solve_step, nb::arg("q"), nb::arg("t"),
-           nb::arg("reference").none(), nb::arg("warm"), nb::arg("time_left"),
+      .def("solve_step", &IKStep::solve_step, nb::arg("q"), nb::arg("warm"),
+           nb::arg("time_left"),
            nb::arg("integrate"), nb::arg("kkt_tol"),
            "step() (strict hierarchy) and on success (x.copy(), res.copy(), info(kkt_tol), "
            "q_next.copy() or None) in one call; else the status code.")

@@ -25,13 +25,12 @@ namespace support {
 
 using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
-/// Per-kernel data of a band kernel (the IK step keeps one per ComBand / SupportPolygon;
-/// View is the step's strided-array view). Views re-mapped when the attribute changes.
-template <class View>
+/// Per-kernel data of a band kernel (the IK step keeps one per ComBand / SupportPolygon):
+/// its parameters (set by the step's setters) and the SupportPolygon's workspace.
 struct Band {
-  View C, lower, upper, sw;     ///< the Inequality's own arrays (task.task)
-  View lo, hi;                  ///< ComBand: the task's faces lower / upper (3,)
-  View points;                  ///< SupportPolygon: contact_points (k, 3), frame coordinates
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();  ///< ComBand faces
+  RowMat points;                ///< SupportPolygon: contact points (k, 3), frame coordinates
+  double margin = 0.0;          ///< SupportPolygon: margin (m)
   std::vector<int> frames;      ///< SupportPolygon: the step's frame slot of each contact frame
   // SupportPolygon workspace (rows = frames x k points)
   Eigen::VectorXd x, y;         ///< ground projection of every contact point (m)
@@ -41,7 +40,8 @@ struct Band {
   RowMat J;                     ///< the rows (rows, nv), pin coordinates
   int edges = 0;                ///< h, the hull's edges at the last step
 
-  void size(int rows, int nv) {
+  void size(int rows, int nv, int points_per_frame) {
+    points.setZero(points_per_frame, 3);
     x.setZero(rows);
     y.setZero(rows);
     Jx.setZero(rows, nv);

@@ -66,7 +66,7 @@ def test_the_one_call_step_follows_the_python_engine(panda, pose):
         hm.set_target(target)
         q_next, v, sol = ikn.step_integrate(qn)
         pin.computeJointJacobians(panda.model, panda.data, qn)
-        assert nm._solver.step(qn, 0.0, None, k > 0, 10.0, True) == 0
+        assert nm._solver.step(qn, k > 0, 10.0, True) == 0
         assert np.array_equal(v, nm.x) and np.array_equal(q_next, nm.q_next)  # bit for bit
         assert np.array_equal(sol.level_residuals, nm.res)
         assert sol.info == nm._solver.info(KKT_TOL)
@@ -166,12 +166,12 @@ def test_vector_targets_are_checked_and_copied_on_both_paths(panda, built, monke
 @pytest.mark.parametrize("pose", [False, True])
 def test_a_cycle_through_the_native_ik_step_is_collected(panda, pose):
     """A task that refers back to its IK (a monkeypatched attribute) makes a cycle through
-    the IKStep, which holds the task: the garbage collector sees the IKStep's references
-    (tp_traverse) and frees the cycle (tp_clear)."""
+    the native step, whose slots hold the task (and the task its slots): the garbage
+    collector frees the cycle."""
     q = panda.random_configuration(1)
     ik, hand, _ = _ik(panda, q, "native", pose)
     ik.step_integrate(q)
-    hand.owner = ik  # the cycle: ik -> native step -> IKStep -> hand -> ik
+    hand.owner = ik  # the cycle: ik -> native step -> its slot -> hand -> ik
     alive = weakref.ref(ik)
     alive_task = weakref.ref(hand)
     del ik, hand

@@ -600,7 +600,7 @@ def test_hybrid_step_matches_the_python_engine(robots):
     ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
     hybrid = ikn._native
     assert hybrid._python_tasks and hybrid._python_limits
-    assert [type(t) for t in hybrid.kernel_tasks] == [FrameTask, qc.PostureTask]
+    assert [type(t) for t in hybrid.kernel_tasks] == [PositionBand, FrameTask, qc.PostureTask]
     for step in range(60):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)
@@ -810,8 +810,8 @@ def test_bad_configurations_are_named(robots):
     # in native byte order is IK_BAD_Q (the Python side converts or names it first)
     call, mod = ik._native._solver.step, native.load()
     for other in (q.astype(np.float32), q.astype(">f8"), list(q), q[:5], np.stack([q, q]), 1.0):
-        assert call(other, 0.0, None, True, 10.0) == mod.IK_BAD_Q
-    assert call(wide[::2], 0.0, None, True, 10.0) == 0
+        assert call(other, True, 10.0) == mod.IK_BAD_Q
+    assert call(wide[::2], True, 10.0) == 0
 
 
 @needs_native
@@ -963,10 +963,10 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
     pin.jacobianCenterOfMass(robot.model, robot.data, False)
     assert ik._native.integrates  # the native call also writes q_next (integrate=True)
     for _ in range(20):
-        assert call(q, 0.0, None, True, 10.0, True) == 0
+        assert call(q, True, 10.0, True) == 0
     before = count()
     for _ in range(500):
-        call(q, 0.0, None, True, 10.0, True)
+        call(q, True, 10.0, True)
     print(kind + "-" + method, count() - before)
 """
 

@@ -1,51 +1,32 @@
 // qpcoord native engine, IKStep: the task kernels -- each task kind's error, Jacobian and rows
-// (run_kernel), the support bands (run_band) and the limits' box (box).
+// from the kernel's parameters (run_kernel: the one place a kind is evaluated), the support
+// bands (run_band) and the limits' box (box).
 // Part of ik_step.cpp's translation unit (included there, after the IKStep class).
 namespace qpcoord {
 namespace {
 
-bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::handle reference) {
-  const double gain = float_attr(k.task, names_[0]);
-  const int rows = static_cast<int>(k.sel.size());
-  if (k.band >= 0) return run_band(k, bands_[k.band], gain, rows);
-  if (cached(k.eq, names_[1], k.sw, 1, rows) != 1) return false;
-  if (cached(k.eq, names_[2], k.A, 2, rows) != 1 || k.A.cols != nv_) return false;
-  if (cached(k.eq, names_[3], k.b, 1, rows) != 1) return false;
+bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
+  const double gain = k.gain;
+  const int rows = k.rows;
+  if (k.band >= 0) return run_band(k, bands_[k.band]);
   switch (k.kind) {
-    case kPosition: {
+    case kPosition: {  // e = y - y*, J the frame's linear rows; b = dy*/dt - K e
       const Frame& f = frames_[k.frame];
-      const View* y = &k.target;
-      View yv, v;
-      nb::object ref_pair;
-      bool moving = false;
-      if (cached(k.task, names_[4], k.target, 1, rows) != 1) {
-        // a path, or no target (the run's reference): PositionTask.reference_at(t, reference)
-        ref_pair = attr(k.task, names_[9])(t, reference);
-        nb::tuple pair = nb::cast<nb::tuple>(ref_pair);
-        if (pair.size() != 2 || !view_of(pair[0], yv, 1) || !view_of(pair[1], v, 1) ||
-            yv.rows != rows || v.rows != rows)
-          return false;
-        y = &yv;
-        moving = true;
-      }
       frame_jacobian(f);
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
-        const double e = gain * ((*y)[r] - f.p[a]);
-        write_row(k, r, Jt_.row(a), moving ? v[r] + e : 0.0 + e);
+        const double e = gain * (k.target[r] - f.p[a]);
+        write_row(k, r, Jt_.row(a), k.has_vel ? k.vel[r] + e : 0.0 + e);
       }
       return true;
     }
     case kFramePosition: {
       const Frame& f = frames_[k.frame];
-      if (cached(k.task, names_[4], k.target, 1, 3) != 1) return false;
-      const int hv = cached(k.task, names_[5], k.vel, 1, 3);
-      if (hv < 0) return false;
       frame_jacobian(f);
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
         double bv = -gain * (f.p[a] - k.target[a]);
-        if (hv) bv += k.vel[a];
+        if (k.has_vel) bv += k.vel[a];
         write_row(k, r, Jt_.row(a), bv);
       }
       return true;
@@ -53,18 +34,7 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::ha
     case kPose:
     case kPoseSplit: {
       const Frame& f = frames_[k.frame];
-      // the validated target T* (FrameTask._target_T, a 4x4 set_target copies into; None
-      // without a target): its inverse (R*^T, -R*^T p*) read at every step (12 numbers)
-      if (cached(k.task, names_[6], k.target, 2, 4) != 1 || k.target.cols != 4) return false;
-      Vec3 pt;
-      for (int i = 0; i < 3; ++i) {
-        pt[i] = k.target(i, 3);
-        for (int j = 0; j < 3; ++j) k.Rinv(j, i) = k.target(i, j);
-      }
-      k.pinv.noalias() = -(k.Rinv * pt);
-      const int hv = cached(k.task, names_[5], k.vel, 1, 6);
-      if (hv < 0) return false;
-      const Mat3 RE = k.Rinv * f.R;
+      const Mat3 RE = k.Rinv * f.R;  // E = T*^-1 T
       const Vec3 pE = k.Rinv * f.p + k.pinv;
       frame_jacobian(f);
       // LOCAL Jacobian: R^T of both parts
@@ -80,7 +50,7 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::ha
         e = spatial::log6(RE, pE);
         const Mat6 Jlog = spatial::jlog6(RE, pE);
         for (int c : f.cols) Jt_.col(c).noalias() = Jlog * Jl_.col(c);
-        if (hv) {
+        if (k.has_vel) {
           // Ad(E^-1) nu with E^-1 = (RE^T, -RE^T pE)
           const Mat3 Ri = RE.transpose();
           const Vec3 pi = -(Ri * pE);
@@ -100,24 +70,18 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::ha
           Jt_.col(c).head<3>() = RE * Jl_.col(c).head<3>();
           Jt_.col(c).tail<3>() = Jlog * Jl_.col(c).tail<3>();
         }
-        if (hv) {
+        if (k.has_vel) {
           const Vec3 u(k.vel[0], k.vel[1], k.vel[2]), w(k.vel[3], k.vel[4], k.vel[5]);
           ff.head<3>() = w.cross(pE) + u;
           ff.tail<3>() = Jlog * (RE.transpose() * w);
         }
       }
-      write_error_rows(k, rows, gain, e, hv != 0, ff);
+      write_error_rows(k, rows, gain, e, k.has_vel, ff);
       return true;
     }
-    case kOrientation: {
+    case kOrientation: {  // Rinv holds R*^T
       const Frame& f = frames_[k.frame];
-      if (cached(k.task, names_[7], k.target, 2, 3) != 1 || k.target.cols != 3) return false;
-      const int hv = cached(k.task, names_[5], k.vel, 1, 3);
-      if (hv < 0) return false;
-      Mat3 Rt;
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) Rt(i, j) = k.target(i, j);
-      const Mat3 E = Rt * f.R;
+      const Mat3 E = k.Rinv * f.R;
       double theta;
       const Vec3 e = spatial::log3(E, theta);
       const Mat3 Jlog = spatial::jlog3(theta, e);
@@ -125,25 +89,21 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::ha
       Jt_.setZero();
       for (int c : f.cols) Jt_.col(c).head<3>() = JR * Vec3(J_(3, c), J_(4, c), J_(5, c));
       Vec3 ff = Vec3::Zero();
-      if (hv) ff = Jlog * (E.transpose() * Vec3(k.vel[0], k.vel[1], k.vel[2]));
-      write_error_rows(k, rows, gain, e, hv != 0, ff);
+      if (k.has_vel) ff = Jlog * (E.transpose() * Vec3(k.vel[0], k.vel[1], k.vel[2]));
+      write_error_rows(k, rows, gain, e, k.has_vel, ff);
       return true;
     }
     case kCom: {
-      if (cached(k.task, names_[4], k.target, 1, 3) != 1) return false;
-      const int hv = cached(k.task, names_[5], k.vel, 1, 3);
-      if (hv < 0) return false;
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
         for (int c = 0; c < nv_; ++c) Jt_(0, c) = Jcom_(a, c);
         double bv = -gain * (com_[a] - k.target[a]);
-        if (hv) bv += k.vel[a];
+        if (k.has_vel) bv += k.vel[a];
         write_row(k, r, Jt_.row(0), bv);
       }
       return true;
     }
     case kPosture: {
-      if (cached(k.task, names_[8], k.target, 1, nq_) != 1) return false;
       double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
       double* beq = out_[1].data() + k.row0;
       for (int r = 0; r < rows; ++r) {
@@ -153,23 +113,19 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs, double t, nb::ha
         // the task's A (the selection) is constant: the stacked row is rewritten
         for (int c = 0; c < nv_; ++c) Aeq[r * nv_ + c] = 0.0;
         Aeq[r * nv_ + j] = k.A(r, j) * s;
-        k.b.w()[r * k.b.s0] = bv;
+        k.b[r] = bv;
         beq[r] = bv * s;
       }
       return true;
     }
+    default:
+      return false;
   }
-  return false;
 }
 
-bool IKStep::run_band(const Kernel& k, support::Band<View>& b, double gain, int rows) {
-  const nb::str &kC = band_names_[0], &kLower = band_names_[1], &kUpper = band_names_[2],
-                &kPoints = band_names_[3], &kMargin = band_names_[4];
-  if (cached(k.eq, names_[1], b.sw, 1, rows) != 1) return false;
-  if (cached(k.eq, kC, b.C, 2, rows) != 1 || b.C.cols != nv_) return false;
-  if (cached(k.eq, kLower, b.lower, 1, rows) != 1) return false;
-  if (cached(k.eq, kUpper, b.upper, 1, rows) != 1) return false;
-  const double c[3] = {com_[0], com_[1], com_[2]};  // data.com[0]
+bool IKStep::run_band(const Kernel& k, support::Band& b) {
+  const int rows = k.rows;
+  const double gain = k.gain;
   double* C = out_[2].data() + static_cast<size_t>(k.row0) * nv_;
   double* lo = out_[3].data() + k.row0;
   double* hi = out_[4].data() + k.row0;
@@ -182,19 +138,28 @@ bool IKStep::run_band(const Kernel& k, support::Band<View>& b, double gain, int 
       row_ = src.transpose();
     }
     if (!row_.allFinite()) return false;
-    double* Cp = b.C.w();
     for (int j = 0; j < nv_; ++j) {
-      Cp[r * b.C.s0 + j * b.C.s1] = row_[j];
+      k.A(r, j) = row_[j];
       C[static_cast<size_t>(r) * nv_ + j] = row_[j];
     }
-    b.lower.w()[r * b.lower.s0] = lo[r] = l;
-    b.upper.w()[r * b.upper.s0] = hi[r] = u;
-    sw[r] = b.sw[r];
+    k.lower[r] = lo[r] = l;
+    k.upper[r] = hi[r] = u;
+    sw[r] = k.sw[r];
     return true;
   };
+  if (k.kind == kPositionBand) {  // y the frame's position rows, C their Jacobian
+    const Frame& f = frames_[k.frame];
+    frame_jacobian(f);
+    for (int r = 0; r < rows; ++r) {
+      const int a = k.sel[r];
+      // y is finite: +-inf - y stays +-inf
+      if (!put(r, Jt_.row(a), gain * (b.lo[r] - f.p[a]), gain * (b.hi[r] - f.p[a])))
+        return false;
+    }
+    return true;
+  }
+  const double c[3] = {com_[0], com_[1], com_[2]};  // data.com[0]
   if (k.kind == kComBand) {
-    if (cached(k.task, kLower, b.lo, 1, 3) != 1 || cached(k.task, kUpper, b.hi, 1, 3) != 1)
-      return false;
     for (int a = 0; a < 3; ++a) {
       for (int j = 0; j < nv_; ++j) Jt_(0, j) = Jcom_(a, j);
       // c is finite: +-inf - c stays +-inf
@@ -202,9 +167,7 @@ bool IKStep::run_band(const Kernel& k, support::Band<View>& b, double gain, int 
     }
     return true;
   }
-  const double margin = float_attr(k.task, kMargin);
   const int nf = static_cast<int>(b.frames.size()), np = rows / nf;
-  if (cached(k.task, kPoints, b.points, 2, np) != 1 || b.points.cols != 3) return false;
   for (int f = 0; f < nf; ++f) {
     const Frame& fr = frames_[b.frames[f]];
     frame_jacobian(fr);
@@ -218,16 +181,10 @@ bool IKStep::run_band(const Kernel& k, support::Band<View>& b, double gain, int 
     Jt_(0, j) = Jcom_(0, j);
     Jt_(1, j) = Jcom_(1, j);
   }
-  if (support::polygon_rows(b, c[0], c[1], Jt_.row(0), Jt_.row(1), gain, margin) < 3)
+  if (support::polygon_rows(b, c[0], c[1], Jt_.row(0), Jt_.row(1), gain, b.margin) < 3)
     return false;  // collinear contacts: the task's _refresh raises its message
   for (int r = 0; r < rows; ++r)
     if (!put(r, b.J.row(r), -kInf, b.ub[r])) return false;
-  // task.edges = h, as _evaluate sets it (a small int: a cached object, no allocation)
-  PyObject* h = PyLong_FromLong(b.edges);
-  if (!h) throw nb::python_error();
-  const int rc = PyObject_SetAttr(k.task.ptr(), band_names_[5].ptr(), h);
-  Py_DECREF(h);
-  if (rc != 0) throw nb::python_error();
   return true;
 }
 
@@ -244,7 +201,7 @@ void IKStep::box(const double* q, int64_t qs) {
         hi2_[i] = L.upper[i];
       }
     } else {
-      const double k = float_attr(L.lim, names_[0]) / dt_;
+      const double k = L.gain / dt_;
       if (L.indexed) {
         for (size_t i = 0; i < L.qi.size(); ++i) {
           const double qq = q[L.qi[i] * qs];
