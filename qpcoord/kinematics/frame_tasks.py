@@ -72,7 +72,7 @@ import pinocchio as pin
 from ..core import native
 from ..core.tasks import Equality, Inequality
 from .robot import Robot
-from .tasks import KinematicTask
+from .tasks import KinematicTask, read_only
 
 __all__ = [
     "FrameTask",
@@ -572,7 +572,7 @@ class FrameTask(_ErrorTask):
         d["_target_se3"] = se3
         d["_target_T"] = self._pose
         d["_target_inv_se3"] = None
-        d["target_velocity"] = nu
+        d["target_velocity"] = nu if nu is None else read_only(nu)
         for slot in self._bound:  # the native IK steps holding a copy: the new target
             slot.set_target(self._pose, nu)
 
@@ -673,7 +673,7 @@ class FramePositionTask(_ErrorTask):
         y = _vector(target, 3, "target", "m")
         v = None if velocity is None else _vector(velocity, 3, "velocity", "m/s")
         d = self.__dict__  # the bound native steps told once, below
-        d["target"], d["target_velocity"] = y, v
+        d["target"], d["target_velocity"] = read_only(y), v if v is None else read_only(v)
         for slot in self._bound:  # the native IK steps holding a copy: the new target
             slot.set_target(y, v)
 
@@ -755,7 +755,8 @@ class OrientationTask(_ErrorTask):
         R = _as_rotation(target, "target")
         w = None if velocity is None else _vector(velocity, 3, "velocity", "rad/s")
         d = self.__dict__  # the bound native steps told once, below
-        d["target"], d["_target_t"], d["target_velocity"] = R, R.T.copy(), w
+        d["target"], d["_target_t"] = read_only(R), read_only(R.T.copy())
+        d["target_velocity"] = w if w is None else read_only(w)
         for slot in self._bound:  # the native IK steps holding a copy: the new target
             slot.set_target(R, w)
 
@@ -929,7 +930,7 @@ class ComTask(_ErrorTask):
         y = _vector(target, 3, "target", "m")
         v = None if velocity is None else _vector(velocity, 3, "velocity", "m/s")
         d = self.__dict__  # the bound native steps told once, below
-        d["target"], d["target_velocity"] = y, v
+        d["target"], d["target_velocity"] = read_only(y), v if v is None else read_only(v)
         for slot in self._bound:  # the native IK steps holding a copy: the new target
             slot.set_target(y, v)
 

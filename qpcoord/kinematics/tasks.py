@@ -74,8 +74,9 @@ _FLOATING_ROOTS = ("JointModelFreeFlyer", "JointModelPlanar")
 
 #: The attributes of a kinematic task that the native IK step holds a copy of (its kernels'
 #: parameters): assigning one tells the steps the task is bound to (``_bound``), which copy
-#: it again. (A write into such an array in place is not an assignment: assign the new
-#: array, or call the task's setter.)
+#: it again. Their arrays are read-only (a write in place raises numpy's "assignment
+#: destination is read-only"): a native step would not see it; assign a new array or call
+#: the task's setter.
 PARAMETERS = frozenset(
     (
         "gain", "target", "target_velocity", "_target_T", "_target_t", "q_ref", "lower",
@@ -83,6 +84,12 @@ PARAMETERS = frozenset(
     )
 )  # fmt: skip
 _setattr = object.__setattr__
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` (an array the task owns, or a view of one) made read-only, returned."""
+    a.flags.writeable = False
+    return a
 
 
 def _gain(value: object, what: str = "gain") -> float:
@@ -251,9 +258,14 @@ class KinematicTask(ABC):
     _bound: tuple = ()
 
     def __setattr__(self, name: str, value: Any) -> None:
+        if name in PARAMETERS:
+            if type(value) is np.ndarray and value.flags.writeable:
+                value = read_only(value.view())
+            _setattr(self, name, value)
+            if self._bound:
+                self._parameters_written()
+            return
         _setattr(self, name, value)
-        if name in PARAMETERS and self._bound:
-            self._parameters_written()
 
     def _parameters_written(self) -> None:
         """Tell the bound native steps that a parameter changed (a setter that writes

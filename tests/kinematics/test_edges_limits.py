@@ -23,8 +23,9 @@ def _drive_into_limit(robot, q0, joint, past, limits_of, engine, steps):
     """A stiff posture pulling ``joint`` ``past`` rad beyond its upper limit: the velocities
     of every step (the first row is the rest before the start) and the configurations."""
     post = qc.PostureTask(robot, q0, gain=20.0)
-    post.q_ref = q0.copy()
-    post.q_ref[joint] = robot.upper[joint] + past
+    q_ref = q0.copy()
+    q_ref[joint] = robot.upper[joint] + past
+    post.q_ref = q_ref
     ik = qc.IK(robot, [post], dt=DT, limits=limits_of(robot), engine=engine)
     q, vs, qs = q0.copy(), [np.zeros(robot.nv)], []
     for _ in range(steps):
@@ -89,8 +90,9 @@ def test_floating_base_acceleration_limits_hold_everywhere():
     base = go1.model.frames[2].name  # the root body's frame
     push = qc.FramePositionTask(go1, base, go1.frame_pose(q0, base)[:3, 3] + [1.0, 0.0, 0.0])
     post = qc.PostureTask(go1, q0, gain=20.0)
-    post.q_ref = q0.copy()
-    post.q_ref[7] = go1.upper[7] + 1.0  # the first hip abduction into its limit
+    q_ref = q0.copy()
+    q_ref[7] = go1.upper[7] + 1.0  # the first hip abduction into its limit
+    post.q_ref = q_ref
     a_max = np.full(go1.nv, A_MAX)  # the base's six rows too
     limits = [qc.JointLimits(go1), qc.VelocityLimits(go1), AccelerationLimits(go1, a_max)]
     ik = qc.IK(go1, [push, post], dt=DT, limits=limits)

@@ -12,16 +12,16 @@ import pickle
 import numpy as np
 import pinocchio as pin
 import pytest
-from test_native_step import (
+from support.counting_malloc import run_counting_malloc
+from support.native_ik import (
     DT,
     FRAMES,
     KINDS,
-    _kind_levels,
-    _pair,
-    _robot,
-    _start,
+    engine_pair,
+    kind_levels,
+    robot_or_skip,
     robots,
-    run_counting_malloc,
+    start_configuration,
 )
 
 import qpcoord as qc
@@ -96,9 +96,9 @@ def _assign(robot: qc.Robot, kind: str, task, posture, q: np.ndarray, seed: int)
 def test_assigned_parameters_reach_the_kernels(robots, name, kind):
     """Gains, targets, feed-forwards, references and weights assigned between steps (talos:
     a floating base) give the rows of the tasks' Python refresh at random configurations."""
-    robot = _robot(robots, name)
-    q0 = _start(robot)
-    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, kind, q0))
+    robot = robot_or_skip(robots, name)
+    q0 = start_configuration(robot)
+    ikn, ikp = engine_pair(robot, lambda: kind_levels(robot, kind, q0))
     assert not ikn._native._hybrid
     for k in range(4):
         q = robot.random_configuration(20 + k)
@@ -114,8 +114,8 @@ def test_the_step_reads_no_task_attribute(robots):
     """A value written into a task's instance dict (no assignment) is not seen by the native
     step, which holds its own copy; the same value assigned is."""
     robot = robots["panda"]
-    q = _start(robot)
-    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, "pose", q))
+    q = start_configuration(robot)
+    ikn, ikp = engine_pair(robot, lambda: kind_levels(robot, "pose", q))
     hand = ikn._dynamic[0]
     P = ikn.stack._compiled
     ikn.step(q)
@@ -135,8 +135,8 @@ def test_rebound_task_arrays_and_limits_are_followed(robots):
     """An ``update`` that rebinds a kernel's output arrays: the next step writes the new ones
     (and counts its matrix); the limits' gain and speed assigned: the same box."""
     robot = robots["panda"]
-    q = _start(robot)
-    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, "frame_position", q))
+    q = start_configuration(robot)
+    ikn, ikp = engine_pair(robot, lambda: kind_levels(robot, "frame_position", q))
     task = ikn._dynamic[0]
     old = task.task.A
     task.task.update(A=np.ones_like(old), b=np.zeros(old.shape[0]))
@@ -157,7 +157,7 @@ def test_bad_parameters_get_the_tasks_messages(robots):
     """Data a kernel cannot use, assigned at any time, raises the task's own message at the
     next step; assigning good data again steps."""
     robot = robots["panda"]
-    q = _start(robot)
+    q = start_configuration(robot)
     hand = FrameTask(robot, FRAMES["panda"], gain=2.0)
     com = ComTask(robot, robot.com(q))
     ik = qc.IK(robot, [hand, com], DT, engine="native")
@@ -184,8 +184,8 @@ def test_bad_parameters_get_the_tasks_messages(robots):
 @needs_native
 def test_a_dropped_step_unbinds_its_tasks_and_tasks_pickle(robots):
     robot = robots["panda"]
-    q = _start(robot)
-    tasks = _kind_levels(robot, "pose", q)
+    q = start_configuration(robot)
+    tasks = kind_levels(robot, "pose", q)
     ik = qc.IK(robot, tasks, DT, engine="native")
     assert all(len(t._bound) == 1 for t in tasks)
     v = ik.step(q)[0]
@@ -219,9 +219,9 @@ def test_position_band_kernel_equals_the_python_refresh(robots, name):
     """PositionBand on the default frame (its robot's position rows), as a hard constraint and
     at a soft level, faces and gain assigned between steps: the rows of its Python refresh
     at random configurations near the start (talos: a floating base)."""
-    robot = _robot(robots, name)
+    robot = robot_or_skip(robots, name)
     ee = robot.with_frame(FRAMES[name]) if robot.frame != FRAMES[name] else robot
-    q0 = _start(robot)
+    q0 = start_configuration(robot)
 
     def build(engine: str) -> tuple[qc.IK, qc.PositionBand]:
         y = ee.position(q0)
@@ -249,7 +249,7 @@ _ALLOCATION_RUN = r"""
 import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
 sys.path.insert(0, {tests!r})
-from test_native_step import FRAMES, DT
+from support.native_ik import FRAMES, DT
 count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
 count.restype = ctypes.c_longlong
 robot = qc.robots.load("panda")
@@ -286,3 +286,22 @@ def test_the_step_and_its_target_setter_do_not_allocate(tmp_path, build):
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
     assert counts == {"step": "0", "set_target": "0"}, out
+
+
+@pytest.mark.parametrize("engine", ["native", "python"])
+def test_a_parameter_array_written_in_place_raises(engine):
+    """The native step holds a copy of a task's parameters: a write into them in place would
+    be seen by the Python engine only, so it raises instead (assign, or call the setter)."""
+    robot = qc.robots.load("panda")
+    q0 = robot.reference_configuration("default")
+    hand = qc.FramePositionTask(
+        robot, "panda_hand_tcp", robot.frame_pose(q0, "panda_hand_tcp")[:3, 3]
+    )
+    post = qc.PostureTask(robot, q0)
+    qc.IK(robot, [hand, post], dt=0.01, engine=engine)
+    for array in (hand.target, post.q_ref):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0] = 0.0
+    post.q_ref = q0 + 0.1  # an assignment is the setter
+    assert not post.q_ref.flags.writeable
+    np.testing.assert_array_equal(post.q_ref, q0 + 0.1)

@@ -11,6 +11,17 @@ import pinocchio as pin
 import pytest
 from support.counting_malloc import run_counting_malloc
 from support.native_engine import needs_native
+from support.native_ik import (
+    DT,
+    FRAMES,
+    KINDS,
+    ee_robot,
+    engine_pair,
+    kind_levels,
+    robot_or_skip,
+    start_configuration,
+    target_pose,
+)
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -22,99 +33,8 @@ from qpcoord.kinematics.frame_tasks import (
     RelativeFrameTask,
 )
 from qpcoord.kinematics.native_step import native_kind
-from qpcoord.kinematics.paths import Circle, HorizontalCircle
+from qpcoord.kinematics.paths import Circle
 from qpcoord.kinematics.tasks import AccelerationLimits, PositionBand
-
-DT = 0.01
-#: the controlled frame and the default-frame robot of each test robot
-FRAMES = {"panda": "panda_hand_tcp", "planar_3r": "tip", "talos": "gripper_right_base_link"}
-
-
-@pytest.fixture(scope="module")
-def robots() -> dict[str, qc.Robot]:
-    out = {"panda": qc.robots.load("panda"), "planar_3r": qc.robots.load("planar_3r")}
-    try:
-        out["talos"] = qc.robots.load("talos")
-    except ValueError:  # example-robot-data missing
-        pass
-    return out
-
-
-def _robot(robots, name: str) -> qc.Robot:
-    if name not in robots:
-        pytest.skip(f"{name} not available")
-    return robots[name]
-
-
-def _start(robot: qc.Robot) -> np.ndarray:
-    if robot.name == "talos":
-        return robot.reference_configuration("half_sitting")
-    return robot.random_configuration(3)
-
-
-def _ee(robot: qc.Robot) -> qc.Robot:
-    """A robot whose default frame is the controlled frame (shares the model)."""
-    frame = FRAMES[robot.name]
-    return robot if robot.frame == frame else robot.with_frame(frame)
-
-
-def _target_pose(robot: qc.Robot, q: np.ndarray) -> np.ndarray:
-    frame = FRAMES[robot.name]
-    T = robot.frame_pose(q, frame).copy()
-    T[:3, :3] = T[:3, :3] @ pin.exp3(np.array([0.2, -0.3, 0.4]))
-    T[:3, 3] += [0.05, -0.04, 0.03]
-    return T
-
-
-def _kind_levels(robot: qc.Robot, kind: str, q: np.ndarray) -> list:
-    """A fresh stack of one task kind (with masks, weights, feed-forward) and a posture."""
-    frame = FRAMES[robot.name]
-    ee = _ee(robot)
-    if kind == "position":
-        task = qc.PositionTask(ee, target=ee.position(q) + 0.05, gain=7.0, weight=2.0)
-    elif kind == "position_path":
-        path = (
-            Circle(radius=0.2)
-            if ee.m == 2
-            else HorizontalCircle(ee.position(q) + [0.0, 0.0, 0.02], 0.1, 2.0)
-        )
-        task = qc.PositionTask(ee, target=path, gain=5.0)
-    elif kind == "frame_position":
-        task = FramePositionTask(robot, frame, gain=3.0, mask="x z", weight=2.0)
-        task.set_target(robot.frame_pose(q, frame)[:3, 3] + 0.03, velocity=[0.1, -0.2, 0.3])
-    elif kind == "pose":
-        task = FrameTask(
-            robot, frame, gain=2.0, position_weight=2.0, orientation_weight=0.5, mask="x y rz ry"
-        )
-        task.set_target(_target_pose(robot, q), velocity=[0.1, 0.0, -0.1, 0.2, 0.1, -0.3])
-    elif kind == "pose_split":
-        task = FrameTask(robot, frame, gain=2.5, mask="x z rx ry", error="split", name="split")
-        task.set_target(_target_pose(robot, q), velocity=[0.1, 0.2, -0.1, 0.3, -0.1, 0.2])
-    elif kind == "pose_plain":
-        task = FrameTask(robot, frame, _target_pose(robot, q), gain=4.0)
-    elif kind == "orientation":
-        task = OrientationTask(robot, frame, gain=1.5, mask="rx rz", weight=3.0)
-        task.set_target(_target_pose(robot, q), velocity=[0.3, -0.2, 0.1])
-    elif kind == "com":
-        task = ComTask(robot, gain=2.0, mask="xy", weight=4.0)
-        task.set_target(robot.com(q) + [0.01, -0.02, 0.0], velocity=[0.05, 0.0, 0.1])
-    else:
-        raise AssertionError(kind)
-    w = np.linspace(0.5, 2.0, qc.PostureTask(robot, q).task.shape[0])
-    posture = qc.PostureTask(robot, robot.random_configuration(9), gain=1.5, weight=w)
-    return [task, posture]
-
-
-KINDS = ["position", "position_path", "frame_position", "pose", "pose_split", "orientation", "com"]
-
-
-def _pair(robot, factory, **options):
-    """A native-step IK and a Python-engine IK of two copies of one stack."""
-    return (
-        qc.IK(robot, factory(), DT, engine="native", **options),
-        qc.IK(robot, factory(), DT, engine="python", **options),
-    )
-
 
 # ---------------------------------------------------------------------------------------
 # the rows: native kernels against the tasks' Python _refresh
@@ -125,11 +45,11 @@ def _pair(robot, factory, **options):
 @pytest.mark.parametrize("name", ["panda", "planar_3r", "talos"])
 @pytest.mark.parametrize("kind", KINDS)
 def test_native_rows_equal_the_python_refresh(robots, name, kind):
-    robot = _robot(robots, name)
+    robot = robot_or_skip(robots, name)
     if kind == "com" and robot.mass <= 0:
         pytest.skip("massless model")
-    q = _start(robot)
-    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, kind, q))
+    q = start_configuration(robot)
+    ikn, ikp = engine_pair(robot, lambda: kind_levels(robot, kind, q))
     task = ikn._dynamic[0]
     assert native_kind(task) is not None and task in ikn._native.kernel_tasks
     assert ikn._dynamic[1] in ikn._native.kernel_tasks  # the posture too (1-DoF joints)
@@ -154,7 +74,7 @@ def test_native_rows_equal_the_python_refresh(robots, name, kind):
 def test_position_task_follows_the_run_reference(robots):
     robot = robots["planar_3r"]
     q = np.array([0.2, 0.9, -0.4])
-    ikn, ikp = _pair(robot, lambda: [qc.PositionTask(robot, gain=2.0)], limits=None)
+    ikn, ikp = engine_pair(robot, lambda: [qc.PositionTask(robot, gain=2.0)], limits=None)
     for t in (0.0, 0.4, 1.1):
         vn, _ = ikn.step(q, t, reference=Circle(radius=0.3))
         vp, _ = ikp.step(q, t, reference=Circle(radius=0.3))
@@ -165,10 +85,10 @@ def test_position_task_follows_the_run_reference(robots):
 @needs_native
 def test_set_target_and_gain_are_followed(robots):
     robot = robots["panda"]
-    q = _start(robot)
-    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, "pose_plain", q))
+    q = start_configuration(robot)
+    ikn, ikp = engine_pair(robot, lambda: kind_levels(robot, "pose_plain", q))
     for ik in (ikn, ikp):
-        ik._dynamic[0].set_target(_target_pose(robot, robot.random_configuration(11)))
+        ik._dynamic[0].set_target(target_pose(robot, robot.random_configuration(11)))
         ik._dynamic[0].gain = 9.0
         ik._dynamic[1].set_target(robot.random_configuration(12))
     vn, _ = ikn.step(q)
@@ -183,9 +103,9 @@ def test_a_target_rewritten_in_place_is_followed(robots):
     every step (the benchmark's loop): the kernel reads the task's stored copy, whatever the
     caller does to its array afterwards, and the velocities are the Python engine's."""
     robot = robots["panda"]
-    q = _start(robot)
-    ikn, ikp = _pair(robot, lambda: _kind_levels(robot, "pose_plain", q))
-    T = _target_pose(robot, q)
+    q = start_configuration(robot)
+    ikn, ikp = engine_pair(robot, lambda: kind_levels(robot, "pose_plain", q))
+    T = target_pose(robot, q)
     qn = qp = q
     for k in range(6):
         T[:3, 3] += [0.004, -0.003, 0.002 * k]
@@ -212,11 +132,11 @@ def test_a_target_rewritten_in_place_is_followed(robots):
 @needs_native
 @pytest.mark.parametrize("name", ["panda", "talos"])
 def test_limit_boxes_equal_the_python_refresh(robots, name):
-    robot = _robot(robots, name)
-    q = _start(robot).copy()
+    robot = robot_or_skip(robots, name)
+    q = start_configuration(robot).copy()
     limited = _limited_joints(robot)
     q[limited[0]] = robot.upper[limited[0]] + 0.05  # outside a limit: the boxes do not meet
-    levels = lambda: [qc.PostureTask(robot, _start(robot))]  # noqa: E731
+    levels = lambda: [qc.PostureTask(robot, start_configuration(robot))]  # noqa: E731
     limits = lambda: [  # noqa: E731
         qc.JointLimits(robot, gain=0.5),
         qc.VelocityLimits(robot, 0.3 * np.minimum(robot.velocity_limit, 2.0)),
@@ -260,14 +180,16 @@ def _error_and_jacobian(ik: qc.IK, q: np.ndarray) -> tuple[np.ndarray, np.ndarra
     "kind", ["position", "frame_position", "pose", "pose_split", "orientation", "com"]
 )
 def test_native_jacobians_match_finite_differences(robots, name, kind):
-    robot = _robot(robots, name)
+    robot = robot_or_skip(robots, name)
     if kind == "com" and robot.mass <= 0:
         pytest.skip("massless model")
     frame = FRAMES[robot.name]
-    q = _start(robot)
-    T = _target_pose(robot, q)
+    q = start_configuration(robot)
+    T = target_pose(robot, q)
     task = {
-        "position": lambda: qc.PositionTask(_ee(robot), target=_ee(robot).position(q), gain=1.0),
+        "position": lambda: qc.PositionTask(
+            ee_robot(robot), target=ee_robot(robot).position(q), gain=1.0
+        ),
         "frame_position": lambda: FramePositionTask(robot, frame, T[:3, 3], gain=1.0),
         "pose": lambda: FrameTask(robot, frame, T, gain=1.0),
         "pose_split": lambda: FrameTask(robot, frame, T, gain=1.0, error="split"),
@@ -453,11 +375,11 @@ def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind)
     far = robot.random_configuration(21)
 
     def levels():
-        lv = _kind_levels(robot, kind, far)
+        lv = kind_levels(robot, kind, far)
         lv[0].gain = 20.0  # fast: the speed and position limits bind
         return lv
 
-    ikn, ikp = _pair(robot, levels)
+    ikn, ikp = engine_pair(robot, levels)
     current = qc.IK(robot, levels(), DT, engine="python")  # Python tasks + native solve
     from support.native_info import (
         info_reference,  # tests/: not on the allocation subprocess's path
@@ -501,7 +423,7 @@ def test_closed_loop_matches_the_python_engine_with_binding_limits(robots, kind)
 def test_closed_loop_on_the_planar_arm(robots):
     robot = robots["planar_3r"]
     q = np.array([0.3, 0.8, 1.1])
-    ikn, ikp = _pair(
+    ikn, ikp = engine_pair(
         robot,
         lambda: [
             qc.PositionTask(robot, target=Circle(radius=0.4), gain=10.0),
@@ -557,7 +479,7 @@ def test_a_python_task_moving_the_robot_data_does_not_disturb_the_kernels(robots
     robot = robots["panda"]
     frame = FRAMES["panda"]
     q = robot.random_configuration(2)
-    T = _target_pose(robot, q)
+    T = target_pose(robot, q)
 
     def levels():
         return [HeightFD(robot, frame, 0.5), FrameTask(robot, frame, T, gain=3.0)]
@@ -577,7 +499,7 @@ def test_hybrid_step_matches_the_python_engine(robots):
     robot = robots["panda"]
     frame = FRAMES["panda"]
     q = robot.random_configuration(2)
-    T = _target_pose(robot, q)
+    T = target_pose(robot, q)
 
     def levels():
         return [
@@ -610,8 +532,8 @@ def test_hybrid_step_matches_the_python_engine(robots):
 
 @needs_native
 def test_floating_base_whole_body_is_native_and_matches(robots):
-    robot = _robot(robots, "talos")
-    q = _start(robot)
+    robot = robot_or_skip(robots, "talos")
+    q = start_configuration(robot)
     feet = ["left_sole_link", "right_sole_link"]
 
     def levels():
@@ -621,7 +543,7 @@ def test_floating_base_whole_body_is_native_and_matches(robots):
         com = ComTask(robot, robot.com(q) + [0.02, 0.0, -0.01], gain=5.0)
         return [tasks, com, qc.PostureTask(robot, q)]
 
-    ikn, ikp = _pair(robot, levels)
+    ikn, ikp = engine_pair(robot, levels)
     assert len(ikn._native.kernel_tasks) == 4 and not ikn._native._hybrid
     for step in range(30):
         vn, _ = ikn.step(q)
@@ -645,21 +567,21 @@ def test_weighted_step_matches_the_python_weighted_path(robots, name, kind):
     """One native call (kernels + weighted QP) against the previous path, Python refresh +
     native weighted QP (x to 1e-9, the same info dict), and the Python engine (daqp, to its
     accuracy), on a closed loop with binding limits on the Panda."""
-    robot = _robot(robots, name)
+    robot = robot_or_skip(robots, name)
     if kind == "com" and robot.mass <= 0:
         pytest.skip("massless model")
-    q = _start(robot)
+    q = start_configuration(robot)
     if name == "panda":
         q = 0.5 * (robot.lower + robot.upper)
         q[3] = robot.lower[3] + 0.02  # near a limit
 
     def levels():
-        lv = _kind_levels(robot, kind, q)
+        lv = kind_levels(robot, kind, q)
         if name == "panda":
             lv[0].gain = 20.0  # fast: the speed and position limits bind
         return lv
 
-    ikn, ikp = _pair(robot, levels, method="weighted")
+    ikn, ikp = engine_pair(robot, levels, method="weighted")
     assert ikn._native.weighted and not ikn._native._hybrid
     current = qc.IK(robot, levels(), DT, method="weighted", engine="python")
     binding = 0
@@ -699,12 +621,12 @@ def test_weighted_step_integrates_and_refactors_only_on_a_change(robots):
     weighted QP only when a task's matrix or weight changed (``matrix_version``), as
     ``NativeWeighted``; ``step_integrate`` writes ``q_next`` in the same call."""
     robot = robots["panda"]
-    q = _start(robot)
+    q = start_configuration(robot)
 
     def levels():
         return [qc.PostureTask(robot, robot.random_configuration(9), gain=2.0)]
 
-    ikn, ikp = _pair(robot, levels, method="weighted")
+    ikn, ikp = engine_pair(robot, levels, method="weighted")
     refactored = []
     for step in range(6):
         if step == 3:
@@ -724,7 +646,7 @@ def test_weighted_hybrid_step_matches_the_python_engine(robots):
     robot = robots["panda"]
     frame = FRAMES["panda"]
     q = robot.random_configuration(2)
-    T = _target_pose(robot, q)
+    T = target_pose(robot, q)
 
     def levels():
         return [
@@ -766,7 +688,7 @@ def test_weighted_hybrid_step_matches_the_python_engine(robots):
 @needs_native
 def test_weighted_step_errors_are_those_of_the_stack(robots):
     robot = robots["panda"]
-    q = _start(robot)
+    q = start_configuration(robot)
     bad = [qc.Equality(np.ones((2, robot.nv)), [0.0, 1.0], name="clash")]
     msg = "hard equality constraints are inconsistent"
     for engine in ("native", None):
@@ -790,8 +712,10 @@ def test_weighted_step_errors_are_those_of_the_stack(robots):
 @needs_native
 def test_bad_configurations_are_named(robots):
     robot = robots["panda"]
-    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", _start(robot)), DT, engine="native")
-    q = _start(robot)
+    ik = qc.IK(
+        robot, kind_levels(robot, "pose_plain", start_configuration(robot)), DT, engine="native"
+    )
+    q = start_configuration(robot)
     bad = q.copy()
     bad[3] = np.nan
     with pytest.raises(ValueError, match=r"q\[3\] is nan"):
@@ -816,8 +740,8 @@ def test_bad_configurations_are_named(robots):
 
 @needs_native
 def test_non_unit_quaternion_is_named(robots):
-    robot = _robot(robots, "talos")
-    q = _start(robot).copy()
+    robot = robot_or_skip(robots, "talos")
+    q = start_configuration(robot).copy()
     ik = qc.IK(robot, [ComTask(robot, robot.com(q), gain=1.0)], DT, engine="native")
     q[3:7] *= 1.01
     with pytest.raises(ValueError, match=r"q\[3:7\] is the quaternion"):
@@ -829,13 +753,13 @@ def test_missing_target_raises_the_tasks_message(robots):
     robot = robots["panda"]
     ik = qc.IK(robot, [FrameTask(robot, FRAMES["panda"])], DT, engine="native")
     with pytest.raises(ValueError, match="no target"):
-        ik.step(_start(robot))
+        ik.step(start_configuration(robot))
 
 
 @needs_native
 def test_engine_choice(robots):
     robot = robots["panda"]
-    levels = lambda: [qc.PostureTask(robot, _start(robot))]  # noqa: E731
+    levels = lambda: [qc.PostureTask(robot, start_configuration(robot))]  # noqa: E731
     assert qc.IK(robot, levels(), DT).engine == "native"  # the default where built
     assert qc.IK(robot, levels(), DT, engine="python").engine == "python"
     weighted = qc.IK(robot, levels(), DT, method="weighted")
@@ -854,8 +778,8 @@ def test_engine_choice(robots):
 @needs_native
 def test_warm_start_reset_and_v_prev(robots):
     robot = robots["panda"]
-    q = _start(robot)
-    ik = qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="native")
+    q = start_configuration(robot)
+    ik = qc.IK(robot, kind_levels(robot, "position", q), DT, engine="native")
     v1, s1 = ik.step(q)
     np.testing.assert_array_equal(ik.v_prev, v1)
     assert ik.last is s1
@@ -870,18 +794,18 @@ def test_warm_start_reset_and_v_prev(robots):
 
 def test_without_the_extension_the_python_path_warns_once(robots, missing_extension):
     robot = robots["panda"]
-    q = _start(robot)
+    q = start_configuration(robot)
     with pytest.warns(RuntimeWarning, match="native engine is not built") as rec:
-        ik = qc.IK(robot, _kind_levels(robot, "position", q), DT)
+        ik = qc.IK(robot, kind_levels(robot, "position", q), DT)
         v, sol = ik.step(q)
     assert len(rec) == 1
     assert ik.engine == "python" and sol.solver != "native"
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        ref = qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="python")
+        ref = qc.IK(robot, kind_levels(robot, "position", q), DT, engine="python")
         np.testing.assert_allclose(v, ref.step(q)[0], atol=1e-12)
     with pytest.raises(native.NativeUnavailableError):
-        qc.IK(robot, _kind_levels(robot, "position", q), DT, engine="native")
+        qc.IK(robot, kind_levels(robot, "position", q), DT, engine="native")
 
 
 @needs_native
@@ -903,7 +827,7 @@ def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
     def levels():
         return [qc.PositionTask(robot, robot.position(q) + 0.05), qc.PostureTask(robot, q)]
 
-    ikn, ikp = _pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
+    ikn, ikp = engine_pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
     assert ikn._native._python_tasks == [ikn._dynamic[1]]
     for step in range(30):
         vn, _ = ikn.step(q)
@@ -915,12 +839,12 @@ def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
 @needs_native
 def test_hard_constraint_rows_are_native_and_match(robots):
     robot = robots["panda"]
-    q = _start(robot)
+    q = start_configuration(robot)
     frame = FRAMES["panda"]
 
     def build(engine):
         hold = FramePositionTask(robot, frame, robot.frame_pose(q, frame)[:3, 3], gain=10.0)
-        pose = OrientationTask(robot, frame, _target_pose(robot, q), gain=5.0)
+        pose = OrientationTask(robot, frame, target_pose(robot, q), gain=5.0)
         return qc.IK(robot, [pose, qc.PostureTask(robot, q)], DT, constraints=[hold], engine=engine)
 
     ikn, ikp = build("native"), build("python")
@@ -938,9 +862,9 @@ def test_a_path_of_the_wrong_dimension_raises_the_tasks_message(robots):
     task = qc.PositionTask(robot, gain=1.0)  # no target: the run's reference is used
     ik = qc.IK(robot, [task], DT, engine="native")
     with pytest.raises(ValueError, match="reference path is 2-D"):
-        ik.step(_start(robot), reference=Circle())
+        ik.step(start_configuration(robot), reference=Circle())
     with pytest.raises(ValueError, match="no target"):
-        ik.step(_start(robot))
+        ik.step(start_configuration(robot))
 
 
 _ALLOCATION_RUN = r"""
@@ -948,15 +872,15 @@ import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
 from qpcoord.core import native
 sys.path.insert(0, {tests!r})
-from test_native_step import _kind_levels, _start, DT
+from support.native_ik import kind_levels, start_configuration, DT
 count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
 count.restype = ctypes.c_longlong
 robot = qc.robots.load("panda")
 print("variant", native.variant())
 for kind, method in [(k, m) for m in ("hierarchical", "weighted")
                      for k in ("position", "frame_position", "pose", "orientation", "com")]:
-    q = _start(robot)
-    ik = qc.IK(robot, _kind_levels(robot, kind, q), DT, method=method, engine="native")
+    q = start_configuration(robot)
+    ik = qc.IK(robot, kind_levels(robot, kind, q), DT, method=method, engine="native")
     assert ik._native.weighted == (method == "weighted")
     call = ik._native._solver.step
     pin.computeJointJacobians(robot.model, robot.data, q)
@@ -992,8 +916,8 @@ def test_an_ik_with_the_native_step_pickles(robots, method):
     import pickle
 
     robot = robots["panda"]
-    q = _start(robot)
-    ik = qc.IK(robot, _kind_levels(robot, "pose_plain", q), DT, method=method, engine="native")
+    q = start_configuration(robot)
+    ik = qc.IK(robot, kind_levels(robot, "pose_plain", q), DT, method=method, engine="native")
     v, _ = ik.step(q)
     copy = pickle.loads(pickle.dumps(ik))
     assert copy.engine == "native" and copy._native is not None
