@@ -18,9 +18,9 @@ from support.native_ik import (
     FRAMES,
     KINDS,
     engine_pair,
+    ik_robots,
     kind_levels,
     robot_or_skip,
-    robots,
     start_configuration,
 )
 
@@ -28,6 +28,12 @@ import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.kinematics.frame_tasks import ComTask, FrameTask
 from qpcoord.kinematics.native_step import TaskKind, native_kind
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, qc.Robot]:
+    return ik_robots()
+
 
 needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 

@@ -17,6 +17,7 @@ from support.native_ik import (
     KINDS,
     ee_robot,
     engine_pair,
+    ik_robots,
     kind_levels,
     robot_or_skip,
     start_configuration,
@@ -35,6 +36,12 @@ from qpcoord.kinematics.frame_tasks import (
 from qpcoord.kinematics.native_step import native_kind
 from qpcoord.kinematics.paths import Circle
 from qpcoord.kinematics.tasks import AccelerationLimits, PositionBand
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, qc.Robot]:
+    return ik_robots()
+
 
 # ---------------------------------------------------------------------------------------
 # the rows: native kernels against the tasks' Python _refresh

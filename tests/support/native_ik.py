@@ -16,8 +16,8 @@ DT = 0.01
 FRAMES = {"panda": "panda_hand_tcp", "planar_3r": "tip", "talos": "gripper_right_base_link"}
 
 
-@pytest.fixture(scope="module")
-def robots() -> dict[str, qc.Robot]:
+def ik_robots() -> dict[str, qc.Robot]:
+    """The robots of the native IK tests by name (Talos where example-robot-data has it)."""
     out = {"panda": qc.robots.load("panda"), "planar_3r": qc.robots.load("planar_3r")}
     try:
         out["talos"] = qc.robots.load("talos")
