@@ -66,6 +66,24 @@ def _near_dependent(seed: int, m: int, log_sigma: float, zeros: int) -> qc.Stack
 
 
 @needs_native
+@pytest.mark.xfail(
+    strict=True,
+    reason="open defect: the native level 1 moves x along a direction the movable rule drops "
+    "(singular value 1.8e-11), reaches the box and freezes it there: level 2 is 1937 natively, "
+    "530 on the Python engine (every backend), both 'optimal'",
+)
+def test_a_near_dependent_inequality_level_leaves_the_dropped_directions_free():
+    """The level values of both engines on the near-dependent level of seed 641 (found by the
+    hypothesis search below): a direction within the movable tolerance of the frozen rows is
+    left to the lower levels by both rules, so level 2 (x = 0) keeps x small."""
+    stack = _near_dependent(641, 8, -14.0, 0)
+    native_levels = stack.solve(engine="native").level_residuals
+    python_levels = stack.solve(engine="python").level_residuals
+    # the level values are O(1)-O(1e3) sums of squares of O(1) rows: rounding is ~1e-12 of them
+    np.testing.assert_allclose(native_levels, python_levels, rtol=1e-9, atol=1e-12)
+
+
+@needs_native
 @settings(max_examples=60, deadline=None)
 @given(
     seed=st.integers(0, 2**31 - 1),
