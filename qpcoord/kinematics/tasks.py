@@ -87,7 +87,7 @@ _setattr = object.__setattr__
 
 
 def read_only(a: np.ndarray) -> np.ndarray:
-    """``a`` (an array the task owns, or a view of one) made read-only, returned."""
+    """``a`` (an array the task owns) made read-only, returned."""
     a.flags.writeable = False
     return a
 
@@ -260,7 +260,7 @@ class KinematicTask(ABC):
     def __setattr__(self, name: str, value: Any) -> None:
         if name in PARAMETERS:
             if type(value) is np.ndarray and value.flags.writeable:
-                value = read_only(value.view())
+                value = read_only(value.copy())  # the caller keeps no writable alias
             _setattr(self, name, value)
             if self._bound:
                 self._parameters_written()

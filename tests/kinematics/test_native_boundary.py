@@ -308,6 +308,8 @@ def test_a_parameter_array_written_in_place_raises(engine):
     for array in (hand.target, post.q_ref):
         with pytest.raises(ValueError, match="read-only"):
             array[0] = 0.0
-    post.q_ref = q0 + 0.1  # an assignment is the setter
+    mine = q0 + 0.1
+    post.q_ref = mine  # an assignment is the setter: the task keeps a read-only copy
+    mine[0] = 5.0  # so the caller's array stays the caller's
     assert not post.q_ref.flags.writeable
     np.testing.assert_array_equal(post.q_ref, q0 + 0.1)
