@@ -42,7 +42,10 @@ Each step's rows -- the broad phase, coal's distance for each candidate pair, th
 points and the Jacobian rows -- are computed in one native call (``qpcoord._collision``, on
 coal's C++ library; :mod:`qpcoord.kinematics.collision_kernel`) or, where that module or a
 shape is not available, by the same rows in Python (:attr:`CollisionAvoidance.native` says
-which). Measured on the Panda (2-core Xeon, OpenBLAS single-threaded,
+which). In an :class:`~qpcoord.IK` on the native engine the native rows are computed from
+inside its native step (the kernel handed over as a C entry point,
+``src/native/rows_kernel.h``): no Python runs for them per step. Measured on the Panda
+(2-core Xeon, OpenBLAS single-threaded,
 ``python benchmarks/collision_bench.py --update``, a 5 s random-target run at dt = 0.01 s): one
 :meth:`~CollisionAvoidance.update` -- forward kinematics and Jacobians, then the rows --
 costs a median **≈ 32 µs** with self-collision only (44 pairs) or with one sphere (61 pairs)
@@ -384,6 +387,8 @@ class CollisionAvoidance(KinematicTask):
         Whether a step computes the rows natively (``qpcoord._collision``: the broad phase,
         coal's distances and the rows in one call) or in Python (the same rows; see
         :mod:`qpcoord.kinematics.collision_kernel` for when the native rows are not used).
+        Native rows in an :class:`~qpcoord.IK` on the native engine are computed inside its
+        native step call (no Python per step) when the task's robot is the IK's.
 
     Raises
     ------
@@ -544,7 +549,11 @@ class CollisionAvoidance(KinematicTask):
         if self._kernel is not None:
             self._kernel.bind(self._C, self._lower, self.distances, self.active.view(np.uint8))
         self._kernel_data = robot.data  # the Data whose memory the kernel reads
-        self.native = self._kernel is not None
+
+    @property
+    def native(self) -> bool:
+        """Whether a step computes the rows natively (the class docstring)."""
+        return self._kernel is not None and self.robot.data is self._kernel_data
 
     # -- helpers ------------------------------------------------------------------------
     def effective_gain(self, dt: float) -> float:
@@ -583,7 +592,7 @@ class CollisionAvoidance(KinematicTask):
 
     # -- per step -----------------------------------------------------------------------
     def _refresh(self, q, t, dt, reference) -> Inequality:
-        if self._kernel is not None and self.robot.data is self._kernel_data:
+        if self.native:
             return self._native_refresh(q, dt)
         return self._python_refresh(q, dt)
 

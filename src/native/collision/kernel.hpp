@@ -17,6 +17,7 @@
 #include <coal/distance.h>
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -82,6 +83,14 @@ class Kernel {
   int pairs() const { return static_cast<int>(pairs_.size()); }
   int geometries() const { return static_cast<int>(geoms_.size()); }
   void bind(Output out) { out_ = out; }
+  const Output& output() const { return out_; }
+
+  /// xi_eff = min(xi, (d_i - d_s) / dt) (m/s): the gain used at control period dt (s), the
+  /// largest for which one first-order step cannot cross d_s (CollisionAvoidance's
+  /// effective_gain, the same operations).
+  double effective_gain(double gain, double dt) const {
+    return std::min(gain, (settings_.influence_distance - settings_.min_distance) / dt);
+  }
 
   /// One step at gain xi (m/s, already the effective gain): the rows and distances of every
   /// pair into the bound output. Returns the number of rows written (pairs inside d_i).
