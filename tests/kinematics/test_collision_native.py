@@ -182,12 +182,13 @@ def test_an_ik_step_with_native_rows_is_the_python_rows_step(panda):
 # ---------------------------------------------------------------------------------------
 
 
-def _ik(robot, task, q, engine):
+def _ik(robot, task, q, engine, method="hierarchical"):
     T = robot.frame_pose(q, "panda_hand_tcp")
     T[:3, 3] += [0.1, 0.0, -0.05]
     hand = qc.FrameTask(robot, "panda_hand_tcp", T, gain=5.0)
     posture = qc.PostureTask(robot, q, gain=1.0)
-    return qc.IK(robot, [task, hand, posture], DT, limits="robot", engine=engine)
+    levels = [task, hand, posture]
+    return qc.IK(robot, levels, DT, limits="robot", engine=engine, method=method)
 
 
 def _slot(ik, task):
@@ -259,7 +260,8 @@ def test_native_step_rows_are_the_python_rows_on_random_configurations(panda):
 
 
 @needs_native
-def test_a_closed_loop_gives_the_python_engines_velocities(panda):
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+def test_a_closed_loop_gives_the_python_engines_velocities(panda, method):
     """The native engine (rows inside its step) and the Python engine (rows by the task's
     update) along one loop: the same v at every step, through a gain change and a moved
     obstacle. Each IK has its own task, called at the same configurations: the same coal
@@ -268,7 +270,8 @@ def test_a_closed_loop_gives_the_python_engines_velocities(panda):
     1e-9."""
     q = panda.reference_configuration("default")
     tasks = [_task(panda), _task(panda)]
-    iks = [_ik(panda, t, q, engine) for t, engine in zip(tasks, ("native", "python"), strict=True)]
+    engines = ("native", "python")
+    iks = [_ik(panda, t, q, e, method) for t, e in zip(tasks, engines, strict=True)]
     assert tasks[0] in iks[0]._native.kernel_tasks
     active = 0
     for step in range(60):
