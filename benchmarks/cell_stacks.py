@@ -56,9 +56,10 @@ SPHERE_AHEAD, SPHERE_RADIUS = 0.2, 0.05  # m
 
 
 class Loop:
-    """One IK on a scenario with the cell's additions ``extra`` (a name of the tuples above)."""
+    """One IK on a scenario with the cell's additions ``extra`` (a name of the tuples above);
+    ``sphere``: the sphere's centre (m, default ``SPHERE_AHEAD`` in front of the hand)."""
 
-    def __init__(self, sc: dict, extra: str) -> None:
+    def __init__(self, sc: dict, extra: str, sphere=None) -> None:
         robot = sc["robot"]
         self.q = sc["q0"].copy()
         self.targets = sc["targets"]
@@ -91,7 +92,7 @@ class Loop:
             lower = np.array([-np.inf, -np.inf, T0[2, 3] - TABLE_DROP])
             top.append(qc.PositionBand(robot, lower=lower, gain=1.0 / DT, name="table"))
         if extra in PANDA_STACKS[2:]:
-            centre = T0[:3, 3] + [SPHERE_AHEAD, 0.0, 0.0]
+            centre = T0[:3, 3] + [SPHERE_AHEAD, 0.0, 0.0] if sphere is None else sphere
             top.append(
                 CollisionAvoidance(
                     robot,

@@ -239,11 +239,13 @@ class QpcoordLoop:
 
 class PinkLoop:
     """Pink 4.x on the scenario (daqp). Talos: feet and hand as costs, the CoM as a cost
-    toward its start (Pink has no inequality task: the support polygon cannot be posed)."""
+    toward its start (Pink has no inequality task: the support polygon cannot be posed).
+    ``collision_model`` (a ``pinocchio.GeometryModel`` with its pairs) and ``barriers`` (Pink
+    barriers) add Pink's barrier constraints."""
 
     name = "pink"
 
-    def __init__(self, sc: dict) -> None:
+    def __init__(self, sc: dict, collision_model=None, barriers: tuple = ()) -> None:
         import pink
         import pinocchio as pin
         from pink.limits import ConfigurationLimit, VelocityLimit
@@ -255,7 +257,10 @@ class PinkLoop:
         robot = sc["robot"]
         model = robot.model.copy()
         model.velocityLimit[:] = sc["speed"]
-        self.conf = pink.Configuration(model, model.createData(), sc["q0"].copy())
+        self.conf = pink.Configuration(
+            model, model.createData(), sc["q0"].copy(), collision_model=collision_model
+        )
+        self.barriers = list(barriers) or None
         self.targets, self.rotation = sc["targets"], sc["rotation"]
         oc = 0.0 if self.rotation is None else 1.0
         self.hand = FrameTask(sc["frame"], position_cost=1.0, orientation_cost=oc, gain=HAND_ALPHA)
@@ -282,7 +287,13 @@ class PinkLoop:
         self.goal.translation = self.targets[k]
         self.hand.set_target(self.goal)
         v = self.pink.solve_ik(
-            self.conf, self.tasks, DT, solver="daqp", limits=self.limits, safety_break=False
+            self.conf,
+            self.tasks,
+            DT,
+            solver="daqp",
+            limits=self.limits,
+            barriers=self.barriers,
+            safety_break=False,
         )
         self.conf.integrate_inplace(v, DT)
         t = time.perf_counter() - t0
@@ -294,11 +305,12 @@ class PinkLoop:
 
 
 class PlacoLoop:
-    """PlaCo in its own environment (``benchmarks/placo_side.py`` over a pipe)."""
+    """PlaCo in its own environment (``benchmarks/placo_side.py`` over a pipe); ``extra``:
+    more items of the scenario it is sent (``placo_side.py``'s ``self_collision``)."""
 
     name = "placo"
 
-    def __init__(self, sc: dict, python: Path) -> None:
+    def __init__(self, sc: dict, python: Path, extra: dict | None = None) -> None:
         robot = sc["robot"]
         self.robot = robot
         names = [robot.model.names[j] for j in range(1, robot.model.njoints)]
@@ -321,6 +333,7 @@ class PlacoLoop:
             "q0": dict(zip(joints, qj.tolist(), strict=True)),
             "speed": dict(zip(joints, sc["speed"][6:] if free else sc["speed"], strict=True)),
             "posture_weight": POSTURE_WEIGHT,
+            **(extra or {}),
         }
         if free:
             data["soles"] = list(TALOS_SOLES)

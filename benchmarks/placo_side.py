@@ -1,7 +1,8 @@
 """PlaCo's side of ``benchmarks/ik_peers.py``, run in PlaCo's own environment.
 
 PlaCo 0.10 pins ``pin==3.8.0``, which cannot be installed beside qpcoord's ``pin>=4``: this
-script runs under ``benchmarks/.placo-venv/bin/python`` (created by
+script (also ``benchmarks/collision_bench.py``'s PlaCo side) runs under
+``benchmarks/.placo-venv/bin/python`` (created by
 ``python benchmarks/ik_peers.py --make-placo-venv`` from ``benchmarks/placo-requirements.txt``)
 and talks to the benchmark over its standard input/output, one JSON line per message:
 
@@ -10,6 +11,9 @@ and talks to the benchmark over its standard input/output, one JSON line per mes
    ``rotation`` (3 × 3, or null for a position-only task), ``q0`` (joint name → rad),
    ``speed`` (rad/s, joint name → limit), ``posture_weight``, ``frame``, and for Talos
    ``soles`` and ``polygon`` (the support polygon's corners in the world, m) and ``margin``;
+   optionally ``self_collision``: ``pairs`` (URDF link name pairs), ``margin`` and
+   ``trigger`` (m) of PlaCo's hard self-collision constraint (its mesh distances; without it
+   the robot is loaded with ``Flags.ignore_collisions``);
 2. it answers ``{"ready": true, "joints": [names], "placo": version}``;
 3. then, for every line ``{"k": step}``, it runs one control step (targets of step ``k``,
    ``solver.solve(True)``, ``robot.update_kinematics()``) timed with its own
@@ -28,7 +32,9 @@ from __future__ import annotations
 import json
 import os
 import sys
+import tempfile
 import time
+from importlib.metadata import version
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -44,7 +50,14 @@ def _send(obj: dict) -> None:
 
 def build(sc: dict):
     """The robot, solver and per-step target setter of one scenario."""
-    robot = placo.RobotWrapper(sc["urdf"], placo.Flags.ignore_collisions)
+    collision = sc.get("self_collision")
+    robot = placo.RobotWrapper(sc["urdf"], 0 if collision else placo.Flags.ignore_collisions)
+    if collision:  # these pairs only (PlaCo's default: every pair of links)
+        with tempfile.TemporaryDirectory(prefix="qpcoord-placo-") as folder:
+            path = os.path.join(folder, "collisions.json")
+            with open(path, "w") as f:
+                json.dump(collision["pairs"], f)
+            robot.load_collision_pairs(path)
     for name, value in sc["q0"].items():
         robot.set_joint(name, value)
     if sc["robot"] == "talos":
@@ -66,6 +79,11 @@ def build(sc: dict):
             [np.array(c, dtype=float) for c in sc["polygon"]], sc["margin"]
         )
         com.configure("com", "hard")
+    if collision:
+        avoid = solver.add_avoid_self_collisions_constraint()
+        avoid.self_collisions_margin = collision["margin"]
+        avoid.self_collisions_trigger = collision["trigger"]
+        avoid.configure("self-collision", "hard")
     if sc["rotation"] is None:
         hand = solver.add_position_task(sc["frame"], np.array(sc["targets"][0]))
         hand.configure("hand", "soft", 1.0)
@@ -101,7 +119,7 @@ def main() -> int:
         joints = [robot.get_joint(n) for n in names]
         return (list(robot.state.q[:7]) if free else []) + joints
 
-    _send({"ready": True, "joints": names, "placo": getattr(placo, "__version__", "?")})
+    _send({"ready": True, "joints": names, "placo": version("placo")})
 
     def step(k: int) -> None:
         t0 = time.perf_counter()

@@ -155,8 +155,8 @@ DEFAULT_OUTPUTS = [
      "with every backend"),
     (("hierarchy_published.py", "--resolve", "--steps", "6", "--problem", "soth_sot"), "daqp",
      "| soth_sot | 30 | moved |", "| same |"),
-    (("collision_bench.py", "--steps", "20", "--repeats", "1"), "coal",
-     "| qpcoord IK.step, collision at level 0 |", "`CollisionAvoidance.update` alone"),
+    (("collision_bench.py", "--steps", "20", "--no-pink", "--no-mink", "--no-placo"), "coal",
+     "| qpcoord | band + self + sphere, level 0 |", "`CollisionAvoidance.update` alone"),
 ]  # fmt: skip
 
 

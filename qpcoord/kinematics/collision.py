@@ -35,14 +35,22 @@ are replaced by their **convex hulls** by default (a hull contains its mesh, so 
 the hull is a lower bound of the distance to the mesh): coal's GJK on hulls costs about a
 microsecond a pair, a mesh (BVH) distance tens to hundreds. The SRDF's disabled pairs are
 removed (``pinocchio.removeCollisionPairs``), as are pairs on one joint or on two adjacent
-joints. A broad phase skips the pairs whose bounding spheres are farther apart than ``d_i``
-before calling coal.
+joints. A broad phase skips, before calling coal, the pairs whose bounding spheres are
+farther apart than ``d_i``, and those that cannot have come within ``d_i`` since their last
+exact distance ``d0``: a point of a geometry whose bounding ball (radius ``r``) went from
+rotation ``R0`` and centre ``c0`` to ``R1``, ``c1`` moved at most
+``|c1 − c0| + ‖R1 − R0‖_F r``, so the pair's distance is at least ``d0`` minus both
+geometries' bounds (a pair far from the others then costs no coal call while it moves
+slowly).
 
 Each step's rows -- the broad phase, coal's distance for each candidate pair, the witness
 points and the Jacobian rows -- are computed in one native call (``qpcoord._collision``, on
 coal's C++ library; :mod:`qpcoord.kinematics.collision_kernel`) or, where that module or a
 shape is not available, by the same rows in Python (:attr:`CollisionAvoidance.native` says
-which). Measured on the Panda (2-core Xeon, OpenBLAS single-threaded,
+which). In an :class:`~qpcoord.IK` on the native engine the native rows are computed from
+inside its native step (the kernel handed over as a C entry point,
+``src/native/rows_kernel.h``): no Python runs for them per step. Measured on the Panda
+(2-core Xeon, OpenBLAS single-threaded,
 ``python benchmarks/collision_bench.py --update``, a 5 s random-target run at dt = 0.01 s): one
 :meth:`~CollisionAvoidance.update` -- forward kinematics and Jacobians, then the rows --
 costs a median **≈ 32 µs** with self-collision only (44 pairs) or with one sphere (61 pairs)
@@ -130,6 +138,12 @@ def _pose(value: Any, what: str = "pose") -> np.ndarray:
     return T
 
 
+#: m: the broad phase's last-distance bound subtracts this from a pair's last distance:
+#: coal's GJK stops within its tolerance of the true distance (two runs with other support
+#: hints differ by up to 3e-6 m on the Panda)
+_SKIP_MARGIN = 1e-4
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise ``a × b`` of (m, 3) arrays (np.cross costs ~10 µs of overhead a call)."""
     a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
@@ -177,13 +191,23 @@ def _bounding_sphere(go: Any) -> tuple[np.ndarray, float]:
     """Bounding sphere of a geometry object for the broad phase: centre (m, in its parent
     joint's frame) and radius (m). An unbounded geometry (a half-space or a plane: coal gives
     it an infinite radius and a centre near 1e308) gets the origin and an infinite radius,
-    so every pair with it is always a candidate (``gap = −inf``) instead of ``inf − inf``."""
+    so every pair with it is always a candidate (``gap = −inf``) instead of ``inf − inf``.
+    A convex hull's radius is its farthest vertex from the box's centre (the hull is inside
+    that ball), tighter than the box's half-diagonal: on the Panda's 1 kHz circle with
+    self-collision and a sphere, 7.2 instead of 9.6 pairs a step reach coal, all farther than
+    d_i. A shape's swept-sphere radius is added (coal's box leaves it out; its distances
+    include it)."""
     g = go.geometry
     g.computeLocalAABB()
     centre = np.array(g.aabb_center, dtype=float)
     radius = float(g.aabb_radius)
     if not (np.isfinite(radius) and np.all(np.isfinite(centre)) and np.abs(centre).max() < 1e150):
         return np.zeros(3), np.inf
+    if isinstance(g, coal.Convex) and g.num_points > 0:
+        vertices = np.array(g.points(), dtype=float).reshape(-1, 3)
+        radius = min(radius, float(np.linalg.norm(vertices - centre, axis=1).max()))
+    if isinstance(g, coal.ShapeBase):
+        radius += g.getSweptSphereRadius()
     return go.placement.act(centre), radius
 
 
@@ -377,13 +401,15 @@ class CollisionAvoidance(KinematicTask):
         Geometry names of each row (robot geometry first; obstacles last).
     distances : numpy.ndarray
         Distance of each pair at the last update (m): exact for pairs that passed the broad
-        phase, ``inf`` for pairs it skipped (farther than ``d_i``).
+        phase, ``inf`` for pairs it skipped (proved farther than ``d_i``).
     active : numpy.ndarray of bool
         Rows with a damper at the last update.
     native : bool
         Whether a step computes the rows natively (``qpcoord._collision``: the broad phase,
         coal's distances and the rows in one call) or in Python (the same rows; see
         :mod:`qpcoord.kinematics.collision_kernel` for when the native rows are not used).
+        Native rows in an :class:`~qpcoord.IK` on the native engine are computed inside its
+        native step call (no Python per step) when the task's robot is the IK's.
 
     Raises
     ------
@@ -526,6 +552,13 @@ class CollisionAvoidance(KinematicTask):
         self._upper = np.full(m, np.inf)
         self.distances = np.full(m, np.inf)
         self.active = np.zeros(m, dtype=bool)
+        # per pair, at its last exact distance: that distance and its geometries' world
+        # rotations and ball centres (the broad phase's bound since then: module docstring)
+        self._last_ok = np.zeros(m, dtype=bool)
+        self._last_d = np.zeros(m)
+        self._last_R = np.zeros((m, 2, 3, 3))
+        self._last_c = np.zeros((m, 2, 3))
+        self._geom_rotation = np.array([go.placement.rotation for go in gm.geometryObjects])
         self._P1 = np.zeros((m, 3))
         self._P2 = np.zeros((m, 3))
         self._N = np.zeros((m, 3))
@@ -544,7 +577,11 @@ class CollisionAvoidance(KinematicTask):
         if self._kernel is not None:
             self._kernel.bind(self._C, self._lower, self.distances, self.active.view(np.uint8))
         self._kernel_data = robot.data  # the Data whose memory the kernel reads
-        self.native = self._kernel is not None
+
+    @property
+    def native(self) -> bool:
+        """Whether a step computes the rows natively (the class docstring)."""
+        return self._kernel is not None and self.robot.data is self._kernel_data
 
     # -- helpers ------------------------------------------------------------------------
     def effective_gain(self, dt: float) -> float:
@@ -566,6 +603,7 @@ class CollisionAvoidance(KinematicTask):
         obs.pose = T
         g = self._obstacle_geometry[int(index)]
         self.geometry_model.geometryObjects[g].placement = pin.SE3(T)
+        self._geom_rotation[g] = T[:3, :3]
         self._geom_centre[g] = _bounding_sphere(self.geometry_model.geometryObjects[g])[0]
         if self._kernel is not None:
             self._kernel.set_placement(g, T[:3, :3].copy(), T[:3, 3].copy(), self._geom_centre[g])
@@ -583,7 +621,7 @@ class CollisionAvoidance(KinematicTask):
 
     # -- per step -----------------------------------------------------------------------
     def _refresh(self, q, t, dt, reference) -> Inequality:
-        if self._kernel is not None and self.robot.data is self._kernel_data:
+        if self.native:
             return self._native_refresh(q, dt)
         return self._python_refresh(q, dt)
 
@@ -611,6 +649,23 @@ class CollisionAvoidance(KinematicTask):
         gap = np.sqrt(np.einsum("ij,ij->i", diff, diff)) - self._pair_radius
         d_s, d_i = self.min_distance, self.influence_distance
         candidates = np.flatnonzero(gap < d_i)
+        # the geometries' world rotations (R of a joint without geometry: unused)
+        Rw = np.einsum("gab,gbc->gac", R[gj], self._geom_rotation)
+        known = candidates[self._last_ok[candidates]]
+        if known.size:  # pairs that cannot have come within d_i since their last distance
+            a, b = self._first[known], self._second[known]
+            c0, R0 = self._last_c[known], self._last_R[known]
+            radius = self._geom_radius
+            move_a = (
+                np.linalg.norm(centres[a] - c0[:, 0], axis=1)
+                + np.linalg.norm((Rw[a] - R0[:, 0]).reshape(-1, 9), axis=1) * radius[a]
+            )
+            move_b = (
+                np.linalg.norm(centres[b] - c0[:, 1], axis=1)
+                + np.linalg.norm((Rw[b] - R0[:, 1]).reshape(-1, 9), axis=1) * radius[b]
+            )
+            far = self._last_d[known] - _SKIP_MARGIN - move_a - move_b >= d_i
+            candidates = np.setdiff1d(candidates, known[far], assume_unique=True)
         distances = self.distances
         distances.fill(np.inf)
         C, lower = self._C, self._lower
@@ -627,6 +682,12 @@ class CollisionAvoidance(KinematicTask):
                     P1[k] = res.getNearestPoint1()
                     P2[k] = res.getNearestPoint2()
                     N[k] = res.normal
+            a, b = self._first[candidates], self._second[candidates]
+            bounded = np.isfinite(self._geom_radius)
+            self._last_ok[candidates] = bounded[a] & bounded[b] & np.isfinite(distances[candidates])
+            self._last_d[candidates] = distances[candidates]
+            self._last_R[candidates, 0], self._last_R[candidates, 1] = Rw[a], Rw[b]
+            self._last_c[candidates, 0], self._last_c[candidates, 1] = centres[a], centres[b]
             act = candidates[distances[candidates] < d_i]
             if act.size:
                 n, p1, p2 = N[act], P1[act], P2[act]

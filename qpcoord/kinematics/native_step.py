@@ -24,15 +24,21 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   ``lower``, ``upper``; ``src/native/support_kernels.hpp``: the polygon's hull as
   ``frame_tasks._hull``, its ``edges`` set after each step; collinear contacts or a
   non-finite row make Python raise the task's message),
+- :class:`~qpcoord.kinematics.collision.CollisionAvoidance` whose rows are native
+  (:attr:`~qpcoord.kinematics.collision.CollisionAvoidance.native`): ``qpcoord._collision``'s
+  kernel handed to the step as a C entry point (``src/native/rows_kernel.h``), called inside
+  the native call on the step's kinematics (the broad phase, coal's distances, the rows of
+  the pairs inside the influence distance; a pair outside it a zero row with lower ``-inf``,
+  so the row count is the task's, one per pair),
 - :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
   intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
 
-Every other task (other bands, relative frames, collision, user tasks, a posture over a
-continuous joint) and constant Equality/Inequality rows keep their Python ``_refresh``, run
-before the native call and copied into the same arrays (a hybrid step); any other limit
-(acceleration limits, user limits) makes the whole box Python-computed. With
-``integrate=True`` (:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call
-writes ``q_next`` (:func:`integration_plan`).
+Every other task (other bands, relative frames, collision rows computed in Python, user
+tasks, a posture over a continuous joint) and constant Equality/Inequality rows keep their
+Python ``_refresh``, run before the native call and copied into the same arrays (a hybrid
+step); any other limit (acceleration limits, user limits) makes the whole box
+Python-computed. With ``integrate=True`` (:meth:`IK.step_integrate
+<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
 
 The boundary is data only (``docs/engine.md``, *The IK step*): the native step holds its own
 copy of each kernel's parameters (gain, row weights, target and feed-forward, faces, contact
@@ -65,6 +71,7 @@ from ..core.native_weighted import weighted_info
 from ..core.polish import KKT_TOL
 from ..core.solution import Solution
 from ..core.tasks import TASK_WRITES, Equality, _w
+from .collision import CollisionAvoidance
 from .frame_tasks import (
     ComBand,
     ComTask,
@@ -102,6 +109,9 @@ class TaskKind(IntEnum):
     SUPPORT_POLYGON = 8  #: an inequality (``src/native/support_kernels.hpp``)
     POSITION_BAND = 9  #: an inequality on the default frame's position rows
 
+    # rows another extension module computes (``src/native/rows_kernel.h``), from 32 on
+    COLLISION = 32  #: an inequality: ``qpcoord._collision``'s kernel, called by the step
+
 
 #: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
 KERNELS = {
@@ -114,6 +124,7 @@ KERNELS = {
     ComBand: TaskKind.COM_BAND,
     SupportPolygon: TaskKind.SUPPORT_POLYGON,
     PositionBand: TaskKind.POSITION_BAND,
+    CollisionAvoidance: TaskKind.COLLISION,
 }
 #: The band kernels (Inequality rows).
 _BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON, TaskKind.POSITION_BAND)
@@ -187,11 +198,19 @@ def _push_joint_limits(slot: _Slot) -> None:
     slot.solver.set_joint_limits(slot.k, lim.gain, _f64(lo), _f64(hi))
 
 
+def _push_collision(slot: _Slot) -> None:
+    kernel = slot.task._kernel  # a CollisionAvoidance: its qpcoord._collision kernel
+    if kernel is None:
+        raise ValueError("no native rows")
+    slot.solver.set_rows_kernel(slot.k, kernel.entry())
+
+
 def _push_velocity_limits(slot: _Slot) -> None:
     slot.solver.set_velocity_limits(slot.k, _f64(slot.task.limit))  # a VelocityLimits
 
 
-#: How each kernel's parameters (target, faces, contact points) go to the native step.
+#: How each kernel's parameters (target, faces, contact points; a collision task's kernel)
+#: go to the native step.
 _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.POSITION: _push_position,
     TaskKind.FRAME_POSITION: _push_point,
@@ -203,6 +222,7 @@ _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.COM_BAND: _push_faces,
     TaskKind.POSITION_BAND: _push_faces,
     TaskKind.SUPPORT_POLYGON: _push_polygon,
+    TaskKind.COLLISION: _push_collision,
 }
 
 
@@ -272,6 +292,9 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
     if task.lm_rows is not None:
         return None  # its damping rows read the error its Python refresh records
     kind = KERNELS.get(type(task))
+    if kind == TaskKind.COLLISION:  # its native rows (qpcoord._collision), if it has them
+        assert isinstance(task, CollisionAvoidance)
+        return kind if task.native else None
     if kind == TaskKind.POSITION_BAND and task.robot.frame_id is None:
         return None  # no default frame: its _refresh raises the robot's message
     if kind in _BANDS:
@@ -361,7 +384,7 @@ def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
         return [int(r) for r in task.robot.rows]
     if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
-    if kind in _BANDS:
+    if kind in _BANDS or kind == TaskKind.COLLISION:
         return list(range(task.task.shape[0]))
     assert isinstance(task, (FramePositionTask, FrameTask, OrientationTask, ComTask))
     return [int(r) for r in task.selected_rows]
@@ -489,6 +512,7 @@ class NativeIKStep(NativeHierarchy):
         #: ``reference_at(t, reference)`` is copied in before every step
         self._moving: list[_Slot] = []
         frames: dict[int, int] = {}
+        data = self._data
         i = j = 0
         for B in blocks:
             for t in B.eqs:
@@ -518,6 +542,13 @@ class NativeIKStep(NativeHierarchy):
                 m = u.C.shape[0]
                 owner = owners.get(id(u))
                 kind = None if owner is None else native_kind(owner)
+                if owner is not None and kind == TaskKind.COLLISION and owner.robot.data is data:
+                    # its kernel reads its robot's data: this step's kinematics are there
+                    k = solver.add_task(kind, -1, _selection(owner, kind), j, [])
+                    self._slots.append(_Slot(solver, self._moving, k, kind, owner))
+                    self.kernel_tasks.append(owner)
+                    j += m
+                    continue
                 if owner is not None and kind in _BANDS:  # the bands: natively
                     frame = -1
                     if kind == TaskKind.POSITION_BAND:

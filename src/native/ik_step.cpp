@@ -7,7 +7,9 @@
 // band faces, contact points: set_* setters, which the Python side calls when a task's
 // parameter changed), and its output arrays (bind_rows / bind_band_rows: the task's own
 // A, b or C, lower, upper, bound once). No Python attribute is read and no Python code is
-// called by step(); nothing in it allocates (buffers sized when the kernel is added).
+// called by step(); nothing in it allocates (buffers sized when the kernel is added). A
+// collision kernel's rows come from qpcoord._collision through a C entry point
+// (rows_kernel.h, set_rows_kernel): the same step, no Python either.
 #include "ik_step.hpp"
 
 #include <nanobind/eigen/dense.h>
@@ -25,6 +27,7 @@
 #include "hierarchy.hpp"
 #include "info_dict.hpp"
 #include "integrate.hpp"
+#include "rows_kernel.h"
 #include "spatial.hpp"
 #include "support_kernels.hpp"
 #include "weighted.hpp"
@@ -142,9 +145,16 @@ enum Kind : int {
   kComBand,         ///< ComBand (an inequality: support_kernels.hpp)
   kSupportPolygon,  ///< SupportPolygon (an inequality: support_kernels.hpp)
   kPositionBand,    ///< PositionBand (an inequality on the frame's position rows)
+
+  // Rows computed by another extension module through rows_kernel.h (set_rows_kernel), from
+  // 32 on: apart from the kinds evaluated here.
+  kCollision = 32,  ///< CollisionAvoidance (qpcoord._collision's CollisionKernel.entry())
 };
 
+bool known_kind(int k) { return (k >= kPosition && k <= kPositionBand) || k == kCollision; }
 bool is_band(Kind k) { return k == kComBand || k == kSupportPolygon || k == kPositionBand; }
+/// the kinds that write an Inequality (C, lower, upper): the bands and the external rows
+bool is_inequality(Kind k) { return is_band(k) || k == kCollision; }
 /// the bands on the CoM (their rows read data.com and data.Jcom)
 bool on_com(Kind k) { return k == kComBand || k == kSupportPolygon; }
 
@@ -194,6 +204,9 @@ struct Kernel {
   int given = 0;
   static constexpr int kReady = 15;
   int band = -1;  ///< a band kind: its index in IKStep::bands_
+  /// kCollision: the producer's capsule (kept alive) and its entry point (set_rows_kernel)
+  nb::object rows_capsule;
+  const qpcoord_rows_kernel* rows_kernel = nullptr;
 };
 
 struct Limit {
@@ -270,20 +283,23 @@ class IKStep {
   /// SupportPolygon's frame slots. Returns the kernel's index (the setters' k); it runs once
   /// its gain, weights, target and outputs are set.
   int add_task(int kind, int frame, std::vector<int> sel, int row0, std::vector<int> qidx) {
-    if (kind < kPosition || kind > kPositionBand)
-      throw nb::value_error("add_task: unknown kind");
+    if (!known_kind(kind)) throw nb::value_error("add_task: unknown kind");
     const bool band = is_band(static_cast<Kind>(kind));
+    const bool ineq = is_inequality(static_cast<Kind>(kind));
     const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
-    if ((kind != kPosture && !com) && (frame < 0 || frame >= (int)frames_.size()))
+    if ((kind != kPosture && kind != kCollision && !com) &&
+        (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
     if (com && !com_.p) throw nb::value_error("add_task: set_com first");
     if (!bound_) throw nb::value_error("add_task: bind first");
     const int rows = static_cast<int>(sel.size());
-    if (rows < 1 || row0 < 0 || row0 + rows > static_cast<int>(out_[band ? 2 : 0].shape(0)))
+    if (rows < 1 || row0 < 0 || row0 + rows > static_cast<int>(out_[ineq ? 2 : 0].shape(0)))
       throw nb::value_error("add_task: rows out of range");
+    const int sel_end = kind == kPosture ? nv_
+                        : on_com(static_cast<Kind>(kind)) || kind == kCollision ? rows
+                                                                                : 6;
     for (int s : sel)
-      if (s < 0 || s >= (kind == kPosture ? nv_ : on_com(static_cast<Kind>(kind)) ? rows : 6))
-        throw nb::value_error("add_task: row selection out of range");
+      if (s < 0 || s >= sel_end) throw nb::value_error("add_task: row selection out of range");
     if (kind == kPositionBand && rows > 3)
       throw nb::value_error("add_task: a PositionBand has at most 3 rows");
     if (band) {  // sel: the rows 0..rows-1 (a PositionBand: the axes); qidx: a
@@ -341,7 +357,7 @@ class IKStep {
   /// rotation is one (the task's set_target).
   void set_target(int k, nb::handle target, nb::handle velocity) {
     Kernel& K = kernel(k, "set_target");
-    if (is_band(K.kind)) throw nb::value_error("set_target: a band kernel (set_faces)");
+    if (is_inequality(K.kind)) throw nb::value_error("set_target: a band kernel (set_faces)");
     int nvel = 3;
     switch (K.kind) {
       case kPose:
@@ -412,7 +428,8 @@ class IKStep {
   /// (rows,), unweighted: the stacked rows get sqrt(weight) x them).
   void bind_rows(int k, RowsArr A, RowsArr b) {
     Kernel& K = kernel(k, "bind_rows");
-    if (is_band(K.kind)) throw nb::value_error("bind_rows: a band kernel (bind_band_rows)");
+    if (is_inequality(K.kind))
+      throw nb::value_error("bind_rows: a band kernel (bind_band_rows)");
     if (A.ndim() != 2 || A.shape(0) != (size_t)K.rows || A.shape(1) != (size_t)nv_ ||
         b.ndim() != 1 || b.shape(0) != (size_t)K.rows)
       throw nb::value_error("bind_rows: A must be (rows, nv), b (rows,)");
@@ -425,7 +442,7 @@ class IKStep {
   /// upper (rows,)).
   void bind_band_rows(int k, RowsArr C, RowsArr lower, RowsArr upper) {
     Kernel& K = kernel(k, "bind_band_rows");
-    if (!is_band(K.kind)) throw nb::value_error("bind_band_rows: not a band kernel");
+    if (!is_inequality(K.kind)) throw nb::value_error("bind_band_rows: not a band kernel");
     const size_t r = K.rows;
     if (C.ndim() != 2 || C.shape(0) != r || C.shape(1) != (size_t)nv_ || lower.ndim() != 1 ||
         lower.shape(0) != r || upper.ndim() != 1 || upper.shape(0) != r)
@@ -434,6 +451,26 @@ class IKStep {
     K.lower.set(std::move(lower));
     K.upper.set(std::move(upper));
     K.given |= 8;
+  }
+
+  /// A COLLISION kernel's rows: `capsule`, a PyCapsule named QPCOORD_ROWS_KERNEL_CAPSULE
+  /// (rows_kernel.h; qpcoord._collision's CollisionKernel.entry()) of the kernel's rows x nv
+  /// rows, held until another is set. It stands for the kernel's target (set_target).
+  void set_rows_kernel(int k, nb::handle capsule) {
+    Kernel& K = kernel(k, "set_rows_kernel");
+    if (K.kind != kCollision) throw nb::value_error("set_rows_kernel: not a COLLISION kernel");
+    auto* e = static_cast<const qpcoord_rows_kernel*>(
+        PyCapsule_GetPointer(capsule.ptr(), QPCOORD_ROWS_KERNEL_CAPSULE));
+    if (!e) {
+      PyErr_Clear();
+      throw nb::value_error("set_rows_kernel: expected a capsule named "
+                            QPCOORD_ROWS_KERNEL_CAPSULE);
+    }
+    if (e->rows != K.rows || e->cols != nv_ || !e->update || !e->C || !e->lower)
+      throw nb::value_error("set_rows_kernel: the rows kernel's shape is not (rows, nv)");
+    K.rows_capsule = nb::borrow(capsule);
+    K.rows_kernel = e;
+    K.given |= 4;
   }
 
   /// The hull edges of a SUPPORT_POLYGON kernel at the last step (its task's `edges`).
@@ -662,6 +699,8 @@ class IKStep {
       if ((rc = view(*v))) return rc;
     for (const Frame& f : frames_)
       if ((rc = view(f.Rj)) || (rc = view(f.pj))) return rc;
+    for (const Kernel& k : kernels_)
+      if (k.rows_capsule.is_valid() && (rc = visit(k.rows_capsule.ptr(), arg))) return rc;
     return 0;
   }
 
@@ -779,6 +818,17 @@ class IKStep {
   /// unweighted, as stacked).
   bool run_band(const Kernel& k, support::Band& b);
 
+  /// Row r of inequality kernel k: its Inequality's C row (pin coordinates in src, mapped
+  /// here), lower l, upper u, and the stacked row k.row0 + r (C unweighted, as stacked; its
+  /// sqrt(weight)). False: a NaN or an empty interval, or a non-finite row.
+  template <class Src>
+  bool put_row(const Kernel& k, int r, const Src& src, double l, double u);
+
+  /// A COLLISION kernel: its producer's update (rows_kernel.h), then its rows copied into
+  /// the Inequality's C, lower, upper and the stacked rows (put_row). False: the update
+  /// failed or a row is not usable (the task's _refresh raises its message).
+  bool run_rows(const Kernel& k);
+
   /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
   void box(const double* q, int64_t qs);
 
@@ -851,7 +901,8 @@ void bind_ik_step(nb::module_& m) {
       .value("POSE_SPLIT", kPoseSplit)
       .value("COM_BAND", kComBand)
       .value("SUPPORT_POLYGON", kSupportPolygon)
-      .value("POSITION_BAND", kPositionBand);
+      .value("POSITION_BAND", kPositionBand)
+      .value("COLLISION", kCollision);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
@@ -901,6 +952,9 @@ void bind_ik_step(nb::module_& m) {
            "Kernel k has no usable target: step() returns IK_TASK_DATA + k until one is set.")
       .def("forget_limit", &IKStep::forget_limit, nb::arg("i"),
            "Limit i has no usable data: step() returns BAD_INPUT until it is set again.")
+      .def("set_rows_kernel", &IKStep::set_rows_kernel, nb::arg("k"), nb::arg("capsule"),
+           "A COLLISION kernel's rows: a capsule of src/native/rows_kernel.h "
+           "(qpcoord._collision's CollisionKernel.entry()), called at every step.")
       .def("edges", &IKStep::edges, nb::arg("k"),
            "A SUPPORT_POLYGON kernel's hull edges at the last step.")
       .def("add_joint_limits", &IKStep::add_joint_limits, nb::arg("qi"), nb::arg("vi"),

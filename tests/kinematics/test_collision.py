@@ -14,6 +14,7 @@ from qpcoord.kinematics.collision import (
     CollisionAvoidance,
     Obstacle,
     Sphere,
+    _bounding_sphere,
     collision_geometry,
 )
 
@@ -325,3 +326,21 @@ def test_a_half_space_wall_stops_the_hand(panda):
         d_min = min(d_min, float(ca.compute_distances(q).min()))
     assert d_min >= ca.min_distance - TOL  # never closer than d_s to the wall
     assert panda.frame_pose(q, HAND)[0, 3] < wall_x  # the hand stayed in front of it
+
+
+def test_the_broad_phase_sphere_holds_the_geometry(panda):
+    """The broad-phase ball of a shape contains it: a swept-sphere radius is added (coal's
+    box leaves it out, its distances include it); a hull's ball reaches its farthest vertex
+    from the box's centre (the Panda's base: 0.136 m against the box's half-diagonal 0.163)."""
+    g = coal.Sphere(0.05)
+    g.setSweptSphereRadius(0.01)
+    centre, radius = _bounding_sphere(pin.GeometryObject("s", 0, pin.SE3.Identity(), g))
+    assert radius == pytest.approx(0.06, abs=1e-15) and np.all(centre == 0)
+    go = collision_geometry(panda).geometryObjects[0]  # panda_link0_0, a hull
+    hull = go.geometry
+    centre, radius = _bounding_sphere(go)
+    vertices = np.array([go.placement.act(v) for v in np.array(hull.points())])
+    far = np.linalg.norm(vertices - centre, axis=1).max()
+    # the same distances computed in another frame: equal to the placement's rounding
+    assert radius == pytest.approx(far, abs=1e-12)
+    assert radius < hull.aabb_radius - 0.02

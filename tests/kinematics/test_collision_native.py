@@ -13,10 +13,14 @@ import os
 import coal
 import numpy as np
 import pytest
+from support.counting_malloc import run_counting_malloc
+from support.native_engine import needs_native
 
 import qpcoord as qc
+from qpcoord.core import native
 from qpcoord.kinematics import collision_kernel
 from qpcoord.kinematics.collision import Box, Capsule, CollisionAvoidance, Obstacle, Sphere
+from qpcoord.kinematics.native_step import TaskKind, native_kind
 
 BUILT = collision_kernel._collision is not None
 if not BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
@@ -53,8 +57,10 @@ def _task(robot, **kw):
 
 
 def _cold(task):
-    """Both paths' coal caches anew (the kernel rebuilt from the task's data)."""
+    """Both paths' coal caches and last distances anew (the kernel rebuilt from the task's
+    data)."""
     task.geometry_data = task.geometry_model.createData()
+    task._last_ok[:] = False
     robot = task.robot
     support = task._support
     columns = [[int(c) for c in np.flatnonzero(support[j])] for j in range(robot.model.njoints)]
@@ -159,9 +165,9 @@ def test_meshes_and_swept_spheres_use_the_python_rows(panda):
 def test_an_ik_step_with_native_rows_is_the_python_rows_step(panda):
     q = panda.reference_configuration("default")
     steps = []
-    for native in (True, False):
+    for with_kernel in (True, False):
         task = _task(panda)
-        if not native:
+        if not with_kernel:
             task._kernel = None
         T = panda.frame_pose(q, "panda_hand_tcp")
         T[:3, 3] += [0.1, 0.0, -0.05]
@@ -171,3 +177,236 @@ def test_an_ik_step_with_native_rows_is_the_python_rows_step(panda):
         steps.append(v)
     # one GJK history each (a first call: cold caches): the same QP data to rounding
     np.testing.assert_allclose(steps[0], steps[1], rtol=0, atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------
+# the rows inside the native IK step (src/native/rows_kernel.h)
+# ---------------------------------------------------------------------------------------
+
+
+def _ik(robot, task, q, engine, method="hierarchical"):
+    T = robot.frame_pose(q, "panda_hand_tcp")
+    T[:3, 3] += [0.1, 0.0, -0.05]
+    hand = qc.FrameTask(robot, "panda_hand_tcp", T, gain=5.0)
+    posture = qc.PostureTask(robot, q, gain=1.0)
+    levels = [task, hand, posture]
+    return qc.IK(robot, levels, DT, limits="robot", engine=engine, method=method)
+
+
+def _slot(ik, task):
+    (k,) = [s.k for s in ik._native._slots if s.task is task]
+    return k
+
+
+@needs_native
+def test_the_native_ik_step_computes_the_collision_rows(panda):
+    task = _task(panda)
+    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    assert task.native
+    assert native_kind(task) == TaskKind.COLLISION and task in ik._native.kernel_tasks
+    assert not ik._native._hybrid  # no Python task: the step's short path
+    task._kernel = None  # no kernel: the Python rows, in the hybrid step
+    assert not task.native and native_kind(task) is None
+    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    assert task in ik._native._python_tasks
+
+
+@needs_native
+def test_set_rows_kernel_checks_its_kernel_and_capsule(panda):
+    task = _task(panda)
+    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    solver, k = ik._native._solver, _slot(ik, task)
+    hand = next(s.k for s in ik._native._slots if isinstance(s.task, qc.FrameTask))
+    with pytest.raises(ValueError, match="not a COLLISION kernel"):
+        solver.set_rows_kernel(hand, task._kernel.entry())
+    with pytest.raises(ValueError, match="expected a capsule named qpcoord.rows_kernel"):
+        solver.set_rows_kernel(k, task._kernel)
+    other = CollisionAvoidance(panda, obstacles=[Sphere([0.5, 0.0, 0.5], 0.05)])
+    with pytest.raises(ValueError, match="shape is not"):  # another row count
+        solver.set_rows_kernel(k, other._kernel.entry())
+
+
+@needs_native
+def test_native_step_rows_are_the_python_rows_on_random_configurations(panda):
+    """The rows the native step writes (the task's Inequality and the stacked rows) are the
+    task's Python rows, from cold caches (the module docstring), on random configurations."""
+    task = _task(panda)
+    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    k = _slot(ik, task)
+    P = ik._native.P
+    m = len(task.pairs)
+    assert P.C.shape[0] == m  # the collision rows are the stack's only inequalities
+    n_active = 0
+    for q in _configurations(panda, 40, seed=5):
+        _cold(task)
+        ik._native._solver.set_rows_kernel(k, task._kernel.entry())
+        ik.step(q)
+        C2, lo2, hi2 = task.task.C.copy(), task.task.lower.copy(), task.task.upper.copy()
+        d2, a2 = task.distances.copy(), task.active.copy()
+        np.testing.assert_array_equal(P.C, C2)
+        np.testing.assert_array_equal(P.clo, lo2)
+        assert np.all(P.chi == np.inf) and np.all(hi2 == np.inf)
+        _cold(task)
+        C1, lo1, d1, a1 = _rows(task, task._python_refresh, q)
+        np.testing.assert_array_equal(a1, a2)
+        # tolerances: as test_native_rows_are_the_python_rows_on_random_configurations
+        tol = 1e-12
+        f = np.isfinite(d1)
+        np.testing.assert_array_equal(f, np.isfinite(d2))
+        np.testing.assert_allclose(d2[f], d1[f], rtol=0, atol=tol)
+        np.testing.assert_allclose(C2, C1, rtol=0, atol=tol * max(1.0, np.abs(C1).max()))
+        np.testing.assert_allclose(lo2[a1], lo1[a1], rtol=0, atol=tol / DT)
+        assert np.all(lo2[~a2] == -np.inf) and not C2[~a2].any()
+        n_active += int(a1.sum())
+    assert n_active > 60  # the configurations reach the dampers
+
+
+@needs_native
+@pytest.mark.parametrize("method", ["hierarchical", "weighted"])
+def test_a_closed_loop_gives_the_python_engines_velocities(panda, method):
+    """The native engine (rows inside its step) and the Python engine (rows by the task's
+    update) along one loop: the same v at every step, through a gain change and a moved
+    obstacle. Each IK has its own task, called at the same configurations: the same coal
+    history, so the same rows. The engines then solve the same QP: v (~1 rad/s) agrees to
+    double rounding times the stack's conditioning, within the native-vs-Python step tests'
+    1e-9."""
+    q = panda.reference_configuration("default")
+    tasks = [_task(panda), _task(panda)]
+    engines = ("native", "python")
+    iks = [_ik(panda, t, q, e, method) for t, e in zip(tasks, engines, strict=True)]
+    assert tasks[0] in iks[0]._native.kernel_tasks
+    active = 0
+    for step in range(60):
+        if step == 20:
+            for t in tasks:
+                t.gain = 0.2
+        if step == 40:
+            p = panda.frame_pose(q, "panda_hand_tcp")[:3, 3]
+            for t in tasks:
+                t.set_obstacle_pose(0, p + [0.0, 0.0, 0.07])
+        vn, _ = iks[0].step(q)
+        vp, _ = iks[1].step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        np.testing.assert_array_equal(tasks[0].active, tasks[1].active)
+        active += int(tasks[0].active.sum())
+        q = panda.integrate(q, vn, DT)
+    assert active > 100
+
+
+def _loop_configurations(robot, steps):
+    """The configurations of a native closed loop on ``_task``'s stack (hand driven into the
+    obstacles)."""
+    q = robot.reference_configuration("default")
+    ik = _ik(robot, _task(robot), q, None)
+    out = []
+    for _ in range(steps):
+        v, _ = ik.step(q)
+        q = robot.integrate(q, v, DT)
+        out.append(q.copy())
+    return out
+
+
+@pytest.mark.parametrize("path", ["native", "python"])
+def test_skipped_pairs_are_farther_than_the_influence_distance(panda, path):
+    """Along a loop, each path on its own history: a pair without a distance (skipped by the
+    spheres or by its last distance minus the motion since) is at d >= d_i (coal's distance
+    at that configuration), every pair below d_i - 1e-5 m has a row (1e-5 m: above GJK's
+    stopping error, 3e-6 m between two runs here); and the last-distance bound spares coal
+    calls: on this loop (1 cm a step among seven obstacles) about a quarter of those of a
+    kernel without history (a new one at each step), which makes them all."""
+    task = _task(panda)
+    if path == "python":
+        task._kernel = None
+    fresh = _task(panda)
+    warm = cold = 0
+    for q in _loop_configurations(panda, 60):
+        task._refresh(q, 0.0, DT, None)
+        exact = task.compute_distances(q)
+        skipped = np.isinf(task.distances)
+        assert np.all(exact[skipped] >= task.influence_distance)
+        assert np.all(task.active[exact < task.influence_distance - 1e-5])
+        warm += int((~skipped).sum())
+        _cold(fresh)
+        fresh._native_refresh(q, DT)
+        cold += int(np.isfinite(fresh.distances).sum())
+    assert warm < 0.9 * cold, (warm, cold)
+
+
+@needs_native
+def test_a_task_on_another_robots_data_keeps_its_python_refresh(panda):
+    """A task whose robot is not the IK's (``with_frame``: its own Pinocchio data) is not
+    read by the step's kernel call (its kernel reads that other data)."""
+    other = panda.with_frame("panda_link7")
+    task = _task(other)
+    q = panda.reference_configuration("default")
+    ik = _ik(panda, task, q, "native")
+    assert task.native and task in ik._native._python_tasks
+    ref = _ik(panda, _task(other), q, "python")
+    np.testing.assert_allclose(ik.step(q)[0], ref.step(q)[0], rtol=0, atol=1e-9)
+
+
+@needs_native
+def test_a_nan_gain_raises_the_python_engines_message(panda):
+    q = panda.reference_configuration("default")
+    messages = []
+    for engine in ("native", "python"):
+        task = _task(panda)
+        ik = _ik(panda, task, q, engine)
+        ik.step(q)
+        task.gain = float("nan")
+        with pytest.raises(ValueError) as info:
+            ik.step(q)
+        messages.append(str(info.value))
+        task.gain = 0.5  # usable again
+        ik.step(q)
+    assert messages[0] == messages[1] and "NaN" in messages[0]
+
+
+_ALLOCATION_RUN = r"""
+import ctypes, sys
+import numpy as np, pinocchio as pin, qpcoord as qc
+from qpcoord.core import native
+sys.path.insert(0, {tests!r})
+from test_collision_native import _configurations, _ik, _task
+count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
+count.restype = ctypes.c_longlong
+robot = qc.robots.load("panda")
+print("variant", native.variant())
+task = _task(robot)
+ik = _ik(robot, task, robot.reference_configuration("default"), "native")
+assert task in ik._native.kernel_tasks
+# a twin task's kernel alone, called at the same configurations: the same coal calls
+call, kernel = ik._native._solver.step, _task(robot)._kernel
+qs = list(_configurations(robot, 8, seed=3))
+for q in qs:  # first calls: every configuration once
+    pin.computeJointJacobians(robot.model, robot.data, q)
+    call(q, False, 10.0)
+    kernel.update(0.5)
+extra, active = 0, 0
+for _ in range(20):
+    for q in qs:
+        pin.computeJointJacobians(robot.model, robot.data, q)
+        before = count()
+        call(q, True, 10.0)
+        in_step = count() - before
+        active += int(task.active.sum())
+        before = count()
+        kernel.update(0.5)
+        extra += in_step - (count() - before)
+print("extra", extra, active > 0)
+"""
+
+
+@pytest.mark.engine_independent
+@needs_native
+@pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
+def test_the_native_step_with_collision_rows_allocates_only_coals_own(tmp_path, build):
+    """The native call with the collision kernel allocates nothing of its own after its first
+    calls: exactly what a twin task's kernel alone allocates at the same configurations (the
+    same coal calls; kinematics computed outside the counted calls), on configurations that
+    activate dampers. That is not
+    zero: coal 3.0.3's COAL_ASSERT builds its exception object (a std::string) even when the
+    check holds, in GJK::reset and the witness-point extraction of every distance call. Each
+    build of the extension."""
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
+    assert out.split() == ["variant", build, "extra", "0", "True"], out

@@ -5,7 +5,9 @@
 // views of its pinocchio.Data, kept alive by the kernel. Built only where coal's C++ library
 // (the libcoal wheel) is found; qpcoord/kinematics/collision.py uses the Python rows
 // otherwise. COAL_VERSION tells which coal it was built against: a different coal at run
-// time is not used (its ABI may differ).
+// time is not used (its ABI may differ). CollisionKernel.entry() hands the kernel to the native
+// IK step (qpcoord._native) as a plain C entry point (rows_kernel.h): the step then computes
+// the rows itself, with no Python between them.
 #include <coal/config.hh>
 #include <coal/shape/convex.h>
 #include <coal/shape/geometric_shapes.h>
@@ -14,8 +16,11 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include <cmath>
+#include <memory>
 #include <string>
 
+#include "../rows_kernel.h"
 #include "kernel.hpp"
 
 namespace nb = nanobind;
@@ -108,6 +113,31 @@ struct PyKernel {
   int joints = 0, nv = 0;
 };
 
+/// The pointer of CollisionKernel.entry()'s capsule: the C struct, then the Python kernel
+/// object it keeps alive (ctx points into it).
+struct Entry {
+  qpcoord_rows_kernel c;
+  PyObject* owner;
+};
+
+/// rows_kernel.h's update: one Kernel::update at the effective gain. Never throws (a coal
+/// exception: -1, the step then asks Python, whose update raises it).
+int entry_update(void* ctx, double gain, double dt) {
+  auto* kernel = static_cast<Kernel*>(ctx);
+  if (!(dt > 0.0) || std::isnan(gain)) return -1;
+  try {
+    return kernel->update(kernel->effective_gain(gain, dt));
+  } catch (...) {
+    return -1;
+  }
+}
+
+void entry_release(void* p) noexcept {
+  auto* e = static_cast<Entry*>(p);
+  Py_XDECREF(e->owner);  // a capsule's destructor runs with the GIL held
+  delete e;
+}
+
 }  // namespace
 
 NB_MODULE(_collision, m) {
@@ -191,5 +221,22 @@ NB_MODULE(_collision, m) {
              self.kernel->bind({C.data(), lower.data(), distance.data(), active.data()});
            })
       .def("update", [](PyKernel& self, double gain) { return self.kernel->update(gain); },
-           nb::arg("gain"));
+           nb::arg("gain"))
+      .def(
+          "entry",
+          [](PyKernel& self) {
+            const Output& out = self.kernel->output();
+            if (!out.C) throw nb::value_error("entry: bind the output arrays first");
+            auto e = std::make_unique<Entry>(Entry{
+                {self.kernel.get(), &entry_update, out.C, out.lower, self.kernel->pairs(),
+                 self.nv},
+                nullptr});
+            nb::capsule capsule(e.get(), QPCOORD_ROWS_KERNEL_CAPSULE, &entry_release);
+            e.release()->owner = nb::find(&self).inc_ref().ptr();
+            return capsule;
+          },
+          "The kernel as a C entry point for the native IK step: a capsule named "
+          "QPCOORD_ROWS_KERNEL_CAPSULE holding a qpcoord_rows_kernel (src/native/"
+          "rows_kernel.h) whose update(ctx, gain, dt) is update(min(gain, (d_i - d_s) / dt)) "
+          "into the bound C and lower; it keeps this kernel alive.");
 }

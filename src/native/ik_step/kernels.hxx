@@ -1,6 +1,6 @@
 // qpcoord native engine, IKStep: the task kernels -- each task kind's error, Jacobian and rows
 // from the kernel's parameters (run_kernel: the one place a kind is evaluated), the support
-// bands (run_band) and the limits' box (box).
+// bands (run_band), the rows another module computes (run_rows) and the limits' box (box).
 // Part of ik_step.cpp's translation unit (included there, after the IKStep class).
 namespace qpcoord {
 namespace {
@@ -9,6 +9,7 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
   const double gain = k.gain;
   const int rows = k.rows;
   if (k.band >= 0) return run_band(k, bands_[k.band]);
+  if (k.kind == kCollision) return run_rows(k);
   switch (k.kind) {
     case kPosition: {  // e = y - y*, J the frame's linear rows; b = dy*/dt - K e
       const Frame& f = frames_[k.frame];
@@ -123,30 +124,31 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
   }
 }
 
+template <class Src>
+bool IKStep::put_row(const Kernel& k, int r, const Src& src, double l, double u) {
+  if (std::isnan(l) || std::isnan(u) || l == kInf || u == -kInf || l > u) return false;
+  if (mapped_) {
+    row_.noalias() = M_.transpose() * src.transpose();
+  } else {
+    row_ = src.transpose();
+  }
+  if (!row_.allFinite()) return false;
+  const size_t i = static_cast<size_t>(k.row0 + r);
+  double* C = out_[2].data() + i * nv_;
+  for (int j = 0; j < nv_; ++j) {
+    k.A(r, j) = row_[j];
+    C[j] = row_[j];
+  }
+  k.lower[r] = out_[3].data()[i] = l;
+  k.upper[r] = out_[4].data()[i] = u;
+  out_[5].data()[i] = k.sw[r];
+  return true;
+}
+
 bool IKStep::run_band(const Kernel& k, support::Band& b) {
   const int rows = k.rows;
   const double gain = k.gain;
-  double* C = out_[2].data() + static_cast<size_t>(k.row0) * nv_;
-  double* lo = out_[3].data() + k.row0;
-  double* hi = out_[4].data() + k.row0;
-  double* sw = out_[5].data() + k.row0;
-  auto put = [&](int r, const auto& src, double l, double u) {
-    if (std::isnan(l) || std::isnan(u) || l == kInf || u == -kInf || l > u) return false;
-    if (mapped_) {
-      row_.noalias() = M_.transpose() * src.transpose();
-    } else {
-      row_ = src.transpose();
-    }
-    if (!row_.allFinite()) return false;
-    for (int j = 0; j < nv_; ++j) {
-      k.A(r, j) = row_[j];
-      C[static_cast<size_t>(r) * nv_ + j] = row_[j];
-    }
-    k.lower[r] = lo[r] = l;
-    k.upper[r] = hi[r] = u;
-    sw[r] = k.sw[r];
-    return true;
-  };
+  auto put = [&](int r, const auto& src, double l, double u) { return put_row(k, r, src, l, u); };
   if (k.kind == kPositionBand) {  // y the frame's position rows, C their Jacobian
     const Frame& f = frames_[k.frame];
     frame_jacobian(f);
@@ -185,6 +187,16 @@ bool IKStep::run_band(const Kernel& k, support::Band& b) {
     return false;  // collinear contacts: the task's _refresh raises its message
   for (int r = 0; r < rows; ++r)
     if (!put(r, b.J.row(r), -kInf, b.ub[r])) return false;
+  return true;
+}
+
+bool IKStep::run_rows(const Kernel& k) {
+  const qpcoord_rows_kernel& e = *k.rows_kernel;
+  if (e.update(e.ctx, k.gain, dt_) < 0) return false;
+  for (int r = 0; r < k.rows; ++r) {
+    const Eigen::Map<const Eigen::RowVectorXd> src(e.C + static_cast<size_t>(r) * nv_, nv_);
+    if (!put_row(k, r, src, e.lower[r], kInf)) return false;
+  }
   return true;
 }
 
