@@ -132,14 +132,15 @@ def test_bad_position_limits_is_named(panda):
 
 
 def test_joint_limit_gain_is_a_velocity_damper(panda):
-    # without acceleration limits, JointLimits(gain=K < 1) is a velocity damper: the box
-    # v ≤ (K/dt)(q_max − q) makes the approach exponential at rate K/dt, so the joint never
-    # hits its limit and decelerates at most (K/dt)·v_max (here 50/s · 2.175 rad/s)
+    # without acceleration limits, JointLimits(gain=K < 1, band=inf) is a velocity damper:
+    # the box v ≤ (K/dt)(q_max − q) makes the approach exponential at rate K/dt, so the
+    # joint never hits its limit and decelerates at most (K/dt)·v_max (here 50/s · 2.175
+    # rad/s)
     q0 = _panda_start(panda)
     K = 0.05
 
     def limits(robot):
-        return [qc.JointLimits(robot, gain=K), qc.VelocityLimits(robot)]
+        return [qc.JointLimits(robot, gain=K, band=np.inf), qc.VelocityLimits(robot)]
 
     vs, qs = _drive_into_limit(panda, q0, 0, 1.0, limits, "python", 2500)
     acc = np.diff(vs[:, 0]) / DT
