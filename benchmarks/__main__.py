@@ -85,14 +85,7 @@ TABLES: dict[str, Table] = {
     "native_ik_step": Table("native_ik_step.py", (), ("--steps", "30", "--runs", "2")),
     "collision_bench": Table("collision_bench.py", (), ("--steps", "30")),
     "cell_stacks": Table("cell_stacks.py", (), ("--steps", "30", "--runs", "1")),
-    "edges": Table(
-        "edges.py",
-        (),
-        (
-            "--steps",
-            "600",
-        ),
-    ),
+    "edges": Table("edges.py", ("--pairs", "300"), ("--steps", "600", "--pairs", "5")),
     "mpc_bench": Table("mpc_bench.py", (), ("--quick", "--steps", "600"), "ddl.md"),
     "ddl_bench": Table("ddl_bench.py", (), ("--quick",), "ddl.md"),
     "ddl_margin": Table("ddl_margin.py", (), ("--quick",), "ddl.md"),

@@ -15,12 +15,14 @@ Scenarios:
 - ``elbow``: UR10 ``tool0`` position target near its base (reachable with the elbow at
   2.60 rad), deadbeat task over a posture, dt = 10 ms: a one-step joint-limit box lands the
   elbow on its limit at π, where the folded arm is singular; rows: the IK's default limits
-  (``JointLimits`` gain 0.5, a damper), the one-step box (gain 1), and the default with
+  (``JointLimits`` gain 0.5 within its band of 0.2 ``v_max dt``, full speed outside), the
+  one-step box (gain 1), the damper at every distance (``band=inf``), and the default with
   ``AccelerationLimits(50)``; Pink with its default limits (``ConfigurationLimit`` gain 0.5)
   and with its ``AccelerationLimit(50)``; mink with its ``ConfigurationLimit`` (gain 0.95)
   and with gain 0.5, both beside its ``VelocityLimit`` (the robot's speed limits).
 - ``held``: UR10 from ``HELD_Q0`` toward ``HELD_TARGET``: the deadbeat task rests the elbow
-  on its limit at −π, 0.19 m from the target; rows with and without ``lm_damping=1``.
+  on its limit at −π, 0.19 m from the target; rows with and without ``lm_damping=1``, and
+  with ``AccelerationLimits(50)``.
 - ``limit``: Panda joint 1 pulled 1 rad past its upper limit by a posture (gain 20/s; Pink
   gain 0.02 per step), dt = 1 ms, 2 000 steps, acceleration limit 50 rad/s² (qpcoord:
   ``AccelerationLimits(robot, 50)`` beside the default limits, with and without its braking
@@ -44,7 +46,7 @@ Run::
 
     python benchmarks/edges.py            # all scenarios (a few seconds)
     python benchmarks/edges.py --steps 500
-    python benchmarks/edges.py --pairs 300   # and the random elbow-limit pairs (minutes)
+    python benchmarks/edges.py --pairs 300   # and the random elbow-limit pairs (a minute)
 """
 
 from __future__ import annotations
@@ -64,7 +66,7 @@ import pinocchio as pin  # noqa: E402
 from _table import markdown, preamble  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
-from qpcoord.kinematics.tasks import AccelerationLimits  # noqa: E402
+from qpcoord.kinematics.tasks import LIMIT_BAND, AccelerationLimits  # noqa: E402
 
 Q_UR = np.array([0.0, -1.2, 1.6, -1.9, -1.57, 0.0])
 FRAME = "tool0"
@@ -381,10 +383,15 @@ def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> tuple[Rows, list
     """UR10 ``tool0`` position target near the base: a deadbeat task drives the elbow onto
     its limit at π, where the arm is folded (the Jacobian's smallest singular value 0.002)."""
     variants = (
-        ('qpcoord limits="robot" (JointLimits gain 0.5)', _robot_limits, 0.0),
+        ('qpcoord limits="robot" (JointLimits gain 0.5, band 0.2)', _robot_limits, 0.0),
         (
             "qpcoord JointLimits(gain=1)",
             lambda r: [qc.JointLimits(r, gain=1.0), qc.VelocityLimits(r)],
+            0.0,
+        ),
+        (
+            "qpcoord JointLimits(band=inf)",
+            lambda r: [qc.JointLimits(r, band=np.inf), qc.VelocityLimits(r)],
             0.0,
         ),
         (
@@ -401,14 +408,19 @@ def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> tuple[Rows, list
     return _position_rows(q0, ELBOW_TARGET, steps, dt, variants, pink, mink)
 
 
-def held(steps: int, dt: float = 0.01) -> tuple[Rows, list[str]]:
+def held(steps: int, dt: float = 0.01, a_max: float = 50.0) -> tuple[Rows, list[str]]:
     """UR10 ``tool0`` position target 0.19 m from where a deadbeat task rests the elbow on
     its limit at −π: the other joints alternate at their speed limits whatever the
-    position-limit gain (0.5 or 1: the same numbers); the task's ``lm_damping`` settles them
-    there."""
+    position-limit gain or band (the same numbers); the task's ``lm_damping`` settles them
+    there, acceleration limits let the arm reach the target."""
     variants = (
         ('qpcoord limits="robot"', _robot_limits, 0.0),  # the same with JointLimits(gain=1)
         ('qpcoord limits="robot", lm_damping=1', _robot_limits, 1.0),
+        (
+            f"qpcoord + AccelerationLimits({a_max:g})",
+            lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
+            0.0,
+        ),
     )
     pink = (("pink", None, 0.0), ("pink lm_damping=1", None, 1.0))
     mink = (("mink", None, 0.0), ("mink lm_damping=1", None, 1.0))
@@ -420,7 +432,9 @@ def pairs(count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1) -> str
     elbow toward its limit at ±π (start elbow ±[2.2, 3.0] rad, target reached with the elbow
     at ±[2.4, 3.12] rad, the same sign), per position-limit gain ``K``, task gain and task
     ``lm_damping``: how many runs still reverse more than 10 times a second over the last
-    500 steps, and how many reach the target to 1e-6 m."""
+    500 steps, and how many reach the target to 1e-6 m. ``JointLimits`` rows: the one-step
+    box (gain 1), the damper at every distance (gain 0.5, ``band=inf``) and the default (gain
+    0.5 within a band of 0.2 ``v_max dt``)."""
     ur10 = qc.robots.load("ur10")
     rng = np.random.default_rng(seed)
     cases = []
@@ -433,23 +447,24 @@ def pairs(count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1) -> str
     out = [
         f"### UR10, {count} random elbow-limit pairs ({steps} steps, dt 10 ms, seed {seed})",
         "",
-        "| JointLimits gain | task gain (1/s) | task lm_damping | runs reversing > 10/s "
+        "| JointLimits gain | band | task gain (1/s) | task lm_damping | runs reversing > 10/s "
         "| runs reaching 1e-6 m |",
-        "|---:|---:|---:|---:|---:|",
+        "|---:|---:|---:|---:|---:|---:|",
     ]
-    variants = [(g, K, 0.0) for g in (100.0, 50.0, 30.0) for K in (1.0, 0.8, 0.5)]
-    variants.append((100.0, 0.5, 1.0))
-    for task_gain, K, lm in variants:
+    limit_rows = ((1.0, LIMIT_BAND), (0.5, np.inf), (0.5, LIMIT_BAND))
+    variants = [(g, K, band, 0.0) for g in (100.0, 50.0, 30.0) for K, band in limit_rows]
+    variants.append((100.0, 0.5, LIMIT_BAND, 1.0))
+    for task_gain, K, band, lm in variants:
         chatter = reached = 0
         for q0, target in cases:
             task = qc.FramePositionTask(ur10, FRAME, target, gain=task_gain, lm_damping=lm)
-            limits = [qc.JointLimits(ur10, gain=K), qc.VelocityLimits(ur10)]
+            limits = [qc.JointLimits(ur10, gain=K, band=band), qc.VelocityLimits(ur10)]
             ik = qc.IK(ur10, [task, qc.PostureTask(ur10, q0)], dt=dt, limits=limits)
             vs, qs = _qc_loop(ur10, q0, ik, steps)
             err = float(np.linalg.norm(task.compute_error(qs[-1])))
             chatter += metrics(vs, dt, ur10, qs, err)["reversals/s"] > 10
             reached += err < 1e-6
-        out.append(f"| {K:g} | {task_gain:g} | {lm:g} | {chatter} | {reached} |")
+        out.append(f"| {K:g} | {band:g} | {task_gain:g} | {lm:g} | {chatter} | {reached} |")
     return "\n".join(out)
 
 
@@ -480,7 +495,7 @@ def main(argv=None) -> int:
         "--pairs",
         type=int,
         default=0,
-        help="also run this many random UR10 elbow-limit pairs per gain (300: ~3 min)",
+        help="also run this many random UR10 elbow-limit pairs per gain (300: ~1 min)",
     )
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.ERROR)  # Pink logs configurations past a limit

@@ -197,7 +197,11 @@ class QpcoordLoop:
                 self.hand = qc.FrameTask(robot, sc["frame"], self._pose(0), gain=hg)
             posture = qc.PostureTask(robot, self.q, gain=gain)
             levels = [self.hand, posture]
-            limits = [qc.JointLimits(robot, gain=0.5), qc.VelocityLimits(robot, sc["speed"])]
+            # Pink's ConfigurationLimit(model, 0.5): the damper at every distance
+            limits = [
+                qc.JointLimits(robot, gain=0.5, band=np.inf),
+                qc.VelocityLimits(robot, sc["speed"]),
+            ]
         solver = "daqp" if engine == "python" else None
         self.ik = qc.IK(
             robot, levels, DT, limits=limits, method=method, solver=solver, engine=engine

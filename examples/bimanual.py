@@ -27,8 +27,8 @@ hands kept apart by ``SelfCollisionBarrier`` over the same 16 pairs and hulls
 (``γ = ξ/(d_i − d_s)`` = 5/s, its default safe-displacement cost).
 
 Measured (full run, 2 s a phase, 2 shared cores, Python engine; a run prints its own):
-relative pose error in the second half of ``carry`` ≤ 5.8e-5 (log6 norm, m and rad)
-while the left hand moves (5.9e-3 from its target at the end, gain 2/s);
+relative pose error in the second half of ``carry`` ≤ 5.5e-5 (6.3e-6 at its end; log6
+norm, m and rad) while the left hand moves (5.9e-3 from its target at the end, gain 2/s);
 the hands' hulls never closer than ``d_s`` (``squeeze`` ends at ``d_s`` + 2e-5 m, the
 relative error left at 0.14); feet drift 1.1e-3 m during ``grasp`` (the arms swing at their
 speed limits: a first-order Euler step at dt = 0.01 s, corrected at the next step by the

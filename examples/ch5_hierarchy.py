@@ -42,7 +42,7 @@ limit, max hand error):
 run                                                max |q̇|/v    limit excess  hand error
 =================================================  ===========  ============  ==========
 formula, EE + posture                              16.4         0.59 rad (q7)  1.2e-4 m
-hierarchical ``limits="robot"``, EE + posture      1.00         0             2.6e-4 m
+hierarchical ``limits="robot"``, EE + posture      1.00         0             2.5e-4 m
 formula, EE + JLA + posture                        14.1         0             1.8e-4 m
 hierarchical ``limits="robot"``, EE + JLA + post.  1.00         0             1.5e-4 m
 hierarchical, 0.5 rad/s, EE + JLA + posture        0.23         0             2.6e-2 m
@@ -52,7 +52,7 @@ The formula has no way to respect a bound: without level 2 it drives joint 7 0.5
 past its limit toward the posture's 3.5 rad, and with level 2 the barrier keeps every
 joint inside but the speeds reach 14 times the Panda's limits (the cubic ``2α²d‖d‖²`` of a
 far posture). The QP with ``limits="robot"`` keeps both, with hand errors of the same
-order (1.5–2.6e-4 m against the formula's 1.2–1.8e-4 m, Euler at 2 ms).
+order (1.5–2.5e-4 m against the formula's 1.2–1.8e-4 m, Euler at 2 ms).
 With 0.5 rad/s bounds (0.23 of the Panda's) the hand can no longer follow the 0.31 m/s
 circle: the bounds are hard, above every level, and the hand error grows to 2.6e-2 m.
 

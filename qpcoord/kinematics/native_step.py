@@ -194,8 +194,13 @@ def _push_polygon(slot: _Slot) -> None:
 def _push_joint_limits(slot: _Slot) -> None:
     lim = slot.task  # a JointLimits
     qi = lim.q_index
-    lo, hi = (lim.lower, lim.upper) if qi is None else (lim.lower[qi], lim.upper[qi])
-    slot.solver.set_joint_limits(slot.k, lim.gain, _f64(lo), _f64(hi))
+    if qi is None:  # all of q (q and v share one layout); an unlimited joint's band unused
+        lo, hi = lim.lower, lim.upper
+        band = np.full(lim.lower.shape, np.inf)
+        band[lim.joints] = lim.band_rate
+    else:
+        lo, hi, band = lim.lower[qi], lim.upper[qi], lim.band_rate
+    slot.solver.set_joint_limits(slot.k, lim.gain, _f64(lo), _f64(hi), _f64(band))
 
 
 def _push_collision(slot: _Slot) -> None:

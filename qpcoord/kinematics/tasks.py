@@ -896,19 +896,37 @@ class Limit(KinematicTask):
         return self.task._assign(lo, hi)
 
 
-class JointLimits(Limit):
-    """Joint position limits at velocity level: ``K (q_min − q)/dt ≤ v ≤ K (q_max − q)/dt``.
+#: Default width of :class:`JointLimits`' damped band, as a fraction of the distance a joint
+#: covers in one control step at its speed limit (dimensionless): ``b = band · v_max · dt``.
+LIMIT_BAND = 0.2
 
-    One Euler step ``q + dt v`` covers at most the fraction ``K`` of a joint's distance to
-    its limit. The default ``K = 0.5`` is a velocity damper: the joint approaches its limit
-    exponentially at rate ``K/dt`` (1/s), decelerating at most ``(K/dt) v_max``. With
-    ``K = 1`` a joint lands exactly on its limit in one step from any distance; a fast task
-    (gain near ``1/dt``) at a singular configuration on that limit (a folded arm's elbow) can
-    then lock into a two-step cycle on and off the limit at the speed limits, which ``K < 1``
-    leaves (UR10 in ``benchmarks/edges.py``: 499 velocity reversals/s with ``K = 1``, none
-    with 0.5). A fast task held on a limit by a target it cannot reach from there is settled
-    by its ``lm_damping``. A configuration already outside a limit gets a box that moves it
-    back by at least the fraction ``K`` of its excess per step.
+
+class JointLimits(Limit):
+    """Joint position limits at velocity level: one Euler step ``q + dt v`` may cover
+    ``s(D) = max(K D, D − (1 − K) b)`` of a joint's distance ``D`` to its limit.
+
+    A full step toward the limit leaves ``(1 − K) min(D, b)``. Within the band ``b = band ·
+    v_max · dt`` (by default a fifth of a step at the joint's speed limit ``v_max``) the box
+    is a velocity damper: each step covers the fraction ``K`` of the distance, so the joint
+    approaches its limit exponentially at rate ``K/dt`` (1/s) and never crosses it. From
+    farther away the joint may go at full speed and stops ``(1 − K) b`` short of the limit:
+    it reaches its limit as fast as with the one-step box ``v ≤ (q_max − q)/dt`` (``K =
+    1``) to within the band, and where it lands near the limit still depends on where it
+    comes from. That dependence is what keeps a fast task (gain near ``1/dt``) at a singular
+    configuration on the limit (a folded arm's elbow) out of a two-step cycle on and off the
+    limit at the speed limits: the one-step box lands a joint exactly on its limit from
+    anywhere and locks that cycle (UR10 in ``benchmarks/edges.py``: 499 velocity
+    reversals/s with ``K = 1``, none with the default). A fast task held on a limit by a
+    target it cannot reach from there is settled by its ``lm_damping``. A configuration
+    already outside a limit gets a box that moves it back by the fraction ``K`` of its
+    excess per step.
+
+    With ``band=inf`` the box is the damper ``v ≤ (K/dt)(q_max − q)`` at every distance and
+    the joint decelerates at most ``(K/dt) v_max``; with a finite band it may stop from its
+    speed limit within one step at the band's edge, as with ``K = 1``
+    (:class:`AccelerationLimits` bound that deceleration). ``v_max`` is the robot's
+    ``velocity_limit``; a joint without one (infinite, or Pinocchio's ``1.8e308``) has an
+    infinite band.
 
     Only joints with one position variable per velocity (revolute, prismatic; ``q`` index
     ``model.joints[j].idx_q`` ↔ ``v`` index ``idx_v``) are limited. A free-flyer, planar,
@@ -919,15 +937,23 @@ class JointLimits(Limit):
     ----------
     robot : Robot
     gain : float
-        ``K`` in ``(0, 1]`` (dimensionless: the fraction of the distance to the limit one step
-        may cover), default 0.5.
+        ``K`` in ``(0, 1]`` (dimensionless: the fraction of its distance to the limit a joint
+        within the band may cover in one step), default 0.5. ``K = 1``: the one-step box
+        ``v ≤ (q_max − q)/dt`` at every distance.
     lower, upper : array_like, shape (nq,), optional
         Limits (rad, m) in ``q``'s layout; default the robot's.
+    band : float
+        The damped band's width as a fraction of a step at the speed limit (dimensionless,
+        ``≥ 0``; default :data:`LIMIT_BAND` = 0.2): ``b = band · v_max · dt``. ``0``: the
+        one-step box at every gain; ``inf``: the damper at every distance.
 
     Attributes
     ----------
     joints : ndarray of int
         Velocity indices of the limited joints.
+    band_rate : ndarray
+        ``band · v_max`` of each limited joint (rad/s, m/s; order of :attr:`joints`,
+        ``inf`` without a speed limit): the band is ``band_rate · dt``.
     """
 
     def __init__(
@@ -936,11 +962,20 @@ class JointLimits(Limit):
         gain: float = 0.5,
         lower: ArrayLike | None = None,
         upper: ArrayLike | None = None,
+        band: float = LIMIT_BAND,
     ) -> None:
         super().__init__(robot, "joint limits")
         self.gain = _gain(gain)
         if not 0 < self.gain <= 1:
             raise ValueError(f"JointLimits gain must be in (0, 1], got {gain!r}")
+        if (
+            isinstance(band, bool)
+            or not isinstance(band, (int, float, np.integer, np.floating))
+            or not band >= 0
+        ):
+            raise ValueError(f"JointLimits band must be a number >= 0 (or inf), got {band!r}")
+        #: the band's width as a fraction of a step at the speed limit (dimensionless)
+        self.band = float(band)
         lower = robot.lower if lower is None else robot._limit(lower, None, "lower", -1)
         upper = robot.upper if upper is None else robot._limit(upper, None, "upper", 1)
         if np.any(lower > upper):
@@ -962,6 +997,9 @@ class JointLimits(Limit):
             self.joints = self._v_index.copy()
             self._lower_q = self.lower[self._q_index]
             self._upper_q = self.upper[self._q_index]
+        speed = _unlimited(robot.velocity_limit)[self.joints]
+        with np.errstate(invalid="ignore"):  # 0 · inf (no band, no speed limit): no band
+            self.band_rate = np.nan_to_num(self.band * speed, nan=0.0, posinf=np.inf)
 
     @property
     def q_index(self) -> np.ndarray | None:
@@ -981,16 +1019,20 @@ class JointLimits(Limit):
         return self._upper_q - qq, qq - self._lower_q
 
     def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        k = self.gain / dt
-        if self._q_index is None:
-            # lower ≤ upper, so lo ≤ hi; outside a limit both have the sign that moves back
-            return k * (self.lower - q), k * (self.upper - q)
+        up, down = self.distances(q)
         nv = self.robot.nv
         lo, hi = np.full(nv, -np.inf), np.full(nv, np.inf)
-        qq = q[self._q_index]
-        lo[self._v_index] = k * (self._lower_q - qq)
-        hi[self._v_index] = k * (self._upper_q - qq)
+        lo[self.joints] = -self._step(down, dt) / dt
+        hi[self.joints] = self._step(up, dt) / dt
         return lo, hi
+
+    def _step(self, D: np.ndarray, dt: float) -> np.ndarray:
+        """The longest step ``max(K D, D − (1 − K) b)`` toward a limit at distance ``D`` (rad,
+        m; order of :attr:`joints`); outside (``D < 0``) the step back ``K D``."""
+        K = self.gain
+        with np.errstate(invalid="ignore"):
+            # fmax: inf − inf (no limit, no speed limit) is NaN, and the inf K D is the step
+            return np.fmax(K * D, D - (1.0 - K) * (self.band_rate * dt))
 
 
 class VelocityLimits(Limit):
@@ -1039,7 +1081,9 @@ class AccelerationLimits(Limit):
     box nearer to 0 is kept, as :meth:`~qpcoord.IK.refresh` does: outside a limit the joint
     moves back with the acceleration limit.
 
-    The braking rows are computed for the gain of ``position_limits``: give the IK's own
+    The braking rows are computed for the gain of ``position_limits``, as for its damper
+    ``v ≤ (K/dt)(q_max − q)`` at every distance (a :class:`JointLimits` box is never smaller,
+    whatever its band, so the braking sequence keeps it): give the IK's own
     :class:`JointLimits` when it has another gain or other bounds, so that the joint also
     slows down for that box (braking rows for ``K = 1`` beside a damper ``K = 0.5`` let the
     joint decelerate at up to 60 rad/s² for ``a_max = 50``, dt = 1 ms).

@@ -69,7 +69,8 @@ class _QpcoordLoop:
         self.dt = dt
         self.ee = PositionTask(robot, gain=ALPHA / dt)
         posture = PostureTask(robot, q0, gain=ALPHA / dt)
-        limits = [JointLimits(robot, gain=0.5), VelocityLimits(robot, speed)]
+        # Pink's ConfigurationLimit(model, 0.5): the damper at every distance
+        limits = [JointLimits(robot, gain=0.5, band=np.inf), VelocityLimits(robot, speed)]
         self.ik = IK(robot, [self.ee, posture], dt, limits=limits, method=method, solver=solver)
 
     def step(self, t: float, target) -> np.ndarray:

@@ -214,6 +214,7 @@ struct Limit {
   double gain = 1.0;      ///< JointLimits: K
   Vec lower, upper;       ///< JointLimits: q layout (all of q, or the indexed entries);
                           ///< VelocityLimits: the limit in upper
+  Vec band_rate;          ///< JointLimits: band / dt per entry (rad/s, m/s; inf: none)
   std::vector<int> qi, vi;
   bool indexed = false;
   bool given = false;  ///< set_joint_limits / set_velocity_limits called
@@ -494,20 +495,25 @@ class IKStep {
     const int n = L.indexed ? static_cast<int>(qi.size()) : nv_;
     L.lower.setZero(n);
     L.upper.setZero(n);
+    L.band_rate.setZero(n);
     L.qi = std::move(qi);
     L.vi = std::move(vi);
     limits_.push_back(std::move(L));
     return static_cast<int>(limits_.size()) - 1;
   }
 
-  /// JointLimits i's gain K (in (0, 1]) and limits (rad, m; +-inf for no limit) in the
+  /// JointLimits i's gain K (in (0, 1]), limits (rad, m; +-inf for no limit) and band rates
+  /// (JointLimits.band_rate: the band is band_rate * dt; rad/s, m/s, inf for none) in the
   /// layout of add_joint_limits (the indexed entries, or all of q).
-  void set_joint_limits(int i, double gain, nb::handle lower, nb::handle upper) {
+  void set_joint_limits(int i, double gain, nb::handle lower, nb::handle upper,
+                        nb::handle band_rate) {
     Limit& L = limit(i, "set_joint_limits");
     if (L.velocity) throw nb::value_error("set_joint_limits: a velocity limit");
     if (!std::isfinite(gain)) throw nb::value_error("set_joint_limits: gain not finite");
     read_values(lower, L.lower.size(), 0, L.lower.data(), "set_joint_limits: lower", true);
     read_values(upper, L.upper.size(), 0, L.upper.data(), "set_joint_limits: upper", true);
+    read_values(band_rate, L.band_rate.size(), 0, L.band_rate.data(),
+                "set_joint_limits: band_rate", true);
     L.gain = gain;
     L.given = true;
   }
@@ -961,8 +967,9 @@ void bind_ik_step(nb::module_& m) {
            "A JointLimits box over the q indices qi -> v indices vi (both empty: all of q); "
            "its index for set_joint_limits.")
       .def("set_joint_limits", &IKStep::set_joint_limits, nb::arg("i"), nb::arg("gain"),
-           nb::arg("lower"), nb::arg("upper"),
-           "JointLimits i's gain and limits (float64, the layout of add_joint_limits).")
+           nb::arg("lower"), nb::arg("upper"), nb::arg("band_rate"),
+           "JointLimits i's gain, limits and band rates (float64, the layout of "
+           "add_joint_limits).")
       .def("add_velocity_limits", &IKStep::add_velocity_limits,
            "A VelocityLimits box; its index for set_velocity_limits.")
       .def("set_velocity_limits", &IKStep::set_velocity_limits, nb::arg("i"), nb::arg("limit"),

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import qpcoord as qc
+from qpcoord.kinematics.tasks import LIMIT_BAND
 
 
 @pytest.fixture
@@ -246,17 +247,40 @@ def test_one_form_task_wrong_number_of_columns(planar, form):
 def test_joint_limits_box(panda, gain, dt):
     limits = qc.JointLimits(panda, gain=gain)
     lo, hi = limits.box(PANDA_Q, dt)
-    # the same difference, product and quotient in any order: each side is within three
-    # roundings of the exact value, so the two agree to 6 eps relative (measured: 1 ulp)
-    rel = 6 * np.finfo(float).eps
-    np.testing.assert_allclose(lo, gain * (panda.lower - PANDA_Q) / dt, rtol=rel)
-    np.testing.assert_allclose(hi, gain * (panda.upper - PANDA_Q) / dt, rtol=rel)
+    # a step may cover max(K D, D - (1 - K) b) of a distance D, band b = LIMIT_BAND v_max dt;
+    # the same differences, products and quotient in another order: each side is within a
+    # few roundings of the exact value (D - (1 - K) b > D/2 here: no cancellation), so the
+    # two agree to 8 eps relative
+    band = LIMIT_BAND * panda.velocity_limit * dt
+
+    def step(D):
+        return np.maximum(gain * D, D - (1 - gain) * band)
+
+    rel = 8 * np.finfo(float).eps
+    np.testing.assert_allclose(lo, -step(PANDA_Q - panda.lower) / dt, rtol=rel)
+    np.testing.assert_allclose(hi, step(panda.upper - PANDA_Q) / dt, rtol=rel)
     assert np.all(lo < 0) and np.all(hi > 0)
     ineq = limits.update(PANDA_Q, dt=dt)
     assert isinstance(ineq, qc.Inequality) and ineq is limits.task
     np.testing.assert_array_equal(ineq.C, np.eye(7))
     np.testing.assert_array_equal(ineq.lower, lo)
     np.testing.assert_array_equal(ineq.upper, hi)
+
+
+def test_joint_limits_band(panda):
+    # a full step toward the limit leaves (1 - K) min(D, b): from beyond the band the joint
+    # stops (1 - K) b short of its limit (the one-step box K = 1: on it), within the band
+    # it covers the fraction K
+    dt, K = 0.01, 0.5
+    b = LIMIT_BAND * panda.velocity_limit[0] * dt  # 4.35e-3 rad
+    for D, left in [(0.3, (1 - K) * b), (2 * b, (1 - K) * b), (b, (1 - K) * b), (b / 3, b / 6)]:
+        q = PANDA_Q.copy()
+        q[0] = panda.upper[0] - D
+        _, hi = qc.JointLimits(panda, gain=K).box(q, dt)
+        # D - dt hi: the rounding of a difference of numbers of size D (~1e-16 rad)
+        assert panda.upper[0] - (q[0] + dt * hi[0]) == pytest.approx(left, abs=1e-15)
+        _, hi = qc.JointLimits(panda, gain=1.0).box(q, dt)
+        assert panda.upper[0] - (q[0] + dt * hi[0]) == pytest.approx(0.0, abs=1e-15)
 
 
 def test_joint_limits_custom_limits(planar):
@@ -289,6 +313,23 @@ def test_joint_limits_outside_a_limit_pushes_back(planar):
 def test_joint_limits_gain_outside_zero_one(planar, gain):
     with pytest.raises(ValueError, match="gain must be"):
         qc.JointLimits(planar, gain=gain)
+
+
+@pytest.mark.parametrize("band", [-0.1, np.nan, True, "wide"])
+def test_joint_limits_bad_band(planar, band):
+    with pytest.raises(ValueError, match="band must be"):
+        qc.JointLimits(planar, band=band)
+
+
+def test_joint_limits_band_ends(panda):
+    # band 0: the one-step box at any gain; band inf: the damper K D at every distance
+    dt, D = 0.01, 0.3
+    q = PANDA_Q.copy()
+    q[0] = panda.upper[0] - D
+    _, hi = qc.JointLimits(panda, gain=0.5, band=0.0).box(q, dt)
+    assert hi[0] == pytest.approx(D / dt, rel=1e-15)
+    _, hi = qc.JointLimits(panda, gain=0.5, band=np.inf).box(q, dt)
+    assert hi[0] == pytest.approx(0.5 * D / dt, rel=1e-15)
 
 
 def test_joint_limits_lower_above_upper(planar):

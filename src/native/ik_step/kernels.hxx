@@ -213,17 +213,23 @@ void IKStep::box(const double* q, int64_t qs) {
         hi2_[i] = L.upper[i];
       }
     } else {
-      const double k = L.gain / dt_;
+      // JointLimits._step, in the Python engine's operations: the longest step toward a
+      // limit at distance D, max(K D, D - (1 - K) b) with the band b = band_rate dt (K D
+      // outside, D < 0; fmax: the inf K D where inf - inf is NaN)
+      const double K = L.gain, dt = dt_;
+      auto step = [K, dt](double D, double band_rate) {
+        return std::fmax(K * D, D - (1.0 - K) * (band_rate * dt));
+      };
       if (L.indexed) {
         for (size_t i = 0; i < L.qi.size(); ++i) {
           const double qq = q[L.qi[i] * qs];
-          row_[L.vi[i]] = k * (L.lower[i] - qq);
-          hi2_[L.vi[i]] = k * (L.upper[i] - qq);
+          row_[L.vi[i]] = -step(qq - L.lower[i], L.band_rate[i]) / dt;
+          hi2_[L.vi[i]] = step(L.upper[i] - qq, L.band_rate[i]) / dt;
         }
       } else {
         for (int i = 0; i < nv_; ++i) {
-          row_[i] = k * (L.lower[i] - q[i * qs]);
-          hi2_[i] = k * (L.upper[i] - q[i * qs]);
+          row_[i] = -step(q[i * qs] - L.lower[i], L.band_rate[i]) / dt;
+          hi2_[i] = step(L.upper[i] - q[i * qs], L.band_rate[i]) / dt;
         }
       }
     }
