@@ -24,13 +24,15 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   ``lower``, ``upper``; ``src/native/support_kernels.hpp``: the polygon's hull as
   ``frame_tasks._hull``, its ``edges`` set after each step; collinear contacts or a
   non-finite row make Python raise the task's message),
-- :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
-  intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
+- :class:`~qpcoord.JointLimits`, :class:`~qpcoord.VelocityLimits` and
+  :class:`~qpcoord.AccelerationLimits` with its braking before the position limits
+  (``src/native/braking.hpp``; its ``v_prev`` array is bound once and read at every step),
+  intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
 Every other task (other bands, relative frames, collision, user tasks, a posture over a
 continuous joint) and constant Equality/Inequality rows keep their Python ``_refresh``, run
 before the native call and copied into the same arrays (a hybrid step); any other limit
-(acceleration limits, user limits) makes the whole box Python-computed. With
+(a user's :class:`~qpcoord.Limit`) makes the whole box Python-computed. With
 ``integrate=True`` (:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call
 writes ``q_next`` (:func:`integration_plan`).
 
@@ -75,9 +77,12 @@ from .frame_tasks import (
 )
 from .robot import Robot
 from .tasks import (
+    LM_ERROR_FLOOR,
+    AccelerationLimits,
     JointLimits,
     KinematicTask,
     Limit,
+    LMDamping,
     PositionBand,
     PositionTask,
     PostureTask,
@@ -101,6 +106,8 @@ class TaskKind(IntEnum):
     COM_BAND = 7  #: an inequality (``src/native/support_kernels.hpp``)
     SUPPORT_POLYGON = 8  #: an inequality (``src/native/support_kernels.hpp``)
     POSITION_BAND = 9  #: an inequality on the default frame's position rows
+    # -- the damping kernels (a task's rows from another kernel's error) --
+    LM_DAMPING = 10  #: a task's Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`)
 
 
 #: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
@@ -115,6 +122,8 @@ KERNELS = {
     SupportPolygon: TaskKind.SUPPORT_POLYGON,
     PositionBand: TaskKind.POSITION_BAND,
 }
+#: The limits with a kernel (exact classes: a subclass's box is Python's).
+_NATIVE_LIMITS = (JointLimits, VelocityLimits, AccelerationLimits)
 #: The band kernels (Inequality rows).
 _BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON, TaskKind.POSITION_BAND)
 
@@ -180,6 +189,11 @@ def _push_polygon(slot: _Slot) -> None:
     slot.solver.set_contacts(slot.k, _f64(task.contact_points), task.margin)
 
 
+def _push_lm_damping(slot: _Slot) -> None:
+    owner = slot.task.owner  # an LMDamping's task: its lm_damping, read at each assignment
+    slot.solver.set_lm_damping(slot.k, float(owner.lm_damping), LM_ERROR_FLOOR**2)
+
+
 def _push_joint_limits(slot: _Slot) -> None:
     lim = slot.task  # a JointLimits
     qi = lim.q_index
@@ -189,6 +203,23 @@ def _push_joint_limits(slot: _Slot) -> None:
 
 def _push_velocity_limits(slot: _Slot) -> None:
     slot.solver.set_velocity_limits(slot.k, _f64(slot.task.limit))  # a VelocityLimits
+
+
+def _push_acceleration_limits(slot: _Slot) -> None:
+    lim = slot.task  # an AccelerationLimits: its v_prev array is bound (add_acceleration_limits)
+    P = lim.position_limits
+    if P is None:
+        gain, lo, hi = 1.0, np.zeros(0), np.zeros(0)
+    else:
+        qi = _braked_q_index(P)
+        gain, lo, hi = P.gain, _f64(P.lower[qi]), _f64(P.upper[qi])
+    slot.solver.set_acceleration_limits(slot.k, _f64(lim.limit), gain, lo, hi)
+
+
+def _braked_q_index(P: JointLimits) -> np.ndarray:
+    """The q index of each joint of ``P.joints`` (its v index where q and v share one
+    layout)."""
+    return P.joints if P.q_index is None else P.q_index
 
 
 #: How each kernel's parameters (target, faces, contact points) go to the native step.
@@ -203,6 +234,7 @@ _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.COM_BAND: _push_faces,
     TaskKind.POSITION_BAND: _push_faces,
     TaskKind.SUPPORT_POLYGON: _push_polygon,
+    TaskKind.LM_DAMPING: _push_lm_damping,
 }
 
 
@@ -212,17 +244,28 @@ class _Slot:
     ``_bound``, until the step is dropped), and what of the task the step holds (its gain;
     its weights and output arrays, by identity)."""
 
-    __slots__ = ("k", "kind", "task", "solver", "moving", "push", "gain", "arrays", "set_target")
+    __slots__ = (
+        "k", "kind", "task", "solver", "moving", "push", "gain", "arrays", "set_target", "watched",
+    )  # fmt: skip
 
     def __init__(
         self, solver: Any, moving: list[_Slot], k: int, kind: TaskKind | None, task: Any
     ) -> None:
         self.k, self.kind, self.solver, self.moving = k, kind, solver, moving
         self.task: Any = task  # its class is the kind's (KERNELS)
+        #: the tasks whose parameter writes this slot is told of: its own and those it
+        #: reads (an acceleration limit's braked position limits)
+        self.watched: tuple[Any, ...] = (task,)
         if kind is not None:
             self.push = _PUSH[kind]
+            if kind == TaskKind.LM_DAMPING:  # told when its owner's lm_damping is assigned
+                self.watched = (task, task.owner)
         elif isinstance(task, VelocityLimits):
             self.push = _push_velocity_limits
+        elif isinstance(task, AccelerationLimits):
+            self.push = _push_acceleration_limits
+            if task.position_limits is not None:
+                self.watched = (task, task.position_limits)
         else:
             self.push = _push_joint_limits
         self.gain: Any = None
@@ -232,11 +275,13 @@ class _Slot:
         #: (3, 3), FramePositionTask and ComTask: (3,)) and velocity (or None), one native
         #: call per control step
         self.set_target = partial(solver.set_target, k)
-        task._bound = (*task._bound, self)
+        for t in self.watched:
+            t._bound = (*t._bound, self)
 
     def unbind(self) -> None:
-        """Tell the task no more (its step is dropped)."""
-        self.task._bound = tuple(s for s in self.task._bound if s is not self)
+        """Tell the tasks no more (its step is dropped)."""
+        for t in self.watched:
+            t._bound = tuple(s for s in t._bound if s is not self)
 
     def changed(self) -> None:
         """Copy the task's parameters (gain, target, ...) into the native step: at compile
@@ -269,8 +314,8 @@ class _Slot:
 def native_kind(task: KinematicTask) -> TaskKind | None:
     """The native kernel of ``task`` (:data:`KERNELS`), or ``None`` if its rows are
     built by its Python ``_refresh`` (exact classes only: a subclass may change them)."""
-    if task.lm_rows is not None:
-        return None  # its damping rows read the error its Python refresh records
+    if type(task) is LMDamping:  # native when its owner is: its kernel reads the owner's
+        return TaskKind.LM_DAMPING if native_kind(task.owner) is not None else None
     kind = KERNELS.get(type(task))
     if kind == TaskKind.POSITION_BAND and task.robot.frame_id is None:
         return None  # no default frame: its _refresh raises the robot's message
@@ -359,6 +404,8 @@ def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
     if kind in (TaskKind.POSITION, TaskKind.POSITION_BAND):
         return [int(r) for r in task.robot.rows]
+    if kind == TaskKind.LM_DAMPING:
+        return list(range(task.robot.nv))
     if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
     if kind in _BANDS:
@@ -489,6 +536,9 @@ class NativeIKStep(NativeHierarchy):
         #: ``reference_at(t, reference)`` is copied in before every step
         self._moving: list[_Slot] = []
         frames: dict[int, int] = {}
+        #: the LM_DAMPING tasks and their first stacked row: added after the loop (an owner
+        #: band's kernel comes after the equalities of its level)
+        damping: list[tuple[Any, int]] = []
         i = j = 0
         for B in blocks:
             for t in B.eqs:
@@ -499,6 +549,8 @@ class NativeIKStep(NativeHierarchy):
                     self._eq_ops.append((t, P.Aeq[i : i + m], P.beq[i : i + m]))
                     if owner is not None and owner not in self._python_tasks:
                         self._python_tasks.append(owner)
+                elif kind == TaskKind.LM_DAMPING:  # added once every owner's kernel is
+                    damping.append((owner, i))
                 else:
                     frame = -1
                     if kind == TaskKind.COM and not self.com:  # views: computed at each step
@@ -544,10 +596,18 @@ class NativeIKStep(NativeHierarchy):
                 if owner is not None and owner not in self._python_tasks:
                     self._python_tasks.append(owner)
                 j += m
-        # limits: natively when all are JointLimits / VelocityLimits, else Python's box
+        kernel_of = {id(t): k for k, t in enumerate(self.kernel_tasks)}
+        for owner, row0 in damping:
+            kind = TaskKind.LM_DAMPING
+            k = solver.add_task(
+                kind, -1, _selection(owner, kind), row0, [kernel_of[id(owner.owner)]]
+            )
+            self._slots.append(_Slot(solver, self._moving, k, kind, owner))
+            self.kernel_tasks.append(owner)
+        # limits: natively when all are of _NATIVE_LIMITS, else Python's box
         self._python_limits = False
         if spec.limits:
-            if all(type(lim) in (JointLimits, VelocityLimits) for lim in spec.limits):
+            if all(type(lim) in _NATIVE_LIMITS for lim in spec.limits):
                 for lim in spec.limits:
                     self._add_limit(solver, lim)
                 solver.limits_mode = 1
@@ -639,8 +699,13 @@ class NativeIKStep(NativeHierarchy):
     def _add_limit(self, solver: Any, lim: Limit) -> None:
         if isinstance(lim, VelocityLimits):
             i = solver.add_velocity_limits()
+        elif isinstance(lim, AccelerationLimits):
+            P = lim.position_limits
+            qi = [] if P is None else _braked_q_index(P).tolist()
+            vi = [] if P is None else P.joints.tolist()
+            i = solver.add_acceleration_limits(qi, vi, lim.v_prev)
         else:
-            assert isinstance(lim, JointLimits)  # the two kinds with a kernel
+            assert isinstance(lim, JointLimits)  # the kinds with a kernel (_NATIVE_LIMITS)
             qi = lim.q_index
             if qi is None:
                 i = solver.add_joint_limits([], [])

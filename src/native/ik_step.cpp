@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "braking.hpp"
 #include "hierarchy.hpp"
 #include "info_dict.hpp"
 #include "integrate.hpp"
@@ -142,6 +143,8 @@ enum Kind : int {
   kComBand,         ///< ComBand (an inequality: support_kernels.hpp)
   kSupportPolygon,  ///< SupportPolygon (an inequality: support_kernels.hpp)
   kPositionBand,    ///< PositionBand (an inequality on the frame's position rows)
+  // -- the damping kernels (a task's rows from another kernel's error) --
+  kLMDamping,  ///< LMDamping: sqrt(mu) I, mu from its owner kernel's error (run after all)
 };
 
 bool is_band(Kind k) { return k == kComBand || k == kSupportPolygon || k == kPositionBand; }
@@ -194,16 +197,26 @@ struct Kernel {
   int given = 0;
   static constexpr int kReady = 15;
   int band = -1;  ///< a band kind: its index in IKStep::bands_
+  /// an equality kind: the error of each row at the last step (task units; the Python
+  /// task's recorded _lm_e), read by an LM_DAMPING kernel on it
+  Vec err;
+  // LM_DAMPING: the owner kernel's index, lm_damping and LM_ERROR_FLOOR^2 (set_lm_damping)
+  int owner = -1;
+  double lm = 0.0, floor_sq = 0.0;
 };
 
 struct Limit {
-  bool velocity = false;  ///< VelocityLimits (else JointLimits)
-  double gain = 1.0;      ///< JointLimits: K
+  bool velocity = false;  ///< VelocityLimits (else JointLimits, or AccelerationLimits)
+  bool acceleration = false;  ///< AccelerationLimits
+  double gain = 1.0;      ///< JointLimits: K; AccelerationLimits: the braked limits' K
   Vec lower, upper;       ///< JointLimits: q layout (all of q, or the indexed entries);
-                          ///< VelocityLimits: the limit in upper
+                          ///< VelocityLimits: the limit in upper; AccelerationLimits: the
+                          ///< braked position limits (indexed entries)
+  Vec amax;               ///< AccelerationLimits: a_max (nv,)
+  View v_prev;            ///< AccelerationLimits: the limit's own v_prev (nv,), bound once
   std::vector<int> qi, vi;
   bool indexed = false;
-  bool given = false;  ///< set_joint_limits / set_velocity_limits called
+  bool given = false;  ///< set_joint_limits / set_velocity_limits / set_acceleration_limits
 };
 
 class IKStep {
@@ -270,8 +283,8 @@ class IKStep {
   /// SupportPolygon's frame slots. Returns the kernel's index (the setters' k); it runs once
   /// its gain, weights, target and outputs are set.
   int add_task(int kind, int frame, std::vector<int> sel, int row0, std::vector<int> qidx) {
-    if (kind < kPosition || kind > kPositionBand)
-      throw nb::value_error("add_task: unknown kind");
+    if (kind < kPosition || kind > kLMDamping) throw nb::value_error("add_task: unknown kind");
+    if (kind == kLMDamping) return add_damping(static_cast<Kind>(kind), sel, row0, qidx);
     const bool band = is_band(static_cast<Kind>(kind));
     const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
     if ((kind != kPosture && !com) && (frame < 0 || frame >= (int)frames_.size()))
@@ -311,11 +324,49 @@ class IKStep {
     k.row0 = row0;
     k.qidx = std::move(qidx);
     k.sw.setZero(rows);
+    k.err.setZero(rows);
     k.target.setZero(kind == kPosture ? nq_ : kind == kPosition ? rows : 3);
     if (band) k.band = static_cast<int>(bands_.size()) - 1;
     if (kind != kPosture) writes_a_ = true;  // its rows' matrix changes with q
     kernels_.push_back(std::move(k));
     return static_cast<int>(kernels_.size()) - 1;
+  }
+
+  /// An LM_DAMPING kernel (add_task's rows for it): nv rows sel = 0..nv-1 from row0, qidx
+  /// = {the owner kernel's index} (added before it; not a damping kernel).
+  int add_damping(Kind kind, const std::vector<int>& sel, int row0,
+                  const std::vector<int>& qidx) {
+    if (!bound_) throw nb::value_error("add_task: bind first");
+    if (static_cast<int>(sel.size()) != nv_ || row0 < 0 ||
+        row0 + nv_ > static_cast<int>(out_[0].shape(0)))
+      throw nb::value_error("add_task: an LM_DAMPING kernel has nv rows within the equalities");
+    for (int r = 0; r < nv_; ++r)
+      if (sel[r] != r) throw nb::value_error("add_task: row selection out of range");
+    if (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= static_cast<int>(kernels_.size()) ||
+        kernels_[qidx[0]].kind == kLMDamping)
+      throw nb::value_error("add_task: an LM_DAMPING kernel's qidx is its owner kernel");
+    Kernel k;
+    k.kind = kind;
+    k.rows = nv_;
+    k.sel = sel;
+    k.row0 = row0;
+    k.owner = qidx[0];
+    k.sw.setZero(nv_);
+    writes_a_ = true;
+    kernels_.push_back(std::move(k));
+    return static_cast<int>(kernels_.size()) - 1;
+  }
+
+  /// An LM_DAMPING kernel's lm_damping (dimensionless, >= 0) and the square of the error
+  /// floor below which its rows are zero (LM_ERROR_FLOOR^2, task units^2).
+  void set_lm_damping(int k, double lm, double floor_sq) {
+    Kernel& K = kernel(k, "set_lm_damping");
+    if (K.kind != kLMDamping) throw nb::value_error("set_lm_damping: not an LM_DAMPING kernel");
+    if (!(std::isfinite(lm) && lm >= 0.0 && std::isfinite(floor_sq) && floor_sq >= 0.0))
+      throw nb::value_error("set_lm_damping: lm_damping and the floor must be finite, >= 0");
+    K.lm = lm;
+    K.floor_sq = floor_sq;
+    K.given |= 4;
   }
 
   /// Kernel k's gain K (1/s; finite).
@@ -484,6 +535,51 @@ class IKStep {
     return static_cast<int>(limits_.size()) - 1;
   }
 
+  /// An AccelerationLimits box: v_prev its own (nv,) float64 array of the previous step's
+  /// velocity (read at every step: bound once, written in place by its record / reset),
+  /// braking before the position limits of q indices qi -> v indices vi (both empty: no
+  /// braking). Returns its index for set_acceleration_limits.
+  int add_acceleration_limits(std::vector<int> qi, std::vector<int> vi, nb::handle v_prev) {
+    Limit L;
+    L.acceleration = true;
+    L.indexed = true;
+    if (qi.size() != vi.size())
+      throw nb::value_error("add_acceleration_limits: sizes do not match");
+    for (size_t i = 0; i < qi.size(); ++i)
+      if (qi[i] < 0 || qi[i] >= nq_ || vi[i] < 0 || vi[i] >= nv_)
+        throw nb::value_error("add_acceleration_limits: index out of range");
+    if (!view_of(v_prev, L.v_prev, 1) || L.v_prev.rows != nv_)
+      throw nb::value_error("add_acceleration_limits: v_prev must be a (nv,) float64 array");
+    L.amax.setZero(nv_);
+    L.lower.setZero(static_cast<Eigen::Index>(qi.size()));
+    L.upper.setZero(static_cast<Eigen::Index>(qi.size()));
+    L.qi = std::move(qi);
+    L.vi = std::move(vi);
+    limits_.push_back(std::move(L));
+    return static_cast<int>(limits_.size()) - 1;
+  }
+
+  /// AccelerationLimits i's a_max (nv,) (rad/s^2, m/s^2; > 0, inf for none), and the gain K
+  /// (in (0, 1]) and limits (rad, m; +-inf for none) of the position limits it brakes before
+  /// (the entries of add_acceleration_limits).
+  void set_acceleration_limits(int i, nb::handle amax, double gain, nb::handle lower,
+                               nb::handle upper) {
+    Limit& L = limit(i, "set_acceleration_limits");
+    if (!L.acceleration)
+      throw nb::value_error("set_acceleration_limits: not an acceleration limit");
+    if (!(gain > 0.0 && gain <= 1.0))
+      throw nb::value_error("set_acceleration_limits: gain not in (0, 1]");
+    read_values(amax, nv_, 0, L.amax.data(), "set_acceleration_limits: limit", true);
+    for (int j = 0; j < nv_; ++j)
+      if (!(L.amax[j] > 0.0)) throw nb::value_error("set_acceleration_limits: limit not > 0");
+    read_values(lower, L.lower.size(), 0, L.lower.data(), "set_acceleration_limits: lower",
+                true);
+    read_values(upper, L.upper.size(), 0, L.upper.data(), "set_acceleration_limits: upper",
+                true);
+    L.gain = gain;
+    L.given = true;
+  }
+
   /// Limit i has no usable data: step() returns kBadInput until it is set again.
   void forget_limit(int i) { limit(i, "forget_limit").given = false; }
 
@@ -575,10 +671,14 @@ class IKStep {
       f.p.noalias() = Rj * f.pp;
       f.p += pj;
     }
-    for (size_t i = 0; i < kernels_.size(); ++i) {
-      if (kernels_[i].given != Kernel::kReady || !run_kernel(kernels_[i], qp, qs)) {
-        failed = static_cast<int>(i);
-        return kTaskData + static_cast<int>(i);
+    // the damping kernels after the others: they read their owner's error or rows
+    for (const bool damping : {false, true}) {
+      for (size_t i = 0; i < kernels_.size(); ++i) {
+        if ((kernels_[i].kind == kLMDamping) != damping) continue;
+        if (kernels_[i].given != Kernel::kReady || !run_kernel(kernels_[i], qp, qs)) {
+          failed = static_cast<int>(i);
+          return kTaskData + static_cast<int>(i);
+        }
       }
     }
     double* lbs = out_[6].data();
@@ -662,6 +762,8 @@ class IKStep {
       if ((rc = view(*v))) return rc;
     for (const Frame& f : frames_)
       if ((rc = view(f.Rj)) || (rc = view(f.pj))) return rc;
+    for (const Limit& L : limits_)
+      if ((rc = view(L.v_prev))) return rc;
     return 0;
   }
 
@@ -738,12 +840,13 @@ class IKStep {
   /// The kernel's selected rows a = k.sel[r] of Jt_ with right-hand sides
   /// -gain * e[a] (+ ff[a] with a feed-forward velocity), written by write_row.
   template <class VE, class VF>
-  void write_error_rows(const Kernel& k, int rows, double gain, const VE& e, bool has_ff,
+  void write_error_rows(Kernel& k, int rows, double gain, const VE& e, bool has_ff,
                         const VF& ff) {
     for (int r = 0; r < rows; ++r) {
       const int a = k.sel[r];
       double bv = -gain * e[a];
       if (has_ff) bv += ff[a];
+      k.err[r] = e[a];
       write_row(k, r, Jt_.row(a), bv);
     }
   }
@@ -778,6 +881,10 @@ class IKStep {
   /// Inequality's C, lower, upper and the stacked rows C, clo, chi, csw from row k.row0 (C
   /// unweighted, as stacked).
   bool run_band(const Kernel& k, support::Band& b);
+
+  /// An LM_DAMPING kernel: sqrt(mu) I into its task's A (b = 0) and the stacked rows, mu
+  /// from its owner kernel's error at this step (LMDamping._refresh).
+  bool run_damping(Kernel& k);
 
   /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
   void box(const double* q, int64_t qs);
@@ -851,7 +958,9 @@ void bind_ik_step(nb::module_& m) {
       .value("POSE_SPLIT", kPoseSplit)
       .value("COM_BAND", kComBand)
       .value("SUPPORT_POLYGON", kSupportPolygon)
-      .value("POSITION_BAND", kPositionBand);
+      .value("POSITION_BAND", kPositionBand)
+      // the damping kernels
+      .value("LM_DAMPING", kLMDamping);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
@@ -889,6 +998,11 @@ void bind_ik_step(nb::module_& m) {
            nb::arg("margin"),
            "A SUPPORT_POLYGON kernel's contact points (per frame, 3) in frame coordinates "
            "(m) and margin (m).")
+      .def("set_lm_damping", &IKStep::set_lm_damping, nb::arg("k"), nb::arg("lm_damping"),
+           nb::arg("floor_sq"),
+           "An LM_DAMPING kernel's lm_damping (dimensionless) and squared error floor "
+           "(task units^2): its rows sqrt(mu) I, mu = lm_damping * sum(w e^2) of its owner "
+           "kernel (0 when mu <= lm_damping * floor_sq).")
       .def("bind_rows", &IKStep::bind_rows, nb::arg("k"), nb::arg("A").noconvert(),
            nb::arg("b").noconvert(),
            "The writable float64 arrays (rows, nv) and (rows,) an equality kernel writes its "
@@ -913,6 +1027,15 @@ void bind_ik_step(nb::module_& m) {
            "A VelocityLimits box; its index for set_velocity_limits.")
       .def("set_velocity_limits", &IKStep::set_velocity_limits, nb::arg("i"), nb::arg("limit"),
            "VelocityLimits i's limit (nv,) float64.")
+      .def("add_acceleration_limits", &IKStep::add_acceleration_limits, nb::arg("qi"),
+           nb::arg("vi"), nb::arg("v_prev"),
+           "An AccelerationLimits box reading v_prev (its (nv,) float64 array, bound), "
+           "braking before the position limits of q indices qi -> v indices vi (empty: "
+           "none); its index for set_acceleration_limits.")
+      .def("set_acceleration_limits", &IKStep::set_acceleration_limits, nb::arg("i"),
+           nb::arg("limit"), nb::arg("gain"), nb::arg("lower"), nb::arg("upper"),
+           "AccelerationLimits i's a_max (nv,) and its braked position limits' gain and "
+           "limits (float64, the entries of add_acceleration_limits).")
       .def("set_integrator", &IKStep::set_integrator, nb::arg("plan"), nb::arg("q_next"))
       .def("set_weighted", &IKStep::set_weighted, nb::arg("regularization"),
            nb::arg("weight_ratio"), nb::arg("active"))

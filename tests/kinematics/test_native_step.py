@@ -501,6 +501,14 @@ def test_a_python_task_moving_the_robot_data_does_not_disturb_the_kernels(robots
         q = robot.integrate(q, vn, DT)
 
 
+class HalfSpeed(qc.Limit):
+    """A user's limit: half the robot's speed limits (its box is Python's)."""
+
+    def box(self, q, dt):
+        v = 0.5 * self.robot.velocity_limit
+        return -v, v
+
+
 @needs_native
 def test_hybrid_step_matches_the_python_engine(robots):
     robot = robots["panda"]
@@ -524,6 +532,7 @@ def test_hybrid_step_matches_the_python_engine(robots):
         qc.JointLimits(robot),
         qc.VelocityLimits(robot),
         AccelerationLimits(robot, 30.0),
+        HalfSpeed(robot, "half speed"),
     ]
     ikn = qc.IK(robot, levels(), DT, limits=limits(), engine="native")
     ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
@@ -663,7 +672,11 @@ def test_weighted_hybrid_step_matches_the_python_engine(robots):
             qc.PostureTask(robot, robot.random_configuration(4)),
         ]
 
-    limits = lambda: [qc.JointLimits(robot), AccelerationLimits(robot, 30.0)]  # noqa: E731
+    limits = lambda: [  # noqa: E731
+        qc.JointLimits(robot),
+        AccelerationLimits(robot, 30.0),
+        HalfSpeed(robot, "half speed"),
+    ]
     ikn = qc.IK(robot, levels(), DT, limits=limits(), method="weighted")
     ikp = qc.IK(robot, levels(), DT, limits=limits(), method="weighted", engine="python")
     ikc = qc.IK(robot, levels(), DT, limits=limits(), method="weighted", engine="python")
@@ -899,6 +912,29 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
     for _ in range(500):
         call(q, True, 10.0, True)
     print(kind + "-" + method, count() - before)
+# the acceleration limits' box (braking rows) and the damping kernels (a task's, a band's and
+# a posture's lm_damping rows)
+q = start_configuration(robot)
+ee = robot.with_frame("panda_hand_tcp")
+T = robot.frame_pose(q, "panda_hand_tcp")
+stacks = {{
+    "acceleration": (kind_levels(robot, "pose", q), [
+        qc.JointLimits(robot), qc.VelocityLimits(robot), qc.AccelerationLimits(robot, 50.0)]),
+    "lm_damping": ([[qc.FrameTask(robot, "panda_hand_tcp", T, lm_damping=1.0),
+                     qc.PositionBand(ee, lower=ee.position(q) + 0.1, lm_damping=2.0)],
+                    [qc.PostureTask(robot, robot.random_configuration(4), lm_damping=0.5)]],
+                   "robot"),
+}}
+for name, (levels, limits) in stacks.items():
+    ik = qc.IK(robot, levels, DT, limits=limits, engine="native")
+    assert not ik._native._hybrid and not ik._native._python_limits
+    call = ik._native._solver.step
+    for _ in range(20):
+        assert call(q, True, 10.0, True) == 0
+    before = count()
+    for _ in range(500):
+        call(q, True, 10.0, True)
+    print(name, count() - before)
 """
 
 
@@ -913,7 +949,7 @@ def test_the_native_call_does_not_allocate(tmp_path, build):
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
     assert counts.pop("variant") == build
-    assert len(counts) == 10
+    assert len(counts) == 12
     assert all(int(c) == 0 for c in counts.values()), counts
 
 

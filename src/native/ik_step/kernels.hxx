@@ -15,6 +15,7 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       frame_jacobian(f);
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
+        k.err[r] = f.p[a] - k.target[r];
         const double e = gain * (k.target[r] - f.p[a]);
         write_row(k, r, Jt_.row(a), k.has_vel ? k.vel[r] + e : 0.0 + e);
       }
@@ -25,7 +26,8 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       frame_jacobian(f);
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
-        double bv = -gain * (f.p[a] - k.target[a]);
+        k.err[r] = f.p[a] - k.target[a];
+        double bv = -gain * k.err[r];
         if (k.has_vel) bv += k.vel[a];
         write_row(k, r, Jt_.row(a), bv);
       }
@@ -97,7 +99,8 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
         for (int c = 0; c < nv_; ++c) Jt_(0, c) = Jcom_(a, c);
-        double bv = -gain * (com_[a] - k.target[a]);
+        k.err[r] = com_[a] - k.target[a];
+        double bv = -gain * k.err[r];
         if (k.has_vel) bv += k.vel[a];
         write_row(k, r, Jt_.row(0), bv);
       }
@@ -109,7 +112,9 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       for (int r = 0; r < rows; ++r) {
         const int j = k.sel[r], iq = k.qidx[r];
         const double s = k.sw[r];
-        const double bv = gain * (k.target[iq] - q[iq * qs]);
+        const double d = k.target[iq] - q[iq * qs];
+        const double bv = gain * d;
+        k.err[r] = -d;
         // the task's A (the selection) is constant: the stacked row is rewritten
         for (int c = 0; c < nv_; ++c) Aeq[r * nv_ + c] = 0.0;
         Aeq[r * nv_ + j] = k.A(r, j) * s;
@@ -118,9 +123,46 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       }
       return true;
     }
+    case kLMDamping:
+      return run_damping(k);
     default:
       return false;
   }
+}
+
+bool IKStep::run_damping(Kernel& k) {
+  const Kernel& o = kernels_[k.owner];
+  // sum(w e^2) of the owner (w = sqrt(w)^2: to rounding of the Python task's weight); a band:
+  // its distance outside [lower, upper], read from its rows K (lower - e), K (upper - e)
+  double e2 = 0.0;
+  if (o.band >= 0) {
+    for (int r = 0; r < o.rows; ++r) {
+      const double out = std::max(o.lower[r], 0.0) - std::min(o.upper[r], 0.0);
+      e2 += o.sw[r] * o.sw[r] * (out * out);
+    }
+    e2 /= o.gain * o.gain;
+  } else {
+    for (int r = 0; r < o.rows; ++r) e2 += o.sw[r] * o.sw[r] * (o.err[r] * o.err[r]);
+  }
+  double mu = k.lm * e2;
+  if (!std::isfinite(mu)) return false;  // the owner's Python refresh names its data
+  // below the floor the rows are zero, not tiny (LMDamping._refresh: rows of any positive
+  // size would fix the level's null space around a met task)
+  if (mu <= k.lm * k.floor_sq) mu = 0.0;
+  const double s = std::sqrt(mu);
+  double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
+  double* beq = out_[1].data() + k.row0;
+  for (int r = 0; r < nv_; ++r) {  // v coordinates (no coordinate map: sqrt(mu) I is in v's)
+    for (int c = 0; c < nv_; ++c) {
+      k.A(r, c) = 0.0;
+      Aeq[static_cast<size_t>(r) * nv_ + c] = 0.0;
+    }
+    k.A(r, r) = s;
+    Aeq[static_cast<size_t>(r) * nv_ + r] = s * k.sw[r];
+    k.b[r] = 0.0;
+    beq[r] = 0.0;
+  }
+  return true;
 }
 
 bool IKStep::run_band(const Kernel& k, support::Band& b) {
@@ -200,6 +242,23 @@ void IKStep::box(const double* q, int64_t qs) {
         row_[i] = -L.upper[i];
         hi2_[i] = L.upper[i];
       }
+    } else if (L.acceleration) {  // AccelerationLimits.box
+      for (int i = 0; i < nv_; ++i) {
+        const double step = L.amax[i] * dt_;
+        row_[i] = L.v_prev[i] - step;
+        hi2_[i] = L.v_prev[i] + step;
+      }
+      for (size_t n = 0; n < L.qi.size(); ++n) {
+        const double qq = q[L.qi[n] * qs];
+        const int v = L.vi[n];
+        const double a = L.amax[v];
+        hi2_[v] = std::min(hi2_[v], braking::speed(L.upper[n] - qq, a, dt_, L.gain));
+        row_[v] = std::max(row_[v], -braking::speed(qq - L.lower[n], a, dt_, L.gain));
+      }
+      // cannot brake in time, or outside the limit: the end nearer to 0
+      for (int i = 0; i < nv_; ++i)
+        if (row_[i] > hi2_[i])
+          row_[i] = hi2_[i] = std::abs(row_[i]) < std::abs(hi2_[i]) ? row_[i] : hi2_[i];
     } else {
       const double k = L.gain / dt_;
       if (L.indexed) {

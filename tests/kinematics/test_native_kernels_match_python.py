@@ -1,0 +1,362 @@
+"""The native IK step's acceleration-limit box and Levenberg–Marquardt damping kernels
+(``src/native/braking.hpp``, ``ik_step/kernels.hxx``) against the Python task classes, the
+oracle: the same box and rows on random configurations (a floating base included) and the
+same velocities over closed loops."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from support.native_engine import needs_native
+
+import qpcoord as qc
+from qpcoord.kinematics.frame_tasks import (
+    ComBand,
+    ComTask,
+    FramePositionTask,
+    FrameTask,
+    OrientationTask,
+    SupportPolygon,
+)
+from qpcoord.kinematics.native_step import TaskKind, native_kind
+from qpcoord.kinematics.tasks import LM_ERROR_FLOOR, LMDamping
+
+DT = 1e-3
+EPS = np.finfo(float).eps
+HAND = {"panda": "panda_hand_tcp", "talos": "gripper_right_base_link"}
+SOLES = ("left_sole_link", "right_sole_link")
+CORNERS = [[x, y, 0.0] for x in (-0.1, 0.1) for y in (-0.05, 0.05)]
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, qc.Robot]:
+    out = {"panda": qc.robots.load("panda")}
+    try:
+        out["talos"] = qc.robots.load("talos")
+    except ValueError:  # example-robot-data missing
+        pass
+    return out
+
+
+def _robot(robots: dict[str, qc.Robot], name: str) -> qc.Robot:
+    if name not in robots:
+        pytest.skip(f"{name} not available")
+    return robots[name]
+
+
+def _start(robot: qc.Robot) -> np.ndarray:
+    if robot.name == "talos":
+        return robot.reference_configuration("half_sitting")
+    return np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])
+
+
+def _q_index(lim: qc.JointLimits) -> np.ndarray:
+    """The q index of each joint a JointLimits limits."""
+    return lim.joints if lim.q_index is None else lim.q_index
+
+
+def _near_limits(robot: qc.Robot, rng: np.random.Generator) -> np.ndarray:
+    """A random configuration with every limited 1-DoF joint within 0.05 rad of one of its
+    limits, some up to 0.01 rad outside it (the braking rows, and the box's rule where
+    they cannot hold)."""
+    q = robot.random_configuration(rng)
+    qi = _q_index(qc.JointLimits(robot))
+    lo, hi = robot.lower[qi], robot.upper[qi]
+    at = np.where(rng.random(qi.size) < 0.5, lo, hi)
+    inward = np.sign((lo + hi) / 2 - at)
+    q[qi] = at + inward * rng.uniform(-0.01, 0.05, qi.size)
+    return q
+
+
+def _acceleration(robot: qc.Robot, a: float) -> np.ndarray:
+    """``a`` (rad/s²) on every joint, ``inf`` on a floating base's six rows."""
+    out = np.full(robot.nv, a)
+    if not robot.euclidean:
+        out[:6] = np.inf
+    return out
+
+
+def _limits(robot: qc.Robot, gain: float, a: float, brake: bool = True) -> list:
+    jl = qc.JointLimits(robot, gain=gain)
+    acc = qc.AccelerationLimits(
+        robot, _acceleration(robot, a), position_limits=jl if brake else None
+    )
+    return [jl, qc.VelocityLimits(robot), acc]
+
+
+def _finite(x: np.ndarray) -> np.ndarray:
+    return np.where(np.isfinite(x), np.abs(x), 0.0)
+
+
+# ---------------------------------------------------------------------------------------
+# the acceleration limits' box
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+@pytest.mark.parametrize(
+    ("gain", "a", "brake"), [(0.5, 50.0, True), (1.0, 8.0, True), (0.7, 30.0, False)]
+)
+def test_the_acceleration_box_equals_the_python_limits(robots, name, gain, a, brake):
+    robot = _robot(robots, name)
+    limn, limp = _limits(robot, gain, a, brake), _limits(robot, gain, a, brake)
+    ikn = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limn, engine="native")
+    ikp = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limp, engine="python")
+    assert not ikn._native._python_limits and not ikn._native._hybrid
+    rng = np.random.default_rng(7)
+    vmax = limp[1].limit
+    jl = limp[0]
+    for trial in range(25):
+        q = _near_limits(robot, rng)
+        v_prev = rng.uniform(-1.0, 1.0, robot.nv) * np.where(np.isfinite(vmax), vmax, 1.0)
+        limn[2].reset(v_prev)
+        limp[2].reset(v_prev)
+        ikn.step(q)
+        ikp.refresh(q)
+        # each finite entry is a few roundings (a square root and a quotient in the braking
+        # speed) of terms no larger than |v_prev| + a dt + v_max + (K/dt)(|q| + |limits|):
+        # 64 eps of that scale bounds the difference of two evaluations
+        qi = _q_index(jl)
+        far = np.zeros(robot.nv)
+        far[jl.joints] = (gain / DT) * (
+            np.abs(q[qi]) + _finite(jl.lower[qi]) + _finite(jl.upper[qi])
+        )
+        scale = np.abs(v_prev) + _finite(limp[2].limit) * DT + _finite(vmax) + far
+        for mine, ref in (
+            (ikn.bounds.lower, ikp.bounds.lower),
+            (ikn.bounds.upper, ikp.bounds.upper),
+        ):
+            f = np.isfinite(ref)
+            assert np.array_equal(mine[~f], ref[~f]), trial
+            err = np.abs(mine[f] - ref[f])
+            assert np.all(err <= 64 * EPS * scale[f]), (trial, err.max())
+
+
+@needs_native
+def test_an_assigned_acceleration_or_position_limit_reaches_the_native_box(robots):
+    robot = robots["panda"]
+    limn, limp = _limits(robot, 0.5, 50.0), _limits(robot, 0.5, 50.0)
+    ikn = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limn, engine="native")
+    ikp = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limp, engine="python")
+    q = _near_limits(robot, np.random.default_rng(2))
+    for lims in (limn, limp):
+        lims[2].limit = np.full(robot.nv, 5.0)  # a_max
+        lims[0].gain = 0.9  # the braked limits' gain
+        lims[0].upper = robot.upper - 0.02
+        lims[2].v_prev = np.full(robot.nv, 0.3)  # copied into the bound array
+    ikn.step(q)
+    ikp.refresh(q)
+    scale = 1e3 * (np.abs(q).max() + np.abs(robot.upper).max())  # (K/dt)(|q| + |limit|)
+    np.testing.assert_allclose(ikn.bounds.lower, ikp.bounds.lower, rtol=0, atol=64 * EPS * scale)
+    np.testing.assert_allclose(ikn.bounds.upper, ikp.bounds.upper, rtol=0, atol=64 * EPS * scale)
+    with pytest.raises(ValueError, match="v_prev"):
+        limn[2].v_prev = np.zeros(robot.nv + 1)
+
+
+def _limit_run(robot: qc.Robot, levels, limits, engine: str) -> qc.IK:
+    return qc.IK(robot, levels(), DT, limits=limits(), engine=engine)
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_a_joint_driven_into_its_limit_brakes_alike_on_both_engines(robots, name):
+    """The hand pulled far past the reach of a limited joint, with acceleration limits: the
+    native step and the Python engine give the same v at every step, and the joint stops
+    at its limit within the acceleration bound."""
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+    T = robot.frame_pose(q0, frame).copy()
+    T[:3, 3] += [0.6, -0.4, 0.3]
+    a = 40.0
+
+    def levels():
+        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.5 / DT)
+        low = [qc.PostureTask(robot, q0, gain=1.0)]
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [hand], low]
+        return [[hand], low]
+
+    ikn = _limit_run(robot, levels, lambda: _limits(robot, 0.5, a), "native")
+    ikp = _limit_run(robot, levels, lambda: _limits(robot, 0.5, a), "python")
+    assert not ikn._native._python_limits
+    q, v_last = q0.copy(), np.zeros(robot.nv)
+    acc = _acceleration(robot, a)
+    for step in range(600):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows and box to rounding) solved by two engines, each to its KKT
+        # tolerance 1e-9 relative to the problem's scale: velocities ≤ the speed limits
+        # (~2-6 rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        # the acceleration bound holds (a dt per step), to the solver's tolerance
+        assert np.all(np.abs(vn - v_last) <= acc * DT + tol), step
+        v_last = vn
+        ikp.limits[2].reset(vn)  # both engines brake from the same previous velocity
+        q = robot.integrate(q, vn, DT)
+    jl = ikn.limits[0]
+    qi = _q_index(jl)
+    assert np.all(q[qi] <= jl.upper[qi] + 1e-9) and np.all(q[qi] >= jl.lower[qi] - 1e-9)
+
+
+# ---------------------------------------------------------------------------------------
+# Levenberg–Marquardt damping rows
+# ---------------------------------------------------------------------------------------
+
+
+def _damped(robot: qc.Robot, kind: str, q: np.ndarray, lm: float) -> qc.KinematicTask:
+    """A task of ``kind`` with ``lm_damping=lm``, its target or faces away from ``q``."""
+    frame = HAND[robot.name]
+    T = robot.frame_pose(q, frame).copy()
+    T[:3, 3] += [0.05, -0.04, 0.03]
+    T[:3, :3] = T[:3, :3] @ pin.exp3(np.array([0.12, -0.08, 0.36]))
+    if kind == "position":
+        ee = robot.with_frame(frame)
+        return qc.PositionTask(ee, target=T[:3, 3], gain=7.0, weight=2.0, lm_damping=lm)
+    if kind == "frame_position":
+        return FramePositionTask(robot, frame, T[:3, 3], gain=3.0, mask="x z", lm_damping=lm)
+    if kind == "pose":
+        return FrameTask(robot, frame, T, gain=2.0, position_weight=2.0, lm_damping=lm)
+    if kind == "pose_split":
+        return FrameTask(robot, frame, T, gain=2.5, error="split", mask="x z rx ry", lm_damping=lm)
+    if kind == "orientation":
+        return OrientationTask(robot, frame, T[:3, :3], gain=1.5, weight=3.0, lm_damping=lm)
+    if kind == "com":
+        c = robot.com(q) + [0.01, -0.02, 0.005]
+        return ComTask(robot, c, gain=2.0, mask="xy", weight=4.0, lm_damping=lm)
+    if kind == "posture":
+        return qc.PostureTask(robot, robot.random_configuration(5), gain=1.5, lm_damping=lm)
+    if kind == "position_band":
+        ee = robot.with_frame(frame)
+        y = ee.position(q)
+        return qc.PositionBand(ee, lower=y + [0.02, -1.0, -np.inf], gain=5.0, lm_damping=lm)
+    if kind == "com_band":
+        c = robot.com(q)
+        return ComBand(robot, c + [0.01, -0.5, -np.inf], c + [0.2, -0.005, 0.01], lm_damping=lm)
+    if kind == "support_polygon":
+        return SupportPolygon(
+            robot, list(SOLES), margin=0.02, gain=40.0, contact_points=CORNERS, lm_damping=lm
+        )
+    raise AssertionError(kind)
+
+
+LM_KINDS = [
+    "position", "frame_position", "pose", "pose_split", "orientation", "com", "posture",
+    "position_band", "com_band",
+]  # fmt: skip
+LM_CASES = [("panda", k) for k in LM_KINDS] + [("talos", k) for k in [*LM_KINDS, "support_polygon"]]
+
+
+@needs_native
+@pytest.mark.parametrize(("name", "kind"), LM_CASES)
+def test_native_damping_rows_equal_the_python_refresh(robots, name, kind):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    lm = 0.7
+    tn, tp = _damped(robot, kind, q0, lm), _damped(robot, kind, q0, lm)
+    posture = qc.PostureTask(robot, q0, gain=1.0)
+    ikn = qc.IK(robot, [[tn], [posture]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[tp], [posture]], DT, limits=None, engine="python")
+    assert native_kind(tn.lm_rows) == TaskKind.LM_DAMPING and isinstance(tn.lm_rows, LMDamping)
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(11)
+    seen = 0
+    for trial in range(6):
+        q = robot.integrate(q0, rng.normal(scale=0.15, size=robot.nv), 1.0)
+        ikn.step(q)
+        ikp.refresh(q)
+        a, b = tn.lm_rows.task, tp.lm_rows.task
+        # A = sqrt(mu) I with mu = lm * |e|_w^2: two evaluations of e (native kinematics and
+        # Pinocchio's) differ by a few eps of the quantities e is made of (positions of at
+        # most a few m, angles of at most pi: scale 10), so sqrt(mu) differs by at most
+        # sqrt(lm * sum(w)) times that
+        w = tp.task.weight
+        tol = np.sqrt(lm * w.sum()) * 64 * EPS * 10.0
+        np.testing.assert_allclose(a.A, b.A, rtol=0, atol=tol, err_msg=f"trial {trial}")
+        assert not a.b.any() and not b.b.any()
+        assert tn.lm_rows.mu == pytest.approx(tp.lm_rows.mu, rel=1e-6, abs=tol**2)
+        seen += tp.lm_rows.mu > 0
+    assert seen >= 3  # the rows were not all zero (below the floor)
+
+
+@needs_native
+@pytest.mark.parametrize(("offset", "zero"), [(0.1 * LM_ERROR_FLOOR, True), (0.01, False)])
+def test_native_damping_rows_are_zero_below_the_error_floor(robots, offset, zero):
+    robot = robots["panda"]
+    q = _start(robot)
+    frame = HAND["panda"]
+    target = robot.frame_pose(q, frame)[:3, 3] + [offset, 0.0, 0.0]
+    task = FramePositionTask(robot, frame, target, gain=1.0, lm_damping=2.0)
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q)]], DT, engine="native")
+    assert native_kind(task.lm_rows) == TaskKind.LM_DAMPING
+    ik.step(q)
+    A = task.lm_rows.task.A
+    if zero:
+        assert not A.any()  # exactly zero, not tiny
+    else:  # sqrt(2) * 0.01 on the diagonal, to the rounding of a ~1 m position
+        np.testing.assert_allclose(np.diag(A), np.sqrt(2.0) * offset, rtol=0, atol=1e-12)
+
+
+@needs_native
+def test_an_assigned_lm_damping_reaches_the_native_rows(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    task = _damped(robot, "pose", q, 1.0)
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q)]], DT, engine="native")
+    ik.step(q)
+    mu = task.lm_rows.mu
+    task.lm_damping = 4.0
+    ik.step(q)
+    assert task.lm_rows.mu == pytest.approx(4.0 * mu, rel=1e-9)
+
+
+@needs_native
+def test_a_python_task_keeps_its_damping_rows_in_python(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    task = qc.PotentialTask(robot, lambda q: q - _start(robot), lm_damping=1.0)
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q)]], DT, engine="native")
+    assert native_kind(task) is None and native_kind(task.lm_rows) is None
+    assert task.lm_rows in ik._native._python_tasks
+    ik.step(q + 0.1)
+    assert task.lm_rows.mu > 0
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_an_unreachable_damped_target_runs_alike_on_both_engines(robots, name):
+    """A hand target out of reach with lm_damping, a damped band and a damped posture: the
+    same v from the native step and the Python engine at every step of a closed loop."""
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+
+    def levels():
+        far = robot.frame_pose(q0, frame)[:3, 3] + [2.5, 0.0, 0.5]
+        hand = FramePositionTask(robot, frame, far, gain=0.2 / DT, lm_damping=1.0)
+        band = _damped(robot, "position_band", q0, 2.0)
+        low = qc.PostureTask(robot, q0, gain=1.0, lm_damping=0.5)
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [band, hand], [low]]
+        return [[band, hand], [low]]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    q = q0.copy()
+    for step in range(400):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
+        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s);
+        # the damping makes the last levels' rows near-dependent on the unreachable task's
+        # (mu ~ 1 against rows of size ~1): the engines' answers agree to 1e-9 of the scale
+        # times that level's conditioning, below 1e3 here
+        tol = 1e-6 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
