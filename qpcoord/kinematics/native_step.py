@@ -18,6 +18,11 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   masks, weights),
 - :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
   not in it; a continuous joint's are),
+- :class:`~qpcoord.RelativeFrameTask` (``e = log₆(T*⁻¹ T_ref⁻¹ T_frame)``, both frames'
+  motions) and :class:`~qpcoord.JointCouplingTask` (one row; its ``offset`` is a parameter),
+- the Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`) of every task listed here with
+  ``lm_damping > 0``: ``√μ I`` from the error its kernel computed at the same step (run after
+  the other kernels; zero below ``LM_ERROR_FLOOR``),
 - :class:`~qpcoord.PositionBand` on a robot with a default frame (inequality rows ``C``,
   ``lower``, ``upper``: the frame's position rows),
 - :class:`~qpcoord.ComBand` and :class:`~qpcoord.SupportPolygon` (inequality rows ``C``,
@@ -29,12 +34,12 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   (``src/native/braking.hpp``; its ``v_prev`` array is bound once and read at every step),
   intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
-Every other task (other bands, relative frames, collision, user tasks, a posture over a
-continuous joint) and constant Equality/Inequality rows keep their Python ``_refresh``, run
-before the native call and copied into the same arrays (a hybrid step); any other limit
-(a user's :class:`~qpcoord.Limit`) makes the whole box Python-computed. With
-``integrate=True`` (:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call
-writes ``q_next`` (:func:`integration_plan`).
+Every other task (other bands, damping tasks, collision, user tasks, a posture over a
+continuous joint, and their ``lm_damping`` rows) and constant Equality/Inequality rows keep
+their Python ``_refresh``, run before the native call and copied into the same arrays (a
+hybrid step); any other limit (a user's :class:`~qpcoord.Limit`) makes the whole box
+Python-computed. With ``integrate=True`` (:meth:`IK.step_integrate
+<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
 
 The boundary is data only (``docs/engine.md``, *The IK step*): the native step holds its own
 copy of each kernel's parameters (gain, row weights, target and feed-forward, faces, contact
@@ -72,7 +77,9 @@ from .frame_tasks import (
     ComTask,
     FramePositionTask,
     FrameTask,
+    JointCouplingTask,
     OrientationTask,
+    RelativeFrameTask,
     SupportPolygon,
 )
 from .robot import Robot
@@ -108,6 +115,8 @@ class TaskKind(IntEnum):
     POSITION_BAND = 9  #: an inequality on the default frame's position rows
     # -- the damping kernels (a task's rows from another kernel's error) --
     LM_DAMPING = 10  #: a task's Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`)
+    RELATIVE_FRAME = 11  #: :class:`~qpcoord.RelativeFrameTask` (two frames)
+    JOINT_COUPLING = 12  #: :class:`~qpcoord.JointCouplingTask`
 
 
 #: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
@@ -121,6 +130,8 @@ KERNELS = {
     ComBand: TaskKind.COM_BAND,
     SupportPolygon: TaskKind.SUPPORT_POLYGON,
     PositionBand: TaskKind.POSITION_BAND,
+    RelativeFrameTask: TaskKind.RELATIVE_FRAME,
+    JointCouplingTask: TaskKind.JOINT_COUPLING,
 }
 #: The limits with a kernel (exact classes: a subclass's box is Python's).
 _NATIVE_LIMITS = (JointLimits, VelocityLimits, AccelerationLimits)
@@ -173,6 +184,18 @@ def _push_orientation(slot: _Slot) -> None:
     if Rt is None:
         raise ValueError("no target")
     slot.solver.set_target(slot.k, Rt.T, v if v is None else _f64(v))
+
+
+def _push_relative(slot: _Slot) -> None:
+    T = slot.task.target  # a RelativeFrameTask's pin.SE3 (validated by its set_target)
+    if T is None:
+        raise ValueError("no target")
+    slot.solver.set_target(slot.k, np.asarray(T.homogeneous, dtype=float), None)
+
+
+def _push_coupling(slot: _Slot) -> None:
+    task = slot.task  # a JointCouplingTask: (ratios, offset)
+    slot.solver.set_target(slot.k, np.append(_f64(task.ratios), float(task.offset)), None)
 
 
 def _push_posture(slot: _Slot) -> None:
@@ -235,6 +258,8 @@ _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.POSITION_BAND: _push_faces,
     TaskKind.SUPPORT_POLYGON: _push_polygon,
     TaskKind.LM_DAMPING: _push_lm_damping,
+    TaskKind.RELATIVE_FRAME: _push_relative,
+    TaskKind.JOINT_COUPLING: _push_coupling,
 }
 
 
@@ -336,6 +361,13 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
     return kind
 
 
+def _coupling_indices(task: JointCouplingTask) -> list[int]:
+    """A joint coupling's q indices, then its v indices (one-DoF joints, in its order)."""
+    model = task.robot.model
+    joints = [model.joints[model.getJointId(name)] for name in task.joints]
+    return [int(j.idx_q) for j in joints] + [int(j.idx_v) for j in joints]
+
+
 def _posture_q_index(task: PostureTask) -> list[int] | None:
     """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there), or
     ``None`` if a row's joint is not a 1-DoF vector-space joint (a continuous joint)."""
@@ -410,14 +442,24 @@ def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
         return [int(j) for j in task.joints]
     if kind in _BANDS:
         return list(range(task.task.shape[0]))
-    assert isinstance(task, (FramePositionTask, FrameTask, OrientationTask, ComTask))
+    assert isinstance(
+        task,
+        (
+            FramePositionTask,
+            FrameTask,
+            OrientationTask,
+            ComTask,
+            RelativeFrameTask,
+            JointCouplingTask,
+        ),
+    )
     return [int(r) for r in task.selected_rows]
 
 
 def _frame_id(task: KinematicTask, kind: TaskKind) -> int:
     """The frame a kernel of ``kind`` reads for ``task`` (its own, or its robot's default)."""
     fid: int | None
-    if isinstance(task, (FramePositionTask, FrameTask, OrientationTask)):
+    if isinstance(task, (FramePositionTask, FrameTask, OrientationTask, RelativeFrameTask)):
         fid = task.frame_id
     else:  # POSITION: a PositionTask, on a robot with a default frame (native_kind)
         fid = task.robot.frame_id
@@ -556,12 +598,21 @@ class NativeIKStep(NativeHierarchy):
                     if kind == TaskKind.COM and not self.com:  # views: computed at each step
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
-                    elif kind not in (TaskKind.COM, TaskKind.POSTURE):
+                    elif kind not in (TaskKind.COM, TaskKind.POSTURE, TaskKind.JOINT_COUPLING):
                         fid = _frame_id(owner, kind)
                         if fid not in frames:
                             frames[fid] = self._add_frame(solver, fid)
                         frame = frames[fid]
-                    qidx = _posture_q_index(owner) if isinstance(owner, PostureTask) else []
+                    qidx: list[int] | None = []
+                    if isinstance(owner, PostureTask):
+                        qidx = _posture_q_index(owner)
+                    elif isinstance(owner, RelativeFrameTask):  # the reference frame's slot
+                        ref = int(owner.reference_id)
+                        if ref not in frames:
+                            frames[ref] = self._add_frame(solver, ref)
+                        qidx = [frames[ref]]
+                    elif isinstance(owner, JointCouplingTask):  # q indices, then v indices
+                        qidx = _coupling_indices(owner)
                     k = solver.add_task(kind, frame, _selection(owner, kind), i, qidx)
                     self._slots.append(_Slot(solver, self._moving, k, kind, owner))
                     self.kernel_tasks.append(owner)

@@ -80,7 +80,7 @@ _FLOATING_ROOTS = ("JointModelFreeFlyer", "JointModelPlanar")
 PARAMETERS = frozenset(
     (
         "gain", "target", "target_velocity", "_target_T", "_target_t", "q_ref", "lower",
-        "upper", "contact_points", "margin", "limit", "lm_damping",
+        "upper", "contact_points", "margin", "limit", "lm_damping", "offset",
     )
 )  # fmt: skip
 _setattr = object.__setattr__
@@ -217,8 +217,9 @@ class KinematicTask(ABC):
         an unreachable target it slows the motion to a stop instead of chattering at the
         speed limits. The damping rows are :attr:`lm_rows` (``nv`` rows beside the task in
         its level; in a strict hierarchy they fix the level's null space); they are zero once
-        the error is below ``LM_ERROR_FLOOR`` = 1e-6 (task units). The task's rows are then
-        built by its Python refresh.
+        the error is below ``LM_ERROR_FLOOR`` = 1e-6 (task units). The native IK step
+        computes them for a task it has a kernel for; for any other task, from its Python
+        refresh.
 
     Raises
     ------

@@ -143,8 +143,11 @@ enum Kind : int {
   kComBand,         ///< ComBand (an inequality: support_kernels.hpp)
   kSupportPolygon,  ///< SupportPolygon (an inequality: support_kernels.hpp)
   kPositionBand,    ///< PositionBand (an inequality on the frame's position rows)
-  // -- the damping kernels (a task's rows from another kernel's error) --
-  kLMDamping,  ///< LMDamping: sqrt(mu) I, mu from its owner kernel's error (run after all)
+  // -- kinds after the bands: damping rows, two frames, joint couplings --
+  kLMDamping,      ///< LMDamping: sqrt(mu) I, mu from its owner kernel's error (run after all)
+  kRelativeFrame,  ///< RelativeFrameTask: log6 of frame in a reference frame (qidx: its slot)
+  kJointCoupling,  ///< JointCouplingTask: one row sum(r_i q_i) - offset (qidx: q, v indices)
+  kKindEnd,        ///< one past the last kind (not a kind)
 };
 
 bool is_band(Kind k) { return k == kComBand || k == kSupportPolygon || k == kPositionBand; }
@@ -280,14 +283,17 @@ class IKStep {
   /// A kernel of `kind` writing rows row0.. of the stacked equalities (a band: inequalities).
   /// sel: per row, the axis of the full error (a posture: the joint's v index; a band: the
   /// rows 0..rows-1); qidx: a posture's q index per row (a 1-DoF joint: q_ref - q there), a
-  /// SupportPolygon's frame slots. Returns the kernel's index (the setters' k); it runs once
-  /// its gain, weights, target and outputs are set.
+  /// SupportPolygon's frame slots, a RELATIVE_FRAME's reference frame slot, a
+  /// JOINT_COUPLING's q indices then v indices, an LM_DAMPING's owner kernel. Returns the
+  /// kernel's index (the setters' k); it runs once its gain, weights, target and outputs are
+  /// set.
   int add_task(int kind, int frame, std::vector<int> sel, int row0, std::vector<int> qidx) {
-    if (kind < kPosition || kind > kLMDamping) throw nb::value_error("add_task: unknown kind");
+    if (kind < kPosition || kind >= kKindEnd) throw nb::value_error("add_task: unknown kind");
     if (kind == kLMDamping) return add_damping(static_cast<Kind>(kind), sel, row0, qidx);
     const bool band = is_band(static_cast<Kind>(kind));
     const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
-    if ((kind != kPosture && !com) && (frame < 0 || frame >= (int)frames_.size()))
+    const bool framed = kind != kPosture && kind != kJointCoupling && !com;
+    if (framed && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
     if (com && !com_.p) throw nb::value_error("add_task: set_com first");
     if (!bound_) throw nb::value_error("add_task: bind first");
@@ -316,6 +322,17 @@ class IKStep {
       for (int i : qidx)
         if (i < 0 || i >= nq_) throw nb::value_error("add_task: q index out of range");
     }
+    if (kind == kRelativeFrame &&
+        (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= (int)frames_.size() || qidx[0] == frame))
+      throw nb::value_error("add_task: a RELATIVE_FRAME's qidx is its reference frame's slot");
+    if (kind == kJointCoupling) {  // qidx: the joints' q indices, then their v indices
+      const size_t n = qidx.size() / 2;
+      if (rows != 1 || n < 1 || qidx.size() != 2 * n)
+        throw nb::value_error("add_task: a JOINT_COUPLING has one row, q and v indices");
+      for (size_t i = 0; i < n; ++i)
+        if (qidx[i] < 0 || qidx[i] >= nq_ || qidx[n + i] < 0 || qidx[n + i] >= nv_)
+          throw nb::value_error("add_task: q index out of range");
+    }
     Kernel k;
     k.kind = static_cast<Kind>(kind);
     k.frame = frame;
@@ -325,7 +342,10 @@ class IKStep {
     k.qidx = std::move(qidx);
     k.sw.setZero(rows);
     k.err.setZero(rows);
-    k.target.setZero(kind == kPosture ? nq_ : kind == kPosition ? rows : 3);
+    k.target.setZero(kind == kPosture          ? nq_
+                     : kind == kPosition       ? rows
+                     : kind == kJointCoupling  ? static_cast<int>(k.qidx.size() / 2) + 1
+                                               : 3);
     if (band) k.band = static_cast<int>(bands_.size()) - 1;
     if (kind != kPosture) writes_a_ = true;  // its rows' matrix changes with q
     kernels_.push_back(std::move(k));
@@ -388,15 +408,17 @@ class IKStep {
   /// POSITION y* (rows,) m and dy*/dt (rows,) m/s; FRAME_POSITION and COM the point (3,) m
   /// and its velocity (3,) m/s; POSE and POSE_SPLIT T* (4, 4) and the target's body twist
   /// (6,) m/s, rad/s; ORIENTATION R* (3, 3) and its angular velocity (3,) rad/s, target
-  /// frame; POSTURE q_ref (nq,), no velocity. Finite values; the caller has checked that a
-  /// rotation is one (the task's set_target).
+  /// frame; POSTURE q_ref (nq,), no velocity; RELATIVE_FRAME T* (4, 4) of the frame in its
+  /// reference; JOINT_COUPLING (ratios..., offset). Finite values; the caller has checked
+  /// that a rotation is one (the task's set_target).
   void set_target(int k, nb::handle target, nb::handle velocity) {
     Kernel& K = kernel(k, "set_target");
     if (is_band(K.kind)) throw nb::value_error("set_target: a band kernel (set_faces)");
     int nvel = 3;
     switch (K.kind) {
       case kPose:
-      case kPoseSplit: {
+      case kPoseSplit:
+      case kRelativeFrame: {
         double T[16];
         read_values(target, 4, 4, T, "set_target");
         Vec3 pt;
@@ -960,7 +982,9 @@ void bind_ik_step(nb::module_& m) {
       .value("SUPPORT_POLYGON", kSupportPolygon)
       .value("POSITION_BAND", kPositionBand)
       // the damping kernels
-      .value("LM_DAMPING", kLMDamping);
+      .value("LM_DAMPING", kLMDamping)
+      .value("RELATIVE_FRAME", kRelativeFrame)
+      .value("JOINT_COUPLING", kJointCoupling);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
@@ -978,9 +1002,10 @@ void bind_ik_step(nb::module_& m) {
            nb::arg("row0"), nb::arg("qidx"),
            "A kernel of kind (IKTaskKind) on frame slot frame (-1: none), rows sel from row0 "
            "of the stacked rows; qidx: a posture's q indices, a support polygon's frame "
-           "slots. Returns its index k; it runs once set_gain, set_weights, its target "
-           "(set_target / set_faces / set_contacts) and its outputs (bind_rows / "
-           "bind_band_rows) are set.")
+           "slots, a relative frame's reference slot, a joint coupling's q then v indices, "
+           "an LM_DAMPING's owner kernel. Returns its index k; it runs once set_gain, "
+           "set_weights, its target (set_target / set_faces / set_contacts / set_lm_damping) "
+           "and its outputs (bind_rows / bind_band_rows) are set.")
       .def("set_gain", &IKStep::set_gain, nb::arg("k"), nb::arg("gain"),
            "Kernel k's gain K (1/s), finite.")
       .def("set_weights", &IKStep::set_weights, nb::arg("k"), nb::arg("sqrt_weight"),
@@ -990,7 +1015,8 @@ void bind_ik_step(nb::module_& m) {
            "Kernel k's target and feed-forward (None: none), float64 arrays: POSITION y* "
            "(rows,) and dy*/dt (rows,); FRAME_POSITION, COM (3,) and (3,); POSE, POSE_SPLIT "
            "T* (4, 4) and the target's body twist (6,); ORIENTATION R* (3, 3) and (3,); "
-           "POSTURE q_ref (nq,). Finite values.")
+           "POSTURE q_ref (nq,); RELATIVE_FRAME T* (4, 4), no velocity; JOINT_COUPLING "
+           "(ratios..., offset), no velocity. Finite values.")
       .def("set_faces", &IKStep::set_faces, nb::arg("k"), nb::arg("lower"), nb::arg("upper"),
            "A COM_BAND (3,) or POSITION_BAND (rows,) kernel's faces (m; -inf / inf on its "
            "side).")

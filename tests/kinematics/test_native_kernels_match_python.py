@@ -1,7 +1,7 @@
-"""The native IK step's acceleration-limit box and Levenberg–Marquardt damping kernels
-(``src/native/braking.hpp``, ``ik_step/kernels.hxx``) against the Python task classes, the
-oracle: the same box and rows on random configurations (a floating base included) and the
-same velocities over closed loops."""
+"""The native IK step's acceleration-limit box, Levenberg–Marquardt damping, relative-frame
+and joint-coupling kernels (``src/native/braking.hpp``, ``ik_step/kernels.hxx``) against the
+Python task classes, the oracle: the same box and rows on random configurations (a floating
+base included) and the same velocities over closed loops."""
 
 from __future__ import annotations
 
@@ -360,3 +360,126 @@ def test_an_unreachable_damped_target_runs_alike_on_both_engines(robots, name):
         tol = 1e-6 * max(1.0, float(np.abs(vp).max()))
         np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
         q = robot.integrate(q, vn, DT)
+
+
+# ---------------------------------------------------------------------------------------
+# relative frames and joint couplings
+# ---------------------------------------------------------------------------------------
+
+#: (frame, reference frame, coupled joints) of each robot: a reference frame on the same
+#: chain (shared joints) on the Panda, on the other arm of Talos (over the floating base)
+PAIRS = {
+    "panda": ("panda_hand_tcp", "panda_link3", ["panda_joint1", "panda_joint3"]),
+    "talos": (
+        "gripper_right_base_link",
+        "gripper_left_base_link",
+        ["arm_left_1_joint", "arm_right_1_joint"],
+    ),
+}
+
+
+def _relative(robot: qc.Robot, q: np.ndarray, mask: str | None, lm: float = 0.0):
+    frame, ref, _ = PAIRS[robot.name]
+    task = qc.RelativeFrameTask(
+        robot, frame, ref, gain=3.0, position_weight=2.0, mask=mask, lm_damping=lm
+    )
+    task.set_target_from_configuration(q)
+    T = task.target.homogeneous.copy()  # away from the start: a rotation of 0.4 rad
+    T[:3, :3] = T[:3, :3] @ pin.exp3(np.array([0.12, -0.08, 0.36]))
+    T[:3, 3] += [0.05, -0.04, 0.03]
+    task.set_target(T)
+    return task
+
+
+def _coupling(robot: qc.Robot, lm: float = 0.0):
+    _, _, joints = PAIRS[robot.name]
+    return qc.JointCouplingTask(
+        robot, joints, [1.0, -0.7], gain=2.0, offset=0.3, weight=3.0, lm_damping=lm
+    )
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+@pytest.mark.parametrize("kind", ["relative", "relative_masked", "coupling"])
+def test_native_relative_and_coupling_rows_equal_the_python_refresh(robots, name, kind):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+
+    def make():
+        if kind == "coupling":
+            return _coupling(robot)
+        return _relative(robot, q0, "x z ry rz" if kind == "relative_masked" else None)
+
+    tn, tp = make(), make()
+    expected = TaskKind.JOINT_COUPLING if kind == "coupling" else TaskKind.RELATIVE_FRAME
+    assert native_kind(tn) == expected
+    posture = qc.PostureTask(robot, q0, gain=1.0)
+    ikn = qc.IK(robot, [[tn], [posture]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[tp], [posture]], DT, limits=None, engine="python")
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(5)
+    for trial in range(6):
+        q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
+        version = tn.task.matrix_version
+        ikn.step(q)
+        assert tn.task.matrix_version == version + 1
+        ikp.refresh(q)
+        # the rows are products of a few 3×3 and 6×6 factors (rotations, the log's
+        # Jacobian at angles well above its series threshold) with entries no larger than
+        # the rows' scale: the two evaluations differ by a few hundred eps of that scale
+        scale = max(1.0, float(np.abs(tp.task.A).max()), float(np.abs(tp.task.b).max()))
+        tol = 1e3 * EPS * scale
+        np.testing.assert_allclose(tn.task.A, tp.task.A, rtol=0, atol=tol, err_msg=f"{trial}")
+        np.testing.assert_allclose(tn.task.b, tp.task.b, rtol=0, atol=tol, err_msg=f"{trial}")
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_relative_and_coupling_closed_loop_matches_the_python_engine(robots, name):
+    """A relative frame and a joint coupling (both damped) below a hand task: the same v
+    from the native step and the Python engine at every step."""
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+
+    def levels():
+        T = robot.frame_pose(q0, frame).copy()
+        T[:3, 3] += [0.05, 0.05, -0.05]
+        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.2 / DT)
+        rel = _relative(robot, q0, "x y z", lm=0.5)
+        low = [_coupling(robot, lm=0.3), rel, qc.PostureTask(robot, q0, gain=1.0)]
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [hand], low]
+        return [[hand], low]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    q = q0.copy()
+    for step in range(300):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
+        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_an_assigned_offset_or_relative_target_reaches_the_native_rows(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    coupling, rel = _coupling(robot), _relative(robot, q, None)
+    ik = qc.IK(robot, [[coupling, rel], [qc.PostureTask(robot, q)]], DT, engine="native")
+    coupling.set_offset_from_configuration(q)
+    rel.set_target_from_configuration(q)
+    ik.step(q)
+    # both met at q: e is rounding of sums of ~1 rad and of a ~1 m pose
+    assert abs(coupling.task.b[0]) < 1e3 * EPS * coupling.gain
+    assert np.abs(rel.task.b).max() < 1e3 * EPS * rel.gain
+    coupling.offset = 0.5
+    ik.step(q)
+    expected = -coupling.gain * (coupling.ratios @ q[coupling._iq] - 0.5)
+    assert coupling.task.b[0] == pytest.approx(expected, rel=1e-12)

@@ -538,7 +538,12 @@ def test_hybrid_step_matches_the_python_engine(robots):
     ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
     hybrid = ikn._native
     assert hybrid._python_tasks and hybrid._python_limits
-    assert [type(t) for t in hybrid.kernel_tasks] == [PositionBand, FrameTask, qc.PostureTask]
+    assert [type(t) for t in hybrid.kernel_tasks] == [
+        PositionBand,
+        FrameTask,
+        RelativeFrameTask,
+        qc.PostureTask,
+    ]
     for step in range(60):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)
@@ -912,8 +917,8 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
     for _ in range(500):
         call(q, True, 10.0, True)
     print(kind + "-" + method, count() - before)
-# the acceleration limits' box (braking rows) and the damping kernels (a task's, a band's and
-# a posture's lm_damping rows)
+# the acceleration limits' box (braking rows), the damping kernels (a task's, a band's and
+# a posture's lm_damping rows), a relative frame and a joint coupling
 q = start_configuration(robot)
 ee = robot.with_frame("panda_hand_tcp")
 T = robot.frame_pose(q, "panda_hand_tcp")
@@ -924,6 +929,10 @@ stacks = {{
                      qc.PositionBand(ee, lower=ee.position(q) + 0.1, lm_damping=2.0)],
                     [qc.PostureTask(robot, robot.random_configuration(4), lm_damping=0.5)]],
                    "robot"),
+    "relative_coupling": ([qc.RelativeFrameTask(robot, "panda_hand_tcp", "panda_link3",
+                                                np.eye(4), lm_damping=0.5),
+                           qc.JointCouplingTask(robot, ["panda_joint1", "panda_joint3"],
+                                                [1.0, -0.5], offset=0.2)], "robot"),
 }}
 for name, (levels, limits) in stacks.items():
     ik = qc.IK(robot, levels, DT, limits=limits, engine="native")
@@ -949,7 +958,7 @@ def test_the_native_call_does_not_allocate(tmp_path, build):
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
     assert counts.pop("variant") == build
-    assert len(counts) == 12
+    assert len(counts) == 13
     assert all(int(c) == 0 for c in counts.values()), counts
 
 

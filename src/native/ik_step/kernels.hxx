@@ -123,6 +123,51 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       }
       return true;
     }
+    case kRelativeFrame: {  // E = T*^-1 (oMr^-1 oMf), e = log6(E), J = Jlog6(E) (Jf - Ad Jr)
+      const Frame& f = frames_[k.frame];
+      const Frame& g = frames_[k.qidx[0]];
+      const Mat3 Rrel = g.R.transpose() * f.R;
+      const Vec3 prel = g.R.transpose() * (f.p - g.p);
+      const Mat3 RE = k.Rinv * Rrel;
+      const Vec3 pE = k.Rinv * prel + k.pinv;
+      // Jf - Ad(fMr) Jr in LOCAL coordinates of f: the world-aligned motion at f's origin
+      // of f's supporting joints less that of r's, rotated by Rf^T (shared joints cancel)
+      Jl_.setZero();
+      for (int c : f.cols) {
+        const Vec3 w(J_(3, c), J_(4, c), J_(5, c));
+        Jl_.col(c).head<3>() += Vec3(J_(0, c), J_(1, c), J_(2, c)) + w.cross(f.p);
+        Jl_.col(c).tail<3>() += w;
+      }
+      for (int c : g.cols) {
+        const Vec3 w(J_(3, c), J_(4, c), J_(5, c));
+        Jl_.col(c).head<3>() -= Vec3(J_(0, c), J_(1, c), J_(2, c)) + w.cross(f.p);
+        Jl_.col(c).tail<3>() -= w;
+      }
+      const Mat3 Rt = f.R.transpose();
+      const Vec6 e = spatial::log6(RE, pE);
+      const Mat6 Jlog = spatial::jlog6(RE, pE);
+      for (int c = 0; c < nv_; ++c) {
+        Vec6 local;
+        local.head<3>() = Rt * Jl_.col(c).head<3>();
+        local.tail<3>() = Rt * Jl_.col(c).tail<3>();
+        Jt_.col(c).noalias() = Jlog * local;
+      }
+      write_error_rows(k, rows, gain, e, false, e);
+      return true;
+    }
+    case kJointCoupling: {  // e = sum(r_i q_i) - offset, J = r_i at the joints' v indices
+      const int n = static_cast<int>(k.qidx.size() / 2);
+      double s = 0.0;
+      Jt_.row(0).setZero();
+      for (int i = 0; i < n; ++i) {
+        s += k.target[i] * q[k.qidx[i] * qs];
+        Jt_(0, k.qidx[n + i]) = k.target[i];
+      }
+      const double e = s - k.target[n];
+      k.err[0] = e;
+      write_row(k, 0, Jt_.row(0), -gain * e);
+      return true;
+    }
     case kLMDamping:
       return run_damping(k);
     default:
