@@ -260,6 +260,9 @@ class KinematicTask(ABC):
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name in PARAMETERS:
+            if name == "lm_damping":  # read by its damping rows at every step
+                task = self.__dict__.get("task")
+                value = _lm_damping(value, type(self).__name__ if task is None else task.name)
             if type(value) is np.ndarray and value.flags.writeable:
                 value = read_only(value.copy())  # the caller keeps no writable alias
             _setattr(self, name, value)

@@ -483,3 +483,28 @@ def test_an_assigned_offset_or_relative_target_reaches_the_native_rows(robots):
     ik.step(q)
     expected = -coupling.gain * (coupling.ratios @ q[coupling._iq] - 0.5)
     assert coupling.task.b[0] == pytest.approx(expected, rel=1e-12)
+
+
+# ---------------------------------------------------------------------------------------
+# bad data: the tasks' own messages
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+def test_a_relative_frame_without_target_raises_its_message_on_the_native_step(robots):
+    robot = robots["panda"]
+    task = qc.RelativeFrameTask(robot, "panda_hand_tcp", "panda_link3")
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, _start(robot))]], DT, engine="native")
+    assert native_kind(task) == TaskKind.RELATIVE_FRAME
+    with pytest.raises(ValueError, match="no target"):
+        ik.step(_start(robot))
+    task.set_target_from_configuration(_start(robot))
+    ik.step(_start(robot))  # the kernel has its target now
+
+
+@pytest.mark.parametrize("bad", [-1.0, np.nan, np.inf, "1"])
+def test_an_assigned_bad_lm_damping_is_named(robots, bad):
+    task = _damped(robots["panda"], "pose", _start(robots["panda"]), 1.0)
+    with pytest.raises(ValueError, match="lm_damping"):
+        task.lm_damping = bad
+    assert task.lm_damping == 1.0
