@@ -9,7 +9,8 @@ The stack (1 kHz): the Franka Panda's hand (``FrameTask``, gain ``0.5/dt``) towa
 - ``pose with lm_damping``: the hand task built with ``lm_damping=1`` (its damping rows);
 - ``+ relative frame``: a ``RelativeFrameTask`` of the hand in ``panda_link3`` at the
   posture level;
-- ``+ joint coupling``: a ``JointCouplingTask`` ``q1 + q3 = const`` at the posture level.
+- ``+ joint coupling``: a ``JointCouplingTask`` ``q1 + q3 = const`` at the posture level;
+- ``+ damping task``: a ``DampingTask`` (weight 1e-2) at the posture level.
 
 Each row runs a closed loop of ``step_integrate`` calls (the native engine, and the Python
 engine for reference), one BLAS thread. Printed: median and p99 (µs) per step, each the
@@ -61,6 +62,8 @@ def stack(robot: qc.Robot, variant: str) -> tuple[list, list]:
                 robot, ["panda_joint1", "panda_joint3"], [1.0, 1.0], gain=0.05 / DT
             )
         )
+    if variant == "+ damping task":
+        low.append(qc.DampingTask(robot, weight=1e-2))
     limits: list = [qc.JointLimits(robot), qc.VelocityLimits(robot)]
     if variant == "+ acceleration limits":
         limits.append(qc.AccelerationLimits(robot, 50.0, position_limits=limits[0]))
@@ -73,6 +76,7 @@ VARIANTS = (
     "pose with lm_damping",
     "+ relative frame",
     "+ joint coupling",
+    "+ damping task",
 )
 
 

@@ -1400,7 +1400,21 @@ class DampingTask(_ErrorTask):
         self.weight = w
         self._init_equality(robot, nv, np.ones(nv, dtype=bool), w, name)
         self.task._assign(np.eye(nv), np.zeros(nv))
-        self.q_hold: np.ndarray | None = None
+        self._hold = np.full(robot.nq, np.nan)  # NaN: no update yet
+
+    @property
+    def q_hold(self) -> np.ndarray | None:
+        """The configuration of the last update (nq,; rad, m), ``None`` before the first: one
+        array for the task's life, written in place at each update (by a native IK step
+        too); assigning copies into it."""
+        return None if np.isnan(self._hold[0]) else self._hold
+
+    @q_hold.setter
+    def q_hold(self, value: Any) -> None:
+        if value is None:
+            self._hold[...] = np.nan
+        else:
+            self._hold[...] = self.robot.check_configuration(value)
 
     def _evaluate(self, q):
         robot = self.robot
@@ -1413,7 +1427,7 @@ class DampingTask(_ErrorTask):
         return np.asarray(e), np.asarray(J).reshape(robot.nv, robot.nv), None
 
     def _refresh(self, q, t, dt, reference) -> Equality:
-        self.q_hold = q.copy()
+        self._hold[...] = q
         return self.task  # A = I, b = 0: constant
 
 
@@ -1456,5 +1470,5 @@ class LowAccelerationTask(DampingTask):
                 self.v_prev[:] = (q - self.q_hold) / dt
             else:
                 self.v_prev[:] = pin.difference(robot.model, self.q_hold, q) / dt
-        self.q_hold = q.copy()
+        self._hold[...] = q
         return self.task._assign(b=self.v_prev)

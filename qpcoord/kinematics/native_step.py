@@ -20,6 +20,7 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   not in it; a continuous joint's are),
 - :class:`~qpcoord.RelativeFrameTask` (``e = log₆(T*⁻¹ T_ref⁻¹ T_frame)``, both frames'
   motions) and :class:`~qpcoord.JointCouplingTask` (one row; its ``offset`` is a parameter),
+- :class:`~qpcoord.DampingTask` (``v = 0``; the step writes ``q`` into its ``q_hold``),
 - the Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`) of every task listed here with
   ``lm_damping > 0``: ``√μ I`` from the error its kernel computed at the same step (run after
   the other kernels; zero below ``LM_ERROR_FLOOR``),
@@ -34,12 +35,13 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   (``src/native/braking.hpp``; its ``v_prev`` array is bound once and read at every step),
   intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
-Every other task (other bands, damping tasks, collision, user tasks, a posture over a
-continuous joint, and their ``lm_damping`` rows) and constant Equality/Inequality rows keep
-their Python ``_refresh``, run before the native call and copied into the same arrays (a
-hybrid step); any other limit (a user's :class:`~qpcoord.Limit`) makes the whole box
-Python-computed. With ``integrate=True`` (:meth:`IK.step_integrate
-<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
+Every other task (other bands, :class:`~qpcoord.LowAccelerationTask`, collision, user
+tasks, a posture over a continuous joint, and their ``lm_damping`` rows) and constant
+Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
+copied into the same arrays (a hybrid step); any other limit (a user's
+:class:`~qpcoord.Limit`) makes the whole box Python-computed. With ``integrate=True``
+(:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call writes ``q_next``
+(:func:`integration_plan`).
 
 The boundary is data only (``docs/engine.md``, *The IK step*): the native step holds its own
 copy of each kernel's parameters (gain, row weights, target and feed-forward, faces, contact
@@ -75,6 +77,7 @@ from ..core.tasks import TASK_WRITES, Equality, _w
 from .frame_tasks import (
     ComBand,
     ComTask,
+    DampingTask,
     FramePositionTask,
     FrameTask,
     JointCouplingTask,
@@ -117,6 +120,7 @@ class TaskKind(IntEnum):
     LM_DAMPING = 10  #: a task's Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`)
     RELATIVE_FRAME = 11  #: :class:`~qpcoord.RelativeFrameTask` (two frames)
     JOINT_COUPLING = 12  #: :class:`~qpcoord.JointCouplingTask`
+    DAMPING = 13  #: :class:`~qpcoord.DampingTask` (``v = 0``; ``q_hold`` written in place)
 
 
 #: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
@@ -132,9 +136,14 @@ KERNELS = {
     PositionBand: TaskKind.POSITION_BAND,
     RelativeFrameTask: TaskKind.RELATIVE_FRAME,
     JointCouplingTask: TaskKind.JOINT_COUPLING,
+    DampingTask: TaskKind.DAMPING,
 }
 #: The limits with a kernel (exact classes: a subclass's box is Python's).
 _NATIVE_LIMITS = (JointLimits, VelocityLimits, AccelerationLimits)
+#: The kernels that read no frame.
+_FRAMELESS = (TaskKind.COM, TaskKind.POSTURE, TaskKind.JOINT_COUPLING, TaskKind.DAMPING)
+#: The kernels whose task's matrix is constant (a step writes no new ``A``).
+_CONSTANT_A = (TaskKind.POSTURE, TaskKind.DAMPING)
 #: The band kernels (Inequality rows).
 _BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON, TaskKind.POSITION_BAND)
 
@@ -196,6 +205,10 @@ def _push_relative(slot: _Slot) -> None:
 def _push_coupling(slot: _Slot) -> None:
     task = slot.task  # a JointCouplingTask: (ratios, offset)
     slot.solver.set_target(slot.k, np.append(_f64(task.ratios), float(task.offset)), None)
+
+
+def _push_damping(slot: _Slot) -> None:
+    slot.solver.bind_hold(slot.k, slot.task._hold)  # a DampingTask's q_hold, one array
 
 
 def _push_posture(slot: _Slot) -> None:
@@ -260,6 +273,7 @@ _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.LM_DAMPING: _push_lm_damping,
     TaskKind.RELATIVE_FRAME: _push_relative,
     TaskKind.JOINT_COUPLING: _push_coupling,
+    TaskKind.DAMPING: _push_damping,
 }
 
 
@@ -436,7 +450,7 @@ def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
     if kind in (TaskKind.POSITION, TaskKind.POSITION_BAND):
         return [int(r) for r in task.robot.rows]
-    if kind == TaskKind.LM_DAMPING:
+    if kind in (TaskKind.LM_DAMPING, TaskKind.DAMPING):
         return list(range(task.robot.nv))
     if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
@@ -598,7 +612,7 @@ class NativeIKStep(NativeHierarchy):
                     if kind == TaskKind.COM and not self.com:  # views: computed at each step
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
-                    elif kind not in (TaskKind.COM, TaskKind.POSTURE, TaskKind.JOINT_COUPLING):
+                    elif kind not in _FRAMELESS:
                         fid = _frame_id(owner, kind)
                         if fid not in frames:
                             frames[fid] = self._add_frame(solver, fid)
@@ -667,10 +681,13 @@ class NativeIKStep(NativeHierarchy):
                 solver.limits_mode = 2
         self._hybrid = bool(self._python_tasks or self._eq_ops or self._in_ops)
         #: the kernels' tasks whose matrix each step writes: their ``matrix_version`` counts a
-        #: new matrix per step, as their ``_assign(A, b)`` would (a posture writes only b)
+        #: new matrix per step, as their ``_assign(A, b)`` would (a posture writes only b, a
+        #: damping task nothing)
         #: (their instance dicts: one item write each per step)
         self._bumps = [
-            sl.task.task.__dict__ for sl in self._slots if sl.kind not in (None, TaskKind.POSTURE)
+            sl.task.task.__dict__
+            for sl in self._slots
+            if sl.kind is not None and sl.kind not in _CONSTANT_A
         ]
         for d in self._bumps:  # the class default 0 as an instance item
             d.setdefault("matrix_version", 0)
@@ -700,7 +717,7 @@ class NativeIKStep(NativeHierarchy):
             solver.set_weighted(float(spec.regularization), float(spec.weight_ratio), self.active)
             # a kernel that writes a task's A (all but a posture's) refactors at every step;
             # without one, the tasks' matrix_version decides (as NativeWeighted.run)
-            writes_a = any(native_kind(t) != TaskKind.POSTURE for t in self.kernel_tasks)
+            writes_a = any(native_kind(t) not in _CONSTANT_A for t in self.kernel_tasks)
             self._watched = [] if writes_a else [t for B in blocks for t in (*B.eqs, *B.ineqs)]
             self._versions: list | None = None
         #: the copy of :attr:`q_next` the last ``step(..., integrate=True)`` returned with its

@@ -147,6 +147,7 @@ enum Kind : int {
   kLMDamping,      ///< LMDamping: sqrt(mu) I, mu from its owner kernel's error (run after all)
   kRelativeFrame,  ///< RelativeFrameTask: log6 of frame in a reference frame (qidx: its slot)
   kJointCoupling,  ///< JointCouplingTask: one row sum(r_i q_i) - offset (qidx: q, v indices)
+  kDamping,        ///< DampingTask: v = 0 on all nv rows, q copied into its hold array
   kKindEnd,        ///< one past the last kind (not a kind)
 };
 
@@ -195,6 +196,7 @@ struct Kernel {
   Vec3 pinv = Vec3::Zero();      ///< ORIENTATION: R*^T in Rinv
   // outputs: the task's own arrays (Equality: A (rows, nv), b; Inequality: C, lower, upper)
   Out A, b, lower, upper;
+  Out hold;  ///< DAMPING: the task's q_hold (nq,), written with q at each step
   /// which of gain (1), weights (2), target (4), outputs (8) were set: step() runs a kernel
   /// only once all are (kReady)
   int given = 0;
@@ -292,7 +294,7 @@ class IKStep {
     if (kind == kLMDamping) return add_damping(static_cast<Kind>(kind), sel, row0, qidx);
     const bool band = is_band(static_cast<Kind>(kind));
     const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
-    const bool framed = kind != kPosture && kind != kJointCoupling && !com;
+    const bool framed = kind != kPosture && kind != kJointCoupling && kind != kDamping && !com;
     if (framed && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
     if (com && !com_.p) throw nb::value_error("add_task: set_com first");
@@ -301,7 +303,9 @@ class IKStep {
     if (rows < 1 || row0 < 0 || row0 + rows > static_cast<int>(out_[band ? 2 : 0].shape(0)))
       throw nb::value_error("add_task: rows out of range");
     for (int s : sel)
-      if (s < 0 || s >= (kind == kPosture ? nv_ : on_com(static_cast<Kind>(kind)) ? rows : 6))
+      if (s < 0 || s >= (kind == kPosture || kind == kDamping ? nv_
+                         : on_com(static_cast<Kind>(kind))  ? rows
+                                                            : 6))
         throw nb::value_error("add_task: row selection out of range");
     if (kind == kPositionBand && rows > 3)
       throw nb::value_error("add_task: a PositionBand has at most 3 rows");
@@ -325,6 +329,12 @@ class IKStep {
     if (kind == kRelativeFrame &&
         (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= (int)frames_.size() || qidx[0] == frame))
       throw nb::value_error("add_task: a RELATIVE_FRAME's qidx is its reference frame's slot");
+    if (kind == kDamping) {
+      if (rows != nv_ || !qidx.empty())
+        throw nb::value_error("add_task: a DAMPING kernel has nv rows and no qidx");
+      for (int r = 0; r < rows; ++r)
+        if (sel[r] != r) throw nb::value_error("add_task: row selection out of range");
+    }
     if (kind == kJointCoupling) {  // qidx: the joints' q indices, then their v indices
       const size_t n = qidx.size() / 2;
       if (rows != 1 || n < 1 || qidx.size() != 2 * n)
@@ -347,7 +357,7 @@ class IKStep {
                      : kind == kJointCoupling  ? static_cast<int>(k.qidx.size() / 2) + 1
                                                : 3);
     if (band) k.band = static_cast<int>(bands_.size()) - 1;
-    if (kind != kPosture) writes_a_ = true;  // its rows' matrix changes with q
+    if (kind != kPosture && kind != kDamping) writes_a_ = true;  // its matrix changes with q
     kernels_.push_back(std::move(k));
     return static_cast<int>(kernels_.size()) - 1;
   }
@@ -478,6 +488,17 @@ class IKStep {
     if (!std::isfinite(margin)) throw nb::value_error("set_contacts: margin not finite");
     read_values(points, b.points.rows(), 3, b.points.data(), "set_contacts");
     b.margin = margin;
+    K.given |= 4;
+  }
+
+  /// A DAMPING kernel's hold array (the task's own (nq,) float64 q_hold): each step copies q
+  /// into it (the kernel's only parameter: it runs once this is bound).
+  void bind_hold(int k, RowsArr hold) {
+    Kernel& K = kernel(k, "bind_hold");
+    if (K.kind != kDamping) throw nb::value_error("bind_hold: not a DAMPING kernel");
+    if (hold.ndim() != 1 || hold.shape(0) != static_cast<size_t>(nq_))
+      throw nb::value_error("bind_hold: expected a (nq,) float64 array");
+    K.hold.set(std::move(hold));
     K.given |= 4;
   }
 
@@ -984,7 +1005,8 @@ void bind_ik_step(nb::module_& m) {
       // the damping kernels
       .value("LM_DAMPING", kLMDamping)
       .value("RELATIVE_FRAME", kRelativeFrame)
-      .value("JOINT_COUPLING", kJointCoupling);
+      .value("JOINT_COUPLING", kJointCoupling)
+      .value("DAMPING", kDamping);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
@@ -1029,6 +1051,9 @@ void bind_ik_step(nb::module_& m) {
            "An LM_DAMPING kernel's lm_damping (dimensionless) and squared error floor "
            "(task units^2): its rows sqrt(mu) I, mu = lm_damping * sum(w e^2) of its owner "
            "kernel (0 when mu <= lm_damping * floor_sq).")
+      .def("bind_hold", &IKStep::bind_hold, nb::arg("k"), nb::arg("hold").noconvert(),
+           "A DAMPING kernel's (nq,) float64 array that each step copies q into (its task's "
+           "q_hold).")
       .def("bind_rows", &IKStep::bind_rows, nb::arg("k"), nb::arg("A").noconvert(),
            nb::arg("b").noconvert(),
            "The writable float64 arrays (rows, nv) and (rows,) an equality kernel writes its "

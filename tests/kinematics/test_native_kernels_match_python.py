@@ -508,3 +508,71 @@ def test_an_assigned_bad_lm_damping_is_named(robots, bad):
     with pytest.raises(ValueError, match="lm_damping"):
         task.lm_damping = bad
     assert task.lm_damping == 1.0
+
+
+# ---------------------------------------------------------------------------------------
+# damping tasks
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_native_damping_task_rows_and_hold_equal_the_python_refresh(robots, name):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    w = np.linspace(0.5, 2.0, robot.nv)
+    tn, tp = qc.DampingTask(robot, weight=w), qc.DampingTask(robot, weight=w)
+    assert native_kind(tn) == TaskKind.DAMPING and tn.q_hold is None
+
+    def hand():
+        return FramePositionTask(robot, HAND[name], robot.frame_pose(q0, HAND[name])[:3, 3])
+
+    ikn = qc.IK(robot, [[hand()], [tn]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[hand()], [tp]], DT, limits=None, engine="python")
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
+        version = tn.task.matrix_version
+        ikn.step(q)
+        assert tn.task.matrix_version == version  # a constant matrix, as the Python refresh
+        ikp.refresh(q)
+        # the same constant rows and the same held configuration, exactly (copies)
+        np.testing.assert_array_equal(tn.task.A, tp.task.A)
+        np.testing.assert_array_equal(tn.task.b, tp.task.b)
+        np.testing.assert_array_equal(tn.q_hold, q)
+        np.testing.assert_array_equal(tp.q_hold, q)
+        Pn, Pp = ikn.stack._compiled, ikp.stack._compiled
+        Pp.refresh_stacked()
+        np.testing.assert_array_equal(Pn.Aeq[-robot.nv :], Pp.Aeq[-robot.nv :])
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+
+    def levels():
+        T = robot.frame_pose(q0, frame).copy()
+        T[:3, 3] += [0.05, 0.05, -0.05]
+        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.2 / DT)
+        low = [qc.DampingTask(robot, weight=1e-2)]
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [hand], low]
+        return [[hand], low]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    q = q0.copy()
+    for step in range(200):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
+        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)

@@ -918,7 +918,7 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
         call(q, True, 10.0, True)
     print(kind + "-" + method, count() - before)
 # the acceleration limits' box (braking rows), the damping kernels (a task's, a band's and
-# a posture's lm_damping rows), a relative frame and a joint coupling
+# a posture's lm_damping rows), a relative frame, a joint coupling and a damping task
 q = start_configuration(robot)
 ee = robot.with_frame("panda_hand_tcp")
 T = robot.frame_pose(q, "panda_hand_tcp")
@@ -933,6 +933,8 @@ stacks = {{
                                                 np.eye(4), lm_damping=0.5),
                            qc.JointCouplingTask(robot, ["panda_joint1", "panda_joint3"],
                                                 [1.0, -0.5], offset=0.2)], "robot"),
+    "damping": ([qc.FramePositionTask(robot, "panda_hand_tcp", T[:3, 3]),
+                 qc.DampingTask(robot, weight=0.1)], "robot"),
 }}
 for name, (levels, limits) in stacks.items():
     ik = qc.IK(robot, levels, DT, limits=limits, engine="native")
@@ -958,7 +960,7 @@ def test_the_native_call_does_not_allocate(tmp_path, build):
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
     assert counts.pop("variant") == build
-    assert len(counts) == 13
+    assert len(counts) == 14
     assert all(int(c) == 0 for c in counts.values()), counts
 
 

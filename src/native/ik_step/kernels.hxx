@@ -168,6 +168,21 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       write_row(k, 0, Jt_.row(0), -gain * e);
       return true;
     }
+    case kDamping: {  // A = I, b = 0 (v coordinates: no coordinate map); q_hold = q
+      double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
+      double* beq = out_[1].data() + k.row0;
+      for (int r = 0; r < nv_; ++r) {
+        for (int c = 0; c < nv_; ++c) {
+          k.A(r, c) = r == c ? 1.0 : 0.0;
+          Aeq[static_cast<size_t>(r) * nv_ + c] = r == c ? k.sw[r] : 0.0;
+        }
+        k.b[r] = 0.0;
+        k.err[r] = 0.0;
+        beq[r] = 0.0;
+      }
+      for (int i = 0; i < nq_; ++i) k.hold[i] = q[i * qs];
+      return true;
+    }
     case kLMDamping:
       return run_damping(k);
     default:
