@@ -83,6 +83,7 @@ TABLES: dict[str, Table] = {
         ("--quick", "--no-placo", "--no-pink", "--scenario", "panda-position"),
     ),
     "native_ik_step": Table("native_ik_step.py", (), ("--steps", "30", "--runs", "2")),
+    "native_ik_kinds": Table("native_ik_kinds.py", (), ("--steps", "30", "--runs", "1")),
     "collision_bench": Table("collision_bench.py", (), ("--steps", "20", "--repeats", "1")),
     "cell_stacks": Table("cell_stacks.py", (), ("--steps", "30", "--runs", "1")),
     "edges": Table(
