@@ -10,7 +10,8 @@ The stack (1 kHz): the Franka Panda's hand (``FrameTask``, gain ``0.5/dt``) towa
 - ``+ relative frame``: a ``RelativeFrameTask`` of the hand in ``panda_link3`` at the
   posture level;
 - ``+ joint coupling``: a ``JointCouplingTask`` ``q1 + q3 = const`` at the posture level;
-- ``+ damping task``: a ``DampingTask`` (weight 1e-2) at the posture level.
+- ``+ damping task``: a ``DampingTask`` (weight 1e-2) at the posture level;
+- ``+ low acceleration``: a ``LowAccelerationTask`` (weight 1e-2) at the posture level.
 
 Each row runs a closed loop of ``step_integrate`` calls (the native engine, and the Python
 engine for reference), one BLAS thread. Printed: median and p99 (µs) per step, each the
@@ -64,6 +65,8 @@ def stack(robot: qc.Robot, variant: str) -> tuple[list, list]:
         )
     if variant == "+ damping task":
         low.append(qc.DampingTask(robot, weight=1e-2))
+    if variant == "+ low acceleration":
+        low.append(qc.LowAccelerationTask(robot, weight=1e-2))
     limits: list = [qc.JointLimits(robot), qc.VelocityLimits(robot)]
     if variant == "+ acceleration limits":
         limits.append(qc.AccelerationLimits(robot, 50.0, position_limits=limits[0]))
@@ -77,6 +80,7 @@ VARIANTS = (
     "+ relative frame",
     "+ joint coupling",
     "+ damping task",
+    "+ low acceleration",
 )
 
 

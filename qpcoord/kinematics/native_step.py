@@ -20,7 +20,9 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   not in it; a continuous joint's are),
 - :class:`~qpcoord.RelativeFrameTask` (``e = log₆(T*⁻¹ T_ref⁻¹ T_frame)``, both frames'
   motions) and :class:`~qpcoord.JointCouplingTask` (one row; its ``offset`` is a parameter),
-- :class:`~qpcoord.DampingTask` (``v = 0``; the step writes ``q`` into its ``q_hold``),
+- :class:`~qpcoord.DampingTask` (``v = 0``; the step writes ``q`` into its ``q_hold``) and
+  :class:`~qpcoord.LowAccelerationTask` (``v = v_prev``: its ``set_previous`` velocity, else
+  ``difference(q_hold, q) / dt`` on the configuration manifold, ``src/native/integrate.hpp``),
 - the Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`) of every task listed here with
   ``lm_damping > 0``: ``√μ I`` from the error its kernel computed at the same step (run after
   the other kernels; zero below ``LM_ERROR_FLOOR``),
@@ -35,13 +37,12 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   (``src/native/braking.hpp``; its ``v_prev`` array is bound once and read at every step),
   intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
-Every other task (other bands, :class:`~qpcoord.LowAccelerationTask`, collision, user
-tasks, a posture over a continuous joint, and their ``lm_damping`` rows) and constant
-Equality/Inequality rows keep their Python ``_refresh``, run before the native call and
-copied into the same arrays (a hybrid step); any other limit (a user's
-:class:`~qpcoord.Limit`) makes the whole box Python-computed. With ``integrate=True``
-(:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call writes ``q_next``
-(:func:`integration_plan`).
+Every other task (other bands, collision, user tasks, a posture over a continuous joint, and
+their ``lm_damping`` rows) and constant Equality/Inequality rows keep their Python
+``_refresh``, run before the native call and copied into the same arrays (a hybrid step); any
+other limit (a user's :class:`~qpcoord.Limit`) makes the whole box Python-computed. With
+``integrate=True`` (:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call
+writes ``q_next`` (:func:`integration_plan`).
 
 The boundary is data only (``docs/engine.md``, *The IK step*): the native step holds its own
 copy of each kernel's parameters (gain, row weights, target and feed-forward, faces, contact
@@ -81,6 +82,7 @@ from .frame_tasks import (
     FramePositionTask,
     FrameTask,
     JointCouplingTask,
+    LowAccelerationTask,
     OrientationTask,
     RelativeFrameTask,
     SupportPolygon,
@@ -121,6 +123,7 @@ class TaskKind(IntEnum):
     RELATIVE_FRAME = 11  #: :class:`~qpcoord.RelativeFrameTask` (two frames)
     JOINT_COUPLING = 12  #: :class:`~qpcoord.JointCouplingTask`
     DAMPING = 13  #: :class:`~qpcoord.DampingTask` (``v = 0``; ``q_hold`` written in place)
+    LOW_ACCELERATION = 14  #: :class:`~qpcoord.LowAccelerationTask` (``v = v_prev``)
 
 
 #: The kernel of each task class (``FrameTask(error="split")``: ``POSE_SPLIT``).
@@ -137,13 +140,17 @@ KERNELS = {
     RelativeFrameTask: TaskKind.RELATIVE_FRAME,
     JointCouplingTask: TaskKind.JOINT_COUPLING,
     DampingTask: TaskKind.DAMPING,
+    LowAccelerationTask: TaskKind.LOW_ACCELERATION,
 }
 #: The limits with a kernel (exact classes: a subclass's box is Python's).
 _NATIVE_LIMITS = (JointLimits, VelocityLimits, AccelerationLimits)
 #: The kernels that read no frame.
-_FRAMELESS = (TaskKind.COM, TaskKind.POSTURE, TaskKind.JOINT_COUPLING, TaskKind.DAMPING)
+_FRAMELESS = (
+    TaskKind.COM, TaskKind.POSTURE, TaskKind.JOINT_COUPLING, TaskKind.DAMPING,
+    TaskKind.LOW_ACCELERATION,
+)  # fmt: skip
 #: The kernels whose task's matrix is constant (a step writes no new ``A``).
-_CONSTANT_A = (TaskKind.POSTURE, TaskKind.DAMPING)
+_CONSTANT_A = (TaskKind.POSTURE, TaskKind.DAMPING, TaskKind.LOW_ACCELERATION)
 #: The band kernels (Inequality rows).
 _BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON, TaskKind.POSITION_BAND)
 
@@ -208,7 +215,15 @@ def _push_coupling(slot: _Slot) -> None:
 
 
 def _push_damping(slot: _Slot) -> None:
-    slot.solver.bind_hold(slot.k, slot.task._hold)  # a DampingTask's q_hold, one array
+    slot.solver.bind_hold(slot.k, slot.task._hold, None)  # a DampingTask's q_hold, one array
+
+
+def _push_low_acceleration(slot: _Slot) -> None:
+    task = slot.task  # a LowAccelerationTask: q_hold and v_prev (one array each)
+    slot.solver.bind_hold(slot.k, task._hold, task._v_prev)
+    if task._given is not None:  # set_previous: the native step's next step takes it
+        slot.solver.set_previous(slot.k, task._given)
+        task._given = None
 
 
 def _push_posture(slot: _Slot) -> None:
@@ -274,6 +289,7 @@ _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.RELATIVE_FRAME: _push_relative,
     TaskKind.JOINT_COUPLING: _push_coupling,
     TaskKind.DAMPING: _push_damping,
+    TaskKind.LOW_ACCELERATION: _push_low_acceleration,
 }
 
 
@@ -372,6 +388,8 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
         and _posture_q_index(task) is None
     ):
         return None
+    if kind == TaskKind.LOW_ACCELERATION and integration_plan(task.robot) is None:
+        return None  # a joint without a native difference (planar, composite, ...)
     return kind
 
 
@@ -450,7 +468,7 @@ def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
     if kind in (TaskKind.POSITION, TaskKind.POSITION_BAND):
         return [int(r) for r in task.robot.rows]
-    if kind in (TaskKind.LM_DAMPING, TaskKind.DAMPING):
+    if kind in (TaskKind.LM_DAMPING, TaskKind.DAMPING, TaskKind.LOW_ACCELERATION):
         return list(range(task.robot.nv))
     if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
@@ -627,6 +645,8 @@ class NativeIKStep(NativeHierarchy):
                         qidx = [frames[ref]]
                     elif isinstance(owner, JointCouplingTask):  # q indices, then v indices
                         qidx = _coupling_indices(owner)
+                    elif isinstance(owner, LowAccelerationTask):  # its difference's segments
+                        qidx = integration_plan(owner.robot)
                     k = solver.add_task(kind, frame, _selection(owner, kind), i, qidx)
                     self._slots.append(_Slot(solver, self._moving, k, kind, owner))
                     self.kernel_tasks.append(owner)

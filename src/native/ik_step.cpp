@@ -148,6 +148,7 @@ enum Kind : int {
   kRelativeFrame,  ///< RelativeFrameTask: log6 of frame in a reference frame (qidx: its slot)
   kJointCoupling,  ///< JointCouplingTask: one row sum(r_i q_i) - offset (qidx: q, v indices)
   kDamping,        ///< DampingTask: v = 0 on all nv rows, q copied into its hold array
+  kLowAcceleration,  ///< LowAccelerationTask: v = v_prev (qidx: the integration plan)
   kKindEnd,        ///< one past the last kind (not a kind)
 };
 
@@ -196,7 +197,8 @@ struct Kernel {
   Vec3 pinv = Vec3::Zero();      ///< ORIENTATION: R*^T in Rinv
   // outputs: the task's own arrays (Equality: A (rows, nv), b; Inequality: C, lower, upper)
   Out A, b, lower, upper;
-  Out hold;  ///< DAMPING: the task's q_hold (nq,), written with q at each step
+  Out hold;   ///< DAMPING, LOW_ACCELERATION: the task's q_hold (nq,), q at each step
+  Out vprev;  ///< LOW_ACCELERATION: the task's v_prev (nv,), written at each step
   /// which of gain (1), weights (2), target (4), outputs (8) were set: step() runs a kernel
   /// only once all are (kReady)
   int given = 0;
@@ -236,6 +238,7 @@ class IKStep {
     lo_.resize(nv);
     hi_.resize(nv);
     hi2_.resize(nv);
+    hold_.resize(nq);
   }
 
   void bind(OutArr Aeq, OutArr beq, OutArr C, OutArr clo, OutArr chi, OutArr csw, OutArr lbs,
@@ -294,7 +297,8 @@ class IKStep {
     if (kind == kLMDamping) return add_damping(static_cast<Kind>(kind), sel, row0, qidx);
     const bool band = is_band(static_cast<Kind>(kind));
     const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
-    const bool framed = kind != kPosture && kind != kJointCoupling && kind != kDamping && !com;
+    const bool hold = kind == kDamping || kind == kLowAcceleration;
+    const bool framed = kind != kPosture && kind != kJointCoupling && !hold && !com;
     if (framed && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
     if (com && !com_.p) throw nb::value_error("add_task: set_com first");
@@ -303,7 +307,7 @@ class IKStep {
     if (rows < 1 || row0 < 0 || row0 + rows > static_cast<int>(out_[band ? 2 : 0].shape(0)))
       throw nb::value_error("add_task: rows out of range");
     for (int s : sel)
-      if (s < 0 || s >= (kind == kPosture || kind == kDamping ? nv_
+      if (s < 0 || s >= (kind == kPosture || hold ? nv_
                          : on_com(static_cast<Kind>(kind))  ? rows
                                                             : 6))
         throw nb::value_error("add_task: row selection out of range");
@@ -329,11 +333,12 @@ class IKStep {
     if (kind == kRelativeFrame &&
         (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= (int)frames_.size() || qidx[0] == frame))
       throw nb::value_error("add_task: a RELATIVE_FRAME's qidx is its reference frame's slot");
-    if (kind == kDamping) {
-      if (rows != nv_ || !qidx.empty())
+    if (hold) {  // DAMPING: no qidx; LOW_ACCELERATION: the integration plan
+      if (rows != nv_ || (kind == kDamping && !qidx.empty()))
         throw nb::value_error("add_task: a DAMPING kernel has nv rows and no qidx");
       for (int r = 0; r < rows; ++r)
         if (sel[r] != r) throw nb::value_error("add_task: row selection out of range");
+      if (kind == kLowAcceleration) check_plan(qidx, "add_task");
     }
     if (kind == kJointCoupling) {  // qidx: the joints' q indices, then their v indices
       const size_t n = qidx.size() / 2;
@@ -354,10 +359,11 @@ class IKStep {
     k.err.setZero(rows);
     k.target.setZero(kind == kPosture          ? nq_
                      : kind == kPosition       ? rows
+                     : kind == kLowAcceleration ? nv_
                      : kind == kJointCoupling  ? static_cast<int>(k.qidx.size() / 2) + 1
                                                : 3);
     if (band) k.band = static_cast<int>(bands_.size()) - 1;
-    if (kind != kPosture && kind != kDamping) writes_a_ = true;  // its matrix changes with q
+    if (kind != kPosture && !hold) writes_a_ = true;  // its matrix changes with q
     kernels_.push_back(std::move(k));
     return static_cast<int>(kernels_.size()) - 1;
   }
@@ -382,6 +388,7 @@ class IKStep {
     k.row0 = row0;
     k.owner = qidx[0];
     k.sw.setZero(nv_);
+    k.err.setZero(nv_);
     writes_a_ = true;
     kernels_.push_back(std::move(k));
     return static_cast<int>(kernels_.size()) - 1;
@@ -491,15 +498,36 @@ class IKStep {
     K.given |= 4;
   }
 
-  /// A DAMPING kernel's hold array (the task's own (nq,) float64 q_hold): each step copies q
-  /// into it (the kernel's only parameter: it runs once this is bound).
-  void bind_hold(int k, RowsArr hold) {
+  /// A DAMPING or LOW_ACCELERATION kernel's arrays: the task's own (nq,) float64 q_hold,
+  /// into which each step copies q (NaN in its first entry: no step yet), and a
+  /// LOW_ACCELERATION's (nv,) v_prev, which each step writes (velocity None for a DAMPING).
+  /// Its only parameters: the kernel runs once these are bound.
+  void bind_hold(int k, RowsArr hold, nb::handle velocity) {
     Kernel& K = kernel(k, "bind_hold");
-    if (K.kind != kDamping) throw nb::value_error("bind_hold: not a DAMPING kernel");
+    if (K.kind != kDamping && K.kind != kLowAcceleration)
+      throw nb::value_error("bind_hold: not a DAMPING or LOW_ACCELERATION kernel");
     if (hold.ndim() != 1 || hold.shape(0) != static_cast<size_t>(nq_))
       throw nb::value_error("bind_hold: expected a (nq,) float64 array");
+    if (velocity.is_none() != (K.kind == kDamping))
+      throw nb::value_error("bind_hold: a LOW_ACCELERATION kernel's v_prev, only");
+    if (!velocity.is_none()) {
+      RowsArr v = nb::cast<RowsArr>(velocity, false);
+      if (v.ndim() != 1 || v.shape(0) != static_cast<size_t>(nv_))
+        throw nb::value_error("bind_hold: v_prev must be a (nv,) float64 array");
+      K.vprev.set(std::move(v));
+    }
     K.hold.set(std::move(hold));
     K.given |= 4;
+  }
+
+  /// A LOW_ACCELERATION kernel's previous velocity (nv,) for its next step only (its task's
+  /// set_previous), instead of the one measured from the two last configurations.
+  void set_previous(int k, nb::handle v) {
+    Kernel& K = kernel(k, "set_previous");
+    if (K.kind != kLowAcceleration)
+      throw nb::value_error("set_previous: not a LOW_ACCELERATION kernel");
+    read_values(v, nv_, 0, K.target.data(), "set_previous");
+    K.has_vel = true;
   }
 
   /// The arrays an equality kernel writes its rows into (the task's own A (rows, nv) and b
@@ -644,23 +672,9 @@ class IKStep {
   /// The plan of integrate::run (kind, idx_q, idx_v, size per segment, covering q) and the
   /// (nq,) array step(..., integrate=True) writes q_next = integrate(q, x dt) into.
   void set_integrator(std::vector<int> plan, OutArr q_next) {
-    if (plan.size() % 4 != 0) throw nb::value_error("set_integrator: 4 ints per segment");
     if (q_next.ndim() != 1 || q_next.shape(0) != static_cast<size_t>(nq_))
       throw nb::value_error("set_integrator: q_next must be (nq,)");
-    static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
-    int covered = 0;
-    for (size_t s = 0; s < plan.size(); s += 4) {
-      const int kind = plan[s], iq = plan[s + 1], iv = plan[s + 2], n = plan[s + 3];
-      if (kind < integrate::kVector || kind > integrate::kFreeFlyer)
-        throw nb::value_error("set_integrator: unknown segment kind");
-      const int nq = kind == integrate::kVector ? n : kNq[kind];
-      const int nv = kind == integrate::kVector ? n : kNv[kind];
-      if ((kind != integrate::kVector && n != 1) || n < 1 || iq < 0 || iv < 0 ||
-          iq + nq > nq_ || iv + nv > nv_)
-        throw nb::value_error("set_integrator: segment out of range");
-      covered += nq;
-    }
-    if (covered != nq_) throw nb::value_error("set_integrator: the plan does not cover q");
+    check_plan(plan, "set_integrator");
     plan_ = std::move(plan);
     q_next_ = q_next;
     integrator_ = true;
@@ -868,6 +882,27 @@ class IKStep {
     }
   }
 
+  /// Throws ValueError (naming who) unless plan is an integration plan covering q: (kind,
+  /// idx_q, idx_v, size) per segment (integrate.hpp).
+  void check_plan(const std::vector<int>& plan, const char* who) const {
+    const std::string w(who);
+    if (plan.size() % 4 != 0) throw nb::value_error((w + ": 4 ints per segment").c_str());
+    static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
+    int covered = 0;
+    for (size_t s = 0; s < plan.size(); s += 4) {
+      const int kind = plan[s], iq = plan[s + 1], iv = plan[s + 2], n = plan[s + 3];
+      if (kind < integrate::kVector || kind > integrate::kFreeFlyer)
+        throw nb::value_error((w + ": unknown segment kind").c_str());
+      const int nq = kind == integrate::kVector ? n : kNq[kind];
+      const int nv = kind == integrate::kVector ? n : kNv[kind];
+      if ((kind != integrate::kVector && n != 1) || n < 1 || iq < 0 || iv < 0 ||
+          iq + nq > nq_ || iv + nv > nv_)
+        throw nb::value_error((w + ": segment out of range").c_str());
+      covered += nq;
+    }
+    if (covered != nq_) throw nb::value_error((w + ": the plan does not cover q").c_str());
+  }
+
   Kernel& kernel(int k, const char* who) {
     if (k < 0 || k >= static_cast<int>(kernels_.size()))
       throw nb::value_error((std::string(who) + ": no kernel " + std::to_string(k)).c_str());
@@ -929,6 +964,10 @@ class IKStep {
   /// from its owner kernel's error at this step (LMDamping._refresh).
   bool run_damping(Kernel& k);
 
+  /// The nv rows d I (v coordinates: no coordinate map) and right-hand side b (nullptr: 0)
+  /// of an nv-row kernel (the damping kinds) into its task's A, b and the stacked rows.
+  void diagonal_rows(Kernel& k, double d, const double* b);
+
   /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
   void box(const double* q, int64_t qs);
 
@@ -959,6 +998,7 @@ class IKStep {
   info::Keys info_keys_;  ///< info()'s keys (info_dict.hpp)
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
+  Vec hold_;  ///< (nq,) a LOW_ACCELERATION kernel's q_hold, contiguous
   nb::object copy_x_, copy_res_, copy_q_next_;  ///< set_copies: the outputs' copy methods
 };
 
@@ -1006,7 +1046,8 @@ void bind_ik_step(nb::module_& m) {
       .value("LM_DAMPING", kLMDamping)
       .value("RELATIVE_FRAME", kRelativeFrame)
       .value("JOINT_COUPLING", kJointCoupling)
-      .value("DAMPING", kDamping);
+      .value("DAMPING", kDamping)
+      .value("LOW_ACCELERATION", kLowAcceleration);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
                      "hierarchy (qpcoord.kinematics.native_step builds it).",
@@ -1052,8 +1093,12 @@ void bind_ik_step(nb::module_& m) {
            "(task units^2): its rows sqrt(mu) I, mu = lm_damping * sum(w e^2) of its owner "
            "kernel (0 when mu <= lm_damping * floor_sq).")
       .def("bind_hold", &IKStep::bind_hold, nb::arg("k"), nb::arg("hold").noconvert(),
-           "A DAMPING kernel's (nq,) float64 array that each step copies q into (its task's "
-           "q_hold).")
+           nb::arg("velocity").none(),
+           "A DAMPING or LOW_ACCELERATION kernel's (nq,) float64 array that each step copies "
+           "q into (its task's q_hold; NaN first: no step yet) and a LOW_ACCELERATION's (nv,) "
+           "v_prev that each step writes (None for a DAMPING).")
+      .def("set_previous", &IKStep::set_previous, nb::arg("k"), nb::arg("v"),
+           "A LOW_ACCELERATION kernel's previous velocity (nv,) for its next step only.")
       .def("bind_rows", &IKStep::bind_rows, nb::arg("k"), nb::arg("A").noconvert(),
            nb::arg("b").noconvert(),
            "The writable float64 arrays (rows, nv) and (rows,) an equality kernel writes its "

@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from support.native_engine import needs_native
+from support.native_ik import manifold_robot
 
 import qpcoord as qc
 from qpcoord.kinematics.frame_tasks import (
@@ -549,7 +550,8 @@ def test_native_damping_task_rows_and_hold_equal_the_python_refresh(robots, name
 
 @needs_native
 @pytest.mark.parametrize("name", ["panda", "talos"])
-def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name):
+@pytest.mark.parametrize("cls", [qc.DampingTask, qc.LowAccelerationTask])
+def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name, cls):
     robot = _robot(robots, name)
     q0 = _start(robot)
     frame = HAND[name]
@@ -558,7 +560,7 @@ def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name):
         T = robot.frame_pose(q0, frame).copy()
         T[:3, 3] += [0.05, 0.05, -0.05]
         hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.2 / DT)
-        low = [qc.DampingTask(robot, weight=1e-2)]
+        low = [cls(robot, weight=1e-2)]
         if name == "talos":
             feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
             return [feet, [hand], low]
@@ -576,3 +578,45 @@ def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name):
         tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
         np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
         q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos", "manifold"])
+def test_native_low_acceleration_rows_equal_the_python_refresh(robots, name):
+    """``v_prev`` (and the rows ``v = v_prev``) from the two last configurations on the
+    configuration manifold (free-flyer, continuous and spherical joints on ``manifold``),
+    or from ``set_previous``, as the Python refresh."""
+    robot = manifold_robot() if name == "manifold" else _robot(robots, name)
+    q0 = robot.neutral() if name == "manifold" else _start(robot)
+    w = np.linspace(0.5, 2.0, robot.nv)
+    tn, tp = qc.LowAccelerationTask(robot, weight=w), qc.LowAccelerationTask(robot, weight=w)
+    assert native_kind(tn) == TaskKind.LOW_ACCELERATION
+    frame = "tip" if name == "manifold" else HAND[name]
+
+    def hand():
+        return FramePositionTask(robot, frame, robot.frame_pose(q0, frame)[:3, 3])
+
+    ikn = qc.IK(robot, [[hand()], [tn]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[hand()], [tp]], DT, limits=None, engine="python")
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(8)
+    q = q0
+    for step in range(6):
+        if step == 3:  # a given previous velocity, for the next step only
+            given = rng.normal(size=robot.nv)
+            tn.set_previous(given)
+            tp.set_previous(given)
+        ikn.step(q)
+        ikp.refresh(q)
+        if step == 3:
+            np.testing.assert_array_equal(tn.v_prev, given)
+        # difference(q_hold, q) / dt: the two evaluations (a log of rotations of at most a
+        # few rad, differences of coordinates of at most a few rad or m) differ by a few eps
+        # of |q|, divided by dt
+        tol = 64 * EPS * (1.0 + np.abs(q).max()) / DT
+        np.testing.assert_allclose(tn.v_prev, tp.v_prev, rtol=0, atol=tol, err_msg=f"{step}")
+        np.testing.assert_array_equal(tn.task.b, tn.v_prev)
+        np.testing.assert_array_equal(tn.task.A, tp.task.A)
+        np.testing.assert_array_equal(tn.q_hold, q)
+        q = robot.integrate(q, rng.normal(scale=0.5, size=robot.nv), DT)
+    assert np.abs(tp.v_prev).max() > 0.1  # measured, not the zero of the first step

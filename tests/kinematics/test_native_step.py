@@ -918,7 +918,7 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
         call(q, True, 10.0, True)
     print(kind + "-" + method, count() - before)
 # the acceleration limits' box (braking rows), the damping kernels (a task's, a band's and
-# a posture's lm_damping rows), a relative frame, a joint coupling and a damping task
+# a posture's lm_damping rows), a relative frame, a joint coupling and the damping tasks
 q = start_configuration(robot)
 ee = robot.with_frame("panda_hand_tcp")
 T = robot.frame_pose(q, "panda_hand_tcp")
@@ -934,7 +934,8 @@ stacks = {{
                            qc.JointCouplingTask(robot, ["panda_joint1", "panda_joint3"],
                                                 [1.0, -0.5], offset=0.2)], "robot"),
     "damping": ([qc.FramePositionTask(robot, "panda_hand_tcp", T[:3, 3]),
-                 qc.DampingTask(robot, weight=0.1)], "robot"),
+                 qc.DampingTask(robot, weight=0.1),
+                 qc.LowAccelerationTask(robot, weight=0.1)], "robot"),
 }}
 for name, (levels, limits) in stacks.items():
     ik = qc.IK(robot, levels, DT, limits=limits, engine="native")

@@ -168,18 +168,28 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       write_row(k, 0, Jt_.row(0), -gain * e);
       return true;
     }
-    case kDamping: {  // A = I, b = 0 (v coordinates: no coordinate map); q_hold = q
-      double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
-      double* beq = out_[1].data() + k.row0;
-      for (int r = 0; r < nv_; ++r) {
-        for (int c = 0; c < nv_; ++c) {
-          k.A(r, c) = r == c ? 1.0 : 0.0;
-          Aeq[static_cast<size_t>(r) * nv_ + c] = r == c ? k.sw[r] : 0.0;
-        }
-        k.b[r] = 0.0;
-        k.err[r] = 0.0;
-        beq[r] = 0.0;
+    case kDamping: {  // A = I, b = 0; q_hold = q
+      diagonal_rows(k, 1.0, nullptr);
+      for (int i = 0; i < nq_; ++i) k.hold[i] = q[i * qs];
+      return true;
+    }
+    case kLowAcceleration: {  // A = I, b = v_prev (v coordinates); q_hold = q
+      if (k.has_vel) {  // set_previous: for this step only
+        for (int i = 0; i < nv_; ++i) k.vprev[i] = k.target[i];
+        k.has_vel = false;
+      } else if (std::isnan(k.hold[0])) {  // the first step: from rest
+        for (int i = 0; i < nv_; ++i) k.vprev[i] = 0.0;
+      } else {  // difference(q_hold, q) / dt, into row_ then v_prev
+        for (int i = 0; i < nq_; ++i) hold_[i] = k.hold[i];
+        integrate::difference(k.qidx.data(), static_cast<int>(k.qidx.size() / 4),
+                              hold_.data(), q, qs, dt_, row_.data());
+        for (int i = 0; i < nv_; ++i) k.vprev[i] = row_[i];
       }
+      for (int r = 0; r < nv_; ++r) {
+        row_[r] = k.vprev[r];
+        if (!std::isfinite(row_[r])) return false;  // the task's refresh names it
+      }
+      diagonal_rows(k, 1.0, row_.data());
       for (int i = 0; i < nq_; ++i) k.hold[i] = q[i * qs];
       return true;
     }
@@ -209,20 +219,23 @@ bool IKStep::run_damping(Kernel& k) {
   // below the floor the rows are zero, not tiny (LMDamping._refresh: rows of any positive
   // size would fix the level's null space around a met task)
   if (mu <= k.lm * k.floor_sq) mu = 0.0;
-  const double s = std::sqrt(mu);
+  diagonal_rows(k, std::sqrt(mu), nullptr);
+  return true;
+}
+
+void IKStep::diagonal_rows(Kernel& k, double d, const double* b) {
   double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
   double* beq = out_[1].data() + k.row0;
-  for (int r = 0; r < nv_; ++r) {  // v coordinates (no coordinate map: sqrt(mu) I is in v's)
+  for (int r = 0; r < nv_; ++r) {
     for (int c = 0; c < nv_; ++c) {
-      k.A(r, c) = 0.0;
-      Aeq[static_cast<size_t>(r) * nv_ + c] = 0.0;
+      k.A(r, c) = r == c ? d : 0.0;
+      Aeq[static_cast<size_t>(r) * nv_ + c] = r == c ? d * k.sw[r] : 0.0;
     }
-    k.A(r, r) = s;
-    Aeq[static_cast<size_t>(r) * nv_ + r] = s * k.sw[r];
-    k.b[r] = 0.0;
-    beq[r] = 0.0;
+    const double bv = b ? b[r] : 0.0;
+    k.b[r] = bv;
+    k.err[r] = 0.0;
+    beq[r] = bv * k.sw[r];
   }
-  return true;
 }
 
 bool IKStep::run_band(const Kernel& k, support::Band& b) {
