@@ -8,10 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.counting_malloc import run_counting_malloc
 from support.native_engine import needs_native
 from support.native_ik import manifold_robot
 
 import qpcoord as qc
+from qpcoord.core import native
 from qpcoord.kinematics.frame_tasks import (
     ComBand,
     ComTask,
@@ -620,3 +622,80 @@ def test_native_low_acceleration_rows_equal_the_python_refresh(robots, name):
         np.testing.assert_array_equal(tn.q_hold, q)
         q = robot.integrate(q, rng.normal(scale=0.5, size=robot.nv), DT)
     assert np.abs(tp.v_prev).max() > 0.1  # measured, not the zero of the first step
+
+
+# ---------------------------------------------------------------------------------------
+# the weighted QP on the same kernels; no allocation on a floating base
+# ---------------------------------------------------------------------------------------
+
+
+def _talos_stack(robot: qc.Robot, q0: np.ndarray) -> tuple[list, list]:
+    """Feet, a damped hand, a relative frame, a coupling and a low-acceleration level on
+    Talos, with acceleration limits braking before the position limits."""
+    feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+    far = robot.frame_pose(q0, HAND["talos"])[:3, 3] + [0.3, -0.2, 0.2]
+    hand = FramePositionTask(robot, HAND["talos"], far, gain=0.2 / DT, lm_damping=0.5)
+    low = [_relative(robot, q0, "x y z"), _coupling(robot), qc.LowAccelerationTask(robot, 1e-3)]
+    return [feet, [hand], low], _limits(robot, 0.5, 30.0)
+
+
+@needs_native
+def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
+    robot = _robot(robots, "talos")
+    q0 = _start(robot)
+    iks = []
+    for engine in ("native", "python"):
+        levels, limits = _talos_stack(robot, q0)
+        iks.append(qc.IK(robot, levels, DT, limits=limits, method="weighted", engine=engine))
+    ikn, ikp = iks
+    assert ikn._native.weighted and not ikn._native._hybrid
+    assert not ikn._native._python_limits
+    q = q0.copy()
+    for step in range(150):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same weighted QP (rows and box to rounding) solved by both engines in the
+        # whitened variables of the weighted rows' QR (as test_native_support.py's Talos
+        # loop): 1e-9 of the velocities' scale (a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+_ALLOCATION_RUN = r"""
+import ctypes, sys
+import numpy as np, pinocchio as pin, qpcoord as qc
+sys.path.insert(0, {tests!r})
+from test_native_kernels_match_python import _talos_stack, _start, DT
+count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
+count.restype = ctypes.c_longlong
+robot = qc.robots.load("talos")
+print("variant", qc.core.native.variant())
+q0 = _start(robot)
+q = robot.integrate(q0, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
+for method in ("hierarchical", "weighted"):
+    levels, limits = _talos_stack(robot, q0)
+    ik = qc.IK(robot, levels, DT, limits=limits, method=method, engine="native")
+    assert not ik._native._hybrid and not ik._native._python_limits
+    pin.computeJointJacobians(robot.model, robot.data, q)
+    call = ik._native._solver.step
+    for _ in range(20):
+        assert call(q, True, 10.0, True) == 0
+    before = count()
+    for _ in range(500):
+        call(q, True, 10.0, True)
+    print(method, count() - before)
+"""
+
+
+@pytest.mark.engine_independent
+@needs_native
+@pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
+def test_the_new_kernels_do_not_allocate_on_a_floating_base(tmp_path, robots, build):
+    """The native call with the acceleration box, LM damping, relative-frame, coupling and
+    low-acceleration kernels (a free-flyer difference) on Talos makes no heap allocation
+    after its first calls. Each build of the extension, chosen by QPCOORD_NATIVE_ISA."""
+    _robot(robots, "talos")
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
+    counts = dict(line.split() for line in out.splitlines())
+    assert counts == {"variant": build, "hierarchical": "0", "weighted": "0"}, out
