@@ -699,3 +699,30 @@ def test_the_new_kernels_do_not_allocate_on_a_floating_base(tmp_path, robots, bu
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
     assert counts == {"variant": build, "hierarchical": "0", "weighted": "0"}, out
+
+
+@needs_native
+@pytest.mark.parametrize("kind", ["relative", "coupling"])
+def test_native_relative_and_coupling_jacobians_match_finite_differences(robots, kind):
+    """The native rows' ``A`` against central differences of their error ``e = −b/K`` (no
+    feed-forward) along random velocities, on Talos (floating base)."""
+    robot = _robot(robots, "talos")
+    q0 = _start(robot)
+    task = _coupling(robot) if kind == "coupling" else _relative(robot, q0, "x z ry rz")
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q0)]], DT, limits=None, engine="native")
+    assert native_kind(task) in (TaskKind.RELATIVE_FRAME, TaskKind.JOINT_COUPLING)
+    rng = np.random.default_rng(12)
+    h = 1e-6
+
+    def error(q):
+        ik.step(q)
+        return -task.task.b / task.gain
+
+    for _ in range(3):
+        q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
+        d = rng.normal(size=robot.nv)
+        ik.step(q)
+        Jd = task.task.A @ d
+        fd = (error(robot.integrate(q, d, h)) - error(robot.integrate(q, d, -h))) / (2 * h)
+        # central differences: truncation O(h²) and rounding O(eps |e| / h) ~ 1e-10
+        np.testing.assert_allclose(Jd, fd, rtol=0, atol=1e-6 * max(1.0, np.abs(fd).max()))
