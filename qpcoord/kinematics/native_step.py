@@ -301,6 +301,7 @@ class _Slot:
 
     __slots__ = (
         "k", "kind", "task", "solver", "moving", "push", "gain", "arrays", "set_target", "watched",
+        "error",
     )  # fmt: skip
 
     def __init__(
@@ -325,6 +326,8 @@ class _Slot:
             self.push = _push_joint_limits
         self.gain: Any = None
         self.arrays: tuple[np.ndarray, ...] = ()
+        #: what the native setter said of data it refused (None: its data is in the step)
+        self.error: str | None = None
         #: ``set_target(target, velocity)`` of this kernel: a task's own set_target calls it
         #: with its validated float64 target (FrameTask: T* (4, 4), OrientationTask: R*
         #: (3, 3), FramePositionTask and ComTask: (3,)) and velocity (or None), one native
@@ -349,7 +352,9 @@ class _Slot:
                     self.solver.set_gain(self.k, gain)
                     self.gain = gain
             self.push(self)
-        except (TypeError, ValueError):
+            self.error = None
+        except (TypeError, ValueError) as exc:
+            self.error = str(exc)
             if self in self.moving:
                 self.moving.remove(self)
             if self.kind is None:
@@ -985,6 +990,13 @@ class NativeIKStep(NativeHierarchy):
 
     def _raise_status(self, code: int, q: Any, t: float, reference: Any) -> None:
         mod = self._mod
+        if code == mod.BAD_INPUT:  # a limit whose data its setter refused: named
+            for slot in self._slots:
+                if slot.kind is None and slot.error is not None:
+                    raise ValueError(
+                        f"{slot.task.task.name}: the native IK step cannot use its data "
+                        f"({slot.error})"
+                    )
         if code == mod.IK_BAD_Q:
             self.robot.check_configuration(q)  # names q
             raise ValueError(f"q: the native IK step rejected the configuration {q!r}")

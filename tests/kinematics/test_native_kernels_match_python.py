@@ -726,3 +726,20 @@ def test_native_relative_and_coupling_jacobians_match_finite_differences(robots,
         fd = (error(robot.integrate(q, d, h)) - error(robot.integrate(q, d, -h))) / (2 * h)
         # central differences: truncation O(h²) and rounding O(eps |e| / h) ~ 1e-10
         np.testing.assert_allclose(Jd, fd, rtol=0, atol=1e-6 * max(1.0, np.abs(fd).max()))
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("what", "message"),
+    [("a_max", "acceleration limits: .*limit not > 0"), ("gain", "joint limits: .*gain")],
+)
+def test_limit_data_the_native_step_refuses_is_named(robots, what, message):
+    robot = robots["panda"]
+    limits = _limits(robot, 0.5, 50.0)
+    ik = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limits, engine="native")
+    if what == "a_max":
+        limits[2].limit = np.full(robot.nv, -1.0)
+    else:
+        limits[0].gain = float("nan")
+    with pytest.raises(ValueError, match=message):
+        ik.step(_start(robot))
