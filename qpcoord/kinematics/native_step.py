@@ -16,8 +16,8 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
 - :class:`~qpcoord.FramePositionTask`, :class:`~qpcoord.FrameTask` (both errors),
   :class:`~qpcoord.OrientationTask`, :class:`~qpcoord.ComTask` (targets, feed-forward,
   masks, weights),
-- :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
-  not in it; a continuous joint's are),
+- :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints, continuous ones included (a
+  floating base's own rows are not in it),
 - :class:`~qpcoord.RelativeFrameTask` (``e = log₆(T*⁻¹ T_ref⁻¹ T_frame)``, both frames'
   motions) and :class:`~qpcoord.JointCouplingTask` (one row; its ``offset`` is a parameter),
 - :class:`~qpcoord.DampingTask` (``v = 0``; the step writes ``q`` into its ``q_hold``) and
@@ -37,7 +37,7 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   (``src/native/braking.hpp``; its ``v_prev`` array is bound once and read at every step),
   intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
-Every other task (other bands, collision, user tasks, a posture over a continuous joint, and
+Every other task (other bands, collision, user tasks, a posture over a spherical joint, and
 their ``lm_damping`` rows) and constant Equality/Inequality rows keep their Python
 ``_refresh``, run before the native call and copied into the same arrays (a hybrid step); any
 other limit (a user's :class:`~qpcoord.Limit`) makes the whole box Python-computed. With
@@ -406,8 +406,9 @@ def _coupling_indices(task: JointCouplingTask) -> list[int]:
 
 
 def _posture_q_index(task: PostureTask) -> list[int] | None:
-    """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there), or
-    ``None`` if a row's joint is not a 1-DoF vector-space joint (a continuous joint)."""
+    """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there; a
+    continuous joint's: ``nq`` + the index of its (cos, sin) pair, ``q_ref ⊖ q`` the angle
+    from ``q`` to ``q_ref``), or ``None`` if a row's joint is neither (a spherical joint's)."""
     robot = task.robot
     if robot.euclidean:
         return [int(j) for j in task.joints]
@@ -416,6 +417,8 @@ def _posture_q_index(task: PostureTask) -> list[int] | None:
     for joint in model.joints[1:]:
         if joint.nq == 1 and joint.nv == 1:
             by_v[int(joint.idx_v)] = int(joint.idx_q)
+        elif _MANIFOLD_JOINTS.get(joint.shortname()) == 1:  # a (cos, sin) pair
+            by_v[int(joint.idx_v)] = model.nq + int(joint.idx_q)
     out: list[int] = []
     for j in task.joints:
         iq = by_v.get(int(j))

@@ -287,7 +287,8 @@ class IKStep {
 
   /// A kernel of `kind` writing rows row0.. of the stacked equalities (a band: inequalities).
   /// sel: per row, the axis of the full error (a posture: the joint's v index; a band: the
-  /// rows 0..rows-1); qidx: a posture's q index per row (a 1-DoF joint: q_ref - q there), a
+  /// rows 0..rows-1); qidx: a posture's q index per row (a 1-DoF joint: q_ref - q there; nq +
+  /// the index of a continuous joint's (cos, sin) pair: the angle from q to q_ref), a
   /// SupportPolygon's frame slots, a RELATIVE_FRAME's reference frame slot, a
   /// JOINT_COUPLING's q indices then v indices, an LM_DAMPING's owner kernel. Returns the
   /// kernel's index (the setters' k); it runs once its gain, weights, target and outputs are
@@ -325,10 +326,11 @@ class IKStep {
       bands_.back().frames = qidx;
       if (kind == kSupportPolygon) bands_.back().size(rows, nv_, rows / (int)qidx.size());
     }
-    if (kind == kPosture) {
+    if (kind == kPosture) {  // qidx: the joint's q index, or nq + that of a (cos, sin) pair
       if (qidx.size() != sel.size()) throw nb::value_error("add_task: one q index per row");
       for (int i : qidx)
-        if (i < 0 || i >= nq_) throw nb::value_error("add_task: q index out of range");
+        if (i < 0 || (i >= nq_ && i - nq_ + 1 >= nq_))
+          throw nb::value_error("add_task: q index out of range");
     }
     if (kind == kRelativeFrame &&
         (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= (int)frames_.size() || qidx[0] == frame))

@@ -743,3 +743,47 @@ def test_limit_data_the_native_step_refuses_is_named(robots, what, message):
         limits[0].gain = float("nan")
     with pytest.raises(ValueError, match=message):
         ik.step(_start(robot))
+
+
+# ---------------------------------------------------------------------------------------
+# a posture over continuous joints
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+def test_a_posture_over_continuous_joints_is_native_and_matches(robots):
+    """The Kinova's continuous joints ((cos, sin) pairs): the posture's rows are the angle
+    from q to q_ref (``pinocchio.difference``) natively, damped too, as the Python refresh;
+    and a closed loop gives the same v on both engines."""
+    try:
+        robot = qc.robots.load("kinova")
+    except ValueError:  # example-robot-data missing
+        pytest.skip("kinova not available")
+    assert any(j.shortname().startswith("JointModelRUB") for j in robot.model.joints)
+    q0 = robot.neutral()
+    frame = robot.frame
+
+    def levels():
+        q_ref = robot.random_configuration(6)
+        hand = FramePositionTask(robot, frame, robot.frame_pose(q0, frame)[:3, 3] + 0.05)
+        return [[hand], [qc.PostureTask(robot, q_ref, gain=2.0, lm_damping=0.3)]]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    tn = next(t for t in ikn._native.kernel_tasks if isinstance(t, qc.PostureTask))
+    tp = next(t for t in ikp._dynamic if isinstance(t, qc.PostureTask))
+    rng = np.random.default_rng(3)
+    q = q0
+    for step in range(200):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        if step % 50 == 0:  # the rows: an atan2 of products of unit (cos, sin) pairs
+            tol = 64 * EPS * tp.gain * np.pi
+            np.testing.assert_allclose(tn.task.b, tp.task.b, rtol=0, atol=tol)
+            np.testing.assert_allclose(tn.lm_rows.task.A, tp.lm_rows.task.A, rtol=0, atol=tol)
+        # the same QP (rows to rounding) on two engines, each to its KKT tolerance 1e-9
+        # relative to the velocities' scale (a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn + 0.01 * rng.normal(size=robot.nv), DT)

@@ -33,7 +33,7 @@ from qpcoord.kinematics.frame_tasks import (
     OrientationTask,
     RelativeFrameTask,
 )
-from qpcoord.kinematics.native_step import native_kind
+from qpcoord.kinematics.native_step import TaskKind, native_kind
 from qpcoord.kinematics.paths import Circle
 from qpcoord.kinematics.tasks import AccelerationLimits, PositionBand
 
@@ -834,7 +834,7 @@ def test_without_the_extension_the_python_path_warns_once(robots, missing_extens
 
 
 @needs_native
-def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
+def test_posture_over_a_continuous_joint_is_native_and_matches():
     model = pin.Model()
     parent = 0
     for i, joint in enumerate(
@@ -853,7 +853,8 @@ def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
         return [qc.PositionTask(robot, robot.position(q) + 0.05), qc.PostureTask(robot, q)]
 
     ikn, ikp = engine_pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
-    assert ikn._native._python_tasks == [ikn._dynamic[1]]
+    assert not ikn._native._hybrid  # the continuous joint's row: an atan2 natively
+    assert native_kind(ikn._dynamic[1]) == TaskKind.POSTURE
     for step in range(30):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)

@@ -112,7 +112,14 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       for (int r = 0; r < rows; ++r) {
         const int j = k.sel[r], iq = k.qidx[r];
         const double s = k.sw[r];
-        const double d = k.target[iq] - q[iq * qs];
+        double d;  // difference(q, q_ref) on the row's joint
+        if (iq < nq_) {  // a 1-DoF vector-space joint: q_ref - q
+          d = k.target[iq] - q[iq * qs];
+        } else {  // a continuous joint's (cos, sin) pair at iq - nq: the angle from q to q_ref
+          const int c = iq - nq_;
+          const double ca = q[c * qs], sa = q[(c + 1) * qs], cb = k.target[c], sb = k.target[c + 1];
+          d = std::atan2(ca * sb - sa * cb, ca * cb + sa * sb);
+        }
         const double bv = gain * d;
         k.err[r] = -d;
         // the task's A (the selection) is constant: the stacked row is rewritten
