@@ -34,8 +34,9 @@ feed-forward twist (3.9e-6 m and 2.0e-5 rad without the speed bound). The quater
 unit to 2.2e-16. Pink with the feet as ``constraints`` does not move at all (largest joint
 speed 7e-14 rad/s): its constraints take a ``FrameTask``'s six rows whatever the costs, so
 four point feet become 24 equations on 18 DoF. Median step (IK + integrate) qpcoord
-≈ 200 µs (≈ 250 µs with feed-forward; 300–400 µs in runs on a busier machine), Pink
-≈ 170 µs; the p99s (4–9 ms, Pink's too) come from other jobs on the 2 shared cores.
+≈ 24 µs (≈ 25 µs with feed-forward: every task, the low-acceleration one included, in the
+native IK step), Pink ≈ 165 µs; Pink's p99s (4–8 ms) come from other jobs on the 2 shared
+cores.
 Pink's ``LowAccelerationTask`` on Solo-12: ``ValueError: matmul: … (size 18 is different
 from 12)``; ours is 18 × 18 and runs at level 2. ``--quick`` (0.5 s): feet drift 9.4e-7 m
 (Pink 1.5e-6 m), the same crash.

@@ -219,8 +219,8 @@ def test_lexls_bench_without_lexls(tmp_path):
 
 def test_pages_hold_every_table_with_its_command():
     """Every table of ``python -m benchmarks`` has one marker pair in its page
-    (benchmarks/README.md or ddl.md, so ``--write`` writes them all), every marker pair is one
-    of them, and each block opens with its machine line, which ends with the command
+    (benchmarks/README.md, ddl.md or edges.md, so ``--write`` writes them all), every marker
+    pair is one of them, and each block opens with its machine line, which ends with the command
     ``python -m benchmarks`` runs for it; the README stays under 300 lines."""
     import re
     import shlex

@@ -1400,7 +1400,21 @@ class DampingTask(_ErrorTask):
         self.weight = w
         self._init_equality(robot, nv, np.ones(nv, dtype=bool), w, name)
         self.task._assign(np.eye(nv), np.zeros(nv))
-        self.q_hold: np.ndarray | None = None
+        self._hold = np.full(robot.nq, np.nan)  # NaN: no update yet
+
+    @property
+    def q_hold(self) -> np.ndarray | None:
+        """The configuration of the last update (nq,; rad, m), ``None`` before the first: one
+        array for the task's life, written in place at each update (by a native IK step
+        too); assigning copies into it."""
+        return None if np.isnan(self._hold[0]) else self._hold
+
+    @q_hold.setter
+    def q_hold(self, value: Any) -> None:
+        if value is None:
+            self._hold[...] = np.nan
+        else:
+            self._hold[...] = self.robot.check_configuration(value)
 
     def _evaluate(self, q):
         robot = self.robot
@@ -1413,7 +1427,7 @@ class DampingTask(_ErrorTask):
         return np.asarray(e), np.asarray(J).reshape(robot.nv, robot.nv), None
 
     def _refresh(self, q, t, dt, reference) -> Equality:
-        self.q_hold = q.copy()
+        self._hold[...] = q
         return self.task  # A = I, b = 0: constant
 
 
@@ -1437,24 +1451,37 @@ class LowAccelerationTask(DampingTask):
 
     def __init__(self, robot: Robot, weight: Any = 1.0, name: str = "low acceleration") -> None:
         super().__init__(robot, weight, name)
-        self.v_prev = np.zeros(robot.nv)
+        self._v_prev = np.zeros(robot.nv)
         self._given: np.ndarray | None = None
+
+    @property
+    def v_prev(self) -> np.ndarray:
+        """The previous step's velocity of the last update (nv,; rad/s, m/s, base twist): one
+        array for the task's life, written in place at each update (by a native IK step
+        too); assigning copies into it."""
+        return self._v_prev
+
+    @v_prev.setter
+    def v_prev(self, value: Any) -> None:
+        self._v_prev[...] = self.robot._check_velocity(value, "v_prev")
 
     def set_previous(self, v: Any) -> None:
         """Set ``v_prev`` (size nv; rad/s, m/s, base twist) for the next update."""
         self._given = self.robot._check_velocity(v, "v").copy()
+        if self._bound:  # a native IK step takes it for its next step
+            self._parameters_written()
 
     def _refresh(self, q, t, dt, reference) -> Equality:
         if self._given is not None:
-            self.v_prev[:] = self._given
+            self._v_prev[:] = self._given
             self._given = None
         elif self.q_hold is None:
-            self.v_prev[:] = 0.0
+            self._v_prev[:] = 0.0
         else:
             robot = self.robot
             if robot.euclidean:
-                self.v_prev[:] = (q - self.q_hold) / dt
+                self._v_prev[:] = (q - self.q_hold) / dt
             else:
-                self.v_prev[:] = pin.difference(robot.model, self.q_hold, q) / dt
-        self.q_hold = q.copy()
-        return self.task._assign(b=self.v_prev)
+                self._v_prev[:] = pin.difference(robot.model, self.q_hold, q) / dt
+        self._hold[...] = q
+        return self.task._assign(b=self._v_prev)

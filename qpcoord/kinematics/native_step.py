@@ -16,8 +16,16 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
 - :class:`~qpcoord.FramePositionTask`, :class:`~qpcoord.FrameTask` (both errors),
   :class:`~qpcoord.OrientationTask`, :class:`~qpcoord.ComTask` (targets, feed-forward,
   masks, weights),
-- :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints (a floating base's own rows are
-  not in it; a continuous joint's are),
+- :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints, continuous ones included (a
+  floating base's own rows are not in it),
+- :class:`~qpcoord.RelativeFrameTask` (``e = log₆(T*⁻¹ T_ref⁻¹ T_frame)``, both frames'
+  motions) and :class:`~qpcoord.JointCouplingTask` (one row; its ``offset`` is a parameter),
+- :class:`~qpcoord.DampingTask` (``v = 0``; the step writes ``q`` into its ``q_hold``) and
+  :class:`~qpcoord.LowAccelerationTask` (``v = v_prev``: its ``set_previous`` velocity, else
+  ``difference(q_hold, q) / dt`` on the configuration manifold, ``src/native/integrate.hpp``),
+- the Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`) of every task listed here with
+  ``lm_damping > 0``: ``√μ I`` from the error its kernel computed at the same step (run after
+  the other kernels; zero below ``LM_ERROR_FLOOR``),
 - :class:`~qpcoord.PositionBand` on a robot with a default frame (inequality rows ``C``,
   ``lower``, ``upper``: the frame's position rows),
 - :class:`~qpcoord.ComBand` and :class:`~qpcoord.SupportPolygon` (inequality rows ``C``,
@@ -30,13 +38,15 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   the native call on the step's kinematics (the broad phase, coal's distances, the rows of
   the pairs inside the influence distance; a pair outside it a zero row with lower ``-inf``,
   so the row count is the task's, one per pair),
-- :class:`~qpcoord.JointLimits` and :class:`~qpcoord.VelocityLimits` (the bound
-  intersection rule of :meth:`IK.refresh <qpcoord.IK.refresh>`).
+- :class:`~qpcoord.JointLimits`, :class:`~qpcoord.VelocityLimits` and
+  :class:`~qpcoord.AccelerationLimits` with its braking before the position limits
+  (``src/native/braking.hpp``; its ``v_prev`` array is bound once and read at every step),
+  intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
-Every other task (other bands, relative frames, collision rows computed in Python, user
-tasks, a posture over a continuous joint) and constant Equality/Inequality rows keep their
-Python ``_refresh``, run before the native call and copied into the same arrays (a hybrid
-step); any other limit (acceleration limits, user limits) makes the whole box
+Every other task (other bands, collision rows computed in Python, user tasks, a posture over a
+spherical joint, and their ``lm_damping`` rows) and constant Equality/Inequality rows keep
+their Python ``_refresh``, run before the native call and copied into the same arrays (a
+hybrid step); any other limit (a user's :class:`~qpcoord.Limit`) makes the whole box
 Python-computed. With ``integrate=True`` (:meth:`IK.step_integrate
 <qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
 
@@ -75,16 +85,23 @@ from .collision import CollisionAvoidance
 from .frame_tasks import (
     ComBand,
     ComTask,
+    DampingTask,
     FramePositionTask,
     FrameTask,
+    JointCouplingTask,
+    LowAccelerationTask,
     OrientationTask,
+    RelativeFrameTask,
     SupportPolygon,
 )
 from .robot import Robot
 from .tasks import (
+    LM_ERROR_FLOOR,
+    AccelerationLimits,
     JointLimits,
     KinematicTask,
     Limit,
+    LMDamping,
     PositionBand,
     PositionTask,
     PostureTask,
@@ -108,6 +125,12 @@ class TaskKind(IntEnum):
     COM_BAND = 7  #: an inequality (``src/native/support_kernels.hpp``)
     SUPPORT_POLYGON = 8  #: an inequality (``src/native/support_kernels.hpp``)
     POSITION_BAND = 9  #: an inequality on the default frame's position rows
+    # -- the damping kernels (a task's rows from another kernel's error) --
+    LM_DAMPING = 10  #: a task's Levenberg–Marquardt rows (:class:`~qpcoord.LMDamping`)
+    RELATIVE_FRAME = 11  #: :class:`~qpcoord.RelativeFrameTask` (two frames)
+    JOINT_COUPLING = 12  #: :class:`~qpcoord.JointCouplingTask`
+    DAMPING = 13  #: :class:`~qpcoord.DampingTask` (``v = 0``; ``q_hold`` written in place)
+    LOW_ACCELERATION = 14  #: :class:`~qpcoord.LowAccelerationTask` (``v = v_prev``)
 
     # rows another extension module computes (``src/native/rows_kernel.h``), from 32 on
     COLLISION = 32  #: an inequality: ``qpcoord._collision``'s kernel, called by the step
@@ -124,8 +147,21 @@ KERNELS = {
     ComBand: TaskKind.COM_BAND,
     SupportPolygon: TaskKind.SUPPORT_POLYGON,
     PositionBand: TaskKind.POSITION_BAND,
+    RelativeFrameTask: TaskKind.RELATIVE_FRAME,
+    JointCouplingTask: TaskKind.JOINT_COUPLING,
+    DampingTask: TaskKind.DAMPING,
+    LowAccelerationTask: TaskKind.LOW_ACCELERATION,
     CollisionAvoidance: TaskKind.COLLISION,
 }
+#: The limits with a kernel (exact classes: a subclass's box is Python's).
+_NATIVE_LIMITS = (JointLimits, VelocityLimits, AccelerationLimits)
+#: The kernels that read no frame.
+_FRAMELESS = (
+    TaskKind.COM, TaskKind.POSTURE, TaskKind.JOINT_COUPLING, TaskKind.DAMPING,
+    TaskKind.LOW_ACCELERATION,
+)  # fmt: skip
+#: The kernels whose task's matrix is constant (a step writes no new ``A``).
+_CONSTANT_A = (TaskKind.POSTURE, TaskKind.DAMPING, TaskKind.LOW_ACCELERATION)
 #: The band kernels (Inequality rows).
 _BANDS = (TaskKind.COM_BAND, TaskKind.SUPPORT_POLYGON, TaskKind.POSITION_BAND)
 
@@ -177,6 +213,30 @@ def _push_orientation(slot: _Slot) -> None:
     slot.solver.set_target(slot.k, Rt.T, v if v is None else _f64(v))
 
 
+def _push_relative(slot: _Slot) -> None:
+    T = slot.task.target  # a RelativeFrameTask's pin.SE3 (validated by its set_target)
+    if T is None:
+        raise ValueError("no target")
+    slot.solver.set_target(slot.k, np.asarray(T.homogeneous, dtype=float), None)
+
+
+def _push_coupling(slot: _Slot) -> None:
+    task = slot.task  # a JointCouplingTask: (ratios, offset)
+    slot.solver.set_target(slot.k, np.append(_f64(task.ratios), float(task.offset)), None)
+
+
+def _push_damping(slot: _Slot) -> None:
+    slot.solver.bind_hold(slot.k, slot.task._hold, None)  # a DampingTask's q_hold, one array
+
+
+def _push_low_acceleration(slot: _Slot) -> None:
+    task = slot.task  # a LowAccelerationTask: q_hold and v_prev (one array each)
+    slot.solver.bind_hold(slot.k, task._hold, task._v_prev)
+    if task._given is not None:  # set_previous: the native step's next step takes it
+        slot.solver.set_previous(slot.k, task._given)
+        task._given = None
+
+
 def _push_posture(slot: _Slot) -> None:
     slot.solver.set_target(slot.k, _f64(slot.task.q_ref), None)
 
@@ -189,6 +249,11 @@ def _push_faces(slot: _Slot) -> None:
 def _push_polygon(slot: _Slot) -> None:
     task = slot.task  # a SupportPolygon
     slot.solver.set_contacts(slot.k, _f64(task.contact_points), task.margin)
+
+
+def _push_lm_damping(slot: _Slot) -> None:
+    owner = slot.task.owner  # an LMDamping's task: its lm_damping, read at each assignment
+    slot.solver.set_lm_damping(slot.k, float(owner.lm_damping), LM_ERROR_FLOOR**2)
 
 
 def _push_joint_limits(slot: _Slot) -> None:
@@ -214,6 +279,23 @@ def _push_velocity_limits(slot: _Slot) -> None:
     slot.solver.set_velocity_limits(slot.k, _f64(slot.task.limit))  # a VelocityLimits
 
 
+def _push_acceleration_limits(slot: _Slot) -> None:
+    lim = slot.task  # an AccelerationLimits: its v_prev array is bound (add_acceleration_limits)
+    P = lim.position_limits
+    if P is None:
+        gain, lo, hi = 1.0, np.zeros(0), np.zeros(0)
+    else:
+        qi = _braked_q_index(P)
+        gain, lo, hi = P.gain, _f64(P.lower[qi]), _f64(P.upper[qi])
+    slot.solver.set_acceleration_limits(slot.k, _f64(lim.limit), gain, lo, hi)
+
+
+def _braked_q_index(P: JointLimits) -> np.ndarray:
+    """The q index of each joint of ``P.joints`` (its v index where q and v share one
+    layout)."""
+    return P.joints if P.q_index is None else P.q_index
+
+
 #: How each kernel's parameters (target, faces, contact points; a collision task's kernel)
 #: go to the native step.
 _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
@@ -228,6 +310,11 @@ _PUSH: dict[TaskKind, Callable[[_Slot], None]] = {
     TaskKind.POSITION_BAND: _push_faces,
     TaskKind.SUPPORT_POLYGON: _push_polygon,
     TaskKind.COLLISION: _push_collision,
+    TaskKind.LM_DAMPING: _push_lm_damping,
+    TaskKind.RELATIVE_FRAME: _push_relative,
+    TaskKind.JOINT_COUPLING: _push_coupling,
+    TaskKind.DAMPING: _push_damping,
+    TaskKind.LOW_ACCELERATION: _push_low_acceleration,
 }
 
 
@@ -237,31 +324,47 @@ class _Slot:
     ``_bound``, until the step is dropped), and what of the task the step holds (its gain;
     its weights and output arrays, by identity)."""
 
-    __slots__ = ("k", "kind", "task", "solver", "moving", "push", "gain", "arrays", "set_target")
+    __slots__ = (
+        "k", "kind", "task", "solver", "moving", "push", "gain", "arrays", "set_target", "watched",
+        "error",
+    )  # fmt: skip
 
     def __init__(
         self, solver: Any, moving: list[_Slot], k: int, kind: TaskKind | None, task: Any
     ) -> None:
         self.k, self.kind, self.solver, self.moving = k, kind, solver, moving
         self.task: Any = task  # its class is the kind's (KERNELS)
+        #: the tasks whose parameter writes this slot is told of: its own and those it
+        #: reads (an acceleration limit's braked position limits)
+        self.watched: tuple[Any, ...] = (task,)
         if kind is not None:
             self.push = _PUSH[kind]
+            if kind == TaskKind.LM_DAMPING:  # told when its owner's lm_damping is assigned
+                self.watched = (task, task.owner)
         elif isinstance(task, VelocityLimits):
             self.push = _push_velocity_limits
+        elif isinstance(task, AccelerationLimits):
+            self.push = _push_acceleration_limits
+            if task.position_limits is not None:
+                self.watched = (task, task.position_limits)
         else:
             self.push = _push_joint_limits
         self.gain: Any = None
         self.arrays: tuple[np.ndarray, ...] = ()
+        #: what the native setter said of data it refused (None: its data is in the step)
+        self.error: str | None = None
         #: ``set_target(target, velocity)`` of this kernel: a task's own set_target calls it
         #: with its validated float64 target (FrameTask: T* (4, 4), OrientationTask: R*
         #: (3, 3), FramePositionTask and ComTask: (3,)) and velocity (or None), one native
         #: call per control step
         self.set_target = partial(solver.set_target, k)
-        task._bound = (*task._bound, self)
+        for t in self.watched:
+            t._bound = (*t._bound, self)
 
     def unbind(self) -> None:
-        """Tell the task no more (its step is dropped)."""
-        self.task._bound = tuple(s for s in self.task._bound if s is not self)
+        """Tell the tasks no more (its step is dropped)."""
+        for t in self.watched:
+            t._bound = tuple(s for s in t._bound if s is not self)
 
     def changed(self) -> None:
         """Copy the task's parameters (gain, target, ...) into the native step: at compile
@@ -274,7 +377,9 @@ class _Slot:
                     self.solver.set_gain(self.k, gain)
                     self.gain = gain
             self.push(self)
-        except (TypeError, ValueError):
+            self.error = None
+        except (TypeError, ValueError) as exc:
+            self.error = str(exc)
             if self in self.moving:
                 self.moving.remove(self)
             if self.kind is None:
@@ -294,8 +399,8 @@ class _Slot:
 def native_kind(task: KinematicTask) -> TaskKind | None:
     """The native kernel of ``task`` (:data:`KERNELS`), or ``None`` if its rows are
     built by its Python ``_refresh`` (exact classes only: a subclass may change them)."""
-    if task.lm_rows is not None:
-        return None  # its damping rows read the error its Python refresh records
+    if type(task) is LMDamping:  # native when its owner is: its kernel reads the owner's
+        return TaskKind.LM_DAMPING if native_kind(task.owner) is not None else None
     kind = KERNELS.get(type(task))
     if kind == TaskKind.COLLISION:  # its native rows (qpcoord._collision), if it has them
         assert isinstance(task, CollisionAvoidance)
@@ -316,12 +421,22 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
         and _posture_q_index(task) is None
     ):
         return None
+    if kind == TaskKind.LOW_ACCELERATION and integration_plan(task.robot) is None:
+        return None  # a joint without a native difference (planar, composite, ...)
     return kind
 
 
+def _coupling_indices(task: JointCouplingTask) -> list[int]:
+    """A joint coupling's q indices, then its v indices (one-DoF joints, in its order)."""
+    model = task.robot.model
+    joints = [model.joints[model.getJointId(name)] for name in task.joints]
+    return [int(j.idx_q) for j in joints] + [int(j.idx_v) for j in joints]
+
+
 def _posture_q_index(task: PostureTask) -> list[int] | None:
-    """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there), or
-    ``None`` if a row's joint is not a 1-DoF vector-space joint (a continuous joint)."""
+    """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there; a
+    continuous joint's: ``nq`` + the index of its (cos, sin) pair, ``q_ref ⊖ q`` the angle
+    from ``q`` to ``q_ref``), or ``None`` if a row's joint is neither (a spherical joint's)."""
     robot = task.robot
     if robot.euclidean:
         return [int(j) for j in task.joints]
@@ -330,6 +445,8 @@ def _posture_q_index(task: PostureTask) -> list[int] | None:
     for joint in model.joints[1:]:
         if joint.nq == 1 and joint.nv == 1:
             by_v[int(joint.idx_v)] = int(joint.idx_q)
+        elif _MANIFOLD_JOINTS.get(joint.shortname()) == 1:  # a (cos, sin) pair
+            by_v[int(joint.idx_v)] = model.nq + int(joint.idx_q)
     out: list[int] = []
     for j in task.joints:
         iq = by_v.get(int(j))
@@ -387,18 +504,30 @@ def _selection(task: KinematicTask, kind: TaskKind) -> list[int]:
     """Per row of the task: the axis of its full error (or the joint of a posture)."""
     if kind in (TaskKind.POSITION, TaskKind.POSITION_BAND):
         return [int(r) for r in task.robot.rows]
+    if kind in (TaskKind.LM_DAMPING, TaskKind.DAMPING, TaskKind.LOW_ACCELERATION):
+        return list(range(task.robot.nv))
     if isinstance(task, PostureTask):  # TaskKind.POSTURE
         return [int(j) for j in task.joints]
     if kind in _BANDS or kind == TaskKind.COLLISION:
         return list(range(task.task.shape[0]))
-    assert isinstance(task, (FramePositionTask, FrameTask, OrientationTask, ComTask))
+    assert isinstance(
+        task,
+        (
+            FramePositionTask,
+            FrameTask,
+            OrientationTask,
+            ComTask,
+            RelativeFrameTask,
+            JointCouplingTask,
+        ),
+    )
     return [int(r) for r in task.selected_rows]
 
 
 def _frame_id(task: KinematicTask, kind: TaskKind) -> int:
     """The frame a kernel of ``kind`` reads for ``task`` (its own, or its robot's default)."""
     fid: int | None
-    if isinstance(task, (FramePositionTask, FrameTask, OrientationTask)):
+    if isinstance(task, (FramePositionTask, FrameTask, OrientationTask, RelativeFrameTask)):
         fid = task.frame_id
     else:  # POSITION: a PositionTask, on a robot with a default frame (native_kind)
         fid = task.robot.frame_id
@@ -518,6 +647,9 @@ class NativeIKStep(NativeHierarchy):
         self._moving: list[_Slot] = []
         frames: dict[int, int] = {}
         data = self._data
+        #: the LM_DAMPING tasks and their first stacked row: added after the loop (an owner
+        #: band's kernel comes after the equalities of its level)
+        damping: list[tuple[Any, int]] = []
         i = j = 0
         for B in blocks:
             for t in B.eqs:
@@ -528,17 +660,30 @@ class NativeIKStep(NativeHierarchy):
                     self._eq_ops.append((t, P.Aeq[i : i + m], P.beq[i : i + m]))
                     if owner is not None and owner not in self._python_tasks:
                         self._python_tasks.append(owner)
+                elif kind == TaskKind.LM_DAMPING:  # added once every owner's kernel is
+                    damping.append((owner, i))
                 else:
                     frame = -1
                     if kind == TaskKind.COM and not self.com:  # views: computed at each step
                         solver.set_com(self._data.com[0], self._data.Jcom)
                         self.com = True
-                    elif kind not in (TaskKind.COM, TaskKind.POSTURE):
+                    elif kind not in _FRAMELESS:
                         fid = _frame_id(owner, kind)
                         if fid not in frames:
                             frames[fid] = self._add_frame(solver, fid)
                         frame = frames[fid]
-                    qidx = _posture_q_index(owner) if isinstance(owner, PostureTask) else []
+                    qidx: list[int] | None = []
+                    if isinstance(owner, PostureTask):
+                        qidx = _posture_q_index(owner)
+                    elif isinstance(owner, RelativeFrameTask):  # the reference frame's slot
+                        ref = int(owner.reference_id)
+                        if ref not in frames:
+                            frames[ref] = self._add_frame(solver, ref)
+                        qidx = [frames[ref]]
+                    elif isinstance(owner, JointCouplingTask):  # q indices, then v indices
+                        qidx = _coupling_indices(owner)
+                    elif isinstance(owner, LowAccelerationTask):  # its difference's segments
+                        qidx = integration_plan(owner.robot)
                     k = solver.add_task(kind, frame, _selection(owner, kind), i, qidx)
                     self._slots.append(_Slot(solver, self._moving, k, kind, owner))
                     self.kernel_tasks.append(owner)
@@ -580,10 +725,18 @@ class NativeIKStep(NativeHierarchy):
                 if owner is not None and owner not in self._python_tasks:
                     self._python_tasks.append(owner)
                 j += m
-        # limits: natively when all are JointLimits / VelocityLimits, else Python's box
+        kernel_of = {id(t): k for k, t in enumerate(self.kernel_tasks)}
+        for owner, row0 in damping:
+            kind = TaskKind.LM_DAMPING
+            k = solver.add_task(
+                kind, -1, _selection(owner, kind), row0, [kernel_of[id(owner.owner)]]
+            )
+            self._slots.append(_Slot(solver, self._moving, k, kind, owner))
+            self.kernel_tasks.append(owner)
+        # limits: natively when all are of _NATIVE_LIMITS, else Python's box
         self._python_limits = False
         if spec.limits:
-            if all(type(lim) in (JointLimits, VelocityLimits) for lim in spec.limits):
+            if all(type(lim) in _NATIVE_LIMITS for lim in spec.limits):
                 for lim in spec.limits:
                     self._add_limit(solver, lim)
                 solver.limits_mode = 1
@@ -592,10 +745,13 @@ class NativeIKStep(NativeHierarchy):
                 solver.limits_mode = 2
         self._hybrid = bool(self._python_tasks or self._eq_ops or self._in_ops)
         #: the kernels' tasks whose matrix each step writes: their ``matrix_version`` counts a
-        #: new matrix per step, as their ``_assign(A, b)`` would (a posture writes only b)
+        #: new matrix per step, as their ``_assign(A, b)`` would (a posture writes only b, a
+        #: damping task nothing)
         #: (their instance dicts: one item write each per step)
         self._bumps = [
-            sl.task.task.__dict__ for sl in self._slots if sl.kind not in (None, TaskKind.POSTURE)
+            sl.task.task.__dict__
+            for sl in self._slots
+            if sl.kind is not None and sl.kind not in _CONSTANT_A
         ]
         for d in self._bumps:  # the class default 0 as an instance item
             d.setdefault("matrix_version", 0)
@@ -625,7 +781,7 @@ class NativeIKStep(NativeHierarchy):
             solver.set_weighted(float(spec.regularization), float(spec.weight_ratio), self.active)
             # a kernel that writes a task's A (all but a posture's) refactors at every step;
             # without one, the tasks' matrix_version decides (as NativeWeighted.run)
-            writes_a = any(native_kind(t) != TaskKind.POSTURE for t in self.kernel_tasks)
+            writes_a = any(native_kind(t) not in _CONSTANT_A for t in self.kernel_tasks)
             self._watched = [] if writes_a else [t for B in blocks for t in (*B.eqs, *B.ineqs)]
             self._versions: list | None = None
         #: the copy of :attr:`q_next` the last ``step(..., integrate=True)`` returned with its
@@ -675,8 +831,13 @@ class NativeIKStep(NativeHierarchy):
     def _add_limit(self, solver: Any, lim: Limit) -> None:
         if isinstance(lim, VelocityLimits):
             i = solver.add_velocity_limits()
+        elif isinstance(lim, AccelerationLimits):
+            P = lim.position_limits
+            qi = [] if P is None else _braked_q_index(P).tolist()
+            vi = [] if P is None else P.joints.tolist()
+            i = solver.add_acceleration_limits(qi, vi, lim.v_prev)
         else:
-            assert isinstance(lim, JointLimits)  # the two kinds with a kernel
+            assert isinstance(lim, JointLimits)  # the kinds with a kernel (_NATIVE_LIMITS)
             qi = lim.q_index
             if qi is None:
                 i = solver.add_joint_limits([], [])
@@ -868,6 +1029,13 @@ class NativeIKStep(NativeHierarchy):
 
     def _raise_status(self, code: int, q: Any, t: float, reference: Any) -> None:
         mod = self._mod
+        if code == mod.BAD_INPUT:  # a limit whose data its setter refused: named
+            for slot in self._slots:
+                if slot.kind is None and slot.error is not None:
+                    raise ValueError(
+                        f"{slot.task.task.name}: the native IK step cannot use its data "
+                        f"({slot.error})"
+                    )
         if code == mod.IK_BAD_Q:
             self.robot.check_configuration(q)  # names q
             raise ValueError(f"q: the native IK step rejected the configuration {q!r}")

@@ -80,7 +80,7 @@ _FLOATING_ROOTS = ("JointModelFreeFlyer", "JointModelPlanar")
 PARAMETERS = frozenset(
     (
         "gain", "target", "target_velocity", "_target_T", "_target_t", "q_ref", "lower",
-        "upper", "contact_points", "margin", "limit",
+        "upper", "contact_points", "margin", "limit", "lm_damping", "offset",
     )
 )  # fmt: skip
 _setattr = object.__setattr__
@@ -217,8 +217,9 @@ class KinematicTask(ABC):
         an unreachable target it slows the motion to a stop instead of chattering at the
         speed limits. The damping rows are :attr:`lm_rows` (``nv`` rows beside the task in
         its level; in a strict hierarchy they fix the level's null space); they are zero once
-        the error is below ``LM_ERROR_FLOOR`` = 1e-6 (task units). The task's rows are then
-        built by its Python refresh.
+        the error is below ``LM_ERROR_FLOOR`` = 1e-6 (task units). The native IK step
+        computes them for a task it has a kernel for; for any other task, from its Python
+        refresh.
 
     Raises
     ------
@@ -259,6 +260,9 @@ class KinematicTask(ABC):
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name in PARAMETERS:
+            if name == "lm_damping":  # read by its damping rows at every step
+                task = self.__dict__.get("task")
+                value = _lm_damping(value, type(self).__name__ if task is None else task.name)
             if type(value) is np.ndarray and value.flags.writeable:
                 value = read_only(value.copy())  # the caller keeps no writable alias
             _setattr(self, name, value)
@@ -830,8 +834,10 @@ class LMDamping(KinematicTask):
 
     @property
     def mu(self) -> float:
-        """``μ = lm_damping · Σ wᵢ eᵢ²`` of the owner's last refresh ((task units)²)."""
-        return self.owner.lm_damping * self.owner._lm_error_sq()
+        """``μ = lm_damping · Σ wᵢ eᵢ²`` of the last step's rows ((task units)²; 0 below
+        :data:`LM_ERROR_FLOOR`), read from them (``√μ`` on the diagonal): the same for the
+        rows of a native IK step and those of :meth:`update`."""
+        return float(self.task.A[0, 0]) ** 2
 
     def _refresh(self, q: np.ndarray, t: float, dt: float, reference: Path | None) -> Equality:
         owner = self.owner
@@ -846,10 +852,10 @@ class LMDamping(KinematicTask):
                     "compute_error(q) (its _refresh does not record one)"
                 ) from None
             owner._lm_e, _ = owner._checked(e, np.zeros(owner.task.shape))
-            mu = self.mu
+            mu = owner.lm_damping * owner._lm_error_sq()
             owner._lm_e = None
         else:
-            mu = self.mu
+            mu = owner.lm_damping * owner._lm_error_sq()
         # below LM_ERROR_FLOOR the rows are zero, not tiny: in a strict hierarchy rows of any
         # positive size fix the level's null space, so rows at rounding size would switch the
         # levels below on and off from step to step around a met task
@@ -995,8 +1001,6 @@ class JointLimits(Limit):
             self._q_index = np.array([p[0] for p in pairs], dtype=int)
             self._v_index = np.array([p[1] for p in pairs], dtype=int)
             self.joints = self._v_index.copy()
-            self._lower_q = self.lower[self._q_index]
-            self._upper_q = self.upper[self._q_index]
         speed = _unlimited(robot.velocity_limit)[self.joints]
         with np.errstate(invalid="ignore"):  # 0 · inf (no band, no speed limit): no band
             self.band_rate = np.nan_to_num(self.band * speed, nan=0.0, posinf=np.inf)
@@ -1015,8 +1019,9 @@ class JointLimits(Limit):
         if self._q_index is None:
             j = self.joints
             return self.upper[j] - q[j], q[j] - self.lower[j]
-        qq = q[self._q_index]
-        return self._upper_q - qq, qq - self._lower_q
+        qi = self._q_index
+        qq = q[qi]
+        return self.upper[qi] - qq, qq - self.lower[qi]
 
     def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         up, down = self.distances(q)
@@ -1112,7 +1117,7 @@ class AccelerationLimits(Limit):
         if np.any(a <= 0):
             raise ValueError(f"AccelerationLimits: limit must be > 0 (rad/s²), got {a}")
         self.limit = _unlimited(a)
-        self.v_prev = np.zeros(robot.nv)
+        self._v_prev = np.zeros(robot.nv)
         if isinstance(position_limits, str) and position_limits == "robot":
             position_limits = JointLimits(robot)
         elif position_limits is not None and not (
@@ -1126,18 +1131,27 @@ class AccelerationLimits(Limit):
         self.position_limits: JointLimits | None = (
             position_limits if position_limits is not None and position_limits.joints.size else None
         )
-        if self.position_limits is not None:
-            self._brake_a = self.limit[self.position_limits.joints]
+
+    @property
+    def v_prev(self) -> np.ndarray:
+        """The previous step's velocity (nv,) (rad/s, m/s): one array for the limit's life,
+        written in place (assigning copies into it; a native IK step reads it)."""
+        return self._v_prev
+
+    @v_prev.setter
+    def v_prev(self, value: ArrayLike) -> None:
+        self._v_prev[...] = self.robot._check_velocity(value, "v_prev")
 
     def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         step = self.limit * dt
-        lo, hi = self.v_prev - step, self.v_prev + step
+        lo, hi = self._v_prev - step, self._v_prev + step
         P = self.position_limits
         if P is not None:
             j = P.joints
+            a = self.limit[j]
             up, down = P.distances(q)
-            hi[j] = np.minimum(hi[j], braking_speed(up, self._brake_a, dt, P.gain))
-            lo[j] = np.maximum(lo[j], -braking_speed(down, self._brake_a, dt, P.gain))
+            hi[j] = np.minimum(hi[j], braking_speed(up, a, dt, P.gain))
+            lo[j] = np.maximum(lo[j], -braking_speed(down, a, dt, P.gain))
             bad = lo > hi
             if bad.any():  # cannot brake in time, or outside the limit: the end nearer to 0
                 back = np.where(np.abs(lo) < np.abs(hi), lo, hi)
@@ -1146,11 +1160,11 @@ class AccelerationLimits(Limit):
 
     def record(self, v: np.ndarray) -> None:
         """Keep ``v`` (nv,) as the previous step's velocity."""
-        self.v_prev[...] = v
+        self._v_prev[...] = v
 
     def reset(self, v_prev: ArrayLike | None = None) -> None:
         """Start again from rest (``v_prev = 0``) or from the given velocity (nv,)."""
         if v_prev is None:
-            self.v_prev[...] = 0.0
+            self._v_prev[...] = 0.0
         else:
-            self.v_prev[...] = self.robot._check_velocity(v_prev, "v_prev")
+            self.v_prev = v_prev

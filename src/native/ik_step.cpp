@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "braking.hpp"
 #include "hierarchy.hpp"
 #include "info_dict.hpp"
 #include "integrate.hpp"
@@ -145,13 +146,20 @@ enum Kind : int {
   kComBand,         ///< ComBand (an inequality: support_kernels.hpp)
   kSupportPolygon,  ///< SupportPolygon (an inequality: support_kernels.hpp)
   kPositionBand,    ///< PositionBand (an inequality on the frame's position rows)
+  // -- kinds after the bands: damping rows, two frames, joint couplings --
+  kLMDamping,      ///< LMDamping: sqrt(mu) I, mu from its owner kernel's error (run after all)
+  kRelativeFrame,  ///< RelativeFrameTask: log6 of frame in a reference frame (qidx: its slot)
+  kJointCoupling,  ///< JointCouplingTask: one row sum(r_i q_i) - offset (qidx: q, v indices)
+  kDamping,        ///< DampingTask: v = 0 on all nv rows, q copied into its hold array
+  kLowAcceleration,  ///< LowAccelerationTask: v = v_prev (qidx: the integration plan)
+  kKindEnd,        ///< one past the last kind evaluated here (not a kind)
 
   // Rows computed by another extension module through rows_kernel.h (set_rows_kernel), from
   // 32 on: apart from the kinds evaluated here.
   kCollision = 32,  ///< CollisionAvoidance (qpcoord._collision's CollisionKernel.entry())
 };
 
-bool known_kind(int k) { return (k >= kPosition && k <= kPositionBand) || k == kCollision; }
+bool known_kind(int k) { return (k >= kPosition && k < kKindEnd) || k == kCollision; }
 bool is_band(Kind k) { return k == kComBand || k == kSupportPolygon || k == kPositionBand; }
 /// the kinds that write an Inequality (C, lower, upper): the bands and the external rows
 bool is_inequality(Kind k) { return is_band(k) || k == kCollision; }
@@ -199,6 +207,8 @@ struct Kernel {
   Vec3 pinv = Vec3::Zero();      ///< ORIENTATION: R*^T in Rinv
   // outputs: the task's own arrays (Equality: A (rows, nv), b; Inequality: C, lower, upper)
   Out A, b, lower, upper;
+  Out hold;   ///< DAMPING, LOW_ACCELERATION: the task's q_hold (nq,), q at each step
+  Out vprev;  ///< LOW_ACCELERATION: the task's v_prev (nv,), written at each step
   /// which of gain (1), weights (2), target (4), outputs (8) were set: step() runs a kernel
   /// only once all are (kReady)
   int given = 0;
@@ -207,17 +217,27 @@ struct Kernel {
   /// kCollision: the producer's capsule (kept alive) and its entry point (set_rows_kernel)
   nb::object rows_capsule;
   const qpcoord_rows_kernel* rows_kernel = nullptr;
+  /// an equality kind: the error of each row at the last step (task units; the Python
+  /// task's recorded _lm_e), read by an LM_DAMPING kernel on it
+  Vec err;
+  // LM_DAMPING: the owner kernel's index, lm_damping and LM_ERROR_FLOOR^2 (set_lm_damping)
+  int owner = -1;
+  double lm = 0.0, floor_sq = 0.0;
 };
 
 struct Limit {
-  bool velocity = false;  ///< VelocityLimits (else JointLimits)
-  double gain = 1.0;      ///< JointLimits: K
+  bool velocity = false;  ///< VelocityLimits (else JointLimits, or AccelerationLimits)
+  bool acceleration = false;  ///< AccelerationLimits
+  double gain = 1.0;      ///< JointLimits: K; AccelerationLimits: the braked limits' K
   Vec lower, upper;       ///< JointLimits: q layout (all of q, or the indexed entries);
-                          ///< VelocityLimits: the limit in upper
+                          ///< VelocityLimits: the limit in upper; AccelerationLimits: the
+                          ///< braked position limits (indexed entries)
   Vec band_rate;          ///< JointLimits: band / dt per entry (rad/s, m/s; inf: none)
+  Vec amax;               ///< AccelerationLimits: a_max (nv,)
+  View v_prev;            ///< AccelerationLimits: the limit's own v_prev (nv,), bound once
   std::vector<int> qi, vi;
   bool indexed = false;
-  bool given = false;  ///< set_joint_limits / set_velocity_limits called
+  bool given = false;  ///< set_joint_limits / set_velocity_limits / set_acceleration_limits
 };
 
 class IKStep {
@@ -232,6 +252,7 @@ class IKStep {
     lo_.resize(nv);
     hi_.resize(nv);
     hi2_.resize(nv);
+    hold_.resize(nq);
   }
 
   void bind(OutArr Aeq, OutArr beq, OutArr C, OutArr clo, OutArr chi, OutArr csw, OutArr lbs,
@@ -280,23 +301,29 @@ class IKStep {
 
   /// A kernel of `kind` writing rows row0.. of the stacked equalities (a band: inequalities).
   /// sel: per row, the axis of the full error (a posture: the joint's v index; a band: the
-  /// rows 0..rows-1); qidx: a posture's q index per row (a 1-DoF joint: q_ref - q there), a
-  /// SupportPolygon's frame slots. Returns the kernel's index (the setters' k); it runs once
-  /// its gain, weights, target and outputs are set.
+  /// rows 0..rows-1); qidx: a posture's q index per row (a 1-DoF joint: q_ref - q there; nq +
+  /// the index of a continuous joint's (cos, sin) pair: the angle from q to q_ref), a
+  /// SupportPolygon's frame slots, a RELATIVE_FRAME's reference frame slot, a
+  /// JOINT_COUPLING's q indices then v indices, an LM_DAMPING's owner kernel. Returns the
+  /// kernel's index (the setters' k); it runs once its gain, weights, target and outputs are
+  /// set.
   int add_task(int kind, int frame, std::vector<int> sel, int row0, std::vector<int> qidx) {
     if (!known_kind(kind)) throw nb::value_error("add_task: unknown kind");
+    if (kind == kLMDamping) return add_damping(static_cast<Kind>(kind), sel, row0, qidx);
     const bool band = is_band(static_cast<Kind>(kind));
     const bool ineq = is_inequality(static_cast<Kind>(kind));
     const bool com = kind == kCom || on_com(static_cast<Kind>(kind));
-    if ((kind != kPosture && kind != kCollision && !com) &&
-        (frame < 0 || frame >= (int)frames_.size()))
+    const bool hold = kind == kDamping || kind == kLowAcceleration;
+    const bool framed =
+        kind != kPosture && kind != kJointCoupling && kind != kCollision && !hold && !com;
+    if (framed && (frame < 0 || frame >= (int)frames_.size()))
       throw nb::value_error("add_task: unknown frame slot");
     if (com && !com_.p) throw nb::value_error("add_task: set_com first");
     if (!bound_) throw nb::value_error("add_task: bind first");
     const int rows = static_cast<int>(sel.size());
     if (rows < 1 || row0 < 0 || row0 + rows > static_cast<int>(out_[ineq ? 2 : 0].shape(0)))
       throw nb::value_error("add_task: rows out of range");
-    const int sel_end = kind == kPosture ? nv_
+    const int sel_end = kind == kPosture || hold ? nv_
                         : on_com(static_cast<Kind>(kind)) || kind == kCollision ? rows
                                                                                 : 6;
     for (int s : sel)
@@ -315,10 +342,29 @@ class IKStep {
       bands_.back().frames = qidx;
       if (kind == kSupportPolygon) bands_.back().size(rows, nv_, rows / (int)qidx.size());
     }
-    if (kind == kPosture) {
+    if (kind == kPosture) {  // qidx: the joint's q index, or nq + that of a (cos, sin) pair
       if (qidx.size() != sel.size()) throw nb::value_error("add_task: one q index per row");
       for (int i : qidx)
-        if (i < 0 || i >= nq_) throw nb::value_error("add_task: q index out of range");
+        if (i < 0 || (i >= nq_ && i - nq_ + 1 >= nq_))
+          throw nb::value_error("add_task: q index out of range");
+    }
+    if (kind == kRelativeFrame &&
+        (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= (int)frames_.size() || qidx[0] == frame))
+      throw nb::value_error("add_task: a RELATIVE_FRAME's qidx is its reference frame's slot");
+    if (hold) {  // DAMPING: no qidx; LOW_ACCELERATION: the integration plan
+      if (rows != nv_ || (kind == kDamping && !qidx.empty()))
+        throw nb::value_error("add_task: a DAMPING kernel has nv rows and no qidx");
+      for (int r = 0; r < rows; ++r)
+        if (sel[r] != r) throw nb::value_error("add_task: row selection out of range");
+      if (kind == kLowAcceleration) check_plan(qidx, "add_task");
+    }
+    if (kind == kJointCoupling) {  // qidx: the joints' q indices, then their v indices
+      const size_t n = qidx.size() / 2;
+      if (rows != 1 || n < 1 || qidx.size() != 2 * n)
+        throw nb::value_error("add_task: a JOINT_COUPLING has one row, q and v indices");
+      for (size_t i = 0; i < n; ++i)
+        if (qidx[i] < 0 || qidx[i] >= nq_ || qidx[n + i] < 0 || qidx[n + i] >= nv_)
+          throw nb::value_error("add_task: q index out of range");
     }
     Kernel k;
     k.kind = static_cast<Kind>(kind);
@@ -328,11 +374,54 @@ class IKStep {
     k.row0 = row0;
     k.qidx = std::move(qidx);
     k.sw.setZero(rows);
-    k.target.setZero(kind == kPosture ? nq_ : kind == kPosition ? rows : 3);
+    k.err.setZero(rows);
+    k.target.setZero(kind == kPosture          ? nq_
+                     : kind == kPosition       ? rows
+                     : kind == kLowAcceleration ? nv_
+                     : kind == kJointCoupling  ? static_cast<int>(k.qidx.size() / 2) + 1
+                                               : 3);
     if (band) k.band = static_cast<int>(bands_.size()) - 1;
-    if (kind != kPosture) writes_a_ = true;  // its rows' matrix changes with q
+    if (kind != kPosture && !hold) writes_a_ = true;  // its matrix changes with q
     kernels_.push_back(std::move(k));
     return static_cast<int>(kernels_.size()) - 1;
+  }
+
+  /// An LM_DAMPING kernel (add_task's rows for it): nv rows sel = 0..nv-1 from row0, qidx
+  /// = {the owner kernel's index} (added before it; not a damping kernel).
+  int add_damping(Kind kind, const std::vector<int>& sel, int row0,
+                  const std::vector<int>& qidx) {
+    if (!bound_) throw nb::value_error("add_task: bind first");
+    if (static_cast<int>(sel.size()) != nv_ || row0 < 0 ||
+        row0 + nv_ > static_cast<int>(out_[0].shape(0)))
+      throw nb::value_error("add_task: an LM_DAMPING kernel has nv rows within the equalities");
+    for (int r = 0; r < nv_; ++r)
+      if (sel[r] != r) throw nb::value_error("add_task: row selection out of range");
+    if (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= static_cast<int>(kernels_.size()) ||
+        kernels_[qidx[0]].kind == kLMDamping)
+      throw nb::value_error("add_task: an LM_DAMPING kernel's qidx is its owner kernel");
+    Kernel k;
+    k.kind = kind;
+    k.rows = nv_;
+    k.sel = sel;
+    k.row0 = row0;
+    k.owner = qidx[0];
+    k.sw.setZero(nv_);
+    k.err.setZero(nv_);
+    writes_a_ = true;
+    kernels_.push_back(std::move(k));
+    return static_cast<int>(kernels_.size()) - 1;
+  }
+
+  /// An LM_DAMPING kernel's lm_damping (dimensionless, >= 0) and the square of the error
+  /// floor below which its rows are zero (LM_ERROR_FLOOR^2, task units^2).
+  void set_lm_damping(int k, double lm, double floor_sq) {
+    Kernel& K = kernel(k, "set_lm_damping");
+    if (K.kind != kLMDamping) throw nb::value_error("set_lm_damping: not an LM_DAMPING kernel");
+    if (!(std::isfinite(lm) && lm >= 0.0 && std::isfinite(floor_sq) && floor_sq >= 0.0))
+      throw nb::value_error("set_lm_damping: lm_damping and the floor must be finite, >= 0");
+    K.lm = lm;
+    K.floor_sq = floor_sq;
+    K.given |= 4;
   }
 
   /// Kernel k's gain K (1/s; finite).
@@ -354,15 +443,17 @@ class IKStep {
   /// POSITION y* (rows,) m and dy*/dt (rows,) m/s; FRAME_POSITION and COM the point (3,) m
   /// and its velocity (3,) m/s; POSE and POSE_SPLIT T* (4, 4) and the target's body twist
   /// (6,) m/s, rad/s; ORIENTATION R* (3, 3) and its angular velocity (3,) rad/s, target
-  /// frame; POSTURE q_ref (nq,), no velocity. Finite values; the caller has checked that a
-  /// rotation is one (the task's set_target).
+  /// frame; POSTURE q_ref (nq,), no velocity; RELATIVE_FRAME T* (4, 4) of the frame in its
+  /// reference; JOINT_COUPLING (ratios..., offset). Finite values; the caller has checked
+  /// that a rotation is one (the task's set_target).
   void set_target(int k, nb::handle target, nb::handle velocity) {
     Kernel& K = kernel(k, "set_target");
     if (is_inequality(K.kind)) throw nb::value_error("set_target: a band kernel (set_faces)");
     int nvel = 3;
     switch (K.kind) {
       case kPose:
-      case kPoseSplit: {
+      case kPoseSplit:
+      case kRelativeFrame: {
         double T[16];
         read_values(target, 4, 4, T, "set_target");
         Vec3 pt;
@@ -423,6 +514,38 @@ class IKStep {
     read_values(points, b.points.rows(), 3, b.points.data(), "set_contacts");
     b.margin = margin;
     K.given |= 4;
+  }
+
+  /// A DAMPING or LOW_ACCELERATION kernel's arrays: the task's own (nq,) float64 q_hold,
+  /// into which each step copies q (NaN in its first entry: no step yet), and a
+  /// LOW_ACCELERATION's (nv,) v_prev, which each step writes (velocity None for a DAMPING).
+  /// Its only parameters: the kernel runs once these are bound.
+  void bind_hold(int k, RowsArr hold, nb::handle velocity) {
+    Kernel& K = kernel(k, "bind_hold");
+    if (K.kind != kDamping && K.kind != kLowAcceleration)
+      throw nb::value_error("bind_hold: not a DAMPING or LOW_ACCELERATION kernel");
+    if (hold.ndim() != 1 || hold.shape(0) != static_cast<size_t>(nq_))
+      throw nb::value_error("bind_hold: expected a (nq,) float64 array");
+    if (velocity.is_none() != (K.kind == kDamping))
+      throw nb::value_error("bind_hold: a LOW_ACCELERATION kernel's v_prev, only");
+    if (!velocity.is_none()) {
+      RowsArr v = nb::cast<RowsArr>(velocity, false);
+      if (v.ndim() != 1 || v.shape(0) != static_cast<size_t>(nv_))
+        throw nb::value_error("bind_hold: v_prev must be a (nv,) float64 array");
+      K.vprev.set(std::move(v));
+    }
+    K.hold.set(std::move(hold));
+    K.given |= 4;
+  }
+
+  /// A LOW_ACCELERATION kernel's previous velocity (nv,) for its next step only (its task's
+  /// set_previous), instead of the one measured from the two last configurations.
+  void set_previous(int k, nb::handle v) {
+    Kernel& K = kernel(k, "set_previous");
+    if (K.kind != kLowAcceleration)
+      throw nb::value_error("set_previous: not a LOW_ACCELERATION kernel");
+    read_values(v, nv_, 0, K.target.data(), "set_previous");
+    K.has_vel = true;
   }
 
   /// The arrays an equality kernel writes its rows into (the task's own A (rows, nv) and b
@@ -527,6 +650,51 @@ class IKStep {
     return static_cast<int>(limits_.size()) - 1;
   }
 
+  /// An AccelerationLimits box: v_prev its own (nv,) float64 array of the previous step's
+  /// velocity (read at every step: bound once, written in place by its record / reset),
+  /// braking before the position limits of q indices qi -> v indices vi (both empty: no
+  /// braking). Returns its index for set_acceleration_limits.
+  int add_acceleration_limits(std::vector<int> qi, std::vector<int> vi, nb::handle v_prev) {
+    Limit L;
+    L.acceleration = true;
+    L.indexed = true;
+    if (qi.size() != vi.size())
+      throw nb::value_error("add_acceleration_limits: sizes do not match");
+    for (size_t i = 0; i < qi.size(); ++i)
+      if (qi[i] < 0 || qi[i] >= nq_ || vi[i] < 0 || vi[i] >= nv_)
+        throw nb::value_error("add_acceleration_limits: index out of range");
+    if (!view_of(v_prev, L.v_prev, 1) || L.v_prev.rows != nv_)
+      throw nb::value_error("add_acceleration_limits: v_prev must be a (nv,) float64 array");
+    L.amax.setZero(nv_);
+    L.lower.setZero(static_cast<Eigen::Index>(qi.size()));
+    L.upper.setZero(static_cast<Eigen::Index>(qi.size()));
+    L.qi = std::move(qi);
+    L.vi = std::move(vi);
+    limits_.push_back(std::move(L));
+    return static_cast<int>(limits_.size()) - 1;
+  }
+
+  /// AccelerationLimits i's a_max (nv,) (rad/s^2, m/s^2; > 0, inf for none), and the gain K
+  /// (in (0, 1]) and limits (rad, m; +-inf for none) of the position limits it brakes before
+  /// (the entries of add_acceleration_limits).
+  void set_acceleration_limits(int i, nb::handle amax, double gain, nb::handle lower,
+                               nb::handle upper) {
+    Limit& L = limit(i, "set_acceleration_limits");
+    if (!L.acceleration)
+      throw nb::value_error("set_acceleration_limits: not an acceleration limit");
+    if (!(gain > 0.0 && gain <= 1.0))
+      throw nb::value_error("set_acceleration_limits: gain not in (0, 1]");
+    read_values(amax, nv_, 0, L.amax.data(), "set_acceleration_limits: limit", true);
+    for (int j = 0; j < nv_; ++j)
+      if (!(L.amax[j] > 0.0)) throw nb::value_error("set_acceleration_limits: limit not > 0");
+    read_values(lower, L.lower.size(), 0, L.lower.data(), "set_acceleration_limits: lower",
+                true);
+    read_values(upper, L.upper.size(), 0, L.upper.data(), "set_acceleration_limits: upper",
+                true);
+    L.gain = gain;
+    L.given = true;
+  }
+
   /// Limit i has no usable data: step() returns kBadInput until it is set again.
   void forget_limit(int i) { limit(i, "forget_limit").given = false; }
 
@@ -548,23 +716,9 @@ class IKStep {
   /// The plan of integrate::run (kind, idx_q, idx_v, size per segment, covering q) and the
   /// (nq,) array step(..., integrate=True) writes q_next = integrate(q, x dt) into.
   void set_integrator(std::vector<int> plan, OutArr q_next) {
-    if (plan.size() % 4 != 0) throw nb::value_error("set_integrator: 4 ints per segment");
     if (q_next.ndim() != 1 || q_next.shape(0) != static_cast<size_t>(nq_))
       throw nb::value_error("set_integrator: q_next must be (nq,)");
-    static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
-    int covered = 0;
-    for (size_t s = 0; s < plan.size(); s += 4) {
-      const int kind = plan[s], iq = plan[s + 1], iv = plan[s + 2], n = plan[s + 3];
-      if (kind < integrate::kVector || kind > integrate::kFreeFlyer)
-        throw nb::value_error("set_integrator: unknown segment kind");
-      const int nq = kind == integrate::kVector ? n : kNq[kind];
-      const int nv = kind == integrate::kVector ? n : kNv[kind];
-      if ((kind != integrate::kVector && n != 1) || n < 1 || iq < 0 || iv < 0 ||
-          iq + nq > nq_ || iv + nv > nv_)
-        throw nb::value_error("set_integrator: segment out of range");
-      covered += nq;
-    }
-    if (covered != nq_) throw nb::value_error("set_integrator: the plan does not cover q");
+    check_plan(plan, "set_integrator");
     plan_ = std::move(plan);
     q_next_ = q_next;
     integrator_ = true;
@@ -618,10 +772,14 @@ class IKStep {
       f.p.noalias() = Rj * f.pp;
       f.p += pj;
     }
-    for (size_t i = 0; i < kernels_.size(); ++i) {
-      if (kernels_[i].given != Kernel::kReady || !run_kernel(kernels_[i], qp, qs)) {
-        failed = static_cast<int>(i);
-        return kTaskData + static_cast<int>(i);
+    // the damping kernels after the others: they read their owner's error or rows
+    for (const bool damping : {false, true}) {
+      for (size_t i = 0; i < kernels_.size(); ++i) {
+        if ((kernels_[i].kind == kLMDamping) != damping) continue;
+        if (kernels_[i].given != Kernel::kReady || !run_kernel(kernels_[i], qp, qs)) {
+          failed = static_cast<int>(i);
+          return kTaskData + static_cast<int>(i);
+        }
       }
     }
     double* lbs = out_[6].data();
@@ -707,6 +865,8 @@ class IKStep {
       if ((rc = view(f.Rj)) || (rc = view(f.pj))) return rc;
     for (const Kernel& k : kernels_)
       if (k.rows_capsule.is_valid() && (rc = visit(k.rows_capsule.ptr(), arg))) return rc;
+    for (const Limit& L : limits_)
+      if ((rc = view(L.v_prev))) return rc;
     return 0;
   }
 
@@ -768,6 +928,27 @@ class IKStep {
     }
   }
 
+  /// Throws ValueError (naming who) unless plan is an integration plan covering q: (kind,
+  /// idx_q, idx_v, size) per segment (integrate.hpp).
+  void check_plan(const std::vector<int>& plan, const char* who) const {
+    const std::string w(who);
+    if (plan.size() % 4 != 0) throw nb::value_error((w + ": 4 ints per segment").c_str());
+    static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
+    int covered = 0;
+    for (size_t s = 0; s < plan.size(); s += 4) {
+      const int kind = plan[s], iq = plan[s + 1], iv = plan[s + 2], n = plan[s + 3];
+      if (kind < integrate::kVector || kind > integrate::kFreeFlyer)
+        throw nb::value_error((w + ": unknown segment kind").c_str());
+      const int nq = kind == integrate::kVector ? n : kNq[kind];
+      const int nv = kind == integrate::kVector ? n : kNv[kind];
+      if ((kind != integrate::kVector && n != 1) || n < 1 || iq < 0 || iv < 0 ||
+          iq + nq > nq_ || iv + nv > nv_)
+        throw nb::value_error((w + ": segment out of range").c_str());
+      covered += nq;
+    }
+    if (covered != nq_) throw nb::value_error((w + ": the plan does not cover q").c_str());
+  }
+
   Kernel& kernel(int k, const char* who) {
     if (k < 0 || k >= static_cast<int>(kernels_.size()))
       throw nb::value_error((std::string(who) + ": no kernel " + std::to_string(k)).c_str());
@@ -783,12 +964,13 @@ class IKStep {
   /// The kernel's selected rows a = k.sel[r] of Jt_ with right-hand sides
   /// -gain * e[a] (+ ff[a] with a feed-forward velocity), written by write_row.
   template <class VE, class VF>
-  void write_error_rows(const Kernel& k, int rows, double gain, const VE& e, bool has_ff,
+  void write_error_rows(Kernel& k, int rows, double gain, const VE& e, bool has_ff,
                         const VF& ff) {
     for (int r = 0; r < rows; ++r) {
       const int a = k.sel[r];
       double bv = -gain * e[a];
       if (has_ff) bv += ff[a];
+      k.err[r] = e[a];
       write_row(k, r, Jt_.row(a), bv);
     }
   }
@@ -835,6 +1017,14 @@ class IKStep {
   /// failed or a row is not usable (the task's _refresh raises its message).
   bool run_rows(const Kernel& k);
 
+  /// An LM_DAMPING kernel: sqrt(mu) I into its task's A (b = 0) and the stacked rows, mu
+  /// from its owner kernel's error at this step (LMDamping._refresh).
+  bool run_damping(Kernel& k);
+
+  /// The nv rows d I (v coordinates: no coordinate map) and right-hand side b (nullptr: 0)
+  /// of an nv-row kernel (the damping kinds) into its task's A, b and the stacked rows.
+  void diagonal_rows(Kernel& k, double d, const double* b);
+
   /// The limits' boxes intersected into lo_, hi_ (IK.refresh's rule).
   void box(const double* q, int64_t qs);
 
@@ -865,6 +1055,7 @@ class IKStep {
   info::Keys info_keys_;  ///< info()'s keys (info_dict.hpp)
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
+  Vec hold_;  ///< (nq,) a LOW_ACCELERATION kernel's q_hold, contiguous
   nb::object copy_x_, copy_res_, copy_q_next_;  ///< set_copies: the outputs' copy methods
 };
 
@@ -908,6 +1099,13 @@ void bind_ik_step(nb::module_& m) {
       .value("COM_BAND", kComBand)
       .value("SUPPORT_POLYGON", kSupportPolygon)
       .value("POSITION_BAND", kPositionBand)
+      // the damping kernels
+      .value("LM_DAMPING", kLMDamping)
+      .value("RELATIVE_FRAME", kRelativeFrame)
+      .value("JOINT_COUPLING", kJointCoupling)
+      .value("DAMPING", kDamping)
+      .value("LOW_ACCELERATION", kLowAcceleration)
+
       .value("COLLISION", kCollision);
   nb::class_<IKStep>(m, "IKStep",
                      "One differential-IK step in one call: task rows, limit box and strict "
@@ -926,9 +1124,10 @@ void bind_ik_step(nb::module_& m) {
            nb::arg("row0"), nb::arg("qidx"),
            "A kernel of kind (IKTaskKind) on frame slot frame (-1: none), rows sel from row0 "
            "of the stacked rows; qidx: a posture's q indices, a support polygon's frame "
-           "slots. Returns its index k; it runs once set_gain, set_weights, its target "
-           "(set_target / set_faces / set_contacts) and its outputs (bind_rows / "
-           "bind_band_rows) are set.")
+           "slots, a relative frame's reference slot, a joint coupling's q then v indices, "
+           "an LM_DAMPING's owner kernel. Returns its index k; it runs once set_gain, "
+           "set_weights, its target (set_target / set_faces / set_contacts / set_lm_damping) "
+           "and its outputs (bind_rows / bind_band_rows) are set.")
       .def("set_gain", &IKStep::set_gain, nb::arg("k"), nb::arg("gain"),
            "Kernel k's gain K (1/s), finite.")
       .def("set_weights", &IKStep::set_weights, nb::arg("k"), nb::arg("sqrt_weight"),
@@ -938,7 +1137,8 @@ void bind_ik_step(nb::module_& m) {
            "Kernel k's target and feed-forward (None: none), float64 arrays: POSITION y* "
            "(rows,) and dy*/dt (rows,); FRAME_POSITION, COM (3,) and (3,); POSE, POSE_SPLIT "
            "T* (4, 4) and the target's body twist (6,); ORIENTATION R* (3, 3) and (3,); "
-           "POSTURE q_ref (nq,). Finite values.")
+           "POSTURE q_ref (nq,); RELATIVE_FRAME T* (4, 4), no velocity; JOINT_COUPLING "
+           "(ratios..., offset), no velocity. Finite values.")
       .def("set_faces", &IKStep::set_faces, nb::arg("k"), nb::arg("lower"), nb::arg("upper"),
            "A COM_BAND (3,) or POSITION_BAND (rows,) kernel's faces (m; -inf / inf on its "
            "side).")
@@ -946,6 +1146,18 @@ void bind_ik_step(nb::module_& m) {
            nb::arg("margin"),
            "A SUPPORT_POLYGON kernel's contact points (per frame, 3) in frame coordinates "
            "(m) and margin (m).")
+      .def("set_lm_damping", &IKStep::set_lm_damping, nb::arg("k"), nb::arg("lm_damping"),
+           nb::arg("floor_sq"),
+           "An LM_DAMPING kernel's lm_damping (dimensionless) and squared error floor "
+           "(task units^2): its rows sqrt(mu) I, mu = lm_damping * sum(w e^2) of its owner "
+           "kernel (0 when mu <= lm_damping * floor_sq).")
+      .def("bind_hold", &IKStep::bind_hold, nb::arg("k"), nb::arg("hold").noconvert(),
+           nb::arg("velocity").none(),
+           "A DAMPING or LOW_ACCELERATION kernel's (nq,) float64 array that each step copies "
+           "q into (its task's q_hold; NaN first: no step yet) and a LOW_ACCELERATION's (nv,) "
+           "v_prev that each step writes (None for a DAMPING).")
+      .def("set_previous", &IKStep::set_previous, nb::arg("k"), nb::arg("v"),
+           "A LOW_ACCELERATION kernel's previous velocity (nv,) for its next step only.")
       .def("bind_rows", &IKStep::bind_rows, nb::arg("k"), nb::arg("A").noconvert(),
            nb::arg("b").noconvert(),
            "The writable float64 arrays (rows, nv) and (rows,) an equality kernel writes its "
@@ -974,6 +1186,15 @@ void bind_ik_step(nb::module_& m) {
            "A VelocityLimits box; its index for set_velocity_limits.")
       .def("set_velocity_limits", &IKStep::set_velocity_limits, nb::arg("i"), nb::arg("limit"),
            "VelocityLimits i's limit (nv,) float64.")
+      .def("add_acceleration_limits", &IKStep::add_acceleration_limits, nb::arg("qi"),
+           nb::arg("vi"), nb::arg("v_prev"),
+           "An AccelerationLimits box reading v_prev (its (nv,) float64 array, bound), "
+           "braking before the position limits of q indices qi -> v indices vi (empty: "
+           "none); its index for set_acceleration_limits.")
+      .def("set_acceleration_limits", &IKStep::set_acceleration_limits, nb::arg("i"),
+           nb::arg("limit"), nb::arg("gain"), nb::arg("lower"), nb::arg("upper"),
+           "AccelerationLimits i's a_max (nv,) and its braked position limits' gain and "
+           "limits (float64, the entries of add_acceleration_limits).")
       .def("set_integrator", &IKStep::set_integrator, nb::arg("plan"), nb::arg("q_next"))
       .def("set_weighted", &IKStep::set_weighted, nb::arg("regularization"),
            nb::arg("weight_ratio"), nb::arg("active"))

@@ -16,6 +16,8 @@
 #include <cstdint>
 #include <limits>
 
+#include "spatial.hpp"
+
 namespace qpcoord {
 namespace integrate {
 
@@ -102,6 +104,48 @@ inline void run(const int* plan, int count, const double* q, int64_t qs, const d
         first_order_normalize(r.coeffs());
         for (int i = 0; i < 3; ++i) out[iq + i] = p[i];
         for (int i = 0; i < 4; ++i) out[iq + 3 + i] = r.coeffs()[i];
+        break;
+      }
+      default:
+        break;
+    }
+  }
+}
+
+/// out = difference(q0, q1) / dt over the plan: the velocity v with integrate(q0, v dt) = q1,
+/// with Pinocchio's conventions: q1 - q0 on a vector space; the angle of the (cos, sin) pair
+/// q1 in the frame of q0 (atan2); log3(R0^T R1) of a quaternion pair; log6(M0^-1 M1) of a
+/// free-flyer pair (linear, angular). q0 is contiguous, q1 read with stride qs.
+inline void difference(const int* plan, int count, const double* q0, const double* q1,
+                       int64_t qs, double dt, double* out) {
+  for (int s = 0; s < count; ++s) {
+    const int kind = plan[4 * s], iq = plan[4 * s + 1], iv = plan[4 * s + 2], n = plan[4 * s + 3];
+    switch (kind) {
+      case kVector:
+        for (int i = 0; i < n; ++i) out[iv + i] = (q1[(iq + i) * qs] - q0[iq + i]) / dt;
+        break;
+      case kCircle: {
+        const double ca = q0[iq], sa = q0[iq + 1], cb = q1[iq * qs], sb = q1[(iq + 1) * qs];
+        out[iv] = std::atan2(ca * sb - sa * cb, ca * cb + sa * sb) / dt;
+        break;
+      }
+      case kSpherical: {
+        const Quat a(q0[iq + 3], q0[iq], q0[iq + 1], q0[iq + 2]);
+        const Quat b(q1[(iq + 3) * qs], q1[iq * qs], q1[(iq + 1) * qs], q1[(iq + 2) * qs]);
+        double theta;
+        const Vec3 w = spatial::log3(a.toRotationMatrix().transpose() * b.toRotationMatrix(),
+                                     theta);
+        for (int i = 0; i < 3; ++i) out[iv + i] = w[i] / dt;
+        break;
+      }
+      case kFreeFlyer: {
+        const Vec3 pa(q0[iq], q0[iq + 1], q0[iq + 2]);
+        const Vec3 pb(q1[iq * qs], q1[(iq + 1) * qs], q1[(iq + 2) * qs]);
+        const Quat a(q0[iq + 6], q0[iq + 3], q0[iq + 4], q0[iq + 5]);
+        const Quat b(q1[(iq + 6) * qs], q1[(iq + 3) * qs], q1[(iq + 4) * qs], q1[(iq + 5) * qs]);
+        const Eigen::Matrix3d Rat = a.toRotationMatrix().transpose();
+        const auto d = spatial::log6(Rat * b.toRotationMatrix(), Rat * (pb - pa));
+        for (int i = 0; i < 6; ++i) out[iv + i] = d[i] / dt;
         break;
       }
       default:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.native_ik import manifold_robot
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -14,32 +15,9 @@ from qpcoord.kinematics.native_step import integration_plan
 needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 
-def _manifold_robot() -> qc.Robot:
-    """Free-flyer root, then revolute, continuous, spherical and prismatic joints."""
-    model = pin.Model()
-    parent = 0
-    joints = [
-        pin.JointModelFreeFlyer(),
-        pin.JointModelRZ(),
-        pin.JointModelRUBY(),
-        pin.JointModelSpherical(),
-        pin.JointModelPX(),
-        pin.JointModelRUBX(),
-        pin.JointModelRY(),
-    ]
-    for i, joint in enumerate(joints):
-        placement = pin.SE3(np.eye(3), np.array([0.0 if i == 0 else 0.3, 0.0, 0.0]))
-        parent = model.addJoint(parent, joint, placement, f"j{i}")
-        model.appendBodyToJoint(parent, pin.Inertia.Random(), pin.SE3.Identity())
-    model.addFrame(
-        pin.Frame("tip", parent, 0, pin.SE3(np.eye(3), np.array([0.3, 0, 0])), pin.OP_FRAME)
-    )
-    return qc.Robot(model, "tip")
-
-
 @pytest.fixture(scope="module")
 def robots() -> dict[str, qc.Robot]:
-    out = {"panda": qc.robots.load("panda"), "manifold": _manifold_robot()}
+    out = {"panda": qc.robots.load("panda"), "manifold": manifold_robot()}
     for name in ("talos", "kinova"):  # kinova: continuous joints
         try:
             out[name] = qc.robots.load(name)

@@ -33,7 +33,7 @@ from qpcoord.kinematics.frame_tasks import (
     OrientationTask,
     RelativeFrameTask,
 )
-from qpcoord.kinematics.native_step import native_kind
+from qpcoord.kinematics.native_step import TaskKind, native_kind
 from qpcoord.kinematics.paths import Circle
 from qpcoord.kinematics.tasks import AccelerationLimits, PositionBand
 
@@ -501,6 +501,14 @@ def test_a_python_task_moving_the_robot_data_does_not_disturb_the_kernels(robots
         q = robot.integrate(q, vn, DT)
 
 
+class HalfSpeed(qc.Limit):
+    """A user's limit: half the robot's speed limits (its box is Python's)."""
+
+    def box(self, q, dt):
+        v = 0.5 * self.robot.velocity_limit
+        return -v, v
+
+
 @needs_native
 def test_hybrid_step_matches_the_python_engine(robots):
     robot = robots["panda"]
@@ -524,12 +532,18 @@ def test_hybrid_step_matches_the_python_engine(robots):
         qc.JointLimits(robot),
         qc.VelocityLimits(robot),
         AccelerationLimits(robot, 30.0),
+        HalfSpeed(robot, "half speed"),
     ]
     ikn = qc.IK(robot, levels(), DT, limits=limits(), engine="native")
     ikp = qc.IK(robot, levels(), DT, limits=limits(), engine="python")
     hybrid = ikn._native
     assert hybrid._python_tasks and hybrid._python_limits
-    assert [type(t) for t in hybrid.kernel_tasks] == [PositionBand, FrameTask, qc.PostureTask]
+    assert [type(t) for t in hybrid.kernel_tasks] == [
+        PositionBand,
+        FrameTask,
+        RelativeFrameTask,
+        qc.PostureTask,
+    ]
     for step in range(60):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)
@@ -663,7 +677,11 @@ def test_weighted_hybrid_step_matches_the_python_engine(robots):
             qc.PostureTask(robot, robot.random_configuration(4)),
         ]
 
-    limits = lambda: [qc.JointLimits(robot), AccelerationLimits(robot, 30.0)]  # noqa: E731
+    limits = lambda: [  # noqa: E731
+        qc.JointLimits(robot),
+        AccelerationLimits(robot, 30.0),
+        HalfSpeed(robot, "half speed"),
+    ]
     ikn = qc.IK(robot, levels(), DT, limits=limits(), method="weighted")
     ikp = qc.IK(robot, levels(), DT, limits=limits(), method="weighted", engine="python")
     ikc = qc.IK(robot, levels(), DT, limits=limits(), method="weighted", engine="python")
@@ -816,7 +834,7 @@ def test_without_the_extension_the_python_path_warns_once(robots, missing_extens
 
 
 @needs_native
-def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
+def test_posture_over_a_continuous_joint_is_native_and_matches():
     model = pin.Model()
     parent = 0
     for i, joint in enumerate(
@@ -835,7 +853,8 @@ def test_posture_over_a_continuous_joint_is_hybrid_and_matches():
         return [qc.PositionTask(robot, robot.position(q) + 0.05), qc.PostureTask(robot, q)]
 
     ikn, ikp = engine_pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
-    assert ikn._native._python_tasks == [ikn._dynamic[1]]
+    assert not ikn._native._hybrid  # the continuous joint's row: an atan2 natively
+    assert native_kind(ikn._dynamic[1]) == TaskKind.POSTURE
     for step in range(30):
         vn, _ = ikn.step(q)
         vp, _ = ikp.step(q)
@@ -899,6 +918,36 @@ for kind, method in [(k, m) for m in ("hierarchical", "weighted")
     for _ in range(500):
         call(q, True, 10.0, True)
     print(kind + "-" + method, count() - before)
+# the acceleration limits' box (braking rows), the damping kernels (a task's, a band's and
+# a posture's lm_damping rows), a relative frame, a joint coupling and the damping tasks
+q = start_configuration(robot)
+ee = robot.with_frame("panda_hand_tcp")
+T = robot.frame_pose(q, "panda_hand_tcp")
+stacks = {{
+    "acceleration": (kind_levels(robot, "pose", q), [
+        qc.JointLimits(robot), qc.VelocityLimits(robot), qc.AccelerationLimits(robot, 50.0)]),
+    "lm_damping": ([[qc.FrameTask(robot, "panda_hand_tcp", T, lm_damping=1.0),
+                     qc.PositionBand(ee, lower=ee.position(q) + 0.1, lm_damping=2.0)],
+                    [qc.PostureTask(robot, robot.random_configuration(4), lm_damping=0.5)]],
+                   "robot"),
+    "relative_coupling": ([qc.RelativeFrameTask(robot, "panda_hand_tcp", "panda_link3",
+                                                np.eye(4), lm_damping=0.5),
+                           qc.JointCouplingTask(robot, ["panda_joint1", "panda_joint3"],
+                                                [1.0, -0.5], offset=0.2)], "robot"),
+    "damping": ([qc.FramePositionTask(robot, "panda_hand_tcp", T[:3, 3]),
+                 qc.DampingTask(robot, weight=0.1),
+                 qc.LowAccelerationTask(robot, weight=0.1)], "robot"),
+}}
+for name, (levels, limits) in stacks.items():
+    ik = qc.IK(robot, levels, DT, limits=limits, engine="native")
+    assert not ik._native._hybrid and not ik._native._python_limits
+    call = ik._native._solver.step
+    for _ in range(20):
+        assert call(q, True, 10.0, True) == 0
+    before = count()
+    for _ in range(500):
+        call(q, True, 10.0, True)
+    print(name, count() - before)
 """
 
 
@@ -913,7 +962,7 @@ def test_the_native_call_does_not_allocate(tmp_path, build):
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
     assert counts.pop("variant") == build
-    assert len(counts) == 10
+    assert len(counts) == 14
     assert all(int(c) == 0 for c in counts.values()), counts
 
 

@@ -416,7 +416,7 @@ def test_add_task_rejects_bad_band_data(talos):
     with pytest.raises(ValueError, match="rows out of range"):
         solver.add_task(8, -1, list(range(8)), 9, [0])
     with pytest.raises(ValueError, match="unknown kind"):
-        solver.add_task(10, -1, list(range(8)), 3, [0])
+        solver.add_task(max(TaskKind) + 1, -1, list(range(8)), 3, [0])
 
 
 # ---------------------------------------------------------------------------------------

@@ -26,6 +26,29 @@ def ik_robots() -> dict[str, qc.Robot]:
     return out
 
 
+def manifold_robot() -> qc.Robot:
+    """Free-flyer root, then revolute, continuous, spherical and prismatic joints."""
+    model = pin.Model()
+    parent = 0
+    joints = [
+        pin.JointModelFreeFlyer(),
+        pin.JointModelRZ(),
+        pin.JointModelRUBY(),
+        pin.JointModelSpherical(),
+        pin.JointModelPX(),
+        pin.JointModelRUBX(),
+        pin.JointModelRY(),
+    ]
+    for i, joint in enumerate(joints):
+        placement = pin.SE3(np.eye(3), np.array([0.0 if i == 0 else 0.3, 0.0, 0.0]))
+        parent = model.addJoint(parent, joint, placement, f"j{i}")
+        model.appendBodyToJoint(parent, pin.Inertia.Random(), pin.SE3.Identity())
+    model.addFrame(
+        pin.Frame("tip", parent, 0, pin.SE3(np.eye(3), np.array([0.3, 0, 0])), pin.OP_FRAME)
+    )
+    return qc.Robot(model, "tip")
+
+
 def robot_or_skip(robots, name: str) -> qc.Robot:
     if name not in robots:
         pytest.skip(f"{name} not available")

@@ -16,6 +16,7 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       frame_jacobian(f);
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
+        k.err[r] = f.p[a] - k.target[r];
         const double e = gain * (k.target[r] - f.p[a]);
         write_row(k, r, Jt_.row(a), k.has_vel ? k.vel[r] + e : 0.0 + e);
       }
@@ -26,7 +27,8 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       frame_jacobian(f);
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
-        double bv = -gain * (f.p[a] - k.target[a]);
+        k.err[r] = f.p[a] - k.target[a];
+        double bv = -gain * k.err[r];
         if (k.has_vel) bv += k.vel[a];
         write_row(k, r, Jt_.row(a), bv);
       }
@@ -98,7 +100,8 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       for (int r = 0; r < rows; ++r) {
         const int a = k.sel[r];
         for (int c = 0; c < nv_; ++c) Jt_(0, c) = Jcom_(a, c);
-        double bv = -gain * (com_[a] - k.target[a]);
+        k.err[r] = com_[a] - k.target[a];
+        double bv = -gain * k.err[r];
         if (k.has_vel) bv += k.vel[a];
         write_row(k, r, Jt_.row(0), bv);
       }
@@ -110,7 +113,16 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       for (int r = 0; r < rows; ++r) {
         const int j = k.sel[r], iq = k.qidx[r];
         const double s = k.sw[r];
-        const double bv = gain * (k.target[iq] - q[iq * qs]);
+        double d;  // difference(q, q_ref) on the row's joint
+        if (iq < nq_) {  // a 1-DoF vector-space joint: q_ref - q
+          d = k.target[iq] - q[iq * qs];
+        } else {  // a continuous joint's (cos, sin) pair at iq - nq: the angle from q to q_ref
+          const int c = iq - nq_;
+          const double ca = q[c * qs], sa = q[(c + 1) * qs], cb = k.target[c], sb = k.target[c + 1];
+          d = std::atan2(ca * sb - sa * cb, ca * cb + sa * sb);
+        }
+        const double bv = gain * d;
+        k.err[r] = -d;
         // the task's A (the selection) is constant: the stacked row is rewritten
         for (int c = 0; c < nv_; ++c) Aeq[r * nv_ + c] = 0.0;
         Aeq[r * nv_ + j] = k.A(r, j) * s;
@@ -119,6 +131,78 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
       }
       return true;
     }
+    case kRelativeFrame: {  // E = T*^-1 (oMr^-1 oMf), e = log6(E), J = Jlog6(E) (Jf - Ad Jr)
+      const Frame& f = frames_[k.frame];
+      const Frame& g = frames_[k.qidx[0]];
+      const Mat3 Rrel = g.R.transpose() * f.R;
+      const Vec3 prel = g.R.transpose() * (f.p - g.p);
+      const Mat3 RE = k.Rinv * Rrel;
+      const Vec3 pE = k.Rinv * prel + k.pinv;
+      // Jf - Ad(fMr) Jr in LOCAL coordinates of f: the world-aligned motion at f's origin
+      // of f's supporting joints less that of r's, rotated by Rf^T (shared joints cancel)
+      Jl_.setZero();
+      for (int c : f.cols) {
+        const Vec3 w(J_(3, c), J_(4, c), J_(5, c));
+        Jl_.col(c).head<3>() += Vec3(J_(0, c), J_(1, c), J_(2, c)) + w.cross(f.p);
+        Jl_.col(c).tail<3>() += w;
+      }
+      for (int c : g.cols) {
+        const Vec3 w(J_(3, c), J_(4, c), J_(5, c));
+        Jl_.col(c).head<3>() -= Vec3(J_(0, c), J_(1, c), J_(2, c)) + w.cross(f.p);
+        Jl_.col(c).tail<3>() -= w;
+      }
+      const Mat3 Rt = f.R.transpose();
+      const Vec6 e = spatial::log6(RE, pE);
+      const Mat6 Jlog = spatial::jlog6(RE, pE);
+      for (int c = 0; c < nv_; ++c) {
+        Vec6 local;
+        local.head<3>() = Rt * Jl_.col(c).head<3>();
+        local.tail<3>() = Rt * Jl_.col(c).tail<3>();
+        Jt_.col(c).noalias() = Jlog * local;
+      }
+      write_error_rows(k, rows, gain, e, false, e);
+      return true;
+    }
+    case kJointCoupling: {  // e = sum(r_i q_i) - offset, J = r_i at the joints' v indices
+      const int n = static_cast<int>(k.qidx.size() / 2);
+      double s = 0.0;
+      Jt_.row(0).setZero();
+      for (int i = 0; i < n; ++i) {
+        s += k.target[i] * q[k.qidx[i] * qs];
+        Jt_(0, k.qidx[n + i]) = k.target[i];
+      }
+      const double e = s - k.target[n];
+      k.err[0] = e;
+      write_row(k, 0, Jt_.row(0), -gain * e);
+      return true;
+    }
+    case kDamping: {  // A = I, b = 0; q_hold = q
+      diagonal_rows(k, 1.0, nullptr);
+      for (int i = 0; i < nq_; ++i) k.hold[i] = q[i * qs];
+      return true;
+    }
+    case kLowAcceleration: {  // A = I, b = v_prev (v coordinates); q_hold = q
+      if (k.has_vel) {  // set_previous: for this step only
+        for (int i = 0; i < nv_; ++i) k.vprev[i] = k.target[i];
+        k.has_vel = false;
+      } else if (std::isnan(k.hold[0])) {  // the first step: from rest
+        for (int i = 0; i < nv_; ++i) k.vprev[i] = 0.0;
+      } else {  // difference(q_hold, q) / dt, into row_ then v_prev
+        for (int i = 0; i < nq_; ++i) hold_[i] = k.hold[i];
+        integrate::difference(k.qidx.data(), static_cast<int>(k.qidx.size() / 4),
+                              hold_.data(), q, qs, dt_, row_.data());
+        for (int i = 0; i < nv_; ++i) k.vprev[i] = row_[i];
+      }
+      for (int r = 0; r < nv_; ++r) {
+        row_[r] = k.vprev[r];
+        if (!std::isfinite(row_[r])) return false;  // the task's refresh names it
+      }
+      diagonal_rows(k, 1.0, row_.data());
+      for (int i = 0; i < nq_; ++i) k.hold[i] = q[i * qs];
+      return true;
+    }
+    case kLMDamping:
+      return run_damping(k);
     default:
       return false;
   }
@@ -143,6 +227,44 @@ bool IKStep::put_row(const Kernel& k, int r, const Src& src, double l, double u)
   k.upper[r] = out_[4].data()[i] = u;
   out_[5].data()[i] = k.sw[r];
   return true;
+}
+
+bool IKStep::run_damping(Kernel& k) {
+  const Kernel& o = kernels_[k.owner];
+  // sum(w e^2) of the owner (w = sqrt(w)^2: to rounding of the Python task's weight); a band:
+  // its distance outside [lower, upper], read from its rows K (lower - e), K (upper - e)
+  double e2 = 0.0;
+  if (o.band >= 0) {
+    for (int r = 0; r < o.rows; ++r) {
+      const double out = std::max(o.lower[r], 0.0) - std::min(o.upper[r], 0.0);
+      e2 += o.sw[r] * o.sw[r] * (out * out);
+    }
+    e2 /= o.gain * o.gain;
+  } else {
+    for (int r = 0; r < o.rows; ++r) e2 += o.sw[r] * o.sw[r] * (o.err[r] * o.err[r]);
+  }
+  double mu = k.lm * e2;
+  if (!std::isfinite(mu)) return false;  // the owner's Python refresh names its data
+  // below the floor the rows are zero, not tiny (LMDamping._refresh: rows of any positive
+  // size would fix the level's null space around a met task)
+  if (mu <= k.lm * k.floor_sq) mu = 0.0;
+  diagonal_rows(k, std::sqrt(mu), nullptr);
+  return true;
+}
+
+void IKStep::diagonal_rows(Kernel& k, double d, const double* b) {
+  double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
+  double* beq = out_[1].data() + k.row0;
+  for (int r = 0; r < nv_; ++r) {
+    for (int c = 0; c < nv_; ++c) {
+      k.A(r, c) = r == c ? d : 0.0;
+      Aeq[static_cast<size_t>(r) * nv_ + c] = r == c ? d * k.sw[r] : 0.0;
+    }
+    const double bv = b ? b[r] : 0.0;
+    k.b[r] = bv;
+    k.err[r] = 0.0;
+    beq[r] = bv * k.sw[r];
+  }
 }
 
 bool IKStep::run_band(const Kernel& k, support::Band& b) {
@@ -212,6 +334,23 @@ void IKStep::box(const double* q, int64_t qs) {
         row_[i] = -L.upper[i];
         hi2_[i] = L.upper[i];
       }
+    } else if (L.acceleration) {  // AccelerationLimits.box
+      for (int i = 0; i < nv_; ++i) {
+        const double step = L.amax[i] * dt_;
+        row_[i] = L.v_prev[i] - step;
+        hi2_[i] = L.v_prev[i] + step;
+      }
+      for (size_t n = 0; n < L.qi.size(); ++n) {
+        const double qq = q[L.qi[n] * qs];
+        const int v = L.vi[n];
+        const double a = L.amax[v];
+        hi2_[v] = std::min(hi2_[v], braking::speed(L.upper[n] - qq, a, dt_, L.gain));
+        row_[v] = std::max(row_[v], -braking::speed(qq - L.lower[n], a, dt_, L.gain));
+      }
+      // cannot brake in time, or outside the limit: the end nearer to 0
+      for (int i = 0; i < nv_; ++i)
+        if (row_[i] > hi2_[i])
+          row_[i] = hi2_[i] = std::abs(row_[i]) < std::abs(hi2_[i]) ? row_[i] : hi2_[i];
     } else {
       // JointLimits._step, in the Python engine's operations: the longest step toward a
       // limit at distance D, max(K D, D - (1 - K) b) with the band b = band_rate dt (K D

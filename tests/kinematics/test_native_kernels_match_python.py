@@ -1,0 +1,789 @@
+"""The native IK step's acceleration-limit box, Levenberg–Marquardt damping, relative-frame
+and joint-coupling kernels (``src/native/braking.hpp``, ``ik_step/kernels.hxx``) against the
+Python task classes, the oracle: the same box and rows on random configurations (a floating
+base included) and the same velocities over closed loops."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from support.counting_malloc import run_counting_malloc
+from support.native_engine import needs_native
+from support.native_ik import manifold_robot
+
+import qpcoord as qc
+from qpcoord.core import native
+from qpcoord.kinematics.frame_tasks import (
+    ComBand,
+    ComTask,
+    FramePositionTask,
+    FrameTask,
+    OrientationTask,
+    SupportPolygon,
+)
+from qpcoord.kinematics.native_step import TaskKind, native_kind
+from qpcoord.kinematics.tasks import LM_ERROR_FLOOR, LMDamping
+
+DT = 1e-3
+EPS = np.finfo(float).eps
+HAND = {"panda": "panda_hand_tcp", "talos": "gripper_right_base_link"}
+SOLES = ("left_sole_link", "right_sole_link")
+CORNERS = [[x, y, 0.0] for x in (-0.1, 0.1) for y in (-0.05, 0.05)]
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict[str, qc.Robot]:
+    out = {"panda": qc.robots.load("panda")}
+    try:
+        out["talos"] = qc.robots.load("talos")
+    except ValueError:  # example-robot-data missing
+        pass
+    return out
+
+
+def _robot(robots: dict[str, qc.Robot], name: str) -> qc.Robot:
+    if name not in robots:
+        pytest.skip(f"{name} not available")
+    return robots[name]
+
+
+def _start(robot: qc.Robot) -> np.ndarray:
+    if robot.name == "talos":
+        return robot.reference_configuration("half_sitting")
+    return np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])
+
+
+def _q_index(lim: qc.JointLimits) -> np.ndarray:
+    """The q index of each joint a JointLimits limits."""
+    return lim.joints if lim.q_index is None else lim.q_index
+
+
+def _near_limits(robot: qc.Robot, rng: np.random.Generator) -> np.ndarray:
+    """A random configuration with every limited 1-DoF joint within 0.05 rad of one of its
+    limits, some up to 0.01 rad outside it (the braking rows, and the box's rule where
+    they cannot hold)."""
+    q = robot.random_configuration(rng)
+    qi = _q_index(qc.JointLimits(robot))
+    lo, hi = robot.lower[qi], robot.upper[qi]
+    at = np.where(rng.random(qi.size) < 0.5, lo, hi)
+    inward = np.sign((lo + hi) / 2 - at)
+    q[qi] = at + inward * rng.uniform(-0.01, 0.05, qi.size)
+    return q
+
+
+def _acceleration(robot: qc.Robot, a: float) -> np.ndarray:
+    """``a`` (rad/s²) on every joint, ``inf`` on a floating base's six rows."""
+    out = np.full(robot.nv, a)
+    if not robot.euclidean:
+        out[:6] = np.inf
+    return out
+
+
+def _limits(robot: qc.Robot, gain: float, a: float, brake: bool = True) -> list:
+    jl = qc.JointLimits(robot, gain=gain)
+    acc = qc.AccelerationLimits(
+        robot, _acceleration(robot, a), position_limits=jl if brake else None
+    )
+    return [jl, qc.VelocityLimits(robot), acc]
+
+
+def _finite(x: np.ndarray) -> np.ndarray:
+    return np.where(np.isfinite(x), np.abs(x), 0.0)
+
+
+# ---------------------------------------------------------------------------------------
+# the acceleration limits' box
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+@pytest.mark.parametrize(
+    ("gain", "a", "brake"), [(0.5, 50.0, True), (1.0, 8.0, True), (0.7, 30.0, False)]
+)
+def test_the_acceleration_box_equals_the_python_limits(robots, name, gain, a, brake):
+    robot = _robot(robots, name)
+    limn, limp = _limits(robot, gain, a, brake), _limits(robot, gain, a, brake)
+    ikn = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limn, engine="native")
+    ikp = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limp, engine="python")
+    assert not ikn._native._python_limits and not ikn._native._hybrid
+    rng = np.random.default_rng(7)
+    vmax = limp[1].limit
+    jl = limp[0]
+    for trial in range(25):
+        q = _near_limits(robot, rng)
+        v_prev = rng.uniform(-1.0, 1.0, robot.nv) * np.where(np.isfinite(vmax), vmax, 1.0)
+        limn[2].reset(v_prev)
+        limp[2].reset(v_prev)
+        ikn.step(q)
+        ikp.refresh(q)
+        # each finite entry is a few roundings (a square root and a quotient in the braking
+        # speed) of terms no larger than |v_prev| + a dt + v_max + (K/dt)(|q| + |limits|):
+        # 64 eps of that scale bounds the difference of two evaluations
+        qi = _q_index(jl)
+        far = np.zeros(robot.nv)
+        far[jl.joints] = (gain / DT) * (
+            np.abs(q[qi]) + _finite(jl.lower[qi]) + _finite(jl.upper[qi])
+        )
+        scale = np.abs(v_prev) + _finite(limp[2].limit) * DT + _finite(vmax) + far
+        for mine, ref in (
+            (ikn.bounds.lower, ikp.bounds.lower),
+            (ikn.bounds.upper, ikp.bounds.upper),
+        ):
+            f = np.isfinite(ref)
+            assert np.array_equal(mine[~f], ref[~f]), trial
+            err = np.abs(mine[f] - ref[f])
+            assert np.all(err <= 64 * EPS * scale[f]), (trial, err.max())
+
+
+@needs_native
+def test_an_assigned_acceleration_or_position_limit_reaches_the_native_box(robots):
+    robot = robots["panda"]
+    limn, limp = _limits(robot, 0.5, 50.0), _limits(robot, 0.5, 50.0)
+    ikn = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limn, engine="native")
+    ikp = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limp, engine="python")
+    q = _near_limits(robot, np.random.default_rng(2))
+    for lims in (limn, limp):
+        lims[2].limit = np.full(robot.nv, 5.0)  # a_max
+        lims[0].gain = 0.9  # the braked limits' gain
+        lims[0].upper = robot.upper - 0.02
+        lims[2].v_prev = np.full(robot.nv, 0.3)  # copied into the bound array
+    ikn.step(q)
+    ikp.refresh(q)
+    scale = 1e3 * (np.abs(q).max() + np.abs(robot.upper).max())  # (K/dt)(|q| + |limit|)
+    np.testing.assert_allclose(ikn.bounds.lower, ikp.bounds.lower, rtol=0, atol=64 * EPS * scale)
+    np.testing.assert_allclose(ikn.bounds.upper, ikp.bounds.upper, rtol=0, atol=64 * EPS * scale)
+    with pytest.raises(ValueError, match="v_prev"):
+        limn[2].v_prev = np.zeros(robot.nv + 1)
+
+
+def _limit_run(robot: qc.Robot, levels, limits, engine: str) -> qc.IK:
+    return qc.IK(robot, levels(), DT, limits=limits(), engine=engine)
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_a_joint_driven_into_its_limit_brakes_alike_on_both_engines(robots, name):
+    """The hand pulled far past the reach of a limited joint, with acceleration limits: the
+    native step and the Python engine give the same v at every step, and the joint stops
+    at its limit within the acceleration bound."""
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+    T = robot.frame_pose(q0, frame).copy()
+    T[:3, 3] += [0.6, -0.4, 0.3]
+    a = 40.0
+
+    def levels():
+        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.5 / DT)
+        low = [qc.PostureTask(robot, q0, gain=1.0)]
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [hand], low]
+        return [[hand], low]
+
+    ikn = _limit_run(robot, levels, lambda: _limits(robot, 0.5, a), "native")
+    ikp = _limit_run(robot, levels, lambda: _limits(robot, 0.5, a), "python")
+    assert not ikn._native._python_limits
+    q, v_last = q0.copy(), np.zeros(robot.nv)
+    acc = _acceleration(robot, a)
+    for step in range(600):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows and box to rounding) solved by two engines, each to its KKT
+        # tolerance 1e-9 relative to the problem's scale: velocities ≤ the speed limits
+        # (~2-6 rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        # the acceleration bound holds (a dt per step), to the solver's tolerance
+        assert np.all(np.abs(vn - v_last) <= acc * DT + tol), step
+        v_last = vn
+        ikp.limits[2].reset(vn)  # both engines brake from the same previous velocity
+        q = robot.integrate(q, vn, DT)
+    jl = ikn.limits[0]
+    qi = _q_index(jl)
+    assert np.all(q[qi] <= jl.upper[qi] + 1e-9) and np.all(q[qi] >= jl.lower[qi] - 1e-9)
+
+
+# ---------------------------------------------------------------------------------------
+# Levenberg–Marquardt damping rows
+# ---------------------------------------------------------------------------------------
+
+
+def _damped(robot: qc.Robot, kind: str, q: np.ndarray, lm: float) -> qc.KinematicTask:
+    """A task of ``kind`` with ``lm_damping=lm``, its target or faces away from ``q``."""
+    frame = HAND[robot.name]
+    T = robot.frame_pose(q, frame).copy()
+    T[:3, 3] += [0.05, -0.04, 0.03]
+    T[:3, :3] = T[:3, :3] @ pin.exp3(np.array([0.12, -0.08, 0.36]))
+    if kind == "position":
+        ee = robot.with_frame(frame)
+        return qc.PositionTask(ee, target=T[:3, 3], gain=7.0, weight=2.0, lm_damping=lm)
+    if kind == "frame_position":
+        return FramePositionTask(robot, frame, T[:3, 3], gain=3.0, mask="x z", lm_damping=lm)
+    if kind == "pose":
+        return FrameTask(robot, frame, T, gain=2.0, position_weight=2.0, lm_damping=lm)
+    if kind == "pose_split":
+        return FrameTask(robot, frame, T, gain=2.5, error="split", mask="x z rx ry", lm_damping=lm)
+    if kind == "orientation":
+        return OrientationTask(robot, frame, T[:3, :3], gain=1.5, weight=3.0, lm_damping=lm)
+    if kind == "com":
+        c = robot.com(q) + [0.01, -0.02, 0.005]
+        return ComTask(robot, c, gain=2.0, mask="xy", weight=4.0, lm_damping=lm)
+    if kind == "posture":
+        return qc.PostureTask(robot, robot.random_configuration(5), gain=1.5, lm_damping=lm)
+    if kind == "position_band":
+        ee = robot.with_frame(frame)
+        y = ee.position(q)
+        return qc.PositionBand(ee, lower=y + [0.02, -1.0, -np.inf], gain=5.0, lm_damping=lm)
+    if kind == "com_band":
+        c = robot.com(q)
+        return ComBand(robot, c + [0.01, -0.5, -np.inf], c + [0.2, -0.005, 0.01], lm_damping=lm)
+    if kind == "support_polygon":
+        return SupportPolygon(
+            robot, list(SOLES), margin=0.02, gain=40.0, contact_points=CORNERS, lm_damping=lm
+        )
+    raise AssertionError(kind)
+
+
+LM_KINDS = [
+    "position", "frame_position", "pose", "pose_split", "orientation", "com", "posture",
+    "position_band", "com_band",
+]  # fmt: skip
+LM_CASES = [("panda", k) for k in LM_KINDS] + [("talos", k) for k in [*LM_KINDS, "support_polygon"]]
+
+
+@needs_native
+@pytest.mark.parametrize(("name", "kind"), LM_CASES)
+def test_native_damping_rows_equal_the_python_refresh(robots, name, kind):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    lm = 0.7
+    tn, tp = _damped(robot, kind, q0, lm), _damped(robot, kind, q0, lm)
+    posture = qc.PostureTask(robot, q0, gain=1.0)
+    ikn = qc.IK(robot, [[tn], [posture]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[tp], [posture]], DT, limits=None, engine="python")
+    assert native_kind(tn.lm_rows) == TaskKind.LM_DAMPING and isinstance(tn.lm_rows, LMDamping)
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(11)
+    seen = 0
+    for trial in range(6):
+        q = robot.integrate(q0, rng.normal(scale=0.15, size=robot.nv), 1.0)
+        ikn.step(q)
+        ikp.refresh(q)
+        a, b = tn.lm_rows.task, tp.lm_rows.task
+        # A = sqrt(mu) I with mu = lm * |e|_w^2: two evaluations of e (native kinematics and
+        # Pinocchio's) differ by a few eps of the quantities e is made of (positions of at
+        # most a few m, angles of at most pi: scale 10), so sqrt(mu) differs by at most
+        # sqrt(lm * sum(w)) times that
+        w = tp.task.weight
+        tol = np.sqrt(lm * w.sum()) * 64 * EPS * 10.0
+        np.testing.assert_allclose(a.A, b.A, rtol=0, atol=tol, err_msg=f"trial {trial}")
+        assert not a.b.any() and not b.b.any()
+        assert tn.lm_rows.mu == pytest.approx(tp.lm_rows.mu, rel=1e-6, abs=tol**2)
+        seen += tp.lm_rows.mu > 0
+    assert seen >= 3  # the rows were not all zero (below the floor)
+
+
+@needs_native
+@pytest.mark.parametrize(("offset", "zero"), [(0.1 * LM_ERROR_FLOOR, True), (0.01, False)])
+def test_native_damping_rows_are_zero_below_the_error_floor(robots, offset, zero):
+    robot = robots["panda"]
+    q = _start(robot)
+    frame = HAND["panda"]
+    target = robot.frame_pose(q, frame)[:3, 3] + [offset, 0.0, 0.0]
+    task = FramePositionTask(robot, frame, target, gain=1.0, lm_damping=2.0)
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q)]], DT, engine="native")
+    assert native_kind(task.lm_rows) == TaskKind.LM_DAMPING
+    ik.step(q)
+    A = task.lm_rows.task.A
+    if zero:
+        assert not A.any()  # exactly zero, not tiny
+    else:  # sqrt(2) * 0.01 on the diagonal, to the rounding of a ~1 m position
+        np.testing.assert_allclose(np.diag(A), np.sqrt(2.0) * offset, rtol=0, atol=1e-12)
+
+
+@needs_native
+def test_an_assigned_lm_damping_reaches_the_native_rows(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    task = _damped(robot, "pose", q, 1.0)
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q)]], DT, engine="native")
+    ik.step(q)
+    mu = task.lm_rows.mu
+    task.lm_damping = 4.0
+    ik.step(q)
+    assert task.lm_rows.mu == pytest.approx(4.0 * mu, rel=1e-9)
+
+
+@needs_native
+def test_a_python_task_keeps_its_damping_rows_in_python(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    task = qc.PotentialTask(robot, lambda q: q - _start(robot), lm_damping=1.0)
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q)]], DT, engine="native")
+    assert native_kind(task) is None and native_kind(task.lm_rows) is None
+    assert task.lm_rows in ik._native._python_tasks
+    ik.step(q + 0.1)
+    assert task.lm_rows.mu > 0
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_an_unreachable_damped_target_runs_alike_on_both_engines(robots, name):
+    """A hand target out of reach with lm_damping, a damped band and a damped posture: the
+    same v from the native step and the Python engine at every step of a closed loop."""
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+
+    def levels():
+        far = robot.frame_pose(q0, frame)[:3, 3] + [2.5, 0.0, 0.5]
+        hand = FramePositionTask(robot, frame, far, gain=0.2 / DT, lm_damping=1.0)
+        band = _damped(robot, "position_band", q0, 2.0)
+        low = qc.PostureTask(robot, q0, gain=1.0, lm_damping=0.5)
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [band, hand], [low]]
+        return [[band, hand], [low]]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    q = q0.copy()
+    for step in range(400):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
+        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s);
+        # the damping makes the last levels' rows near-dependent on the unreachable task's
+        # (mu ~ 1 against rows of size ~1): the engines' answers agree to 1e-9 of the scale
+        # times that level's conditioning, below 1e3 here
+        tol = 1e-6 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+# ---------------------------------------------------------------------------------------
+# relative frames and joint couplings
+# ---------------------------------------------------------------------------------------
+
+#: (frame, reference frame, coupled joints) of each robot: a reference frame on the same
+#: chain (shared joints) on the Panda, on the other arm of Talos (over the floating base)
+PAIRS = {
+    "panda": ("panda_hand_tcp", "panda_link3", ["panda_joint1", "panda_joint3"]),
+    "talos": (
+        "gripper_right_base_link",
+        "gripper_left_base_link",
+        ["arm_left_1_joint", "arm_right_1_joint"],
+    ),
+}
+
+
+def _relative(robot: qc.Robot, q: np.ndarray, mask: str | None, lm: float = 0.0):
+    frame, ref, _ = PAIRS[robot.name]
+    task = qc.RelativeFrameTask(
+        robot, frame, ref, gain=3.0, position_weight=2.0, mask=mask, lm_damping=lm
+    )
+    task.set_target_from_configuration(q)
+    T = task.target.homogeneous.copy()  # away from the start: a rotation of 0.4 rad
+    T[:3, :3] = T[:3, :3] @ pin.exp3(np.array([0.12, -0.08, 0.36]))
+    T[:3, 3] += [0.05, -0.04, 0.03]
+    task.set_target(T)
+    return task
+
+
+def _coupling(robot: qc.Robot, lm: float = 0.0):
+    _, _, joints = PAIRS[robot.name]
+    return qc.JointCouplingTask(
+        robot, joints, [1.0, -0.7], gain=2.0, offset=0.3, weight=3.0, lm_damping=lm
+    )
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+@pytest.mark.parametrize("kind", ["relative", "relative_masked", "coupling"])
+def test_native_relative_and_coupling_rows_equal_the_python_refresh(robots, name, kind):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+
+    def make():
+        if kind == "coupling":
+            return _coupling(robot)
+        return _relative(robot, q0, "x z ry rz" if kind == "relative_masked" else None)
+
+    tn, tp = make(), make()
+    expected = TaskKind.JOINT_COUPLING if kind == "coupling" else TaskKind.RELATIVE_FRAME
+    assert native_kind(tn) == expected
+    posture = qc.PostureTask(robot, q0, gain=1.0)
+    ikn = qc.IK(robot, [[tn], [posture]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[tp], [posture]], DT, limits=None, engine="python")
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(5)
+    for trial in range(6):
+        q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
+        version = tn.task.matrix_version
+        ikn.step(q)
+        assert tn.task.matrix_version == version + 1
+        ikp.refresh(q)
+        # the rows are products of a few 3×3 and 6×6 factors (rotations, the log's
+        # Jacobian at angles well above its series threshold) with entries no larger than
+        # the rows' scale: the two evaluations differ by a few hundred eps of that scale
+        scale = max(1.0, float(np.abs(tp.task.A).max()), float(np.abs(tp.task.b).max()))
+        tol = 1e3 * EPS * scale
+        np.testing.assert_allclose(tn.task.A, tp.task.A, rtol=0, atol=tol, err_msg=f"{trial}")
+        np.testing.assert_allclose(tn.task.b, tp.task.b, rtol=0, atol=tol, err_msg=f"{trial}")
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_relative_and_coupling_closed_loop_matches_the_python_engine(robots, name):
+    """A relative frame and a joint coupling (both damped) below a hand task: the same v
+    from the native step and the Python engine at every step."""
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+
+    def levels():
+        T = robot.frame_pose(q0, frame).copy()
+        T[:3, 3] += [0.05, 0.05, -0.05]
+        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.2 / DT)
+        rel = _relative(robot, q0, "x y z", lm=0.5)
+        low = [_coupling(robot, lm=0.3), rel, qc.PostureTask(robot, q0, gain=1.0)]
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [hand], low]
+        return [[hand], low]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    q = q0.copy()
+    for step in range(300):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
+        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+def test_an_assigned_offset_or_relative_target_reaches_the_native_rows(robots):
+    robot = robots["panda"]
+    q = _start(robot)
+    coupling, rel = _coupling(robot), _relative(robot, q, None)
+    ik = qc.IK(robot, [[coupling, rel], [qc.PostureTask(robot, q)]], DT, engine="native")
+    coupling.set_offset_from_configuration(q)
+    rel.set_target_from_configuration(q)
+    ik.step(q)
+    # both met at q: e is rounding of sums of ~1 rad and of a ~1 m pose
+    assert abs(coupling.task.b[0]) < 1e3 * EPS * coupling.gain
+    assert np.abs(rel.task.b).max() < 1e3 * EPS * rel.gain
+    coupling.offset = 0.5
+    ik.step(q)
+    expected = -coupling.gain * (coupling.ratios @ q[coupling._iq] - 0.5)
+    assert coupling.task.b[0] == pytest.approx(expected, rel=1e-12)
+
+
+# ---------------------------------------------------------------------------------------
+# bad data: the tasks' own messages
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+def test_a_relative_frame_without_target_raises_its_message_on_the_native_step(robots):
+    robot = robots["panda"]
+    task = qc.RelativeFrameTask(robot, "panda_hand_tcp", "panda_link3")
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, _start(robot))]], DT, engine="native")
+    assert native_kind(task) == TaskKind.RELATIVE_FRAME
+    with pytest.raises(ValueError, match="no target"):
+        ik.step(_start(robot))
+    task.set_target_from_configuration(_start(robot))
+    ik.step(_start(robot))  # the kernel has its target now
+
+
+@pytest.mark.parametrize("bad", [-1.0, np.nan, np.inf, "1"])
+def test_an_assigned_bad_lm_damping_is_named(robots, bad):
+    task = _damped(robots["panda"], "pose", _start(robots["panda"]), 1.0)
+    with pytest.raises(ValueError, match="lm_damping"):
+        task.lm_damping = bad
+    assert task.lm_damping == 1.0
+
+
+# ---------------------------------------------------------------------------------------
+# damping tasks
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+def test_native_damping_task_rows_and_hold_equal_the_python_refresh(robots, name):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    w = np.linspace(0.5, 2.0, robot.nv)
+    tn, tp = qc.DampingTask(robot, weight=w), qc.DampingTask(robot, weight=w)
+    assert native_kind(tn) == TaskKind.DAMPING and tn.q_hold is None
+
+    def hand():
+        return FramePositionTask(robot, HAND[name], robot.frame_pose(q0, HAND[name])[:3, 3])
+
+    ikn = qc.IK(robot, [[hand()], [tn]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[hand()], [tp]], DT, limits=None, engine="python")
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
+        version = tn.task.matrix_version
+        ikn.step(q)
+        assert tn.task.matrix_version == version  # a constant matrix, as the Python refresh
+        ikp.refresh(q)
+        # the same constant rows and the same held configuration, exactly (copies)
+        np.testing.assert_array_equal(tn.task.A, tp.task.A)
+        np.testing.assert_array_equal(tn.task.b, tp.task.b)
+        np.testing.assert_array_equal(tn.q_hold, q)
+        np.testing.assert_array_equal(tp.q_hold, q)
+        Pn, Pp = ikn.stack._compiled, ikp.stack._compiled
+        Pp.refresh_stacked()
+        np.testing.assert_array_equal(Pn.Aeq[-robot.nv :], Pp.Aeq[-robot.nv :])
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos"])
+@pytest.mark.parametrize("cls", [qc.DampingTask, qc.LowAccelerationTask])
+def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name, cls):
+    robot = _robot(robots, name)
+    q0 = _start(robot)
+    frame = HAND[name]
+
+    def levels():
+        T = robot.frame_pose(q0, frame).copy()
+        T[:3, 3] += [0.05, 0.05, -0.05]
+        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.2 / DT)
+        low = [cls(robot, weight=1e-2)]
+        if name == "talos":
+            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+            return [feet, [hand], low]
+        return [[hand], low]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    q = q0.copy()
+    for step in range(200):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
+        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["panda", "talos", "manifold"])
+def test_native_low_acceleration_rows_equal_the_python_refresh(robots, name):
+    """``v_prev`` (and the rows ``v = v_prev``) from the two last configurations on the
+    configuration manifold (free-flyer, continuous and spherical joints on ``manifold``),
+    or from ``set_previous``, as the Python refresh."""
+    robot = manifold_robot() if name == "manifold" else _robot(robots, name)
+    q0 = robot.neutral() if name == "manifold" else _start(robot)
+    w = np.linspace(0.5, 2.0, robot.nv)
+    tn, tp = qc.LowAccelerationTask(robot, weight=w), qc.LowAccelerationTask(robot, weight=w)
+    assert native_kind(tn) == TaskKind.LOW_ACCELERATION
+    frame = "tip" if name == "manifold" else HAND[name]
+
+    def hand():
+        return FramePositionTask(robot, frame, robot.frame_pose(q0, frame)[:3, 3])
+
+    ikn = qc.IK(robot, [[hand()], [tn]], DT, limits=None, engine="native")
+    ikp = qc.IK(robot, [[hand()], [tp]], DT, limits=None, engine="python")
+    assert not ikn._native._hybrid
+    rng = np.random.default_rng(8)
+    q = q0
+    for step in range(6):
+        if step == 3:  # a given previous velocity, for the next step only
+            given = rng.normal(size=robot.nv)
+            tn.set_previous(given)
+            tp.set_previous(given)
+        ikn.step(q)
+        ikp.refresh(q)
+        if step == 3:
+            np.testing.assert_array_equal(tn.v_prev, given)
+        # difference(q_hold, q) / dt: the two evaluations (a log of rotations of at most a
+        # few rad, differences of coordinates of at most a few rad or m) differ by a few eps
+        # of |q|, divided by dt
+        tol = 64 * EPS * (1.0 + np.abs(q).max()) / DT
+        np.testing.assert_allclose(tn.v_prev, tp.v_prev, rtol=0, atol=tol, err_msg=f"{step}")
+        np.testing.assert_array_equal(tn.task.b, tn.v_prev)
+        np.testing.assert_array_equal(tn.task.A, tp.task.A)
+        np.testing.assert_array_equal(tn.q_hold, q)
+        q = robot.integrate(q, rng.normal(scale=0.5, size=robot.nv), DT)
+    assert np.abs(tp.v_prev).max() > 0.1  # measured, not the zero of the first step
+
+
+# ---------------------------------------------------------------------------------------
+# the weighted QP on the same kernels; no allocation on a floating base
+# ---------------------------------------------------------------------------------------
+
+
+def _talos_stack(robot: qc.Robot, q0: np.ndarray) -> tuple[list, list]:
+    """Feet, a damped hand, a relative frame, a coupling and a low-acceleration level on
+    Talos, with acceleration limits braking before the position limits."""
+    feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+    far = robot.frame_pose(q0, HAND["talos"])[:3, 3] + [0.3, -0.2, 0.2]
+    hand = FramePositionTask(robot, HAND["talos"], far, gain=0.2 / DT, lm_damping=0.5)
+    low = [_relative(robot, q0, "x y z"), _coupling(robot), qc.LowAccelerationTask(robot, 1e-3)]
+    return [feet, [hand], low], _limits(robot, 0.5, 30.0)
+
+
+@needs_native
+def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
+    robot = _robot(robots, "talos")
+    q0 = _start(robot)
+    iks = []
+    for engine in ("native", "python"):
+        levels, limits = _talos_stack(robot, q0)
+        iks.append(qc.IK(robot, levels, DT, limits=limits, method="weighted", engine=engine))
+    ikn, ikp = iks
+    assert ikn._native.weighted and not ikn._native._hybrid
+    assert not ikn._native._python_limits
+    q = q0.copy()
+    for step in range(150):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        # the same weighted QP (rows and box to rounding) solved by both engines in the
+        # whitened variables of the weighted rows' QR (as test_native_support.py's Talos
+        # loop): 1e-9 of the velocities' scale (a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn, DT)
+
+
+_ALLOCATION_RUN = r"""
+import ctypes, sys
+import numpy as np, pinocchio as pin, qpcoord as qc
+sys.path.insert(0, {tests!r})
+from test_native_kernels_match_python import _talos_stack, _start, DT
+count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
+count.restype = ctypes.c_longlong
+robot = qc.robots.load("talos")
+print("variant", qc.core.native.variant())
+q0 = _start(robot)
+q = robot.integrate(q0, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
+for method in ("hierarchical", "weighted"):
+    levels, limits = _talos_stack(robot, q0)
+    ik = qc.IK(robot, levels, DT, limits=limits, method=method, engine="native")
+    assert not ik._native._hybrid and not ik._native._python_limits
+    pin.computeJointJacobians(robot.model, robot.data, q)
+    call = ik._native._solver.step
+    for _ in range(20):
+        assert call(q, True, 10.0, True) == 0
+    before = count()
+    for _ in range(500):
+        call(q, True, 10.0, True)
+    print(method, count() - before)
+"""
+
+
+@pytest.mark.engine_independent
+@needs_native
+@pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
+def test_the_new_kernels_do_not_allocate_on_a_floating_base(tmp_path, robots, build):
+    """The native call with the acceleration box, LM damping, relative-frame, coupling and
+    low-acceleration kernels (a free-flyer difference) on Talos makes no heap allocation
+    after its first calls. Each build of the extension, chosen by QPCOORD_NATIVE_ISA."""
+    _robot(robots, "talos")
+    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
+    counts = dict(line.split() for line in out.splitlines())
+    assert counts == {"variant": build, "hierarchical": "0", "weighted": "0"}, out
+
+
+@needs_native
+@pytest.mark.parametrize("kind", ["relative", "coupling"])
+def test_native_relative_and_coupling_jacobians_match_finite_differences(robots, kind):
+    """The native rows' ``A`` against central differences of their error ``e = −b/K`` (no
+    feed-forward) along random velocities, on Talos (floating base)."""
+    robot = _robot(robots, "talos")
+    q0 = _start(robot)
+    task = _coupling(robot) if kind == "coupling" else _relative(robot, q0, "x z ry rz")
+    ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q0)]], DT, limits=None, engine="native")
+    assert native_kind(task) in (TaskKind.RELATIVE_FRAME, TaskKind.JOINT_COUPLING)
+    rng = np.random.default_rng(12)
+    h = 1e-6
+
+    def error(q):
+        ik.step(q)
+        return -task.task.b / task.gain
+
+    for _ in range(3):
+        q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
+        d = rng.normal(size=robot.nv)
+        ik.step(q)
+        Jd = task.task.A @ d
+        fd = (error(robot.integrate(q, d, h)) - error(robot.integrate(q, d, -h))) / (2 * h)
+        # central differences: truncation O(h²) and rounding O(eps |e| / h) ~ 1e-10
+        np.testing.assert_allclose(Jd, fd, rtol=0, atol=1e-6 * max(1.0, np.abs(fd).max()))
+
+
+@needs_native
+@pytest.mark.parametrize(
+    ("what", "message"),
+    [("a_max", "acceleration limits: .*limit not > 0"), ("gain", "joint limits: .*gain")],
+)
+def test_limit_data_the_native_step_refuses_is_named(robots, what, message):
+    robot = robots["panda"]
+    limits = _limits(robot, 0.5, 50.0)
+    ik = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limits, engine="native")
+    if what == "a_max":
+        limits[2].limit = np.full(robot.nv, -1.0)
+    else:
+        limits[0].gain = float("nan")
+    with pytest.raises(ValueError, match=message):
+        ik.step(_start(robot))
+
+
+# ---------------------------------------------------------------------------------------
+# a posture over continuous joints
+# ---------------------------------------------------------------------------------------
+
+
+@needs_native
+def test_a_posture_over_continuous_joints_is_native_and_matches(robots):
+    """The Kinova's continuous joints ((cos, sin) pairs): the posture's rows are the angle
+    from q to q_ref (``pinocchio.difference``) natively, damped too, as the Python refresh;
+    and a closed loop gives the same v on both engines."""
+    try:
+        robot = qc.robots.load("kinova")
+    except ValueError:  # example-robot-data missing
+        pytest.skip("kinova not available")
+    assert any(j.shortname().startswith("JointModelRUB") for j in robot.model.joints)
+    q0 = robot.neutral()
+    frame = robot.frame
+
+    def levels():
+        q_ref = robot.random_configuration(6)
+        hand = FramePositionTask(robot, frame, robot.frame_pose(q0, frame)[:3, 3] + 0.05)
+        return [[hand], [qc.PostureTask(robot, q_ref, gain=2.0, lm_damping=0.3)]]
+
+    ikn = qc.IK(robot, levels(), DT, engine="native")
+    ikp = qc.IK(robot, levels(), DT, engine="python")
+    assert not ikn._native._hybrid
+    tn = next(t for t in ikn._native.kernel_tasks if isinstance(t, qc.PostureTask))
+    tp = next(t for t in ikp._dynamic if isinstance(t, qc.PostureTask))
+    rng = np.random.default_rng(3)
+    q = q0
+    for step in range(200):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        if step % 50 == 0:  # the rows: an atan2 of products of unit (cos, sin) pairs
+            tol = 64 * EPS * tp.gain * np.pi
+            np.testing.assert_allclose(tn.task.b, tp.task.b, rtol=0, atol=tol)
+            np.testing.assert_allclose(tn.lm_rows.task.A, tp.lm_rows.task.A, rtol=0, atol=tol)
+        # the same QP (rows to rounding) on two engines, each to its KKT tolerance 1e-9
+        # relative to the velocities' scale (a few rad/s)
+        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = robot.integrate(q, vn + 0.01 * rng.normal(size=robot.nv), DT)
