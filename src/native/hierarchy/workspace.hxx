@@ -249,6 +249,11 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   auto cx = cinx_.head(k_);
   cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
+    // a level's row whose projection is within kMovableTol of its norm lies in the frozen
+    // rows' span to rounding of the freeze: constant, as for the level's own movable test
+    // (its projection's direction is rounding: a half-space through x with that normal
+    // decides the lower levels by rounding). The hard rows stay (the end check holds them)
+    if (inid_[i] >= min_[0] && !(CZ.row(i).norm() > kMovableTol * cin_norm(i))) continue;
     full.head(r_) = CZ.row(i).transpose();
     const double l = std::min(lin_(i) - cx(i), 0.0);
     const double u = std::max(uin_(i) - cx(i), 0.0);
