@@ -87,9 +87,11 @@ struct LsqProblem {
   double c_norm() const { return std::sqrt(c.head(qrows).squaredNorm() + dropped2); }
   void resize(int max_qrows, int max_grows, int max_cols);
   void start(int qrows_, int cols_);
-  /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind.
-  /// Returns the row's norm, or 0 when it was skipped.
-  double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm);
+  /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind (both
+  /// sides infinite, or ||g|| at most floor * ref_norm: constant). Returns the row's norm, or
+  /// 0 when it was skipped.
+  double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm,
+                 double floor = 1e-12);
 };
 
 /// What a user may tune in a Hierarchy (Hierarchy::settings; bound to Python).
