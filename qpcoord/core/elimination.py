@@ -24,7 +24,7 @@ from .linalg import all_finite, null_space, numerical_rank, svd
 from .polish import polish
 from .tolerance import widen, within
 
-__all__ = ["Reduced", "FEAS_TOL", "CHECK_TOL", "within", "widen"]
+__all__ = ["Reduced", "FEAS_TOL", "CHECK_TOL", "MOVABLE_TOL", "within", "widen"]
 
 #: Relative tolerance under which a closed-form candidate counts as feasible
 #: (``row ≤ hi + FEAS_TOL·max(1, |hi|)``).
@@ -32,6 +32,14 @@ FEAS_TOL = 1e-9
 #: Relative tolerance of the final check of every returned ``x`` against the hard
 #: constraints and inherited rows; beyond it a :class:`SolverError` is raised.
 CHECK_TOL = 1e-6
+#: A level row, or combination of a level's rows, whose projection on the remaining freedom
+#: is at most this fraction of its own norm lies in the frozen rows' span to rounding of the
+#: freeze (``eps·κ`` of the frozen levels, ≤ 2e-9 for ``κ`` up to ``1/damping`` = 1e7 at the
+#: default damping): it moves nothing and is left as dependent (the native engine's
+#: ``kMovableTol``; the single-row case is the movable test of the level's inequality rows,
+#: and an inherited level row that becomes such a row is no longer a constraint:
+#: :meth:`Reduced.drop_dependent`).
+MOVABLE_TOL = 1e-9
 #: Relative opening of inherited rows and bounds in the QPs of lower levels, per backend:
 #: active-set backends resolve a point pinned by active rows exactly; the others need a
 #: feasible set at least as wide as their tolerances (proxqp and highs reported
@@ -165,6 +173,7 @@ class Reduced:
         self._hi = np.empty(capacity)
         self._low = np.empty(capacity)  # widened by FEAS_TOL, for the closed-form test
         self._high = np.empty(capacity)
+        self._dependent = np.zeros(capacity, dtype=bool)
         self.reset(None, None, "")
 
     def reset(self, lb: np.ndarray | None, ub: np.ndarray | None, solver: str) -> Reduced:
@@ -172,6 +181,8 @@ class Reduced:
         self.x = np.zeros(self.n)
         self.Z: np.ndarray | None = None
         self.k = 0
+        self.k_hard = 0  # the hard rows come first among the inherited rows
+        self.n_dependent = 0
         self.lb, self.ub = lb, ub
         if lb is not None and ub is not None:
             self.lbw, self.ubw = widen(lb, ub, FEAS_TOL)
@@ -199,6 +210,30 @@ class Reduced:
         return self._C[: self.k]
 
     @property
+    def dependent(self) -> np.ndarray:
+        """Mask of the inherited rows that are no longer constraints (:meth:`drop_dependent`)."""
+        return self._dependent[: self.k]
+
+    def drop_dependent(self) -> None:
+        """Stop imposing the inherited level rows whose projection ``Cᵢ Z`` is at most
+        :data:`MOVABLE_TOL` of ``‖Cᵢ‖``: they lie in the frozen rows' span to rounding of the
+        freeze, constant as far as the remaining freedom can tell, and the direction of their
+        projection is rounding (a half-space through ``x̄`` with that normal would decide the
+        lower levels by rounding; the native engine's ``add_inherited_rows`` skips them).
+        Projections only shrink as ``Z`` does: a row once dropped stays dropped. The hard
+        rows are kept (the final check holds them)."""
+        k0, k = self.k_hard, self.k
+        if k <= k0 or self.Z is None:
+            return
+        C = self._C[k0:k]
+        Cz = C @ self.Z
+        dep = np.sqrt(np.einsum("ij,ij->i", Cz, Cz)) <= MOVABLE_TOL * np.sqrt(
+            np.einsum("ij,ij->i", C, C)
+        )
+        self._dependent[k0:k] |= dep
+        self.n_dependent = int(self._dependent[:k].sum())
+
+    @property
     def lin(self) -> np.ndarray:
         """Lower bounds of the inherited rows."""
         return self._lo[: self.k]
@@ -217,6 +252,7 @@ class Reduced:
         self._C[k : k + m] = C
         self._lo[k : k + m] = lo
         self._hi[k : k + m] = hi
+        self._dependent[k : k + m] = False
         self._low[k : k + m], self._high[k : k + m] = widen(lo, hi, FEAS_TOL)
         self.k = k + m
 
@@ -284,29 +320,35 @@ class Reduced:
         ``u = T z``: every row's ``z`` part is multiplied by ``T⁻¹`` and bounds on ``z``
         become rows (see :meth:`solve_qp`).
 
-        The matrix depends only on ``(kdim, D, k, Z, T)``; it is kept and reused while those
-        are the same objects (a level's QP, its retries, polish and certificate share it),
-        only the bounds are recomputed."""
+        The inherited rows dropped as dependent (:meth:`drop_dependent`) are left out.
+        The matrix depends only on ``(kdim, D, k, Z, T)`` and the dropped rows; it is kept
+        and reused while those are the same (a level's QP, its retries, polish and
+        certificate share it), only the bounds are recomputed."""
         r = self.r
         x = self.x
-        k = self.k
+        Cin, cl, ch = self.Cin, self.lin, self.uin
+        if self.n_dependent:
+            keep = ~self.dependent
+            Cin, cl, ch = Cin[keep], cl[keep], ch[keep]
+        k = Cin.shape[0]
         box_rows = self.lb is not None and (self.Z is not None or T is not None)
         c = self._asm
         if (
             c is not None
             and c[0] == kdim
             and c[1] is D
-            and c[2] == k
+            and c[2] == self.k
             and c[3] is self.Z
             and c[4] is T
+            and c[5] == self.n_dependent
         ):
-            G = c[5]
+            G = c[6]
         else:
             blocks = []
             if D is not None and D.shape[0]:
                 blocks.append(D)
             if k:
-                Cz = self.reduce(self._C[:k])
+                Cz = self.reduce(Cin)
                 if kdim > r:
                     Cz = np.hstack((Cz, np.zeros((k, kdim - r))))
                 blocks.append(Cz)
@@ -320,17 +362,17 @@ class Reduced:
                 G = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
             if T is not None and G.shape[0]:
                 G = whiten_rows(G.copy() if len(blocks) == 1 else G, T, r)
-            self._asm = (kdim, D, k, self.Z, T, G)
+            self._asm = (kdim, D, self.k, self.Z, T, self.n_dependent, G)
         los, his = [], []
         if D is not None and D.shape[0]:
             los.append(dlo)
             his.append(dhi)
         if k:
-            cx = self._C[:k] @ x
+            cx = Cin @ x
             # x̄ meets these rows up to the previous solve's tolerance; never ask for more
             # than z = 0 already gives, so the QP stays feasible by construction
-            los.append(np.minimum(self._lo[:k] - cx, 0.0) - self._relax(self._lo[:k]))
-            his.append(np.maximum(self._hi[:k] - cx, 0.0) + self._relax(self._hi[:k]))
+            los.append(np.minimum(cl - cx, 0.0) - self._relax(cl))
+            his.append(np.maximum(ch - cx, 0.0) + self._relax(ch))
         lb = ub = None
         if self.lb is not None and self.ub is not None:
             if self.Z is None and T is None:
@@ -512,6 +554,7 @@ class Reduced:
             self.x = x
             self.restrict(Vt[rank:].T)
         self.inherit(hard.C, hard.lo, hard.hi)
+        self.k_hard = self.k
         if (self.lb is None and not self.k) or self.feasible(self.x):
             return
         if self.lb is not None and self.ub is not None and self.Z is None and not self.k:

@@ -355,7 +355,7 @@ def active_set_ls(
     as far as the inactive rows allow, adds the blocking row, or, when the point is
     stationary on its working set, drops the row whose multiplier has the wrong sign.
     A multiplier counts as negative below ``−KKT_TOL·‖g‖∞``; with ``exact_signs`` below the
-    rounding of the gradient only (``16·ε·k·‖Q‖·(‖Q‖·‖y‖∞ + ‖c‖)``, in the equilibrated
+    rounding of the gradient only (``16·ε·k·‖Q‖·(‖|Q|·|y|‖ + ‖c‖)``, in the equilibrated
     variables), and a working set counts as solved when the step is at rounding, not when
     it gains under 1e-15 of the objective: for a damped level, whose damped directions
     have curvature ``τ²`` and gradients far under ``KKT_TOL``, so that a multiplier of
@@ -433,8 +433,12 @@ def active_set_ls(
             j = int(np.argmin(mu))
             gref = max(float(np.abs(g).max()), 1e-300)
             if exact_signs:
+                # the rounding of res = Qs u − c is at most k·ε·(|Qs| |u|) + ε|c| entrywise:
+                # |Qs| |u|, not ‖Qs‖·‖u‖∞ (a level's slack rows do not read z, whose entries
+                # at the box, 1e3, made the bound 500× its size and hid multipliers of -2e-10
+                # of a level whose gains along a 3e-8 direction are ~1e-9)
                 qn = float(np.linalg.norm(Qs))
-                thr = 16.0 * _EPS * k * qn * (qn * float(np.abs(u).max()) + cn)
+                thr = 16.0 * _EPS * k * qn * (float(np.linalg.norm(np.abs(Qs) @ np.abs(u))) + cn)
             else:
                 thr = KKT_TOL * gref
             if mu[j] >= -thr:

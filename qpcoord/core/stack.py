@@ -472,7 +472,8 @@ class Stack:
                 f"backend {solver!r} returned a point violating the hard inequalities"
             )
         tol = CHECK_TOL if R is None else CHECK_TOL + (len(P.levels) + 1) * R.used_relax
-        if R is not None and R.k and not within(R.Cin @ x, R.lin, R.uin, tol):
+        kept = slice(None) if R is None or not R.n_dependent else ~R.dependent
+        if R is not None and R.k and not within(R.Cin[kept] @ x, R.lin[kept], R.uin[kept], tol):
             raise SolverError(
                 f"backend {solver!r} returned a point that breaks an inequality a higher "
                 "level had satisfied"

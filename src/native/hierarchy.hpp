@@ -87,9 +87,11 @@ struct LsqProblem {
   double c_norm() const { return std::sqrt(c.head(qrows).squaredNorm() + dropped2); }
   void resize(int max_qrows, int max_grows, int max_cols);
   void start(int qrows_, int cols_);
-  /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind.
-  /// Returns the row's norm, or 0 when it was skipped.
-  double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm);
+  /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind (both
+  /// sides infinite, or ||g|| at most floor * ref_norm: constant). Returns the row's norm, or
+  /// 0 when it was skipped.
+  double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm,
+                 double floor = 1e-12);
 };
 
 /// What a user may tune in a Hierarchy (Hierarchy::settings; bound to Python).
@@ -296,12 +298,14 @@ class Hierarchy {
   int independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, int me, int rank,
                        double scale);
   /// Rows of R (a level's moving rows' projections) without the directions in which they
-  /// are dependent to within the movable tolerance (robust: see hierarchy.cpp).
-  void drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
-                                 const Eigen::Ref<const Vec>& norms);
-  /// True when the r x m matrix T proves every pivot of its column-pivoted QR above the
-  /// movable tolerance (see hierarchy.cpp).
-  bool independent_by_gram(const Eigen::Ref<const Mat>& T);
+  /// are dependent to within the movable tolerance (robust: see hierarchy.cpp). Returns the
+  /// last pivot the rows keep (scaled by their norms), or 1 when every pivot is proven at
+  /// least kIllConditioned.
+  double drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
+                                   const Eigen::Ref<const Vec>& norms);
+  /// True when the r x m matrix T proves every pivot of its column-pivoted QR at least
+  /// pivot_floor (see hierarchy.cpp).
+  bool independent_by_gram(const Eigen::Ref<const Mat>& T, double pivot_floor);
   /// Z <- Z Qf(:, rank:) after a wide M's QR in the stage's mqr (M^T = Qf R: null(M) is spanned by
   /// Qf's last r - rank columns); the carried projection follows (carry_z).
   void freeze_wide(int rank);
@@ -562,6 +566,7 @@ class Hierarchy {
   Mat CZl_;  ///< their projection C Z (max_in x n: the left r columns)
   Mat Ztmp_;
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
+  double rows_pivot_ = 1.0;    ///< level_problem: the moving rows' last kept pivot (scaled)
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
   /// The freeze cache's value: a level's Z, r, z_identity_ and Cin Z after its freeze; its
   /// key: the freeze's kind and rank, Cin Z on entry, the violated rows -- and, through the

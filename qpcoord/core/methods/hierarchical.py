@@ -33,7 +33,7 @@ import numpy as np
 from scipy.linalg import qr
 
 from ..compile import CompiledStack
-from ..elimination import Reduced
+from ..elimination import MOVABLE_TOL, Reduced
 from ..linalg import filtered_svd, numerical_rank, svd
 from ..polish import (
     KKT_FEAS_TOL,
@@ -76,14 +76,6 @@ _ABS_FLOOR = 1e-14
 FAR_RATIO = VIOLATION_TOL / KKT_FEAS_TOL
 
 
-#: A level row, or combination of a level's rows, whose projection on the remaining freedom
-#: is at most this fraction of its own norm lies in the frozen rows' span to rounding of the
-#: freeze (``eps·κ`` of the frozen levels, ≤ 2e-9 for ``κ`` up to ``1/damping`` = 1e7 at the
-#: default damping): it moves nothing and is left as dependent (the native engine's
-#: ``kMovableTol``; the single-row case is the movable test of the level's inequality rows).
-MOVABLE_TOL = 1e-9
-
-
 def _independent_rank(A: np.ndarray, U: np.ndarray, s: np.ndarray, rank: int, scale: float):
     """The rank of a level's ``M = A Z`` (SVD ``U, s``, numerical rank ``rank``) without the
     directions in which the level's rows are dependent to within :data:`MOVABLE_TOL` of the
@@ -112,7 +104,7 @@ def _independent_rank(A: np.ndarray, U: np.ndarray, s: np.ndarray, rank: int, sc
     return rank
 
 
-def _drop_dependent(D: np.ndarray, norms: np.ndarray) -> np.ndarray:
+def _drop_dependent(D: np.ndarray, norms: np.ndarray) -> tuple[np.ndarray, float]:
     """The projected rows ``D`` (rows ``Cᵢ Z`` of rows of norms ``norms``) without the
     directions in which they are dependent to within :data:`MOVABLE_TOL` of their own norms:
     each row projected on the span of the pivot rows of a pivoted QR of the rows scaled to
@@ -121,17 +113,21 @@ def _drop_dependent(D: np.ndarray, norms: np.ndarray) -> np.ndarray:
     together). The Talos support polygon is a function of the CoM and the feet; with the
     feet frozen by an ill-conditioned level its 6 projected rows have rank 2 plus singular
     values ~1e-13, and stepping along those (the native engine: to ``y`` = 1e17) is a step
-    along rounding. ``D`` itself when nothing is dropped."""
+    along rounding. Returns ``(D, pivot)``: ``D`` itself when nothing is dropped, and the
+    last pivot kept (one row: ``‖D₀‖ / ‖C₀‖``), under :data:`ILL_CONDITIONED` an
+    ill-conditioned level (the native engine's ``drop_dependent_directions``, whose Gram
+    screen proves the pivots above it without the QR)."""
     m, r = D.shape
-    if m < 2 or r == 0:
-        return D
+    if m == 1 or r == 0:
+        return D, float(np.linalg.norm(D[0]) / norms[0]) if r else 0.0
     Q, Rf, _ = qr(D.T / norms, mode="economic", pivoting=True)
     d = np.abs(np.diag(Rf))
     rank = int(np.argmax(d <= MOVABLE_TOL)) if (d <= MOVABLE_TOL).any() else d.size
+    last = float(d[rank - 1]) if rank else 0.0
     if rank >= min(m, r):
-        return D
+        return D, last
     Qr = Q[:, :rank]
-    return (D @ Qr) @ Qr.T
+    return (D @ Qr) @ Qr.T, last
 
 
 def _finite_abs(v: np.ndarray) -> np.ndarray:
@@ -178,12 +174,15 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
     xn0 = x + R.lift(z0)
     E, t = [], []
     if R.k:
-        Cin = R.Cin
-        a_lo, a_hi = at_bounds(Cin @ xn0, R.lin, R.uin, tol)
+        Cin, cl, ch = R.Cin, R.lin, R.uin
+        if R.n_dependent:  # (rows that are no longer constraints: Reduced.drop_dependent)
+            keep = ~R.dependent
+            Cin, cl, ch = Cin[keep], cl[keep], ch[keep]
+        a_lo, a_hi = at_bounds(Cin @ xn0, cl, ch, tol)
         if a_lo.any() or a_hi.any():
             act = a_lo | a_hi
             E.append(R.reduce(Cin[act]))
-            t.append(np.where(a_lo, R.lin, R.uin)[act] - Cin[act] @ x)
+            t.append(np.where(a_lo, cl, ch)[act] - Cin[act] @ x)
     if R.lb is not None and R.ub is not None:
         a_lo, a_hi = at_bounds(xn0, R.lb, R.ub, tol)
         if a_lo.any() or a_hi.any():
@@ -240,13 +239,15 @@ def _refine_at(R: Reduced, L, x, z0, A, b, nA, before, viol_rows, tol):
 class _Certifier:
     """Certify a level's point, and make it exact where it is not.
 
-    The level, in ``y = (z, w)`` (``w`` the slacks of its movable inequality rows, in units
-    of ``z``), is ``min ½‖Q y − c‖²`` under the inherited rows, the bounds and its own rows
-    ``dlo ≤ D z − w ≤ dhi``, none of them opened: ``Q`` holds the projected equality rows
+    The level, in ``y = (z, w)`` (``w`` the slacks of its movable inequality rows, in the
+    rows' own units), is ``min ½‖Q y − c‖²`` under the inherited rows, the bounds and its own
+    rows ``dlo ≤ D z − w ≤ dhi``, none of them opened: ``Q`` holds the projected equality rows
     ``M``, the damping rows ``√(τ² − s²)·vᵢᵀ`` of the damped directions (the damping is
     part of the level's objective: a damped level is certified as the damped problem it
-    is) and ``diag(√weight·‖Dᵢ‖)`` on the slacks. The regularisation of the QP is not: the
-    certificate is of the level's own problem.
+    is) and ``diag(√weight)`` on the slacks (not the QP's slacks in units of ``z``,
+    ``w / ‖Dᵢ‖``: a row nearly dependent on the frozen ones, ``‖Dᵢ‖`` = 1e-9, has a slack of
+    ~1e9 there, whose rounding hid the level's last multipliers from the exact finish). The
+    regularisation of the QP is not: the certificate is of the level's own problem.
 
     :meth:`run` tries the candidate points in turn (pulled back into the rows if a backend
     left them by its tolerance), then the exact active-set continuation from the best one,
@@ -561,6 +562,7 @@ def solve_hierarchical(
                 cx = L.C @ x
                 R.inherit(L.C, np.minimum(L.lo, cx), np.maximum(L.hi, cx))
             continue
+        R.drop_dependent()
         # ---- closed form for the equality rows --------------------------------------
         rank = 0
         # a level without equality rows keeps rank 0: M, e, s and Vt are then never read
@@ -597,6 +599,7 @@ def solve_hierarchical(
             d = np.maximum(s[:rank] ** 2, tau * tau)
             curv.append(d)
         mv = 0
+        rows_pivot = 1.0  # the moving rows' last kept pivot (_drop_dependent)
         dlo: np.ndarray | None
         dhi: np.ndarray | None
         if L.m_in:
@@ -607,9 +610,13 @@ def solve_hierarchical(
             mv = int(movable.sum())
             if mv:
                 idx = np.flatnonzero(movable)
-                D[idx] = _drop_dependent(D[idx], cn[idx])
+                D[idx], rows_pivot = _drop_dependent(D[idx], cn[idx])
                 dn[idx] = np.sqrt(np.einsum("ij,ij->i", D[idx], D[idx]))
-                dm = dn[idx]
+                # each row scaled to a unit row in z (slack in units of z), unless a
+                # combination of them is nearly dependent on the frozen rows: then by its own
+                # norm (a row with ‖Dᵢ‖ = 1e-9‖Cᵢ‖ has a slack ~1e9 in units of z, next to
+                # box rows met to 1e-11 at a vertex: every backend called that infeasible)
+                dm = dn[idx] if rows_pivot >= ILL_CONDITIONED else cn[idx]
                 Dm = D[idx] / dm[:, None]
                 cx = L.C[idx] @ x
                 dlo = (L.lo[idx] - cx) / dm
@@ -688,11 +695,17 @@ def solve_hierarchical(
             tau,
             Vt,
             mv,
-            Dm if mv else None,
-            dlo,
-            dhi,
-            (L.sw[idx] * dm) if mv else None,
+            D[idx] if mv else None,
+            dlo * dm if mv else None,
+            dhi * dm if mv else None,
+            L.sw[idx] if mv else None,
         )
+        if mv and rows_pivot < ILL_CONDITIONED:
+            # moving rows with a combination within ILL_CONDITIONED of the frozen rows' span
+            # (a row parallel to them to 1e-8: its violation falls by ~1e-8 of itself across
+            # the whole box, under KKT_TOL; the QP's regularised point stopped short of the
+            # box, where the lower levels are decided): finished exactly, as the native engine
+            cert.exact = True
         z_qp = z
         z, ok, kkt = cert.run([zp, z] if zp is not None else [z], H, f, Dy, where)
         if ok:
@@ -727,6 +740,7 @@ def solve_hierarchical(
     # ---- remaining freedom: minimum-norm x ----------------------------------------
     r = R.r
     if r:
+        R.drop_dependent()
         x = R.x
         if R.Z is None:
             xc = np.zeros(P.n)

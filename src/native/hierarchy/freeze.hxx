@@ -110,19 +110,22 @@ int Hierarchy::independent_rank(const Svd& svd, const CRef<Mat>& Aeq, int e0, in
 /// ill-conditioned level (condition 3e6, targets 1e5), its 6 projected rows have rank 2 plus
 /// singular values ~1e-13; the active set stepped along them to y = 1e17 (level value 4.5
 /// for 2e4) and did not converge on the next level: tests/data/talos_extreme_feet_{10,11}.npz).
+/// Returns the last pivot kept (the level is ill-conditioned below kIllConditioned: see
+/// ill_conditioned), 1 when the Gram screen proves every pivot at least kIllConditioned.
 /// Uses fqr_ (free until the level's freeze) and tmpr_.
-void Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
-                                          const Eigen::Ref<const Vec>& norms) {
+double Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<int>& rows,
+                                            const Eigen::Ref<const Vec>& norms) {
   const int m = static_cast<int>(rows.size());
-  if (m < 2 || r_ == 0) return;
+  if (m < 2 || r_ == 0) return 1.0;
   MapMat T = fqr_.matrix(r_, m);
   for (int j = 0; j < m; ++j) T.col(j) = R.row(rows[j]).head(r_).transpose() / norms(j);
-  if (independent_by_gram(T)) {
+  if (independent_by_gram(T, kIllConditioned)) {
     ++stats_.gram_screens;
-    return;
+    return 1.0;
   }
   const int rank = fqr_.factor(kMovableTol, 0.0);
-  if (rank >= std::min(m, r_)) return;
+  const double last = rank ? std::abs(fqr_.matrix()(rank - 1, rank - 1)) : 0.0;
+  if (rank >= std::min(m, r_)) return last;
   auto v = tmpr_.head(r_);
   for (int j = 0; j < m; ++j) {
     v = R.row(rows[j]).head(r_).transpose();
@@ -132,20 +135,21 @@ void Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector<i
     R.row(rows[j]).head(r_) = v.transpose();
   }
   ++stats_.dependent_drops;
+  return last;
 }
 
 /// True when the pivoted QR of T (r x m, columns of norm at most 1: projections of rows
-/// scaled by their own norms) provably keeps min(m, r) pivots above kMovableTol, so that
-/// drop_dependent_directions would change nothing: a Cholesky of G - delta I, G = T^T T
-/// (m <= r) or T T^T (m > r), k = min(m, r), succeeds. Then lambda_min(G) > delta - err, err
-/// the rounding of G and of the Cholesky (at most 16 (m + r) eps trace(G), trace(G) =
-/// |T|_F^2), so sigma_k(T) > 2 sqrt(m) kMovableTol; every pivot of the QR is at least
-/// sigma_k(T) / sqrt(m) (at step j, the largest remaining column of the projection P T off
-/// the j - 1 chosen columns is at least |P T|_2 / sqrt(m) >= sigma_j(T) / sqrt(m)), twice the
-/// tolerance. A failed Cholesky proves nothing (the QR decides). k^2 max(m, r) / 2 + k^3 / 6
-/// multiply-adds in products where the QR takes about 2 m r k in matrix-vector steps (the
-/// humanoid: 72 moving rows in 88 columns at its first level).
-bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T) {
+/// scaled by their own norms) provably keeps min(m, r) pivots of at least pivot_floor, so
+/// that drop_dependent_directions would change nothing and the level is not ill-conditioned
+/// by its rows: a Cholesky of G - delta I, G = T^T T (m <= r) or T T^T (m > r), k = min(m, r),
+/// succeeds. Then lambda_min(G) > delta - err, err the rounding of G and of the Cholesky (at
+/// most 16 (m + r) eps trace(G), trace(G) = |T|_F^2), so sigma_k(T) > sqrt(m) pivot_floor;
+/// every pivot of the QR is at least sigma_k(T) / sqrt(m) (at step j, the largest remaining
+/// column of the projection P T off the j - 1 chosen columns is at least |P T|_2 / sqrt(m) >=
+/// sigma_j(T) / sqrt(m)). A failed Cholesky proves nothing (the QR decides). k^2 max(m, r) / 2
+/// + k^3 / 6 multiply-adds in products where the QR takes about 2 m r k in matrix-vector steps
+/// (the humanoid: 72 moving rows in 88 columns at its first level).
+bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T, double pivot_floor) {
   const int r = static_cast<int>(T.rows()), m = static_cast<int>(T.cols());
   const int k = std::min(m, r);
   if (k == 0 || k > gram_.rows()) return false;
@@ -157,7 +161,7 @@ bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T) {
     G.selfadjointView<Eigen::Lower>().rankUpdate(T);
   const double trace = G.trace();
   if (!std::isfinite(trace)) return false;
-  const double need = 4.0 * m * kMovableTol * kMovableTol;
+  const double need = m * pivot_floor * pivot_floor;
   const double delta = need + 16.0 * (m + r) * kEps * trace;
   G.diagonal().array() -= delta;
   // G = L L^T in the lower triangle, in place, a column of L at a time: L(j+1:, j) from one

@@ -158,7 +158,11 @@ int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form) {
     }
   }
   const int mv = static_cast<int>(mov_.size());
-  if (mv > 1) drop_dependent_directions(CZl, mov_, depn_.head(mv));
+  // the moving rows' conditioning, scaled by their norms (ill_conditioned): one row's is its
+  // own projection's share of its norm
+  rows_pivot_ = 1.0;
+  if (mv == 1) rows_pivot_ = CZl.row(mov_[0]).norm() / depn_(0);
+  if (mv > 1) rows_pivot_ = drop_dependent_directions(CZl, mov_, depn_.head(mv));
   int ndamp = 0;
   static const Vec kNoSvd;  // empty: no equality rows, or the QR path (no SVD this call)
   const Vec& s = (me && !by_qr) ? svd.singularValues() : kNoSvd;
@@ -221,6 +225,11 @@ int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form) {
 }
 
 bool Hierarchy::ill_conditioned(const LevelRows& d, const LevelForm& form) const {
+  // moving rows with a combination within kIllConditioned of the frozen rows' span (a row
+  // parallel to them to 1e-8: its violation falls by ~1e-8 of itself across the whole box,
+  // and a multiplier under settings.kkt_tol stopped the active set short of the box, where
+  // the lower levels are decided; the Python engine's rule too)
+  if (rows_pivot_ < kIllConditioned) return true;
   if (!d.me || !form.rank) return false;
   if (form.by_qr) return cf_->smin < kIllConditioned * form.scale;
   const Vec& s = svds_[d.stage].singularValues();

@@ -23,10 +23,10 @@ void LsqProblem::start(int qrows_, int cols_) {
 }
 
 double LsqProblem::add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid,
-                           double ref_norm) {
+                           double ref_norm, double floor) {
   if (!std::isfinite(l) && !std::isfinite(u)) return 0.0;
   const double nrm = g.norm();
-  if (!(nrm > 1e-12 * std::max(ref_norm, 1e-300))) return 0.0;  // cannot bind: constant row
+  if (!(nrm > floor * std::max(ref_norm, 1e-300))) return 0.0;  // cannot bind: constant row
   G.row(rows).head(cols) = g.transpose() / nrm;
   lo(rows) = l / nrm;
   hi(rows) = u / nrm;
@@ -252,7 +252,11 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
     full.head(r_) = CZ.row(i).transpose();
     const double l = std::min(lin_(i) - cx(i), 0.0);
     const double u = std::max(uin_(i) - cx(i), 0.0);
-    P.add_row(full, l, u, inid_[i], cin_norm(i));
+    // a level's row whose projection is within kMovableTol of its norm lies in the frozen
+    // rows' span to rounding of the freeze: constant, as for the level's own movable test
+    // (its projection's direction is rounding: a half-space through x with that normal
+    // decides the lower levels by rounding). The hard rows stay (the end check holds them)
+    P.add_row(full, l, u, inid_[i], cin_norm(i), inid_[i] >= min_[0] ? kMovableTol : 1e-12);
   }
 }
 
