@@ -438,3 +438,69 @@ def test_rows_dependent_on_the_frozen_rows_to_rounding_are_not_stepped_along(pat
         )
         # x is unique (level 3 is x = 0 with unit weights)
         assert np.max(np.abs(p.x - n.x)) <= 1e-9 * float(np.max(np.abs(p.x)))
+
+
+_NEARLY_PINNED = Path(__file__).resolve().parents[1] / "data" / "panda_nearly_pinned_face.npz"
+
+
+def _nearly_pinned_reference() -> tuple[dict, np.ndarray, float, np.ndarray, float]:
+    """The stack, its exact answer (the vertex of the level-0 rows and the four speed bounds
+    level 1 pushes against, a 7×7 solve of condition number ~8), the rounding bound of that
+    solve, the face's near-null direction and how far along it an active set may stop."""
+    d = dict(np.load(_NEARLY_PINNED))
+    A0, b0, A1, b1, lb, ub = (d[k] for k in ("A0", "b0", "A1", "b1", "lb", "ub"))
+    eye = np.eye(A0.shape[1])
+    V = np.vstack((A0, eye[[0, 2, 5, 6]]))
+    x = np.linalg.solve(V, np.concatenate((b0, [ub[0], lb[2], lb[5], ub[6]])))
+    eps = np.finfo(float).eps
+    # backward-stable solve: ε·κ(V)·‖x‖, with a factor for the two solves compared
+    x_tol = 16.0 * eps * np.linalg.cond(V) * float(np.abs(x).max())
+    # the face of level 0 with joints 1, 6, 7 on their bounds is a line, along which level
+    # 1's row is 1.9e-10 of its norm: level 1 gains g per unit along it; an active set
+    # calls a working set solved where a step gains under 1e-15 of the objective f
+    face = np.linalg.svd(np.vstack((A0, eye[[0, 5, 6]])))[2][-1]
+    res = A1 @ x - b1
+    f = float(res @ res)
+    g = abs(2.0 * float(res @ (A1 @ face)))
+    return d, x, x_tol, face, 1e-15 * f / g
+
+
+def _nearly_pinned_stack(d: dict) -> qc.Stack:
+    return qc.Stack(
+        [qc.Equality(d["A0"], d["b0"]), qc.Equality(d["A1"], d["b1"])],
+        bounds=qc.Bounds(d["lb"], d["ub"]),
+        damping=1e-4,
+    )
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_minimum_norm_step_does_not_slide_through_the_bounds_opening(solver):
+    """A Panda IK step (hand position, then a posture asking 240 rad/s² of rate it cannot
+    get, the speed limits as bounds; ``examples/ch5_hierarchy.py``'s second step) whose
+    level 1 ends on a vertex: joints 1, 3, 6, 7 on their speed bounds. Level 1 froze, the
+    minimum-norm step keeps 3 directions in which the three bounds of joints 1, 6, 7 are
+    nearly dependent (smallest singular value 1.9e-10 with the frozen rows): the Python
+    engine's minimum-norm QP went 3e-12 past them (the backends' opening of the rows)
+    and bought 0.017 rad/s along the face (joint 3 at −2.169 instead of −2.175), leaving
+    level 0 at 1.2e-12 and level 1 1.8e-11 above its optimum, while the native engine,
+    exact on the bounds, stayed on the vertex. The step is now finished exactly on the
+    rows the QP's point meets to the opening (daqp and quadprog failed without it)."""
+    d, x_ref, x_tol, face, face_tol = _nearly_pinned_reference()
+    sol = _nearly_pinned_stack(d).solve(engine="python", solver=solver)
+    assert sol.status == "optimal"
+    assert np.abs(sol.x - x_ref).max() <= x_tol, (sol.x, x_ref)
+    # level 0 is met exactly by the vertex: its residual is the rounding of A0 x − b0
+    eps = np.finfo(float).eps
+    scale = np.linalg.norm(d["A0"]) * np.linalg.norm(x_ref) + np.linalg.norm(d["b0"])
+    assert sol.level_residuals[0] <= 8.0 * eps * scale
+    if native.available():
+        sn = _nearly_pinned_stack(d).solve(engine="native")
+        dx = sn.x - x_ref
+        along = float(dx @ face)
+        # the native active set may stop short of joint 3's bound along the face (a step
+        # gaining under 1e-15 of level 1's objective), exact across it
+        assert abs(along) <= face_tol, along
+        assert np.abs(dx - along * face).max() <= x_tol
+        assert abs(sn.level_residuals[1] - sol.level_residuals[1]) <= 8.0 * eps * (
+            abs(float(d["b1"][0])) + np.linalg.norm(d["A1"]) * np.linalg.norm(x_ref)
+        )

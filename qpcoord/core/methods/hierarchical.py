@@ -38,6 +38,7 @@ from ..linalg import filtered_svd, numerical_rank, svd
 from ..polish import (
     KKT_FEAS_TOL,
     KKT_TOL,
+    PULL_TOL,
     active_rank,
     active_set_ls,
     kkt_residual,
@@ -526,6 +527,43 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
     return x, info
 
 
+def _exact_on_active_rows(G, lo, hi, z, p, floor: float) -> np.ndarray | None:
+    """The minimum-norm step ``min ½‖z + p‖²`` solved exactly on the rows the QP's point
+    ``z`` meets to the backends' opening (:data:`~qpcoord.core.polish.PULL_TOL`), each
+    held at its bound; ``None`` if that point leaves a row (beyond the opening), is far
+    (``FAR_RATIO``) or is not certified (a row held that should be left).
+
+    The backends meet the rows only to their opening (``RELAX``, 1e-12): where active
+    rows are nearly dependent in the remaining freedom (smallest singular value ``σ``),
+    the opening ``δ`` buys a step ``δ/σ`` along them that shortens ``x``, which the
+    native engine's exact step does not take (Panda, a frozen posture row and three speed
+    bounds at ``σ`` = 1.9e-10: 3e-12 past the bounds bought 0.017 rad/s). The rows within
+    ``ACTIVE_TOL`` (1e-7) instead of the opening held a row the optimum leaves on the
+    LexLS humanoid, 4.3 away, and the certificate did not catch it: the opening it is."""
+    a_lo, a_hi = at_bounds(G @ z, lo, hi, PULL_TOL)
+    act = a_lo | a_hi
+    if not act.any():
+        return None
+    E = G[act]
+    t = np.where(a_lo, lo, hi)[act]
+    U, s, Vt = svd(E, full=True)
+    rk = numerical_rank(s, E.shape)
+    ze = Vt[:rk].T @ ((U[:, :rk].T @ t) / s[:rk])
+    N = Vt[rk:].T
+    ze = ze - N @ (N.T @ (ze + p))
+    if not np.isfinite(ze).all() or np.linalg.norm(ze) > FAR_RATIO * max(
+        floor, float(np.linalg.norm(z))
+    ):
+        return None
+    if pull_back(G, lo, hi, ze) is not ze:
+        return None
+    # the step is strictly convex: a certified point is its optimum (rows wrongly held
+    # active, with multipliers of the wrong sign, are not)
+    Q = np.eye(z.shape[0])
+    st, infeas = kkt_residual(Q, -p, G, lo, hi, ze, prepare(Q, G, lo, hi))
+    return ze if st <= KKT_TOL and infeas <= KKT_FEAS_TOL else None
+
+
 def solve_hierarchical(
     P: CompiledStack,
     R: Reduced,
@@ -750,14 +788,20 @@ def solve_hierarchical(
             R.move_to(xc, verified=True)
         else:
             y0 = None if x_warm is None else R.project(x_warm - x)
-            z = R.solve_qp(np.eye(r), R.project(x), y0=y0, where="minimum-norm step")
+            p = R.project(x)
+            z = R.solve_qp(np.eye(r), p, y0=y0, where="minimum-norm step")
             # never let the step slip through a row a level above kept (an opened QP)
             G, lo, hi = R.exact_rows(r)
             zb = pull_back(G, lo, hi, z)
             if zb is not z:  # pulled back: finish the step exactly from there
-                zb, _ = active_set_ls(np.eye(r), -R.project(x), G, lo, hi, zb)
+                zb, _ = active_set_ls(np.eye(r), -p, G, lo, hi, zb)
                 z = pull_back(G, lo, hi, zb)
                 R.continued += 1
+            else:
+                ze = _exact_on_active_rows(G, lo, hi, z, p, max(1.0, float(np.linalg.norm(x))))
+                if ze is not None:
+                    z = ze
+                    R.continued += 1
             R.move_to(x + R.lift(z), verified=False)
     return {
         "qp_calls": R.qp_calls,
