@@ -74,11 +74,14 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Pr_.resize(max_qrows, max_grows, std::max(n, 1));
   y_.setZero(max_cols);
   W_.assign(max_grows, 0);
+  Wp_.assign(max_grows, 0);
   working_.resize(blocks + 1);
   for (auto& w : working_) {
     w.id.reserve(max_grows);
     w.side.reserve(max_grows);
   }
+  pruned_.id.reserve(max_grows);
+  pruned_.side.reserve(max_grows);
   // the first call's working-set and K factorisations, shared by its stages (the memos'
   // per-stage ones are allocated at the second call: a one-shot solve never pays for them)
   shared_trial_.value.reserve(max_cols, max_grows, max_qrows);
