@@ -90,6 +90,8 @@ struct LsqProblem {
   /// Append row g (scaled by 1/||g||) with bounds [l, u]; skips rows that cannot bind.
   /// Returns the row's norm, or 0 when it was skipped.
   double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm);
+  /// |g|: the one compiled norm of add_row and of the bound rows' block (the same bits)
+  static double row_norm(const Eigen::Ref<const Vec>& g);
 };
 
 /// What a user may tune in a Hierarchy (Hierarchy::settings; bound to Python).
@@ -582,6 +584,8 @@ class Hierarchy {
   Mat CZl_;  ///< their projection C Z (max_in x n: the left r columns)
   Mat Ztmp_;
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
+  std::vector<int> bidx_;      ///< add_bound_rows: the variables whose rows are kept
+  Vec bnrm_;                   ///< add_bound_rows: their rows' norms
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
   /// The freeze cache's value: a level's Z, r, z_identity_ and Cin Z after its freeze; its
   /// key: the freeze's kind and rank, Cin Z on entry, the violated rows -- and, through the
