@@ -214,6 +214,8 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
     {"trial_memo_hits", &S::trial_memo_hits, "Warm trials whose factorisations were reused."},
     {"bound_rows_memo_hits", &S::bound_rows_memo_hits, "Stages whose bound rows came from the cache."},
     {"wy_applications", &S::wy_applications, "Changes of Z by the compact WY form (builds with FMA)."},
+    {"pruned_working_sets", &S::pruned_working_sets, "Levels whose working set was stored without its rows far from the start (a zero objective)."},
+    {"zero_objective_hits", &S::zero_objective_hits, "Warm trials accepted at a zero objective whatever their multipliers."},
   };
   auto stats = nb::class_<S>(m, "Stats",
                              "Counters of one solve: how often each path and cache was taken "

@@ -25,6 +25,9 @@ constexpr double kWarmFeasTol = 1e-10;  // a working set's point must meet every
 // a level row (or combination of rows) whose projection on the remaining freedom is under this
 // fraction of the row's norm is dependent on the frozen rows (rounding of the freeze)
 constexpr double kMovableTol = 1e-9;
+// tries of a zero-objective level's working set without its far rows before the whole set
+// is stored (each adds the rows the last one's point violated)
+constexpr int kPruneRounds = 3;
 constexpr int kBlandAfter = 2;          // zero-length steps in a row before Bland's rule
 constexpr double kRoundFactor = 16.0;   // rounding floor of a multiplier, in eps k |Q| |Q y|
 constexpr double kQrMargin = 4.0;       // QR closed form: sigma_min bound over the SVD's floor
@@ -267,7 +270,8 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     exact_ = false;
     if (!done) return timed_out_ ? kTimeLimit : kNotConverged;
   }
-  store_working_set(P, W_, working_[stage]);
+  // (the exact finish may leave the trial's set: then W_ is stored as after a miss)
+  store_level_working_set(P, y, mv, hit && iters == 0, working_[stage]);
   stats(stage, 0) = iters;
   stats(stage, 1) = hit ? 1.0 : 0.0;
   xold_.head(n_) = x_;

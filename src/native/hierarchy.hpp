@@ -92,6 +92,8 @@ struct LsqProblem {
   /// 0 when it was skipped.
   double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm,
                  double floor = 1e-12);
+  /// |g|: the one compiled norm of add_row and of the bound rows' block (the same bits)
+  static double row_norm(const Eigen::Ref<const Vec>& g);
 };
 
 /// What a user may tune in a Hierarchy (Hierarchy::settings; bound to Python).
@@ -135,6 +137,8 @@ struct Stats {
   int trial_memo_hits = 0;       ///< warm trials whose factorisations were reused
   int bound_rows_memo_hits = 0;  ///< stages whose bound rows were copied from the cache
   int wy_applications = 0;       ///< changes of Z by the compact WY form (FMA builds)
+  int pruned_working_sets = 0;   ///< levels whose set was stored without its far rows
+  int zero_objective_hits = 0;   ///< warm trials accepted at a zero objective (any multipliers)
 };
 
 /// The strict-hierarchy solver of one stack structure (sizes fixed at construction).
@@ -177,6 +181,9 @@ class Hierarchy {
     /// a set was stored (it may hold no one-sided row: the stage's optimum has only its
     /// equality rows active, and is still a warm start)
     bool stored = false;
+    /// stored after store_level_working_set's verification, pruned or whole (a later hit of
+    /// it is not verified again: the set changes only after a miss)
+    bool verified = false;
   };
 
   int hard_phase(const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CRef<Mat>& C,
@@ -372,6 +379,19 @@ class Hierarchy {
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                        std::vector<int8_t>& W, int* found);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// A level's working set W_ at its optimum y (hit: y is the warm trial's of ws, no exact
+  /// finish moved it), stored for the next call's trial. When the level's objective is zero
+  /// there (to rounding: every row of the level met), every multiplier is zero and a working
+  /// row matters only for its point's feasibility: the rows without slack (bounds, inherited
+  /// rows) whose bound is away from the level's start (|t| > violation_tol max(1, |y|)) are
+  /// dropped, the rows the rest's point violates added, up to kPruneRounds warm trials
+  /// (try_working_set); the first that hits is stored, else the whole set. Either way the
+  /// stored set is not verified again while its trials hit (a hit of it keeps it).
+  /// level_rows: the last rows of P, the level's own (one slack column each).
+  void store_level_working_set(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
+                               int level_rows, bool hit, Working& ws);
+  /// The objective of P at y is zero to the rounding of Q y - c (a feasible y is optimal).
+  bool zero_objective(const LsqProblem& P, const Eigen::Ref<const Vec>& y);
   /// A stage's warm start and active set, the one rule of the hard phase, the levels and the
   /// minimum-norm step: with warm, the stored working set ws is tried first (hit: its point
   /// is the optimum, into y and W_); on a miss whose stored rows matched, the active set
@@ -469,6 +489,8 @@ class Hierarchy {
   int slack_rows_ = 0;   ///< slack rows of the level being tried (0: none, or not a level)
   Vec y_;
   std::vector<int8_t> W_;
+  std::vector<int8_t> Wp_;  ///< the pruned working set store_level_working_set tries
+  Working pruned_;          ///< its rows, as a stored set (swapped into the stage's on success)
 
   // workspace, sized at construction (the memos' per-stage part at the second call): the
   // per-call path does not allocate after that (the closed-form SVDs are one object per
@@ -567,6 +589,8 @@ class Hierarchy {
   Mat Ztmp_;
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   double rows_pivot_ = 1.0;    ///< level_problem: the moving rows' last kept pivot (scaled)
+  std::vector<int> bidx_;      ///< add_bound_rows: the variables whose rows are kept
+  Vec bnrm_;                   ///< add_bound_rows: their rows' norms
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
   /// The freeze cache's value: a level's Z, r, z_identity_ and Cin Z after its freeze; its
   /// key: the freeze's kind and rank, Cin Z on entry, the violated rows -- and, through the

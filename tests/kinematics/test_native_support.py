@@ -472,3 +472,42 @@ def test_the_task_kinds_are_the_extensions():
         name: int(getattr(ext, name)) for name in TaskKind.__members__
     }
     assert len(ext.__members__) == len(TaskKind)
+
+
+@needs_native
+def test_a_met_polygon_level_drops_its_far_working_rows_and_matches_the_python_engine(talos):
+    """The benchmark's cell (feet, the CoM polygon at gain 1/dt, a far hand target, posture):
+    the polygon's first corrections drive joints to their speed bounds, and at a level whose
+    objective is zero (every row met) those rows carry zero multipliers. The native step
+    stores the level's working set without its rows away from the start once the rest is
+    verified (``pruned_working_sets``), and accepts a warm trial of zero objective whatever
+    the rounding of its multipliers (``zero_objective_hits``: two near-parallel inherited
+    polygon rows give multipliers ~5e-9 for a gradient ~3e-17). x stays the Python engine's
+    to 1e-9, the tolerance of this file's closed loops: the engines stop on kkt_tol = 1e-9 of
+    the gradient, on rows of unit scale (velocities ~0.5 rad/s, max deviation seen 1.6e-10)."""
+    q0 = talos.reference_configuration("half_sitting")
+    hand_target = talos.frame_pose(q0, "gripper_right_base_link")[:3, 3] + [0.4, 0.1, -0.3]
+
+    def stack() -> list:
+        feet = [qc.FrameTask(talos, s, gain=1.0 / DT) for s in SOLES]
+        for foot in feet:
+            foot.set_target_from_configuration(q0)
+        polygon = SupportPolygon(
+            talos, list(SOLES), margin=0.02, gain=1.0 / DT, contact_points=CORNERS
+        )
+        hand = qc.FramePositionTask(talos, "gripper_right_base_link", hand_target, gain=5.0)
+        return [feet, polygon, hand, qc.PostureTask(talos, q0, gain=50.0)]
+
+    ikn = qc.IK(talos, stack(), DT, limits="robot", engine="native")
+    ikp = qc.IK(talos, stack(), DT, limits="robot", engine="python")
+    q = q0.copy()
+    pruned = zero_objective = 0
+    for step in range(200):
+        vn, sn = ikn.step(q)
+        vp, _ = ikp.step(q)
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
+        counters = sn.info["stats"]
+        pruned += counters.pruned_working_sets
+        zero_objective += counters.zero_objective_hits
+        q = talos.integrate(q, vn, DT)
+    assert pruned > 0 and zero_objective > 0, (pruned, zero_objective)

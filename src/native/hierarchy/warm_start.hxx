@@ -186,9 +186,14 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
     const double su = kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)));
     if (gy(i) < P.lo(i) - sl || gy(i) > P.hi(i) + su) return false;
   }
+  // (a feasible point of zero objective is optimal whatever the multipliers computed there:
+  // at a zero gradient they are rounding, amplified by the conditioning of the working rows
+  // -- two near-parallel inherited polygon rows gave +-5e-9 for a gradient of 3e-17)
   if (reduced >= 0 ? !reduced_multipliers_ok(P, slack_rows_, yp, W)
-                   : !multipliers_ok(P, yp, W, nullptr, nullptr, false))
-    return false;
+                   : !multipliers_ok(P, yp, W, nullptr, nullptr, false)) {
+    if (!zero_objective(P, yp)) return false;
+    ++stats_.zero_objective_hits;
+  }
   y.head(k) = yp;
   return true;
 }
@@ -272,11 +277,84 @@ int Hierarchy::warm_started_active_set(const LsqProblem& P, const Working& ws, b
   return kOk;
 }
 
+bool Hierarchy::zero_objective(const LsqProblem& P, const Eigen::Ref<const Vec>& y) {
+  // |Q y - c| (with the compressed rows' constant part) within the rounding of Q y - c itself,
+  // as sign_tolerance's floor: the objective is >= 0, so its minimum is within that too
+  const int k = P.cols, qr = P.qrows;
+  const auto Q = P.Q.topLeftCorner(qr, k);
+  auto res = dres_.head(qr);
+  res.noalias() = Q * y;
+  res -= P.c.head(qr);
+  const double qn = Q.norm();
+  const double round = kRoundFactor * kEps * k * qn * (qn * y.cwiseAbs().maxCoeff() + P.c_norm());
+  return std::sqrt(res.squaredNorm() + P.dropped2) <= round;
+}
+
+void Hierarchy::store_level_working_set(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
+                                        int level_rows, bool hit, Working& ws) {
+  if (hit && ws.verified) return;  // (W_ is ws on P's rows)
+  store_working_set(P, W_, ws);
+  // (a stored vertex of far rows is tried again at every later call while its point stays
+  // feasible, however far the point moves from the level's start: on the humanoid's support
+  // polygon, 24 joint speed bounds of an early large correction, |z| ~ 23 rad/s where the
+  // polygon asked ~1e-5, a 26 x 24 QR per call and the levels below moving back off them)
+  const int k = P.cols, first_own = P.rows - level_rows;
+  const double tight = settings.violation_tol * std::max(1.0, y.head(k).cwiseAbs().maxCoeff());
+  int far = 0;
+  for (int i = 0; i < P.rows; ++i) {
+    Wp_[i] = W_[i];
+    if (i >= first_own || (W_[i] != 1 && W_[i] != -1)) continue;
+    const double t = (W_[i] == 1) ? P.hi(i) : P.lo(i);
+    if (!(std::abs(t) <= tight)) {
+      Wp_[i] = 0;
+      ++far;
+    }
+  }
+  if (far == 0) return;
+  if (!zero_objective(P, y.head(k))) return;
+  // the rest tried as the next call would (its point into xc_, scratch here; y and x stay
+  // this call's), the rows its point violates added, up to kPruneRounds tries: stored when
+  // one hits (a verification, not counted as a warm trial)
+  const int trials = stats_.reduced_trials;
+  bool verified = false;
+  for (int attempt = 0; attempt < kPruneRounds && !verified; ++attempt) {
+    store_working_set(P, Wp_, pruned_);
+    int found = 0;
+    slack_rows_ = level_rows;
+    verified = try_working_set(P, pruned_, xc_.head(k), Wp_, &found);
+    slack_rows_ = 0;
+    if (verified || found != static_cast<int>(pruned_.id.size())) break;
+    auto gy = gy_.head(P.rows);
+    gy.noalias() = P.G.topLeftCorner(P.rows, k) * xc_.head(k);
+    int back = 0;
+    for (int i = 0; i < P.rows; ++i) {
+      if (Wp_[i]) continue;
+      if (gy(i) > P.hi(i) + kWarmFeasTol * std::max(1.0, finite_abs(P.hi(i)))) {
+        Wp_[i] = 1;
+      } else if (gy(i) < P.lo(i) - kWarmFeasTol * std::max(1.0, finite_abs(P.lo(i)))) {
+        Wp_[i] = -1;
+      } else {
+        continue;
+      }
+      ++back;
+    }
+    if (back == 0) break;  // (a multiplier's sign: not the drop)
+  }
+  stats_.reduced_trials = trials;
+  if (verified) {
+    std::swap(ws.id, pruned_.id);  // (swapped buffers: no allocation)
+    std::swap(ws.side, pruned_.side);
+    ++stats_.pruned_working_sets;
+  }
+  ws.verified = true;  // (a failed verification is not repeated either, until a miss)
+}
+
 void Hierarchy::store_working_set(const LsqProblem& P, const std::vector<int8_t>& W,
                                   Working& ws) {
   ws.id.clear();
   ws.side.clear();
   ws.stored = true;
+  ws.verified = false;
   for (int i = 0; i < P.rows; ++i) {
     if (W[i] == 1 || W[i] == -1) {
       ws.id.push_back(P.id[i]);

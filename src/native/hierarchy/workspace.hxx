@@ -22,10 +22,14 @@ void LsqProblem::start(int qrows_, int cols_) {
   c.head(qrows).setZero();
 }
 
+EIGEN_DONT_INLINE double LsqProblem::row_norm(const Eigen::Ref<const Vec>& g) {
+  return g.norm();
+}
+
 double LsqProblem::add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid,
                            double ref_norm, double floor) {
   if (!std::isfinite(l) && !std::isfinite(u)) return 0.0;
-  const double nrm = g.norm();
+  const double nrm = row_norm(g);
   if (!(nrm > floor * std::max(ref_norm, 1e-300))) return 0.0;  // cannot bind: constant row
   G.row(rows).head(cols) = g.transpose() / nrm;
   lo(rows) = l / nrm;
@@ -74,11 +78,14 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
   Pr_.resize(max_qrows, max_grows, std::max(n, 1));
   y_.setZero(max_cols);
   W_.assign(max_grows, 0);
+  Wp_.assign(max_grows, 0);
   working_.resize(blocks + 1);
   for (auto& w : working_) {
     w.id.reserve(max_grows);
     w.side.reserve(max_grows);
   }
+  pruned_.id.reserve(max_grows);
+  pruned_.side.reserve(max_grows);
   // the first call's working-set and K factorisations, shared by its stages (the memos'
   // per-stage ones are allocated at the second call: a one-shot solve never pays for them)
   shared_trial_.value.reserve(max_cols, max_grows, max_qrows);
@@ -92,6 +99,8 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
                  &tmpr_, &xc_, &xold_, &e_, &ute_})
     v->setZero(big);
   widx_.reserve(max_grows);
+  bidx_.assign(std::max(n, 1), 0);
+  bnrm_.setZero(std::max(n, 1));
   mov_.reserve(std::max(max_in, 1));
   depn_.setZero(std::max(max_in, 1));
   gram_.setZero(std::max(std::min(max_in, n), 1), std::max(std::min(max_in, n), 1));
@@ -285,15 +294,35 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
     P.rows += n_;
     return;
   }
+  // add_row's rows (ref_norm 1), their bounds and norms row by row, the scaled rows written
+  // by columns (contiguous; add_row writes a row of the column-major G entry by entry)
   auto full = rowbuf_.head(cols);
   full.setZero();
+  int kept = 0;
   for (int j = 0; j < n_; ++j) {
-    full.head(r_) = Z_.row(j).head(r_).transpose();
     const double l = std::min(lb_(j) - x_(j), 0.0);
     const double u = std::max(ub_(j) - x_(j), 0.0);
-    const double nrm = P.add_row(full, l, u, capacity_ + j, 1.0);
+    double nrm = 0.0;
+    if (std::isfinite(l) || std::isfinite(u)) {
+      full.head(r_) = Z_.row(j).head(r_).transpose();
+      nrm = LsqProblem::row_norm(full);
+      if (!(nrm > 1e-12)) nrm = 0.0;  // cannot bind: constant row
+    }
     if (cache) cache->value.nrm(j) = nrm;
+    if (nrm == 0.0) continue;
+    P.lo(r0 + kept) = l / nrm;
+    P.hi(r0 + kept) = u / nrm;
+    P.id[r0 + kept] = capacity_ + j;
+    bidx_[kept] = j;
+    bnrm_(kept++) = nrm;
   }
+  for (int c = 0; c < r_; ++c) {
+    double* g = P.G.col(c).data() + r0;
+    const double* z = Z_.col(c).data();
+    for (int i = 0; i < kept; ++i) g[i] = z[bidx_[i]] / bnrm_(i);
+  }
+  if (cols > r_) P.G.block(r0, r_, kept, cols - r_).setZero();
+  P.rows += kept;
   if (!cache) return;
   // stored when every row was kept (a skipped row shifts the others: not one block)
   if (P.rows - r0 != n_) {
