@@ -8,8 +8,27 @@ from typing import Any
 import numpy as np
 
 from .explain import Explanation, explain
+from .polish import KKT_TOL
 
-__all__ = ["Solution"]
+__all__ = ["Solution", "inaccurate"]
+
+
+def inaccurate(level: int, residual: float, engine: str) -> dict[str, Any]:
+    """``Solution.info["inaccurate"]`` for a level that could not be certified: its index,
+    its relative KKT residual and a sentence saying why (``engine``: ``"python"``, whose
+    check is the level's optimality conditions at ``x``, or ``"native"``, whose check is how
+    far the level's value moved after the level was frozen)."""
+    if engine == "native":
+        what = f"its value moved by {residual:.3g} (relative) after the level was frozen"
+    else:
+        what = f"its optimality conditions hold only to {residual:.3g} (relative KKT residual)"
+    return {
+        "level": level,
+        "kkt_residual": residual,
+        "reason": f"level {level}: {what}, above the tolerance {KKT_TOL:g}; its value may "
+        "depend on a rank or active-set decision within rounding (rows nearly dependent on "
+        "the levels above, or a point far from the origin)",
+    }
 
 
 @dataclass
@@ -24,7 +43,7 @@ class Solution:
         ``"optimal"`` when every level's optimality conditions were checked on ``x``
         (``method="hierarchical"``: its KKT residual, see ``docs/stack.md``);
         ``"inaccurate"`` when a level could not be certified (``info["inaccurate"]`` names
-        the level and its KKT residual; ``Stack.solve(strict=True)`` raises instead).
+        the level, its KKT residual and the reason; ``Stack.solve(strict=True)`` raises instead).
     level_residuals : numpy.ndarray, shape (levels,)
         Per level, ``√(‖√w (A x − b)‖² + ‖√w · violation(C x)‖²)`` over its tasks, in task
         units (weights included).
@@ -42,7 +61,8 @@ class Solution:
         minimum-norm step; hierarchical), and for the hierarchical method ``kkt`` (the
         certified KKT residual of each level that ran a QP), ``continued`` (levels made
         exact by the active-set continuation), ``uncertified`` (``(level, residual)``) and,
-        when ``status == "inaccurate"``, ``inaccurate`` (``{"level", "kkt_residual"}``).
+        when ``status == "inaccurate"``, ``inaccurate`` (``{"level", "kkt_residual",
+        "reason"}``).
     stack : Stack or None
         The stack this solves (for :meth:`explain`); ``None`` for a solution built
         elsewhere, and after pickling (the stack is not pickled with it).

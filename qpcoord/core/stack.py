@@ -25,7 +25,7 @@ from .native import NativeHierarchy, resolve_engine
 from .native_weighted import NativeWeighted, resolve_weighted_engine
 from .persistent import PersistentQP
 from .polish import KKT_TOL
-from .solution import Solution
+from .solution import Solution, inaccurate
 from .tasks import Bounds, Equality, Inequality
 from .tolerance import within
 
@@ -329,7 +329,7 @@ class Stack:
         if bad:
             status = "inaccurate"
             k, kkt = bad[0]
-            info["inaccurate"] = {"level": k, "kkt_residual": kkt}
+            info["inaccurate"] = inaccurate(k, kkt, "python")
             if strict:
                 raise SolverError(
                     f"level {k}: the answer could not be certified optimal (KKT residual "
@@ -368,7 +368,7 @@ class Stack:
         if bad:
             status = "inaccurate"
             k, dev = bad[0]
-            info["inaccurate"] = {"level": k, "kkt_residual": dev}
+            info["inaccurate"] = inaccurate(k, dev, "native")
             if strict:
                 raise SolverError(
                     f"level {k}: the answer could not be certified optimal (its value moved "

@@ -79,7 +79,7 @@ from ..core.errors import InfeasibleError, SolverError
 from ..core.native import NativeHierarchy, load, raise_status
 from ..core.native_weighted import weighted_info
 from ..core.polish import KKT_TOL
-from ..core.solution import Solution
+from ..core.solution import Solution, inaccurate
 from ..core.tasks import TASK_WRITES, Equality, _w
 from .collision import CollisionAvoidance
 from .frame_tasks import (
@@ -973,7 +973,7 @@ class NativeIKStep(NativeHierarchy):
         if bad:
             status = "inaccurate"
             k, dev = bad[0]
-            info["inaccurate"] = {"level": k, "kkt_residual": dev}
+            info["inaccurate"] = inaccurate(k, dev, "native")
         # positional (x, status, level_residuals, solver, solve_time, method, info): 0.2 µs
         # less than by keyword
         return Solution(

@@ -56,6 +56,7 @@ def test_uncertified_level_is_inaccurate_and_strict_raises(monkeypatch):
     assert sol.status == "inaccurate"
     assert sol.info["inaccurate"]["level"] == 0
     assert np.isfinite(sol.info["inaccurate"]["kkt_residual"])
+    assert sol.info["inaccurate"]["reason"].startswith("level 0: its optimality conditions")
     with pytest.raises(qc.SolverError, match="level 0"):
         stack.solve(solver="quadprog", strict=True)
     with pytest.raises(ValueError, match="strict"):

@@ -103,6 +103,7 @@ def _check(sol, levels, ref):
         return True
     assert sol.status == "inaccurate"
     k = sol.info["inaccurate"]["level"]
+    assert sol.info["inaccurate"]["reason"].startswith(f"level {k}: ")
     assert not off.any() or k <= int(np.argmax(off)), (k, values, ref)
     return not off.any()
 
