@@ -1106,8 +1106,12 @@ class JointLimits(Limit):
         """``band · v_max`` of each limited joint (rad/s, m/s; order of :attr:`joints`,
         ``inf`` without a speed limit), from the current :attr:`band`: the band is
         ``band_rate · dt``."""
-        with np.errstate(invalid="ignore"):  # 0 · inf (no band, no speed limit): no band
-            return np.nan_to_num(self.band * self._speed, nan=0.0, posinf=np.inf)
+        band, rate = self.__dict__.get("_band_rate", (None, None))
+        if band != self.band:  # first read, or band assigned since: computed again
+            with np.errstate(invalid="ignore"):  # 0 · inf (no band, no speed limit): no band
+                rate = read_only(np.nan_to_num(self.band * self._speed, nan=0.0, posinf=np.inf))
+            self._band_rate = (self.band, rate)
+        return rate
 
     @property
     def q_index(self) -> np.ndarray | None:
