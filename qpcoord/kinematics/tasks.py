@@ -1087,7 +1087,7 @@ class JointLimits(Limit):
             if bad.size:
                 raise ValueError(
                     f"JointLimits: lower > upper at q index {bad.tolist()}: "
-                    f"{lo[bad]} > {hi[bad]} (assigning {name}, got {value!r})"
+                    f"{lo[bad]} > {hi[bad]}; got {name}={value!r}"
                 )
         if "joints" in self.__dict__:  # an assignment: the limited joints are fixed
             limited = self.joints if self._q_index is None else self._q_index
