@@ -73,14 +73,16 @@ _FLOATING_ROOTS = ("JointModelFreeFlyer", "JointModelPlanar")
 
 
 #: The attributes of a kinematic task that the native IK step holds a copy of (its kernels'
-#: parameters): assigning one tells the steps the task is bound to (``_bound``), which copy
-#: it again. Their arrays are read-only (a write in place raises numpy's "assignment
-#: destination is read-only"): a native step would not see it; assign a new array or call
-#: the task's setter.
+#: parameters): an assignment is validated by the task's ``_checked_parameter`` (the
+#: constructor's checks and messages, where the task has them) and tells the steps the task
+#: is bound to (``_bound``), which copy it again. Their arrays are read-only (a write in
+#: place raises numpy's "assignment destination is read-only"): a native step would not see
+#: it; assign a new array or call the task's setter.
 PARAMETERS = frozenset(
     (
         "gain", "target", "target_velocity", "_target_T", "_target_t", "q_ref", "lower",
-        "upper", "contact_points", "margin", "limit", "lm_damping", "offset",
+        "upper", "contact_points", "margin", "limit", "lm_damping", "offset", "band",
+        "position_limits",
     )
 )  # fmt: skip
 _setattr = object.__setattr__
@@ -123,6 +125,26 @@ def _check_robot(robot: Any, who: str) -> Robot:
     if not isinstance(robot, Robot):
         raise ValueError(f"{who}: robot must be a qpcoord.Robot, got {type(robot).__name__}")
     return robot
+
+
+def _is_number(value: object) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+
+
+def _positive_limit(value: Any, nv: int, who: str, units: str) -> np.ndarray:
+    """A limit's ``limit``: ``nv`` numbers > 0 (a scalar broadcast; ``inf``, or Pinocchio's
+    ``1.8e308``, for an unlimited entry, read as ``inf``)."""
+    try:
+        arr = np.array(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is not None and arr.size == 1:
+        arr = np.full(nv, arr[0])
+    if arr is None or arr.shape != (nv,) or not np.all(arr > 0):  # NaN is not > 0
+        raise ValueError(
+            f"{who}: limit must be {nv} numbers > 0 or one ({units}; inf for none), got {value!r}"
+        )
+    return _unlimited(arr)
 
 
 def _faces(lower: Any, upper: Any, rows: int, who: str) -> tuple[np.ndarray, np.ndarray]:
@@ -260,9 +282,7 @@ class KinematicTask(ABC):
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name in PARAMETERS:
-            if name == "lm_damping":  # read by its damping rows at every step
-                task = self.__dict__.get("task")
-                value = _lm_damping(value, type(self).__name__ if task is None else task.name)
+            value = self._checked_parameter(name, value)
             if type(value) is np.ndarray and value.flags.writeable:
                 value = read_only(value.copy())  # the caller keeps no writable alias
             _setattr(self, name, value)
@@ -270,6 +290,18 @@ class KinematicTask(ABC):
                 self._parameters_written()
             return
         _setattr(self, name, value)
+
+    def _checked_parameter(self, name: str, value: Any) -> Any:
+        """``value`` for the parameter ``name`` (one of :data:`PARAMETERS`) validated, in the
+        form the task keeps: what an assignment, the constructor's included, stores.
+
+        Raises the constructor's ``ValueError`` (naming the argument and the value). Here:
+        ``lm_damping`` (read by the damping rows at every step); a subclass extends it for
+        its own parameters (the limits: all of theirs)."""
+        if name == "lm_damping":
+            task = self.__dict__.get("task")
+            return _lm_damping(value, type(self).__name__ if task is None else task.name)
+        return value
 
     def _parameters_written(self) -> None:
         """Tell the bound native steps that a parameter changed (a setter that writes
@@ -907,6 +939,17 @@ class Limit(KinematicTask):
 LIMIT_BAND = 0.2
 
 
+def _one_dof_q_index(robot: Robot) -> np.ndarray:
+    """``(q index, v index)`` of each joint with one position variable per velocity
+    (revolute, prismatic), shape ``(n, 2)``."""
+    pairs = [
+        (int(joint.idx_q), int(joint.idx_v))
+        for joint in robot.model.joints[1:]
+        if joint.nq == 1 and joint.nv == 1
+    ]
+    return np.array(pairs, dtype=int).reshape(-1, 2)
+
+
 class JointLimits(Limit):
     """Joint position limits at velocity level: one Euler step ``q + dt v`` may cover
     ``s(D) = max(K D, D − (1 − K) b)`` of a joint's distance ``D`` to its limit.
@@ -931,8 +974,10 @@ class JointLimits(Limit):
     the joint decelerates at most ``(K/dt) v_max``; with a finite band it may stop from its
     speed limit within one step at the band's edge, as with ``K = 1``
     (:class:`AccelerationLimits` bound that deceleration). ``v_max`` is the robot's
-    ``velocity_limit``; a joint without one (infinite, or Pinocchio's ``1.8e308``) has an
-    infinite band.
+    ``velocity_limit``, also beside a tighter :class:`VelocityLimits`: the band is a
+    property of the joint, the same in every IK the limits are given to (for a band relative
+    to a speed limit ``c · v_max``, give ``band = c · 0.2``). A joint without a speed limit
+    (infinite, or Pinocchio's ``1.8e308``) has an infinite band.
 
     Only joints with one position variable per velocity (revolute, prismatic; ``q`` index
     ``model.joints[j].idx_q`` ↔ ``v`` index ``idx_v``) are limited. A free-flyer, planar,
@@ -953,13 +998,26 @@ class JointLimits(Limit):
         ``≥ 0``; default :data:`LIMIT_BAND` = 0.2): ``b = band · v_max · dt``. ``0``: the
         one-step box at every gain; ``inf``: the damper at every distance.
 
+    Each of them may be assigned later (``limits.band = 0.5``): checked as here, used from
+    the next step on, by both engines. ``lower`` and ``upper`` keep the limited joints of
+    the construction (:attr:`joints`).
+
+    Raises
+    ------
+    ValueError
+        ``gain`` not in ``(0, 1]``, ``band`` not a number ``≥ 0``, ``lower`` or ``upper``
+        not ``nq`` numbers (NaN, a wrong-signed infinity), ``lower > upper``; on
+        assignment, a finite ``lower`` or ``upper`` on a joint built without a limit. The
+        message names the argument and the value; a bad assignment keeps the old value.
+
     Attributes
     ----------
     joints : ndarray of int
         Velocity indices of the limited joints.
     band_rate : ndarray
         ``band · v_max`` of each limited joint (rad/s, m/s; order of :attr:`joints`,
-        ``inf`` without a speed limit): the band is ``band_rate · dt``.
+        ``inf`` without a speed limit): the band is ``band_rate · dt`` (read-only, from the
+        current ``band``).
     """
 
     def __init__(
@@ -971,39 +1029,89 @@ class JointLimits(Limit):
         band: float = LIMIT_BAND,
     ) -> None:
         super().__init__(robot, "joint limits")
-        self.gain = _gain(gain)
-        if not 0 < self.gain <= 1:
-            raise ValueError(f"JointLimits gain must be in (0, 1], got {gain!r}")
-        if (
-            isinstance(band, bool)
-            or not isinstance(band, (int, float, np.integer, np.floating))
-            or not band >= 0
-        ):
-            raise ValueError(f"JointLimits band must be a number >= 0 (or inf), got {band!r}")
+        # each through _checked_parameter: the checks and messages of an assignment
+        self.gain = gain
         #: the band's width as a fraction of a step at the speed limit (dimensionless)
-        self.band = float(band)
-        lower = robot.lower if lower is None else robot._limit(lower, None, "lower", -1)
-        upper = robot.upper if upper is None else robot._limit(upper, None, "upper", 1)
-        if np.any(lower > upper):
-            raise ValueError("JointLimits: lower > upper")
-        self.lower, self.upper = _unlimited(lower), _unlimited(upper)
+        self.band = band
+        self.lower = lower
+        self.upper = upper
         bounded = np.isfinite(self.lower) | np.isfinite(self.upper)
         if robot.euclidean:
             # q and v share one layout (q index = v index): the box is computed on all of q
             self._q_index = self._v_index = None
             self.joints = np.flatnonzero(bounded)
         else:
-            pairs = [
-                (int(joint.idx_q), int(joint.idx_v))
-                for joint in robot.model.joints[1:]
-                if joint.nq == 1 and joint.nv == 1 and bounded[joint.idx_q]
-            ]
-            self._q_index = np.array([p[0] for p in pairs], dtype=int)
-            self._v_index = np.array([p[1] for p in pairs], dtype=int)
+            one_dof = _one_dof_q_index(robot)
+            self._q_index = one_dof[bounded[one_dof[:, 0]], 0]
+            self._v_index = one_dof[bounded[one_dof[:, 0]], 1]
             self.joints = self._v_index.copy()
-        speed = _unlimited(robot.velocity_limit)[self.joints]
-        with np.errstate(invalid="ignore"):  # 0 · inf (no band, no speed limit): no band
-            self.band_rate = np.nan_to_num(self.band * speed, nan=0.0, posinf=np.inf)
+        #: the speed limit of each limited joint (rad/s, m/s; order of :attr:`joints`)
+        self._speed = _unlimited(robot.velocity_limit)[self.joints]
+
+    def _checked_parameter(self, name: str, value: Any) -> Any:
+        if name == "gain":
+            if not _is_number(value) or not 0 < value <= 1:  # NaN is not in (0, 1]
+                raise ValueError(
+                    f"JointLimits: gain must be a number in (0, 1] (dimensionless), got {value!r}"
+                )
+            return float(value)
+        if name == "band":
+            if not _is_number(value) or not value >= 0:  # NaN is not >= 0
+                raise ValueError(
+                    "JointLimits: band must be a number >= 0 or inf (dimensionless: a "
+                    f"fraction of a step at the speed limit), got {value!r}"
+                )
+            return float(value)
+        if name == "lower" or name == "upper":
+            return self._checked_side(name, value)
+        return super()._checked_parameter(name, value)
+
+    def _checked_side(self, name: str, value: Any) -> np.ndarray:
+        """``lower`` or ``upper`` (``None``: the robot's) validated: ``nq`` numbers or one
+        (rad, m), read with ``±1.8e308`` as unlimited, not beyond the other side; after
+        construction, finite only on the joints it limits."""
+        robot = self.robot
+        sign = -1 if name == "lower" else 1
+        given = getattr(robot, name) if value is None else value
+        try:
+            arr = _unlimited(robot._limit(given, None, name, sign))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"JointLimits: {name} must be {robot.nq} numbers or one (rad, m; "
+                f"{'-' if sign < 0 else ''}inf for none): {exc}; got {value!r}"
+            ) from None
+        other = self.__dict__.get("upper" if sign < 0 else "lower")
+        if other is not None:
+            lo, hi = (arr, other) if sign < 0 else (other, arr)
+            bad = np.flatnonzero(lo > hi)
+            if bad.size:
+                raise ValueError(
+                    f"JointLimits: lower > upper at q index {bad.tolist()}: "
+                    f"{lo[bad]} > {hi[bad]}; got {name}={value!r}"
+                )
+        if "joints" in self.__dict__:  # an assignment: the limited joints are fixed
+            limited = self.joints if self._q_index is None else self._q_index
+            candidates = np.arange(robot.nq) if robot.euclidean else _one_dof_q_index(robot)[:, 0]
+            new = np.setdiff1d(candidates[np.isfinite(arr[candidates])], limited)
+            if new.size:
+                raise ValueError(
+                    f"JointLimits: {name} is finite at q index {new.tolist()}, joints built "
+                    "without a limit (the limited joints are fixed at construction: build a "
+                    f"new JointLimits), got {value!r}"
+                )
+        return arr
+
+    @property
+    def band_rate(self) -> np.ndarray:
+        """``band · v_max`` of each limited joint (rad/s, m/s; order of :attr:`joints`,
+        ``inf`` without a speed limit), from the current :attr:`band`: the band is
+        ``band_rate · dt``."""
+        band, rate = self.__dict__.get("_band_rate", (None, None))
+        if band != self.band:  # first read, or band assigned since: computed again
+            with np.errstate(invalid="ignore"):  # 0 · inf (no band, no speed limit): no band
+                rate = read_only(np.nan_to_num(self.band * self._speed, nan=0.0, posinf=np.inf))
+            self._band_rate = (self.band, rate)
+        return rate
 
     @property
     def q_index(self) -> np.ndarray | None:
@@ -1047,21 +1155,28 @@ class VelocityLimits(Limit):
     ----------
     robot : Robot
     limit : float or array_like, shape (nv,), optional
-        ``v_max`` (rad/s, m/s), default the robot's ``velocity_limit`` (a floating base's
-        ``±1.8e308`` entries read as unlimited).
+        ``v_max`` (rad/s, m/s), > 0, default the robot's ``velocity_limit`` (a floating
+        base's ``±1.8e308`` entries read as unlimited). May be assigned later: checked as
+        here, used from the next step on, by both engines.
+
+    Raises
+    ------
+    ValueError
+        ``limit`` not ``nv`` numbers ``> 0`` or one (NaN, ``≤ 0``), at construction or on
+        assignment (the message names it and the value; the old value is kept).
     """
 
     def __init__(self, robot: Robot, limit: ArrayLike | None = None) -> None:
         super().__init__(robot, "velocity limits")
-        v = (
-            robot.velocity_limit
-            if limit is None
-            else robot._limit(limit, None, "limit", 1, size=robot.nv)
-        )
-        if np.any(v <= 0):
-            raise ValueError(f"VelocityLimits: limit must be > 0 (rad/s), got {v}")
-        self.limit = _unlimited(v)
+        self.limit = limit  # validated (_checked_parameter), as an assignment
         self.task = Inequality(np.eye(robot.nv), -self.limit, self.limit, name="velocity limits")
+
+    def _checked_parameter(self, name: str, value: Any) -> Any:
+        if name == "limit":
+            robot = self.robot
+            given = robot.velocity_limit if value is None else value
+            return _positive_limit(given, robot.nv, "VelocityLimits", "rad/s, m/s")
+        return super()._checked_parameter(name, value)
 
     def box(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         return -self.limit, self.limit
@@ -1098,39 +1213,56 @@ class AccelerationLimits(Limit):
     robot : Robot
     limit : float or array_like, shape (nv,)
         ``a_max`` (rad/s², m/s²), > 0; ``inf`` for an unlimited entry (e.g. a floating base's
-        six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``).
+        six rows: ``np.r_[np.full(6, np.inf), np.full(robot.nv - 6, 20.0)]``). May be
+        assigned later: checked as here, used from the next step on, by both engines.
     position_limits : "robot", JointLimits or None
         The position limits braked before, and their gain (default ``"robot"``: the
         robot's finite limits of its 1-DoF joints, as ``JointLimits(robot)``, its default
         gain 0.5: the IK's ``limits="robot"``); give the IK's own :class:`JointLimits` if it
-        has another gain or other bounds; ``None``: no braking.
+        has another gain or other bounds; ``None``: no braking. Fixed at construction (an
+        IK's native step holds the braked joints): assign the JointLimits' own ``gain``,
+        ``lower``, ``upper`` instead, which the braking rows follow.
 
     Raises
     ------
     ValueError
-        ``limit`` not positive, ``position_limits`` of another kind or robot.
+        ``limit`` not ``nv`` numbers ``> 0`` or one (at construction or on assignment),
+        ``position_limits`` of another kind or robot, or assigned after construction. The
+        message names the argument and the value; a bad assignment keeps the old value.
     """
 
     def __init__(self, robot: Robot, limit: ArrayLike, position_limits: Any = "robot") -> None:
         super().__init__(robot, "acceleration limits")
-        a = robot._limit(limit, None, "limit", 1, size=robot.nv)
-        if np.any(a <= 0):
-            raise ValueError(f"AccelerationLimits: limit must be > 0 (rad/s²), got {a}")
-        self.limit = _unlimited(a)
+        # each through _checked_parameter: the checks and messages of an assignment
+        self.limit = limit
         self._v_prev = np.zeros(robot.nv)
-        if isinstance(position_limits, str) and position_limits == "robot":
-            position_limits = JointLimits(robot)
-        elif position_limits is not None and not (
-            isinstance(position_limits, JointLimits) and position_limits.robot.model is robot.model
-        ):
-            raise ValueError(
-                "AccelerationLimits: position_limits must be 'robot', a JointLimits of this "
-                f"robot or None, got {position_limits!r}"
-            )
-        #: The :class:`JointLimits` braked before (``None``: no braking)
-        self.position_limits: JointLimits | None = (
-            position_limits if position_limits is not None and position_limits.joints.size else None
-        )
+        #: The :class:`JointLimits` braked before (``None``: no braking); fixed at
+        #: construction
+        self.position_limits: JointLimits | None = position_limits
+
+    def _checked_parameter(self, name: str, value: Any) -> Any:
+        robot = self.robot
+        if name == "limit":
+            return _positive_limit(value, robot.nv, "AccelerationLimits", "rad/s², m/s²")
+        if name == "position_limits":
+            if "position_limits" in self.__dict__:
+                # an IK's native step and start-up check hold the braked joints
+                raise ValueError(
+                    "AccelerationLimits: position_limits is fixed at construction (assign "
+                    "the JointLimits' own gain, lower, upper; or build a new "
+                    f"AccelerationLimits and IK), got {value!r}"
+                )
+            if isinstance(value, str) and value == "robot":
+                value = JointLimits(robot)
+            elif value is not None and not (
+                isinstance(value, JointLimits) and value.robot.model is robot.model
+            ):
+                raise ValueError(
+                    "AccelerationLimits: position_limits must be 'robot', a JointLimits of "
+                    f"this robot or None, got {value!r}"
+                )
+            return value if value is not None and value.joints.size else None
+        return super()._checked_parameter(name, value)
 
     @property
     def v_prev(self) -> np.ndarray:

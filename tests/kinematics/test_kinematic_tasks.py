@@ -337,6 +337,19 @@ def test_joint_limits_lower_above_upper(planar):
         qc.JointLimits(planar, lower=[0.0, 0.0, 2.0], upper=1.0)
 
 
+def test_joint_limits_assigned_keep_the_limited_joints(planar):
+    # the limited joints (a native step's index of them) are fixed at construction: a finite
+    # limit assigned on a joint built without one is refused, not silently unused
+    limits = qc.JointLimits(planar, lower=[-1.0, -np.inf, -np.inf], upper=[1.0, np.inf, np.inf])
+    limits.upper = [0.5, np.inf, np.inf]
+    limits.lower = -np.inf  # a limit removed: its side of the box is free
+    lo, hi = limits.box(np.zeros(3), 0.1)
+    assert lo[0] == -np.inf and hi[0] == pytest.approx(limits.gain * 0.5 / 0.1)
+    with pytest.raises(ValueError, match=r"JointLimits: upper is finite at q index \[1\]"):
+        limits.upper = [0.5, 2.0, np.inf]
+    np.testing.assert_array_equal(limits.upper, [0.5, np.inf, np.inf])
+
+
 def test_joint_limits_of_an_unlimited_robot_are_infinite(planar):
     lo, hi = qc.JointLimits(planar).box(np.zeros(3), 0.01)
     assert np.all(lo == -np.inf) and np.all(hi == np.inf)

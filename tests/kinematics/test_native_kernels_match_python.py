@@ -728,21 +728,128 @@ def test_native_relative_and_coupling_jacobians_match_finite_differences(robots,
         np.testing.assert_allclose(Jd, fd, rtol=0, atol=1e-6 * max(1.0, np.abs(fd).max()))
 
 
-@needs_native
-@pytest.mark.parametrize(
-    ("what", "message"),
-    [("a_max", "acceleration limits: .*limit not > 0"), ("gain", "joint limits: .*gain")],
-)
-def test_limit_data_the_native_step_refuses_is_named(robots, what, message):
+ENGINES = ["python", pytest.param("native", marks=needs_native)]
+
+
+def _limit_set(robot: qc.Robot, braking: bool, **given) -> list:
+    """``[JointLimits, VelocityLimits]`` and, with ``braking``, ``AccelerationLimits`` braking
+    before the JointLimits (a_max 1e4 rad/s²: its braking rows bind, not its box); ``given``
+    the constructor arguments, keyed ``"<index>_<name>"``."""
+    arg = {k.split("_", 1)[1]: v for k, v in given.items() if k.startswith("0_")}
+    jl = qc.JointLimits(robot, **arg)
+    out = [jl, qc.VelocityLimits(robot, given.get("1_limit"))]
+    if braking:
+        out.append(qc.AccelerationLimits(robot, given.get("2_limit", 1e4), position_limits=jl))
+    return out
+
+
+def _at_the_limits(robot: qc.Robot) -> tuple[np.ndarray, qc.PostureTask]:
+    """Panda joints 1 to 3 mm inside a limit (alternately the upper and the lower one), each
+    pulled past it at 100 rad/s by a posture: the step's v is the limit box on every joint."""
+    rng = np.random.default_rng(5)
+    side = np.where(np.arange(robot.nv) % 2 == 0, 1.0, -1.0)
+    D = rng.uniform(1e-3, 3e-3, robot.nv)
+    q = np.where(side > 0, robot.upper - D, robot.lower + D)
+    return q, qc.PostureTask(robot, q + side, gain=100.0)
+
+
+def _ik_step(robot: qc.Robot, limits: list, q: np.ndarray, engine: str) -> tuple:
+    _, posture = _at_the_limits(robot)
+    ik = qc.IK(robot, [posture], DT, limits=limits, engine=engine)
+    return ik, *_stepped(ik, q)
+
+
+def _stepped(ik: qc.IK, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One step from rest (``v_prev = 0``): ``v`` and the box."""
+    for lim in ik.limits:
+        if isinstance(lim, qc.AccelerationLimits):
+            lim.reset()
+    v, _ = ik.step(q)
+    return v.copy(), ik.bounds.lower.copy(), ik.bounds.upper.copy()
+
+
+#: (limit index, parameter, bad value or a function of the robot giving it, the message)
+_BAD = [
+    (0, "gain", np.nan, r"JointLimits: gain must be a number in \(0, 1\].*got nan"),
+    (0, "gain", 0.0, r"JointLimits: gain must be .*got 0\.0"),
+    (0, "gain", 1.5, r"JointLimits: gain must be .*got 1\.5"),
+    (0, "gain", "0.5", r"JointLimits: gain must be .*got '0\.5'"),
+    (0, "band", -1.0, r"JointLimits: band must be a number >= 0 .*got -1\.0"),
+    (0, "band", np.nan, r"JointLimits: band must be .*got nan"),
+    (0, "lower", np.nan, r"JointLimits: lower must be 7 numbers .*got nan"),
+    (0, "upper", np.zeros(3), r"JointLimits: upper must be 7 numbers .*got array"),
+    (0, "upper", lambda r: r.lower - 1.0, r"JointLimits: lower > upper at q index \[0, 1"),
+    (1, "limit", 0.0, r"VelocityLimits: limit must be 7 numbers > 0 .*got 0\.0"),
+    (1, "limit", np.nan, r"VelocityLimits: limit must be .*got nan"),
+    (2, "limit", -1.0, r"AccelerationLimits: limit must be 7 numbers > 0 .*got -1\.0"),
+    (2, "limit", np.nan, r"AccelerationLimits: limit must be .*got nan"),
+    (2, "position_limits", lambda r: qc.JointLimits(r), r"AccelerationLimits: position_limits"),
+    (2, "v_prev", np.full(7, np.nan), r"v_prev\[0\] is nan"),
+]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize(("i", "name", "bad", "message"), _BAD)
+def test_a_bad_limit_parameter_assigned_is_named_and_kept_out(
+    robots, engine, i, name, bad, message
+):
+    """An assignment is checked as the constructor checks the argument (the same message):
+    it raises, the limit keeps its value, and the next step is the one before."""
     robot = robots["panda"]
-    limits = _limits(robot, 0.5, 50.0)
-    ik = qc.IK(robot, [qc.PostureTask(robot, _start(robot))], DT, limits=limits, engine="native")
-    if what == "a_max":
-        limits[2].limit = np.full(robot.nv, -1.0)
-    else:
-        limits[0].gain = float("nan")
-    with pytest.raises(ValueError, match=message):
-        ik.step(_start(robot))
+    bad = bad(robot) if callable(bad) else bad
+    q, _ = _at_the_limits(robot)
+    limits = _limit_set(robot, braking=True)
+    ik, *before = _ik_step(robot, limits, q, engine)
+    old = getattr(limits[i], name)
+    with pytest.raises(ValueError, match=message) as info:
+        setattr(limits[i], name, bad)
+    assert getattr(limits[i], name) is old or np.array_equal(getattr(limits[i], name), old)
+    for mine, ref in zip(_stepped(ik, q), before, strict=True):
+        np.testing.assert_array_equal(mine, ref)
+    if name not in ("position_limits", "v_prev"):  # arguments of the constructor
+        with pytest.raises(ValueError) as built:
+            _limit_set(robot, braking=True, **{f"{i}_{name}": bad})
+        assert str(built.value) == str(info.value)
+
+
+#: (the limit set has braking rows, limit index, parameter, a good value or a function of
+#: the robot giving it)
+_GOOD = [
+    (False, 0, "gain", 0.9),
+    (False, 0, "band", np.inf),
+    (False, 0, "band", 0.0),
+    (False, 0, "lower", lambda r: r.lower + 1e-3),
+    (False, 0, "upper", lambda r: r.upper - 1e-3),
+    (False, 1, "limit", 0.5),
+    (True, 0, "gain", 0.9),
+    (True, 0, "upper", lambda r: r.upper - 1e-3),
+    (True, 2, "limit", 5.0),
+]
+
+
+@needs_native
+@pytest.mark.parametrize(("braking", "i", "name", "good"), _GOOD)
+def test_an_assigned_limit_parameter_moves_both_engines_alike(robots, braking, i, name, good):
+    """A limit's parameter assigned between two steps: the next step's box and v are those
+    of the limits built with it, on both engines (and the box moved: it takes effect)."""
+    robot = robots["panda"]
+    good = good(robot) if callable(good) else good
+    q, _ = _at_the_limits(robot)
+    limn, limp = _limit_set(robot, braking), _limit_set(robot, braking)
+    ikn, *before = _ik_step(robot, limn, q, "native")
+    ikp, *_ = _ik_step(robot, limp, q, "python")
+    setattr(limn[i], name, good)
+    setattr(limp[i], name, good)
+    native_after, python_after = _stepped(ikn, q), _stepped(ikp, q)
+    _, *built = _ik_step(robot, _limit_set(robot, braking, **{f"{i}_{name}": good}), q, "python")
+    assert not all(np.array_equal(a, b) for a, b in zip(python_after[1:], before[1:], strict=True))
+    # every joint is pulled past its box at 100 rad/s: v is the box, whose entries are a few
+    # roundings (a square root and quotients in the braking speed) of terms no larger than
+    # (K/dt)(|q| + |limits|): 64 eps of that scale bounds two evaluations of it
+    scale = (1.0 / DT) * (np.abs(q).max() + np.abs(robot.upper).max())
+    for mine, ref, fresh in zip(native_after, python_after, built, strict=True):
+        np.testing.assert_allclose(mine, ref, rtol=0, atol=64 * EPS * scale)
+        np.testing.assert_allclose(ref, fresh, rtol=0, atol=64 * EPS * scale)
 
 
 # ---------------------------------------------------------------------------------------
