@@ -998,10 +998,6 @@ class JointLimits(Limit):
         ``≥ 0``; default :data:`LIMIT_BAND` = 0.2): ``b = band · v_max · dt``. ``0``: the
         one-step box at every gain; ``inf``: the damper at every distance.
 
-    Each of them may be assigned later (``limits.band = 0.5``): checked as here, used from
-    the next step on, by both engines. ``lower`` and ``upper`` keep the limited joints of
-    the construction (:attr:`joints`).
-
     Raises
     ------
     ValueError
@@ -1018,6 +1014,12 @@ class JointLimits(Limit):
         ``band · v_max`` of each limited joint (rad/s, m/s; order of :attr:`joints`,
         ``inf`` without a speed limit): the band is ``band_rate · dt`` (read-only, from the
         current ``band``).
+
+    Notes
+    -----
+    Each parameter may be assigned later (``limits.band = 0.5``): checked as here, used from
+    the next step on, by both engines. ``lower`` and ``upper`` keep the limited joints of
+    the construction (:attr:`joints`).
     """
 
     def __init__(
