@@ -1022,6 +1022,9 @@ class JointLimits(Limit):
     the construction (:attr:`joints`).
     """
 
+    lower: np.ndarray  # an assigned value is checked and converted (__setattr__)
+    upper: np.ndarray  # an assigned value is checked and converted (__setattr__)
+
     def __init__(
         self,
         robot: Robot,
@@ -1035,8 +1038,8 @@ class JointLimits(Limit):
         self.gain = gain
         #: the band's width as a fraction of a step at the speed limit (dimensionless)
         self.band = band
-        self.lower = lower
-        self.upper = upper
+        self.lower = lower  # type: ignore[assignment]  # an ndarray: __setattr__ converts
+        self.upper = upper  # type: ignore[assignment]
         bounded = np.isfinite(self.lower) | np.isfinite(self.upper)
         if robot.euclidean:
             # q and v share one layout (q index = v index): the box is computed on all of q
@@ -1168,9 +1171,11 @@ class VelocityLimits(Limit):
         assignment (the message names it and the value; the old value is kept).
     """
 
+    limit: np.ndarray  # an assigned value is checked and converted (__setattr__)
+
     def __init__(self, robot: Robot, limit: ArrayLike | None = None) -> None:
         super().__init__(robot, "velocity limits")
-        self.limit = limit  # validated (_checked_parameter), as an assignment
+        self.limit = limit  # type: ignore[assignment]  # validated and converted, as assigned
         self.task = Inequality(np.eye(robot.nv), -self.limit, self.limit, name="velocity limits")
 
     def _checked_parameter(self, name: str, value: Any) -> Any:
@@ -1233,10 +1238,12 @@ class AccelerationLimits(Limit):
         message names the argument and the value; a bad assignment keeps the old value.
     """
 
+    limit: np.ndarray  # an assigned value is checked and converted (__setattr__)
+
     def __init__(self, robot: Robot, limit: ArrayLike, position_limits: Any = "robot") -> None:
         super().__init__(robot, "acceleration limits")
         # each through _checked_parameter: the checks and messages of an assignment
-        self.limit = limit
+        self.limit = limit  # type: ignore[assignment]  # an ndarray: __setattr__ converts
         self._v_prev = np.zeros(robot.nv)
         #: The :class:`JointLimits` braked before (``None``: no braking); fixed at
         #: construction
