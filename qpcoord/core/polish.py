@@ -247,15 +247,11 @@ def kkt_residual(Q, c, G, lo, hi, y, prepared=None) -> tuple[float, float]:
       ``S Qᵀ(Q y − c)`` from the cone of the active rows' normals with multipliers of the
       right sign (non-negative least squares: dual sign and complementarity are part of it,
       only rows within ``KKT_FEAS_TOL`` of a bound may carry a multiplier), divided by
-      ``max(‖Q y − c‖, 1e-8·(‖c‖ + ‖Q y‖))``. A multiplier ``μᵢ`` on a row ``sᵢ`` from its
-      bound is an objective gap ``μᵢ·sᵢ``: the NNLS also minimises ``‖μ∘s‖ / (‖c‖ + ‖Q y‖)``
-      and its residual counts it, so rows dependent to rounding cannot hold a point far
-      along them with multipliers of ``‖g‖/σ``.
+      ``max(‖Q y − c‖, 1e-8·(‖c‖ + ‖Q y‖))``.
 
     A point with both under their tolerances (:data:`KKT_TOL`, :data:`KKT_FEAS_TOL`) is
     optimal up to an objective gap of order ``KKT_TOL²`` times the level's value in
-    well-scaled directions, plus the rows' gap ``Σ μᵢ·sᵢ``, under about
-    ``KKT_TOL·‖Q y − c‖·(‖c‖ + ‖Q y‖)``. ``prepared`` (:func:`prepare` of the same ``Q, G, lo, hi``)
+    well-scaled directions. ``prepared`` (:func:`prepare` of the same ``Q, G, lo, hi``)
     saves the row normalisation; the verdict is the same.
 
     Cheap paths (same verdict): a level met to :data:`VALUE_TOL` of its scale is certified
@@ -304,20 +300,9 @@ def kkt_residual(Q, c, G, lo, hi, y, prepared=None) -> tuple[float, float]:
             gmax = float(np.abs(gs).max())
             if gmax == 0.0:
                 return 0.0, infeas
-            # complementarity: a row counted active is met to KKT_FEAS_TOL, not exactly,
-            # and a multiplier μ_i on a row s_i from its bound is an objective gap μ_i·s_i
-            # the cone does not see; rows dependent to rounding (singular value σ) put any
-            # gradient in their cone with μ ~ ‖g‖/σ (the LexLS humanoid's minimum-norm
-            # step: a point 8.7 from the optimum, its rows 1e-13 past their bounds, was
-            # stationary with μ = 1e14, a gap of 92). Each μ_i is weighted by s_i / lscale:
-            # the residual ‖(gs − Bμ, μ∘s / lscale)‖ / den measures the gap as the
-            # stationarity measures a move of the level's scale
-            slack = np.abs(np.concatenate(((gy - lon)[a_lo], (hin - gy)[a_hi])))
-            Bw = np.vstack((B, np.diag(slack / lscale)))
-            gw = np.concatenate((gs, np.zeros(idx.size)))
             from scipy.optimize import nnls
 
-            _mu, rn = nnls(Bw / gmax, gw / gmax, maxiter=50 * B.shape[1] + 50)
+            _mu, rn = nnls(B / gmax, gs / gmax, maxiter=50 * B.shape[1] + 50)
             return rn * gmax / den, infeas
         return g0, infeas
     if by_value:

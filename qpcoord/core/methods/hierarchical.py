@@ -538,9 +538,8 @@ def _exact_on_active_rows(G, lo, hi, z, p, floor: float) -> np.ndarray | None:
     the opening ``δ`` buys a step ``δ/σ`` along them that shortens ``x``, which the
     native engine's exact step does not take (Panda, a frozen posture row and three speed
     bounds at ``σ`` = 1.9e-10: 3e-12 past the bounds bought 0.017 rad/s). The rows within
-    ``ACTIVE_TOL`` (1e-7) instead of the opening held the LexLS humanoid's step 8.7 from
-    its optimum, at the far end of rows dependent to rounding: the opening it is (the
-    certificate rejects that point: it counts the multipliers' gap)."""
+    ``ACTIVE_TOL`` (1e-7) instead of the opening held a row the optimum leaves on the
+    LexLS humanoid, 4.3 away, and the certificate did not catch it: the opening it is."""
     a_lo, a_hi = at_bounds(G @ z, lo, hi, PULL_TOL)
     act = a_lo | a_hi
     if not act.any():
@@ -559,7 +558,7 @@ def _exact_on_active_rows(G, lo, hi, z, p, floor: float) -> np.ndarray | None:
     if pull_back(G, lo, hi, ze) is not ze:
         return None
     # the step is strictly convex: a certified point is its optimum (rows wrongly held
-    # active, with multipliers of the wrong sign or a gap μ·s that is not small, are not)
+    # active, with multipliers of the wrong sign, are not)
     Q = np.eye(z.shape[0])
     st, infeas = kkt_residual(Q, -p, G, lo, hi, ze, prepare(Q, G, lo, hi))
     return ze if st <= KKT_TOL and infeas <= KKT_FEAS_TOL else None
