@@ -216,6 +216,7 @@ NB_MODULE(QPCOORD_NATIVE_MODULE, m) {
     {"wy_applications", &S::wy_applications, "Changes of Z by the compact WY form (builds with FMA)."},
     {"pruned_working_sets", &S::pruned_working_sets, "Levels whose working set was stored without its rows far from the start (a zero objective)."},
     {"zero_objective_hits", &S::zero_objective_hits, "Warm trials accepted at a zero objective whatever their multipliers."},
+    {"range_trials", &S::range_trials, "Warm trials whose least-squares step came from the closed form's triangular factor (no factorisation of the projected objective)."},
   };
   auto stats = nb::class_<S>(m, "Stats",
                              "Counters of one solve: how often each path and cache was taken "

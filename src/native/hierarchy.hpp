@@ -139,6 +139,7 @@ struct Stats {
   int wy_applications = 0;       ///< changes of Z by the compact WY form (FMA builds)
   int pruned_working_sets = 0;   ///< levels whose set was stored without its far rows
   int zero_objective_hits = 0;   ///< warm trials accepted at a zero objective (any multipliers)
+  int range_trials = 0;          ///< warm trials stepped through the closed form's R (no K)
 };
 
 /// The strict-hierarchy solver of one stack structure (sizes fixed at construction).
@@ -351,6 +352,15 @@ class Hierarchy {
   /// or an infinite bound); *consistent: the point meets the set's rows.
   int stored_set_point(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W,
                        bool* consistent);
+  /// stored_set_point's factorisations for a level with range_trial_ (from the trial cache
+  /// where it holds them): the working rows' QR (wqr) and, when they have full rank, the QR
+  /// of B = R^-T P^T G_w^T (k x kw: kw triangular solves) in bqr; ts_->range: B has full
+  /// column rank. No Q Qf and no K. Returns true when computed (not restored).
+  bool factor_range_trial(const LsqProblem& P, const std::vector<int8_t>& W);
+  /// The step from y (on the working rows) to the optimum on them, through R alone:
+  /// y += d, d = -P R^-1 (I - P_B) (Q y - c), P_B the projector onto the range of B (where
+  /// the general trial forms Q Qf and factorises the k x (k - kw) K = Q N).
+  void range_step(const LsqProblem& P, Eigen::Ref<Vec> y);
   /// Map a stored working set onto P's rows (into W: equality rows 2, stored rows their
   /// side); returns the number of stored rows matched.
   int map_working_set(const LsqProblem& P, const Working& ws, std::vector<int8_t>& W);
@@ -513,6 +523,8 @@ class Hierarchy {
     bool k_rz = false;            ///< that K's minimum-norm step by krz (else cqr)
     /// qt_stale_ as factor_trial left it (the trial cache restores it with the rest)
     bool qt_stale = true;
+    PivotedQR bqr;       ///< B = R^-T P^T G_w^T of a range trial (k x kw)
+    bool range = false;  ///< bqr holds B of full column rank (factor_range_trial)
     /// Buffers for problems of up to cols columns, grows rows and qrows objective rows.
     void reserve(int cols, int grows, int qrows);
   };
@@ -533,6 +545,7 @@ class Hierarchy {
   void enter_stage(int stage) {
     tc_ = per_stage_ ? &trials_[stage] : &shared_trial_;
     ts_ = &tc_->value;
+    range_trial_ = false;
   }
   /// A level's closed form from the QR of M = A Z (one per stage): the closed-form cache finds
   /// the factorisation of the level's M of the previous call there when A and Z repeat.
@@ -566,6 +579,10 @@ class Hierarchy {
   /// the last factorisation was stored_set_point's on a level's full problem (W: its mapped
   /// set; the exact finish after a hit starts from it)
   bool trial_ready_ = false;
+  /// the level being solved has P's objective Q = R P^T, R the closed form's triangular factor
+  /// of full rank r, its condition within 1 / kIllConditioned, and no slack or damping rows
+  /// (set by level_problem, cleared by enter_stage): its warm trials step by range_step
+  bool range_trial_ = false;
   /// Qt not formed for the working set's QR (factor_working of a level with slacks and
   /// ls_step forms it when its general path needs it; updates skip it till then)
   bool qt_stale_ = true;

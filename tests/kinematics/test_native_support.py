@@ -482,9 +482,12 @@ def test_a_met_polygon_level_drops_its_far_working_rows_and_matches_the_python_e
     stores the level's working set without its rows away from the start once the rest is
     verified (``pruned_working_sets``), and accepts a warm trial of zero objective whatever
     the rounding of its multipliers (``zero_objective_hits``: two near-parallel inherited
-    polygon rows give multipliers ~5e-9 for a gradient ~3e-17). x stays the Python engine's
-    to 1e-9, the tolerance of this file's closed loops: the engines stop on kkt_tol = 1e-9 of
-    the gradient, on rows of unit scale (velocities ~0.5 rad/s, max deviation seen 1.6e-10)."""
+    polygon rows give multipliers ~5e-9 for a gradient ~3e-17). The posture level's warm
+    trials step through its closed form's triangular factor (``range_trials``: a tall,
+    full-rank, well-conditioned level, no factorisation of its projected objective). x stays
+    the Python engine's to 1e-9, the tolerance of this file's closed loops: the engines stop
+    on kkt_tol = 1e-9 of the gradient, on rows of unit scale (velocities ~0.5 rad/s, max
+    deviation seen 1.6e-10)."""
     q0 = talos.reference_configuration("half_sitting")
     hand_target = talos.frame_pose(q0, "gripper_right_base_link")[:3, 3] + [0.4, 0.1, -0.3]
 
@@ -501,7 +504,7 @@ def test_a_met_polygon_level_drops_its_far_working_rows_and_matches_the_python_e
     ikn = qc.IK(talos, stack(), DT, limits="robot", engine="native")
     ikp = qc.IK(talos, stack(), DT, limits="robot", engine="python")
     q = q0.copy()
-    pruned = zero_objective = 0
+    pruned = zero_objective = range_trials = 0
     for step in range(200):
         vn, sn = ikn.step(q)
         vp, _ = ikp.step(q)
@@ -509,5 +512,10 @@ def test_a_met_polygon_level_drops_its_far_working_rows_and_matches_the_python_e
         counters = sn.info["stats"]
         pruned += counters.pruned_working_sets
         zero_objective += counters.zero_objective_hits
+        range_trials += counters.range_trials
         q = talos.integrate(q, vn, DT)
-    assert pruned > 0 and zero_objective > 0, (pruned, zero_objective)
+    assert pruned > 0 and zero_objective > 0 and range_trials > 0, (
+        pruned,
+        zero_objective,
+        range_trials,
+    )

@@ -90,7 +90,8 @@ bool Hierarchy::trial_lookup(const LsqProblem& P, const std::vector<int8_t>& W) 
   TrialCache& t = *tc_;
   const int k = P.cols, qr = P.qrows;
   t.begin();
-  const int sizes[8] = {k, qr, unit_q_ ? 1 : 0, P.slacks, P.zcols, P.slack_q0, P.slack_g0, 0};
+  const int sizes[8] = {k, qr, unit_q_ ? 1 : 0, P.slacks, P.zcols, P.slack_q0, P.slack_g0,
+                        range_trial_ ? 1 : 0};
   t.same(sizes, sizeof sizes);
   // (factor_rows' widx_: W's rows in order)
   widx_.clear();

@@ -6,6 +6,7 @@ namespace qpcoord {
 void Hierarchy::factor_rows(const LsqProblem& P, const std::vector<int8_t>& W) {
   const int k = P.cols;
   ts_->k_valid = false;
+  ts_->range = false;
   trial_ready_ = false;
   widx_.clear();
   for (int i = 0; i < P.rows; ++i)

@@ -215,6 +215,10 @@ int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form) {
     g(r_ + j) = -1.0;
     P.add_row(g, lo(row) - v, hi(row) - v, row, C.row(row).norm());
   }
+  // Q = R P^T of full rank and well-conditioned, nothing else in the objective: the warm
+  // trial's least-squares step through R (factor_range_trial, range_step)
+  range_trial_ = full_r && form.rank == r_ && cf_->mqr.rank() == r_ && mv == 0 &&
+                 P.qrows == r_ && !ill_conditioned(d, form);
   if (P.rows == slack_g0 + mv && P.qrows == qme + ndamp + mv) {  // every level row kept
     P.zcols = r_;
     P.slacks = mv;

@@ -11,14 +11,82 @@ int Hierarchy::stored_set_point(const LsqProblem& P, const Working& ws, std::vec
   const int found = map_working_set(P, ws, W);
   if (!found && !ws.id.empty()) return 0;
   qscale_ = P.Q.topLeftCorner(P.qrows, k).norm();
-  factor_trial(P, W);
   auto yp = xc_.head(k);
+  if (range_trial_) {
+    const bool computed = factor_range_trial(P, W);
+    if (ts_->range) {
+      if (!working_set_point(P, W, yp, consistent)) return 0;
+      range_step(P, yp);
+      return found;
+    }
+    // (B rank-deficient: the general trial, its factorisations stored in place of these)
+    if (computed) tc_->drop();
+  }
+  factor_trial(P, W);
   if (!working_set_point(P, W, yp, consistent)) return 0;
   auto step = step_.head(k);
   ls_step(P, yp, step);
   yp += step;
   trial_ready_ = true;  // wqr and K are those of W on P (the exact finish's start)
   return found;
+}
+
+bool Hierarchy::factor_range_trial(const LsqProblem& P, const std::vector<int8_t>& W) {
+  // (the trial cache, as factor_trial's: its key holds range_trial_, so an entry is either
+  // this function's or the general trial's for a B found rank-deficient here)
+  const bool memo = memo_gate();
+  if (memo && trial_lookup(P, W)) return false;
+  tc_->drop();
+  finish_ready_ = false;
+  factor_rows(P, W);  // (ts_->range false)
+  qt_stale_ = true;
+  const int k = P.cols, kw = static_cast<int>(widx_.size());
+  if (ts_->wqr.rank() == kw) {
+    // B = Q^-T G_w^T = R^-T P^T G_w^T, Q = R P^T (level_problem's compressed objective, R
+    // the closed form's upper triangle, of condition below 1 / kIllConditioned: range_trial_)
+    const MapMat Rf = cf_->mqr.matrix();
+    const auto R = Rf.topLeftCorner(k, k).triangularView<Eigen::Upper>();
+    MapMat B = ts_->bqr.matrix(k, kw);
+    for (int j = 0; j < kw; ++j) {
+      auto b = B.col(j);
+      for (int i = 0; i < k; ++i) b(i) = P.G(widx_[j], cf_->mqr.perm(i));
+      R.transpose().solveInPlace(b);
+    }
+    ts_->range = kw == 0 || ts_->bqr.factor(0.0, std::max(k, kw) * kEps * 10.0) == kw;
+  }
+  if (memo) {
+    ts_->qt_stale = qt_stale_;
+    tc_->store();
+  }
+  return true;
+}
+
+void Hierarchy::range_step(const LsqProblem& P, Eigen::Ref<Vec> y) {
+  const int k = P.cols, qr = P.qrows, kw = static_cast<int>(widx_.size());
+  // min |Q (y + d) - c| over G_w d = 0: the KKT system's multipliers solve B lambda = -res
+  // in least squares (res = Q y - c), and d = -Q^-1 (I - P_B) res
+  const MapMat Rf = cf_->mqr.matrix();
+  const auto R = Rf.topLeftCorner(k, k).triangularView<Eigen::Upper>();
+  auto res = res_.head(qr);
+  res.noalias() = P.Q.topLeftCorner(qr, k) * y;
+  res -= P.c.head(qr);
+  auto v = step_.head(k);
+  v = res;
+  if (kw) {
+    ts_->bqr.apply_qt(v);
+    v.head(kw).setZero();
+    ts_->bqr.apply_q(v);
+  }
+  R.solveInPlace(v);
+  auto d = u_.head(k);
+  for (int i = 0; i < k; ++i) d(cf_->mqr.perm(i)) = -v(i);
+  // d in null(G_w) to the rounding of the working rows' own QR, as the general trial's N s
+  const int rho = ts_->wqr.rank();
+  ts_->wqr.apply_qt(d);
+  d.head(rho).setZero();
+  ts_->wqr.apply_q(d);
+  y += d;
+  ++stats_.range_trials;
 }
 
 bool Hierarchy::working_set_point(const LsqProblem& P, const std::vector<int8_t>& W,

@@ -126,6 +126,7 @@ void Hierarchy::TrialState::reserve(int cols, int grows, int qrows) {
   cqr.reserve(cols, cols, 1);
   krz.reserve(cols, cols);
   kqr_t.reserve(cols, qrows, 1);
+  bqr.reserve(cols, grows, 1);
   Qt.setZero(qrows, cols);
 }
 
