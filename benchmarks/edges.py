@@ -16,10 +16,12 @@ Scenarios:
   2.60 rad), deadbeat task over a posture, dt = 10 ms: a one-step joint-limit box lands the
   elbow on its limit at π, where the folded arm is singular; rows: the IK's default limits
   (``JointLimits`` gain 0.5 within its band of 0.2 ``v_max dt``, full speed outside), the
-  one-step box (gain 1), the damper at every distance (``band=inf``), and the default with
-  ``AccelerationLimits(50)``; Pink with its default limits (``ConfigurationLimit`` gain 0.5)
-  and with its ``AccelerationLimit(50)``; mink with its ``ConfigurationLimit`` (gain 0.95)
-  and with gain 0.5, both beside its ``VelocityLimit`` (the robot's speed limits).
+  one-step box (gain 1), the damper at every distance (``band=inf``), the default with
+  ``AccelerationLimits(50)``, and the default beside ``VelocityLimits(robot, 0.5 v_max)``,
+  alone and with ``AccelerationLimits(20)`` (:data:`SLOW_A_MAX`); Pink with its default
+  limits (``ConfigurationLimit`` gain 0.5) and with its ``AccelerationLimit(50)``; mink with
+  its ``ConfigurationLimit`` (gain 0.95) and with gain 0.5, both beside its
+  ``VelocityLimit`` (the robot's speed limits).
 - ``held``: UR10 from ``HELD_Q0`` toward ``HELD_TARGET``: the deadbeat task rests the elbow
   on its limit at −π, 0.19 m from the target; rows with and without ``lm_damping=1``, and
   with ``AccelerationLimits(50)``.
@@ -47,6 +49,7 @@ Run::
     python benchmarks/edges.py            # all scenarios (a few seconds)
     python benchmarks/edges.py --steps 500
     python benchmarks/edges.py --pairs 300   # and the random elbow-limit pairs (a minute)
+    python benchmarks/edges.py --pairs 60 --pairs-steps 600 --pairs-speed 0.5  # half speed
 """
 
 from __future__ import annotations
@@ -326,6 +329,8 @@ def limit(steps: int, dt: float = 1e-3, a_max: float = 50.0) -> tuple[Rows, list
 
 
 ELBOW_TARGET = np.array([-0.118, 0.193, 0.303])  # tool0, m: reached with the elbow at 2.60 rad
+#: rad/s²: the acceleration limit of the elbow case's half-speed row with acceleration limits
+SLOW_A_MAX = 20.0
 #: UR10 start and tool0 target (m) from which a deadbeat task rests the elbow on its limit at
 #: -π with the target 0.19 m away: reached (elbow at -2.29 rad) by a task of gain ≤ 50/s
 HELD_Q0 = np.array([-0.83, -3.04, -2.46, -2.84, -1.6, -1.77])
@@ -399,6 +404,20 @@ def elbow(steps: int, dt: float = 0.01, a_max: float = 50.0) -> tuple[Rows, list
             lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
             0.0,
         ),
+        (
+            "qpcoord VelocityLimits(0.5 v_max)",
+            lambda r: [qc.JointLimits(r), qc.VelocityLimits(r, 0.5 * r.velocity_limit)],
+            0.0,
+        ),
+        (
+            f"qpcoord VelocityLimits(0.5 v_max) + AccelerationLimits({SLOW_A_MAX:g})",
+            lambda r: [
+                qc.JointLimits(r),
+                qc.VelocityLimits(r, 0.5 * r.velocity_limit),
+                AccelerationLimits(r, SLOW_A_MAX),
+            ],
+            0.0,
+        ),
     )
     pink = (("pink (ConfigurationLimit gain 0.5)", None, 0.0),
             (f"pink + AccelerationLimit({a_max:g})", a_max, 0.0))  # fmt: skip
@@ -427,14 +446,17 @@ def held(steps: int, dt: float = 0.01, a_max: float = 50.0) -> tuple[Rows, list[
     return _position_rows(HELD_Q0, HELD_TARGET, steps, dt, variants, pink, mink)
 
 
-def pairs(count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1) -> str:
+def pairs(
+    count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1, speed: float = 1.0
+) -> str:
     """``count`` random UR10 start/target pairs whose deadbeat-ish ``tool0`` task drives the
     elbow toward its limit at ±π (start elbow ±[2.2, 3.0] rad, target reached with the elbow
     at ±[2.4, 3.12] rad, the same sign), per position-limit gain ``K``, task gain and task
     ``lm_damping``: how many runs still reverse more than 10 times a second over the last
     500 steps, and how many reach the target to 1e-6 m. ``JointLimits`` rows: the one-step
     box (gain 1), the damper at every distance (gain 0.5, ``band=inf``) and the default (gain
-    0.5 within a band of 0.2 ``v_max dt``)."""
+    0.5 within a band of 0.2 ``v_max dt``); the last rows add ``AccelerationLimits(r,
+    SLOW_A_MAX)`` to the default. The speed box is ``VelocityLimits(r, speed · v_max)``."""
     ur10 = qc.robots.load("ur10")
     rng = np.random.default_rng(seed)
     cases = []
@@ -445,26 +467,34 @@ def pairs(count: int, steps: int = 1500, dt: float = 0.01, seed: int = 1) -> str
         goal[2] = np.sign(q0[2]) * rng.uniform(2.4, 3.12)
         cases.append((q0, ur10.frame_pose(goal, FRAME)[:3, 3].copy()))
     out = [
-        f"### UR10, {count} random elbow-limit pairs ({steps} steps, dt 10 ms, seed {seed})",
+        f"### UR10, {count} random elbow-limit pairs ({steps} steps, dt 10 ms, seed {seed}, "
+        f"speed limits {speed:g} v_max)",
         "",
-        "| JointLimits gain | band | task gain (1/s) | task lm_damping | runs reversing > 10/s "
-        "| runs reaching 1e-6 m |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "| JointLimits gain | band | AccelerationLimits (rad/s²) | task gain (1/s) "
+        "| task lm_damping | runs reversing > 10/s | runs reaching 1e-6 m |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
     ]
     limit_rows = ((1.0, LIMIT_BAND), (0.5, np.inf), (0.5, LIMIT_BAND))
-    variants = [(g, K, band, 0.0) for g in (100.0, 50.0, 30.0) for K, band in limit_rows]
-    variants.append((100.0, 0.5, LIMIT_BAND, 1.0))
-    for task_gain, K, band, lm in variants:
+    variants = [(g, K, band, 0.0, None) for g in (100.0, 50.0, 30.0) for K, band in limit_rows]
+    variants.append((100.0, 0.5, LIMIT_BAND, 1.0, None))
+    variants += [(g, 0.5, LIMIT_BAND, 0.0, SLOW_A_MAX) for g in (100.0, 50.0)]
+    for task_gain, K, band, lm, a_max in variants:
         chatter = reached = 0
         for q0, target in cases:
             task = qc.FramePositionTask(ur10, FRAME, target, gain=task_gain, lm_damping=lm)
-            limits = [qc.JointLimits(ur10, gain=K, band=band), qc.VelocityLimits(ur10)]
+            limits = [
+                qc.JointLimits(ur10, gain=K, band=band),
+                qc.VelocityLimits(ur10, speed * ur10.velocity_limit),
+            ]
+            if a_max is not None:
+                limits.append(AccelerationLimits(ur10, a_max))
             ik = qc.IK(ur10, [task, qc.PostureTask(ur10, q0)], dt=dt, limits=limits)
             vs, qs = _qc_loop(ur10, q0, ik, steps)
             err = float(np.linalg.norm(task.compute_error(qs[-1])))
             chatter += metrics(vs, dt, ur10, qs, err)["reversals/s"] > 10
             reached += err < 1e-6
-        out.append(f"| {K:g} | {band:g} | {task_gain:g} | {lm:g} | {chatter} | {reached} |")
+        acc = "—" if a_max is None else f"{a_max:g}"
+        out.append(f"| {K:g} | {band:g} | {acc} | {task_gain:g} | {lm:g} | {chatter} | {reached} |")
     return "\n".join(out)
 
 
@@ -497,6 +527,15 @@ def main(argv=None) -> int:
         default=0,
         help="also run this many random UR10 elbow-limit pairs per gain (300: ~1 min)",
     )
+    parser.add_argument(
+        "--pairs-steps", type=int, default=1500, help="steps of each random pair (default 1500)"
+    )
+    parser.add_argument(
+        "--pairs-speed",
+        type=float,
+        default=1.0,
+        help="the random pairs' speed limits as a fraction c of the robot's (default 1)",
+    )
     args = parser.parse_args(argv)
     logging.getLogger().setLevel(logging.ERROR)  # Pink logs configurations past a limit
     n = args.steps
@@ -517,7 +556,7 @@ def main(argv=None) -> int:
     print(table(cases))
     if args.pairs > 0:
         print()
-        print(pairs(args.pairs))
+        print(pairs(args.pairs, steps=args.pairs_steps, speed=args.pairs_speed))
     return 0
 
 
