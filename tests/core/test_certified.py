@@ -175,3 +175,65 @@ def test_prepared_rows_give_the_same_certificate():
         a = kkt_residual(Q, c, G, lo, hi, y)
         b = kkt_residual(Q, c, G, lo, hi, y, prepare(Q, G, lo, hi))
         assert a == pytest.approx(b, rel=1e-12, abs=1e-15)
+
+
+_MN_LEVELS = [qc.Equality([[1.0, 1.0, 0.0]], [2.0])]
+_MN_BOUNDS = qc.Bounds([-1.0, -1.0, 0.5], [2.0, 2.0, 2.0])
+_MN_OPTIMUM = np.array([1.0, 1.0, 0.5])
+
+
+def _bad_minimum_norm_qp(monkeypatch, dx, stuck):
+    """Make the minimum-norm step's QP return its optimum moved by ``dx`` (in ``x``), and,
+    with ``stuck``, the active-set continuation after it return its start (the levels above
+    solve unpatched)."""
+    import qpcoord.core.elimination as elim
+
+    real, real_continuation = elim.Reduced.solve_qp, hier.active_set_ls
+
+    def solve_qp(self, H, f, *args, where="", **kwargs):
+        y = real(self, H, f, *args, where=where, **kwargs)
+        if where != "minimum-norm step":
+            monkeypatch.setattr(hier, "active_set_ls", real_continuation)
+            return y
+        if stuck:
+            monkeypatch.setattr(
+                hier, "active_set_ls", lambda Q, c, G, lo, hi, y0, **kw: (y0, False)
+            )
+        return y + self.project(np.asarray(dx))
+
+    monkeypatch.setattr(elim.Reduced, "solve_qp", solve_qp)
+
+
+def test_minimum_norm_point_rejected_by_its_exact_finish_is_certified(monkeypatch):
+    """The QP's point of the minimum-norm step, within its rows but 0.17 from the optimum,
+    after its exact finish on the active rows is rejected: it was kept unchecked and the
+    solution said "optimal"; it is now checked, fails, and the continuation from it finds
+    the optimum."""
+    _bad_minimum_norm_qp(monkeypatch, [0.1, -0.1, 0.1], stuck=False)
+    monkeypatch.setattr(hier, "_exact_on_active_rows", lambda *args: None)
+    sol = qc.Stack(_MN_LEVELS, bounds=_MN_BOUNDS).solve(engine="python", solver="daqp")
+    assert sol.status == "optimal" and not sol.info["uncertified"]
+    # the continuation solves the step exactly on its working set: a 3-variable system of
+    # condition 1 with entries ~1, to a few ε
+    np.testing.assert_allclose(sol.x, _MN_OPTIMUM, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "dx",
+    [[0.1, -0.1, 0.1], [1.2, -1.2, 0.1]],
+    ids=["within-the-rows", "pulled-back"],
+)
+def test_uncertified_minimum_norm_step_is_inaccurate_and_strict_raises(monkeypatch, dx):
+    """A minimum-norm step whose every path ends on a point away from its optimum (the
+    QP's point within the rows, 0.17 from it, or one through the upper bound of x0 pulled
+    back into it, 1.4 from it; and a continuation that stops where it started) is
+    reported as the level after the last one, never returned as "optimal"."""
+    _bad_minimum_norm_qp(monkeypatch, dx, stuck=True)
+    stack = qc.Stack(_MN_LEVELS, bounds=_MN_BOUNDS, fallback=False)
+    sol = stack.solve(engine="python", solver="daqp")
+    assert np.abs(sol.x - _MN_OPTIMUM).max() > 0.01  # the injected point is what was kept
+    assert sol.status == "inaccurate"
+    assert sol.info["inaccurate"]["level"] == len(_MN_LEVELS)
+    assert sol.info["inaccurate"]["kkt_residual"] > KKT_TOL
+    with pytest.raises(qc.SolverError, match=f"level {len(_MN_LEVELS)}"):
+        stack.solve(engine="python", solver="daqp", strict=True)

@@ -530,8 +530,8 @@ def solve_equality_chain(P: CompiledStack, damping: float) -> tuple[np.ndarray, 
 def _exact_on_active_rows(G, lo, hi, z, p, floor: float) -> np.ndarray | None:
     """The minimum-norm step ``min ½‖z + p‖²`` solved exactly on the rows the QP's point
     ``z`` meets to the backends' opening (:data:`~qpcoord.core.polish.PULL_TOL`), each
-    held at its bound; ``None`` if that point leaves a row (beyond the opening), is far
-    (``FAR_RATIO``) or is not certified (a row held that should be left).
+    held at its bound; ``None`` if that point leaves a row (beyond the opening) or is far
+    (``FAR_RATIO``). The caller certifies it (a row held that should be left is not).
 
     The backends meet the rows only to their opening (``RELAX``, 1e-12): where active
     rows are nearly dependent in the remaining freedom (smallest singular value ``σ``),
@@ -555,13 +555,52 @@ def _exact_on_active_rows(G, lo, hi, z, p, floor: float) -> np.ndarray | None:
         floor, float(np.linalg.norm(z))
     ):
         return None
-    if pull_back(G, lo, hi, ze) is not ze:
-        return None
-    # the step is strictly convex: a certified point is its optimum (rows wrongly held
-    # active, with multipliers of the wrong sign, are not)
+    return ze if pull_back(G, lo, hi, ze) is ze else None
+
+
+def _min_norm_step(G, lo, hi, z, p, floor: float, R: Reduced) -> tuple[np.ndarray, bool, float]:
+    """The minimum-norm step ``min ½‖z + p‖²`` under the inherited rows and bounds
+    (``lo ≤ G z ≤ hi``, none opened) from the QP's point ``z``, certified as a level is.
+
+    Paths, each point certified before it is kept: the QP's point within the opening,
+    finished exactly on the rows it meets to it (:func:`_exact_on_active_rows`) or as it
+    is; then the active-set continuation from it (pulled back into the rows if it slipped
+    through one), as it is or finished exactly on its active rows. The continuation is not
+    always right: from the LexLS humanoid's interior-point QP points (piqp, proxqp,
+    clarabel: 1.4e-8 outside a row, pulled back) it stopped 0.1–0.4 from the optimum
+    (KKT residual 1e-6–5e-4), and the caller tries the fallback backends' points.
+    Returns ``(z, ok, residual)``: ``ok`` False when no path's point is certified (the
+    feasible one of least objective is kept)."""
     Q = np.eye(z.shape[0])
-    st, infeas = kkt_residual(Q, -p, G, lo, hi, ze, prepare(Q, G, lo, hi))
-    return ze if st <= KKT_TOL and infeas <= KKT_FEAS_TOL else None
+    prep = prepare(Q, G, lo, hi)
+    best = None  # (objective, z, residual) of the feasible points that fail
+
+    def certified(w, exact: bool) -> bool:
+        nonlocal best
+        if exact:
+            w = _exact_on_active_rows(G, lo, hi, w, p, floor)
+            if w is None:
+                return False
+        # the step is strictly convex: a certified point is its optimum (rows wrongly held
+        # active, with multipliers of the wrong sign, are not)
+        st, infeas = kkt_residual(Q, -p, G, lo, hi, w, prep)
+        if st <= KKT_TOL and infeas <= KKT_FEAS_TOL:
+            best = (0.0, w, st)
+            return True
+        o = float(np.sum((w + p) ** 2))
+        if best is None or o < best[0]:
+            best = (o, w, st)
+        return False
+
+    zb = pull_back(G, lo, hi, z)
+    if zb is z and (certified(z, True) or certified(z, False)):
+        R.continued += best[1] is not z
+        return best[1], True, best[2]
+    za, _conv = active_set_ls(Q, -p, G, lo, hi, zb, prepared=prep)
+    za = pull_back(G, lo, hi, za)
+    R.continued += 1
+    ok = certified(za, False) or certified(za, True)
+    return best[1], ok, best[2]
 
 
 def solve_hierarchical(
@@ -792,16 +831,32 @@ def solve_hierarchical(
             z = R.solve_qp(np.eye(r), p, y0=y0, where="minimum-norm step")
             # never let the step slip through a row a level above kept (an opened QP)
             G, lo, hi = R.exact_rows(r)
-            zb = pull_back(G, lo, hi, z)
-            if zb is not z:  # pulled back: finish the step exactly from there
-                zb, _ = active_set_ls(np.eye(r), -p, G, lo, hi, zb)
-                z = pull_back(G, lo, hi, zb)
-                R.continued += 1
-            else:
-                ze = _exact_on_active_rows(G, lo, hi, z, p, max(1.0, float(np.linalg.norm(x))))
-                if ze is not None:
-                    z = ze
-                    R.continued += 1
+            if R.Z is not None and R.lb is not None and R.ub is not None:
+                # the bounds are the last rows, Z's own: a variable the levels froze to
+                # rounding (‖Zᵢ‖ ≤ MOVABLE_TOL, Reduced.drop_dependent's rule for a row of
+                # norm 1) is no row of the step; normalised, its rounding reads as a
+                # violation of 0.4 (LexLS humanoid, bounds as a box). The final check
+                # holds its bound.
+                keep = np.ones(G.shape[0], dtype=bool)
+                keep[G.shape[0] - P.n :] = np.einsum("ij,ij->i", R.Z, R.Z) > MOVABLE_TOL**2
+                if not keep.all():
+                    G, lo, hi = G[keep], lo[keep], hi[keep]
+            floor = max(1.0, float(np.linalg.norm(x)))
+            z, ok, kkt = _min_norm_step(G, lo, hi, z, p, floor, R)
+            # then each fallback backend's QP point, as a level's (HiGHS on the LexLS
+            # humanoid with its bounds as a box: the continuation from its point stopped
+            # 8–9 from the optimum)
+            for alt in R.alternatives() if not ok else ():
+                za = R.solve_qp_with(alt, np.eye(r), p, where="minimum-norm step")
+                if za is None:
+                    continue
+                R.fallbacks.append(f"minimum-norm step: {alt} (not certified)")
+                za, ok, ka = _min_norm_step(G, lo, hi, za, p, floor, R)
+                if ok:
+                    z, kkt = za, ka
+                    break
+            if not ok:  # reported as the level after the last one
+                R.uncertified.append((len(P.levels), kkt))
             R.move_to(x + R.lift(z), verified=False)
     return {
         "qp_calls": R.qp_calls,
