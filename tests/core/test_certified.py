@@ -4,6 +4,8 @@ continuation, fallback backends) or the solution says ``status="inaccurate"``.""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
@@ -11,7 +13,7 @@ from support.stacks import retry_leak_case
 
 import qpcoord as qc
 import qpcoord.core.methods.hierarchical as hier
-from qpcoord.core.polish import active_set_ls, kkt_residual
+from qpcoord.core.polish import KKT_FEAS_TOL, KKT_TOL, active_set_ls, kkt_residual
 
 SOLVERS = qc.available_solvers()
 FAST = [s for s in ("daqp", "quadprog", "piqp", "clarabel", "highs", "osqp") if s in SOLVERS]
@@ -237,3 +239,67 @@ def test_uncertified_minimum_norm_step_is_inaccurate_and_strict_raises(monkeypat
     assert sol.info["inaccurate"]["kkt_residual"] > KKT_TOL
     with pytest.raises(qc.SolverError, match=f"level {len(_MN_LEVELS)}"):
         stack.solve(engine="python", solver="daqp", strict=True)
+
+
+def test_a_row_short_of_its_bound_carries_its_gap():
+    """A row within KKT_FEAS_TOL of its bound counts as active, but a multiplier ``μ`` on a
+    row ``s`` short of it is an objective gap ``μ·s`` the cone does not see. Two rows
+    ``δ`` from parallel bound a wedge whose edge is met to the tolerance for a long way:
+    10 along it from the unique optimum the gradient lies in their cone (``μ ~ 10/δ``,
+    right signs), and the point is feasible, 50 above the optimum's value. It was
+    certified by stationarity alone (0); with ``gap=True`` (the minimum-norm step's check)
+    the gap ``μ·s`` = 150 is part of the residual."""
+    C = 1e6  # the rows' bounds: their tolerance is KKT_FEAS_TOL·C
+    delta = 0.5 * KKT_FEAS_TOL * C / 15.0  # 15 along the edge, row 2 is half of it short
+    G = np.array([[1.0, 0.0], [1.0, delta]])
+    lo, hi = np.array([C, -np.inf]), np.array([np.inf, C])
+    Q, c = np.eye(2), np.array([C - 1.0, -5.0])
+    # strictly convex: the KKT point is the optimum (row 1 at its bound, μ = 1; row 2
+    # 5δ short of its bound, no multiplier)
+    optimum = np.array([C, -5.0])
+    held = np.array([C, -15.0])
+    st, infeas = kkt_residual(Q, c, G, lo, hi, optimum, gap=True)
+    assert st <= KKT_TOL and infeas == 0.0
+    # the held point is feasible and its gradient lies in the rows' cone, right signs
+    g = held - c
+    a2 = G[1] / np.linalg.norm(G[1])
+    mu2 = -g[1] / a2[1]
+    mu1 = g[0] + mu2 * a2[0]
+    assert mu1 > 0 and mu2 > 0
+    # the identity holds to the rounding of μ₂·a₂ (ε·μ₂ per entry)
+    eps = np.finfo(float).eps
+    assert np.abs(mu1 * G[0] - mu2 * a2 - g).max() <= 4.0 * eps * mu2
+    st, infeas = kkt_residual(Q, c, G, lo, hi, held, gap=True)
+    assert infeas == 0.0
+    assert st > KKT_TOL, st
+    # a level's check (no gap term) sees stationarity only
+    assert kkt_residual(Q, c, G, lo, hi, held)[0] <= KKT_TOL
+
+
+_HUMANOID_STEP = Path(__file__).resolve().parents[1] / "data" / "humanoid_min_norm_step.npz"
+
+
+def test_humanoid_minimum_norm_step_held_on_rows_dependent_to_rounding_is_not_certified():
+    """The LexLS humanoid's (rows form) minimum-norm step: 8 free directions, 20 rows. Its
+    optimum meets 11 rows whose normals are dependent to rounding (smallest singular value
+    5e-14): they are met to ~1e-13 along a segment 8.7 long. Finishing the step on the
+    rows its QP point met to ACTIVE_TOL held it at the segment's far end (``held``): its
+    gradient lay in the rows' cone with multipliers of 1e14 on rows 1e-13 past their
+    bounds, and the certificate (stationarity 0) accepted a point 8.7 from the optimum
+    whose value is 38 above it. The data: the step's rows, ``p`` (``min ½‖z + p‖²``),
+    the optimum (the native engine's within 9e-11) and the held point."""
+    d = np.load(_HUMANOID_STEP)
+    G, lo, hi, p = d["G"], d["lo"], d["hi"], d["p"]
+    optimum, held = d["optimum"], d["held"]
+    Q = np.eye(p.size)
+    st, infeas = kkt_residual(Q, -p, G, lo, hi, optimum, gap=True)
+    assert st <= KKT_TOL and infeas <= KKT_FEAS_TOL
+    st_held, infeas_held = kkt_residual(Q, -p, G, lo, hi, held, gap=True)
+    # the held point is as feasible as the optimum, so is the segment between them (each
+    # row's violation is convex along it): the held point is not the minimum on a
+    # segment of points feasible to the tolerance; the step is strictly convex
+    assert infeas_held <= KKT_FEAS_TOL
+    assert np.linalg.norm(held - optimum) > 8.0
+    value = 0.5 * np.sum((held + p) ** 2) - 0.5 * np.sum((optimum + p) ** 2)
+    assert value > 30.0
+    assert st_held > KKT_TOL, st_held

@@ -582,8 +582,8 @@ def _min_norm_step(G, lo, hi, z, p, floor: float, R: Reduced) -> tuple[np.ndarra
             if w is None:
                 return False
         # the step is strictly convex: a certified point is its optimum (rows wrongly held
-        # active, with multipliers of the wrong sign, are not)
-        st, infeas = kkt_residual(Q, -p, G, lo, hi, w, prep)
+        # active, with multipliers of the wrong sign or a gap μ·s that is not small, are not)
+        st, infeas = kkt_residual(Q, -p, G, lo, hi, w, prep, gap=True)
         if st <= KKT_TOL and infeas <= KKT_FEAS_TOL:
             best = (0.0, w, st)
             return True
