@@ -13,11 +13,23 @@ from .polish import KKT_TOL
 __all__ = ["Solution", "inaccurate"]
 
 
-def inaccurate(level: int, residual: float, engine: str) -> dict[str, Any]:
+def inaccurate(
+    level: int, residual: float, engine: str, levels: int | None = None
+) -> dict[str, Any]:
     """``Solution.info["inaccurate"]`` for a level that could not be certified: its index,
     its relative KKT residual and a sentence saying why (``engine``: ``"python"``, whose
     check is the level's optimality conditions at ``x``, or ``"native"``, whose check is how
-    far the level's value moved after the level was frozen)."""
+    far the level's value moved after the level was frozen). ``level == levels`` (the
+    stack's level count) is the final minimum-norm step, named so."""
+    if levels is not None and level >= levels:
+        return {
+            "level": level,
+            "kkt_residual": residual,
+            "reason": f"level {level} (the minimum-norm step after the {levels} levels): its "
+            f"optimality conditions hold only to {residual:.3g} (relative KKT residual), "
+            f"above the tolerance {KKT_TOL:g}; the levels' values are certified, x may lie "
+            "elsewhere in their optimal set",
+        }
     if engine == "native":
         what = f"its value moved by {residual:.3g} (relative) after the level was frozen"
     else:

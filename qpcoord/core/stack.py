@@ -329,10 +329,11 @@ class Stack:
         if bad:
             status = "inaccurate"
             k, kkt = bad[0]
-            info["inaccurate"] = inaccurate(k, kkt, "python")
+            info["inaccurate"] = inaccurate(k, kkt, "python", len(P.levels))
             if strict:
+                step = " (the minimum-norm step)" if k >= len(P.levels) else ""
                 raise SolverError(
-                    f"level {k}: the answer could not be certified optimal (KKT residual "
+                    f"level {k}{step}: the answer could not be certified optimal (KKT residual "
                     f"{kkt:.3g}, relative; tolerance {KKT_TOL:g}) with backend {used!r}"
                     + (" or its fallbacks" if self._work.fallback else "")
                 )

@@ -594,12 +594,14 @@ def _min_norm_step(G, lo, hi, z, p, floor: float, R: Reduced) -> tuple[np.ndarra
 
     zb = pull_back(G, lo, hi, z)
     if zb is z and (certified(z, True) or certified(z, False)):
+        assert best is not None  # set by the check that certified
         R.continued += best[1] is not z
         return best[1], True, best[2]
     za, _conv = active_set_ls(Q, -p, G, lo, hi, zb, prepared=prep)
     za = pull_back(G, lo, hi, za)
     R.continued += 1
     ok = certified(za, False) or certified(za, True)
+    assert best is not None  # certified(za, False) records its point whatever the verdict
     return best[1], ok, best[2]
 
 
