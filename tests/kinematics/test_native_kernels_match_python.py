@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 from support.counting_malloc import run_counting_malloc
 from support.native_engine import needs_native
-from support.native_ik import manifold_robot
+from support.native_ik import closed_loop_agrees, engine_pair, manifold_robot
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -348,21 +348,12 @@ def test_an_unreachable_damped_target_runs_alike_on_both_engines(robots, name):
             return [feet, [band, hand], [low]]
         return [[band, hand], [low]]
 
-    ikn = qc.IK(robot, levels(), DT, engine="native")
-    ikp = qc.IK(robot, levels(), DT, engine="python")
+    ikn, ikp = engine_pair(robot, levels, DT)
     assert not ikn._native._hybrid
-    q = q0.copy()
-    for step in range(400):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
-        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s);
-        # the damping makes the last levels' rows near-dependent on the unreachable task's
-        # (mu ~ 1 against rows of size ~1): the engines' answers agree to 1e-9 of the scale
-        # times that level's conditioning, below 1e3 here
-        tol = 1e-6 * max(1.0, float(np.abs(vp).max()))
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    # the damping makes the last levels' rows near-dependent on the unreachable task's
+    # (mu ~ 1 against rows of size ~1): the engines' answers agree to 1e-9 of the scale
+    # times that level's conditioning, below 1e3 here
+    closed_loop_agrees(ikn, ikp, q0, 400, rel_tol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------
@@ -456,18 +447,9 @@ def test_relative_and_coupling_closed_loop_matches_the_python_engine(robots, nam
             return [feet, [hand], low]
         return [[hand], low]
 
-    ikn = qc.IK(robot, levels(), DT, engine="native")
-    ikp = qc.IK(robot, levels(), DT, engine="python")
+    ikn, ikp = engine_pair(robot, levels, DT)
     assert not ikn._native._hybrid
-    q = q0.copy()
-    for step in range(300):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
-        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s)
-        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    closed_loop_agrees(ikn, ikp, q0, 300)
 
 
 @needs_native
@@ -568,18 +550,9 @@ def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name, cls)
             return [feet, [hand], low]
         return [[hand], low]
 
-    ikn = qc.IK(robot, levels(), DT, engine="native")
-    ikp = qc.IK(robot, levels(), DT, engine="python")
+    ikn, ikp = engine_pair(robot, levels, DT)
     assert not ikn._native._hybrid
-    q = q0.copy()
-    for step in range(200):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        # the same QP (rows to rounding) solved by two engines, each to its KKT tolerance
-        # 1e-9 relative to the problem's scale (velocities ≤ the speed limits, a few rad/s)
-        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    closed_loop_agrees(ikn, ikp, q0, 200)
 
 
 @needs_native
@@ -650,16 +623,9 @@ def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
     ikn, ikp = iks
     assert ikn._native.weighted and not ikn._native._hybrid
     assert not ikn._native._python_limits
-    q = q0.copy()
-    for step in range(150):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        # the same weighted QP (rows and box to rounding) solved by both engines in the
-        # whitened variables of the weighted rows' QR (as test_native_support.py's Talos
-        # loop): 1e-9 of the velocities' scale (a few rad/s)
-        tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    # the same weighted QP solved by both engines in the whitened variables of the
+    # weighted rows' QR (as test_native_support.py's Talos loop)
+    closed_loop_agrees(ikn, ikp, q0, 150)
 
 
 _ALLOCATION_RUN = r"""

@@ -117,9 +117,26 @@ def kind_levels(robot: qc.Robot, kind: str, q: np.ndarray) -> list:
 KINDS = ["position", "position_path", "frame_position", "pose", "pose_split", "orientation", "com"]
 
 
-def engine_pair(robot, factory, **options):
-    """A native-step IK and a Python-engine IK of two copies of one stack."""
+def engine_pair(robot, factory, dt: float = DT, **options):
+    """A native-step IK and a Python-engine IK of two copies of one stack (``dt`` s)."""
     return (
-        qc.IK(robot, factory(), DT, engine="native", **options),
-        qc.IK(robot, factory(), DT, engine="python", **options),
+        qc.IK(robot, factory(), dt, engine="native", **options),
+        qc.IK(robot, factory(), dt, engine="python", **options),
     )
+
+
+def closed_loop_agrees(ikn, ikp, q0: np.ndarray, steps: int, rel_tol: float = 1e-9) -> np.ndarray:
+    """Step both IKs from the native step's configurations for ``steps`` steps of the IKs'
+    ``dt``, asserting
+    the same ``v`` at each to ``rel_tol`` of the velocities' scale (``max(1, |v|∞)``, rad/s:
+    each engine solves the same QP to its KKT tolerance 1e-9 relative to that scale; a caller
+    whose levels are worse conditioned passes a looser one and says why). Returns the last
+    configuration."""
+    q = q0.copy()
+    for step in range(steps):
+        vn, _ = ikn.step(q)
+        vp, _ = ikp.step(q)
+        tol = rel_tol * max(1.0, float(np.abs(vp).max()))
+        np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
+        q = ikn.robot.integrate(q, vn, ikn.dt)
+    return q
