@@ -1337,7 +1337,7 @@ class JointCouplingTask(_ErrorTask):
             raise ValueError(f"ratios must not all be zero, got {self.ratios}")
         self._iq = np.array(iq)
         self.gain = _gain(gain)
-        self.offset = self._offset(offset)
+        self.offset = offset  # checked by _checked_parameter, as an assignment
         w = _number(weight, "weight", "per (rad or m)²", positive=True)
         self._init_equality(robot, 1, np.ones(1, dtype=bool), w, name)
         self._init_lm(lm_damping)
@@ -1345,13 +1345,16 @@ class JointCouplingTask(_ErrorTask):
         J[0, iv] = self.ratios
         self._J = J
 
-    @staticmethod
-    def _offset(value: Any) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise ValueError(f"offset must be a number (rad or m), got {value!r}")
-        if not np.isfinite(value):
-            raise ValueError(f"offset must be finite (rad or m), got {value!r}")
-        return float(value)
+    def _checked_parameter(self, name: str, value: Any) -> Any:
+        if name == "offset":  # at construction and on assignment alike
+            if isinstance(value, bool) or not isinstance(
+                value, (int, float, np.integer, np.floating)
+            ):
+                raise ValueError(f"offset must be a number (rad or m), got {value!r}")
+            if not np.isfinite(value):
+                raise ValueError(f"offset must be finite (rad or m), got {value!r}")
+            return float(value)
+        return super()._checked_parameter(name, value)
 
     def set_offset_from_configuration(self, q: Any) -> None:
         """Set ``offset = Σ rᵢ qᵢ`` at configuration ``q`` (keep the current relation)."""

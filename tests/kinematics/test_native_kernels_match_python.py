@@ -475,6 +475,15 @@ def test_an_assigned_offset_or_relative_target_reaches_the_native_rows(robots):
 # ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), "0.3", True])
+def test_a_bad_offset_assigned_is_named_and_kept_out(robots, bad):
+    """The constructor's check, at the assignment: the old offset stays."""
+    coupling = _coupling(robots["panda"])
+    with pytest.raises(ValueError, match="offset must be"):
+        coupling.offset = bad
+    assert coupling.offset == 0.3
+
+
 @needs_native
 def test_a_relative_frame_without_target_raises_its_message_on_the_native_step(robots):
     robot = robots["panda"]
