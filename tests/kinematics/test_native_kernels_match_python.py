@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from support.counting_malloc import run_counting_malloc
+from support.counting_malloc import native_malloc_counts
 from support.native_engine import needs_native
 from support.native_ik import closed_loop_agrees, engine_pair, manifold_robot
 
@@ -638,14 +638,10 @@ def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
 
 
 _ALLOCATION_RUN = r"""
-import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
-sys.path.insert(0, {tests!r})
+from support.malloc_counts import print_step_mallocs
 from test_native_kernels_match_python import _talos_stack, _start, DT
-count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
-count.restype = ctypes.c_longlong
 robot = qc.robots.load("talos")
-print("variant", qc.core.native.variant())
 q0 = _start(robot)
 q = robot.integrate(q0, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
 for method in ("hierarchical", "weighted"):
@@ -653,13 +649,7 @@ for method in ("hierarchical", "weighted"):
     ik = qc.IK(robot, levels, DT, limits=limits, method=method, engine="native")
     assert not ik._native._hybrid and not ik._native._python_limits
     pin.computeJointJacobians(robot.model, robot.data, q)
-    call = ik._native._solver.step
-    for _ in range(20):
-        assert call(q, True, 10.0, True) == 0
-    before = count()
-    for _ in range(500):
-        call(q, True, 10.0, True)
-    print(method, count() - before)
+    print_step_mallocs(method, ik, q)
 """
 
 
@@ -671,9 +661,8 @@ def test_the_new_kernels_do_not_allocate_on_a_floating_base(tmp_path, robots, bu
     low-acceleration kernels (a free-flyer difference) on Talos makes no heap allocation
     after its first calls. Each build of the extension, chosen by QPCOORD_NATIVE_ISA."""
     _robot(robots, "talos")
-    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
-    counts = dict(line.split() for line in out.splitlines())
-    assert counts == {"variant": build, "hierarchical": "0", "weighted": "0"}, out
+    counts = native_malloc_counts(tmp_path, _ALLOCATION_RUN, build)
+    assert counts == {"hierarchical": 0, "weighted": 0}
 
 
 @needs_native
