@@ -15,6 +15,7 @@ from support.native_ik import (
     DT,
     FRAMES,
     KINDS,
+    closed_loop_agrees,
     ee_robot,
     engine_pair,
     ik_robots,
@@ -566,11 +567,7 @@ def test_floating_base_whole_body_is_native_and_matches(robots):
 
     ikn, ikp = engine_pair(robot, levels)
     assert len(ikn._native.kernel_tasks) == 4 and not ikn._native._hybrid
-    for step in range(30):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    closed_loop_agrees(ikn, ikp, q, 30)
 
 
 # ---------------------------------------------------------------------------------------
@@ -855,11 +852,7 @@ def test_posture_over_a_continuous_joint_is_native_and_matches():
     ikn, ikp = engine_pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
     assert not ikn._native._hybrid  # the continuous joint's row: an atan2 natively
     assert native_kind(ikn._dynamic[1]) == TaskKind.POSTURE
-    for step in range(30):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    closed_loop_agrees(ikn, ikp, q, 30)
 
 
 @needs_native
