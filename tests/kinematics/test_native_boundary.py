@@ -13,6 +13,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from support.counting_malloc import native_malloc_counts
+from support.native_engine import needs_native
 from support.native_ik import (
     DT,
     FRAMES,
@@ -34,8 +35,6 @@ from qpcoord.kinematics.native_step import TaskKind, native_kind
 def robots() -> dict[str, qc.Robot]:
     return ik_robots()
 
-
-needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 __all__ = ["robots"]  # the fixture, shared with test_native_step
 
