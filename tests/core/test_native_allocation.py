@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.native_engine import needs_native
-from support.stacks import hard_random_stack
+from support.stacks import hard_random_stack, inequality_shifts
 
 import qpcoord as qc
 
@@ -39,12 +39,10 @@ def _hard_row_scenario(rng) -> dict:
 def _conflict_scenario(rng) -> dict:
     """Conflicting inequality levels with moving rows: misses, seeds, drops (downdates)."""
     s = hard_random_stack(int(rng.integers(100)), n=30, levels=6)
-    ineqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    shift = inequality_shifts(s)
 
     def move(step, x=None):
-        for j, t in enumerate(ineqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        shift(step)
 
     return {"stack": s, "move": move, "daqp": None}
 

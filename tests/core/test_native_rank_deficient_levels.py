@@ -28,7 +28,7 @@ from support.native_engine import (
     path_check,
 )
 from support.published import published_stack
-from support.stacks import hard_random_stack
+from support.stacks import hard_random_stack, inequality_shifts
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -127,12 +127,10 @@ def test_compressed_and_wide_least_squares_equal_python(seed):
     st = qc.Stack([*st.levels, [tall, last]], bounds=qc.Bounds(-np.ones(n), np.ones(n)))
     P = st._compiled
     new = NativeHierarchy(P, st.damping)
-    ineqs = [t for lev in st.levels for t in lev if isinstance(t, qc.Inequality)]
+    move = inequality_shifts(st)
     b0 = tall.b.copy()
     for step in range(8):
-        for j, t in enumerate(ineqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        move(step)
         tall.update(b=b0 + 0.1 * np.sin(0.5 * step + np.arange(40)))
         xn, rn, info = new.solve(P)
         assert new.counters.qr_closed_forms == 2  # the wide first and the tall last level

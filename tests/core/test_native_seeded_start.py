@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.native_engine import X_TOL, native_solver, needs_native, path_check
-from support.stacks import hard_random_stack, no_freedom_stack, vertex_stack
+from support.stacks import hard_random_stack, inequality_shifts, no_freedom_stack, vertex_stack
 
 import qpcoord as qc
 
@@ -33,12 +33,10 @@ def test_a_missed_working_set_seeds_the_next_start(seed):
     P = s._compiled
     seeded = NativeHierarchy(P, s.damping)
     cold = NativeHierarchy(P, s.damping)
-    eqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    move = inequality_shifts(s)
     used = 0
     for step in range(12):
-        for j, t in enumerate(eqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        move(step)
         xs, rs, info = seeded.solve(P)
         xc, rc, _ = cold.solve(P, warm=False)
         ref = s.solve(engine="python").level_residuals

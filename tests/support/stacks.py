@@ -75,6 +75,20 @@ def hard_random_stack(seed: int, n: int = 40, levels: int = 8) -> qc.Stack:
     return qc.Stack(tasks, bounds=qc.Bounds(-np.ones(n), np.ones(n)))
 
 
+def inequality_shifts(stack: qc.Stack):
+    """``move(step)`` of the inequality tasks of ``stack``: each call shifts both bounds of
+    its ``j``-th inequality task by ``0.05 sin(0.7 step + j)`` (cumulative), so that stored
+    working sets miss and rows enter and leave them."""
+    ineqs = [t for lev in stack.levels for t in lev if isinstance(t, qc.Inequality)]
+
+    def move(step: int) -> None:
+        for j, t in enumerate(ineqs):
+            shift = 0.05 * np.sin(0.7 * step + j)
+            t.update(lower=t.lower + shift, upper=t.upper + shift)
+
+    return move
+
+
 def vertex_stack(
     seed: int,
     n: int = 12,
