@@ -150,3 +150,35 @@ def no_freedom_stack() -> tuple[qc.Stack, qc.Equality, np.ndarray]:
 def clipped_stack() -> qc.Stack:
     """One level of 3 equality rows (targets 1, 2, 3) that the box [-1, 1] clips to 1."""
     return qc.Stack([qc.Equality(np.eye(3), [1.0, 2.0, 3.0])], bounds=qc.Bounds(-1.0, 1.0))
+
+
+def region_problem(seed: int, n: int = 8, p: int = 3, engine: str | None = None):
+    """A weighted stack with no soft inequality, bounds and hard rows, everything affine in
+    θ (``p`` parameters): the critical-region cache of a persistent QP applies. Returns
+    ``(stack, pq, rng, hard)``: its :class:`~qpcoord.core.persistent.PersistentQP` on
+    ``engine`` (``None``: the default) parametrised in θ, the generator after it, the hard
+    rows."""
+    rng = np.random.default_rng(seed)
+    track = qc.Equality(rng.normal(size=(5, n)), np.zeros(5), name="track")
+    effort = qc.Equality(np.eye(n), np.zeros(n), name="effort")
+    hard = qc.Inequality(rng.normal(size=(3, n)), -1.0, 1.0, name="hard")
+    stack = qc.Stack(
+        [track, effort],
+        bounds=qc.Bounds(-0.5 * np.ones(n), 0.5 * np.ones(n)),
+        constraints=[hard],
+        weight_ratio=1e-2,
+    )
+    pq = stack.persistent(engine=engine)
+    M = rng.normal(size=(5, p))
+    # upper = 1 + U θ with |θ_i| ≤ 2 (the property test): kept above the lower limit -1
+    # (hypothesis found a seed whose upper limit crossed it, a ValueError)
+    U = 0.2 * rng.normal(size=(3, p))
+    U /= max(1.0, 2.0 * float(np.abs(U).sum(axis=1).max()) / 1.5)
+    pq.parametrize(
+        p,
+        {
+            track: (np.zeros(5), M),
+            hard: ((-np.ones(3), np.zeros((3, p))), (np.ones(3), U)),
+        },
+    )
+    return stack, pq, rng, hard
