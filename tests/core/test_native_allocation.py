@@ -13,25 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.native_engine import needs_native
-from support.stacks import hard_random_stack, inequality_shifts
+from support.stacks import hard_random_stack, hard_row_stack, inequality_shifts
 
 import qpcoord as qc
 
 
 def _hard_row_scenario(rng) -> dict:
     """Hard rows that x = 0 breaks (the least-violation phase runs), one level, moving."""
-    n = 8
-    xs = rng.uniform(-0.5, 0.5, n)
-    C = rng.standard_normal((5, n))
-    C /= np.linalg.norm(C, axis=1)[:, None]
-    C *= np.sign(C @ xs)[:, None]
-    hard = qc.Inequality(C, C @ xs - 0.05, np.full(5, np.inf))
-    lev = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))
-    s = qc.Stack([lev], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+    s, _, shift = hard_row_stack(rng)
 
     def move(step, x=None):
-        xt = np.clip(xs + 0.4 * np.sin(0.7 * step + np.arange(n)), -0.9, 0.9)
-        hard.update(lower=C @ xt - 0.05)
+        shift(step)
 
     return {"stack": s, "move": move, "daqp": None}
 

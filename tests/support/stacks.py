@@ -89,6 +89,28 @@ def inequality_shifts(stack: qc.Stack):
     return move
 
 
+def hard_row_stack(rng: np.random.Generator):
+    """Five unit hard inequality rows over 8 variables that x = 0 breaks (the
+    least-violation phase runs at every call) under one equality level of 3 rows, in the
+    box |x| <= 1. Returns ``(stack, hard, move)``: ``move(step)`` moves the rows' lower
+    bounds so that a point ``xt`` stays 0.05 inside every row, and returns ``xt``."""
+    n = 8
+    xs = rng.uniform(-0.5, 0.5, n)
+    C = rng.standard_normal((5, n))
+    C /= np.linalg.norm(C, axis=1)[:, None]
+    C *= np.sign(C @ xs)[:, None]
+    hard = qc.Inequality(C, C @ xs - 0.05, np.full(5, np.inf))
+    lev = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))
+    stack = qc.Stack([lev], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+
+    def move(step: int) -> np.ndarray:
+        xt = np.clip(xs + 0.4 * np.sin(0.7 * step + np.arange(n)), -0.9, 0.9)
+        hard.update(lower=C @ xt - 0.05)
+        return xt
+
+    return stack, hard, move
+
+
 def vertex_stack(
     seed: int,
     n: int = 12,
