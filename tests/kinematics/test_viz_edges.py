@@ -241,21 +241,30 @@ def test_the_overlay_text_names_the_frame(run):
     assert notes[-1].text.endswith(notes[-1].nearest[-1].state)  # no "active:" section
 
 
+def _annotated_page(panda, run, path, **options):
+    """The run annotated and animated with its ball and the table, written at ``path``
+    (``options``: more of ``viz.animate``'s): the notes, the page's path and the frames
+    kept."""
+    notes = viz.annotate(run["ik"], run["q"], run["sols"], collision=run["avoid"])
+    out = viz.animate(
+        panda,
+        run["q"],
+        path,
+        dt=DT,
+        obstacles=[run["ball"], {"normal": (0, 0, 1), "offset": TABLE_Z}],
+        annotations=notes,
+        **options,
+    )
+    keep = viz._frames(np.arange(len(run["q"])) * DT, viz.DEFAULT_FPS, viz.DEFAULT_MAX_FRAMES)
+    return notes, out, keep
+
+
 def test_the_page_draws_what_the_notes_say(panda, run, tmp_path, monkeypatch):
     import json
     import re
 
-    notes = viz.annotate(run["ik"], run["q"], run["sols"], collision=run["avoid"])
     sent = _recorded(monkeypatch)
-    out = viz.animate(
-        panda,
-        run["q"],
-        tmp_path / "edges.html",
-        dt=DT,
-        obstacles=[run["ball"], {"normal": (0, 0, 1), "offset": TABLE_Z}],
-        annotations=notes,
-    )
-    keep = viz._frames(np.arange(len(run["q"])) * DT, viz.DEFAULT_FPS, viz.DEFAULT_MAX_FRAMES)
+    notes, out, keep = _annotated_page(panda, run, tmp_path / "edges.html")
     anim = next(c for c in sent if c["type"] == "set_animation")
     tracks = {a["path"]: {t["name"]: t for t in a["clip"]["tracks"]} for a in anim["animations"]}
     base = "/meshcat/annotations"
@@ -393,17 +402,7 @@ def test_the_annotated_page_shows_each_frame_offline_in_headless_chromium(panda,
     limit is marked in yellow; nothing but the file and its data: URLs is requested."""
     from support.browser import offline_viewer, pixels
 
-    notes = viz.annotate(run["ik"], run["q"], run["sols"], collision=run["avoid"])
-    page_path = viz.animate(
-        panda,
-        run["q"],
-        tmp_path / "edges.html",
-        dt=DT,
-        obstacles=[run["ball"], {"normal": (0, 0, 1), "offset": TABLE_Z}],
-        annotations=notes,
-        loop=False,
-    )
-    keep = viz._frames(np.arange(len(run["q"])) * DT, viz.DEFAULT_FPS, viz.DEFAULT_MAX_FRAMES)
+    notes, page_path, keep = _annotated_page(panda, run, tmp_path / "edges.html", loop=False)
     near = next(k for k in keep if notes[k].nearest[0].state == "near")
     assert notes[0].joints, "the run starts at a limit (the acceleration limit from rest)"
 
