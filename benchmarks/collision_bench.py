@@ -39,9 +39,7 @@ Run: ``python benchmarks/collision_bench.py [--steps 1400] [--no-pink] [--no-min
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import subprocess
 import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -49,10 +47,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-import pinocchio as pin  # noqa: E402
+from _mink import call_mink_side  # noqa: E402
 from _table import markdown, preamble  # noqa: E402
 from cell_stacks import PANDA_STACKS, SPHERE_RADIUS, TABLE_DROP, Loop  # noqa: E402
-from edges import MINK_SETUP, MINK_VENV, _joint_body  # noqa: E402
 from ik_peers import (  # noqa: E402
     DT,
     HAND_ALPHA,
@@ -66,7 +63,6 @@ from ik_peers import scenario as peers_scenario  # noqa: E402
 import qpcoord as qc  # noqa: E402
 from qpcoord.kinematics.collision import Box, Capsule, CollisionAvoidance, Sphere  # noqa: E402
 
-HERE = os.path.dirname(os.path.abspath(__file__))
 HAND = "panda_hand_tcp"
 D_MIN, D_INFLUENCE = 0.02, 0.10  # m: CollisionAvoidance's defaults, cell_stacks.py's task
 FINGERS = ("panda_finger_joint1", "panda_finger_joint2")  # locked in qc.robots.load("panda")
@@ -165,60 +161,31 @@ def run_placo(sc: dict, watch: Watch, steps: int):
 
 
 def run_mink(sc: dict, watch: Watch, steps: int):
-    python = MINK_VENV / "bin" / "python"
-    if not python.exists():
-        return None, f"mink: not run (no benchmarks/.mink-venv; {MINK_SETUP})."
     robot = sc["robot"]
-    model = robot.model
-    frame = model.frames[model.getFrameId(HAND)]
-    quat = pin.Quaternion(frame.placement.rotation)
     q0 = sc["q0"]
     target = robot.frame_pose(q0, HAND)
     target[:3, :3] = sc["rotation"]
-    scenario = {
-        "urdf": str(robot.urdf_path),
-        "package_dir": str(robot.package_dirs[0]),
-        "site": {
-            "body": _joint_body(model, frame.parentJoint),
-            "pos": frame.placement.translation.tolist(),
-            "quat": [quat.w, quat.x, quat.y, quat.z],
-        },
-        "joints": list(model.names[1:]),
-        "velocity": sc["speed"].tolist(),
-        "check": [q0.tolist()],
-        "dt": DT,
-        "collision": {
-            "fixed": list(FINGERS),
-            "sphere": [*watch.centre.tolist(), SPHERE_RADIUS],
-            "min_distance": D_MIN,
-            "detection_distance": D_INFLUENCE,
-        },
-        "runs": [
-            {
-                "label": "mink",
-                "q0": q0.tolist(),
-                "steps": steps,
-                "target": target.tolist(),
-                "path": sc["targets"][:steps].tolist(),
-                "position_only": False,
-                "gain": HAND_ALPHA,
-                "lm_damping": 0.0,
-                "posture_cost": POSTURE_WEIGHT,
-                "config_gain": 0.5,
-            }
-        ],
+    run = {
+        "label": "mink",
+        "q0": q0,
+        "steps": steps,
+        "target": target,
+        "path": sc["targets"][:steps],
+        "position_only": False,
+        "gain": HAND_ALPHA,
+        "lm_damping": 0.0,
+        "posture_cost": POSTURE_WEIGHT,
+        "config_gain": 0.5,
     }
-    done = subprocess.run(
-        [str(python), os.path.join(HERE, "mink_side.py")],
-        input=json.dumps(scenario) + "\n",
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if done.returncode != 0:
-        tail = done.stderr.strip().splitlines()[-1:] or ["no message"]
-        return None, f"mink: failed ({tail[0]})."
-    out = json.loads(done.stdout)
+    collision = {
+        "fixed": list(FINGERS),
+        "sphere": [*watch.centre, SPHERE_RADIUS],
+        "min_distance": D_MIN,
+        "detection_distance": D_INFLUENCE,
+    }
+    out, why = call_mink_side(robot, HAND, [run], DT, [q0], sc["speed"], collision)
+    if out is None:
+        return None, why + "."
     same = float(np.abs(np.array(out["poses"][0]) - robot.frame_pose(q0, HAND)).max())
     run = out["runs"][0]
     qs = [np.array(q) for q in run["q"]]

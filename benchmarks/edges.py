@@ -32,7 +32,7 @@ Scenarios:
   mink has no acceleration limit).
 
 mink runs in its own environment (``benchmarks/mink_side.py`` under
-``benchmarks/.mink-venv``, see :data:`MINK_SETUP`) on a MuJoCo model built from the same
+``benchmarks/.mink-venv``, see ``_mink.MINK_SETUP``) on a MuJoCo model built from the same
 URDF, ``tool0`` a site; the notes under the table give its version and how far its
 ``tool0`` pose is from qpcoord's, or why it did not run.
 
@@ -55,17 +55,15 @@ Run::
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
-import subprocess
-from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
+from _mink import call_mink_side  # noqa: E402
 from _table import markdown, preamble  # noqa: E402
 
 import qpcoord as qc  # noqa: E402
@@ -73,13 +71,6 @@ from qpcoord.kinematics.tasks import LIMIT_BAND, AccelerationLimits  # noqa: E40
 
 Q_UR = np.array([0.0, -1.2, 1.6, -1.9, -1.57, 0.0])
 FRAME = "tool0"
-HERE = Path(__file__).resolve().parent
-#: mink's own environment (MuJoCo is not a qpcoord dependency): ``benchmarks/mink_side.py``
-MINK_VENV = HERE / ".mink-venv"
-MINK_SETUP = (
-    "python3 -m venv benchmarks/.mink-venv && "
-    "benchmarks/.mink-venv/bin/pip install -r benchmarks/mink-requirements.txt"
-)
 
 
 def metrics(vs: np.ndarray, dt: float, robot, qs: np.ndarray, error: float) -> dict:
@@ -138,18 +129,6 @@ def _qc_loop(robot, q0, ik, steps):
     return np.array(vs), np.array(qs)
 
 
-def _joint_body(model, joint: int) -> str:
-    """The URDF link a joint moves: the body frame at the joint's own frame."""
-    for frame in model.frames:
-        if (
-            frame.type == pin.FrameType.BODY
-            and frame.parentJoint == joint
-            and frame.placement.isIdentity()
-        ):
-            return frame.name
-    raise ValueError(f"no body frame at joint {model.names[joint]}")
-
-
 def mink_runs(robot, runs: list[dict], dt: float) -> tuple[dict, str]:
     """mink's runs (``benchmarks/mink_side.py`` in ``benchmarks/.mink-venv``) on a MuJoCo
     model of the same URDF, ``FRAME`` as a site: (label -> (vs, qs, failed), a note).
@@ -157,42 +136,11 @@ def mink_runs(robot, runs: list[dict], dt: float) -> tuple[dict, str]:
     Each run: ``label``, ``q0``, ``steps``, ``target`` (4 × 4), ``position_only``, ``gain``
     (per step), ``lm_damping``, ``posture_cost``, ``config_gain`` (``None``: mink's default);
     mink's ``ConfigurationLimit`` and ``VelocityLimit`` (the robot's speed limits)."""
-    python = MINK_VENV / "bin" / "python"
-    if not python.exists():
-        return {}, f"mink: not run (no benchmarks/.mink-venv; {MINK_SETUP})"
-    model = robot.model
-    frame = model.frames[model.getFrameId(FRAME)]
-    quat = pin.Quaternion(frame.placement.rotation)
     check = [np.asarray(r["q0"], dtype=float) for r in runs]
     check.append(robot.random_configuration(0))
-    scenario = {
-        "urdf": str(robot.urdf_path),
-        "package_dir": str(robot.package_dirs[0]),
-        "site": {
-            "body": _joint_body(model, frame.parentJoint),
-            "pos": frame.placement.translation.tolist(),
-            "quat": [quat.w, quat.x, quat.y, quat.z],
-        },
-        "joints": list(model.names[1:]),
-        "velocity": robot.velocity_limit.tolist(),
-        "check": [q.tolist() for q in check],
-        "dt": dt,
-        "runs": [
-            {**r, "q0": np.asarray(r["q0"]).tolist(), "target": np.asarray(r["target"]).tolist()}
-            for r in runs
-        ],
-    }
-    done = subprocess.run(
-        [str(python), str(HERE / "mink_side.py")],
-        input=json.dumps(scenario) + "\n",
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if done.returncode != 0:
-        tail = done.stderr.strip().splitlines()[-1:] or ["no message"]
-        return {}, f"mink: failed ({tail[0]})"
-    out = json.loads(done.stdout)
+    out, why = call_mink_side(robot, FRAME, runs, dt, check, robot.velocity_limit)
+    if out is None:
+        return {}, why
     same = max(
         float(np.abs(np.array(T) - robot.frame_pose(q, FRAME)).max())
         for q, T in zip(check, out["poses"], strict=True)

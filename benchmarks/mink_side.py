@@ -1,5 +1,5 @@
 """mink's side of ``benchmarks/edges.py`` and ``benchmarks/collision_bench.py``, run in mink's
-own environment.
+own environment (by ``benchmarks/_mink.py``'s ``call_mink_side``).
 
 mink needs MuJoCo, which is not a qpcoord dependency: this script runs under
 ``benchmarks/.mink-venv/bin/python`` (``python3 -m venv benchmarks/.mink-venv &&

@@ -23,16 +23,8 @@ LEXLS_BENCH = ROOT / "benchmarks" / "lexls" / "bench.py"
 
 def _run(tmp_path: Path, *args: str) -> tuple[str, list[dict]]:
     out = tmp_path / "rows.json"
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run(
-        [sys.executable, str(SCRIPT), "--quick", "--json", str(out), *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=600,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return proc.stdout, json.loads(out.read_text())
+    stdout = _script(SCRIPT.name, "--quick", "--json", str(out), *args, timeout=600)
+    return stdout, json.loads(out.read_text())
 
 
 def test_quick_without_placo(tmp_path):
@@ -106,24 +98,7 @@ def test_stack_bench_one_shot_table():
     """``stack_bench.py --one-shot-only``: the three calls per size, and the daqp floor solves
     the weighted QP of the same numbers (its x matches qpcoord's weighted method)."""
     pytest.importorskip("daqp")
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "benchmarks" / "stack_bench.py"),
-            "--one-shot-only",
-            "--one-shot-steps",
-            "20",
-            "--sizes",
-            "7",
-        ],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    out = proc.stdout
+    out = _script("stack_bench.py", "--one-shot-only", "--one-shot-steps", "20", "--sizes", "7")
     for call in ("solve_stack native", "solve_stack python", "daqp.solve floor"):
         assert f"| 7 | {call} | 18 |" in out
     note = next(line for line in out.splitlines() if line.startswith("<!-- n=7"))
@@ -245,16 +220,7 @@ def test_oneshot_table():
     """``oneshot.py``: every call and part has its row, and the direct daqp call solves the
     stack's weighted QP (its x matches qpcoord's weighted method to daqp's tolerance)."""
     pytest.importorskip("daqp")
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "oneshot.py"), "--steps", "20", "--parts"],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    out = proc.stdout
+    out = _script("oneshot.py", "--steps", "20", "--parts")
     for row in ("tasks + Bounds", "qc.solve_stack", "Stack + solve", "daqp.solve weighted QP"):
         assert f"| {row} |" in out
     assert "| native engine: first (cold) call |" in out
@@ -271,14 +237,7 @@ def test_engine_agreement_table():
 
     if not native.available():
         pytest.skip("the native engine is not built")
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "engine_agreement.py"), "--seeds", "3",
-         "--first", "232", "--show", "silent"],
-        capture_output=True, text=True, env=env, timeout=300,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    out = proc.stdout
+    out = _script("engine_agreement.py", "--seeds", "3", "--first", "232", "--show", "silent")
     assert "Seeds 232-234:" in out
     for cat in ("flagged", "scale", "silent", "other", "error"):
         assert f"| {cat} |" in out

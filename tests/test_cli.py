@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from support.pages import run_blocks, run_page
 
 from qpcoord.cli import main
 
@@ -69,9 +70,7 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_second():
 
 @pytest.mark.parametrize("method", ["hierarchical", "weighted"])
 def test_readme_example_runs(method):
-    readme = (ROOT / "README.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
-    code = next(block for block in blocks if "qc.Stack(" in block)
+    code = next(block for block in run_blocks(ROOT / "README.md") if "qc.Stack(" in block)
     ns: dict = {}
     exec(compile(code, "README.md", "exec"), ns)
     sol = ns["stack"].solve(method=method)
@@ -93,12 +92,8 @@ def test_ddl_track_bad_preset_is_a_clean_error(capsys):
 
 def test_every_readme_code_block_runs():
     """The README's snippets run in order, in one namespace (as a reader would paste them)."""
-    readme = (ROOT / "README.md").read_text()
-    ns: dict = {}
-    blocks = re.findall(r"```python\n(.*?)```", readme, re.S)
-    assert len(blocks) >= 3
-    for i, code in enumerate(blocks):
-        exec(compile(code, f"README.md block {i}", "exec"), ns)
+    assert len(run_blocks(ROOT / "README.md")) >= 3
+    ns = run_page(ROOT / "README.md")
     assert ns["traj"].max_error < 1e-3
 
 

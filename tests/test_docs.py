@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from support.pages import FENCE, page_blocks
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -98,32 +99,11 @@ NUMBER_RTOL = 2e-3
 #: (1e-17 on one machine, 3e-16 on another): they are compared absolutely, all equal to 0.
 NUMBER_ATOL = 1e-6
 
-_FENCE = re.compile(r"^```([\w-]*)([^\n]*)\n(.*?)^```[ \t]*$", re.S | re.M)
 _NUMBER = r"[-+−]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 
 
 def _pages() -> list[Path]:
     return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-
-
-def page_blocks(path: Path) -> list[tuple[str, str, str]]:
-    """``(kind, code, expected_output)`` per python block of the page, in page order: kind is
-    ``"run"`` or ``"shown"`` (a title after ``python``), expected_output the text block that
-    follows a run block or ``""``."""
-    text = path.read_text(encoding="utf-8")
-    fences = list(_FENCE.finditer(text))
-    out = []
-    for k, m in enumerate(fences):
-        lang, rest, code = m.group(1), m.group(2).strip(), m.group(3)
-        if lang != "python":
-            continue
-        expected = ""
-        if k + 1 < len(fences):
-            nxt = fences[k + 1]
-            if nxt.group(1) == "text" and not text[m.end() : nxt.start()].strip():
-                expected = nxt.group(3)
-        out.append(("shown" if rest else "run", code, expected))
-    return out
 
 
 def _pattern(expected: str) -> tuple[re.Pattern, list[float]]:
@@ -196,6 +176,6 @@ def test_the_snippets_of_a_page_run_and_print_what_it_shows(page, tmp_path, monk
 def test_shown_only_blocks_say_why() -> None:
     for path in _pages():
         text = path.read_text(encoding="utf-8")
-        for m in _FENCE.finditer(text):
+        for m in FENCE.finditer(text):
             if m.group(1) == "python" and m.group(2).strip():
                 assert "title=" in m.group(2), f"{path.name}: {m.group(0).splitlines()[0]!r}"

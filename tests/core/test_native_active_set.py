@@ -24,7 +24,7 @@ import pytest
 from support.hlsp import load
 from support.native_engine import LEVEL_TOL, X_TOL, native_solver, needs_native, path_check
 from support.published import published_module
-from support.stacks import hard_random_stack, no_freedom_stack, vertex_stack
+from support.stacks import hard_random_stack, inequality_shifts, no_freedom_stack, vertex_stack
 
 import qpcoord as qc
 
@@ -51,12 +51,10 @@ def test_conflicting_rows_many_iterations_equal_python(seed):
     taken at many iterations and every step equals the Python engine."""
     st = hard_random_stack(seed, n=30, levels=6)
     P, h = native_solver(st)
-    ineqs = [t for lev in st.levels for t in lev if isinstance(t, qc.Inequality)]
+    move = inequality_shifts(st)
     total = iters = 0
     for step in range(8):
-        for j, t in enumerate(ineqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        move(step)
         s, it = _slack_check(st, P, h)
         total += s
         iters += it

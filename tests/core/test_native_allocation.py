@@ -13,25 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.native_engine import needs_native
-from support.stacks import hard_random_stack
+from support.stacks import hard_random_stack, hard_row_stack, inequality_shifts
 
 import qpcoord as qc
 
 
 def _hard_row_scenario(rng) -> dict:
     """Hard rows that x = 0 breaks (the least-violation phase runs), one level, moving."""
-    n = 8
-    xs = rng.uniform(-0.5, 0.5, n)
-    C = rng.standard_normal((5, n))
-    C /= np.linalg.norm(C, axis=1)[:, None]
-    C *= np.sign(C @ xs)[:, None]
-    hard = qc.Inequality(C, C @ xs - 0.05, np.full(5, np.inf))
-    lev = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))
-    s = qc.Stack([lev], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+    s, _, shift = hard_row_stack(rng)
 
     def move(step, x=None):
-        xt = np.clip(xs + 0.4 * np.sin(0.7 * step + np.arange(n)), -0.9, 0.9)
-        hard.update(lower=C @ xt - 0.05)
+        shift(step)
 
     return {"stack": s, "move": move, "daqp": None}
 
@@ -39,12 +31,10 @@ def _hard_row_scenario(rng) -> dict:
 def _conflict_scenario(rng) -> dict:
     """Conflicting inequality levels with moving rows: misses, seeds, drops (downdates)."""
     s = hard_random_stack(int(rng.integers(100)), n=30, levels=6)
-    ineqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    shift = inequality_shifts(s)
 
     def move(step, x=None):
-        for j, t in enumerate(ineqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        shift(step)
 
     return {"stack": s, "move": move, "daqp": None}
 

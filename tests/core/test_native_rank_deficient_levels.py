@@ -28,7 +28,7 @@ from support.native_engine import (
     path_check,
 )
 from support.published import published_stack
-from support.stacks import hard_random_stack
+from support.stacks import hard_random_stack, inequality_shifts
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -127,12 +127,10 @@ def test_compressed_and_wide_least_squares_equal_python(seed):
     st = qc.Stack([*st.levels, [tall, last]], bounds=qc.Bounds(-np.ones(n), np.ones(n)))
     P = st._compiled
     new = NativeHierarchy(P, st.damping)
-    ineqs = [t for lev in st.levels for t in lev if isinstance(t, qc.Inequality)]
+    move = inequality_shifts(st)
     b0 = tall.b.copy()
     for step in range(8):
-        for j, t in enumerate(ineqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        move(step)
         tall.update(b=b0 + 0.1 * np.sin(0.5 * step + np.arange(40)))
         xn, rn, info = new.solve(P)
         assert new.counters.qr_closed_forms == 2  # the wide first and the tall last level
@@ -169,6 +167,36 @@ def _equality_under_bounds(seed: int, rank: int, cond: float):
     return st, move
 
 
+def _tall_rank_deficient(seed: int):
+    """Tall equality levels of low rank (30 x 24 of rank 9, 20 x 24 of rank 6), then a
+    full-rank 5 x 24 one; the two first levels' targets move. Returns (stack, move(step))."""
+    rng = np.random.default_rng(seed)
+    n = 24
+    A1 = rng.standard_normal((30, 9)) @ rng.standard_normal((9, n))
+    A2 = rng.standard_normal((20, 6)) @ rng.standard_normal((6, n))
+    A3 = rng.standard_normal((5, n))
+    b1, b2, b3 = (rng.standard_normal(m) for m in (30, 20, 5))
+    t1, t2, t3 = qc.Equality(A1, b1), qc.Equality(A2, b2), qc.Equality(A3, b3)
+
+    def move(step: int) -> None:
+        t1.update(b=b1 + 0.3 * step * rng.standard_normal(30))
+        t2.update(b=b2 + 0.3 * np.cos(step) * rng.standard_normal(20))
+
+    return qc.Stack([t1, t2, t3]), move
+
+
+def _path_count(st: qc.Stack, move, steps: int, counter: str, unique: bool) -> int:
+    """The total of the native ``Stats`` field ``counter`` over ``steps`` solves of ``st``,
+    each after ``move(step)`` and checked against the Python engine (level values, and x if
+    ``unique``: :func:`support.native_engine.path_check`)."""
+    P, h = native_solver(st)
+    total = 0
+    for step in range(steps):
+        move(step)
+        total += path_check(st, P, h, counter, unique)[0]
+    return total
+
+
 @needs_native
 @pytest.mark.parametrize(
     ("seed", "rank", "cond", "unique"),
@@ -182,12 +210,7 @@ def test_equality_level_on_the_bounds(seed, rank, cond, unique):
     trial's K): equal to the Python engine at every step, x
     compared where the problem is well conditioned."""
     st, move = _equality_under_bounds(seed, rank, cond)
-    P, h = native_solver(st)
-    total = 0
-    for step in range(8):
-        move(step)
-        total += path_check(st, P, h, "k_qr_reuses", unique)[0]
-    assert total > 0
+    assert _path_count(st, move, 8, "k_qr_reuses", unique) > 0
 
 
 @needs_native
@@ -197,21 +220,9 @@ def test_rank_deficient_tall_levels_closed_form_and_freeze(seed):
     closed forms feasible: the minimum-norm step and the row space frozen come from the RZ;
     the last level and the minimum-norm stage then see the same null space. x is unique:
     equal to the Python engine's, over changing targets."""
-    rng = np.random.default_rng(seed)
-    n = 24
-    A1 = rng.standard_normal((30, 9)) @ rng.standard_normal((9, n))
-    A2 = rng.standard_normal((20, 6)) @ rng.standard_normal((6, n))
-    A3 = rng.standard_normal((5, n))
-    b1, b2, b3 = (rng.standard_normal(m) for m in (30, 20, 5))
-    t1, t2, t3 = qc.Equality(A1, b1), qc.Equality(A2, b2), qc.Equality(A3, b3)
-    st = qc.Stack([t1, t2, t3])
-    P, h = native_solver(st)
-    total = 0
-    for step in range(4):
-        t1.update(b=b1 + 0.3 * step * rng.standard_normal(30))
-        t2.update(b=b2 + 0.3 * np.cos(step) * rng.standard_normal(20))
-        total += path_check(st, P, h, "rz_factors", True)[0]
-    assert total >= 8  # both rank-deficient levels at every step
+    st, move = _tall_rank_deficient(seed)
+    # both rank-deficient levels at every step
+    assert _path_count(st, move, 4, "rz_factors", True) >= 8
 
 
 @needs_native
@@ -224,12 +235,7 @@ def test_rank_deficient_k_by_rz(seed, rank, cond, unique):
     """An equality level held by the bounds (its active set's K rank-deficient): the
     minimum-norm step by the RZ equals the Python engine's."""
     st, move = _equality_under_bounds(seed, rank, cond)
-    P, h = native_solver(st)
-    total = 0
-    for step in range(8):
-        move(step)
-        total += path_check(st, P, h, "rz_factors", unique)[0]
-    assert total > 0
+    assert _path_count(st, move, 8, "rz_factors", unique) > 0
 
 
 @needs_native
@@ -239,21 +245,9 @@ def test_rank_deficient_tall_closed_forms(seed):
     forms are accepted, then a full-rank level: both rank-deficient levels frozen by the null
     space (N from the RZ); x is unique and equals the Python engine's over changing
     targets."""
-    rng = np.random.default_rng(seed)
-    n = 24
-    A1 = rng.standard_normal((30, 9)) @ rng.standard_normal((9, n))
-    A2 = rng.standard_normal((20, 6)) @ rng.standard_normal((6, n))
-    A3 = rng.standard_normal((5, n))
-    b1, b2, b3 = (rng.standard_normal(m) for m in (30, 20, 5))
-    t1, t2, t3 = qc.Equality(A1, b1), qc.Equality(A2, b2), qc.Equality(A3, b3)
-    st = qc.Stack([t1, t2, t3])
-    P, h = native_solver(st)
-    total = 0
-    for step in range(4):
-        t1.update(b=b1 + 0.3 * step * rng.standard_normal(30))
-        t2.update(b=b2 + 0.3 * np.cos(step) * rng.standard_normal(20))
-        total += path_check(st, P, h, "null_space_freezes", True)[0]
-    assert total == 8  # both rank-deficient levels at every step
+    st, move = _tall_rank_deficient(seed)
+    # both rank-deficient levels at every step
+    assert _path_count(st, move, 4, "null_space_freezes", True) == 8
 
 
 @needs_native
@@ -268,12 +262,7 @@ def test_rank_deficient_level_held_by_the_bounds(seed, rank, cond, unique, taken
     up to sigma_min / sigma_max = 1e-9 (there damped: the SVD's closed form and the general
     freeze): equal to the Python engine."""
     st, move = _equality_under_bounds(seed, rank, cond)
-    P, h = native_solver(st)
-    total = 0
-    for step in range(6):
-        move(step)
-        total += path_check(st, P, h, "null_space_freezes", unique)[0]
-    assert (total > 0) == taken
+    assert (_path_count(st, move, 6, "null_space_freezes", unique) > 0) == taken
 
 
 @needs_native
@@ -294,11 +283,11 @@ def test_rank_near_the_tolerance(gap):
     eq = qc.Equality(A, b0)
     last = qc.Equality(rng.standard_normal((4, n)), rng.standard_normal(4))
     st = qc.Stack([eq, last])
-    P, h = native_solver(st)
-    total = 0
-    for step in range(4):
+
+    def move(step: int) -> None:
         eq.update(b=b0 + 0.1 * np.sin(step + np.arange(30)))
-        total += path_check(st, P, h, "null_space_freezes", False)[0]
+
+    total = _path_count(st, move, 4, "null_space_freezes", False)
     if gap < 1e-14:
         assert total == 4
     elif gap > 1e-14:
@@ -345,13 +334,12 @@ def test_rank_deficient_wide_level_under_inherited_rows(seed):
     mid = qc.Equality(rng.standard_normal((5, n)), rng.standard_normal(5))
     last = qc.Equality(np.eye(n), np.zeros(n))
     st = qc.Stack([ineq, wide, mid, last], bounds=qc.Bounds(-np.ones(n), np.ones(n)))
-    P, h = native_solver(st)
-    total = 0
-    for step in range(5):
+
+    def move(step: int) -> None:
         ineq.update(lower=lo0 + 0.1 * np.sin(0.8 * step + np.arange(10)))
         wide.update(b=b0 + 0.5 * np.cos(step + np.arange(6)))
-        total += path_check(st, P, h, "wide_freezes", True)[0]
-    assert total >= 1
+
+    assert _path_count(st, move, 5, "wide_freezes", True) >= 1
 
 
 @needs_native

@@ -16,7 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.native_engine import X_TOL, native_solver, needs_native, path_check
-from support.stacks import hard_random_stack, no_freedom_stack, vertex_stack
+from support.stacks import (
+    hard_random_stack,
+    hard_row_stack,
+    inequality_shifts,
+    no_freedom_stack,
+    vertex_stack,
+)
 
 import qpcoord as qc
 
@@ -33,12 +39,10 @@ def test_a_missed_working_set_seeds_the_next_start(seed):
     P = s._compiled
     seeded = NativeHierarchy(P, s.damping)
     cold = NativeHierarchy(P, s.damping)
-    eqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    move = inequality_shifts(s)
     used = 0
     for step in range(12):
-        for j, t in enumerate(eqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        move(step)
         xs, rs, info = seeded.solve(P)
         xc, rc, _ = cold.solve(P, warm=False)
         ref = s.solve(engine="python").level_residuals
@@ -88,22 +92,14 @@ def test_a_missed_hard_phase_set_seeds_its_start():
     it is used."""
     from qpcoord.core.native import NativeHierarchy
 
-    rng = np.random.default_rng(1)
-    n = 8
-    xs = rng.uniform(-0.5, 0.5, n)
-    C = rng.standard_normal((5, n))
-    C /= np.linalg.norm(C, axis=1)[:, None]
-    C *= np.sign(C @ xs)[:, None]
-    hard = qc.Inequality(C, C @ xs - 0.05, np.full(5, np.inf))
-    lev = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))
-    s = qc.Stack([lev], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+    s, hard, move = hard_row_stack(np.random.default_rng(1))
+    C = hard.C
     P = s._compiled
     seeded = NativeHierarchy(P, s.damping)
     cold = NativeHierarchy(P, s.damping)
     used = 0
     for step in range(20):
-        xt = np.clip(xs + 0.4 * np.sin(0.7 * step + np.arange(n)), -0.9, 0.9)
-        hard.update(lower=C @ xt - 0.05)  # xt stays feasible
+        xt = move(step)  # xt stays feasible
         xs_, rs, info = seeded.solve(P)
         xc, rc, cinfo = cold.solve(P, warm=False)
         sp = s.solve(engine="python")

@@ -17,7 +17,7 @@ from support.families import build, stack
 from support.hlsp import load
 from support.native_engine import X_TOL, assert_same, needs_native
 from support.published import published_module
-from support.stacks import hard_random_stack
+from support.stacks import hard_random_stack, inequality_shifts
 
 import qpcoord as qc
 
@@ -95,12 +95,10 @@ def test_downdated_working_sets_give_the_cold_answer(seed):
     P = s._compiled
     down = NativeHierarchy(P, s.damping)
     cold = NativeHierarchy(P, s.damping)
-    ineqs = [t for lev in s.levels for t in lev if isinstance(t, qc.Inequality)]
+    move = inequality_shifts(s)
     used = 0
     for step in range(12):
-        for j, t in enumerate(ineqs):
-            shift = 0.05 * np.sin(0.7 * step + j)
-            t.update(lower=t.lower + shift, upper=t.upper + shift)
+        move(step)
         xd, rd, _ = down.solve(P)
         used += down.counters.downdates
         xc, rc, _ = cold.solve(P, warm=False)

@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from support.arrays import force_write as _force_write
 from support.families import CASES, build, stack
 from support.families import case_ids as _ids
-from support.stacks import clipped_stack, hard_random_stack
+from support.stacks import clipped_stack, hard_random_stack, region_problem
 from support.strategies import stacks as random_stacks
 from support.weighted import X_TOL, assert_same_weighted, condition, epsilon, objective, relative_dx
 
@@ -359,35 +359,13 @@ def test_persistent_native_falls_back_on_infeasible_steps():
     assert_same_weighted(s, s.solve(method="weighted", engine="python"), s.solve(method="weighted"))
 
 
-def _region_pq(seed: int, engine: str, n: int = 8, p: int = 3) -> PersistentQP:
-    """``test_persistent.region_problem``'s stack (no soft inequality, bounds and hard rows,
-    everything affine in θ: the critical-region cache applies) on the given engine."""
-    rng = np.random.default_rng(seed)
-    track = qc.Equality(rng.normal(size=(5, n)), np.zeros(5), name="track")
-    effort = qc.Equality(np.eye(n), np.zeros(n), name="effort")
-    hard = qc.Inequality(rng.normal(size=(3, n)), -1.0, 1.0, name="hard")
-    s = qc.Stack(
-        [track, effort],
-        bounds=qc.Bounds(-0.5 * np.ones(n), 0.5 * np.ones(n)),
-        constraints=[hard],
-        weight_ratio=1e-2,
-    )
-    pq = PersistentQP(s, engine=engine)
-    M = rng.normal(size=(5, p))
-    U = 0.2 * rng.normal(size=(3, p))
-    U /= max(1.0, 2.0 * float(np.abs(U).sum(axis=1).max()) / 1.5)
-    pq.parametrize(
-        p, {track: (np.zeros(5), M), hard: ((-np.ones(3), np.zeros((3, p))), (np.ones(3), U))}
-    )
-    return pq
-
-
 @needs_native
 @pytest.mark.parametrize("seed", [0, 1])
 def test_persistent_native_regions_match_daqp(seed):
     """The parametric path (critical-region cache, then the QP) on the native workspace:
     the same answers as on the daqp workspace, most steps from the cache."""
-    pn, pd = _region_pq(seed, "native"), _region_pq(seed, "python")
+    pn = region_problem(seed, engine="native")[1]
+    pd = region_problem(seed, engine="python")[1]
     assert pn.engine == "native" and pd.engine == "python"
     direction = np.random.default_rng(seed + 10).normal(size=3)
     worst = 0.0

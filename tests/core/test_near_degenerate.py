@@ -24,14 +24,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.native_engine import needs_native
 from support.oracle import OracleError, level_residuals, lexicographic
 
 import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.core.linalg import numerical_rank, svd
 from qpcoord.core.methods.hierarchical import MOVABLE_TOL, _independent_rank
-
-needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "regressions" / "near_parallel_level1.json"
 #: ``δ = REL·scale`` (module docstring): the rank decision (MOVABLE_TOL) and the certificate.

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support.stacks import region_problem
 
 import qpcoord as qc
 from qpcoord.core.persistent import PersistentQP
@@ -234,35 +235,6 @@ def test_parametric_unconstrained_shortcut_matches_the_qp():
         np.testing.assert_allclose(x, ref, atol=1e-9)
         active += int(np.isclose(np.abs(x).max(), 1.0) or np.abs(hard.C @ x).max() > 1 - 1e-9)
     assert 0 < active < 5  # both paths were exercised
-
-
-def region_problem(seed: int, n: int = 8, p: int = 3):
-    """No soft inequality, bounds and hard rows, everything affine in θ: the critical-region
-    cache applies."""
-    rng = np.random.default_rng(seed)
-    track = qc.Equality(rng.normal(size=(5, n)), np.zeros(5), name="track")
-    effort = qc.Equality(np.eye(n), np.zeros(n), name="effort")
-    hard = qc.Inequality(rng.normal(size=(3, n)), -1.0, 1.0, name="hard")
-    stack = qc.Stack(
-        [track, effort],
-        bounds=qc.Bounds(-0.5 * np.ones(n), 0.5 * np.ones(n)),
-        constraints=[hard],
-        weight_ratio=1e-2,
-    )
-    pq = stack.persistent()
-    M = rng.normal(size=(5, p))
-    # upper = 1 + U θ with |θ_i| ≤ 2 (the property test): kept above the lower limit -1
-    # (hypothesis found a seed whose upper limit crossed it, a ValueError)
-    U = 0.2 * rng.normal(size=(3, p))
-    U /= max(1.0, 2.0 * float(np.abs(U).sum(axis=1).max()) / 1.5)
-    pq.parametrize(
-        p,
-        {
-            track: (np.zeros(5), M),
-            hard: ((-np.ones(3), np.zeros((3, p))), (np.ones(3), U)),
-        },
-    )
-    return stack, pq, rng, hard
 
 
 def reference_x(stack, pq, theta):

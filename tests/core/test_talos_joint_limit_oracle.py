@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.native_engine import needs_native
 
 import qpcoord as qc
-from qpcoord.core import native
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "talos_joint_limit_steps.npz"
 #: the exact solution's active set: (polygon / band row, side), (joint, side)
@@ -179,9 +179,6 @@ def test_python_engine_matches_the_exact_solution(data, exact, warm):
     sol = stack.solve(engine="python")
     np.testing.assert_allclose(sol.x, exact, rtol=0, atol=X_TOL)
     np.testing.assert_allclose(sol.level_residuals, _residuals(a, exact), rtol=1e-9, atol=1e-9)
-
-
-needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 
 @needs_native

@@ -4,28 +4,20 @@ order in one namespace, as a reader pasting them would (the same rule as
 
 from __future__ import annotations
 
-import re
-from pathlib import Path
-
 import matplotlib
+from support.pages import ROOT, run_blocks, run_page
 
 matplotlib.use("Agg")
 
-PAGE = Path(__file__).resolve().parents[2] / "docs" / "custom-task.md"
-
-
-def _blocks() -> list[str]:
-    return re.findall(r"```python\n(.*?)```", PAGE.read_text(encoding="utf-8"), re.S)
+PAGE = ROOT / "docs" / "custom-task.md"
 
 
 def test_the_page_has_python_blocks():
-    assert len(_blocks()) >= 6
+    assert len(run_blocks(PAGE)) >= 6
 
 
 def test_the_snippets_of_the_custom_task_page_run(capsys):
-    namespace: dict = {}
-    for i, code in enumerate(_blocks()):
-        exec(compile(code, f"docs/custom-task.md block {i}", "exec"), namespace)
+    namespace = run_page(PAGE)
     out = capsys.readouterr().out
     assert "height error" in out and "optimal" in out
     # the page's custom task is a KinematicTask subclass used at a level, as a band, hard

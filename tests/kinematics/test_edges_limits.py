@@ -19,6 +19,17 @@ def panda():
     return qc.robots.load("panda")
 
 
+def _integrated(ik: qc.IK, q0: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``steps`` steps of ``IK.step_integrate`` from ``q0``: the velocities (the first row is
+    the rest before the start) and the configurations after each step."""
+    q, vs, qs = q0.copy(), [np.zeros(ik.robot.nv)], []
+    for _ in range(steps):
+        q, v, _ = ik.step_integrate(q)
+        vs.append(v)
+        qs.append(q)
+    return np.array(vs), np.array(qs)
+
+
 def _drive_into_limit(robot, q0, joint, past, limits_of, engine, steps):
     """A stiff posture pulling ``joint`` ``past`` rad beyond its upper limit: the velocities
     of every step (the first row is the rest before the start) and the configurations."""
@@ -27,12 +38,7 @@ def _drive_into_limit(robot, q0, joint, past, limits_of, engine, steps):
     q_ref[joint] = robot.upper[joint] + past
     post.q_ref = q_ref
     ik = qc.IK(robot, [post], dt=DT, limits=limits_of(robot), engine=engine)
-    q, vs, qs = q0.copy(), [np.zeros(robot.nv)], []
-    for _ in range(steps):
-        q, v, _ = ik.step_integrate(q)
-        vs.append(v)
-        qs.append(q)
-    return np.array(vs), np.array(qs)
+    return _integrated(ik, q0, steps)
 
 
 def _limits(a_max, brake=True, gain=None):
@@ -168,16 +174,20 @@ ELBOW_TARGET = np.array([-0.118, 0.193, 0.303])
 ELBOW_Q0 = np.array([0.0, -1.2, 2.6, -1.9, -1.57, 0.0])
 
 
-def _elbow_run(limits_of, engine=None, steps=1200, dt=0.01):
+def _tool0_run(q0, target, limits_of, engine, steps, dt=0.01, gain=None):
+    """The UR10's ``tool0`` driven from ``q0`` to the position ``target`` (m; gain ``1/dt``
+    unless ``gain``) over a posture at ``q0``: the velocities (the first row is the rest
+    before the start) and the final position error (m)."""
     ur10 = qc.robots.load("ur10")
-    task = qc.FramePositionTask(ur10, "tool0", ELBOW_TARGET, gain=1 / dt)
-    levels = [task, qc.PostureTask(ur10, ELBOW_Q0)]
+    task = qc.FramePositionTask(ur10, "tool0", target, gain=1 / dt if gain is None else gain)
+    levels = [task, qc.PostureTask(ur10, q0)]
     ik = qc.IK(ur10, levels, dt=dt, limits=limits_of(ur10), engine=engine)
-    q, vs = ELBOW_Q0.copy(), [np.zeros(ur10.nv)]
-    for _ in range(steps):
-        q, v, _ = ik.step_integrate(q)
-        vs.append(v)
-    return np.array(vs), np.linalg.norm(task.compute_error(q))
+    vs, qs = _integrated(ik, q0, steps)
+    return vs, np.linalg.norm(task.compute_error(qs[-1]))
+
+
+def _elbow_run(limits_of, engine=None, steps=1200, dt=0.01):
+    return _tool0_run(ELBOW_Q0, ELBOW_TARGET, limits_of, engine, steps, dt)
 
 
 def _reversals(vs, floor=1e-6):
@@ -185,18 +195,26 @@ def _reversals(vs, floor=1e-6):
     return int(np.sum((np.sign(vs[1:]) * np.sign(vs[:-1]) < 0) & big[1:] & big[:-1]))
 
 
+def _with_acceleration_limits(a_max):
+    """The robot's default position and speed limits and acceleration limits ``a_max``
+    braking before the robot's limits (``position_limits="robot"``, not the IK's object)."""
+    return lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)]
+
+
+def _assert_braked_and_reached(vs, err, a_max, dt):
+    """No jump above ``a_max dt`` at any step (to rounding of v, ~3 rad/s · 1e-15), no
+    reversal over the last 500 steps and the target reached."""
+    assert np.abs(np.diff(vs, axis=0)).max() <= a_max * dt * (1 + 1e-9)
+    assert _reversals(vs[-500:]) == 0
+    assert err < 1e-6
+
+
 @pytest.mark.parametrize("engine", ["native", "python"])
 def test_elbow_at_its_limit_at_a_singularity_does_not_chatter(engine):
     # with acceleration limits the joint brakes before π: no jump above a_max dt, and the
     # arm reaches the target without chattering
     dt, a_max = 0.01, 50.0
-    vs, err = _elbow_run(
-        lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
-        engine,
-    )
-    assert np.abs(np.diff(vs, axis=0)).max() <= a_max * dt * (1 + 1e-9)
-    assert _reversals(vs[-500:]) == 0
-    assert err < 1e-6
+    _assert_braked_and_reached(*_elbow_run(_with_acceleration_limits(a_max), engine), a_max, dt)
     # the damper form of the position limits does the same without acceleration limits
     vs, err = _elbow_run(lambda r: [qc.JointLimits(r, gain=0.5), qc.VelocityLimits(r)], engine)
     assert _reversals(vs[-500:]) == 0
@@ -212,15 +230,9 @@ def test_the_default_limits_leave_the_singular_elbow_cycle(engine):
     assert _reversals(vs[-500:]) == 0  # the posture level still moves, smoothly
     assert err < 1e-6
     # with acceleration limits beside them (braking for the same default gain): no jump
-    # above a_max dt at any step, to rounding of v (~3 rad/s · 1e-15)
+    # above a_max dt at any step
     dt, a_max = 0.01, 50.0
-    vs, err = _elbow_run(
-        lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
-        engine,
-    )
-    assert np.abs(np.diff(vs, axis=0)).max() <= a_max * dt * (1 + 1e-9)
-    assert _reversals(vs[-500:]) == 0
-    assert err < 1e-6
+    _assert_braked_and_reached(*_elbow_run(_with_acceleration_limits(a_max), engine), a_max, dt)
     # the one-step box on the same run: the cycle, every joint at its speed limit
     vs, err = _elbow_run(lambda r: [qc.JointLimits(r, gain=1.0), qc.VelocityLimits(r)], engine)
     assert _reversals(vs[-500:]) > 400 and err > 1e-3
@@ -235,31 +247,15 @@ HELD_TARGET = np.array([0.087, -0.028, 0.494])
 
 
 def _held_run(limits_of, engine, steps=1500, dt=0.01, gain=None):
-    ur10 = qc.robots.load("ur10")
-    task = qc.FramePositionTask(ur10, "tool0", HELD_TARGET, gain=1 / dt if gain is None else gain)
-    ik = qc.IK(
-        ur10, [task, qc.PostureTask(ur10, HELD_Q0)], dt=dt, limits=limits_of(ur10), engine=engine
-    )
-    q, vs = HELD_Q0.copy(), [np.zeros(ur10.nv)]
-    for _ in range(steps):
-        q, v, _ = ik.step_integrate(q)
-        vs.append(v)
-    return np.array(vs), np.linalg.norm(task.compute_error(q))
+    return _tool0_run(HELD_Q0, HELD_TARGET, limits_of, engine, steps, dt, gain)
 
 
 @pytest.mark.parametrize("engine", ["native", "python"])
 def test_held_elbow_with_acceleration_limits_reaches_the_target(engine):
     # the acceleration box makes v continuous from step to step: no corner-to-corner flip,
-    # the arm leaves the limit and reaches the target; no jump above a_max dt (to rounding
-    # of v, ~3 rad/s · 1e-15)
+    # the arm leaves the limit and reaches the target; no jump above a_max dt
     dt, a_max = 0.01, 50.0
-    vs, err = _held_run(
-        lambda r: [qc.JointLimits(r), qc.VelocityLimits(r), AccelerationLimits(r, a_max)],
-        engine,
-    )
-    assert np.abs(np.diff(vs, axis=0)).max() <= a_max * dt * (1 + 1e-9)
-    assert _reversals(vs[-500:]) == 0
-    assert err < 1e-6
+    _assert_braked_and_reached(*_held_run(_with_acceleration_limits(a_max), engine), a_max, dt)
 
 
 @pytest.mark.parametrize("engine", ["native", "python"])

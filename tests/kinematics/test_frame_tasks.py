@@ -709,16 +709,13 @@ def test_the_robot_tasks_page_snippets_run():
     the page's Talos scenario keeps its feet and its CoM where the page says."""
     import contextlib
     import io
-    import re
-    from pathlib import Path
 
-    page = Path(__file__).resolve().parents[2] / "docs" / "robot-tasks.md"
-    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
-    assert len(blocks) >= 5
-    ns: dict = {}
+    from support.pages import ROOT, run_blocks, run_page
+
+    page = ROOT / "docs" / "robot-tasks.md"
+    assert len(run_blocks(page)) >= 5
     with contextlib.redirect_stdout(io.StringIO()):
-        for block in blocks:
-            exec(compile(block, str(page), "exec"), ns)  # noqa: S102
+        ns = run_page(page)
 
     feet, polygon, q = ns["feet"], ns["polygon"], ns["q"]
     assert max(np.abs(f.compute_error(q)).max() for f in feet) <= 1e-5

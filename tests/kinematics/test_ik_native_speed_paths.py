@@ -11,13 +11,12 @@ import weakref
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.native_engine import needs_native
 
 import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.core.polish import KKT_TOL
 from qpcoord.kinematics import frame_tasks
-
-needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 DT = 0.01
 FRAME = "panda_hand_tcp"

@@ -12,7 +12,8 @@ import pickle
 import numpy as np
 import pinocchio as pin
 import pytest
-from support.counting_malloc import run_counting_malloc
+from support.counting_malloc import native_malloc_counts
+from support.native_engine import needs_native
 from support.native_ik import (
     DT,
     FRAMES,
@@ -34,8 +35,6 @@ from qpcoord.kinematics.native_step import TaskKind, native_kind
 def robots() -> dict[str, qc.Robot]:
     return ik_robots()
 
-
-needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 __all__ = ["robots"]  # the fixture, shared with test_native_step
 
@@ -252,12 +251,9 @@ def test_position_band_kernel_equals_the_python_refresh(robots, name):
 
 
 _ALLOCATION_RUN = r"""
-import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
-sys.path.insert(0, {tests!r})
+from support.malloc_counts import print_mallocs, print_step_mallocs
 from support.native_ik import FRAMES, DT
-count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
-count.restype = ctypes.c_longlong
 robot = qc.robots.load("panda")
 ee = robot.with_frame(FRAMES["panda"])
 q = robot.random_configuration(3)
@@ -267,18 +263,9 @@ hand = qc.FrameTask(robot, FRAMES["panda"], T, gain=5.0)
 ik = qc.IK(robot, [band, hand, qc.PostureTask(robot, q)], DT, engine="native")
 assert not ik._native._hybrid
 pin.computeJointJacobians(robot.model, robot.data, q)
-call, slot = ik._native._solver.step, ik._native._slots[1]
-for _ in range(20):
-    slot.set_target(T, None)
-    assert call(q, True, 10.0, True) == 0
-before = count()
-for _ in range(500):
-    call(q, True, 10.0, True)
-print("step", count() - before)
-before = count()
-for _ in range(500):
-    slot.set_target(T, None)
-print("set_target", count() - before)
+slot = ik._native._slots[1]
+print_mallocs("set_target", lambda: slot.set_target(T, None))
+print_step_mallocs("step", ik, q)
 """
 
 
@@ -289,9 +276,8 @@ def test_the_step_and_its_target_setter_do_not_allocate(tmp_path, build):
     """The native call with a PositionBand, a FrameTask and a posture, and the kernel's
     target setter (what FrameTask.set_target calls every control step), make no heap
     allocation after the first calls. Each build of the extension."""
-    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
-    counts = dict(line.split() for line in out.splitlines())
-    assert counts == {"step": "0", "set_target": "0"}, out
+    counts = native_malloc_counts(tmp_path, _ALLOCATION_RUN, build)
+    assert counts == {"step": 0, "set_target": 0}
 
 
 @pytest.mark.parametrize("engine", ["native", "python"])

@@ -6,13 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.native_engine import needs_native
 from support.native_ik import manifold_robot
 
 import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.kinematics.native_step import integration_plan
-
-needs_native = pytest.mark.skipif(not native.available(), reason="native engine not built")
 
 
 @pytest.fixture(scope="module")

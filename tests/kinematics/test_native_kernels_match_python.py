@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from support.counting_malloc import run_counting_malloc
+from support.counting_malloc import native_malloc_counts
 from support.native_engine import needs_native
 from support.native_ik import closed_loop_agrees, engine_pair, manifold_robot
 
@@ -92,6 +92,39 @@ def _finite(x: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(x), np.abs(x), 0.0)
 
 
+def _hand(robot: qc.Robot, q0: np.ndarray, offset, gain: float, lm: float = 0.0):
+    """The hand's position task, its target ``offset`` (m) from the hand at ``q0``."""
+    frame = HAND[robot.name]
+    target = robot.frame_pose(q0, frame)[:3, 3] + offset
+    return FramePositionTask(robot, frame, target, gain=gain, lm_damping=lm)
+
+
+def _on_feet(robot: qc.Robot, q0: np.ndarray, levels: list[list]) -> list[list]:
+    """``levels``, below a first level holding both soles where they are at ``q0`` on Talos
+    (a floating base); as they are on the Panda."""
+    if robot.name != "talos":
+        return levels
+    feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
+    return [feet, *levels]
+
+
+def _refresh_pair(robot: qc.Robot, tn, tp, stack) -> tuple[qc.IK, qc.IK]:
+    """IKs without limits of ``stack(tn)`` on the native step and of ``stack(tp)`` on the
+    Python engine, every task of the native one on a kernel."""
+    ikn = qc.IK(robot, stack(tn), DT, limits=None, engine="native")
+    ikp = qc.IK(robot, stack(tp), DT, limits=None, engine="python")
+    assert not ikn._native._hybrid
+    return ikn, ikp
+
+
+def _closed_loops_agree(robot: qc.Robot, levels, q0: np.ndarray, steps: int, **tol) -> None:
+    """The stack ``levels()`` on both engines, every task of the native one on a kernel,
+    stepped alike (:func:`support.native_ik.closed_loop_agrees`)."""
+    ikn, ikp = engine_pair(robot, levels, DT)
+    assert not ikn._native._hybrid
+    closed_loop_agrees(ikn, ikp, q0, steps, **tol)
+
+
 # ---------------------------------------------------------------------------------------
 # the acceleration limits' box
 # ---------------------------------------------------------------------------------------
@@ -170,18 +203,11 @@ def test_a_joint_driven_into_its_limit_brakes_alike_on_both_engines(robots, name
     at its limit within the acceleration bound."""
     robot = _robot(robots, name)
     q0 = _start(robot)
-    frame = HAND[name]
-    T = robot.frame_pose(q0, frame).copy()
-    T[:3, 3] += [0.6, -0.4, 0.3]
     a = 40.0
 
     def levels():
-        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.5 / DT)
-        low = [qc.PostureTask(robot, q0, gain=1.0)]
-        if name == "talos":
-            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
-            return [feet, [hand], low]
-        return [[hand], low]
+        hand = _hand(robot, q0, [0.6, -0.4, 0.3], gain=0.5 / DT)
+        return _on_feet(robot, q0, [[hand], [qc.PostureTask(robot, q0, gain=1.0)]])
 
     ikn = _limit_run(robot, levels, lambda: _limits(robot, 0.5, a), "native")
     ikp = _limit_run(robot, levels, lambda: _limits(robot, 0.5, a), "python")
@@ -262,10 +288,8 @@ def test_native_damping_rows_equal_the_python_refresh(robots, name, kind):
     lm = 0.7
     tn, tp = _damped(robot, kind, q0, lm), _damped(robot, kind, q0, lm)
     posture = qc.PostureTask(robot, q0, gain=1.0)
-    ikn = qc.IK(robot, [[tn], [posture]], DT, limits=None, engine="native")
-    ikp = qc.IK(robot, [[tp], [posture]], DT, limits=None, engine="python")
+    ikn, ikp = _refresh_pair(robot, tn, tp, lambda t: [[t], [posture]])
     assert native_kind(tn.lm_rows) == TaskKind.LM_DAMPING and isinstance(tn.lm_rows, LMDamping)
-    assert not ikn._native._hybrid
     rng = np.random.default_rng(11)
     seen = 0
     for trial in range(6):
@@ -291,9 +315,7 @@ def test_native_damping_rows_equal_the_python_refresh(robots, name, kind):
 def test_native_damping_rows_are_zero_below_the_error_floor(robots, offset, zero):
     robot = robots["panda"]
     q = _start(robot)
-    frame = HAND["panda"]
-    target = robot.frame_pose(q, frame)[:3, 3] + [offset, 0.0, 0.0]
-    task = FramePositionTask(robot, frame, target, gain=1.0, lm_damping=2.0)
+    task = _hand(robot, q, [offset, 0.0, 0.0], gain=1.0, lm=2.0)
     ik = qc.IK(robot, [[task], [qc.PostureTask(robot, q)]], DT, engine="native")
     assert native_kind(task.lm_rows) == TaskKind.LM_DAMPING
     ik.step(q)
@@ -336,24 +358,17 @@ def test_an_unreachable_damped_target_runs_alike_on_both_engines(robots, name):
     same v from the native step and the Python engine at every step of a closed loop."""
     robot = _robot(robots, name)
     q0 = _start(robot)
-    frame = HAND[name]
 
     def levels():
-        far = robot.frame_pose(q0, frame)[:3, 3] + [2.5, 0.0, 0.5]
-        hand = FramePositionTask(robot, frame, far, gain=0.2 / DT, lm_damping=1.0)
+        hand = _hand(robot, q0, [2.5, 0.0, 0.5], gain=0.2 / DT, lm=1.0)
         band = _damped(robot, "position_band", q0, 2.0)
         low = qc.PostureTask(robot, q0, gain=1.0, lm_damping=0.5)
-        if name == "talos":
-            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
-            return [feet, [band, hand], [low]]
-        return [[band, hand], [low]]
+        return _on_feet(robot, q0, [[band, hand], [low]])
 
-    ikn, ikp = engine_pair(robot, levels, DT)
-    assert not ikn._native._hybrid
     # the damping makes the last levels' rows near-dependent on the unreachable task's
     # (mu ~ 1 against rows of size ~1): the engines' answers agree to 1e-9 of the scale
     # times that level's conditioning, below 1e3 here
-    closed_loop_agrees(ikn, ikp, q0, 400, rel_tol=1e-6)
+    _closed_loops_agree(robot, levels, q0, 400, rel_tol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------
@@ -408,9 +423,7 @@ def test_native_relative_and_coupling_rows_equal_the_python_refresh(robots, name
     expected = TaskKind.JOINT_COUPLING if kind == "coupling" else TaskKind.RELATIVE_FRAME
     assert native_kind(tn) == expected
     posture = qc.PostureTask(robot, q0, gain=1.0)
-    ikn = qc.IK(robot, [[tn], [posture]], DT, limits=None, engine="native")
-    ikp = qc.IK(robot, [[tp], [posture]], DT, limits=None, engine="python")
-    assert not ikn._native._hybrid
+    ikn, ikp = _refresh_pair(robot, tn, tp, lambda t: [[t], [posture]])
     rng = np.random.default_rng(5)
     for trial in range(6):
         q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
@@ -434,22 +447,14 @@ def test_relative_and_coupling_closed_loop_matches_the_python_engine(robots, nam
     from the native step and the Python engine at every step."""
     robot = _robot(robots, name)
     q0 = _start(robot)
-    frame = HAND[name]
 
     def levels():
-        T = robot.frame_pose(q0, frame).copy()
-        T[:3, 3] += [0.05, 0.05, -0.05]
-        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.2 / DT)
+        hand = _hand(robot, q0, [0.05, 0.05, -0.05], gain=0.2 / DT)
         rel = _relative(robot, q0, "x y z", lm=0.5)
         low = [_coupling(robot, lm=0.3), rel, qc.PostureTask(robot, q0, gain=1.0)]
-        if name == "talos":
-            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
-            return [feet, [hand], low]
-        return [[hand], low]
+        return _on_feet(robot, q0, [[hand], low])
 
-    ikn, ikp = engine_pair(robot, levels, DT)
-    assert not ikn._native._hybrid
-    closed_loop_agrees(ikn, ikp, q0, 300)
+    _closed_loops_agree(robot, levels, q0, 300)
 
 
 @needs_native
@@ -518,12 +523,7 @@ def test_native_damping_task_rows_and_hold_equal_the_python_refresh(robots, name
     tn, tp = qc.DampingTask(robot, weight=w), qc.DampingTask(robot, weight=w)
     assert native_kind(tn) == TaskKind.DAMPING and tn.q_hold is None
 
-    def hand():
-        return FramePositionTask(robot, HAND[name], robot.frame_pose(q0, HAND[name])[:3, 3])
-
-    ikn = qc.IK(robot, [[hand()], [tn]], DT, limits=None, engine="native")
-    ikp = qc.IK(robot, [[hand()], [tp]], DT, limits=None, engine="python")
-    assert not ikn._native._hybrid
+    ikn, ikp = _refresh_pair(robot, tn, tp, lambda t: [[_hand(robot, q0, 0.0, gain=1.0)], [t]])
     rng = np.random.default_rng(4)
     for _ in range(3):
         q = robot.integrate(q0, rng.normal(scale=0.3, size=robot.nv), 1.0)
@@ -547,21 +547,12 @@ def test_native_damping_task_rows_and_hold_equal_the_python_refresh(robots, name
 def test_a_damping_task_closed_loop_matches_the_python_engine(robots, name, cls):
     robot = _robot(robots, name)
     q0 = _start(robot)
-    frame = HAND[name]
 
     def levels():
-        T = robot.frame_pose(q0, frame).copy()
-        T[:3, 3] += [0.05, 0.05, -0.05]
-        hand = FramePositionTask(robot, frame, T[:3, 3], gain=0.2 / DT)
-        low = [cls(robot, weight=1e-2)]
-        if name == "talos":
-            feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
-            return [feet, [hand], low]
-        return [[hand], low]
+        hand = _hand(robot, q0, [0.05, 0.05, -0.05], gain=0.2 / DT)
+        return _on_feet(robot, q0, [[hand], [cls(robot, weight=1e-2)]])
 
-    ikn, ikp = engine_pair(robot, levels, DT)
-    assert not ikn._native._hybrid
-    closed_loop_agrees(ikn, ikp, q0, 200)
+    _closed_loops_agree(robot, levels, q0, 200)
 
 
 @needs_native
@@ -580,9 +571,7 @@ def test_native_low_acceleration_rows_equal_the_python_refresh(robots, name):
     def hand():
         return FramePositionTask(robot, frame, robot.frame_pose(q0, frame)[:3, 3])
 
-    ikn = qc.IK(robot, [[hand()], [tn]], DT, limits=None, engine="native")
-    ikp = qc.IK(robot, [[hand()], [tp]], DT, limits=None, engine="python")
-    assert not ikn._native._hybrid
+    ikn, ikp = _refresh_pair(robot, tn, tp, lambda t: [[hand()], [t]])
     rng = np.random.default_rng(8)
     q = q0
     for step in range(6):
@@ -614,11 +603,9 @@ def test_native_low_acceleration_rows_equal_the_python_refresh(robots, name):
 def _talos_stack(robot: qc.Robot, q0: np.ndarray) -> tuple[list, list]:
     """Feet, a damped hand, a relative frame, a coupling and a low-acceleration level on
     Talos, with acceleration limits braking before the position limits."""
-    feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
-    far = robot.frame_pose(q0, HAND["talos"])[:3, 3] + [0.3, -0.2, 0.2]
-    hand = FramePositionTask(robot, HAND["talos"], far, gain=0.2 / DT, lm_damping=0.5)
+    hand = _hand(robot, q0, [0.3, -0.2, 0.2], gain=0.2 / DT, lm=0.5)
     low = [_relative(robot, q0, "x y z"), _coupling(robot), qc.LowAccelerationTask(robot, 1e-3)]
-    return [feet, [hand], low], _limits(robot, 0.5, 30.0)
+    return _on_feet(robot, q0, [[hand], low]), _limits(robot, 0.5, 30.0)
 
 
 @needs_native
@@ -638,14 +625,10 @@ def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
 
 
 _ALLOCATION_RUN = r"""
-import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
-sys.path.insert(0, {tests!r})
+from support.malloc_counts import print_step_mallocs
 from test_native_kernels_match_python import _talos_stack, _start, DT
-count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
-count.restype = ctypes.c_longlong
 robot = qc.robots.load("talos")
-print("variant", qc.core.native.variant())
 q0 = _start(robot)
 q = robot.integrate(q0, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
 for method in ("hierarchical", "weighted"):
@@ -653,13 +636,7 @@ for method in ("hierarchical", "weighted"):
     ik = qc.IK(robot, levels, DT, limits=limits, method=method, engine="native")
     assert not ik._native._hybrid and not ik._native._python_limits
     pin.computeJointJacobians(robot.model, robot.data, q)
-    call = ik._native._solver.step
-    for _ in range(20):
-        assert call(q, True, 10.0, True) == 0
-    before = count()
-    for _ in range(500):
-        call(q, True, 10.0, True)
-    print(method, count() - before)
+    print_step_mallocs(method, ik, q)
 """
 
 
@@ -671,9 +648,8 @@ def test_the_new_kernels_do_not_allocate_on_a_floating_base(tmp_path, robots, bu
     low-acceleration kernels (a free-flyer difference) on Talos makes no heap allocation
     after its first calls. Each build of the extension, chosen by QPCOORD_NATIVE_ISA."""
     _robot(robots, "talos")
-    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
-    counts = dict(line.split() for line in out.splitlines())
-    assert counts == {"variant": build, "hierarchical": "0", "weighted": "0"}, out
+    counts = native_malloc_counts(tmp_path, _ALLOCATION_RUN, build)
+    assert counts == {"hierarchical": 0, "weighted": 0}
 
 
 @needs_native

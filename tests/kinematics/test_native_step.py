@@ -9,12 +9,13 @@ import warnings
 import numpy as np
 import pinocchio as pin
 import pytest
-from support.counting_malloc import run_counting_malloc
+from support.counting_malloc import native_malloc_counts
 from support.native_engine import needs_native
 from support.native_ik import (
     DT,
     FRAMES,
     KINDS,
+    closed_loop_agrees,
     ee_robot,
     engine_pair,
     ik_robots,
@@ -566,11 +567,7 @@ def test_floating_base_whole_body_is_native_and_matches(robots):
 
     ikn, ikp = engine_pair(robot, levels)
     assert len(ikn._native.kernel_tasks) == 4 and not ikn._native._hybrid
-    for step in range(30):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    closed_loop_agrees(ikn, ikp, q, 30)
 
 
 # ---------------------------------------------------------------------------------------
@@ -855,11 +852,7 @@ def test_posture_over_a_continuous_joint_is_native_and_matches():
     ikn, ikp = engine_pair(robot, levels, limits=[qc.VelocityLimits(robot, 1.0)])
     assert not ikn._native._hybrid  # the continuous joint's row: an atan2 natively
     assert native_kind(ikn._dynamic[1]) == TaskKind.POSTURE
-    for step in range(30):
-        vn, _ = ikn.step(q)
-        vp, _ = ikp.step(q)
-        np.testing.assert_allclose(vn, vp, rtol=0, atol=1e-9, err_msg=f"step {step}")
-        q = robot.integrate(q, vn, DT)
+    closed_loop_agrees(ikn, ikp, q, 30)
 
 
 @needs_native
@@ -894,36 +887,25 @@ def test_a_path_of_the_wrong_dimension_raises_the_tasks_message(robots):
 
 
 _ALLOCATION_RUN = r"""
-import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
-from qpcoord.core import native
-sys.path.insert(0, {tests!r})
+from support.malloc_counts import print_step_mallocs
 from support.native_ik import kind_levels, start_configuration, DT
-count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
-count.restype = ctypes.c_longlong
 robot = qc.robots.load("panda")
-print("variant", native.variant())
 for kind, method in [(k, m) for m in ("hierarchical", "weighted")
                      for k in ("position", "frame_position", "pose", "orientation", "com")]:
     q = start_configuration(robot)
     ik = qc.IK(robot, kind_levels(robot, kind, q), DT, method=method, engine="native")
     assert ik._native.weighted == (method == "weighted")
-    call = ik._native._solver.step
     pin.computeJointJacobians(robot.model, robot.data, q)
     pin.jacobianCenterOfMass(robot.model, robot.data, False)
     assert ik._native.integrates  # the native call also writes q_next (integrate=True)
-    for _ in range(20):
-        assert call(q, True, 10.0, True) == 0
-    before = count()
-    for _ in range(500):
-        call(q, True, 10.0, True)
-    print(kind + "-" + method, count() - before)
+    print_step_mallocs(kind + "-" + method, ik, q)
 # the acceleration limits' box (braking rows), the damping kernels (a task's, a band's and
 # a posture's lm_damping rows), a relative frame, a joint coupling and the damping tasks
 q = start_configuration(robot)
 ee = robot.with_frame("panda_hand_tcp")
 T = robot.frame_pose(q, "panda_hand_tcp")
-stacks = {{
+stacks = {
     "acceleration": (kind_levels(robot, "pose", q), [
         qc.JointLimits(robot), qc.VelocityLimits(robot), qc.AccelerationLimits(robot, 50.0)]),
     "lm_damping": ([[qc.FrameTask(robot, "panda_hand_tcp", T, lm_damping=1.0),
@@ -937,17 +919,11 @@ stacks = {{
     "damping": ([qc.FramePositionTask(robot, "panda_hand_tcp", T[:3, 3]),
                  qc.DampingTask(robot, weight=0.1),
                  qc.LowAccelerationTask(robot, weight=0.1)], "robot"),
-}}
+}
 for name, (levels, limits) in stacks.items():
     ik = qc.IK(robot, levels, DT, limits=limits, engine="native")
     assert not ik._native._hybrid and not ik._native._python_limits
-    call = ik._native._solver.step
-    for _ in range(20):
-        assert call(q, True, 10.0, True) == 0
-    before = count()
-    for _ in range(500):
-        call(q, True, 10.0, True)
-    print(name, count() - before)
+    print_step_mallocs(name, ik, q)
 """
 
 
@@ -959,11 +935,9 @@ def test_the_native_call_does_not_allocate(tmp_path, build):
     makes no heap allocation after its first calls: malloc is counted by a preloaded shim
     (glibc). Each build of the extension (baseline, x86-64-v3), chosen by
     QPCOORD_NATIVE_ISA."""
-    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
-    counts = dict(line.split() for line in out.splitlines())
-    assert counts.pop("variant") == build
+    counts = native_malloc_counts(tmp_path, _ALLOCATION_RUN, build)
     assert len(counts) == 14
-    assert all(int(c) == 0 for c in counts.values()), counts
+    assert all(c == 0 for c in counts.values()), counts
 
 
 @needs_native

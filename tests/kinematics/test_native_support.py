@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from support.counting_malloc import run_counting_malloc
+from support.counting_malloc import native_malloc_counts
 from support.native_engine import needs_native
 
 import qpcoord as qc
@@ -424,14 +424,10 @@ def test_add_task_rejects_bad_band_data(talos):
 # ---------------------------------------------------------------------------------------
 
 _ALLOCATION_RUN = r"""
-import ctypes, sys
 import numpy as np, pinocchio as pin, qpcoord as qc
-sys.path.insert(0, {tests!r})
+from support.malloc_counts import print_step_mallocs
 from test_native_support import _talos_stack, DT
-count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
-count.restype = ctypes.c_longlong
 robot = qc.robots.load("talos")
-print("variant", qc.core.native.variant())
 q = robot.reference_configuration("half_sitting")
 levels, polygon, band = _talos_stack(robot, q)
 q = robot.integrate(q, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
@@ -440,13 +436,7 @@ pin.jacobianCenterOfMass(robot.model, robot.data, False)
 for name, stack in (("bands", [[polygon, band]]), ("whole", levels)):
     ik = qc.IK(robot, stack, DT, limits="robot", engine="native")
     assert not ik._native._hybrid
-    call = ik._native._solver.step
-    for _ in range(20):
-        assert call(q, True, 10.0, True) == 0
-    before = count()
-    for _ in range(500):
-        call(q, True, 10.0, True)
-    print(name, count() - before)
+    print_step_mallocs(name, ik, q)
 """
 
 
@@ -458,9 +448,8 @@ def test_the_native_band_kernels_do_not_allocate(tmp_path, talos, build):
     allocation on Talos, alone and in the whole Talos stack (feet, polygon and band, hand,
     posture: the hierarchy's equality levels made 3 mallocs per call before their buffers
     were made fixed-size). Each build of the extension, chosen by QPCOORD_NATIVE_ISA."""
-    out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
-    counts = dict(line.split() for line in out.splitlines())
-    assert counts == {"variant": build, "bands": "0", "whole": "0"}, out
+    counts = native_malloc_counts(tmp_path, _ALLOCATION_RUN, build)
+    assert counts == {"bands": 0, "whole": 0}
 
 
 @needs_native

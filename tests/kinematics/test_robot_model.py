@@ -502,13 +502,10 @@ def test_the_robots_page_snippets_run():
     """Every ``python`` block of docs/robots.md runs, in order, in one namespace."""
     import contextlib
     import io
-    import re
-    from pathlib import Path
 
-    page = Path(__file__).resolve().parents[2] / "docs" / "robots.md"
-    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
-    assert len(blocks) >= 4
-    namespace: dict = {}
+    from support.pages import ROOT, run_blocks, run_page
+
+    page = ROOT / "docs" / "robots.md"
+    assert len(run_blocks(page)) >= 4
     with contextlib.redirect_stdout(io.StringIO()):
-        for block in blocks:
-            exec(compile(block, str(page), "exec"), namespace)  # noqa: S102
+        run_page(page)

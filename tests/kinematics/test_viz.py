@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from support.browser import chromium, need_browser
+from support.browser import need_browser, offline_viewer, pixels
 
 import qpcoord as qc
 
@@ -295,20 +295,6 @@ def test_the_page_renders_the_robot_offline_in_headless_chromium(panda, tmp_path
     and look at it: a canvas, a robot in it (pixels that vanish when the robot is hidden),
     the red obstacle and the green target, a pose that changes along the animation, and no
     request but the file itself and its inlined data: URLs."""
-    exe = chromium()
-    if exe is None:
-        need_browser(
-            "no Chromium browser found (install Debian's `chromium` or set "
-            "QPCOORD_CHROMIUM=/path/to/chrome): the offline screenshot test needs one"
-        )
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        need_browser(
-            "playwright is not installed (pip install playwright; it is in the test extra)"
-        )
-    from PIL import Image
-
     page_path = viz.animate(
         panda,
         _swing(panda, 41),
@@ -319,43 +305,23 @@ def test_the_page_renders_the_robot_offline_in_headless_chromium(panda, tmp_path
         loop=False,
     )
 
-    def pixels(png: bytes) -> np.ndarray:
-        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
-
-    requests: list[str] = []
-    with sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=exe,
-            args=["--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
-            timeout=30_000,
+    with offline_viewer(page_path) as (page, requests):
+        assert page.evaluate("document.querySelectorAll('canvas').length") >= 1
+        duration = page.evaluate("viewer.animator.duration")
+        assert duration == pytest.approx(2.0)
+        page.wait_for_timeout(2500)  # a few seconds of animation: the meshes are in
+        page.evaluate("viewer.animator.pause(); viewer.animator.seek(0)")
+        page.wait_for_timeout(300)
+        start = pixels(page)
+        page.evaluate(f"viewer.animator.seek({duration / 4})")
+        page.wait_for_timeout(300)
+        quarter = pixels(page)
+        page.evaluate(
+            "viewer.scene_tree.find(['meshcat', 'robot']).set_property('visible', false);"
+            "viewer.set_dirty()"
         )
-        try:
-            context = browser.new_context(viewport={"width": 480, "height": 360}, offline=True)
-            page = context.new_page()
-            page.on("request", lambda r: requests.append(r.url))
-            page.goto(page_path.as_uri(), timeout=30_000)
-            # the inlined scene has loaded when the animation (last command) is in place
-            page.wait_for_function(
-                "typeof viewer !== 'undefined' && viewer.animator.duration > 0", timeout=30_000
-            )
-            assert page.evaluate("document.querySelectorAll('canvas').length") >= 1
-            duration = page.evaluate("viewer.animator.duration")
-            assert duration == pytest.approx(2.0)
-            page.wait_for_timeout(2500)  # a few seconds of animation: the meshes are in
-            page.evaluate("viewer.animator.pause(); viewer.animator.seek(0)")
-            page.wait_for_timeout(300)
-            start = pixels(page.screenshot())
-            page.evaluate(f"viewer.animator.seek({duration / 4})")
-            page.wait_for_timeout(300)
-            quarter = pixels(page.screenshot())
-            page.evaluate(
-                "viewer.scene_tree.find(['meshcat', 'robot']).set_property('visible', false);"
-                "viewer.set_dirty()"
-            )
-            page.wait_for_timeout(300)
-            hidden = pixels(page.screenshot())
-        finally:
-            browser.close()
+        page.wait_for_timeout(300)
+        hidden = pixels(page)
 
     assert start.std() > 5.0  # not a blank page
     robot = np.abs(quarter - hidden).sum(axis=2) > 30

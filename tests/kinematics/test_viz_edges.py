@@ -241,21 +241,30 @@ def test_the_overlay_text_names_the_frame(run):
     assert notes[-1].text.endswith(notes[-1].nearest[-1].state)  # no "active:" section
 
 
+def _annotated_page(panda, run, path, **options):
+    """The run annotated and animated with its ball and the table, written at ``path``
+    (``options``: more of ``viz.animate``'s): the notes, the page's path and the frames
+    kept."""
+    notes = viz.annotate(run["ik"], run["q"], run["sols"], collision=run["avoid"])
+    out = viz.animate(
+        panda,
+        run["q"],
+        path,
+        dt=DT,
+        obstacles=[run["ball"], {"normal": (0, 0, 1), "offset": TABLE_Z}],
+        annotations=notes,
+        **options,
+    )
+    keep = viz._frames(np.arange(len(run["q"])) * DT, viz.DEFAULT_FPS, viz.DEFAULT_MAX_FRAMES)
+    return notes, out, keep
+
+
 def test_the_page_draws_what_the_notes_say(panda, run, tmp_path, monkeypatch):
     import json
     import re
 
-    notes = viz.annotate(run["ik"], run["q"], run["sols"], collision=run["avoid"])
     sent = _recorded(monkeypatch)
-    out = viz.animate(
-        panda,
-        run["q"],
-        tmp_path / "edges.html",
-        dt=DT,
-        obstacles=[run["ball"], {"normal": (0, 0, 1), "offset": TABLE_Z}],
-        annotations=notes,
-    )
-    keep = viz._frames(np.arange(len(run["q"])) * DT, viz.DEFAULT_FPS, viz.DEFAULT_MAX_FRAMES)
+    notes, out, keep = _annotated_page(panda, run, tmp_path / "edges.html")
     anim = next(c for c in sent if c["type"] == "set_animation")
     tracks = {a["path"]: {t["name"]: t for t in a["clip"]["tracks"]} for a in anim["animations"]}
     base = "/meshcat/annotations"
@@ -391,80 +400,36 @@ def test_the_annotated_page_shows_each_frame_offline_in_headless_chromium(panda,
     frame where the nearest pair is within the influence distance the overlay holds that
     frame's text and an orange witness segment is drawn; at the first frame a joint at its
     limit is marked in yellow; nothing but the file and its data: URLs is requested."""
-    import io
+    from support.browser import offline_viewer, pixels
 
-    from support.browser import chromium as _chromium
-    from support.browser import need_browser as _need
-
-    exe = _chromium()
-    if exe is None:
-        _need(
-            "no Chromium browser found (install Debian's `chromium` or set "
-            "QPCOORD_CHROMIUM=/path/to/chrome): the offline screenshot test needs one"
-        )
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        _need("playwright is not installed (pip install playwright; it is in the test extra)")
-    from PIL import Image
-
-    notes = viz.annotate(run["ik"], run["q"], run["sols"], collision=run["avoid"])
-    page_path = viz.animate(
-        panda,
-        run["q"],
-        tmp_path / "edges.html",
-        dt=DT,
-        obstacles=[run["ball"], {"normal": (0, 0, 1), "offset": TABLE_Z}],
-        annotations=notes,
-        loop=False,
-    )
-    keep = viz._frames(np.arange(len(run["q"])) * DT, viz.DEFAULT_FPS, viz.DEFAULT_MAX_FRAMES)
+    notes, page_path, keep = _annotated_page(panda, run, tmp_path / "edges.html", loop=False)
     near = next(k for k in keep if notes[k].nearest[0].state == "near")
     assert notes[0].joints, "the run starts at a limit (the acceleration limit from rest)"
-
-    def pixels(png: bytes) -> np.ndarray:
-        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
 
     def hide(path: str) -> str:
         return f"viewer.scene_tree.find({path}).set_property('visible', false); viewer.set_dirty()"
 
-    requests: list[str] = []
-    with sync_playwright() as p:
-        browser = p.chromium.launch(
-            executable_path=exe,
-            args=["--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
-            timeout=30_000,
-        )
-        try:
-            context = browser.new_context(viewport={"width": 480, "height": 360}, offline=True)
-            page = context.new_page()
-            page.on("request", lambda r: requests.append(r.url))
-            page.goto(page_path.as_uri(), timeout=30_000)
-            page.wait_for_function(
-                "typeof viewer !== 'undefined' && viewer.animator.duration > 0", timeout=30_000
-            )
-            page.wait_for_timeout(2500)  # the meshes are in
-            overlay = f"document.getElementById('{viz.OVERLAY_ID}').textContent"
-            page.evaluate("viewer.animator.pause(); viewer.animator.seek(0)")
-            page.wait_for_timeout(300)
-            assert page.evaluate(overlay) == notes[0].text
-            # the text box covers a part of a small view: out of the way of the pixels
-            page.evaluate(f"document.getElementById('{viz.OVERLAY_ID}').style.opacity = 0")
-            start = pixels(page.screenshot())
-            page.evaluate(hide("['meshcat', 'annotations', 'joints']"))
-            page.wait_for_timeout(300)
-            unmarked = pixels(page.screenshot())
-            page.evaluate(f"viewer.animator.seek({near * DT})")
-            page.wait_for_timeout(300)
-            previous = int(keep[list(keep).index(near) - 1])
-            extra = viz.between(notes, previous, near)
-            assert page.evaluate(overlay) == notes[near].text + (f"\n{extra}" if extra else "")
-            # the robot and the ball hidden: the segment is not behind them
-            page.evaluate(hide("['meshcat', 'robot']") + ";" + hide("['meshcat', 'obstacles']"))
-            page.wait_for_timeout(300)
-            segment = pixels(page.screenshot())
-        finally:
-            browser.close()
+    with offline_viewer(page_path) as (page, requests):
+        page.wait_for_timeout(2500)  # the meshes are in
+        overlay = f"document.getElementById('{viz.OVERLAY_ID}').textContent"
+        page.evaluate("viewer.animator.pause(); viewer.animator.seek(0)")
+        page.wait_for_timeout(300)
+        assert page.evaluate(overlay) == notes[0].text
+        # the text box covers a part of a small view: out of the way of the pixels
+        page.evaluate(f"document.getElementById('{viz.OVERLAY_ID}').style.opacity = 0")
+        start = pixels(page)
+        page.evaluate(hide("['meshcat', 'annotations', 'joints']"))
+        page.wait_for_timeout(300)
+        unmarked = pixels(page)
+        page.evaluate(f"viewer.animator.seek({near * DT})")
+        page.wait_for_timeout(300)
+        previous = int(keep[list(keep).index(near) - 1])
+        extra = viz.between(notes, previous, near)
+        assert page.evaluate(overlay) == notes[near].text + (f"\n{extra}" if extra else "")
+        # the robot and the ball hidden: the segment is not behind them
+        page.evaluate(hide("['meshcat', 'robot']") + ";" + hide("['meshcat', 'obstacles']"))
+        page.wait_for_timeout(300)
+        segment = pixels(page)
 
     r, g, b = start[..., 0], start[..., 1], start[..., 2]
     yellow = (r > 180) & (g > 150) & (b < 110)

@@ -18,6 +18,9 @@ Test modules import these (``from support.oracle import lexicographic``; pytest 
 - :mod:`support.published`: the benchmark scripts as modules; published stacks and their moves.
 - :mod:`support.strategies`: hypothesis strategies of random stacks.
 - :mod:`support.weighted`: the weighted QP's cost, condition number and comparison.
-- :mod:`support.counting_malloc`: a child Python whose malloc calls are counted.
-- :mod:`support.browser`: a headless Chromium, or the reason a test skips.
+- :mod:`support.counting_malloc`: a child Python whose malloc calls are counted, and
+  :mod:`support.malloc_counts`, what its scripts count them with.
+- :mod:`support.pages`: the runnable snippets of the README and the pages of ``docs/``.
+- :mod:`support.browser`: a headless Chromium (a viewer page opened offline, its
+  screenshots), or the reason a test skips.
 """

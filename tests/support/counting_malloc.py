@@ -1,5 +1,6 @@
 """A child Python whose malloc and realloc calls are counted (a preloaded shim), for the tests
-that a native call allocates nothing per step."""
+that a native call allocates nothing per step. The child's scripts count with
+:mod:`support.malloc_counts`."""
 
 from __future__ import annotations
 
@@ -11,11 +12,15 @@ from pathlib import Path
 
 import pytest
 
+from qpcoord.core import native
+
 #: tests/: on the child's path (``support`` is imported from there)
 TESTS = Path(__file__).resolve().parents[1]
-#: tests/kinematics: put on the child's path as ``{tests}`` (its scripts build their IK
-#: stacks with the builders of the test module that runs them)
+#: tests/kinematics: on the child's path too (its scripts build their IK stacks with the
+#: builders of the test module that runs them)
 KINEMATICS_TESTS = TESTS / "kinematics"
+#: the first line every script of :func:`native_malloc_counts` prints: the build it loaded
+_VARIANT_LINE = "import qpcoord.core.native\nprint('variant', qpcoord.core.native.variant())\n"
 
 _COUNTING_MALLOC = r"""
 #define _GNU_SOURCE
@@ -39,24 +44,24 @@ void* realloc(void* p, size_t s) {
 
 
 def run_counting_malloc(tmp_path: Path, script: str, env: dict | None = None) -> str:
-    """Run ``script`` (a template with ``{tests}``: tests/kinematics, ``{lib}``: the shim, whose
-    ``qpcoord_malloc_calls()`` counts malloc/realloc calls) in a fresh Python with the
-    counting shim preloaded and ``env`` added to the environment; its stdout. Skips without
-    a C compiler or glibc."""
+    """Run the Python source ``script`` in a fresh Python with the counting shim preloaded
+    (:mod:`support.malloc_counts` reads its count), tests/ and tests/kinematics on its path
+    and ``env`` added to the environment; its stdout. Skips without a C compiler or glibc."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None or not sys.platform.startswith("linux"):
         pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
     src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
     src.write_text(_COUNTING_MALLOC)
     subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
+    path = [str(TESTS), str(KINEMATICS_TESTS), os.environ.get("PYTHONPATH", "")]
     proc = subprocess.run(
-        [sys.executable, "-c", script.format(tests=str(KINEMATICS_TESTS), lib=str(lib))],
+        [sys.executable, "-c", script],
         capture_output=True,
         text=True,
         env={
             **os.environ,
             **(env or {}),
-            "PYTHONPATH": os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]),
+            "PYTHONPATH": os.pathsep.join(path),
             "LD_PRELOAD": str(lib),
             "OPENBLAS_NUM_THREADS": "1",
         },
@@ -64,3 +69,19 @@ def run_counting_malloc(tmp_path: Path, script: str, env: dict | None = None) ->
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     return proc.stdout
+
+
+def native_malloc_counts(tmp_path: Path, script: str, build: str) -> dict[str, int]:
+    """Run ``script`` as :func:`run_counting_malloc` does, on the extension's build ``build``
+    (``QPCOORD_NATIVE_ISA``), and return the counts it printed as ``name count`` lines
+    (:func:`support.malloc_counts.print_mallocs`) by name. Asserts that the child loaded
+    ``build``."""
+    out = run_counting_malloc(tmp_path, _VARIANT_LINE + script, {native.ISA_ENV: build})
+    lines = [line.split() for line in out.splitlines()]
+    assert lines and lines[0] == ["variant", build], out
+    counts = {}
+    for line in lines[1:]:
+        assert len(line) == 2 and line[1].lstrip("-").isdigit(), out
+        counts[line[0]] = int(line[1])
+    assert len(counts) == len(lines) - 1, f"a name printed twice: {out}"
+    return counts

@@ -75,6 +75,42 @@ def hard_random_stack(seed: int, n: int = 40, levels: int = 8) -> qc.Stack:
     return qc.Stack(tasks, bounds=qc.Bounds(-np.ones(n), np.ones(n)))
 
 
+def inequality_shifts(stack: qc.Stack):
+    """``move(step)`` of the inequality tasks of ``stack``: each call shifts both bounds of
+    its ``j``-th inequality task by ``0.05 sin(0.7 step + j)`` (cumulative), so that stored
+    working sets miss and rows enter and leave them."""
+    ineqs = [t for lev in stack.levels for t in lev if isinstance(t, qc.Inequality)]
+
+    def move(step: int) -> None:
+        for j, t in enumerate(ineqs):
+            shift = 0.05 * np.sin(0.7 * step + j)
+            t.update(lower=t.lower + shift, upper=t.upper + shift)
+
+    return move
+
+
+def hard_row_stack(rng: np.random.Generator):
+    """Five unit hard inequality rows over 8 variables that x = 0 breaks (the
+    least-violation phase runs at every call) under one equality level of 3 rows, in the
+    box |x| <= 1. Returns ``(stack, hard, move)``: ``move(step)`` moves the rows' lower
+    bounds so that a point ``xt`` stays 0.05 inside every row, and returns ``xt``."""
+    n = 8
+    xs = rng.uniform(-0.5, 0.5, n)
+    C = rng.standard_normal((5, n))
+    C /= np.linalg.norm(C, axis=1)[:, None]
+    C *= np.sign(C @ xs)[:, None]
+    hard = qc.Inequality(C, C @ xs - 0.05, np.full(5, np.inf))
+    lev = qc.Equality(rng.standard_normal((3, n)), rng.standard_normal(3))
+    stack = qc.Stack([lev], bounds=qc.Bounds(-np.ones(n), np.ones(n)), constraints=[hard])
+
+    def move(step: int) -> np.ndarray:
+        xt = np.clip(xs + 0.4 * np.sin(0.7 * step + np.arange(n)), -0.9, 0.9)
+        hard.update(lower=C @ xt - 0.05)
+        return xt
+
+    return stack, hard, move
+
+
 def vertex_stack(
     seed: int,
     n: int = 12,
@@ -136,3 +172,35 @@ def no_freedom_stack() -> tuple[qc.Stack, qc.Equality, np.ndarray]:
 def clipped_stack() -> qc.Stack:
     """One level of 3 equality rows (targets 1, 2, 3) that the box [-1, 1] clips to 1."""
     return qc.Stack([qc.Equality(np.eye(3), [1.0, 2.0, 3.0])], bounds=qc.Bounds(-1.0, 1.0))
+
+
+def region_problem(seed: int, n: int = 8, p: int = 3, engine: str | None = None):
+    """A weighted stack with no soft inequality, bounds and hard rows, everything affine in
+    θ (``p`` parameters): the critical-region cache of a persistent QP applies. Returns
+    ``(stack, pq, rng, hard)``: its :class:`~qpcoord.core.persistent.PersistentQP` on
+    ``engine`` (``None``: the default) parametrised in θ, the generator after it, the hard
+    rows."""
+    rng = np.random.default_rng(seed)
+    track = qc.Equality(rng.normal(size=(5, n)), np.zeros(5), name="track")
+    effort = qc.Equality(np.eye(n), np.zeros(n), name="effort")
+    hard = qc.Inequality(rng.normal(size=(3, n)), -1.0, 1.0, name="hard")
+    stack = qc.Stack(
+        [track, effort],
+        bounds=qc.Bounds(-0.5 * np.ones(n), 0.5 * np.ones(n)),
+        constraints=[hard],
+        weight_ratio=1e-2,
+    )
+    pq = stack.persistent(engine=engine)
+    M = rng.normal(size=(5, p))
+    # upper = 1 + U θ with |θ_i| ≤ 2 (the property test): kept above the lower limit -1
+    # (hypothesis found a seed whose upper limit crossed it, a ValueError)
+    U = 0.2 * rng.normal(size=(3, p))
+    U /= max(1.0, 2.0 * float(np.abs(U).sum(axis=1).max()) / 1.5)
+    pq.parametrize(
+        p,
+        {
+            track: (np.zeros(5), M),
+            hard: ((-np.ones(3), np.zeros((3, p))), (np.ones(3), U)),
+        },
+    )
+    return stack, pq, rng, hard
