@@ -114,8 +114,9 @@ inline void run(const int* plan, int count, const double* q, int64_t qs, const d
 
 /// out = difference(q0, q1) / dt over the plan: the velocity v with integrate(q0, v dt) = q1,
 /// with Pinocchio's conventions: q1 - q0 on a vector space; the angle of the (cos, sin) pair
-/// q1 in the frame of q0 (atan2); log3(R0^T R1) of a quaternion pair; log6(M0^-1 M1) of a
-/// free-flyer pair (linear, angular). q0 is contiguous, q1 read with stride qs.
+/// q1 in the frame of q0 (atan2); log3(conj(q0) q1) of a quaternion pair (spatial.hpp);
+/// log6(M0^-1 M1) of a free-flyer pair (linear, angular), both logs from quaternions. q0 is contiguous, q1 read with
+/// stride qs; out is written at the plan's v indices only (a plan may cover part of v).
 inline void difference(const int* plan, int count, const double* q0, const double* q1,
                        int64_t qs, double dt, double* out) {
   for (int s = 0; s < count; ++s) {
@@ -133,8 +134,7 @@ inline void difference(const int* plan, int count, const double* q0, const doubl
         const Quat a(q0[iq + 3], q0[iq], q0[iq + 1], q0[iq + 2]);
         const Quat b(q1[(iq + 3) * qs], q1[iq * qs], q1[(iq + 1) * qs], q1[(iq + 2) * qs]);
         double theta;
-        const Vec3 w = spatial::log3(a.toRotationMatrix().transpose() * b.toRotationMatrix(),
-                                     theta);
+        const Vec3 w = spatial::log3(Quat(a.conjugate() * b), theta);  // as Pinocchio's
         for (int i = 0; i < 3; ++i) out[iv + i] = w[i] / dt;
         break;
       }
@@ -143,8 +143,7 @@ inline void difference(const int* plan, int count, const double* q0, const doubl
         const Vec3 pb(q1[iq * qs], q1[(iq + 1) * qs], q1[(iq + 2) * qs]);
         const Quat a(q0[iq + 6], q0[iq + 3], q0[iq + 4], q0[iq + 5]);
         const Quat b(q1[(iq + 6) * qs], q1[(iq + 3) * qs], q1[(iq + 4) * qs], q1[(iq + 5) * qs]);
-        const Eigen::Matrix3d Rat = a.toRotationMatrix().transpose();
-        const auto d = spatial::log6(Rat * b.toRotationMatrix(), Rat * (pb - pa));
+        const auto d = spatial::log6(Quat(a.conjugate() * b), a.conjugate() * (pb - pa));
         for (int i = 0; i < 6; ++i) out[iv + i] = d[i] / dt;
         break;
       }
