@@ -19,7 +19,8 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
 - :class:`~qpcoord.PostureTask` (``q_ref ⊖ q = pinocchio.difference(q, q_ref)`` on its
   joints by segments of ``src/native/integrate.hpp``: ``q_ref − q`` on 1-DoF joints, the
   angle of a continuous joint, Pinocchio's quaternion ``log3`` of a spherical joint and
-  ``log6`` of a free-flyer below the root; a floating base's own rows are not in it),
+  ``log6`` of a free-flyer below the root, SE(2)'s log of a planar one; a floating base's
+  own rows are not in it),
 - :class:`~qpcoord.RelativeFrameTask` (``e = log₆(T*⁻¹ T_ref⁻¹ T_frame)``, both frames'
   motions) and :class:`~qpcoord.JointCouplingTask` (one row; its ``offset`` is a parameter),
 - :class:`~qpcoord.DampingTask` (``v = 0``; the step writes ``q`` into its ``q_hold``) and
@@ -46,12 +47,12 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
 Every other task (other bands, collision rows computed in Python, user tasks, a posture over a
-joint without a native difference -- planar below the root, composite, mimic --, and their
-``lm_damping`` rows) and constant Equality/Inequality rows keep
-their Python ``_refresh``, run before the native call and copied into the same arrays (a
-hybrid step); any other limit (a user's :class:`~qpcoord.Limit`) makes the whole box
-Python-computed. With ``integrate=True`` (:meth:`IK.step_integrate
-<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
+joint without a native difference -- composite, mimic --, and their ``lm_damping`` rows) and
+constant Equality/Inequality rows keep their Python ``_refresh``, run before the native call
+and copied into the same arrays (a hybrid step); any other limit (a user's
+:class:`~qpcoord.Limit`) makes the whole box Python-computed. With ``integrate=True``
+(:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call writes ``q_next``
+(:func:`integration_plan`).
 
 The boundary is data only (``docs/engine.md``, *The IK step*): the native step holds its own
 copy of each kernel's parameters (gain, row weights, target and feed-forward, faces, contact
@@ -433,13 +434,13 @@ def _coupling_indices(task: JointCouplingTask) -> list[int]:
 
 
 def _posture_plan(task: PostureTask) -> list[int] | None:
-    """A posture's difference plan (``q_ref ⊖ q`` on its joints, the segments of
-    :func:`integration_plan` whose velocity rows are the task's), or ``None`` if one of its
-    joints has no native difference (planar, composite, mimic, ...)."""
+    """A posture's difference plan (``q_ref ⊖ q`` on its joints: the segments of
+    :func:`integration_plan` whose velocity rows are the task's, planar joints too), or
+    ``None`` if one of its joints has no native difference (composite, mimic, ...)."""
     robot = task.robot
     if robot.euclidean:
         return [0, 0, 0, robot.nq]
-    return _segments(robot, {int(j) for j in task.joints})
+    return _segments(robot, {int(j) for j in task.joints}, _DIFFERENCE_JOINTS)
 
 
 #: Joints whose configuration is a vector space (``q + v dt``), by Pinocchio short name.
@@ -459,6 +460,9 @@ _MANIFOLD_JOINTS = {
     "JointModelSpherical": 2,
     "JointModelFreeFlyer": 3,
 }
+#: The segment kinds of the native difference (``integrate::difference``): the integrator's
+#: and the planar joint's (no native integration).
+_DIFFERENCE_JOINTS = {**_MANIFOLD_JOINTS, "JointModelPlanar": 4}
 
 
 def integration_plan(robot: Any) -> list[int] | None:
@@ -470,13 +474,13 @@ def integration_plan(robot: Any) -> list[int] | None:
     included) is one segment ``q + v dt`` in its own coordinates, as ``Robot.integrate``."""
     if robot.euclidean:
         return [0, 0, 0, robot.nq]
-    return _segments(robot, None)
+    return _segments(robot, None, _MANIFOLD_JOINTS)
 
 
-def _segments(robot: Any, rows: set[int] | None) -> list[int] | None:
+def _segments(robot: Any, rows: set[int] | None, kinds: dict[str, int]) -> list[int] | None:
     """The native segments of the robot's joints (all of them, or those whose first velocity
-    row is in ``rows``), adjacent vector-space joints merged; ``None`` if one has no native
-    kind."""
+    row is in ``rows``), adjacent vector-space joints merged, the others' kind from ``kinds``
+    (by short name); ``None`` if one has no native kind."""
     plan: list[int] = []
     for joint in robot.model.joints[1:]:
         name = joint.shortname()
@@ -488,8 +492,8 @@ def _segments(robot: Any, rows: set[int] | None) -> list[int] | None:
                 plan[-1] += int(joint.nq)
             else:
                 plan += [0, iq, iv, int(joint.nq)]
-        elif name in _MANIFOLD_JOINTS:
-            plan += [_MANIFOLD_JOINTS[name], iq, iv, 1]
+        elif name in kinds:
+            plan += [kinds[name], iq, iv, 1]
         else:
             return None
     return plan

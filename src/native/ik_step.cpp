@@ -303,7 +303,7 @@ class IKStep {
   /// sel: per row, the axis of the full error (a posture: the joint's v index; a band: the
   /// rows 0..rows-1); qidx: a posture's difference plan (integrate.hpp's segments over its
   /// joints, each v index of sel in one segment: q_ref - q, the angle from q to q_ref,
-  /// log3(conj(q) q_ref) or log6 of a free-flyer pair), a
+  /// log3(conj(q) q_ref), log6 of a free-flyer pair or SE(2)'s log of a planar pair), a
   /// SupportPolygon's frame slots, a RELATIVE_FRAME's reference frame slot, a
   /// JOINT_COUPLING's q indices then v indices, an LM_DAMPING's owner kernel. Returns the
   /// kernel's index (the setters' k); it runs once its gain, weights, target and outputs are
@@ -929,7 +929,7 @@ class IKStep {
   /// A posture's plan: segments as check_plan's, disjoint in v, whose v indices are
   /// exactly the rows' (sel); it need not cover q (a floating root is not in a posture).
   void check_posture_plan(const std::vector<int>& plan, const std::vector<int>& sel) const {
-    check_segments(plan, "add_task");
+    check_segments(plan, "add_task", integrate::kPlanar);
     std::vector<int> owner(nv_, 0);  // setup only: how many segments hold each v index
     for (size_t s = 0; s < plan.size(); s += 4)
       for (int i = 0; i < segment_nv(plan[s], plan[s + 3]); ++i) ++owner[plan[s + 2] + i];
@@ -945,22 +945,23 @@ class IKStep {
   }
 
   static int segment_nq(int kind, int n) {
-    static constexpr int kNq[4] = {0, 2, 4, 7};
+    static constexpr int kNq[5] = {0, 2, 4, 7, 4};
     return kind == integrate::kVector ? n : kNq[kind];
   }
   static int segment_nv(int kind, int n) {
-    static constexpr int kNv[4] = {0, 1, 3, 6};
+    static constexpr int kNv[5] = {0, 1, 3, 6, 3};
     return kind == integrate::kVector ? n : kNv[kind];
   }
 
-  /// Each segment (kind, idx_q, idx_v, size) known and inside q and v; returns the q they hold.
-  int check_segments(const std::vector<int>& plan, const char* who) const {
+  /// Each segment (kind, idx_q, idx_v, size) of a kind up to last (an integration plan: up
+  /// to kFreeFlyer; a difference: kPlanar too) and inside q and v; returns the q they hold.
+  int check_segments(const std::vector<int>& plan, const char* who, int last) const {
     const std::string w(who);
     if (plan.size() % 4 != 0) throw nb::value_error((w + ": 4 ints per segment").c_str());
     int covered = 0;
     for (size_t s = 0; s < plan.size(); s += 4) {
       const int kind = plan[s], iq = plan[s + 1], iv = plan[s + 2], n = plan[s + 3];
-      if (kind < integrate::kVector || kind > integrate::kFreeFlyer)
+      if (kind < integrate::kVector || kind > last)
         throw nb::value_error((w + ": unknown segment kind").c_str());
       const int nq = segment_nq(kind, n), nv = segment_nv(kind, n);
       if ((kind != integrate::kVector && n != 1) || n < 1 || iq < 0 || iv < 0 ||
@@ -972,7 +973,7 @@ class IKStep {
   }
 
   void check_plan(const std::vector<int>& plan, const char* who) const {
-    if (check_segments(plan, who) != nq_)
+    if (check_segments(plan, who, integrate::kFreeFlyer) != nq_)
       throw nb::value_error((std::string(who) + ": the plan does not cover q").c_str());
   }
 

@@ -6,6 +6,7 @@ base included) and the same velocities over closed loops."""
 from __future__ import annotations
 
 from functools import partial
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -645,17 +646,19 @@ import numpy as np, pinocchio as pin, qpcoord as qc
 sys.path.insert(0, {tests!r})
 from test_native_kernels_match_python import _posture_levels, _posture_robot, _talos_stack
 from test_native_kernels_match_python import _start, DT
+from qpcoord.kinematics.native_step import integration_plan
 count = ctypes.CDLL({lib!r}).qpcoord_malloc_calls
 count.restype = ctypes.c_longlong
 def measure(label, robot, ik, q):
     assert not ik._native._hybrid and not ik._native._python_limits
     pin.computeJointJacobians(robot.model, robot.data, q)
     call = ik._native._solver.step
+    integrate = integration_plan(robot) is not None  # a planar joint: q_next in Python
     for _ in range(20):
-        assert call(q, True, 10.0, True) == 0
+        assert call(q, True, 10.0, integrate) == 0
     before = count()
     for _ in range(500):
-        call(q, True, 10.0, True)
+        call(q, True, 10.0, integrate)
     print(label, count() - before)
 robot = qc.robots.load("talos")
 print("variant", qc.core.native.variant())
@@ -665,9 +668,10 @@ for method in ("hierarchical", "weighted"):
     levels, limits = _talos_stack(robot, q0)
     ik = qc.IK(robot, levels, DT, limits=limits, method=method, engine="native")
     measure(method, robot, ik, q)
-robot = _posture_robot("nested")  # the posture's spherical and free-flyer differences
-q = robot.random_configuration(2)
-measure("posture", robot, qc.IK(robot, _posture_levels(robot, q), DT, engine="native"), q)
+for name in ("nested", "planar"):  # the posture's spherical, free-flyer, planar differences
+    robot = _posture_robot(name)
+    q = robot.random_configuration(2)
+    measure(name, robot, qc.IK(robot, _posture_levels(robot, q), DT, engine="native"), q)
 """
 
 
@@ -677,12 +681,13 @@ measure("posture", robot, qc.IK(robot, _posture_levels(robot, q), DT, engine="na
 def test_the_new_kernels_do_not_allocate_on_a_floating_base(tmp_path, robots, build):
     """The native call with the acceleration box, LM damping, relative-frame, coupling and
     low-acceleration kernels (a free-flyer difference) on Talos, and a damped posture over
-    spherical and free-flyer joints, makes no heap allocation after its first calls. Each
+    spherical, free-flyer and planar joints, makes no heap allocation after its first calls. Each
     build of the extension, chosen by QPCOORD_NATIVE_ISA."""
     _robot(robots, "talos")
     out = run_counting_malloc(tmp_path, _ALLOCATION_RUN, {native.ISA_ENV: build})
     counts = dict(line.split() for line in out.splitlines())
-    assert counts == {"variant": build, "hierarchical": "0", "weighted": "0", "posture": "0"}, out
+    zero = {"hierarchical": "0", "weighted": "0", "nested": "0", "planar": "0"}
+    assert counts == {"variant": build, **zero}, out
 
 
 @needs_native
@@ -881,20 +886,23 @@ def test_a_posture_over_continuous_joints_is_native_and_matches(robots):
 
 
 # ---------------------------------------------------------------------------------------
-# a posture over spherical and free-flyer joints; a joint without a native difference
+# a posture over spherical, free-flyer and planar joints; a joint without a native difference
 # ---------------------------------------------------------------------------------------
 
 
 def _posture_robot(name: str) -> qc.Robot:
     """``manifold``: a free-flyer root (not a posture row), revolute, continuous, spherical
     and prismatic joints; ``nested``: a spherical root, a free-flyer child and a revolute
-    joint (every joint a posture row); ``planar``: a revolute root and a planar child (no
-    native difference)."""
+    joint; ``planar``: a revolute root, a planar child and a revolute joint (every joint a
+    posture row); ``composite``: a composite child joint (no native difference)."""
     if name == "manifold":
         return manifold_robot()
+    composite = pin.JointModelComposite(pin.JointModelRX())  # not a vector space
+    composite.addJoint(pin.JointModelSpherical(), pin.SE3.Identity())
     kinds = {
         "nested": (pin.JointModelSpherical(), pin.JointModelFreeFlyer(), pin.JointModelRX()),
         "planar": (pin.JointModelRZ(), pin.JointModelPlanar(), pin.JointModelRY()),
+        "composite": (pin.JointModelRZ(), composite, pin.JointModelRY()),
     }[name]
     model = pin.Model()
     parent = 0
@@ -905,7 +913,7 @@ def _posture_robot(name: str) -> qc.Robot:
         model.appendBodyToJoint(parent, link, pin.SE3.Identity())
     tip = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3]))
     model.addFrame(pin.Frame("tip", parent, 0, tip, pin.OP_FRAME))
-    # bounded positions: random_configuration samples the free-flyer's translation there
+    # bounded positions: random_configuration samples the translations there
     model.lowerPositionLimit[:] = -1.0
     model.upperPositionLimit[:] = 1.0
     return qc.Robot(model, "tip")
@@ -919,33 +927,46 @@ def _posture_levels(robot: qc.Robot, q0: np.ndarray) -> list:
     return [[hand], [qc.PostureTask(robot, q_ref, gain=0.05 / DT, weight=w, lm_damping=0.3)]]
 
 
-def _sphere_quaternions(robot: qc.Robot) -> list[int]:
-    """The q index of each quaternion of a spherical or free-flyer joint."""
-    out = []
-    for j in robot.model.joints[1:]:
-        if j.shortname() == "JointModelSpherical":
-            out.append(int(j.idx_q))
-        elif j.shortname() == "JointModelFreeFlyer":
-            out.append(int(j.idx_q) + 3)
-    return out
-
-
-def _rotated(q: np.ndarray, iq: int, angle: float, axis: np.ndarray) -> np.ndarray:
-    """``q`` with the quaternion at ``iq`` turned by ``angle`` (rad) about ``axis``."""
+def _turned(q: np.ndarray, joint: Any, angle: float) -> np.ndarray:
+    """``q`` with a spherical or free-flyer joint's quaternion turned by ``angle`` (rad)
+    about a fixed axis, or a planar joint's (cos, sin) pair by ``angle``."""
     out = q.copy()
+    if joint.shortname() == "JointModelPlanar":
+        c, s = q[joint.idx_q + 2 : joint.idx_q + 4]
+        ca, sa = np.cos(angle), np.sin(angle)
+        out[joint.idx_q + 2 : joint.idx_q + 4] = c * ca - s * sa, s * ca + c * sa
+        return out
+    iq = joint.idx_q + (3 if joint.shortname() == "JointModelFreeFlyer" else 0)
     x, y, z, w = q[iq : iq + 4]
-    R = pin.Quaternion(w, x, y, z).matrix() @ pin.exp3(angle * axis / np.linalg.norm(axis))
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    R = pin.Quaternion(w, x, y, z).matrix() @ pin.exp3(angle * axis)
     out[iq : iq + 4] = pin.Quaternion(R).coeffs()
     return out
 
 
+def _angle_rows(robot: qc.Robot, rows: np.ndarray) -> np.ndarray:
+    """Per posture row: the row of the angle Pinocchio's SO(2) log gives it (a continuous
+    joint's own row, a planar joint's rotation row for its three rows), else -1."""
+    of_v = np.full(robot.nv, -1)
+    for j in robot.model.joints[1:]:
+        if j.shortname().startswith("JointModelRUB"):
+            of_v[j.idx_v] = j.idx_v
+        elif j.shortname() == "JointModelPlanar":
+            of_v[j.idx_v : j.idx_v + 3] = j.idx_v + 2
+    where = {int(v): r for r, v in enumerate(rows)}
+    return np.array([where[int(v)] if v >= 0 else -1 for v in of_v[rows]])
+
+
+_TURNING = ("JointModelSpherical", "JointModelFreeFlyer", "JointModelPlanar")
+
+
 @needs_native
-@pytest.mark.parametrize("name", ["manifold", "nested"])
-def test_a_posture_over_spherical_joints_is_native_and_matches(name):
-    """The posture's rows over spherical (and a child free-flyer's) quaternions are
-    ``pinocchio.difference(q, q_ref)`` natively (Pinocchio's quaternion logs), damped too, as
-    the Python refresh: on random configurations and on injected ones where a log is
-    delicate (a rotation near pi, a tiny one, the opposite quaternion of the same
+@pytest.mark.parametrize("name", ["manifold", "nested", "planar"])
+def test_a_posture_over_spherical_and_planar_joints_is_native_and_matches(name):
+    """The posture's rows over spherical, free-flyer (below the root) and planar joints are
+    ``pinocchio.difference(q, q_ref)`` natively (Pinocchio's quaternion logs, SE(2)'s log),
+    damped too, as the Python refresh: on random configurations and on injected ones where a
+    log is delicate (a rotation near pi, a tiny one, the opposite quaternion of the same
     rotation)."""
     robot = _posture_robot(name)
     q0 = robot.random_configuration(1)
@@ -955,39 +976,39 @@ def test_a_posture_over_spherical_joints_is_native_and_matches(name):
     tn = next(t for t in ikn._native.kernel_tasks if isinstance(t, qc.PostureTask))
     tp = next(t for t in ikp._dynamic if isinstance(t, qc.PostureTask))
     assert native_kind(tn) == TaskKind.POSTURE
-    quats = _sphere_quaternions(robot)
-    assert quats
-    circle = np.zeros(robot.nv)  # the continuous joints' velocity rows
-    for j in robot.model.joints[1:]:
-        if j.shortname().startswith("JointModelRUB"):
-            circle[j.idx_v] = 1.0
-    circle = circle[tn.joints]
-    axis = np.array([0.3, -0.5, 0.8])
+    rows = {int(v) for v in tn.joints}  # a floating root is not in them
+    turning = [j for j in robot.model.joints[1:] if j.shortname() in _TURNING and j.idx_v in rows]
+    assert turning
+    angle_row = _angle_rows(robot, tn.joints)
     pairs = [(robot.random_configuration(s), robot.random_configuration(s + 50)) for s in range(8)]
-    for iq in quats:
-        q = robot.random_configuration(20 + iq)
+    for k, joint in enumerate(turning):
+        q = robot.random_configuration(20 + k)
         # near pi a rotation-matrix log loses up to 3e-11 rad (at pi - 4e-3): not here. At
         # pi itself the sign of the log is the rounding's (±pi u): not compared
         for angle in (np.pi - 1e-7, np.pi - 4e-3, 3.0, 1e-3, 1e-9, 0.0):
-            pairs.append((q, _rotated(q, iq, angle, axis)))
-        flipped = q.copy()
-        flipped[iq : iq + 4] *= -1.0  # the same rotation: a zero difference
-        pairs.append((q, flipped))
+            pairs.append((q, _turned(q, joint, angle)))
+        if joint.shortname() != "JointModelPlanar":
+            flipped = _turned(q, joint, 0.0)
+            iq = joint.idx_q + (3 if joint.shortname() == "JointModelFreeFlyer" else 0)
+            flipped[iq : iq + 4] *= -1.0  # the same rotation: a zero difference
+            pairs.append((q, flipped))
     for i, (q, q_ref) in enumerate(pairs):
         tn.set_target(q_ref)
         tp.set_target(q_ref)
         ikn.step(q)
         ikp.refresh(q)
         # the rows K (q_ref ⊖ q): an angle of at most pi, or a coordinate difference of at
-        # most 2 |q|∞; the two evaluations take the same logs of the same quaternion product
-        # and differ by its rounding (a few eps per component), times log3's 1/sinc(theta/2)
-        # (at most pi) and the gain K. A continuous joint's row: Pinocchio's SO(2) log is
-        # acos(cos d), whose rounding grows as eps / |sin d| near pi (the kernel's atan2 does
-        # not), so its tolerance grows so
+        # most 2 |q|∞ (turned by a rotation); the two evaluations take the same logs of the
+        # same quaternion product and differ by its rounding (a few eps per component),
+        # times log3's 1/sinc(theta/2) (at most pi) and the gain K. A continuous or planar
+        # joint's rows: Pinocchio's SO(2) log is acos(cos d), whose rounding grows as
+        # eps / |sin d| near pi (the kernel's atan2 does not), and a planar joint's
+        # translation rows follow that angle: their tolerance grows so
         scale = max(np.pi, float(np.abs(q).max()), float(np.abs(q_ref).max()))
         d = tp.task.b / tp.gain
-        acos = np.maximum(np.abs(np.sin(d)), np.sqrt(EPS)) ** -1 * circle
-        tol = 32 * EPS * tp.gain * (scale + acos)
+        angle = np.where(angle_row >= 0, d[np.maximum(angle_row, 0)], np.pi / 2)
+        acos = np.maximum(np.abs(np.sin(angle)), np.sqrt(EPS)) ** -1 * (angle_row >= 0)
+        tol = 32 * EPS * tp.gain * scale * (1.0 + acos)
         gap = np.abs(tn.task.b - tp.task.b)
         assert (gap <= tol).all(), (i, gap / tol)
         np.testing.assert_array_equal(tn.task.A, tp.task.A)
@@ -1001,24 +1022,24 @@ def test_a_posture_over_spherical_joints_is_native_and_matches(name):
 
 
 @needs_native
-@pytest.mark.parametrize("name", ["manifold", "nested"])
-def test_a_posture_over_spherical_joints_closed_loop_matches_the_python_engine(name):
+@pytest.mark.parametrize("name", ["manifold", "nested", "planar"])
+def test_a_posture_over_spherical_and_planar_joints_closed_loop_matches(name):
     """The tip held, the posture pulled toward another configuration through the spherical
-    joints: the same v on both engines over a closed loop."""
+    (planar) joints: the same v on both engines over a closed loop."""
     robot = _posture_robot(name)
     q0 = robot.random_configuration(1)
     ikn, ikp = engine_pair(robot, partial(_posture_levels, robot, q0), DT)
     assert not ikn._native._hybrid
     q = closed_loop_agrees(ikn, ikp, q0, 200)
-    # the posture moved the quaternions: the loop ran through the spherical rows
+    # the posture moved the joints: the loop ran through their rows
     assert np.abs(robot.difference(q0, q)).max() > 1e-3
 
 
 @needs_native
-def test_a_posture_over_a_planar_child_joint_keeps_its_python_rows():
-    """A planar joint below the root (no native difference) is a posture row: that posture
-    keeps its Python refresh in a hybrid step, and both engines give the same v."""
-    robot = _posture_robot("planar")
+def test_a_posture_over_a_composite_joint_keeps_its_python_rows():
+    """A composite joint (no native difference) is a posture row: that posture keeps its
+    Python refresh in a hybrid step, and both engines give the same v."""
+    robot = _posture_robot("composite")
     q0 = robot.random_configuration(1)
     ikn, ikp = engine_pair(robot, partial(_posture_levels, robot, q0), DT)
     posture = ikn._native._python_tasks
