@@ -11,7 +11,10 @@ The stack (1 kHz): the Franka Panda's hand (``FrameTask``, gain ``0.5/dt``) towa
   posture level;
 - ``+ joint coupling``: a ``JointCouplingTask`` ``q1 + q3 = const`` at the posture level;
 - ``+ damping task``: a ``DampingTask`` (weight 1e-2) at the posture level;
-- ``+ low acceleration``: a ``LowAccelerationTask`` (weight 1e-2) at the posture level.
+- ``+ low acceleration``: a ``LowAccelerationTask`` (weight 1e-2) at the posture level;
+- ``ball-joint arm: pose + posture``: the same pose + posture stack on a 7-DoF arm of a
+  spherical shoulder, a revolute elbow and a spherical wrist (:func:`ball_joint_arm`; the
+  posture's rows over both quaternions).
 
 Each row runs a closed loop of ``step_integrate`` calls (the native engine, and the Python
 engine for reference), one BLAS thread. Printed: median and p99 (µs) per step, each the
@@ -34,6 +37,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
 from _table import markdown, preamble, span  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
@@ -44,9 +48,40 @@ PANDA_Q0 = np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])  # rad
 FRAME = "panda_hand_tcp"
 
 
+BALL_ARM = "ball-joint arm: pose + posture"
+
+
+def ball_joint_arm() -> qc.Robot:
+    """Shoulder (spherical), elbow (revolute y, ±2.5 rad), wrist (spherical): 0.4 m links,
+    the tool frame ``panda_hand_tcp`` 0.1 m past the wrist; unit-mass links."""
+    model = pin.Model()
+    parent = 0
+    for i, joint in enumerate(
+        (pin.JointModelSpherical(), pin.JointModelRY(), pin.JointModelSpherical())
+    ):
+        at = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.4 if i else 0.0]))
+        parent = model.addJoint(parent, joint, at, f"joint{i + 1}")
+        link = pin.Inertia.FromCylinder(1.0, 0.03, 0.4)
+        model.appendBodyToJoint(parent, link, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.2])))
+    tool = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1]))
+    model.addFrame(pin.Frame(FRAME, parent, 0, tool, pin.OP_FRAME))
+    model.lowerPositionLimit[4], model.upperPositionLimit[4] = -2.5, 2.5  # the elbow (rad)
+    model.velocityLimit[:] = 2.0  # rad/s
+    return qc.Robot(model)
+
+
+def start(robot: qc.Robot) -> np.ndarray:
+    """The Panda's start configuration, or the ball-joint arm's elbow bent by 1 rad."""
+    if robot.nq == PANDA_Q0.size:
+        return PANDA_Q0
+    q = robot.neutral()
+    q[4] = 1.0
+    return q
+
+
 def stack(robot: qc.Robot, variant: str) -> tuple[list, list]:
     """The levels and limits of ``variant``."""
-    q0 = PANDA_Q0
+    q0 = start(robot)
     T = robot.frame_pose(q0, FRAME).copy()
     T[:3, 3] += [0.1, 0.0, -0.05]
     lm = 1.0 if variant == "pose with lm_damping" else 0.0
@@ -81,6 +116,7 @@ VARIANTS = (
     "+ joint coupling",
     "+ damping task",
     "+ low acceleration",
+    BALL_ARM,
 )
 
 
@@ -88,7 +124,7 @@ def run(robot: qc.Robot, variant: str, engine: str, steps: int) -> tuple[np.ndar
     levels, limits = stack(robot, variant)
     ik = qc.IK(robot, levels, DT, limits=limits, engine=engine)
     hybrid = bool(ik._native is not None and (ik._native._hybrid or ik._native._python_limits))
-    q = PANDA_Q0.copy()
+    q = start(robot).copy()
     times = np.empty(steps)
     for k in range(steps):
         t0 = time.perf_counter()
@@ -102,10 +138,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1500)
     parser.add_argument("--runs", type=int, default=3)
     args = parser.parse_args()
-    robot = qc.robots.load("panda")
+    panda, arm = qc.robots.load("panda"), ball_joint_arm()
     table = []
     with threadpool_limits(1):
         for variant in VARIANTS:
+            robot = arm if variant == BALL_ARM else panda
             row: list[object] = [variant]
             for engine in ("native", "python"):
                 runs = [run(robot, variant, engine, args.steps) for _ in range(args.runs)]

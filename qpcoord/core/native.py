@@ -72,7 +72,7 @@ VARIANTS = {
 #: :data:`VARIANTS`, or ``auto`` / unset for the highest-level build this CPU supports.
 ISA_ENV = "QPCOORD_NATIVE_ISA"
 #: The interface version this module speaks (``ABI_VERSION`` of the extension).
-ABI_VERSION = 16
+ABI_VERSION = 17
 
 _INF = float("inf")
 

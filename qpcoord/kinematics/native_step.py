@@ -16,8 +16,11 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
 - :class:`~qpcoord.FramePositionTask`, :class:`~qpcoord.FrameTask` (both errors),
   :class:`~qpcoord.OrientationTask`, :class:`~qpcoord.ComTask` (targets, feed-forward,
   masks, weights),
-- :class:`~qpcoord.PostureTask` whose rows are 1-DoF joints, continuous ones included (a
-  floating base's own rows are not in it),
+- :class:`~qpcoord.PostureTask` (``q_ref ⊖ q = pinocchio.difference(q, q_ref)`` on its
+  joints by segments of ``src/native/integrate.hpp``: ``q_ref − q`` on 1-DoF joints, the
+  angle of a continuous joint, Pinocchio's quaternion ``log3`` of a spherical joint and
+  ``log6`` of a free-flyer below the root, SE(2)'s log of a planar one; a floating base's
+  own rows are not in it),
 - :class:`~qpcoord.RelativeFrameTask` (``e = log₆(T*⁻¹ T_ref⁻¹ T_frame)``, both frames'
   motions) and :class:`~qpcoord.JointCouplingTask` (one row; its ``offset`` is a parameter),
 - :class:`~qpcoord.DampingTask` (``v = 0``; the step writes ``q`` into its ``q_hold``) and
@@ -44,11 +47,12 @@ Native kernels (the same rows as the tasks' Python ``_refresh``, to rounding):
   intersected by the rule of :meth:`IK.refresh <qpcoord.IK.refresh>`.
 
 Every other task (other bands, collision rows computed in Python, user tasks, a posture over a
-spherical joint, and their ``lm_damping`` rows) and constant Equality/Inequality rows keep
-their Python ``_refresh``, run before the native call and copied into the same arrays (a
-hybrid step); any other limit (a user's :class:`~qpcoord.Limit`) makes the whole box
-Python-computed. With ``integrate=True`` (:meth:`IK.step_integrate
-<qpcoord.IK.step_integrate>`) the same call writes ``q_next`` (:func:`integration_plan`).
+joint without a native difference -- composite, mimic --, and their ``lm_damping`` rows) and
+constant Equality/Inequality rows keep their Python ``_refresh``, run before the native call
+and copied into the same arrays (a hybrid step); any other limit (a user's
+:class:`~qpcoord.Limit`) makes the whole box Python-computed. With ``integrate=True``
+(:meth:`IK.step_integrate <qpcoord.IK.step_integrate>`) the same call writes ``q_next``
+(:func:`integration_plan`).
 
 The boundary is data only (``docs/engine.md``, *The IK step*): the native step holds its own
 copy of each kernel's parameters (gain, row weights, target and feed-forward, faces, contact
@@ -415,11 +419,7 @@ def native_kind(task: KinematicTask) -> TaskKind | None:
         return None  # no default frame: its _refresh raises the robot's message
     if kind == TaskKind.POSE and isinstance(task, FrameTask) and task.error == "split":
         return TaskKind.POSE_SPLIT
-    if (
-        kind == TaskKind.POSTURE
-        and isinstance(task, PostureTask)
-        and _posture_q_index(task) is None
-    ):
+    if kind == TaskKind.POSTURE and isinstance(task, PostureTask) and _posture_plan(task) is None:
         return None
     if kind == TaskKind.LOW_ACCELERATION and integration_plan(task.robot) is None:
         return None  # a joint without a native difference (planar, composite, ...)
@@ -433,27 +433,14 @@ def _coupling_indices(task: JointCouplingTask) -> list[int]:
     return [int(j.idx_q) for j in joints] + [int(j.idx_v) for j in joints]
 
 
-def _posture_q_index(task: PostureTask) -> list[int] | None:
-    """The q index of each row of a posture (``q_ref ⊖ q`` is ``q_ref − q`` there; a
-    continuous joint's: ``nq`` + the index of its (cos, sin) pair, ``q_ref ⊖ q`` the angle
-    from ``q`` to ``q_ref``), or ``None`` if a row's joint is neither (a spherical joint's)."""
+def _posture_plan(task: PostureTask) -> list[int] | None:
+    """A posture's difference plan (``q_ref ⊖ q`` on its joints: the segments of
+    :func:`integration_plan` whose velocity rows are the task's, planar joints too), or
+    ``None`` if one of its joints has no native difference (composite, mimic, ...)."""
     robot = task.robot
     if robot.euclidean:
-        return [int(j) for j in task.joints]
-    model = robot.model
-    by_v: dict[int, int] = {}
-    for joint in model.joints[1:]:
-        if joint.nq == 1 and joint.nv == 1:
-            by_v[int(joint.idx_v)] = int(joint.idx_q)
-        elif _MANIFOLD_JOINTS.get(joint.shortname()) == 1:  # a (cos, sin) pair
-            by_v[int(joint.idx_v)] = model.nq + int(joint.idx_q)
-    out: list[int] = []
-    for j in task.joints:
-        iq = by_v.get(int(j))
-        if iq is None:
-            return None
-        out.append(iq)
-    return out
+        return [0, 0, 0, robot.nq]
+    return _segments(robot, {int(j) for j in task.joints}, _DIFFERENCE_JOINTS)
 
 
 #: Joints whose configuration is a vector space (``q + v dt``), by Pinocchio short name.
@@ -473,6 +460,9 @@ _MANIFOLD_JOINTS = {
     "JointModelSpherical": 2,
     "JointModelFreeFlyer": 3,
 }
+#: The segment kinds of the native difference (``integrate::difference``): the integrator's
+#: and the planar joint's (no native integration).
+_DIFFERENCE_JOINTS = {**_MANIFOLD_JOINTS, "JointModelPlanar": 4}
 
 
 def integration_plan(robot: Any) -> list[int] | None:
@@ -484,17 +474,26 @@ def integration_plan(robot: Any) -> list[int] | None:
     included) is one segment ``q + v dt`` in its own coordinates, as ``Robot.integrate``."""
     if robot.euclidean:
         return [0, 0, 0, robot.nq]
+    return _segments(robot, None, _MANIFOLD_JOINTS)
+
+
+def _segments(robot: Any, rows: set[int] | None, kinds: dict[str, int]) -> list[int] | None:
+    """The native segments of the robot's joints (all of them, or those whose first velocity
+    row is in ``rows``), adjacent vector-space joints merged, the others' kind from ``kinds``
+    (by short name); ``None`` if one has no native kind."""
     plan: list[int] = []
     for joint in robot.model.joints[1:]:
         name = joint.shortname()
         iq, iv = int(joint.idx_q), int(joint.idx_v)
+        if rows is not None and iv not in rows:
+            continue
         if name in _VECTOR_JOINTS:
             if plan and plan[-4] == 0 and plan[-3] + plan[-1] == iq and plan[-2] + plan[-1] == iv:
                 plan[-1] += int(joint.nq)
             else:
                 plan += [0, iq, iv, int(joint.nq)]
-        elif name in _MANIFOLD_JOINTS:
-            plan += [_MANIFOLD_JOINTS[name], iq, iv, 1]
+        elif name in kinds:
+            plan += [kinds[name], iq, iv, 1]
         else:
             return None
     return plan
@@ -673,8 +672,8 @@ class NativeIKStep(NativeHierarchy):
                             frames[fid] = self._add_frame(solver, fid)
                         frame = frames[fid]
                     qidx: list[int] | None = []
-                    if isinstance(owner, PostureTask):
-                        qidx = _posture_q_index(owner)
+                    if isinstance(owner, PostureTask):  # its difference's segments
+                        qidx = _posture_plan(owner)
                     elif isinstance(owner, RelativeFrameTask):  # the reference frame's slot
                         ref = int(owner.reference_id)
                         if ref not in frames:

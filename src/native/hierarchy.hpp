@@ -32,7 +32,7 @@ namespace qpcoord {
 
 /// The extension's interface version (qpcoord/core/native.py refuses a module of another):
 /// raised whenever a binding changes.
-inline constexpr int kAbiVersion = 16;
+inline constexpr int kAbiVersion = 17;
 
 /// The SVD of the closed forms (used when the QR closed form does not apply: damping active
 /// or a rank the QR cannot settle): Eigen's one-sided Jacobi SVD with its QR preconditioner,

@@ -195,7 +195,7 @@ struct Kernel {
   int frame = -1;
   int rows = 0;
   std::vector<int> sel;   ///< per row: the axis (0..5) or, for a posture, the joint's v index
-  std::vector<int> qidx;  ///< posture: per row, the joint's q index
+  std::vector<int> qidx;  ///< posture: its difference plan (see add_task)
   int row0 = 0;
   // parameters (set_gain, set_weights, set_target / set_faces / set_contacts)
   double gain = 0.0;
@@ -301,8 +301,9 @@ class IKStep {
 
   /// A kernel of `kind` writing rows row0.. of the stacked equalities (a band: inequalities).
   /// sel: per row, the axis of the full error (a posture: the joint's v index; a band: the
-  /// rows 0..rows-1); qidx: a posture's q index per row (a 1-DoF joint: q_ref - q there; nq +
-  /// the index of a continuous joint's (cos, sin) pair: the angle from q to q_ref), a
+  /// rows 0..rows-1); qidx: a posture's difference plan (integrate.hpp's segments over its
+  /// joints, each v index of sel in one segment: q_ref - q, the angle from q to q_ref,
+  /// log3(conj(q) q_ref), log6 of a free-flyer pair or SE(2)'s log of a planar pair), a
   /// SupportPolygon's frame slots, a RELATIVE_FRAME's reference frame slot, a
   /// JOINT_COUPLING's q indices then v indices, an LM_DAMPING's owner kernel. Returns the
   /// kernel's index (the setters' k); it runs once its gain, weights, target and outputs are
@@ -342,12 +343,7 @@ class IKStep {
       bands_.back().frames = qidx;
       if (kind == kSupportPolygon) bands_.back().size(rows, nv_, rows / (int)qidx.size());
     }
-    if (kind == kPosture) {  // qidx: the joint's q index, or nq + that of a (cos, sin) pair
-      if (qidx.size() != sel.size()) throw nb::value_error("add_task: one q index per row");
-      for (int i : qidx)
-        if (i < 0 || (i >= nq_ && i - nq_ + 1 >= nq_))
-          throw nb::value_error("add_task: q index out of range");
-    }
+    if (kind == kPosture) check_posture_plan(qidx, sel);
     if (kind == kRelativeFrame &&
         (qidx.size() != 1 || qidx[0] < 0 || qidx[0] >= (int)frames_.size() || qidx[0] == frame))
       throw nb::value_error("add_task: a RELATIVE_FRAME's qidx is its reference frame's slot");
@@ -930,23 +926,55 @@ class IKStep {
 
   /// Throws ValueError (naming who) unless plan is an integration plan covering q: (kind,
   /// idx_q, idx_v, size) per segment (integrate.hpp).
-  void check_plan(const std::vector<int>& plan, const char* who) const {
+  /// A posture's plan: segments as check_plan's, disjoint in v, whose v indices are
+  /// exactly the rows' (sel); it need not cover q (a floating root is not in a posture).
+  void check_posture_plan(const std::vector<int>& plan, const std::vector<int>& sel) const {
+    check_segments(plan, "add_task", integrate::kPlanar);
+    std::vector<int> owner(nv_, 0);  // setup only: how many segments hold each v index
+    for (size_t s = 0; s < plan.size(); s += 4)
+      for (int i = 0; i < segment_nv(plan[s], plan[s + 3]); ++i) ++owner[plan[s + 2] + i];
+    int held = 0;
+    for (int c : owner) {
+      if (c > 1) throw nb::value_error("add_task: a posture's segments overlap");
+      held += c;
+    }
+    for (int j : sel)
+      if (owner[j] != 1) throw nb::value_error("add_task: a posture row outside its plan");
+    if (held != static_cast<int>(sel.size()))
+      throw nb::value_error("add_task: a posture's plan covers joints it has no row of");
+  }
+
+  static int segment_nq(int kind, int n) {
+    static constexpr int kNq[5] = {0, 2, 4, 7, 4};
+    return kind == integrate::kVector ? n : kNq[kind];
+  }
+  static int segment_nv(int kind, int n) {
+    static constexpr int kNv[5] = {0, 1, 3, 6, 3};
+    return kind == integrate::kVector ? n : kNv[kind];
+  }
+
+  /// Each segment (kind, idx_q, idx_v, size) of a kind up to last (an integration plan: up
+  /// to kFreeFlyer; a difference: kPlanar too) and inside q and v; returns the q they hold.
+  int check_segments(const std::vector<int>& plan, const char* who, int last) const {
     const std::string w(who);
     if (plan.size() % 4 != 0) throw nb::value_error((w + ": 4 ints per segment").c_str());
-    static constexpr int kNq[4] = {0, 2, 4, 7}, kNv[4] = {0, 1, 3, 6};
     int covered = 0;
     for (size_t s = 0; s < plan.size(); s += 4) {
       const int kind = plan[s], iq = plan[s + 1], iv = plan[s + 2], n = plan[s + 3];
-      if (kind < integrate::kVector || kind > integrate::kFreeFlyer)
+      if (kind < integrate::kVector || kind > last)
         throw nb::value_error((w + ": unknown segment kind").c_str());
-      const int nq = kind == integrate::kVector ? n : kNq[kind];
-      const int nv = kind == integrate::kVector ? n : kNv[kind];
+      const int nq = segment_nq(kind, n), nv = segment_nv(kind, n);
       if ((kind != integrate::kVector && n != 1) || n < 1 || iq < 0 || iv < 0 ||
           iq + nq > nq_ || iv + nv > nv_)
         throw nb::value_error((w + ": segment out of range").c_str());
       covered += nq;
     }
-    if (covered != nq_) throw nb::value_error((w + ": the plan does not cover q").c_str());
+    return covered;
+  }
+
+  void check_plan(const std::vector<int>& plan, const char* who) const {
+    if (check_segments(plan, who, integrate::kFreeFlyer) != nq_)
+      throw nb::value_error((std::string(who) + ": the plan does not cover q").c_str());
   }
 
   Kernel& kernel(int k, const char* who) {
@@ -1055,7 +1083,7 @@ class IKStep {
   info::Keys info_keys_;  ///< info()'s keys (info_dict.hpp)
   Mat Jt_, Jl_;
   Vec row_, lo_, hi_, hi2_;
-  Vec hold_;  ///< (nq,) a LOW_ACCELERATION kernel's q_hold, contiguous
+  Vec hold_;  ///< (nq,) integrate::difference's contiguous q0: a q_hold, or q (a posture)
   nb::object copy_x_, copy_res_, copy_q_next_;  ///< set_copies: the outputs' copy methods
 };
 
@@ -1123,7 +1151,8 @@ void bind_ik_step(nb::module_& m) {
       .def("add_task", &IKStep::add_task, nb::arg("kind"), nb::arg("frame"), nb::arg("sel"),
            nb::arg("row0"), nb::arg("qidx"),
            "A kernel of kind (IKTaskKind) on frame slot frame (-1: none), rows sel from row0 "
-           "of the stacked rows; qidx: a posture's q indices, a support polygon's frame "
+           "of the stacked rows; qidx: a posture's difference plan (kind, idx_q, idx_v, size "
+           "per segment), a support polygon's frame "
            "slots, a relative frame's reference slot, a joint coupling's q then v indices, "
            "an LM_DAMPING's owner kernel. Returns its index k; it runs once set_gain, "
            "set_weights, its target (set_target / set_faces / set_contacts / set_lm_damping) "

@@ -26,6 +26,7 @@ enum Segment : int {
   kCircle = 1,      ///< one (cos, sin) pair
   kSpherical = 2,   ///< one quaternion (x, y, z, w)
   kFreeFlyer = 3,   ///< translation (3) then quaternion (4); velocity (linear, angular)
+  kPlanar = 4,      ///< (x, y, cos, sin); velocity (vx, vy, w): difference only (no run)
 };
 
 using Vec3 = Eigen::Vector3d;
@@ -114,8 +115,10 @@ inline void run(const int* plan, int count, const double* q, int64_t qs, const d
 
 /// out = difference(q0, q1) / dt over the plan: the velocity v with integrate(q0, v dt) = q1,
 /// with Pinocchio's conventions: q1 - q0 on a vector space; the angle of the (cos, sin) pair
-/// q1 in the frame of q0 (atan2); log3(R0^T R1) of a quaternion pair; log6(M0^-1 M1) of a
-/// free-flyer pair (linear, angular). q0 is contiguous, q1 read with stride qs.
+/// q1 in the frame of q0 (atan2); log3(conj(q0) q1) of a quaternion pair (spatial.hpp);
+/// log6(M0^-1 M1) of a free-flyer pair (linear, angular), both logs from quaternions; the
+/// SE(2) log of a planar pair. q0 is contiguous, q1 read with
+/// stride qs; out is written at the plan's v indices only (a plan may cover part of v).
 inline void difference(const int* plan, int count, const double* q0, const double* q1,
                        int64_t qs, double dt, double* out) {
   for (int s = 0; s < count; ++s) {
@@ -133,8 +136,7 @@ inline void difference(const int* plan, int count, const double* q0, const doubl
         const Quat a(q0[iq + 3], q0[iq], q0[iq + 1], q0[iq + 2]);
         const Quat b(q1[(iq + 3) * qs], q1[iq * qs], q1[(iq + 1) * qs], q1[(iq + 2) * qs]);
         double theta;
-        const Vec3 w = spatial::log3(a.toRotationMatrix().transpose() * b.toRotationMatrix(),
-                                     theta);
+        const Vec3 w = spatial::log3(Quat(a.conjugate() * b), theta);  // as Pinocchio's
         for (int i = 0; i < 3; ++i) out[iv + i] = w[i] / dt;
         break;
       }
@@ -143,9 +145,22 @@ inline void difference(const int* plan, int count, const double* q0, const doubl
         const Vec3 pb(q1[iq * qs], q1[(iq + 1) * qs], q1[(iq + 2) * qs]);
         const Quat a(q0[iq + 6], q0[iq + 3], q0[iq + 4], q0[iq + 5]);
         const Quat b(q1[(iq + 6) * qs], q1[(iq + 3) * qs], q1[(iq + 4) * qs], q1[(iq + 5) * qs]);
-        const Eigen::Matrix3d Rat = a.toRotationMatrix().transpose();
-        const auto d = spatial::log6(Rat * b.toRotationMatrix(), Rat * (pb - pa));
+        const auto d = spatial::log6(Quat(a.conjugate() * b), a.conjugate() * (pb - pa));
         for (int i = 0; i < 6; ++i) out[iv + i] = d[i] / dt;
+        break;
+      }
+      case kPlanar: {  // Pinocchio's SE(2) log of (R0^T R1, R0^T (p1 - p0)); the angle by atan2
+        const double c0 = q0[iq + 2], s0 = q0[iq + 3];
+        const double c1 = q1[(iq + 2) * qs], s1 = q1[(iq + 3) * qs];
+        const double dx = q1[iq * qs] - q0[iq], dy = q1[(iq + 1) * qs] - q0[iq + 1];
+        const double px = c0 * dx + s0 * dy, py = c0 * dy - s0 * dx;
+        const double t = std::atan2(c0 * s1 - s0 * c1, c0 * c1 + s0 * s1);
+        const double ta = std::abs(t), t2 = t * t;
+        const double alpha = ta < 1e-4 ? 1.0 - t2 / 12.0 - t2 * t2 / 720.0
+                                       : ta * std::sin(ta) / (2.0 * (1.0 - std::cos(ta)));
+        out[iv] = (alpha * px + t / 2.0 * py) / dt;
+        out[iv + 1] = (alpha * py - t / 2.0 * px) / dt;
+        out[iv + 2] = t / dt;
         break;
       }
       default:

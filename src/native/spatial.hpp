@@ -79,6 +79,27 @@ inline Vec3 log3(const Mat3& R, double& theta) {
   return (theta / an) * axis;
 }
 
+/// log3 of a unit quaternion (w, x, y, z): theta u with theta in [0, pi], as Pinocchio's
+/// quaternion::log3 (the difference of two spherical joints' quaternions, conj(q0) q1): the
+/// sign turned so that w >= 0, theta = 2 atan2(|xyz|, w), accurate at every angle (the
+/// matrix log3 above loses ~eps / sin(theta) near pi); below |xyz|^2 = eps^(2/3) the series.
+inline Vec3 log3(const Eigen::Quaterniond& quat, double& theta) {
+  const double eps = std::numeric_limits<double>::epsilon();
+  const double prec = taylor_log();
+  const double n2 = quat.vec().squaredNorm();
+  const double norm = std::sqrt(n2 + eps * eps);
+  const double sign = quat.w() >= 0.0 ? 1.0 : -1.0;
+  const double w = sign * quat.w();
+  const double half = std::atan2(norm, w);  // theta / 2, in [0, pi/2]
+  const double y_x = norm / w, y_x_sq = n2 / (w * w);
+  theta = n2 < prec ? 2.0 * (1.0 - y_x_sq / 3.0) * y_x : 2.0 * half;
+  const double th2_4 = theta * theta / 4.0;
+  const double inv_sinc =
+      n2 < prec ? 2.0 * (1.0 + th2_4 / 6.0 + 7.0 / 360.0 * th2_4 * th2_4)
+                : theta / std::sin(half);
+  return (inv_sinc * sign) * quat.vec();
+}
+
 /// Jlog3 at r = theta u: (theta sin / (2 (1 - cos))) I + r r^T (1/theta^2 - sin / (2 theta
 /// (1 - cos))) + [r]x / 2.
 inline Mat3 jlog3(double theta, const Vec3& r) {
@@ -115,6 +136,27 @@ inline Vec6 log6(const Mat3& R, const Vec3& p) {
   }
   Vec6 out;
   out.head<3>() = alpha * p - 0.5 * w.cross(p) + (beta * w.dot(p)) * w;
+  out.tail<3>() = w;
+  return out;
+}
+
+/// log6 of (quat, p), a unit quaternion and a translation, as Pinocchio's quaternion log6 (the
+/// difference of two free-flyer configurations): angular part log3(quat) above, linear part
+/// p - w x p / 2 + beta w x (w x p) with beta = 1/theta^2 - cot(theta/2) / (2 theta) (its
+/// series (1/3 - theta^2/180) / 4 at or below theta = eps^(1/4)).
+inline Vec6 log6(const Eigen::Quaterniond& quat, const Vec3& p) {
+  const double eps = std::numeric_limits<double>::epsilon();
+  const double sign = quat.w() >= 0.0 ? 1.0 : -1.0;
+  static const double series = std::pow(eps, 0.25);
+  double theta;
+  const Vec3 w = log3(quat, theta);
+  const double t2 = w.squaredNorm();
+  const double cot_half = sign * quat.w() / std::sqrt(quat.vec().squaredNorm() + eps * eps);
+  const double beta = theta <= series
+                          ? (1.0 / 3.0 - t2 / 4.0 / 45.0) / 4.0
+                          : 1.0 / t2 - cot_half * 0.5 / theta;
+  Vec6 out;
+  out.head<3>() = p - 0.5 * w.cross(p) + beta * w.cross(w.cross(p));
   out.tail<3>() = w;
   return out;
 }

@@ -5,6 +5,9 @@ base included) and the same velocities over closed loops."""
 
 from __future__ import annotations
 
+from functools import partial
+from typing import Any
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -627,7 +630,9 @@ def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
 _ALLOCATION_RUN = r"""
 import numpy as np, pinocchio as pin, qpcoord as qc
 from support.malloc_counts import print_step_mallocs
-from test_native_kernels_match_python import _talos_stack, _start, DT
+from test_native_kernels_match_python import _posture_levels, _posture_robot, _talos_stack
+from test_native_kernels_match_python import _start, DT
+from qpcoord.kinematics.native_step import integration_plan
 robot = qc.robots.load("talos")
 q0 = _start(robot)
 q = robot.integrate(q0, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
@@ -637,6 +642,14 @@ for method in ("hierarchical", "weighted"):
     assert not ik._native._hybrid and not ik._native._python_limits
     pin.computeJointJacobians(robot.model, robot.data, q)
     print_step_mallocs(method, ik, q)
+for name in ("nested", "planar"):  # the posture's spherical, free-flyer, planar differences
+    robot = _posture_robot(name)
+    q = robot.random_configuration(2)
+    ik = qc.IK(robot, _posture_levels(robot, q), DT, engine="native")
+    assert not ik._native._hybrid and not ik._native._python_limits
+    pin.computeJointJacobians(robot.model, robot.data, q)
+    # a planar joint: q_next integrated in Python, not by the step
+    print_step_mallocs(name, ik, q, integrate=integration_plan(robot) is not None)
 """
 
 
@@ -645,11 +658,12 @@ for method in ("hierarchical", "weighted"):
 @pytest.mark.parametrize("build", native.built_variants() if native.available() else ())
 def test_the_new_kernels_do_not_allocate_on_a_floating_base(tmp_path, robots, build):
     """The native call with the acceleration box, LM damping, relative-frame, coupling and
-    low-acceleration kernels (a free-flyer difference) on Talos makes no heap allocation
-    after its first calls. Each build of the extension, chosen by QPCOORD_NATIVE_ISA."""
+    low-acceleration kernels (a free-flyer difference) on Talos, and a damped posture over
+    spherical, free-flyer and planar joints, makes no heap allocation after its first calls. Each
+    build of the extension, chosen by QPCOORD_NATIVE_ISA."""
     _robot(robots, "talos")
     counts = native_malloc_counts(tmp_path, _ALLOCATION_RUN, build)
-    assert counts == {"hierarchical": 0, "weighted": 0}
+    assert counts == {"hierarchical": 0, "weighted": 0, "nested": 0, "planar": 0}
 
 
 @needs_native
@@ -845,3 +859,190 @@ def test_a_posture_over_continuous_joints_is_native_and_matches(robots):
         tol = 1e-9 * max(1.0, float(np.abs(vp).max()))
         np.testing.assert_allclose(vn, vp, rtol=0, atol=tol, err_msg=f"step {step}")
         q = robot.integrate(q, vn + 0.01 * rng.normal(size=robot.nv), DT)
+
+
+# ---------------------------------------------------------------------------------------
+# a posture over spherical, free-flyer and planar joints; a joint without a native difference
+# ---------------------------------------------------------------------------------------
+
+
+def _posture_robot(name: str) -> qc.Robot:
+    """``manifold``: a free-flyer root (not a posture row), revolute, continuous, spherical
+    and prismatic joints; ``nested``: a spherical root, a free-flyer child and a revolute
+    joint; ``planar``: a revolute root, a planar child and a revolute joint (every joint a
+    posture row); ``composite``: a composite child joint (no native difference)."""
+    if name == "manifold":
+        return manifold_robot()
+    composite = pin.JointModelComposite(pin.JointModelRX())  # not a vector space
+    composite.addJoint(pin.JointModelSpherical(), pin.SE3.Identity())
+    kinds = {
+        "nested": (pin.JointModelSpherical(), pin.JointModelFreeFlyer(), pin.JointModelRX()),
+        "planar": (pin.JointModelRZ(), pin.JointModelPlanar(), pin.JointModelRY()),
+        "composite": (pin.JointModelRZ(), composite, pin.JointModelRY()),
+    }[name]
+    model = pin.Model()
+    parent = 0
+    for i, joint in enumerate(kinds):
+        at = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.0 if i == 0 else 0.3]))
+        parent = model.addJoint(parent, joint, at, f"j{i}")
+        link = pin.Inertia(1.0, np.array([0.0, 0.0, 0.15]), np.diag([0.01, 0.01, 0.002]))
+        model.appendBodyToJoint(parent, link, pin.SE3.Identity())
+    tip = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3]))
+    model.addFrame(pin.Frame("tip", parent, 0, tip, pin.OP_FRAME))
+    # bounded positions: random_configuration samples the translations there
+    model.lowerPositionLimit[:] = -1.0
+    model.upperPositionLimit[:] = 1.0
+    return qc.Robot(model, "tip")
+
+
+def _posture_levels(robot: qc.Robot, q0: np.ndarray) -> list:
+    """The tip held at its position above a damped posture toward another configuration."""
+    hand = FramePositionTask(robot, "tip", robot.frame_pose(q0, "tip")[:3, 3], gain=0.5 / DT)
+    w = np.linspace(0.5, 2.0, qc.PostureTask(robot, q0).task.shape[0])
+    q_ref = robot.random_configuration(11)
+    return [[hand], [qc.PostureTask(robot, q_ref, gain=0.05 / DT, weight=w, lm_damping=0.3)]]
+
+
+def _turned(q: np.ndarray, joint: Any, angle: float) -> np.ndarray:
+    """``q`` with a spherical or free-flyer joint's quaternion turned by ``angle`` (rad)
+    about a fixed axis, or a planar joint's (cos, sin) pair by ``angle``."""
+    out = q.copy()
+    if joint.shortname() == "JointModelPlanar":
+        c, s = q[joint.idx_q + 2 : joint.idx_q + 4]
+        ca, sa = np.cos(angle), np.sin(angle)
+        out[joint.idx_q + 2 : joint.idx_q + 4] = c * ca - s * sa, s * ca + c * sa
+        return out
+    iq = joint.idx_q + (3 if joint.shortname() == "JointModelFreeFlyer" else 0)
+    x, y, z, w = q[iq : iq + 4]
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    R = pin.Quaternion(w, x, y, z).matrix() @ pin.exp3(angle * axis)
+    out[iq : iq + 4] = pin.Quaternion(R).coeffs()
+    return out
+
+
+def _angle_rows(robot: qc.Robot, rows: np.ndarray) -> np.ndarray:
+    """Per posture row: the row of the angle Pinocchio's SO(2) log gives it (a continuous
+    joint's own row, a planar joint's rotation row for its three rows), else -1."""
+    of_v = np.full(robot.nv, -1)
+    for j in robot.model.joints[1:]:
+        if j.shortname().startswith("JointModelRUB"):
+            of_v[j.idx_v] = j.idx_v
+        elif j.shortname() == "JointModelPlanar":
+            of_v[j.idx_v : j.idx_v + 3] = j.idx_v + 2
+    where = {int(v): r for r, v in enumerate(rows)}
+    return np.array([where[int(v)] if v >= 0 else -1 for v in of_v[rows]])
+
+
+_TURNING = ("JointModelSpherical", "JointModelFreeFlyer", "JointModelPlanar")
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["manifold", "nested", "planar"])
+def test_a_posture_over_spherical_and_planar_joints_is_native_and_matches(name):
+    """The posture's rows over spherical, free-flyer (below the root) and planar joints are
+    ``pinocchio.difference(q, q_ref)`` natively (Pinocchio's quaternion logs, SE(2)'s log),
+    damped too, as the Python refresh: on random configurations and on injected ones where a
+    log is delicate (a rotation near pi, a tiny one, the opposite quaternion of the same
+    rotation)."""
+    robot = _posture_robot(name)
+    q0 = robot.random_configuration(1)
+    ikn = qc.IK(robot, _posture_levels(robot, q0), DT, engine="native")
+    ikp = qc.IK(robot, _posture_levels(robot, q0), DT, engine="python")
+    assert not ikn._native._hybrid
+    tn = next(t for t in ikn._native.kernel_tasks if isinstance(t, qc.PostureTask))
+    tp = next(t for t in ikp._dynamic if isinstance(t, qc.PostureTask))
+    assert native_kind(tn) == TaskKind.POSTURE
+    rows = {int(v) for v in tn.joints}  # a floating root is not in them
+    turning = [j for j in robot.model.joints[1:] if j.shortname() in _TURNING and j.idx_v in rows]
+    assert turning
+    angle_row = _angle_rows(robot, tn.joints)
+    pairs = [(robot.random_configuration(s), robot.random_configuration(s + 50)) for s in range(8)]
+    for k, joint in enumerate(turning):
+        q = robot.random_configuration(20 + k)
+        # near pi a rotation-matrix log loses up to 3e-11 rad (at pi - 4e-3): not here. At
+        # pi itself the sign of the log is the rounding's (±pi u): not compared
+        for angle in (np.pi - 1e-7, np.pi - 4e-3, 3.0, 1e-3, 1e-9, 0.0):
+            pairs.append((q, _turned(q, joint, angle)))
+        if joint.shortname() != "JointModelPlanar":
+            flipped = _turned(q, joint, 0.0)
+            iq = joint.idx_q + (3 if joint.shortname() == "JointModelFreeFlyer" else 0)
+            flipped[iq : iq + 4] *= -1.0  # the same rotation: a zero difference
+            pairs.append((q, flipped))
+    for i, (q, q_ref) in enumerate(pairs):
+        tn.set_target(q_ref)
+        tp.set_target(q_ref)
+        ikn.step(q)
+        ikp.refresh(q)
+        # the rows K (q_ref ⊖ q): an angle of at most pi, or a coordinate difference of at
+        # most 2 |q|∞ (turned by a rotation); the two evaluations take the same logs of the
+        # same quaternion product and differ by its rounding (a few eps per component),
+        # times log3's 1/sinc(theta/2) (at most pi) and the gain K. A continuous or planar
+        # joint's rows: Pinocchio's SO(2) log is acos(cos d), whose rounding grows as
+        # eps / |sin d| near pi (the kernel's atan2 does not), and a planar joint's
+        # translation rows follow that angle: their tolerance grows so
+        scale = max(np.pi, float(np.abs(q).max()), float(np.abs(q_ref).max()))
+        d = tp.task.b / tp.gain
+        angle = np.where(angle_row >= 0, d[np.maximum(angle_row, 0)], np.pi / 2)
+        acos = np.maximum(np.abs(np.sin(angle)), np.sqrt(EPS)) ** -1 * (angle_row >= 0)
+        tol = 32 * EPS * tp.gain * scale * (1.0 + acos)
+        gap = np.abs(tn.task.b - tp.task.b)
+        assert (gap <= tol).all(), (i, gap / tol)
+        np.testing.assert_array_equal(tn.task.A, tp.task.A)
+        # the damping rows √(λ Σ wᵢ eᵢ²) I, λ wᵢ ≤ 0.6: moved less than the rows' summed tol
+        lm_tol = np.sum(tol) / tp.gain
+        np.testing.assert_allclose(
+            tn.lm_rows.task.A, tp.lm_rows.task.A, rtol=0, atol=lm_tol, err_msg=f"pair {i}"
+        )
+        if i < 8:  # a random pair: rows of every joint
+            assert np.abs(tp.task.b).min() > 0, i
+
+
+@needs_native
+@pytest.mark.parametrize("name", ["manifold", "nested", "planar"])
+def test_a_posture_over_spherical_and_planar_joints_closed_loop_matches(name):
+    """The tip held, the posture pulled toward another configuration through the spherical
+    (planar) joints: the same v on both engines over a closed loop."""
+    robot = _posture_robot(name)
+    q0 = robot.random_configuration(1)
+    ikn, ikp = engine_pair(robot, partial(_posture_levels, robot, q0), DT)
+    assert not ikn._native._hybrid
+    q = closed_loop_agrees(ikn, ikp, q0, 200)
+    # the posture moved the joints: the loop ran through their rows
+    assert np.abs(robot.difference(q0, q)).max() > 1e-3
+
+
+@needs_native
+def test_a_posture_over_a_composite_joint_keeps_its_python_rows():
+    """A composite joint (no native difference) is a posture row: that posture keeps its
+    Python refresh in a hybrid step, and both engines give the same v."""
+    robot = _posture_robot("composite")
+    q0 = robot.random_configuration(1)
+    ikn, ikp = engine_pair(robot, partial(_posture_levels, robot, q0), DT)
+    posture = ikn._native._python_tasks
+    assert [type(t) for t in posture] == [qc.PostureTask, LMDamping]
+    assert native_kind(posture[0]) is None and ikn._native._hybrid
+    closed_loop_agrees(ikn, ikp, q0, 50)
+
+
+@needs_native
+def test_add_task_rejects_a_bad_posture_plan():
+    """A posture's plan: whole segments, disjoint, exactly over its rows."""
+    robot = _posture_robot("manifold")
+    ik = qc.IK(robot, _posture_levels(robot, robot.neutral()), DT, engine="native")
+    solver = ik._native._solver
+    ball = [2, 10, 8, 1]  # the spherical joint: q 10..13, v 8..10
+    assert robot.model.joints[4].shortname() == "JointModelSpherical"
+    assert (robot.model.joints[4].idx_q, robot.model.joints[4].idx_v) == (10, 8)
+    posture = int(TaskKind.POSTURE)
+    with pytest.raises(ValueError, match="4 ints per segment"):
+        solver.add_task(posture, -1, [8, 9, 10], 3, ball[:3])
+    with pytest.raises(ValueError, match="unknown segment kind"):
+        solver.add_task(posture, -1, [8, 9, 10], 3, [9, 10, 8, 1])
+    with pytest.raises(ValueError, match="segment out of range"):
+        solver.add_task(posture, -1, [8, 9, 10], 3, [2, 10, 8, 2])
+    with pytest.raises(ValueError, match="outside its plan"):
+        solver.add_task(posture, -1, [8, 9, 10, 11], 3, ball)
+    with pytest.raises(ValueError, match="overlap"):
+        solver.add_task(posture, -1, [8, 9, 10], 3, ball + ball)
+    with pytest.raises(ValueError, match="no row of"):
+        solver.add_task(posture, -1, [8, 9, 10], 3, ball + [0, 14, 11, 1])

@@ -41,11 +41,12 @@ def print_mallocs(name: str, call: Callable[[], object]) -> None:
     print(name, mallocs_in(call))
 
 
-def print_step_mallocs(name: str, ik, q: np.ndarray) -> None:
+def print_step_mallocs(name: str, ik, q: np.ndarray, integrate: bool = True) -> None:
     """:func:`print_mallocs` of the extension's step of ``ik`` (a ``qpcoord.IK`` on the native
     engine) at ``q`` and the robot's kinematics as they are: warm-started, 10 s time limit,
-    ``q_next`` integrated; each uncounted call must succeed (code 0)."""
+    ``q_next`` integrated by the step if ``integrate``; each uncounted call must succeed
+    (code 0)."""
     step = ik._native._solver.step
     for _ in range(WARM_CALLS):
-        assert step(q, True, 10.0, True) == 0
-    print(name, mallocs_in(lambda: step(q, True, 10.0, True)))
+        assert step(q, True, 10.0, integrate) == 0
+    print(name, mallocs_in(lambda: step(q, True, 10.0, integrate)))

@@ -110,17 +110,15 @@ bool IKStep::run_kernel(Kernel& k, const double* q, int64_t qs) {
     case kPosture: {
       double* Aeq = out_[0].data() + static_cast<size_t>(k.row0) * nv_;
       double* beq = out_[1].data() + k.row0;
+      // d = difference(q, q_ref) on the posture's joints (its plan), into row_ at their v
+      // indices: q copied contiguous (integrate::difference's q0), q_ref read in place
+      for (int i = 0; i < nq_; ++i) hold_[i] = q[i * qs];
+      integrate::difference(k.qidx.data(), static_cast<int>(k.qidx.size() / 4), hold_.data(),
+                            k.target.data(), 1, 1.0, row_.data());
       for (int r = 0; r < rows; ++r) {
-        const int j = k.sel[r], iq = k.qidx[r];
+        const int j = k.sel[r];
         const double s = k.sw[r];
-        double d;  // difference(q, q_ref) on the row's joint
-        if (iq < nq_) {  // a 1-DoF vector-space joint: q_ref - q
-          d = k.target[iq] - q[iq * qs];
-        } else {  // a continuous joint's (cos, sin) pair at iq - nq: the angle from q to q_ref
-          const int c = iq - nq_;
-          const double ca = q[c * qs], sa = q[(c + 1) * qs], cb = k.target[c], sb = k.target[c + 1];
-          d = std::atan2(ca * sb - sa * cb, ca * cb + sa * sb);
-        }
+        const double d = row_[j];
         const double bv = gain * d;
         k.err[r] = -d;
         // the task's A (the selection) is constant: the stacked row is rewritten
