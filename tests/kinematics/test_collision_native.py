@@ -8,13 +8,11 @@ same algorithm on the same data, equal up to the rounding of the world placement
 
 from __future__ import annotations
 
-import os
-
 import coal
 import numpy as np
 import pytest
 from support.counting_malloc import native_malloc_counts
-from support.native_engine import needs_native
+from support.native_engine import needs_collision_kernel, needs_native
 from support.obstacle_ik import DT, configurations, obstacle_ik, obstacle_task, placed
 
 import qpcoord as qc
@@ -23,10 +21,7 @@ from qpcoord.kinematics import collision_kernel
 from qpcoord.kinematics.collision import CollisionAvoidance, Obstacle, Sphere
 from qpcoord.kinematics.native_step import TaskKind, native_kind
 
-BUILT = collision_kernel._collision is not None
-if not BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
-    raise RuntimeError("QPCOORD_REQUIRE_NATIVE=1 but qpcoord._collision is not built")
-pytestmark = pytest.mark.skipif(not BUILT, reason="qpcoord._collision is not built")
+pytestmark = needs_collision_kernel
 
 
 @pytest.fixture(scope="module")

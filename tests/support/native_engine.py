@@ -2,9 +2,10 @@
 comparison of its answers with the Python engine's.
 
 Without the extension the tests marked :data:`needs_native` skip, with the reason, and so do
-those marked :data:`needs_native_weighted` without its weighted QP;
-``QPCOORD_REQUIRE_NATIVE=1`` (set by ``.ci/run``) makes a missing extension or weighted QP a
-failure instead (importing this module raises).
+those marked :data:`needs_native_weighted` without its weighted QP and those marked
+:data:`needs_collision_kernel` without ``qpcoord._collision``; ``QPCOORD_REQUIRE_NATIVE=1``
+(set by ``.ci/run``) makes a missing extension a failure instead (importing this module
+raises).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import pytest
 
 import qpcoord as qc
 from qpcoord.core import native, native_weighted
+from qpcoord.kinematics import collision_kernel
 
 #: Level values: |r_native − r_python| ≤ LEVEL_TOL·max(1, r_python).
 LEVEL_TOL = 1e-9
@@ -39,6 +41,15 @@ if BUILT and not WEIGHTED_BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == 
     raise RuntimeError("QPCOORD_REQUIRE_NATIVE=1 but " + _NO_WEIGHTED)
 needs_native_weighted = pytest.mark.skipif(
     not WEIGHTED_BUILT, reason=needs_native.kwargs["reason"] if not BUILT else _NO_WEIGHTED
+)
+
+#: CollisionAvoidance's native rows: the extension ``qpcoord._collision`` (built where CMake
+#: finds coal's library, CMakeLists.txt)
+COLLISION_BUILT = collision_kernel._collision is not None
+if not COLLISION_BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
+    raise RuntimeError("QPCOORD_REQUIRE_NATIVE=1 but qpcoord._collision is not built")
+needs_collision_kernel = pytest.mark.skipif(
+    not COLLISION_BUILT, reason="qpcoord._collision is not built"
 )
 
 
