@@ -12,6 +12,7 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import tomllib
@@ -196,30 +197,45 @@ def python_files(folder: Path) -> list[Path]:
     return out
 
 
+def imported_names(tree: ast.AST, line: int = 1) -> list[tuple[int, str]]:
+    """``(line, dotted name)`` of every import of ``tree`` (``import a.b``: ``a.b``; ``from a
+    import b``: ``a`` and ``a.b``), and of every string literal of it that parses as Python
+    (a script run in a child Python: ``subprocess.run([sys.executable, "-c", script])``),
+    recursively; ``line``: the file's line of the tree's first line."""
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(tree):
+        at = line + getattr(node, "lineno", 1) - 1
+        if isinstance(node, ast.Import):
+            found += [(at, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            found += [(at, base)] + [(at, f"{base}.{alias.name}") for alias in node.names]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            try:
+                script = ast.parse(textwrap.dedent(node.value))
+            except (SyntaxError, ValueError):  # prose, not a script
+                continue
+            found += imported_names(script, at)
+    return found
+
+
 def imports_of_test_modules(folders: list[Path]) -> list[str]:
     """``file:line: module`` for every import of a test module (``test_*.py`` under a folder of
     ``folders``) by any ``.py`` file of ``folders``: by name (``import test_x``, ``from
     test_x import f``: pytest's prepend mode puts each test folder on the path), relative
     (``from .test_x import f``) or dotted (``tests.core.test_x``, ``from tests.core import
-    test_x``); at module level, in a function or under ``TYPE_CHECKING`` alike."""
+    test_x``); at module level, in a function, under ``TYPE_CHECKING`` or in a script (a
+    string literal) run in a child Python alike."""
     files = [path for folder in folders for path in python_files(folder)]
     stems = {path.stem for path in files if path.name.startswith("test_")}
     found: list[str] = []
     for path in files:
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            names: list[str] = []
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom):
-                base = node.module or ""
-                names = [base] + [f"{base}.{alias.name}" for alias in node.names]
-            for name in names:
-                hit = [part for part in name.split(".") if part in stems]
-                if hit:
-                    rel = path.relative_to(folders[0].parent)
-                    found.append(f"{rel}:{node.lineno}: {hit[0]}")
-                    break
-    return found
+        for line, name in imported_names(ast.parse(path.read_text(), str(path))):
+            hit = [part for part in name.split(".") if part in stems]
+            if hit:
+                rel = path.relative_to(folders[0].parent)
+                found.append(f"{rel}:{line}: {hit[0]}")
+    return sorted(set(found), key=lambda f: (f.split(":")[0], int(f.split(":")[1])))
 
 
 def test_no_test_module_imports_a_test_module():
@@ -233,8 +249,9 @@ def test_no_test_module_imports_a_test_module():
 
 
 def test_test_module_imports_are_found(tmp_path):
-    """The check above can fail: every kind of import of a test module is reported, and
-    imports of support modules, of ``conftest`` and of libraries are not."""
+    """The check above can fail: every kind of import of a test module is reported (a
+    script's in a string literal too, at its line of the file), and imports of support
+    modules, of ``conftest`` and of libraries, and prose naming a test module, are not."""
     tests, bench = tmp_path / "tests", tmp_path / "benchmarks"
     (tests / "core").mkdir(parents=True)
     (tests / "support").mkdir()
@@ -245,6 +262,19 @@ def test_test_module_imports_are_found(tmp_path):
     (tests / "core" / "test_d.py").write_text("from tests.core import test_a\n")
     (tests / "core" / "test_e.py").write_text("from .test_a import g\nfrom conftest import S\n")
     (tests / "support" / "stacks.py").write_text("import test_a\n")
+    (tests / "core" / "test_f.py").write_text(
+        '"""A test module (``from test_a import g``: prose)."""\n'
+        "import subprocess, sys\n"
+        "\n"
+        'SCRIPT = r"""\n'
+        "import numpy as np\n"
+        "from test_a import g\n"
+        '"""\n'
+        'INDENTED = """\n'
+        "    import test_a as t\n"
+        '"""\n'
+        'subprocess.run([sys.executable, "-c", "import os; import tests.core.test_a"])\n'
+    )
     (bench / "bench.py").write_text("from support.stacks import s\n")
     (bench / ".venv" / "lib" / "test_x.py").write_text("import test_a\n")
     assert imports_of_test_modules([tests, bench]) == [
@@ -252,6 +282,9 @@ def test_test_module_imports_are_found(tmp_path):
         "tests/core/test_c.py:1: test_a",
         "tests/core/test_d.py:1: test_a",
         "tests/core/test_e.py:1: test_a",
+        "tests/core/test_f.py:6: test_a",
+        "tests/core/test_f.py:9: test_a",
+        "tests/core/test_f.py:11: test_a",
         "tests/support/stacks.py:1: test_a",
     ]
 

@@ -11,7 +11,6 @@ skip (``QPCOORD_REQUIRE_NATIVE=1`` makes that a failure).
 from __future__ import annotations
 
 import math
-import os
 import warnings
 
 import cvxpy as cp
@@ -21,24 +20,17 @@ from hypothesis import HealthCheck, given, settings
 from support.arrays import force_write as _force_write
 from support.families import CASES, build, stack
 from support.families import case_ids as _ids
+from support.native_engine import needs_native_weighted
 from support.stacks import clipped_stack, hard_random_stack, region_problem
 from support.strategies import stacks as random_stacks
 from support.weighted import X_TOL, assert_same_weighted, condition, epsilon, objective, relative_dx
 
 import qpcoord as qc
-from qpcoord.core import native, native_weighted
+from qpcoord.core import native
 from qpcoord.core.persistent import PersistentQP
 
 #: x against the cvxpy oracle (Clarabel's tolerances).
 ORACLE_TOL = 1e-6
-
-BUILT = native_weighted.available()
-if not BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
-    raise RuntimeError(
-        "QPCOORD_REQUIRE_NATIVE=1 but the native weighted QP is not built: "
-        + str(native._load_error)
-    )
-needs_native = pytest.mark.skipif(not BUILT, reason="the native weighted QP is not built")
 
 
 def weighted_oracle(s: qc.Stack, eps: float) -> np.ndarray:
@@ -82,7 +74,7 @@ def weighted_oracle(s: qc.Stack, eps: float) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 
 
-@needs_native
+@needs_native_weighted
 def test_weighted_default_is_native_where_built():
     s = clipped_stack()
     with warnings.catch_warnings():
@@ -111,7 +103,7 @@ def test_weighted_falls_back_to_python_without_the_extension(missing_extension):
 # ---------------------------------------------------------------------------------------
 
 
-@needs_native
+@needs_native_weighted
 @pytest.mark.parametrize("name,seed", CASES, ids=_ids(CASES))
 def test_native_weighted_matches_python(name, seed):
     spec = build(name, seed)
@@ -121,7 +113,7 @@ def test_native_weighted_matches_python(name, seed):
     assert_same_weighted(s, sp, sn)
 
 
-@needs_native
+@needs_native_weighted
 @pytest.mark.parametrize("name,seed", CASES, ids=_ids(CASES))
 def test_native_weighted_matches_oracle(name, seed):
     s = stack(build(name, seed))
@@ -138,7 +130,7 @@ def test_native_weighted_matches_oracle(name, seed):
         assert relative_dx(sn.x, ref) <= ORACLE_TOL
 
 
-@needs_native
+@needs_native_weighted
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(random_stacks())
 def test_native_weighted_matches_python_on_random_stacks(spec):
@@ -156,7 +148,7 @@ def test_native_weighted_matches_python_on_random_stacks(spec):
 # ---------------------------------------------------------------------------------------
 
 
-@needs_native
+@needs_native_weighted
 def test_warm_start_gives_the_cold_answer():
     """A moving target over 40 steps: each warm solve equals a cold one (a fresh stack, and
     the same stack after ``forget``) and the Python engine's; the stored set is hit."""
@@ -176,7 +168,7 @@ def test_warm_start_gives_the_cold_answer():
     assert hits > 10
 
 
-@needs_native
+@needs_native_weighted
 def test_changed_matrix_is_refactored():
     spec = build("weighted_mixed", 0)
     s = stack(spec)
@@ -189,7 +181,7 @@ def test_changed_matrix_is_refactored():
     assert_same_weighted(s, s.solve(method="weighted", engine="python"), sn)
 
 
-@needs_native
+@needs_native_weighted
 @pytest.mark.parametrize("engine", ["python", "native"])
 def test_inconsistent_hard_equalities(engine):
     hard = qc.Equality(np.array([[1.0, 0.0], [1.0, 0.0]]), [0.0, 1.0], name="pin")
@@ -199,7 +191,7 @@ def test_inconsistent_hard_equalities(engine):
         s.solve(method="weighted", engine=engine)
 
 
-@needs_native
+@needs_native_weighted
 @pytest.mark.parametrize("engine", ["python", "native"])
 def test_hard_inequalities_outside_the_box(engine):
     hard = qc.Inequality(np.array([[1.0, 1.0]]), lower=3.0)
@@ -218,7 +210,7 @@ def test_hard_inequalities_outside_the_box(engine):
     np.testing.assert_allclose(s2.solve(method="weighted", engine=engine).x, [1.0, 1.0])
 
 
-@needs_native
+@needs_native_weighted
 @pytest.mark.parametrize("engine", ["python", "native"])
 def test_hard_equalities_fix_x_outside_the_box(engine):
     s = qc.Stack(
@@ -230,7 +222,7 @@ def test_hard_equalities_fix_x_outside_the_box(engine):
         s.solve(method="weighted", engine=engine)
 
 
-@needs_native
+@needs_native_weighted
 @pytest.mark.parametrize("engine", ["python", "native"])
 def test_nan_in_a_task_names_it(engine):
     t = qc.Inequality(np.eye(2), lower=[0.0, 0.0], name="fence")
@@ -241,7 +233,7 @@ def test_nan_in_a_task_names_it(engine):
         s.solve(method="weighted", engine=engine)
 
 
-@needs_native
+@needs_native_weighted
 def test_nan_in_a_right_hand_side_names_it():
     e = qc.Equality(np.eye(2), [1.0, 1.0], name="track")
     s = qc.Stack([e], bounds=qc.Bounds(-2.0, 2.0))
@@ -251,7 +243,7 @@ def test_nan_in_a_right_hand_side_names_it():
         s.solve(method="weighted")
 
 
-@needs_native
+@needs_native_weighted
 def test_time_limit_gives_the_python_engines_error():
     s = hard_random_stack(0)
     with pytest.raises(qc.SolverError, match=r"time limit of 1e-09 s reached.*native engine"):
@@ -260,7 +252,7 @@ def test_time_limit_gives_the_python_engines_error():
     assert_same_weighted(s, s.solve(method="weighted", engine="python"), sn)
 
 
-@needs_native
+@needs_native_weighted
 def test_level_values_are_each_levels_residual():
     s = hard_random_stack(1)
     sol = s.solve(method="weighted")
@@ -268,7 +260,7 @@ def test_level_values_are_each_levels_residual():
     np.testing.assert_allclose(sol.level_residuals, ref, rtol=1e-12, atol=1e-14)
 
 
-@needs_native
+@needs_native_weighted
 def test_regularisation_only_where_singular():
     """ε is added exactly where the Python rule adds it: a rank-deficient stack gets the
     minimum-norm answer (to ε), a full-rank one the exact weighted least squares."""
@@ -301,7 +293,7 @@ def _mpc_like(seed: int):
     return s, track, soft, effort, rng
 
 
-@needs_native
+@needs_native_weighted
 def test_persistent_native_matches_daqp_over_500_steps():
     s, track, soft, effort, rng = _mpc_like(0)
     pn = PersistentQP(s)
@@ -323,7 +315,7 @@ def test_persistent_native_matches_daqp_over_500_steps():
     assert hits > 100  # consecutive steps: the stored working set is often optimal
 
 
-@needs_native
+@needs_native_weighted
 def test_persistent_native_is_the_general_weighted_answer():
     """The native workspace answers ``stack.solve(method="weighted")`` exactly (one rule
     for ε), also with a hard equality."""
@@ -343,7 +335,7 @@ def test_persistent_native_is_the_general_weighted_answer():
         assert abs(a.x.sum() - 0.5) <= 1e-12
 
 
-@needs_native
+@needs_native_weighted
 def test_persistent_native_falls_back_on_infeasible_steps():
     s, track, soft, effort, rng = _mpc_like(2)
     pq = PersistentQP(s)
@@ -359,7 +351,7 @@ def test_persistent_native_falls_back_on_infeasible_steps():
     assert_same_weighted(s, s.solve(method="weighted", engine="python"), s.solve(method="weighted"))
 
 
-@needs_native
+@needs_native_weighted
 @pytest.mark.parametrize("seed", [0, 1])
 def test_persistent_native_regions_match_daqp(seed):
     """The parametric path (critical-region cache, then the QP) on the native workspace:

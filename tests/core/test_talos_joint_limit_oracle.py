@@ -1,11 +1,11 @@
 """Both engines against an exact (rational) reference on a Talos IK step at a joint limit.
 
 The data (``tests/data/talos_joint_limit_steps.npz``) are two consecutive stacks of the Talos
-IK closed loop of ``tests/kinematics/test_native_support.py`` (``_talos_stack``) with a
-harder hand target (polygon margin 0.06 m, hand gain 5 /s), steps 79 and 80, as the native
-IK step wrote them: level 0 the feet (12 equality rows), level 1 the support polygon and
-the CoM band (11 inequality rows), level 2 the hand (3 rows), level 3 the posture (32
-rows), and the velocity box of the joint limits. At step 80 joint 27 reaches its position
+IK closed loop of ``support.talos_balance.balance_stack`` with a harder hand target (polygon
+margin 0.06 m, hand gain 5 /s), steps 79 and 80, as the native IK step wrote them: level 0 the
+feet (12 equality rows), level 1 the support polygon and the CoM band (11 inequality rows),
+level 2 the hand (3 rows), level 3 the posture (32 rows), and the velocity box of the joint
+limits. At step 80 joint 27 reaches its position
 limit (its velocity bound is ``-3.8e-34``, i.e. 0).
 
 The reference is exact: the last level's KKT system on the active set {polygon row 2 at its

@@ -19,11 +19,13 @@ import pytest
 import scipy.linalg
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.native_engine import WEIGHTED_BUILT, needs_native
 
 import qpcoord as qc
-from qpcoord.core import native
 
-ENGINES = ["python"] + (["native"] if native.available() else [])
+#: the native engine where its weighted QP is built (a failure instead under
+#: ``QPCOORD_REQUIRE_NATIVE=1``: :mod:`support.native_engine`)
+ENGINES = ["python"] + (["native"] if WEIGHTED_BUILT else [])
 RATIOS = [1e-1, 1e-2, 1e-3, 1e-4]
 
 
@@ -191,7 +193,7 @@ def test_python_engine_reports_the_regularisation():
 
 
 @pytest.mark.engine_independent
-@pytest.mark.skipif(not native.available(), reason="the native extension is not built")
+@needs_native
 def test_no_allocation_on_the_regularised_path(weighted_driver):
     """``weighted_driver.cpp ... singular``: the levels' rows in half the coordinates, so ``ε``
     is added every call (the QR of ``[W; √ε I]`` at each refactor, its least-squares solve at

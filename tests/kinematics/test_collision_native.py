@@ -8,52 +8,25 @@ same algorithm on the same data, equal up to the rounding of the world placement
 
 from __future__ import annotations
 
-import os
-
 import coal
 import numpy as np
 import pytest
 from support.counting_malloc import native_malloc_counts
-from support.native_engine import needs_native
+from support.native_engine import needs_collision_kernel, needs_native
+from support.obstacle_ik import DT, configurations, obstacle_ik, obstacle_task, placed
 
 import qpcoord as qc
 from qpcoord.core import native
 from qpcoord.kinematics import collision_kernel
-from qpcoord.kinematics.collision import Box, Capsule, CollisionAvoidance, Obstacle, Sphere
+from qpcoord.kinematics.collision import CollisionAvoidance, Obstacle, Sphere
 from qpcoord.kinematics.native_step import TaskKind, native_kind
 
-BUILT = collision_kernel._collision is not None
-if not BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
-    raise RuntimeError("QPCOORD_REQUIRE_NATIVE=1 but qpcoord._collision is not built")
-pytestmark = pytest.mark.skipif(not BUILT, reason="qpcoord._collision is not built")
-
-DT = 0.01  # s
+pytestmark = needs_collision_kernel
 
 
 @pytest.fixture(scope="module")
 def panda():
     return qc.robots.load("panda")
-
-
-def _at(p):
-    T = np.eye(4)
-    T[:3, 3] = p
-    return T
-
-
-def _task(robot, **kw):
-    q0 = robot.reference_configuration("default")
-    p = robot.frame_pose(q0, "panda_hand_tcp")[:3, 3]
-    obstacles = [
-        Sphere(p + [0.05, 0.0, 0.0], 0.05),
-        Box(p + [0.0, 0.1, -0.1], [0.1, 0.05, 0.02]),
-        Capsule(p - [0.1, 0.0, 0.0], p + [0.0, 0.1, 0.1], 0.03),
-        Obstacle(coal.Cylinder(0.04, 0.2), _at(p - [0.2, 0.0, 0.0]), "cylinder"),
-        Obstacle(coal.Cone(0.05, 0.1), _at(p + [0.0, -0.15, 0.0]), "cone"),
-        Obstacle(coal.Ellipsoid(0.03, 0.05, 0.08), _at(p + [0.1, -0.1, -0.1]), "ellipsoid"),
-        Obstacle(coal.Halfspace(np.array([0.0, 0.0, 1.0]), -0.05), np.eye(4), "floor"),
-    ]
-    return CollisionAvoidance(robot, obstacles=obstacles, influence_distance=0.15, **kw)
 
 
 def _cold(task):
@@ -88,25 +61,16 @@ def _rows(task, refresh, q):
     )
 
 
-def _configurations(robot, n, seed):
-    rng = np.random.default_rng(seed)
-    q0 = robot.reference_configuration("default")
-    lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
-    for i in range(n):
-        q = robot.random_configuration(rng) if i % 2 else q0 + 0.3 * rng.standard_normal(robot.nq)
-        yield np.clip(q, lo, hi)
-
-
 def test_the_panda_task_runs_native(panda):
-    task = _task(panda)
+    task = obstacle_task(panda)
     assert task.native
     assert len(task.pairs) == 44 + 7 * 17
 
 
 def test_native_rows_are_the_python_rows_on_random_configurations(panda):
-    task = _task(panda)
+    task = obstacle_task(panda)
     n_active = 0
-    for q in _configurations(panda, 60, seed=3):
+    for q in configurations(panda, 60, seed=3):
         _cold(task)
         C1, lo1, d1, a1 = _rows(task, task._python_refresh, q)
         _cold(task)
@@ -126,7 +90,7 @@ def test_native_rows_are_the_python_rows_on_random_configurations(panda):
 
 
 def test_a_moved_obstacle_moves_in_the_native_rows(panda):
-    task = _task(panda)
+    task = obstacle_task(panda)
     q = panda.reference_configuration("default")
     p = panda.frame_pose(q, "panda_hand_tcp")[:3, 3]
     task.set_obstacle_pose(0, p + [0.0, 0.0, 0.08])
@@ -141,7 +105,7 @@ def test_a_moved_obstacle_moves_in_the_native_rows(panda):
 
 def test_native_step_clears_the_rows_a_python_step_left(panda):
     """The kernel clears the rows flagged active, whoever wrote them."""
-    task = _task(panda)
+    task = obstacle_task(panda)
     q = panda.reference_configuration("default")
     n_self = sum(not b.startswith("obstacle") for _, b in task.pairs)
     _rows(task, task._python_refresh, q)
@@ -159,14 +123,14 @@ def test_meshes_and_swept_spheres_use_the_python_rows(panda):
     assert not CollisionAvoidance(panda, obstacles=[sphere], convex=False).native
     g = coal.Sphere(0.05)
     g.setSweptSphereRadius(0.01)
-    assert not CollisionAvoidance(panda, obstacles=[Obstacle(g, _at([0.5, 0.0, 0.5]))]).native
+    assert not CollisionAvoidance(panda, obstacles=[Obstacle(g, placed([0.5, 0.0, 0.5]))]).native
 
 
 def test_an_ik_step_with_native_rows_is_the_python_rows_step(panda):
     q = panda.reference_configuration("default")
     steps = []
     for with_kernel in (True, False):
-        task = _task(panda)
+        task = obstacle_task(panda)
         if not with_kernel:
             task._kernel = None
         T = panda.frame_pose(q, "panda_hand_tcp")
@@ -184,15 +148,6 @@ def test_an_ik_step_with_native_rows_is_the_python_rows_step(panda):
 # ---------------------------------------------------------------------------------------
 
 
-def _ik(robot, task, q, engine, method="hierarchical"):
-    T = robot.frame_pose(q, "panda_hand_tcp")
-    T[:3, 3] += [0.1, 0.0, -0.05]
-    hand = qc.FrameTask(robot, "panda_hand_tcp", T, gain=5.0)
-    posture = qc.PostureTask(robot, q, gain=1.0)
-    levels = [task, hand, posture]
-    return qc.IK(robot, levels, DT, limits="robot", engine=engine, method=method)
-
-
 def _slot(ik, task):
     (k,) = [s.k for s in ik._native._slots if s.task is task]
     return k
@@ -200,21 +155,21 @@ def _slot(ik, task):
 
 @needs_native
 def test_the_native_ik_step_computes_the_collision_rows(panda):
-    task = _task(panda)
-    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    task = obstacle_task(panda)
+    ik = obstacle_ik(panda, task, panda.reference_configuration("default"), "native")
     assert task.native
     assert native_kind(task) == TaskKind.COLLISION and task in ik._native.kernel_tasks
     assert not ik._native._hybrid  # no Python task: the step's short path
     task._kernel = None  # no kernel: the Python rows, in the hybrid step
     assert not task.native and native_kind(task) is None
-    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    ik = obstacle_ik(panda, task, panda.reference_configuration("default"), "native")
     assert task in ik._native._python_tasks
 
 
 @needs_native
 def test_set_rows_kernel_checks_its_kernel_and_capsule(panda):
-    task = _task(panda)
-    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    task = obstacle_task(panda)
+    ik = obstacle_ik(panda, task, panda.reference_configuration("default"), "native")
     solver, k = ik._native._solver, _slot(ik, task)
     hand = next(s.k for s in ik._native._slots if isinstance(s.task, qc.FrameTask))
     with pytest.raises(ValueError, match="not a COLLISION kernel"):
@@ -230,14 +185,14 @@ def test_set_rows_kernel_checks_its_kernel_and_capsule(panda):
 def test_native_step_rows_are_the_python_rows_on_random_configurations(panda):
     """The rows the native step writes (the task's Inequality and the stacked rows) are the
     task's Python rows, from cold caches (the module docstring), on random configurations."""
-    task = _task(panda)
-    ik = _ik(panda, task, panda.reference_configuration("default"), "native")
+    task = obstacle_task(panda)
+    ik = obstacle_ik(panda, task, panda.reference_configuration("default"), "native")
     k = _slot(ik, task)
     P = ik._native.P
     m = len(task.pairs)
     assert P.C.shape[0] == m  # the collision rows are the stack's only inequalities
     n_active = 0
-    for q in _configurations(panda, 40, seed=5):
+    for q in configurations(panda, 40, seed=5):
         _cold(task)
         ik._native._solver.set_rows_kernel(k, task._kernel.entry())
         ik.step(q)
@@ -271,9 +226,9 @@ def test_a_closed_loop_gives_the_python_engines_velocities(panda, method):
     double rounding times the stack's conditioning, within the native-vs-Python step tests'
     1e-9."""
     q = panda.reference_configuration("default")
-    tasks = [_task(panda), _task(panda)]
+    tasks = [obstacle_task(panda), obstacle_task(panda)]
     engines = ("native", "python")
-    iks = [_ik(panda, t, q, e, method) for t, e in zip(tasks, engines, strict=True)]
+    iks = [obstacle_ik(panda, t, q, e, method) for t, e in zip(tasks, engines, strict=True)]
     assert tasks[0] in iks[0]._native.kernel_tasks
     active = 0
     for step in range(60):
@@ -294,10 +249,10 @@ def test_a_closed_loop_gives_the_python_engines_velocities(panda, method):
 
 
 def _loop_configurations(robot, steps):
-    """The configurations of a native closed loop on ``_task``'s stack (hand driven into the
+    """The configurations of a native closed loop on ``obstacle_task``'s stack (hand driven into the
     obstacles)."""
     q = robot.reference_configuration("default")
-    ik = _ik(robot, _task(robot), q, None)
+    ik = obstacle_ik(robot, obstacle_task(robot), q, None)
     out = []
     for _ in range(steps):
         v, _ = ik.step(q)
@@ -314,10 +269,10 @@ def test_skipped_pairs_are_farther_than_the_influence_distance(panda, path):
     stopping error, 3e-6 m between two runs here); and the last-distance bound spares coal
     calls: on this loop (1 cm a step among seven obstacles) about a quarter of those of a
     kernel without history (a new one at each step), which makes them all."""
-    task = _task(panda)
+    task = obstacle_task(panda)
     if path == "python":
         task._kernel = None
-    fresh = _task(panda)
+    fresh = obstacle_task(panda)
     warm = cold = 0
     for q in _loop_configurations(panda, 60):
         task._refresh(q, 0.0, DT, None)
@@ -337,11 +292,11 @@ def test_a_task_on_another_robots_data_keeps_its_python_refresh(panda):
     """A task whose robot is not the IK's (``with_frame``: its own Pinocchio data) is not
     read by the step's kernel call (its kernel reads that other data)."""
     other = panda.with_frame("panda_link7")
-    task = _task(other)
+    task = obstacle_task(other)
     q = panda.reference_configuration("default")
-    ik = _ik(panda, task, q, "native")
+    ik = obstacle_ik(panda, task, q, "native")
     assert task.native and task in ik._native._python_tasks
-    ref = _ik(panda, _task(other), q, "python")
+    ref = obstacle_ik(panda, obstacle_task(other), q, "python")
     np.testing.assert_allclose(ik.step(q)[0], ref.step(q)[0], rtol=0, atol=1e-9)
 
 
@@ -350,8 +305,8 @@ def test_a_nan_gain_raises_the_python_engines_message(panda):
     q = panda.reference_configuration("default")
     messages = []
     for engine in ("native", "python"):
-        task = _task(panda)
-        ik = _ik(panda, task, q, engine)
+        task = obstacle_task(panda)
+        ik = obstacle_ik(panda, task, q, engine)
         ik.step(q)
         task.gain = float("nan")
         with pytest.raises(ValueError) as info:
@@ -365,14 +320,14 @@ def test_a_nan_gain_raises_the_python_engines_message(panda):
 _ALLOCATION_RUN = r"""
 import numpy as np, pinocchio as pin, qpcoord as qc
 from support.malloc_counts import mallocs_in
-from test_collision_native import _configurations, _ik, _task
+from support.obstacle_ik import configurations, obstacle_ik, obstacle_task
 robot = qc.robots.load("panda")
-task = _task(robot)
-ik = _ik(robot, task, robot.reference_configuration("default"), "native")
+task = obstacle_task(robot)
+ik = obstacle_ik(robot, task, robot.reference_configuration("default"), "native")
 assert task in ik._native.kernel_tasks
 # a twin task's kernel alone, called at the same configurations: the same coal calls
-call, kernel = ik._native._solver.step, _task(robot)._kernel
-qs = list(_configurations(robot, 8, seed=3))
+call, kernel = ik._native._solver.step, obstacle_task(robot)._kernel
+qs = list(configurations(robot, 8, seed=3))
 for q in qs:  # first calls: every configuration once
     pin.computeJointJacobians(robot.model, robot.data, q)
     call(q, False, 10.0)

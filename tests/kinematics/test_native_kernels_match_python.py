@@ -12,8 +12,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from support.counting_malloc import native_malloc_counts
+from support.kernel_tasks import DT, HAND, posture_levels, posture_robot, talos_kernel_stack
+from support.kernel_tasks import acceleration as _acceleration
+from support.kernel_tasks import braking_limits as _limits
+from support.kernel_tasks import coupling_task as _coupling
+from support.kernel_tasks import hand_task as _hand
+from support.kernel_tasks import on_feet as _on_feet
+from support.kernel_tasks import relative_task as _relative
+from support.kernel_tasks import start as _start
 from support.native_engine import needs_native
 from support.native_ik import closed_loop_agrees, engine_pair, manifold_robot
+from support.talos_balance import CORNERS, SOLES
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -28,11 +37,7 @@ from qpcoord.kinematics.frame_tasks import (
 from qpcoord.kinematics.native_step import TaskKind, native_kind
 from qpcoord.kinematics.tasks import LM_ERROR_FLOOR, LMDamping
 
-DT = 1e-3
 EPS = np.finfo(float).eps
-HAND = {"panda": "panda_hand_tcp", "talos": "gripper_right_base_link"}
-SOLES = ("left_sole_link", "right_sole_link")
-CORNERS = [[x, y, 0.0] for x in (-0.1, 0.1) for y in (-0.05, 0.05)]
 
 
 @pytest.fixture(scope="module")
@@ -49,12 +54,6 @@ def _robot(robots: dict[str, qc.Robot], name: str) -> qc.Robot:
     if name not in robots:
         pytest.skip(f"{name} not available")
     return robots[name]
-
-
-def _start(robot: qc.Robot) -> np.ndarray:
-    if robot.name == "talos":
-        return robot.reference_configuration("half_sitting")
-    return np.array([0.0, -0.4, 0.0, -2.2, 0.0, 1.9, 0.8])
 
 
 def _q_index(lim: qc.JointLimits) -> np.ndarray:
@@ -75,40 +74,8 @@ def _near_limits(robot: qc.Robot, rng: np.random.Generator) -> np.ndarray:
     return q
 
 
-def _acceleration(robot: qc.Robot, a: float) -> np.ndarray:
-    """``a`` (rad/s²) on every joint, ``inf`` on a floating base's six rows."""
-    out = np.full(robot.nv, a)
-    if not robot.euclidean:
-        out[:6] = np.inf
-    return out
-
-
-def _limits(robot: qc.Robot, gain: float, a: float, brake: bool = True) -> list:
-    jl = qc.JointLimits(robot, gain=gain)
-    acc = qc.AccelerationLimits(
-        robot, _acceleration(robot, a), position_limits=jl if brake else None
-    )
-    return [jl, qc.VelocityLimits(robot), acc]
-
-
 def _finite(x: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(x), np.abs(x), 0.0)
-
-
-def _hand(robot: qc.Robot, q0: np.ndarray, offset, gain: float, lm: float = 0.0):
-    """The hand's position task, its target ``offset`` (m) from the hand at ``q0``."""
-    frame = HAND[robot.name]
-    target = robot.frame_pose(q0, frame)[:3, 3] + offset
-    return FramePositionTask(robot, frame, target, gain=gain, lm_damping=lm)
-
-
-def _on_feet(robot: qc.Robot, q0: np.ndarray, levels: list[list]) -> list[list]:
-    """``levels``, below a first level holding both soles where they are at ``q0`` on Talos
-    (a floating base); as they are on the Panda."""
-    if robot.name != "talos":
-        return levels
-    feet = [FrameTask(robot, s, robot.frame_pose(q0, s), gain=0.5 / DT) for s in SOLES]
-    return [feet, *levels]
 
 
 def _refresh_pair(robot: qc.Robot, tn, tp, stack) -> tuple[qc.IK, qc.IK]:
@@ -378,37 +345,6 @@ def test_an_unreachable_damped_target_runs_alike_on_both_engines(robots, name):
 # relative frames and joint couplings
 # ---------------------------------------------------------------------------------------
 
-#: (frame, reference frame, coupled joints) of each robot: a reference frame on the same
-#: chain (shared joints) on the Panda, on the other arm of Talos (over the floating base)
-PAIRS = {
-    "panda": ("panda_hand_tcp", "panda_link3", ["panda_joint1", "panda_joint3"]),
-    "talos": (
-        "gripper_right_base_link",
-        "gripper_left_base_link",
-        ["arm_left_1_joint", "arm_right_1_joint"],
-    ),
-}
-
-
-def _relative(robot: qc.Robot, q: np.ndarray, mask: str | None, lm: float = 0.0):
-    frame, ref, _ = PAIRS[robot.name]
-    task = qc.RelativeFrameTask(
-        robot, frame, ref, gain=3.0, position_weight=2.0, mask=mask, lm_damping=lm
-    )
-    task.set_target_from_configuration(q)
-    T = task.target.homogeneous.copy()  # away from the start: a rotation of 0.4 rad
-    T[:3, :3] = T[:3, :3] @ pin.exp3(np.array([0.12, -0.08, 0.36]))
-    T[:3, 3] += [0.05, -0.04, 0.03]
-    task.set_target(T)
-    return task
-
-
-def _coupling(robot: qc.Robot, lm: float = 0.0):
-    _, _, joints = PAIRS[robot.name]
-    return qc.JointCouplingTask(
-        robot, joints, [1.0, -0.7], gain=2.0, offset=0.3, weight=3.0, lm_damping=lm
-    )
-
 
 @needs_native
 @pytest.mark.parametrize("name", ["panda", "talos"])
@@ -603,21 +539,13 @@ def test_native_low_acceleration_rows_equal_the_python_refresh(robots, name):
 # ---------------------------------------------------------------------------------------
 
 
-def _talos_stack(robot: qc.Robot, q0: np.ndarray) -> tuple[list, list]:
-    """Feet, a damped hand, a relative frame, a coupling and a low-acceleration level on
-    Talos, with acceleration limits braking before the position limits."""
-    hand = _hand(robot, q0, [0.3, -0.2, 0.2], gain=0.2 / DT, lm=0.5)
-    low = [_relative(robot, q0, "x y z"), _coupling(robot), qc.LowAccelerationTask(robot, 1e-3)]
-    return _on_feet(robot, q0, [[hand], low]), _limits(robot, 0.5, 30.0)
-
-
 @needs_native
 def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
     robot = _robot(robots, "talos")
     q0 = _start(robot)
     iks = []
     for engine in ("native", "python"):
-        levels, limits = _talos_stack(robot, q0)
+        levels, limits = talos_kernel_stack(robot, q0)
         iks.append(qc.IK(robot, levels, DT, limits=limits, method="weighted", engine=engine))
     ikn, ikp = iks
     assert ikn._native.weighted and not ikn._native._hybrid
@@ -630,22 +558,21 @@ def test_the_weighted_step_on_the_new_kernels_matches_the_python_engine(robots):
 _ALLOCATION_RUN = r"""
 import numpy as np, pinocchio as pin, qpcoord as qc
 from support.malloc_counts import print_step_mallocs
-from test_native_kernels_match_python import _posture_levels, _posture_robot, _talos_stack
-from test_native_kernels_match_python import _start, DT
+from support.kernel_tasks import DT, posture_levels, posture_robot, start, talos_kernel_stack
 from qpcoord.kinematics.native_step import integration_plan
 robot = qc.robots.load("talos")
-q0 = _start(robot)
+q0 = start(robot)
 q = robot.integrate(q0, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
 for method in ("hierarchical", "weighted"):
-    levels, limits = _talos_stack(robot, q0)
+    levels, limits = talos_kernel_stack(robot, q0)
     ik = qc.IK(robot, levels, DT, limits=limits, method=method, engine="native")
     assert not ik._native._hybrid and not ik._native._python_limits
     pin.computeJointJacobians(robot.model, robot.data, q)
     print_step_mallocs(method, ik, q)
 for name in ("nested", "planar"):  # the posture's spherical, free-flyer, planar differences
-    robot = _posture_robot(name)
+    robot = posture_robot(name)
     q = robot.random_configuration(2)
-    ik = qc.IK(robot, _posture_levels(robot, q), DT, engine="native")
+    ik = qc.IK(robot, posture_levels(robot, q), DT, engine="native")
     assert not ik._native._hybrid and not ik._native._python_limits
     pin.computeJointJacobians(robot.model, robot.data, q)
     # a planar joint: q_next integrated in Python, not by the step
@@ -866,43 +793,6 @@ def test_a_posture_over_continuous_joints_is_native_and_matches(robots):
 # ---------------------------------------------------------------------------------------
 
 
-def _posture_robot(name: str) -> qc.Robot:
-    """``manifold``: a free-flyer root (not a posture row), revolute, continuous, spherical
-    and prismatic joints; ``nested``: a spherical root, a free-flyer child and a revolute
-    joint; ``planar``: a revolute root, a planar child and a revolute joint (every joint a
-    posture row); ``composite``: a composite child joint (no native difference)."""
-    if name == "manifold":
-        return manifold_robot()
-    composite = pin.JointModelComposite(pin.JointModelRX())  # not a vector space
-    composite.addJoint(pin.JointModelSpherical(), pin.SE3.Identity())
-    kinds = {
-        "nested": (pin.JointModelSpherical(), pin.JointModelFreeFlyer(), pin.JointModelRX()),
-        "planar": (pin.JointModelRZ(), pin.JointModelPlanar(), pin.JointModelRY()),
-        "composite": (pin.JointModelRZ(), composite, pin.JointModelRY()),
-    }[name]
-    model = pin.Model()
-    parent = 0
-    for i, joint in enumerate(kinds):
-        at = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.0 if i == 0 else 0.3]))
-        parent = model.addJoint(parent, joint, at, f"j{i}")
-        link = pin.Inertia(1.0, np.array([0.0, 0.0, 0.15]), np.diag([0.01, 0.01, 0.002]))
-        model.appendBodyToJoint(parent, link, pin.SE3.Identity())
-    tip = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3]))
-    model.addFrame(pin.Frame("tip", parent, 0, tip, pin.OP_FRAME))
-    # bounded positions: random_configuration samples the translations there
-    model.lowerPositionLimit[:] = -1.0
-    model.upperPositionLimit[:] = 1.0
-    return qc.Robot(model, "tip")
-
-
-def _posture_levels(robot: qc.Robot, q0: np.ndarray) -> list:
-    """The tip held at its position above a damped posture toward another configuration."""
-    hand = FramePositionTask(robot, "tip", robot.frame_pose(q0, "tip")[:3, 3], gain=0.5 / DT)
-    w = np.linspace(0.5, 2.0, qc.PostureTask(robot, q0).task.shape[0])
-    q_ref = robot.random_configuration(11)
-    return [[hand], [qc.PostureTask(robot, q_ref, gain=0.05 / DT, weight=w, lm_damping=0.3)]]
-
-
 def _turned(q: np.ndarray, joint: Any, angle: float) -> np.ndarray:
     """``q`` with a spherical or free-flyer joint's quaternion turned by ``angle`` (rad)
     about a fixed axis, or a planar joint's (cos, sin) pair by ``angle``."""
@@ -944,10 +834,10 @@ def test_a_posture_over_spherical_and_planar_joints_is_native_and_matches(name):
     damped too, as the Python refresh: on random configurations and on injected ones where a
     log is delicate (a rotation near pi, a tiny one, the opposite quaternion of the same
     rotation)."""
-    robot = _posture_robot(name)
+    robot = posture_robot(name)
     q0 = robot.random_configuration(1)
-    ikn = qc.IK(robot, _posture_levels(robot, q0), DT, engine="native")
-    ikp = qc.IK(robot, _posture_levels(robot, q0), DT, engine="python")
+    ikn = qc.IK(robot, posture_levels(robot, q0), DT, engine="native")
+    ikp = qc.IK(robot, posture_levels(robot, q0), DT, engine="python")
     assert not ikn._native._hybrid
     tn = next(t for t in ikn._native.kernel_tasks if isinstance(t, qc.PostureTask))
     tp = next(t for t in ikp._dynamic if isinstance(t, qc.PostureTask))
@@ -1002,9 +892,9 @@ def test_a_posture_over_spherical_and_planar_joints_is_native_and_matches(name):
 def test_a_posture_over_spherical_and_planar_joints_closed_loop_matches(name):
     """The tip held, the posture pulled toward another configuration through the spherical
     (planar) joints: the same v on both engines over a closed loop."""
-    robot = _posture_robot(name)
+    robot = posture_robot(name)
     q0 = robot.random_configuration(1)
-    ikn, ikp = engine_pair(robot, partial(_posture_levels, robot, q0), DT)
+    ikn, ikp = engine_pair(robot, partial(posture_levels, robot, q0), DT)
     assert not ikn._native._hybrid
     q = closed_loop_agrees(ikn, ikp, q0, 200)
     # the posture moved the joints: the loop ran through their rows
@@ -1015,9 +905,9 @@ def test_a_posture_over_spherical_and_planar_joints_closed_loop_matches(name):
 def test_a_posture_over_a_composite_joint_keeps_its_python_rows():
     """A composite joint (no native difference) is a posture row: that posture keeps its
     Python refresh in a hybrid step, and both engines give the same v."""
-    robot = _posture_robot("composite")
+    robot = posture_robot("composite")
     q0 = robot.random_configuration(1)
-    ikn, ikp = engine_pair(robot, partial(_posture_levels, robot, q0), DT)
+    ikn, ikp = engine_pair(robot, partial(posture_levels, robot, q0), DT)
     posture = ikn._native._python_tasks
     assert [type(t) for t in posture] == [qc.PostureTask, LMDamping]
     assert native_kind(posture[0]) is None and ikn._native._hybrid
@@ -1027,8 +917,8 @@ def test_a_posture_over_a_composite_joint_keeps_its_python_rows():
 @needs_native
 def test_add_task_rejects_a_bad_posture_plan():
     """A posture's plan: whole segments, disjoint, exactly over its rows."""
-    robot = _posture_robot("manifold")
-    ik = qc.IK(robot, _posture_levels(robot, robot.neutral()), DT, engine="native")
+    robot = posture_robot("manifold")
+    ik = qc.IK(robot, posture_levels(robot, robot.neutral()), DT, engine="native")
     solver = ik._native._solver
     ball = [2, 10, 8, 1]  # the spherical joint: q 10..13, v 8..10
     assert robot.model.joints[4].shortname() == "JointModelSpherical"

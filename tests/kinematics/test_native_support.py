@@ -9,6 +9,7 @@ import pinocchio as pin
 import pytest
 from support.counting_malloc import native_malloc_counts
 from support.native_engine import needs_native
+from support.talos_balance import CORNERS, DT, SOLES, balance_stack
 
 import qpcoord as qc
 from qpcoord.core import native
@@ -16,13 +17,7 @@ from qpcoord.kinematics.frame_tasks import ComBand, SupportPolygon
 from qpcoord.kinematics.native_step import TaskKind, native_kind
 from qpcoord.robots import absolute_angle_map, planar_chain
 
-DT = 1e-3
-SOLES = ("left_sole_link", "right_sole_link")
-#: the soles' corners (m, sole frame), as benchmarks/ik_peers.py
-CORNERS = [[x, y, 0.0] for x in (-0.1, 0.1) for y in (-0.05, 0.05)]
 #: points off every axis (the offsets' rotation and z terms)
-#: the closed loop's polygon margin (m) and hand gain (1/s)
-MARGIN, HAND_GAIN = 0.08, 2.0
 SKEW_POINTS = [[0.08, -0.03, 0.04], [-0.05, 0.06, -0.02], [0.02, 0.01, 0.07]]
 
 
@@ -209,36 +204,11 @@ def test_native_band_jacobians_match_finite_differences(request, name, kind):
 # ---------------------------------------------------------------------------------------
 
 
-def _talos_stack(robot: qc.Robot, q0: np.ndarray) -> tuple[list, SupportPolygon, ComBand]:
-    feet = [qc.FrameTask(robot, s, gain=1.0 / DT) for s in SOLES]
-    for foot in feet:
-        foot.set_target_from_configuration(q0)
-    # margin: the CoM starts 1-2 cm inside the shrunk polygon, the hand's reach pushes it out
-    polygon = SupportPolygon(
-        robot, list(SOLES), margin=MARGIN, gain=1.0 / DT, contact_points=CORNERS
-    )
-    c = robot.com(q0)
-    band = ComBand(
-        robot,
-        lower=[-np.inf, c[1] - 0.004, -np.inf],
-        upper=[np.inf, np.inf, c[2] + 1e-3],
-        gain=50.0,
-    )
-    hand = qc.FramePositionTask(
-        robot,
-        "gripper_right_base_link",
-        robot.frame_pose(q0, "gripper_right_base_link")[:3, 3] + [0.15, 0.05, -0.1],
-        gain=HAND_GAIN,
-    )
-    posture = qc.PostureTask(robot, q0, gain=50.0)
-    return [feet, [polygon, band], hand, posture], polygon, band
-
-
 @needs_native
 def test_talos_closed_loop_matches_the_python_engine_with_the_polygon_and_band_binding(talos):
     q0 = talos.reference_configuration("half_sitting")
-    levels_n, poly, band = _talos_stack(talos, q0)
-    levels_p, _, _ = _talos_stack(talos, q0)
+    levels_n, poly, band = balance_stack(talos, q0)
+    levels_p, _, _ = balance_stack(talos, q0)
     ikn = qc.IK(talos, levels_n, DT, limits="robot", engine="native")
     ikp = qc.IK(talos, levels_p, DT, limits="robot", engine="python")
     assert not ikn._native._hybrid and poly in ikn._native.kernel_tasks
@@ -270,9 +240,9 @@ def test_talos_weighted_closed_loop_matches_the_python_engine(talos, weight_rati
     whitened variables of the weighted rows' QR, so they agree to 1e-9 (with daqp on the
     formed H the Python engine was 2.3e-3 off in x on 137 of 150 steps)."""
     q0 = talos.reference_configuration("half_sitting")
-    ikn = qc.IK(talos, _talos_stack(talos, q0)[0], DT, limits="robot", method="weighted",
+    ikn = qc.IK(talos, balance_stack(talos, q0)[0], DT, limits="robot", method="weighted",
                 weight_ratio=weight_ratio)  # fmt: skip
-    ikp = qc.IK(talos, _talos_stack(talos, q0)[0], DT, limits="robot", method="weighted",
+    ikp = qc.IK(talos, balance_stack(talos, q0)[0], DT, limits="robot", method="weighted",
                 weight_ratio=weight_ratio, engine="python")  # fmt: skip
     q = q0.copy()
     qp_steps = 0
@@ -426,10 +396,10 @@ def test_add_task_rejects_bad_band_data(talos):
 _ALLOCATION_RUN = r"""
 import numpy as np, pinocchio as pin, qpcoord as qc
 from support.malloc_counts import print_step_mallocs
-from test_native_support import _talos_stack, DT
+from support.talos_balance import DT, balance_stack
 robot = qc.robots.load("talos")
 q = robot.reference_configuration("half_sitting")
-levels, polygon, band = _talos_stack(robot, q)
+levels, polygon, band = balance_stack(robot, q)
 q = robot.integrate(q, np.random.default_rng(1).normal(scale=0.1, size=robot.nv), DT)
 pin.computeJointJacobians(robot.model, robot.data, q)
 pin.jacobianCenterOfMass(robot.model, robot.data, False)

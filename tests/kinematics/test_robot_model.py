@@ -496,16 +496,3 @@ def test_zero_urdf_velocity_limits_read_as_unlimited():
 
 def test_repr_shows_nv_when_it_differs(talos):
     assert repr(talos) == "Robot('talos', nq=39, nv=38, frame=None, rows=(0, 1, 2))"
-
-
-def test_the_robots_page_snippets_run():
-    """Every ``python`` block of docs/robots.md runs, in order, in one namespace."""
-    import contextlib
-    import io
-
-    from support.pages import ROOT, run_blocks, run_page
-
-    page = ROOT / "docs" / "robots.md"
-    assert len(run_blocks(page)) >= 4
-    with contextlib.redirect_stdout(io.StringIO()):
-        run_page(page)

@@ -14,11 +14,8 @@ import pytest
 
 from qpcoord.core import native
 
-#: tests/: on the child's path (``support`` is imported from there)
+#: tests/: on the child's path (its scripts build their problems with ``support``'s builders)
 TESTS = Path(__file__).resolve().parents[1]
-#: tests/kinematics: on the child's path too (its scripts build their IK stacks with the
-#: builders of the test module that runs them)
-KINEMATICS_TESTS = TESTS / "kinematics"
 #: the first line every script of :func:`native_malloc_counts` prints: the build it loaded
 _VARIANT_LINE = "import qpcoord.core.native\nprint('variant', qpcoord.core.native.variant())\n"
 
@@ -45,15 +42,15 @@ void* realloc(void* p, size_t s) {
 
 def run_counting_malloc(tmp_path: Path, script: str, env: dict | None = None) -> str:
     """Run the Python source ``script`` in a fresh Python with the counting shim preloaded
-    (:mod:`support.malloc_counts` reads its count), tests/ and tests/kinematics on its path
-    and ``env`` added to the environment; its stdout. Skips without a C compiler or glibc."""
+    (:mod:`support.malloc_counts` reads its count), tests/ on its path and ``env`` added to
+    the environment; its stdout. Skips without a C compiler or glibc."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None or not sys.platform.startswith("linux"):
         pytest.skip("needs a C compiler and glibc's dlsym(RTLD_NEXT)")
     src, lib = tmp_path / "count.c", tmp_path / "libcount.so"
     src.write_text(_COUNTING_MALLOC)
     subprocess.run([cc, "-shared", "-fPIC", "-O2", "-o", str(lib), str(src), "-ldl"], check=True)
-    path = [str(TESTS), str(KINEMATICS_TESTS), os.environ.get("PYTHONPATH", "")]
+    path = [str(TESTS), os.environ.get("PYTHONPATH", "")]
     proc = subprocess.run(
         [sys.executable, "-c", script],
         capture_output=True,

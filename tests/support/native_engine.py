@@ -1,9 +1,11 @@
 """The native engine under test: whether it is built, a solver of a compiled stack, and the
 comparison of its answers with the Python engine's.
 
-Without the extension the tests marked :data:`needs_native` skip, with the reason;
-``QPCOORD_REQUIRE_NATIVE=1`` (set by ``.ci/run``) makes a missing extension a failure instead
-(importing this module raises).
+Without the extension the tests marked :data:`needs_native` skip, with the reason, and so do
+those marked :data:`needs_native_weighted` without its weighted QP and those marked
+:data:`needs_collision_kernel` without ``qpcoord._collision``; ``QPCOORD_REQUIRE_NATIVE=1``
+(set by ``.ci/run``) makes a missing extension a failure instead (importing this module
+raises).
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import numpy as np
 import pytest
 
 import qpcoord as qc
-from qpcoord.core import native
+from qpcoord.core import native, native_weighted
+from qpcoord.kinematics import collision_kernel
 
 #: Level values: |r_native − r_python| ≤ LEVEL_TOL·max(1, r_python).
 LEVEL_TOL = 1e-9
@@ -28,6 +31,25 @@ if not BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
     )
 needs_native = pytest.mark.skipif(
     not BUILT, reason=f"the native engine (qpcoord._native) is not built: {native._load_error}"
+)
+
+#: the extension binds the weighted QP (``Weighted``: src/native/weighted.cpp, one of the
+#: sources of every build of it in CMakeLists.txt)
+WEIGHTED_BUILT = native_weighted.available()
+_NO_WEIGHTED = "the native engine has no weighted QP (qpcoord._native.Weighted)"
+if BUILT and not WEIGHTED_BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
+    raise RuntimeError("QPCOORD_REQUIRE_NATIVE=1 but " + _NO_WEIGHTED)
+needs_native_weighted = pytest.mark.skipif(
+    not WEIGHTED_BUILT, reason=needs_native.kwargs["reason"] if not BUILT else _NO_WEIGHTED
+)
+
+#: CollisionAvoidance's native rows: the extension ``qpcoord._collision`` (built where CMake
+#: finds coal's library, CMakeLists.txt)
+COLLISION_BUILT = collision_kernel._collision is not None
+if not COLLISION_BUILT and os.environ.get("QPCOORD_REQUIRE_NATIVE") == "1":
+    raise RuntimeError("QPCOORD_REQUIRE_NATIVE=1 but qpcoord._collision is not built")
+needs_collision_kernel = pytest.mark.skipif(
+    not COLLISION_BUILT, reason="qpcoord._collision is not built"
 )
 
 
