@@ -5,8 +5,8 @@ IK closed loop of ``support.talos_balance.balance_stack`` with a harder hand tar
 margin 0.06 m, hand gain 5 /s), steps 79 and 80, as the native IK step wrote them: level 0 the
 feet (12 equality rows), level 1 the support polygon and the CoM band (11 inequality rows),
 level 2 the hand (3 rows), level 3 the posture (32 rows), and the velocity box of the joint
-limits. At step 80 joint 27 reaches its position
-limit (its velocity bound is ``-3.8e-34``, i.e. 0).
+limits. At step 80 joint 27 reaches its position limit (its velocity bound is ``-3.8e-34``,
+i.e. 0).
 
 The reference is exact: the last level's KKT system on the active set {polygon row 2 at its
 upper bound, band row 9 at its lower bound, x_27 at its upper bound} solved in rational
