@@ -92,8 +92,6 @@ struct LsqProblem {
   /// 0 when it was skipped.
   double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm,
                  double floor = 1e-12);
-  /// |g|: the one compiled norm of add_row and of the bound rows' block (the same bits)
-  static double row_norm(const Eigen::Ref<const Vec>& g);
 };
 
 /// What a user may tune in a Hierarchy (Hierarchy::settings; bound to Python).
@@ -607,7 +605,8 @@ class Hierarchy {
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   double rows_pivot_ = 1.0;    ///< level_problem: the moving rows' last kept pivot (scaled)
   std::vector<int> bidx_;      ///< add_bound_rows: the variables whose rows are kept
-  Vec bnrm_;                   ///< add_bound_rows: their rows' norms
+  Vec binv_;                   ///< add_bound_rows: their rows' reciprocal norms
+  Vec bsq_;                    ///< add_bound_rows: every bound row's squared norm
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
   /// The freeze cache's value: a level's Z, r, z_identity_ and Cin Z after its freeze; its
   /// key: the freeze's kind and rank, Cin Z on entry, the violated rows -- and, through the
