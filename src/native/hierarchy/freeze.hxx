@@ -154,21 +154,22 @@ bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T, double pivot
   const int k = std::min(m, r);
   if (k == 0 || k > gram_.rows()) return false;
   auto G = gram_.topLeftCorner(k, k);
-  G.setZero();
-  if (m <= r)
-    G.selfadjointView<Eigen::Lower>().rankUpdate(T.transpose());
-  else
-    G.selfadjointView<Eigen::Lower>().rankUpdate(T);
-  const double trace = G.trace();
+  const double trace = T.squaredNorm();  // trace(G) = |T|_F^2 in either form
   if (!std::isfinite(trace)) return false;
   const double need = m * pivot_floor * pivot_floor;
   const double delta = need + 16.0 * (m + r) * kEps * trace;
-  G.diagonal().array() -= delta;
-  // G = L L^T in the lower triangle, in place, a column of L at a time: L(j+1:, j) from one
-  // product of L(j+1:, 0:j) with L(j, 0:j) (no allocation; fewer instructions than Eigen's
-  // blocked LLT or the row-oriented form at these sizes: 72 x 72 on the humanoid)
+  // G - delta I = L L^T in the lower triangle, a column of L at a time (left-looking): G's
+  // column j is formed only when L reaches it, by one product, so a failure at column j costs
+  // j + 1 columns of G (the Talos support polygon's 6 rows of rank 2 fail at the third; the
+  // whole Gram by a rank update cost more than the QR that decides then). L(j+1:, j) comes
+  // from one product of L(j+1:, 0:j) with L(j, 0:j) (no allocation)
   for (int j = 0; j < k; ++j) {
-    const double d2 = G(j, j) - G.row(j).head(j).squaredNorm();
+    auto gj = G.col(j).tail(k - j);
+    if (m <= r)
+      gj.noalias() = T.rightCols(k - j).transpose() * T.col(j);
+    else
+      gj.noalias() = T.middleRows(j, k - j) * T.row(j).transpose();
+    const double d2 = gj(0) - delta - G.row(j).head(j).squaredNorm();
     if (!(d2 > 0.0)) return false;
     const double d = std::sqrt(d2);
     G(j, j) = d;
