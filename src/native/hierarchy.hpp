@@ -606,6 +606,7 @@ class Hierarchy {
   double rows_pivot_ = 1.0;    ///< level_problem: the moving rows' last kept pivot (scaled)
   std::vector<int> bidx_;      ///< add_bound_rows: the variables whose rows are kept
   Vec binv_;                   ///< add_bound_rows: their rows' reciprocal norms
+  std::vector<int> brun_;      ///< add_bound_rows: the first kept row of each run, then kept
   Vec bsq_;                    ///< add_bound_rows: every bound row's squared norm
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
   /// The freeze cache's value: a level's Z, r, z_identity_ and Cin Z after its freeze; its

@@ -96,6 +96,7 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
     v->setZero(big);
   widx_.reserve(max_grows);
   bidx_.assign(std::max(n, 1), 0);
+  brun_.assign(n + 1, 0);
   binv_.setZero(std::max(n, 1));
   bsq_.setZero(std::max(n, 1));
   mov_.reserve(std::max(max_in, 1));
@@ -317,15 +318,17 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
     bidx_[kept] = j;
     binv_(kept++) = 1.0 / nrm;
   }
-  if (kept == n_) {  // every row kept: one scaled copy per column
-    const auto inv = binv_.head(n_);
-    for (int c = 0; c < r_; ++c)
-      P.G.col(c).segment(r0, n_) = Z_.col(c).head(n_).cwiseProduct(inv);
-  } else {
-    for (int c = 0; c < r_; ++c) {
-      double* g = P.G.col(c).data() + r0;
-      const double* z = Z_.col(c).data();
-      for (int i = 0; i < kept; ++i) g[i] = z[bidx_[i]] * binv_(i);
+  // the kept rows as runs of consecutive variables (a free-flyer's unbounded base leaves one
+  // run): each run of each column one scaled copy
+  int runs = 0;
+  for (int i = 0; i < kept; ++i)
+    if (i == 0 || bidx_[i] != bidx_[i - 1] + 1) brun_[runs++] = i;
+  brun_[runs] = kept;
+  for (int c = 0; c < r_; ++c) {
+    for (int b = 0; b < runs; ++b) {
+      const int i0 = brun_[b], len = brun_[b + 1] - i0;
+      P.G.col(c).segment(r0 + i0, len) =
+          Z_.col(c).segment(bidx_[i0], len).cwiseProduct(binv_.segment(i0, len));
     }
   }
   if (cols > r_) P.G.block(r0, r_, kept, cols - r_).setZero();
