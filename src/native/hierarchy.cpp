@@ -242,7 +242,24 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     stats(stage, 2) = 1.0;
     return kOk;
   }
-  // ---- else the exact active-set least squares in y = (z, w), w the moving rows' slacks
+  // ---- else the exact active-set least squares in y = (z, w), w the moving rows' slacks.
+  // A level without inequality rows, well-conditioned (a hit is final, no exact finish): the
+  // warm trial first on its stored set's rows alone, the bounds and inherited rows it leaves
+  // out checked at its point (a level below the support polygon, its set one inherited
+  // polygon row among 6 and 38 bounds, did not build them). A miss builds the whole problem
+  // and starts over from it.
+  Working& ws = working_[stage];
+  rows_pivot_ = 1.0;
+  if (warm && mi == 0 && ws.stored && !ill_conditioned(d, form) &&
+      light_trial(d, form, ws, y_.head(r_))) {
+    stats(stage, 0) = 0.0;
+    stats(stage, 1) = 1.0;
+    xold_.head(n_) = x_;
+    x_.noalias() += Z_.leftCols(r_) * y_.head(r_);
+    snap(x_);
+    freeze_level(d, form, violated_rows(d));
+    return kOk;
+  }
   const int mv = level_problem(d, form);
   LsqProblem& P = P_;
   const auto Zr = Z_.leftCols(r_);

@@ -234,8 +234,22 @@ class Hierarchy {
   bool accept_closed_form(const LevelRows& d, const LevelForm& form);
   /// The level's least squares in y = (z, w) into P_: its objective (M, or the R of its QR,
   /// the damping rows), the inherited rows, the bounds and its moving rows with their slacks
-  /// (mov_; CZl_ = C Z). Returns the number of moving rows.
-  int level_problem(const LevelRows& d, const LevelForm& form);
+  /// (mov_; CZl_ = C Z). Returns the number of moving rows. With `only` (a level without
+  /// inequality rows): of the inherited rows and bounds only those of the stored set `only`
+  /// and those fixed (lo = hi), in P's order: the rows a warm trial of `only` reads
+  /// (light_trial).
+  int level_problem(const LevelRows& d, const LevelForm& form, const Working* only = nullptr);
+  /// The warm trial of a level without inequality rows, well-conditioned, on the objective
+  /// and its stored set's rows alone (level_problem with only): a hit when the trial hits
+  /// there and its point meets the rows left out (left_out_rows_feasible), as the trial on
+  /// the whole problem decides; y and W_ (on that P) set as try_working_set leaves them and
+  /// the set stored as store_level_working_set stores it after a hit (a set it would prune:
+  /// not a hit here).
+  bool light_trial(const LevelRows& d, const LevelForm& form, Working& ws, Eigen::Ref<Vec> y);
+  /// z meets the inherited rows and bounds level_problem(only = ws) left out, to
+  /// try_working_set's tolerance on each row scaled to unit norm; rows that cannot bind (the
+  /// ones add_row skips) are not checked.
+  bool left_out_rows_feasible(const Working& ws, const Eigen::Ref<const Vec>& z);
   /// The level is ill-conditioned or damped: its active set is finished to rounding.
   bool ill_conditioned(const LevelRows& d, const LevelForm& form) const;
   /// Marks in viol_ the moving rows the new x leaves violated (relative to their scale);
@@ -279,10 +293,11 @@ class Hierarchy {
   /// |Cin_.row(i)| (the scale below which inherited row i's projection cannot bind),
   /// computed on first use in a call and kept: every level's add_inherited_rows reads it
   double cin_norm(int i);
-  void add_inherited_rows(LsqProblem& P);
+  /// The inherited rows as rows of P (all, or with only: those in the set or fixed).
+  void add_inherited_rows(LsqProblem& P, const Working* only = nullptr);
   /// The bounds as rows of P (Z's rows scaled to unit norm; the bound-rows cache: copied from
-  /// the stage's last call when its Z repeats).
-  void add_bound_rows(LsqProblem& P, int stage);
+  /// the stage's last call when its Z repeats; with only: those in the set or fixed, no cache).
+  void add_bound_rows(LsqProblem& P, int stage, const Working* only = nullptr);
   /// The bound-rows cache's value: a stage's bound rows as add_bound_rows wrote them (every
   /// variable's row kept); its key: r and the Z (n x r) they were projected from.
   struct BoundRows {
@@ -387,6 +402,10 @@ class Hierarchy {
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                        std::vector<int8_t>& W, int* found);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// store_level_working_set's test after storing W_: the working rows of P without slack
+  /// whose bound is away from the level's start (Wp_: W_ without them) exist and y has a
+  /// zero objective: the set is to be pruned.
+  bool prunes(const LsqProblem& P, const Eigen::Ref<const Vec>& y, int level_rows);
   /// A level's working set W_ at its optimum y (hit: y is the warm trial's of ws, no exact
   /// finish moved it), stored for the next call's trial. When the level's objective is zero
   /// there (to rounding: every row of the level met), every multiplier is zero and a working

@@ -238,7 +238,14 @@ double Hierarchy::cin_norm(int i) {
   return cin_norm_(i);
 }
 
-void Hierarchy::add_inherited_rows(LsqProblem& P) {
+namespace {
+/// id is one of ids (a stored working set's: a few rows, scanned)
+inline bool holds_id(const std::vector<int>& ids, int id) {
+  return std::find(ids.begin(), ids.end(), id) != ids.end();
+}
+}  // namespace
+
+void Hierarchy::add_inherited_rows(LsqProblem& P, const Working* only) {
   if (k_ == 0) return;
   auto full = rowbuf_.head(P.cols);
   full.setZero();
@@ -257,9 +264,10 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   auto cx = cinx_.head(k_);
   cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
-    full.head(r_) = CZ.row(i).transpose();
     const double l = std::min(lin_(i) - cx(i), 0.0);
     const double u = std::max(uin_(i) - cx(i), 0.0);
+    if (only && l != u && !holds_id(only->id, inid_[i])) continue;
+    full.head(r_) = CZ.row(i).transpose();
     // a level's row whose projection is within kMovableTol of its norm lies in the frozen
     // rows' span to rounding of the freeze: constant, as for the level's own movable test
     // (its projection's direction is rounding: a half-space through x with that normal
@@ -268,9 +276,21 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   }
 }
 
-void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
+void Hierarchy::add_bound_rows(LsqProblem& P, int stage, const Working* only) {
   if (!has_bounds_) return;
   const int r0 = P.rows, cols = P.cols;
+  if (only) {  // the set's rows and the fixed ones, as below (the cache neither read nor kept)
+    auto full = rowbuf_.head(cols);
+    full.setZero();
+    for (int j = 0; j < n_; ++j) {
+      const double l = std::min(lb_(j) - x_(j), 0.0);
+      const double u = std::max(ub_(j) - x_(j), 0.0);
+      if (l != u && !holds_id(only->id, capacity_ + j)) continue;
+      full.head(r_) = Z_.row(j).head(r_).transpose();
+      P.add_row(full, l, u, capacity_ + j, 1.0);
+    }
+    return;
+  }
   // (the bound-rows cache: the rows depend on Z alone, their bounds on x too; no row is
   // skipped unless a variable has no finite bound, or Z a zero row)
   BoundRowsCache* cache = memo_gate() ? &bound_rows_[stage] : nullptr;
