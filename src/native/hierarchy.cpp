@@ -243,15 +243,18 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     return kOk;
   }
   // ---- else the exact active-set least squares in y = (z, w), w the moving rows' slacks.
-  // A level without inequality rows, well-conditioned (a hit is final, no exact finish): the
-  // warm trial first on its stored set's rows alone, the bounds and inherited rows it leaves
-  // out checked at its point (a level below the support polygon, its set one inherited
-  // polygon row among 6 and 38 bounds, did not build them). A miss builds the whole problem
-  // and starts over from it.
+  // The warm trial first on the level's own rows and its stored set's other rows alone, the
+  // bounds and inherited rows it leaves out checked at its point (the support polygon's
+  // level and the levels below it, their sets a polygon row among 38 bounds, did not build
+  // them). A miss builds the whole problem and starts over from it.
   Working& ws = working_[stage];
-  rows_pivot_ = 1.0;
-  if (warm && mi == 0 && ws.stored && !ill_conditioned(d, form) &&
-      light_trial(d, form, ws, y_.head(r_))) {
+  const Light light = (warm && ws.stored) ? light_trial(d, form, ws, y_) : Light::kRebuild;
+  if (light == Light::kHit || light == Light::kHitStore) {
+    if (light == Light::kHitStore) {  // the whole problem, W_ the set on it, for the store
+      const int m = level_problem(d, form);
+      map_working_set(P_, ws, W_);
+      store_level_working_set(P_, y_.head(r_ + m), m, true, ws);
+    }
     stats(stage, 0) = 0.0;
     stats(stage, 1) = 1.0;
     xold_.head(n_) = x_;
@@ -260,7 +263,8 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     freeze_level(d, form, violated_rows(d));
     return kOk;
   }
-  const int mv = level_problem(d, form);
+  const int mv =
+      (light == Light::kWhole) ? static_cast<int>(mov_.size()) : level_problem(d, form);
   LsqProblem& P = P_;
   const auto Zr = Z_.leftCols(r_);
   auto y = y_.head(r_ + mv);

@@ -234,18 +234,26 @@ class Hierarchy {
   bool accept_closed_form(const LevelRows& d, const LevelForm& form);
   /// The level's least squares in y = (z, w) into P_: its objective (M, or the R of its QR,
   /// the damping rows), the inherited rows, the bounds and its moving rows with their slacks
-  /// (mov_; CZl_ = C Z). Returns the number of moving rows. With `only` (a level without
-  /// inequality rows): of the inherited rows and bounds only those of the stored set `only`
-  /// and those fixed (lo = hi), in P's order: the rows a warm trial of `only` reads
-  /// (light_trial).
+  /// (mov_; CZl_ = C Z). Returns the number of moving rows. With `only`: of the inherited
+  /// rows and bounds only those of the stored set `only` and those fixed (lo = hi), in P's
+  /// order (the level's own rows all): the rows a warm trial of `only` reads (light_trial).
   int level_problem(const LevelRows& d, const LevelForm& form, const Working* only = nullptr);
-  /// The warm trial of a level without inequality rows, well-conditioned, on the objective
-  /// and its stored set's rows alone (level_problem with only): a hit when the trial hits
-  /// there and its point meets the rows left out (left_out_rows_feasible), as the trial on
-  /// the whole problem decides; y and W_ (on that P) set as try_working_set leaves them and
-  /// the set stored as store_level_working_set stores it after a hit (a set it would prune:
-  /// not a hit here).
-  bool light_trial(const LevelRows& d, const LevelForm& form, Working& ws, Eigen::Ref<Vec> y);
+  /// The warm trial of a well-conditioned level on the objective, its own rows and its stored
+  /// set's other rows alone (level_problem with only): a hit when the trial hits there and
+  /// its point meets the rows left out (left_out_rows_feasible), as the trial on the whole
+  /// problem decides; y (z, w) and W_ (on that P) set as try_working_set leaves them, mov_,
+  /// CZl_ and rows_pivot_ as level_problem, and the set stored as store_level_working_set
+  /// stores it after a hit (a set it prunes: kHitStore). Not tried when the level is
+  /// ill-conditioned (its hit is finished by the active set) or when no row was left out
+  /// (the whole trial follows, on P_ as built: a second trial of the same rows would be the
+  /// trial cache's hit within one call).
+  enum class Light : int8_t {
+    kHit,       ///< a hit, the set stored: the level's optimum
+    kHitStore,  ///< a hit whose set store_level_working_set prunes: on the whole problem
+    kWhole,     ///< not tried (ill-conditioned, or nothing left out): P_ is the whole problem
+    kRebuild,   ///< a miss, or not tried: the whole problem is to be built
+  };
+  Light light_trial(const LevelRows& d, const LevelForm& form, Working& ws, Eigen::Ref<Vec> y);
   /// z meets the inherited rows and bounds level_problem(only = ws) left out, to
   /// try_working_set's tolerance on each row scaled to unit norm; rows that cannot bind (the
   /// ones add_row skips) are not checked.
@@ -489,6 +497,7 @@ class Hierarchy {
   Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
   int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_z)
   Vec cinx_;  ///< workspace: Cin x (add_inherited_rows, feasible; read where it is formed)
+  int left_out_ = 0;  ///< rows of the last level_problem left out by its `only`
   Vec lin_, uin_;
   /// |Cin_.row(i)| once computed, else -1 (cin_norm)
   Vec cin_norm_;

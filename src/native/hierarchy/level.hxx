@@ -202,6 +202,7 @@ int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form, const Wo
       if (s(i) < tau)
         P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i).head(r_);
   }
+  left_out_ = 0;
   add_inherited_rows(P, only);
   add_bound_rows(P, stage, only);
   auto g = rowbuf_.head(cols);

@@ -266,20 +266,29 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
   return true;
 }
 
-bool Hierarchy::light_trial(const LevelRows& d, const LevelForm& form, Working& ws,
-                            Eigen::Ref<Vec> y) {
-  level_problem(d, form, &ws);
+Hierarchy::Light Hierarchy::light_trial(const LevelRows& d, const LevelForm& form,
+                                        Working& ws, Eigen::Ref<Vec> y) {
+  const int mv = level_problem(d, form, &ws);
+  if (left_out_ == 0) return Light::kWhole;
+  // (an ill-conditioned level's hit is finished by the active set: on the whole problem)
+  if (ill_conditioned(d, form)) return Light::kRebuild;
   int found = 0;
+  slack_rows_ = mv;
+  const bool hit = try_working_set(P_, ws, y.head(r_ + mv), W_, &found);
   slack_rows_ = 0;
-  if (!try_working_set(P_, ws, y, W_, &found) || !left_out_rows_feasible(ws, y.head(r_)))
-    return false;
-  if (ws.verified) return true;  // (store_level_working_set keeps it)
+  if (!hit || !left_out_rows_feasible(ws, y.head(r_))) {
+    // (the whole trial computes its own factorisations: of the same working rows and
+    // objective, the trial cache would return these within the call)
+    tc_->drop();
+    return Light::kRebuild;
+  }
+  if (ws.verified) return Light::kHit;  // (store_level_working_set keeps it)
   // store_level_working_set after a hit: the set stored again (its rows are all in this P,
   // in the whole problem's order: the same set), unless it prunes it: its trials of the
-  // pruned set need the whole problem (then a miss here)
-  if (prunes(P_, y, 0)) return false;
+  // pruned set need the whole problem
+  if (prunes(P_, y.head(r_ + mv), mv)) return Light::kHitStore;
   store_working_set(P_, W_, ws);
-  return true;
+  return Light::kHit;
 }
 
 bool Hierarchy::left_out_rows_feasible(const Working& ws, const Eigen::Ref<const Vec>& z) {

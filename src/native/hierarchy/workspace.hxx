@@ -266,7 +266,10 @@ void Hierarchy::add_inherited_rows(LsqProblem& P, const Working* only) {
   for (int i = 0; i < k_; ++i) {
     const double l = std::min(lin_(i) - cx(i), 0.0);
     const double u = std::max(uin_(i) - cx(i), 0.0);
-    if (only && l != u && !holds_id(only->id, inid_[i])) continue;
+    if (only && l != u && !holds_id(only->id, inid_[i])) {
+      ++left_out_;
+      continue;
+    }
     full.head(r_) = CZ.row(i).transpose();
     // a level's row whose projection is within kMovableTol of its norm lies in the frozen
     // rows' span to rounding of the freeze: constant, as for the level's own movable test
@@ -285,7 +288,10 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage, const Working* only) {
     for (int j = 0; j < n_; ++j) {
       const double l = std::min(lb_(j) - x_(j), 0.0);
       const double u = std::max(ub_(j) - x_(j), 0.0);
-      if (l != u && !holds_id(only->id, capacity_ + j)) continue;
+      if (l != u && !holds_id(only->id, capacity_ + j)) {
+        ++left_out_;
+        continue;
+      }
       full.head(r_) = Z_.row(j).head(r_).transpose();
       P.add_row(full, l, u, capacity_ + j, 1.0);
     }
