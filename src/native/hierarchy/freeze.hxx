@@ -126,13 +126,19 @@ double Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector
   const int rank = fqr_.factor(kMovableTol, 0.0);
   const double last = rank ? std::abs(fqr_.matrix()(rank - 1, rank - 1)) : 0.0;
   if (rank >= std::min(m, r_)) return last;
+  // row j's projection: norms(j) Qf [Qf^T t_j](0:rank), and the QR stopped at rank holds
+  // Qf^T t_j's first rank entries in its column of pivoted order c (perm(c) = j): R's for a
+  // pivot column (c < rank; the reflector below its diagonal), the reflected column's head
+  // for the others. One application of Qf per row (Qf^T t_j is already there)
   auto v = tmpr_.head(r_);
-  for (int j = 0; j < m; ++j) {
-    v = R.row(rows[j]).head(r_).transpose();
-    fqr_.apply_qt(v);
-    v.tail(r_ - rank).setZero();
+  const MapMat F = fqr_.matrix();
+  for (int c = 0; c < m; ++c) {
+    const int j = fqr_.perm(c);
+    const int top = std::min(c + 1, rank);
+    v.setZero();
+    v.head(top) = F.col(c).head(top);
     fqr_.apply_q(v);
-    R.row(rows[j]).head(r_) = v.transpose();
+    R.row(rows[j]).head(r_) = norms(j) * v.transpose();
   }
   ++stats_.dependent_drops;
   return last;
