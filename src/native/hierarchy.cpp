@@ -242,8 +242,29 @@ int Hierarchy::level(int k, const CRef<Mat>& Aeq, const CRef<Vec>& beq, const CR
     stats(stage, 2) = 1.0;
     return kOk;
   }
-  // ---- else the exact active-set least squares in y = (z, w), w the moving rows' slacks
-  const int mv = level_problem(d, form);
+  // ---- else the exact active-set least squares in y = (z, w), w the moving rows' slacks.
+  // The warm trial first on the level's own rows and its stored set's other rows alone, the
+  // bounds and inherited rows it leaves out checked at its point (the support polygon's
+  // level and the levels below it, their sets a polygon row among 38 bounds, did not build
+  // them). A miss builds the whole problem and starts over from it.
+  Working& ws = working_[stage];
+  const Light light = (warm && ws.stored) ? light_trial(d, form, ws, y_) : Light::kRebuild;
+  if (light == Light::kHit || light == Light::kHitStore) {
+    if (light == Light::kHitStore) {  // the whole problem, W_ the set on it, for the store
+      const int m = level_problem(d, form);
+      map_working_set(P_, ws, W_);
+      store_level_working_set(P_, y_.head(r_ + m), m, true, ws);
+    }
+    stats(stage, 0) = 0.0;
+    stats(stage, 1) = 1.0;
+    xold_.head(n_) = x_;
+    x_.noalias() += Z_.leftCols(r_) * y_.head(r_);
+    snap(x_);
+    freeze_level(d, form, violated_rows(d));
+    return kOk;
+  }
+  const int mv =
+      (light == Light::kWhole) ? static_cast<int>(mov_.size()) : level_problem(d, form);
   LsqProblem& P = P_;
   const auto Zr = Z_.leftCols(r_);
   auto y = y_.head(r_ + mv);

@@ -92,8 +92,6 @@ struct LsqProblem {
   /// 0 when it was skipped.
   double add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid, double ref_norm,
                  double floor = 1e-12);
-  /// |g|: the one compiled norm of add_row and of the bound rows' block (the same bits)
-  static double row_norm(const Eigen::Ref<const Vec>& g);
 };
 
 /// What a user may tune in a Hierarchy (Hierarchy::settings; bound to Python).
@@ -236,8 +234,30 @@ class Hierarchy {
   bool accept_closed_form(const LevelRows& d, const LevelForm& form);
   /// The level's least squares in y = (z, w) into P_: its objective (M, or the R of its QR,
   /// the damping rows), the inherited rows, the bounds and its moving rows with their slacks
-  /// (mov_; CZl_ = C Z). Returns the number of moving rows.
-  int level_problem(const LevelRows& d, const LevelForm& form);
+  /// (mov_; CZl_ = C Z). Returns the number of moving rows. With `only`: of the inherited
+  /// rows and bounds only those of the stored set `only` and those fixed (lo = hi), in P's
+  /// order (the level's own rows all): the rows a warm trial of `only` reads (light_trial).
+  int level_problem(const LevelRows& d, const LevelForm& form, const Working* only = nullptr);
+  /// The warm trial of a well-conditioned level on the objective, its own rows and its stored
+  /// set's other rows alone (level_problem with only): a hit when the trial hits there and
+  /// its point meets the rows left out (left_out_rows_feasible), as the trial on the whole
+  /// problem decides; y (z, w) and W_ (on that P) set as try_working_set leaves them, mov_,
+  /// CZl_ and rows_pivot_ as level_problem, and the set stored as store_level_working_set
+  /// stores it after a hit (a set it prunes: kHitStore). Not tried when the level is
+  /// ill-conditioned (its hit is finished by the active set) or when no row was left out
+  /// (the whole trial follows, on P_ as built: a second trial of the same rows would be the
+  /// trial cache's hit within one call).
+  enum class Light : int8_t {
+    kHit,       ///< a hit, the set stored: the level's optimum
+    kHitStore,  ///< a hit whose set store_level_working_set prunes: on the whole problem
+    kWhole,     ///< not tried (ill-conditioned, or nothing left out): P_ is the whole problem
+    kRebuild,   ///< a miss, or not tried: the whole problem is to be built
+  };
+  Light light_trial(const LevelRows& d, const LevelForm& form, Working& ws, Eigen::Ref<Vec> y);
+  /// z meets the inherited rows and bounds level_problem(only = ws) left out, to
+  /// try_working_set's tolerance on each row scaled to unit norm; rows that cannot bind (the
+  /// ones add_row skips) are not checked.
+  bool left_out_rows_feasible(const Working& ws, const Eigen::Ref<const Vec>& z);
   /// The level is ill-conditioned or damped: its active set is finished to rounding.
   bool ill_conditioned(const LevelRows& d, const LevelForm& form) const;
   /// Marks in viol_ the moving rows the new x leaves violated (relative to their scale);
@@ -281,10 +301,11 @@ class Hierarchy {
   /// |Cin_.row(i)| (the scale below which inherited row i's projection cannot bind),
   /// computed on first use in a call and kept: every level's add_inherited_rows reads it
   double cin_norm(int i);
-  void add_inherited_rows(LsqProblem& P);
+  /// The inherited rows as rows of P (all, or with only: those in the set or fixed).
+  void add_inherited_rows(LsqProblem& P, const Working* only = nullptr);
   /// The bounds as rows of P (Z's rows scaled to unit norm; the bound-rows cache: copied from
-  /// the stage's last call when its Z repeats).
-  void add_bound_rows(LsqProblem& P, int stage);
+  /// the stage's last call when its Z repeats; with only: those in the set or fixed, no cache).
+  void add_bound_rows(LsqProblem& P, int stage, const Working* only = nullptr);
   /// The bound-rows cache's value: a stage's bound rows as add_bound_rows wrote them (every
   /// variable's row kept); its key: r and the Z (n x r) they were projected from.
   struct BoundRows {
@@ -389,6 +410,10 @@ class Hierarchy {
   bool try_working_set(const LsqProblem& P, const Working& ws, Eigen::Ref<Vec> y,
                        std::vector<int8_t>& W, int* found);
   void store_working_set(const LsqProblem& P, const std::vector<int8_t>& W, Working& ws);
+  /// store_level_working_set's test after storing W_: the working rows of P without slack
+  /// whose bound is away from the level's start (Wp_: W_ without them) exist and y has a
+  /// zero objective: the set is to be pruned.
+  bool prunes(const LsqProblem& P, const Eigen::Ref<const Vec>& y, int level_rows);
   /// A level's working set W_ at its optimum y (hit: y is the warm trial's of ws, no exact
   /// finish moved it), stored for the next call's trial. When the level's objective is zero
   /// there (to rounding: every row of the level met), every multiplier is zero and a working
@@ -472,6 +497,7 @@ class Hierarchy {
   Mat CinZ_;  ///< the inherited rows projected, Cin Z (capacity x n; rows 0..kz_ current)
   int kz_ = 0;  ///< inherited rows whose projection in CinZ_ is carried (carry_z)
   Vec cinx_;  ///< workspace: Cin x (add_inherited_rows, feasible; read where it is formed)
+  int left_out_ = 0;  ///< rows of the last level_problem left out by its `only`
   Vec lin_, uin_;
   /// |Cin_.row(i)| once computed, else -1 (cin_norm)
   Vec cin_norm_;
@@ -607,7 +633,9 @@ class Hierarchy {
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   double rows_pivot_ = 1.0;    ///< level_problem: the moving rows' last kept pivot (scaled)
   std::vector<int> bidx_;      ///< add_bound_rows: the variables whose rows are kept
-  Vec bnrm_;                   ///< add_bound_rows: their rows' norms
+  Vec binv_;                   ///< add_bound_rows: their rows' reciprocal norms
+  std::vector<int> brun_;      ///< add_bound_rows: the first kept row of each run, then kept
+  Vec bsq_;                    ///< add_bound_rows: every bound row's squared norm
   Mat gram_;                   ///< independent_by_gram: the shifted Gram matrix, min(max_in, n)^2
   /// The freeze cache's value: a level's Z, r, z_identity_ and Cin Z after its freeze; its
   /// key: the freeze's kind and rank, Cin Z on entry, the violated rows -- and, through the

@@ -126,13 +126,19 @@ double Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector
   const int rank = fqr_.factor(kMovableTol, 0.0);
   const double last = rank ? std::abs(fqr_.matrix()(rank - 1, rank - 1)) : 0.0;
   if (rank >= std::min(m, r_)) return last;
+  // row j's projection: norms(j) Qf [Qf^T t_j](0:rank), and the QR stopped at rank holds
+  // Qf^T t_j's first rank entries in its column of pivoted order c (perm(c) = j): R's for a
+  // pivot column (c < rank; the reflector below its diagonal), the reflected column's head
+  // for the others. One application of Qf per row (Qf^T t_j is already there)
   auto v = tmpr_.head(r_);
-  for (int j = 0; j < m; ++j) {
-    v = R.row(rows[j]).head(r_).transpose();
-    fqr_.apply_qt(v);
-    v.tail(r_ - rank).setZero();
+  const MapMat F = fqr_.matrix();
+  for (int c = 0; c < m; ++c) {
+    const int j = fqr_.perm(c);
+    const int top = std::min(c + 1, rank);
+    v.setZero();
+    v.head(top) = F.col(c).head(top);
     fqr_.apply_q(v);
-    R.row(rows[j]).head(r_) = v.transpose();
+    R.row(rows[j]).head(r_) = norms(j) * v.transpose();
   }
   ++stats_.dependent_drops;
   return last;
@@ -154,21 +160,22 @@ bool Hierarchy::independent_by_gram(const Eigen::Ref<const Mat>& T, double pivot
   const int k = std::min(m, r);
   if (k == 0 || k > gram_.rows()) return false;
   auto G = gram_.topLeftCorner(k, k);
-  G.setZero();
-  if (m <= r)
-    G.selfadjointView<Eigen::Lower>().rankUpdate(T.transpose());
-  else
-    G.selfadjointView<Eigen::Lower>().rankUpdate(T);
-  const double trace = G.trace();
+  const double trace = T.squaredNorm();  // trace(G) = |T|_F^2 in either form
   if (!std::isfinite(trace)) return false;
   const double need = m * pivot_floor * pivot_floor;
   const double delta = need + 16.0 * (m + r) * kEps * trace;
-  G.diagonal().array() -= delta;
-  // G = L L^T in the lower triangle, in place, a column of L at a time: L(j+1:, j) from one
-  // product of L(j+1:, 0:j) with L(j, 0:j) (no allocation; fewer instructions than Eigen's
-  // blocked LLT or the row-oriented form at these sizes: 72 x 72 on the humanoid)
+  // G - delta I = L L^T in the lower triangle, a column of L at a time (left-looking): G's
+  // column j is formed only when L reaches it, by one product, so a failure at column j costs
+  // j + 1 columns of G (the Talos support polygon's 6 rows of rank 2 fail at the third; the
+  // whole Gram by a rank update cost more than the QR that decides then). L(j+1:, j) comes
+  // from one product of L(j+1:, 0:j) with L(j, 0:j) (no allocation)
   for (int j = 0; j < k; ++j) {
-    const double d2 = G(j, j) - G.row(j).head(j).squaredNorm();
+    auto gj = G.col(j).tail(k - j);
+    if (m <= r)
+      gj.noalias() = T.rightCols(k - j).transpose() * T.col(j);
+    else
+      gj.noalias() = T.middleRows(j, k - j) * T.row(j).transpose();
+    const double d2 = gj(0) - delta - G.row(j).head(j).squaredNorm();
     if (!(d2 > 0.0)) return false;
     const double d = std::sqrt(d2);
     G(j, j) = d;

@@ -120,7 +120,7 @@ bool Hierarchy::accept_closed_form(const LevelRows& d, const LevelForm& form) {
   return true;
 }
 
-int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form) {
+int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form, const Working* only) {
   const CRef<Mat>& C = d.C;
   const CRef<Vec>& lo = d.lo;
   const CRef<Vec>& hi = d.hi;
@@ -202,8 +202,9 @@ int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form) {
       if (s(i) < tau)
         P.Q.row(d++).head(r_) = std::sqrt(tau * tau - s(i) * s(i)) * svd.matrixV().col(i).head(r_);
   }
-  add_inherited_rows(P);
-  add_bound_rows(P, stage);
+  left_out_ = 0;
+  add_inherited_rows(P, only);
+  add_bound_rows(P, stage, only);
   auto g = rowbuf_.head(cols);
   const int slack_g0 = P.rows;
   for (int j = 0; j < mv; ++j) {

@@ -266,6 +266,69 @@ bool Hierarchy::try_working_set(const LsqProblem& P, const Working& ws, Eigen::R
   return true;
 }
 
+Hierarchy::Light Hierarchy::light_trial(const LevelRows& d, const LevelForm& form,
+                                        Working& ws, Eigen::Ref<Vec> y) {
+  const int mv = level_problem(d, form, &ws);
+  if (left_out_ == 0) return Light::kWhole;
+  // (an ill-conditioned level's hit is finished by the active set: on the whole problem)
+  if (ill_conditioned(d, form)) return Light::kRebuild;
+  int found = 0;
+  slack_rows_ = mv;
+  const bool hit = try_working_set(P_, ws, y.head(r_ + mv), W_, &found);
+  slack_rows_ = 0;
+  if (!hit || !left_out_rows_feasible(ws, y.head(r_))) {
+    // (the whole trial computes its own factorisations: of the same working rows and
+    // objective, the trial cache would return these within the call)
+    tc_->drop();
+    return Light::kRebuild;
+  }
+  if (ws.verified) return Light::kHit;  // (store_level_working_set keeps it)
+  // store_level_working_set after a hit: the set stored again (its rows are all in this P,
+  // in the whole problem's order: the same set), unless it prunes it: its trials of the
+  // pruned set need the whole problem
+  if (prunes(P_, y.head(r_ + mv), mv)) return Light::kHitStore;
+  store_working_set(P_, W_, ws);
+  return Light::kHit;
+}
+
+bool Hierarchy::left_out_rows_feasible(const Working& ws, const Eigen::Ref<const Vec>& z) {
+  // try_working_set's test of a row of P (g / |g|, bounds [l, u] / |g|) at z:
+  // g z / |g| within kWarmFeasTol max(1, |l| / |g|) below l / |g|, and so above u / |g|;
+  // a row inside [l, u] unscaled passes whatever |g|, which is computed for the others only
+  auto outside = [](double v, double l, double u, double nrm) {
+    const double sl = kWarmFeasTol * std::max(1.0, finite_abs(l / nrm));
+    const double su = kWarmFeasTol * std::max(1.0, finite_abs(u / nrm));
+    return v / nrm < l / nrm - sl || v / nrm > u / nrm + su;
+  };
+  if (has_bounds_) {
+    auto dx = tvec_.head(n_);
+    dx.noalias() = Z_.leftCols(r_) * z;
+    for (int j = 0; j < n_; ++j) {
+      const double l = std::min(lb_(j) - x_(j), 0.0);
+      const double u = std::max(ub_(j) - x_(j), 0.0);
+      if ((dx(j) >= l && dx(j) <= u) || l == u || holds_id(ws.id, capacity_ + j)) continue;
+      const double nrm = Z_.row(j).head(r_).norm();
+      if (!(nrm > 1e-12)) continue;  // (add_row's constant row: not in P)
+      if (outside(dx(j), l, u, nrm)) return false;
+    }
+  }
+  if (k_ == 0) return true;
+  // (add_inherited_rows formed Cin Z and Cin x for every inherited row: kz_ = k_)
+  auto cz = cztmp_.col(0).head(k_);
+  cz.noalias() = CinZ_.topLeftCorner(k_, r_) * z;
+  const auto cx = cinx_.head(k_);
+  for (int i = 0; i < k_; ++i) {
+    const double l = std::min(lin_(i) - cx(i), 0.0);
+    const double u = std::max(uin_(i) - cx(i), 0.0);
+    if ((cz(i) >= l && cz(i) <= u) || l == u || holds_id(ws.id, inid_[i])) continue;
+    const double nrm = CinZ_.row(i).head(r_).norm();
+    const double floor = inid_[i] >= min_[0] ? kMovableTol : 1e-12;
+    if (!(nrm > floor * std::max(cin_norm(i), 1e-300))) continue;  // (not in P)
+    if (outside(cz(i), l, u, nrm)) return false;
+  }
+  return true;
+}
+
 bool Hierarchy::seed_working_set(const LsqProblem& P, const Working& ws, int hard_rows,
                                  int zcols, Eigen::Ref<Vec> y, std::vector<int8_t>& W) {
   const int k = P.cols, m = P.rows;
@@ -358,10 +421,7 @@ bool Hierarchy::zero_objective(const LsqProblem& P, const Eigen::Ref<const Vec>&
   return std::sqrt(res.squaredNorm() + P.dropped2) <= round;
 }
 
-void Hierarchy::store_level_working_set(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
-                                        int level_rows, bool hit, Working& ws) {
-  if (hit && ws.verified) return;  // (W_ is ws on P's rows)
-  store_working_set(P, W_, ws);
+bool Hierarchy::prunes(const LsqProblem& P, const Eigen::Ref<const Vec>& y, int level_rows) {
   // (a stored vertex of far rows is tried again at every later call while its point stays
   // feasible, however far the point moves from the level's start: on the humanoid's support
   // polygon, 24 joint speed bounds of an early large correction, |z| ~ 23 rad/s where the
@@ -378,8 +438,15 @@ void Hierarchy::store_level_working_set(const LsqProblem& P, const Eigen::Ref<co
       ++far;
     }
   }
-  if (far == 0) return;
-  if (!zero_objective(P, y.head(k))) return;
+  return far > 0 && zero_objective(P, y.head(k));
+}
+
+void Hierarchy::store_level_working_set(const LsqProblem& P, const Eigen::Ref<const Vec>& y,
+                                        int level_rows, bool hit, Working& ws) {
+  if (hit && ws.verified) return;  // (W_ is ws on P's rows)
+  store_working_set(P, W_, ws);
+  if (!prunes(P, y, level_rows)) return;
+  const int k = P.cols;
   // the rest tried as the next call would (its point into xc_, scratch here; y and x stay
   // this call's), the rows its point violates added, up to kPruneRounds tries: stored when
   // one hits (a verification, not counted as a warm trial)

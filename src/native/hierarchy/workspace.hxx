@@ -22,14 +22,10 @@ void LsqProblem::start(int qrows_, int cols_) {
   c.head(qrows).setZero();
 }
 
-EIGEN_DONT_INLINE double LsqProblem::row_norm(const Eigen::Ref<const Vec>& g) {
-  return g.norm();
-}
-
 double LsqProblem::add_row(const Eigen::Ref<const Vec>& g, double l, double u, int gid,
                            double ref_norm, double floor) {
   if (!std::isfinite(l) && !std::isfinite(u)) return 0.0;
-  const double nrm = row_norm(g);
+  const double nrm = g.norm();
   if (!(nrm > floor * std::max(ref_norm, 1e-300))) return 0.0;  // cannot bind: constant row
   G.row(rows).head(cols) = g.transpose() / nrm;
   lo(rows) = l / nrm;
@@ -100,7 +96,9 @@ Hierarchy::Hierarchy(int n, std::vector<int> meq, std::vector<int> min, bool has
     v->setZero(big);
   widx_.reserve(max_grows);
   bidx_.assign(std::max(n, 1), 0);
-  bnrm_.setZero(std::max(n, 1));
+  brun_.assign(n + 1, 0);
+  binv_.setZero(std::max(n, 1));
+  bsq_.setZero(std::max(n, 1));
   mov_.reserve(std::max(max_in, 1));
   depn_.setZero(std::max(max_in, 1));
   gram_.setZero(std::max(std::min(max_in, n), 1), std::max(std::min(max_in, n), 1));
@@ -240,7 +238,14 @@ double Hierarchy::cin_norm(int i) {
   return cin_norm_(i);
 }
 
-void Hierarchy::add_inherited_rows(LsqProblem& P) {
+namespace {
+/// id is one of ids (a stored working set's: a few rows, scanned)
+inline bool holds_id(const std::vector<int>& ids, int id) {
+  return std::find(ids.begin(), ids.end(), id) != ids.end();
+}
+}  // namespace
+
+void Hierarchy::add_inherited_rows(LsqProblem& P, const Working* only) {
   if (k_ == 0) return;
   auto full = rowbuf_.head(P.cols);
   full.setZero();
@@ -259,9 +264,13 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   auto cx = cinx_.head(k_);
   cx.noalias() = Cin_.topRows(k_) * x_;
   for (int i = 0; i < k_; ++i) {
-    full.head(r_) = CZ.row(i).transpose();
     const double l = std::min(lin_(i) - cx(i), 0.0);
     const double u = std::max(uin_(i) - cx(i), 0.0);
+    if (only && l != u && !holds_id(only->id, inid_[i])) {
+      ++left_out_;
+      continue;
+    }
+    full.head(r_) = CZ.row(i).transpose();
     // a level's row whose projection is within kMovableTol of its norm lies in the frozen
     // rows' span to rounding of the freeze: constant, as for the level's own movable test
     // (its projection's direction is rounding: a half-space through x with that normal
@@ -270,9 +279,24 @@ void Hierarchy::add_inherited_rows(LsqProblem& P) {
   }
 }
 
-void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
+void Hierarchy::add_bound_rows(LsqProblem& P, int stage, const Working* only) {
   if (!has_bounds_) return;
   const int r0 = P.rows, cols = P.cols;
+  if (only) {  // the set's rows and the fixed ones, as below (the cache neither read nor kept)
+    auto full = rowbuf_.head(cols);
+    full.setZero();
+    for (int j = 0; j < n_; ++j) {
+      const double l = std::min(lb_(j) - x_(j), 0.0);
+      const double u = std::max(ub_(j) - x_(j), 0.0);
+      if (l != u && !holds_id(only->id, capacity_ + j)) {
+        ++left_out_;
+        continue;
+      }
+      full.head(r_) = Z_.row(j).head(r_).transpose();
+      P.add_row(full, l, u, capacity_ + j, 1.0);
+    }
+    return;
+  }
   // (the bound-rows cache: the rows depend on Z alone, their bounds on x too; no row is
   // skipped unless a variable has no finite bound, or Z a zero row)
   BoundRowsCache* cache = memo_gate() ? &bound_rows_[stage] : nullptr;
@@ -295,18 +319,21 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
     P.rows += n_;
     return;
   }
-  // add_row's rows (ref_norm 1), their bounds and norms row by row, the scaled rows written
-  // by columns (contiguous; add_row writes a row of the column-major G entry by entry)
-  auto full = rowbuf_.head(cols);
-  full.setZero();
+  // add_row's rows (ref_norm 1: a row of norm at most 1e-12 cannot bind) and bounds. The
+  // rows' squared norms accumulate column by column and the scaled rows are written by
+  // columns: Z is column-major, so every pass reads and writes contiguous memory (a row's own
+  // norm and copy read Z with a stride of n, per row: 16k instructions a level on the Talos
+  // polygon's three active levels, 38 x 26)
+  auto sq = bsq_.head(n_);
+  sq.setZero();
+  for (int c = 0; c < r_; ++c) sq += Z_.col(c).head(n_).cwiseAbs2();
   int kept = 0;
   for (int j = 0; j < n_; ++j) {
     const double l = std::min(lb_(j) - x_(j), 0.0);
     const double u = std::max(ub_(j) - x_(j), 0.0);
     double nrm = 0.0;
     if (std::isfinite(l) || std::isfinite(u)) {
-      full.head(r_) = Z_.row(j).head(r_).transpose();
-      nrm = LsqProblem::row_norm(full);
+      nrm = std::sqrt(sq(j));
       if (!(nrm > 1e-12)) nrm = 0.0;  // cannot bind: constant row
     }
     if (cache) cache->value.nrm(j) = nrm;
@@ -315,12 +342,20 @@ void Hierarchy::add_bound_rows(LsqProblem& P, int stage) {
     P.hi(r0 + kept) = u / nrm;
     P.id[r0 + kept] = capacity_ + j;
     bidx_[kept] = j;
-    bnrm_(kept++) = nrm;
+    binv_(kept++) = 1.0 / nrm;
   }
+  // the kept rows as runs of consecutive variables (a free-flyer's unbounded base leaves one
+  // run): each run of each column one scaled copy
+  int runs = 0;
+  for (int i = 0; i < kept; ++i)
+    if (i == 0 || bidx_[i] != bidx_[i - 1] + 1) brun_[runs++] = i;
+  brun_[runs] = kept;
   for (int c = 0; c < r_; ++c) {
-    double* g = P.G.col(c).data() + r0;
-    const double* z = Z_.col(c).data();
-    for (int i = 0; i < kept; ++i) g[i] = z[bidx_[i]] / bnrm_(i);
+    for (int b = 0; b < runs; ++b) {
+      const int i0 = brun_[b], len = brun_[b + 1] - i0;
+      P.G.col(c).segment(r0 + i0, len) =
+          Z_.col(c).segment(bidx_[i0], len).cwiseProduct(binv_.segment(i0, len));
+    }
   }
   if (cols > r_) P.G.block(r0, r_, kept, cols - r_).setZero();
   P.rows += kept;
