@@ -162,6 +162,12 @@ VALUE_TOL = 1e-10
 PULL_TOL = 1e-12
 #: Iterations of :func:`active_set_ls`, per row and variable.
 AS_ITER = 4
+#: Relative singular value (to the largest) under which :func:`active_set_ls` counts a
+#: direction of its working set's rows as dependent: the rule of the native dual active-set
+#: solver for adding a row. A step along such a direction moves the rows by at most this
+#: fraction of its length (rounding, 1000× under ``KKT_FEAS_TOL``); 1e-9 there let a step
+#: leave a row by 0.36 of its scale.
+AS_DEP_TOL = 1e-12
 
 
 def _row_scale(Gn, lo, hi, y):
@@ -381,7 +387,10 @@ def active_set_ls(
     ``exact_signs`` a step gaining under 1e-15 of the objective that is not at rounding is
     still taken once per working set: on a level with a large residual (an unreachable
     posture, objective 72) a 4.5e-8 step gains only 1.8e-14.
-    Returns ``(y, converged)``; ``y`` is feasible whenever ``y0`` is.
+    The working set's rank, and its multipliers, count singular values above
+    :data:`AS_DEP_TOL` of the largest only: rows dependent to rounding are one constraint.
+    Returns ``(y, converged)``; ``y`` is feasible whenever ``y0`` is (a row of the working
+    set moves by at most ``AS_DEP_TOL`` of a step's length, in the equilibrated variables).
     """
     k = y0.shape[0]
     if prepared is None:
@@ -409,7 +418,11 @@ def active_set_ls(
         W = W_lo | W_hi
         if W.any():
             Uw, sw, Vw = svd(Gs[W], full=True)
-            rw = numerical_rank(sw, Gs[W].shape)
+            # rows dependent to rounding (their combination's singular value ~1e-14) are
+            # one constraint: counted as more, they fill the null space and leave a point
+            # "stationary" that only multipliers of ‖g‖/σ hold (the LexLS humanoid's
+            # minimum-norm step from a pulled-back point: 0.2–18 from its optimum)
+            rw = active_rank(sw, Gs[W].shape, AS_DEP_TOL)
             N = Vw[rw:].T
         else:
             N = np.eye(k)
@@ -446,7 +459,9 @@ def active_set_ls(
                 return u * S, True
             idx = np.flatnonzero(W)
             sign = np.where(W_lo[idx], 1.0, -1.0)
-            mu = np.linalg.lstsq(Gs[idx].T * sign, g, rcond=None)[0]
+            # the multipliers on the same rank (a least-squares solve to machine precision
+            # would divide g's rounding along the dependent directions by their σ)
+            mu = sign * (Uw[:, :rw] @ ((Vw[:rw] @ g) / sw[:rw]))
             mu[eq[idx]] = np.inf  # equalities are never dropped
             j = int(np.argmin(mu))
             gref = max(float(np.abs(g).max()), 1e-300)

@@ -565,10 +565,11 @@ def _min_norm_step(G, lo, hi, z, p, floor: float, R: Reduced) -> tuple[np.ndarra
     Paths, each point certified before it is kept: the QP's point within the opening,
     finished exactly on the rows it meets to it (:func:`_exact_on_active_rows`) or as it
     is; then the active-set continuation from it (pulled back into the rows if it slipped
-    through one), as it is or finished exactly on its active rows. The continuation is not
-    always right: from the LexLS humanoid's interior-point QP points (piqp, proxqp,
-    clarabel: 1.4e-8 outside a row, pulled back) it stopped 0.1–0.4 from the optimum
-    (KKT residual 1e-6–5e-4), and the caller tries the fallback backends' points.
+    through one), as it is or finished exactly on its active rows. The pull-back can land
+    far from the QP's point (the LexLS humanoid's interior-point points, 1.4e-8 outside a
+    row: at ``z = 0``, 0.2–18 from the optimum, on 11 rows dependent to rounding); the
+    continuation goes on from there (it counts such rows as one constraint). When no point
+    is certified the caller tries the fallback backends' points.
     Returns ``(z, ok, residual)``: ``ok`` False when no path's point is certified (the
     feasible one of least objective is kept)."""
     Q = np.eye(z.shape[0])
@@ -845,9 +846,7 @@ def solve_hierarchical(
                     G, lo, hi = G[keep], lo[keep], hi[keep]
             floor = max(1.0, float(np.linalg.norm(x)))
             z, ok, kkt = _min_norm_step(G, lo, hi, z, p, floor, R)
-            # then each fallback backend's QP point, as a level's (HiGHS on the LexLS
-            # humanoid with its bounds as a box: the continuation from its point stopped
-            # 8–9 from the optimum)
+            # then each fallback backend's QP point, as a level's
             for alt in R.alternatives() if not ok else ():
                 za = R.solve_qp_with(alt, np.eye(r), p, where="minimum-norm step")
                 if za is None:
