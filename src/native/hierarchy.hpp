@@ -632,9 +632,6 @@ class Hierarchy {
   Mat Ztmp_;
   Vec depn_;                   ///< drop_dependent_directions: the rows' norms
   double rows_pivot_ = 1.0;    ///< level_problem: the moving rows' last kept pivot (scaled)
-  /// level_problem: CZl_'s moving rows were replaced by their projections without the
-  /// directions dependent on the frozen rows (drop_dependent_directions): they are not C Z
-  bool rows_reduced_ = false;
   std::vector<int> bidx_;      ///< add_bound_rows: the variables whose rows are kept
   Vec binv_;                   ///< add_bound_rows: their rows' reciprocal norms
   std::vector<int> brun_;      ///< add_bound_rows: the first kept row of each run, then kept

@@ -259,38 +259,3 @@ def test_inherited_rows_with_infinite_sides_and_zero_rows():
 
     hits, levels = _run(stack, move, 10)
     assert hits > 0
-
-
-@needs_native
-def test_an_inherited_row_is_held_by_its_own_projection_not_the_reduced_one():
-    """Seed 34281 (3 rows, singular values 0.1, 1e-5, 1e-9 in the free columns): the moving
-    rows' last scaled pivot, 6e-10, is under the movable tolerance, so the level solves them
-    with that direction dropped (each row replaced by its projection on the other two). It
-    meets every row at a box vertex (|x| = 1e3) and row 1 is inherited tight. The next level
-    moves z by ~2e3 back to |x| ~ 34: held by the reduced row, row 1 (whose reduced row is off
-    its own projection by 6e-10 |C_1| per unit of z) ended 1.35e-6 over its bound, level 1
-    flagged "inaccurate"; held by its own projection it stays on its bound."""
-    stack = _near_dependent(34281, 3, -9.0, 0)
-    C = stack.levels[1][0].C
-    up = stack.levels[1][0].upper
-    sp = stack.solve(engine="python")
-    sn = stack.solve(engine="native")
-    assert sp.status == "optimal" and not sp.info.get("inaccurate")
-    assert sn.status == "optimal" and not sn.info.get("inaccurate"), sn.info.get("inaccurate")
-    P, h = native_solver(stack)
-    x_cold, r_cold, _ = h.solve(P, warm=False)
-    x_warm, r_warm, _ = h.solve(P, warm=True)  # (the second call: warm start and caches)
-    # Tolerance from the stack's scale and conditioning: the points pass through the box
-    # vertex (|x| = 1e3) with rows of norm <= |C|_F, so a row value carries rounding
-    # eps |C|_F 1e3; the final point is fixed by row 1 tight in the level-0 null space, its
-    # conditioning |C_1| / |C_1 Z| (~1e2 here), times 10 for the stages in between: 9e-10 in
-    # a level value, 2.4e-10 in x (rounding eps 1e3 times the same factor). The defect this
-    # guards against is 1.35e-6 in the level value and 5e-5 in x.
-    eps = np.finfo(float).eps
-    cond = np.linalg.norm(C[1]) / np.linalg.norm(C[1, 3:])
-    tol = 10.0 * eps * cond * (np.linalg.norm(C) * 1e3 + np.linalg.norm(up))
-    x_tol = 10.0 * eps * cond * 1e3
-    for x, r in ((sn.x, sn.level_residuals), (x_cold, r_cold), (x_warm, r_warm)):
-        assert np.max(np.abs(x - sp.x)) <= x_tol, (x, sp.x)
-        assert np.all(np.abs(r - sp.level_residuals) <= tol), (r, sp.level_residuals)
-        assert C[1] @ x - up[1] <= tol, C[1] @ x - up[1]

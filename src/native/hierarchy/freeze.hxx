@@ -140,7 +140,6 @@ double Hierarchy::drop_dependent_directions(Eigen::Ref<Mat> R, const std::vector
     fqr_.apply_q(v);
     R.row(rows[j]).head(r_) = norms(j) * v.transpose();
   }
-  rows_reduced_ = true;
   ++stats_.dependent_drops;
   return last;
 }

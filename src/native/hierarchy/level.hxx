@@ -161,7 +161,6 @@ int Hierarchy::level_problem(const LevelRows& d, const LevelForm& form, const Wo
   // the moving rows' conditioning, scaled by their norms (ill_conditioned): one row's is its
   // own projection's share of its norm
   rows_pivot_ = 1.0;
-  rows_reduced_ = false;
   if (mv == 1) rows_pivot_ = CZl.row(mov_[0]).norm() / depn_(0);
   if (mv > 1) rows_pivot_ = drop_dependent_directions(CZl, mov_, depn_.head(mv));
   int ndamp = 0;
@@ -287,12 +286,7 @@ void Hierarchy::freeze_level(const LevelRows& d, const LevelForm& form, int nvio
   const bool by_f = !by_null_space && !no_freedom && !by_wide;
   const int k_before = k_;
   inherit(C, lo, hi, i0, mi, &viol_);
-  // the inherited rows' projections, at hand -- unless drop_dependent_directions replaced
-  // them: an inherited row is a constraint on the levels below by its own C_i, and the
-  // reduced row differs from C_i Z by up to kMovableTol |C_i| per unit of z (a level-1 row
-  // held tight by its reduced row drifted 2e-6 off its bound while the next level moved z
-  // by 2e3). Then the rows are projected again by add_inherited_rows where needed
-  if (kz_ == k_before && !rows_reduced_) {
+  if (kz_ == k_before) {  // the inherited rows' projections, at hand
     for (int k = k_before; k < k_; ++k) CinZ_.row(k).head(r_) = CZl.row(inid_[k] - i0);
     kz_ = k_;
   }
