@@ -139,6 +139,23 @@ def test_screen_is_bit_for_bit_across_the_threshold(seed, m, log_sigma, zeros):
 
 
 @needs_native
+@pytest.mark.xfail(
+    strict=True,
+    reason="open defect: the engines use a level-1 direction the rank rule drops "
+    "(singular value 1e-12 of the free rows, under 1e-9) differently: the Python engine's "
+    "level 1 is 3.8e-10 lower, its level 2 1806 against the native engine's 1463",
+)
+def test_both_engines_use_a_dropped_direction_alike():
+    """A hypothesis example of the search above (seed 5467080, eight rows, the smallest
+    singular value of their free part 1e-12): both engines answer "optimal" with level 1
+    equal to 3.8e-10 of itself, within the rank rule's tolerance, and level 2 a quarter
+    apart. The Python engine's level-1 QP keeps the dropped direction's linear term (its
+    regularisation the only curvature) and walks it to the box; the native active set keeps
+    it in the level's objective and the freeze drops it. One rule for both is needed."""
+    _screened_and_dropped(_near_dependent(5467080, 8, -12.0, 0))
+
+
+@needs_native
 def test_the_screen_decides_both_ways():
     # well separated rows (singular values 0.1 ... 0.01: every pivot proven above the
     # ill-conditioning threshold 1e-3) are screened (no QR); rows with a singular value 1e-3
