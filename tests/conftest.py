@@ -20,7 +20,12 @@ import qpcoord as qc
 # failure found there becomes an explicit test).
 settings.register_profile("derandomized", derandomize=True, database=None)
 settings.register_profile("explore")
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "derandomized"))
+HYPOTHESIS_PROFILE = os.environ.get("HYPOTHESIS_PROFILE", "derandomized")
+if HYPOTHESIS_PROFILE not in ("derandomized", "explore"):
+    raise pytest.UsageError(
+        f"HYPOTHESIS_PROFILE must be derandomized or explore, got {HYPOTHESIS_PROFILE!r}"
+    )
+settings.load_profile(HYPOTHESIS_PROFILE)
 
 #: ``QPCOORD_TEST_ENGINE=python`` runs the suite with the Python engine as the default of
 #: ``Stack.solve`` and the IK (``native``: the native one; unset: the library's default, the
